@@ -1,0 +1,50 @@
+#pragma once
+// The job types the service runs, as a registry: the server knows job types only through
+// this interface, and each engine module's API file registers its own.
+
+#include <filesystem>
+#include <functional>
+#include <map>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "engine/util/progress.h"
+
+namespace omnirig::api {
+
+// Everything a job run sees of the service.
+struct JobContext {
+  std::string job_id;
+  std::filesystem::path dataset_dir;     // image files, by name (may hold cam0/, cam1/)
+  std::vector<std::string> image_names;  // sorted names within dataset_dir
+  std::filesystem::path output_dir;      // write artifacts here (files become artifacts)
+  int num_threads = 1;                   // the job's share of the cores
+  ProgressSink progress;                 // progress + cancellation
+  std::function<void(const std::string& line)> log;  // appended to the job's log artifact
+  // Loads the result JSON of an earlier succeeded job (e.g. the calibrations a relative pose
+  // job uses); throws InvalidArgument naming the job when it has none.
+  std::function<nlohmann::json(const std::string& job_id)> load_result;
+};
+
+struct JobType {
+  std::string name;
+  // Validates `params` at submission; throws InvalidArgument with a message naming the field.
+  std::function<void(const nlohmann::json& params)> validate;
+  // Ids of earlier jobs this job reads (so the server can check they exist before queueing).
+  std::function<std::vector<std::string>(const nlohmann::json& params)> referenced_jobs;
+  // Runs the job and returns its result JSON. Throws omnirig::Cancelled on cancellation,
+  // InvalidArgument for bad input discovered while running, anything else for failures.
+  std::function<nlohmann::json(const nlohmann::json& params, const JobContext& context)> run;
+};
+
+// Registers a job type; later registrations of the same name replace earlier ones.
+void RegisterJobType(JobType type);
+// nullptr when no such type.
+const JobType* FindJobType(const std::string& name);
+std::vector<std::string> JobTypeNames();
+// Registers every job type omnirig ships (called once by the server at start-up).
+void RegisterBuiltinJobTypes();
+
+}  // namespace omnirig::api

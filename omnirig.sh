@@ -1,0 +1,84 @@
+#!/usr/bin/env bash
+# omnirig's two commands:
+#   ./omnirig.sh run    install what is missing, build (Release), serve on http://127.0.0.1:8080
+#   ./omnirig.sh test   install what is missing, build, run every test (unit, sanitizer,
+#                       integration, browser)
+# Re-running either on a set-up machine only rebuilds what changed.
+set -euo pipefail
+cd "$(dirname "$0")"
+ROOT=$(pwd)
+
+APT_PACKAGES=(build-essential cmake ninja-build ccache pkg-config git
+  libeigen3-dev libopencv-dev libopencv-contrib-dev libceres-dev libcpp-httplib-dev
+  nlohmann-json3-dev libsqlite3-dev sqlite3 googletest libgtest-dev libbenchmark-dev
+  nodejs npm chromium curl)
+JOBS=${OMNIRIG_JOBS:-$(nproc)}
+
+log() { printf '\033[1m[omnirig]\033[0m %s\n' "$*" >&2; }
+
+install_apt_packages() {
+  local missing=()
+  for pkg in "${APT_PACKAGES[@]}"; do
+    # Node.js may come from elsewhere than Debian (e.g. nodesource); only install when absent.
+    if [[ $pkg == nodejs && -x "$(command -v node)" ]] || [[ $pkg == npm && -x "$(command -v npm)" ]]; then
+      continue
+    fi
+    dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || missing+=("$pkg")
+  done
+  [[ ${#missing[@]} -eq 0 ]] && return
+  log "installing Debian packages: ${missing[*]}"
+  local sudo=()
+  [[ $(id -u) -ne 0 ]] && sudo=(sudo)
+  "${sudo[@]}" apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive "${sudo[@]}" apt-get install -y -qq --no-install-recommends "${missing[@]}"
+}
+
+install_npm_packages() {
+  # web/package.json carries three.js (the 3D viewer) and playwright-core (browser tests).
+  [[ -f web/package.json ]] || return 0
+  local stamp=web/node_modules/.omnirig-installed
+  if [[ ! -f $stamp || web/package.json -nt $stamp || web/package-lock.json -nt $stamp ]]; then
+    log "installing npm packages for web/"
+    (cd web && if [[ -f package-lock.json ]]; then npm ci --no-audit --no-fund; else npm install --no-audit --no-fund; fi)
+    touch "$stamp"
+  fi
+}
+
+configure_and_build() {  # build_dir [cmake args...]
+  local dir=$1
+  shift
+  if [[ ! -f $dir/build.ninja ]]; then
+    cmake -S . -B "$dir" -G Ninja -DCMAKE_BUILD_TYPE=Release -DOMNIRIG_WERROR=ON "$@"
+  fi
+  cmake --build "$dir" -j "$JOBS"
+}
+
+cmd_run() {
+  install_apt_packages
+  install_npm_packages
+  configure_and_build build
+  mkdir -p data
+  log "serving on http://127.0.0.1:8080 (data in $ROOT/data)"
+  exec build/server/omnirig serve --host 127.0.0.1 --port 8080 --data ./data
+}
+
+cmd_test() {
+  install_apt_packages
+  install_npm_packages
+  configure_and_build build
+  log "unit, integration and browser tests (Release)"
+  (cd build && ctest --output-on-failure -j "$JOBS")
+  log "unit tests under AddressSanitizer + UndefinedBehaviorSanitizer"
+  configure_and_build build-asan -DOMNIRIG_SANITIZE=ON
+  (cd build-asan && ctest --output-on-failure -j "$JOBS" -L unit)
+  log "all tests passed"
+}
+
+case "${1:-}" in
+  run) cmd_run ;;
+  test) cmd_test ;;
+  *)
+    echo "usage: $0 run|test" >&2
+    exit 2
+    ;;
+esac

@@ -1,0 +1,18 @@
+#pragma once
+// The `omnirig` subcommands. Each takes the arguments after its name and returns the exit code.
+
+#include <string>
+#include <vector>
+
+namespace omnirig::cli {
+
+using Args = std::vector<std::string>;
+
+int RunServe(const Args& args);      // server/cli/serve.cc
+int RunSynth(const Args& args);      // server/cli/synth.cc
+int RunCalibrate(const Args& args);  // server/cli/calibrate.cc
+int RunRelpose(const Args& args);    // server/cli/relpose.cc
+int RunSlam(const Args& args);       // server/cli/slam.cc
+int RunSubmit(const Args& args);     // server/cli/submit.cc
+
+}  // namespace omnirig::cli
