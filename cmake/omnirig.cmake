@@ -10,8 +10,8 @@ function(omnirig_library name)
 endfunction()
 
 # omnirig_test(MODULE NAME SOURCES ... DEPS ... [LABELS ...]): a GoogleTest executable
-# registered with ctest as MODULE/NAME. Every test carries the label "unit" unless it says
-# "integration"; the sanitizer build runs the "unit" ones.
+# registered with ctest as MODULE/NAME. Labels: "unit" (the default: fast, also run in the
+# sanitizer build) or "integration" (renders, end-to-end runs, servers: Release build only).
 function(omnirig_test module name)
   if(NOT OMNIRIG_BUILD_TESTS)
     return()

@@ -1,0 +1,30 @@
+#pragma once
+// JSON forms of cameras, poses and rigs, shared by every job type's result.
+//
+//   camera: {"model": "unified", "image_size": [w, h],
+//            "intrinsics": {"xi", "gamma_u", "gamma_v", "u0", "v0", "alpha", "k1".."k5"}}
+//   pose:   {"rotation_wxyz": [w, x, y, z], "translation_m": [x, y, z]}
+//   rig:    {"cam0_from_cam1": pose, "cameras": {"cam0": camera, "cam1": camera}, ...}
+
+#include <nlohmann/json.hpp>
+
+#include "engine/geometry/camera_model.h"
+
+namespace omnirig::api {
+
+nlohmann::json IntrinsicsToJson(const UnifiedIntrinsics& intrinsics);
+// Throws InvalidArgument naming the missing or mistyped key.
+UnifiedIntrinsics IntrinsicsFromJson(const nlohmann::json& json);
+
+nlohmann::json CameraToJson(const CameraModel& camera);
+CameraModel CameraFromJson(const nlohmann::json& json);
+
+nlohmann::json PoseToJson(const Rigid3d& pose);
+Rigid3d PoseFromJson(const nlohmann::json& json);
+
+// Reads cam0_from_cam1 and cameras.cam0/cam1 of a relative_pose result.
+StereoRig RigFromJson(const nlohmann::json& json);
+// Writes cam0_from_cam1, baseline_m and cameras; callers add the rest of their result.
+nlohmann::json RigToJson(const StereoRig& rig);
+
+}  // namespace omnirig::api
