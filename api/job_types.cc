@@ -2,6 +2,11 @@
 
 #include <mutex>
 
+#include "api/calibration_json.h"
+#include "api/relpose_json.h"
+#include "api/slam_json.h"
+#include "api/stereo_json.h"
+
 namespace omnirig::api {
 namespace {
 
@@ -38,6 +43,10 @@ std::vector<std::string> JobTypeNames() {
 
 void RegisterBuiltinJobTypes() {
   // Each engine module's API file adds its registration here as it lands.
+  RegisterRelativePoseJobType();
+  RegisterCalibrationJobType();
+  RegisterStereoReconstructJobType();
+  RegisterSlamJobType();
 }
 
 }  // namespace omnirig::api

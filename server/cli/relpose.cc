@@ -1,14 +1,166 @@
-// `omnirig relpose`: placeholder until its issue lands.
+// `omnirig relpose`: the metric pose between a stereo rig's two cameras from image pairs of a
+// shared board, the same engine call as the `relative_pose` job type.
+//
+//   omnirig relpose --board checkerboard --cols 9 --rows 6 --square-mm 24.23
+//       [--calib0 c0.json --calib1 c1.json] DIR -o rig.json
+//
+// DIR holds cam0/NAME and cam1/NAME images, paired by NAME. --calib0/--calib1 take the JSON of
+// `omnirig calibrate` (or a bare camera object); without them each camera is calibrated from
+// its own images first.
 
+#include <filesystem>
+#include <fstream>
+#include <iomanip>
 #include <iostream>
+#include <set>
+#include <sstream>
 
+#include <nlohmann/json.hpp>
+
+#include "api/relpose_json.h"
+#include "engine/util/check.h"
+#include "server/cli/args.h"
 #include "server/cli/commands.h"
 
 namespace omnirig::cli {
+namespace {
 
-int RunRelpose(const Args&) {
-  std::cerr << "omnirig relpose: not available yet\n";
-  return 1;
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+bool IsImageFile(const fs::path& path) {
+  static const std::set<std::string> kExtensions = {".png", ".jpg", ".jpeg", ".bmp",
+                                                    ".tif", ".tiff", ".pgm", ".ppm"};
+  std::string ext = path.extension().string();
+  for (char& ch : ext) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+  return kExtensions.count(ext) > 0;
+}
+
+// "cam0/NAME" and "cam1/NAME" for every image file in DIR/cam0 and DIR/cam1, sorted.
+std::vector<std::string> ListPairImages(const fs::path& dir) {
+  OMNIRIG_CHECK(fs::is_directory(dir), "'" << dir.string() << "' is not a directory");
+  std::vector<std::string> names;
+  for (const char* camera : {"cam0", "cam1"}) {
+    const fs::path sub = dir / camera;
+    OMNIRIG_CHECK(fs::is_directory(sub), "'" << sub.string()
+                                             << "' is missing: DIR must hold cam0/ and cam1/");
+    for (const auto& entry : fs::directory_iterator(sub)) {
+      if (entry.is_regular_file() && IsImageFile(entry.path())) {
+        names.push_back(std::string(camera) + "/" + entry.path().filename().string());
+      }
+    }
+  }
+  std::sort(names.begin(), names.end());
+  return names;
+}
+
+// A calibration file as a job result: `omnirig calibrate`'s JSON has "camera"; a bare camera
+// object is wrapped.
+json LoadCalibrationFile(const std::string& path) {
+  std::ifstream in(path);
+  OMNIRIG_CHECK(in.good(), "cannot open calibration file '" << path << "'");
+  json document;
+  try {
+    in >> document;
+  } catch (const json::exception& e) {
+    throw InvalidArgument("calibration file '" + path + "' is not valid JSON: " + e.what());
+  }
+  if (document.is_object() && document.contains("model") && !document.contains("camera")) {
+    return {{"camera", document}};
+  }
+  return document;
+}
+
+json BoardParams(const ArgParser& parser) {
+  json board = {{"type", parser.Get("board")},
+                {"cols", parser.GetInt("cols")},
+                {"rows", parser.GetInt("rows")},
+                {"square_size_mm", parser.GetDouble("square-mm")}};
+  if (parser.Has("marker-mm")) board["marker_size_mm"] = parser.GetDouble("marker-mm");
+  if (parser.Has("dictionary")) {
+    board["aruco_dictionary"] = parser.GetInt("dictionary");
+  }
+  return board;
+}
+
+void PrintProgress(double fraction, const std::string& stage, const std::string& message) {
+  if (stage == "refine" || stage == "solve") return;  // per-iteration lines are noise here
+  std::cerr << "[" << std::setw(3) << static_cast<int>(100.0 * fraction) << "%] " << stage
+            << (message.empty() ? "" : " " + message) << "\n";
+}
+
+void PrintSummary(const json& result) {
+  std::cerr << std::fixed << std::setprecision(3) << "baseline "
+            << result["baseline_m"].get<double>() * 1e3 << " mm +- "
+            << result["baseline_std_m"].get<double>() * 1e3 << " mm, rotation std "
+            << std::setprecision(4) << result["rotation_std_deg"].get<double>() << " deg, RMS "
+            << std::setprecision(3) << result["rms_px"].get<double>() << " px, "
+            << result["num_pairs_used"].get<int>() << " of " << result["pairs"].size()
+            << " pairs used\n";
+  for (const json& pair : result["pairs"]) {
+    if (!pair["used"].get<bool>()) {
+      std::cerr << "  unused " << pair["name"].get<std::string>() << ": "
+                << pair["reason"].get<std::string>() << "\n";
+    }
+  }
+}
+
+}  // namespace
+
+int RunRelpose(const Args& raw_args) {
+  ArgParser parser("relpose",
+                   "Measures the metric pose between a stereo rig's two cameras (cam0_from_cam1) "
+                   "from image pairs in which both see the same board.");
+  parser.AddOption("board", "checkerboard", "board type: checkerboard or charuco");
+  parser.AddOption("cols", "", "inner corners per row");
+  parser.AddOption("rows", "", "inner corners per column");
+  parser.AddOption("square-mm", "", "square size in millimetres");
+  parser.AddOption("marker-mm", "", "ChArUco marker size in millimetres");
+  parser.AddOption("dictionary", "", "ChArUco: OpenCV predefined ArUco dictionary number");
+  parser.AddOption("calib0", "", "cam0's calibration JSON (omnirig calibrate -o); with --calib1");
+  parser.AddOption("calib1", "", "cam1's calibration JSON; without both, each camera is "
+                                 "calibrated from its own images first");
+  parser.AddFlag("refine-intrinsics", "refine both cameras' intrinsics with the rig");
+  parser.AddOption("threads", "1", "solver threads");
+  parser.AddOption("output", "", "write the result JSON here (also -o); default: stdout");
+  parser.SetPositional("DIR", "folder holding cam0/NAME and cam1/NAME images, paired by NAME");
+  Args args = raw_args;
+  for (std::string& arg : args) {
+    if (arg == "-o") arg = "--output";
+  }
+  if (!parser.Parse(args)) return parser.exit_code();
+  OMNIRIG_CHECK(parser.positional().size() == 1, "expected exactly one DIR (see --help)");
+  OMNIRIG_CHECK(parser.Has("cols") && parser.Has("rows") && parser.Has("square-mm"),
+                "--cols, --rows and --square-mm are required");
+  OMNIRIG_CHECK(parser.Has("calib0") == parser.Has("calib1"),
+                "give both --calib0 and --calib1, or neither");
+
+  json params = {{"board", BoardParams(parser)}};
+  if (parser.Has("calib0")) {
+    params["calibrations"] = {{"cam0", parser.Get("calib0")}, {"cam1", parser.Get("calib1")}};
+  }
+  if (parser.Has("refine-intrinsics")) params["refine_intrinsics"] = true;
+
+  api::JobContext context;
+  context.job_id = "cli";
+  context.dataset_dir = parser.positional()[0];
+  context.image_names = ListPairImages(context.dataset_dir);
+  context.num_threads = parser.GetInt("threads");
+  context.progress.report = PrintProgress;
+  context.log = [](const std::string& line) { std::cerr << line << "\n"; };
+  context.load_result = LoadCalibrationFile;  // the "job ids" are file paths here
+
+  const json result = api::RunRelativePoseJob(params, context);
+  PrintSummary(result);
+  if (parser.Has("output")) {
+    std::ofstream out(parser.Get("output"));
+    OMNIRIG_CHECK(out.good(), "cannot write '" << parser.Get("output") << "'");
+    out << result.dump(2) << "\n";
+    std::cerr << "wrote " << parser.Get("output") << "\n";
+  } else {
+    std::cout << result.dump(2) << "\n";
+  }
+  return 0;
 }
 
 }  // namespace omnirig::cli

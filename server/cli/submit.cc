@@ -1,14 +1,246 @@
-// `omnirig submit`: placeholder until its issue lands.
+// `omnirig submit`: the scripting client. Uploads a folder of images (skipping those the server
+// already holds with the same size and SHA-256, so an interrupted upload resumes), creates a job,
+// shows a progress bar, and downloads the result and every artifact.
 
+#include <httplib.h>
+
+#include <chrono>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
 #include <iostream>
+#include <map>
+#include <thread>
 
+#include <nlohmann/json.hpp>
+
+#include "engine/util/check.h"
+#include "server/cli/args.h"
 #include "server/cli/commands.h"
+#include "storage/atomic_file.h"
 
 namespace omnirig::cli {
+namespace {
 
-int RunSubmit(const Args&) {
-  std::cerr << "omnirig submit: not available yet\n";
-  return 1;
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+bool IsImageFile(const fs::path& path) {
+  std::string ext = path.extension().string();
+  for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return ext == ".png" || ext == ".jpg" || ext == ".jpeg" || ext == ".bmp" || ext == ".pgm" ||
+         ext == ".ppm";
+}
+
+// Image files of `folder` and of its direct sub-folders (e.g. cam0/, cam1/), by upload name.
+std::map<std::string, fs::path> CollectImages(const fs::path& folder) {
+  if (!fs::is_directory(folder)) throw InvalidArgument(folder.string() + " is not a folder");
+  std::map<std::string, fs::path> images;
+  for (auto it = fs::recursive_directory_iterator(folder); it != fs::recursive_directory_iterator();
+       ++it) {
+    const std::string leaf = it->path().filename().string();
+    if (!leaf.empty() && leaf[0] == '.') {
+      if (it->is_directory()) it.disable_recursion_pending();
+      continue;
+    }
+    if (it->is_directory() && it.depth() >= 1) it.disable_recursion_pending();
+    if (it->is_regular_file() && IsImageFile(it->path())) {
+      images[fs::relative(it->path(), folder).generic_string()] = it->path();
+    }
+  }
+  return images;
+}
+
+// Throws with the server's error message unless the status is one of `ok`.
+json Expect(const httplib::Result& result, std::initializer_list<int> ok, const std::string& what) {
+  if (!result) throw std::runtime_error(what + ": " + httplib::to_string(result.error()));
+  for (int status : ok) {
+    if (result->status == status) {
+      return result->body.empty() ? json() : json::parse(result->body, nullptr, false);
+    }
+  }
+  const json body = json::parse(result->body, nullptr, false);
+  const std::string message = body.is_object() && body.contains("error")
+                                  ? body["error"].value("message", result->body)
+                                  : result->body;
+  throw std::runtime_error(what + ": HTTP " + std::to_string(result->status) + ": " + message);
+}
+
+void UploadFile(httplib::Client& client, const std::string& url, const fs::path& path) {
+  const auto size = fs::file_size(path);
+  auto stream = std::make_shared<std::ifstream>(path, std::ios::binary);
+  const auto result = client.Put(
+      url.c_str(), size,
+      [stream](size_t offset, size_t length, httplib::DataSink& sink) {
+        std::vector<char> buffer(std::min<size_t>(length, 1 << 20));
+        stream->seekg(static_cast<std::streamoff>(offset));
+        stream->read(buffer.data(), static_cast<std::streamsize>(buffer.size()));
+        return sink.write(buffer.data(), static_cast<size_t>(stream->gcount()));
+      },
+      "application/octet-stream");
+  Expect(result, {200, 201}, "upload of " + path.string());
+}
+
+// Uploads what the server lacks; returns the number of files sent.
+int SyncImages(httplib::Client& client, const std::string& dataset,
+               const std::map<std::string, fs::path>& images) {
+  const json listing =
+      Expect(client.Get(("/api/v1/datasets/" + dataset).c_str()), {200}, "dataset " + dataset);
+  std::map<std::string, std::pair<int64_t, std::string>> remote;
+  for (const json& image : listing["images"]) {
+    remote[image["name"]] = {image["size"].get<int64_t>(), image["sha256"]};
+  }
+  int sent = 0, index = 0;
+  int64_t bytes = 0;
+  const auto start = std::chrono::steady_clock::now();
+  for (const auto& [name, path] : images) {
+    ++index;
+    const auto it = remote.find(name);
+    if (it != remote.end()) {
+      const storage::FileDigest local = storage::DigestFile(path);
+      if (local.size == it->second.first && local.sha256 == it->second.second) continue;
+    }
+    const std::string url = "/api/v1/datasets/" + dataset + "/images/" + name;
+    for (int attempt = 1;; ++attempt) {
+      try {
+        UploadFile(client, url, path);
+        break;
+      } catch (const std::runtime_error& e) {
+        if (attempt == 3 || std::string(e.what()).find("HTTP 4") != std::string::npos) throw;
+        std::cerr << "\n" << e.what() << "; retrying\n";
+      }
+    }
+    ++sent;
+    bytes += static_cast<int64_t>(fs::file_size(path));
+    const double seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    std::cerr << "\rupload " << index << "/" << images.size() << "  " << sent << " sent, "
+              << static_cast<int>(bytes / 1e6 / std::max(seconds, 1e-3)) << " MB/s   "
+              << std::flush;
+  }
+  std::cerr << "\rupload done: " << sent << " sent, " << images.size() - sent
+            << " already on the server            \n";
+  return sent;
+}
+
+void DrawProgress(const json& job) {
+  const json& progress = job["progress"];
+  const double fraction = progress.value("fraction", 0.0);
+  const int filled = static_cast<int>(fraction * 30);
+  std::cerr << "\r[" << std::string(filled, '#') << std::string(30 - filled, '.') << "] "
+            << static_cast<int>(fraction * 100) << "% " << job["state"].get<std::string>() << " "
+            << progress.value("stage", "");
+  if (progress["eta_s"].is_number()) {
+    std::cerr << " eta " << static_cast<int>(progress["eta_s"].get<double>()) << " s";
+  }
+  std::cerr << "          " << std::flush;
+}
+
+json WaitForJob(httplib::Client& client, const std::string& id) {
+  while (true) {
+    const json job = Expect(client.Get(("/api/v1/jobs/" + id).c_str()), {200}, "job " + id);
+    DrawProgress(job);
+    const std::string state = job["state"];
+    if (state == "succeeded" || state == "failed" || state == "canceled") {
+      std::cerr << "\n";
+      return job;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(500));
+  }
+}
+
+void DownloadArtifacts(httplib::Client& client, const std::string& id, const fs::path& out) {
+  const json artifacts =
+      Expect(client.Get(("/api/v1/jobs/" + id + "/artifacts").c_str()), {200}, "artifacts");
+  for (const json& artifact : artifacts) {
+    const std::string name = artifact["name"];
+    const auto result = client.Get(("/api/v1/jobs/" + id + "/artifacts/" + name).c_str());
+    Expect(result, {200}, "artifact " + name);
+    const storage::FileDigest digest = storage::WriteFileAtomically(out / name, result->body);
+    if (digest.sha256 != artifact["sha256"]) {
+      throw std::runtime_error("artifact " + name + " arrived corrupted (SHA-256 mismatch)");
+    }
+    std::cerr << "  " << (out / name).string() << " (" << digest.size << " bytes)\n";
+  }
+}
+
+json ReadParams(const std::string& text) {
+  std::string content = text;
+  if (!text.empty() && text[0] == '@') {
+    std::ifstream in(text.substr(1));
+    if (!in) throw InvalidArgument("cannot read params file " + text.substr(1));
+    content.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  }
+  const json params = json::parse(content, nullptr, false);
+  if (!params.is_object()) throw InvalidArgument("--params must be a JSON object (or @FILE)");
+  return params;
+}
+
+}  // namespace
+
+int RunSubmit(const Args& args) {
+  ArgParser parser("submit",
+                   "Uploads a folder of images to a running omnirig server (resuming: images the "
+                   "server already holds are skipped), runs a job on it, shows its progress and "
+                   "downloads the result and artifacts.");
+  parser.SetPositional("FOLDER", "images, at top level or one folder deep (cam0/, cam1/)");
+  parser.AddOption("server", "http://127.0.0.1:8080", "server URL");
+  parser.AddOption("token", "", "bearer token (default: $OMNIRIG_TOKEN)");
+  parser.AddOption("type", "", "job type: calibration, relative_pose, stereo_reconstruct, slam");
+  parser.AddOption("params", "{}", "job params as JSON, or @FILE holding them");
+  parser.AddOption("dataset", "", "upload into this existing dataset id instead of a new one");
+  parser.AddOption("name", "", "name of the new dataset (default: the folder's name)");
+  parser.AddOption("out", "", "folder for result.json and artifacts (default: ./omnirig-JOB)");
+  parser.AddFlag("no-wait", "print the job id and return once the job is queued");
+  if (!parser.Parse(args)) return parser.exit_code();
+  if (parser.positional().size() != 1) throw InvalidArgument("expected one FOLDER (see --help)");
+  if (parser.Get("type").empty()) throw InvalidArgument("--type is required");
+  const fs::path folder = parser.positional()[0];
+  const json params = ReadParams(parser.Get("params"));
+  const auto images = CollectImages(folder);
+
+  httplib::Client client(parser.Get("server"));
+  client.set_read_timeout(120);
+  std::string token = parser.Get("token");
+  if (token.empty() && std::getenv("OMNIRIG_TOKEN")) token = std::getenv("OMNIRIG_TOKEN");
+  if (!token.empty()) client.set_bearer_token_auth(token.c_str());
+
+  std::string dataset = parser.Get("dataset");
+  if (dataset.empty()) {
+    std::string name = parser.Get("name");
+    if (name.empty()) name = fs::absolute(folder).lexically_normal().filename().string();
+    if (name.empty()) name = "dataset";
+    dataset =
+        Expect(client.Post("/api/v1/datasets", json{{"name", name}}.dump(), "application/json"),
+               {201}, "create dataset")["id"];
+  }
+  std::cerr << "dataset " << dataset << ": " << images.size() << " image(s) in " << folder << "\n";
+  SyncImages(client, dataset, images);
+  const json job = Expect(
+      client.Post(
+          "/api/v1/jobs",
+          json{{"type", parser.Get("type")}, {"dataset", dataset}, {"params", params}}.dump(),
+          "application/json"),
+      {202}, "create job");
+  const std::string id = job["id"];
+  std::cout << id << std::endl;
+  if (parser.Has("no-wait")) return 0;
+  const json done = WaitForJob(client, id);
+  const fs::path out =
+      parser.Get("out").empty() ? fs::path("omnirig-" + id) : fs::path(parser.Get("out"));
+  fs::create_directories(out);
+  DownloadArtifacts(client, id, out);
+  if (done["state"] != "succeeded") {
+    std::cerr << "job " << id << " " << done["state"].get<std::string>();
+    if (done["error"].is_object()) {
+      std::cerr << ": " << done["error"]["code"].get<std::string>() << ": "
+                << done["error"]["message"].get<std::string>();
+    }
+    std::cerr << "\n";
+    return 1;
+  }
+  std::cerr << "job " << id << " succeeded; results in " << out.string() << "\n";
+  return 0;
 }
 
 }  // namespace omnirig::cli

@@ -1,0 +1,51 @@
+// The `calibration` job end to end on real images (skipped when ../shared/data/real is absent).
+
+#include <cstdlib>
+#include <filesystem>
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include "api/calibration_json.h"
+#include "api/job_types.h"
+
+namespace omnirig::api {
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+json ValidParams() {
+  return {{"board", {{"type", "checkerboard"}, {"cols", 8}, {"rows", 6}, {"square_size_mm", 40}}}};
+}
+
+TEST(CalibrationJob, RunsOnTheVmrSetWithOverlays) {
+  const char* source = std::getenv("OMNIRIG_SOURCE_DIR");
+  const fs::path data = fs::path(source ? source : ".") / ".." / "shared" / "data" / "real" /
+                        "ocamcalib-vmr";
+  if (!fs::is_directory(data)) GTEST_SKIP() << "real data not found at " << data;
+  RegisterCalibrationJobType();
+  const fs::path out = fs::temp_directory_path() / ("omnirig_calib_vmr_" + std::to_string(::getpid()));
+  JobContext context;
+  context.dataset_dir = data;
+  for (int i = 0; i < 10; ++i) context.image_names.push_back("VMRImage" + std::to_string(i) + ".jpg");
+  context.output_dir = out;
+  context.num_threads = 2;
+  int solve_reports = 0;
+  context.progress.report = [&](double, const std::string& stage, const std::string&) {
+    solve_reports += stage == "solve";
+  };
+  json params = ValidParams();
+  params["board"] = {{"cols", 6}, {"rows", 7}, {"square_size_mm", 30}};
+  const json result = FindJobType("calibration")->run(params, context);
+  EXPECT_EQ(result["num_views_used"], 10);
+  EXPECT_LT(result["rms_px"].get<double>(), 0.5);
+  EXPECT_GT(solve_reports, 3);
+  for (const auto& image : result["images"]) {
+    EXPECT_TRUE(fs::exists(out / image["overlay"].get<std::string>())) << image["overlay"];
+  }
+  fs::remove_all(out);
+}
+
+}  // namespace
+}  // namespace omnirig::api

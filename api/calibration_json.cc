@@ -1,0 +1,248 @@
+#include "api/calibration_json.h"
+
+#include <set>
+
+#include "api/camera_json.h"
+#include "api/job_types.h"
+#include "engine/util/check.h"
+
+namespace omnirig::api {
+namespace {
+
+using nlohmann::json;
+
+void RequireObject(const json& value, const std::string& path,
+                   const std::set<std::string>& allowed) {
+  OMNIRIG_CHECK(value.is_object(), "field '" << path << "' must be an object");
+  for (const auto& [key, unused] : value.items()) {
+    OMNIRIG_CHECK(allowed.count(key), "unknown field '" << path << "." << key << "'");
+  }
+}
+
+double GetNumber(const json& object, const std::string& key, const std::string& path,
+                 double fallback, bool required = false) {
+  const auto it = object.find(key);
+  if (it == object.end()) {
+    OMNIRIG_CHECK(!required, "missing field '" << path << "." << key << "'");
+    return fallback;
+  }
+  OMNIRIG_CHECK(it->is_number(), "field '" << path << "." << key << "' must be a number");
+  return it->get<double>();
+}
+
+int GetInt(const json& object, const std::string& key, const std::string& path, int fallback,
+           bool required = false) {
+  const auto it = object.find(key);
+  if (it == object.end()) {
+    OMNIRIG_CHECK(!required, "missing field '" << path << "." << key << "'");
+    return fallback;
+  }
+  OMNIRIG_CHECK(it->is_number_integer(), "field '" << path << "." << key
+                                                   << "' must be an integer");
+  const int64_t value = it->get<int64_t>();
+  OMNIRIG_CHECK(value >= -1000000 && value <= 1000000,
+                "field '" << path << "." << key << "' is out of range");
+  return static_cast<int>(value);
+}
+
+bool GetBool(const json& object, const std::string& key, const std::string& path,
+             bool fallback) {
+  const auto it = object.find(key);
+  if (it == object.end()) return fallback;
+  OMNIRIG_CHECK(it->is_boolean(), "field '" << path << "." << key << "' must be a boolean");
+  return it->get<bool>();
+}
+
+template <int N>
+Eigen::Matrix<double, N, 1> GetVector(const json& value, const std::string& path) {
+  OMNIRIG_CHECK(value.is_array() && value.size() == N,
+                "field '" << path << "' must be an array of " << N << " numbers");
+  Eigen::Matrix<double, N, 1> out;
+  for (int i = 0; i < N; ++i) {
+    OMNIRIG_CHECK(value[i].is_number(), "field '" << path << "' must hold numbers only");
+    out[i] = value[i].get<double>();
+  }
+  return out;
+}
+
+void ApplyFixList(const json& options, const std::string& key, bool fix,
+                  CalibrationOptions* calibrate) {
+  const auto it = options.find(key);
+  if (it == options.end()) return;
+  OMNIRIG_CHECK(it->is_array(), "field 'options." << key << "' must be an array of names");
+  for (const json& name : *it) {
+    OMNIRIG_CHECK(name.is_string(), "field 'options." << key << "' must hold strings only");
+    try {
+      calibrate->SetFixed(name.get<std::string>(), fix);
+    } catch (const InvalidArgument& e) {
+      throw InvalidArgument("field 'options." + key + "': " + e.what());
+    }
+  }
+}
+
+ImageCalibrationOptions OptionsFromJson(const json& options) {
+  RequireObject(options, "options",
+                {"fix", "free", "huber_loss_px", "outlier_sigmas", "min_outlier_px",
+                 "max_rejection_rounds", "max_view_rms_px", "min_corners_per_view", "min_views",
+                 "max_num_iterations", "principal_point_px", "rim_circle_px", "refine_subpixel",
+                 "try_enhanced", "allow_exhaustive", "redetect", "overlay_error_scale"});
+  ImageCalibrationOptions out;
+  CalibrationOptions& c = out.calibrate;
+  ApplyFixList(options, "fix", true, &c);
+  ApplyFixList(options, "free", false, &c);
+  const std::string p = "options";
+  c.huber_loss_px = GetNumber(options, "huber_loss_px", p, c.huber_loss_px);
+  c.outlier_sigmas = GetNumber(options, "outlier_sigmas", p, c.outlier_sigmas);
+  c.min_outlier_px = GetNumber(options, "min_outlier_px", p, c.min_outlier_px);
+  c.max_rejection_rounds = GetInt(options, "max_rejection_rounds", p, c.max_rejection_rounds);
+  c.max_view_rms_px = GetNumber(options, "max_view_rms_px", p, c.max_view_rms_px);
+  c.min_corners_per_view = GetInt(options, "min_corners_per_view", p, c.min_corners_per_view);
+  c.min_views = GetInt(options, "min_views", p, c.min_views);
+  c.max_num_iterations = GetInt(options, "max_num_iterations", p, c.max_num_iterations);
+  if (options.contains("principal_point_px")) {
+    c.principal_point_px = GetVector<2>(options["principal_point_px"], "options.principal_point_px");
+  }
+  if (options.contains("rim_circle_px")) {
+    c.rim_circle_px = GetVector<3>(options["rim_circle_px"], "options.rim_circle_px");
+  }
+  out.detect.refine_subpixel = GetBool(options, "refine_subpixel", p, true);
+  out.detect.try_enhanced = GetBool(options, "try_enhanced", p, true);
+  out.detect.allow_exhaustive = GetBool(options, "allow_exhaustive", p, false);
+  out.redetect_with_model = GetBool(options, "redetect", p, true);
+  out.overlay_error_scale = GetNumber(options, "overlay_error_scale", p, out.overlay_error_scale);
+  return out;
+}
+
+void HintsFromJson(const json& hints, ImageCalibrationOptions* options) {
+  OMNIRIG_CHECK(hints.is_object(), "field 'hints' must be an object of image name -> 4 corners");
+  for (const auto& [name, corners] : hints.items()) {
+    const std::string path = "hints." + name;
+    OMNIRIG_CHECK(corners.is_array() && corners.size() == 4,
+                  "field '" << path << "' must be an array of 4 [u, v] pixels");
+    std::array<Eigen::Vector2d, 4> hint;
+    for (int i = 0; i < 4; ++i) {
+      hint[i] = GetVector<2>(corners[i], path + "[" + std::to_string(i) + "]");
+    }
+    options->hints[name] = hint;
+  }
+}
+
+json ImageToJson(const CalibrationImageReport& image) {
+  const int inliers = static_cast<int>(std::count(image.inlier.begin(), image.inlier.end(), true));
+  json corners = json::array();
+  for (const auto& c : image.corners_px) corners.push_back({c.x(), c.y()});
+  json out = {{"name", image.name},
+              {"used", image.used},
+              {"reason", image.reason},
+              {"rms_px", image.rms_px},
+              {"num_corners", image.corners_px.size()},
+              {"num_inliers", inliers},
+              {"detector", image.detector},
+              {"overlay", OverlayFileName(image.name)},
+              {"corners_px", corners},
+              {"corner_ids", image.corner_ids}};
+  out["cam_from_board"] = image.used ? PoseToJson(image.cam_from_board) : json(nullptr);
+  return out;
+}
+
+}  // namespace
+
+BoardSpec BoardFromJson(const json& board) {
+  RequireObject(board, "board",
+                {"type", "cols", "rows", "square_size_mm", "marker_size_mm", "aruco_dictionary"});
+  BoardSpec spec;
+  const auto type = board.find("type");
+  if (type != board.end()) {
+    OMNIRIG_CHECK(type->is_string() && (*type == "checkerboard" || *type == "charuco"),
+                  "field 'board.type' must be \"checkerboard\" or \"charuco\"");
+    spec.type = *type == "charuco" ? BoardSpec::Type::kCharuco : BoardSpec::Type::kCheckerboard;
+  }
+  spec.cols = GetInt(board, "cols", "board", 0, true);
+  spec.rows = GetInt(board, "rows", "board", 0, true);
+  spec.square_size_m = GetNumber(board, "square_size_mm", "board", 0.0, true) * 1e-3;
+  const bool charuco = spec.type == BoardSpec::Type::kCharuco;
+  spec.marker_size_m = GetNumber(board, "marker_size_mm", "board", 0.0, charuco) * 1e-3;
+  spec.aruco_dictionary = GetInt(board, "aruco_dictionary", "board", 0);
+  try {
+    spec.Check();
+  } catch (const InvalidArgument& e) {
+    throw InvalidArgument(std::string("field 'board': ") + e.what());
+  }
+  return spec;
+}
+
+CalibrationRequest CalibrationRequestFromJson(const json& params) {
+  RequireObject(params, "params", {"board", "options", "hints"});
+  OMNIRIG_CHECK(params.contains("board"), "missing field 'board'");
+  CalibrationRequest request;
+  request.board = BoardFromJson(params["board"]);
+  if (params.contains("options")) request.options = OptionsFromJson(params["options"]);
+  if (params.contains("hints")) HintsFromJson(params["hints"], &request.options);
+  try {
+    request.options.Check();
+  } catch (const InvalidArgument& e) {
+    throw InvalidArgument(std::string("field 'options': ") + e.what());
+  }
+  return request;
+}
+
+json CalibrationReportToJson(const CalibrationReport& report) {
+  json camera = CameraToJson(report.camera);
+  json stds = json::object();
+  for (int i = 0; i < UnifiedIntrinsics::kNumParams; ++i) {
+    stds[UnifiedIntrinsics::kNames[i]] = report.intrinsics_std[i];
+  }
+  camera["intrinsics_std"] = stds;
+  json images = json::array();
+  for (const auto& image : report.images) images.push_back(ImageToJson(image));
+  const CalibrationSolverSummary& s = report.solver;
+  return {{"camera", camera},
+          {"rms_px", report.rms_px},
+          {"mean_px", report.mean_px},
+          {"std_px", report.std_px},
+          {"rms_all_px", report.rms_all_px},
+          {"error_definitions",
+           "over the inlier corners of the used views, e = reprojected - detected (px): rms_px = "
+           "sqrt(mean |e|^2); mean_px and std_px are the mean and standard deviation of |e|; "
+           "rms_all_px includes the rejected outlier corners"},
+          {"num_views_used", report.num_views_used},
+          {"images", images},
+          {"solver",
+           {{"num_rounds", s.num_rounds},
+            {"iterations", s.iterations},
+            {"initial_cost", s.initial_cost},
+            {"final_cost", s.final_cost},
+            {"termination", s.termination},
+            {"num_residuals", s.num_residuals},
+            {"num_parameters", s.num_parameters},
+            {"num_rejected_corners", s.num_rejected_corners},
+            {"num_rejected_views", s.num_rejected_views},
+            {"brief", s.brief}}},
+          {"timings_s",
+           {{"init", report.timings.init_s},
+            {"solve", report.timings.solve_s},
+            {"covariance", report.timings.covariance_s},
+            {"calibrate_total", report.timings.total_s}}}};
+}
+
+void RegisterCalibrationJobType() {
+  JobType type;
+  type.name = "calibration";
+  type.validate = [](const json& params) { CalibrationRequestFromJson(params); };
+  type.referenced_jobs = [](const json&) { return std::vector<std::string>(); };
+  type.run = [](const json& params, const JobContext& context) {
+    CalibrationRequest request = CalibrationRequestFromJson(params);
+    request.options.calibrate.num_threads = std::max(1, context.num_threads);
+    const CalibrationReport report =
+        CalibrateImages(context.dataset_dir, context.image_names, request.board, request.options,
+                        context.output_dir, context.progress);
+    if (context.log) {
+      context.log("calibration: RMS " + std::to_string(report.rms_px) + " px over " +
+                  std::to_string(report.num_views_used) + " views; " + report.solver.brief);
+    }
+    return CalibrationReportToJson(report);
+  };
+  RegisterJobType(std::move(type));
+}
+
+}  // namespace omnirig::api

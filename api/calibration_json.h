@@ -1,0 +1,45 @@
+#pragma once
+// The `calibration` job type: its parameters, its result JSON, and its registration. The CLI
+// (`omnirig calibrate`) builds the same request and returns the same JSON.
+//
+// params: {"board": {"type": "checkerboard" | "charuco", "cols", "rows" (inner corners),
+//                    "square_size_mm", "marker_size_mm" and "aruco_dictionary" (charuco)},
+//          "options": {"fix": [names], "free": [names], "huber_loss_px", "outlier_sigmas",
+//                      "min_outlier_px", "max_rejection_rounds", "max_view_rms_px",
+//                      "min_corners_per_view", "min_views", "max_num_iterations",
+//                      "principal_point_px": [u, v], "rim_circle_px": [u, v, r],
+//                      "refine_subpixel", "try_enhanced", "allow_exhaustive", "redetect",
+//                      "overlay_error_scale"},
+//          "hints": {"IMAGE_NAME": [[u, v] x 4]}}   (all but "board" optional)
+// result: {"camera": {"model", "image_size", "intrinsics", "intrinsics_std"}, "rms_px",
+//          "mean_px", "std_px", "rms_all_px", "error_definitions", "num_views_used",
+//          "images": [{"name", "used", "reason", "rms_px", "cam_from_board", "num_corners",
+//                      "num_inliers", "detector", "overlay", "corners_px", "corner_ids"}],
+//          "solver": {...}, "timings_s": {...}}
+
+#include <string>
+
+#include <nlohmann/json.hpp>
+
+#include "engine/calib/board.h"
+#include "engine/calib/calibrate.h"
+#include "engine/calib/pipeline.h"
+
+namespace omnirig::api {
+
+struct CalibrationRequest {
+  BoardSpec board;
+  ImageCalibrationOptions options;
+};
+
+// Parses and validates job params; throws InvalidArgument naming the offending field (unknown
+// fields and wrong types included).
+CalibrationRequest CalibrationRequestFromJson(const nlohmann::json& params);
+BoardSpec BoardFromJson(const nlohmann::json& board);
+
+nlohmann::json CalibrationReportToJson(const CalibrationReport& report);
+
+// Registers the job type "calibration" (called from RegisterBuiltinJobTypes()).
+void RegisterCalibrationJobType();
+
+}  // namespace omnirig::api

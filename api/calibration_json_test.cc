@@ -1,0 +1,164 @@
+#include "api/calibration_json.h"
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+
+#include <unistd.h>
+
+#include <gtest/gtest.h>
+#include <opencv2/imgcodecs.hpp>
+
+#include "api/camera_json.h"
+#include "api/job_types.h"
+#include "engine/calib/synthetic_corners.h"
+
+namespace omnirig::api {
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+json ValidParams() {
+  return {{"board", {{"type", "checkerboard"}, {"cols", 8}, {"rows", 6}, {"square_size_mm", 40}}}};
+}
+
+// The message of the InvalidArgument that validating `params` throws ("" when none).
+std::string ValidationError(const json& params) {
+  try {
+    CalibrationRequestFromJson(params);
+  } catch (const InvalidArgument& e) {
+    return e.what();
+  }
+  return "";
+}
+
+TEST(CalibrationJson, ParsesBoardOptionsAndHints) {
+  json params = ValidParams();
+  params["options"] = {{"fix", {"xi", "tangential"}}, {"free", {"k5"}}, {"huber_loss_px", 2.0},
+                       {"principal_point_px", {320, 240}}, {"redetect", false}};
+  params["hints"] = {{"a.png", {{1, 2}, {3, 4}, {5, 6}, {7, 8}}}};
+  const CalibrationRequest request = CalibrationRequestFromJson(params);
+  EXPECT_EQ(request.board.cols, 8);
+  EXPECT_DOUBLE_EQ(request.board.square_size_m, 0.04);
+  const auto& fixed = request.options.calibrate.fixed;
+  EXPECT_TRUE(fixed[UnifiedIntrinsics::kXi]);
+  EXPECT_TRUE(fixed[UnifiedIntrinsics::kK3]);
+  EXPECT_FALSE(fixed[UnifiedIntrinsics::kK5]);
+  EXPECT_TRUE(fixed[UnifiedIntrinsics::kAlpha]);  // default
+  EXPECT_EQ(request.options.calibrate.huber_loss_px, 2.0);
+  EXPECT_FALSE(request.options.redetect_with_model);
+  ASSERT_EQ(request.options.hints.count("a.png"), 1u);
+  EXPECT_EQ(request.options.hints.at("a.png")[3], Eigen::Vector2d(7, 8));
+}
+
+TEST(CalibrationJson, ValidationNamesTheField) {
+  EXPECT_NE(ValidationError(json::object()).find("'board'"), std::string::npos);
+  json params = ValidParams();
+  params["board"]["colz"] = 3;
+  EXPECT_NE(ValidationError(params).find("board.colz"), std::string::npos);
+  params = ValidParams();
+  params["board"]["cols"] = "8";
+  EXPECT_NE(ValidationError(params).find("board.cols"), std::string::npos);
+  params = ValidParams();
+  params["board"]["square_size_mm"] = 4e6;
+  EXPECT_NE(ValidationError(params).find("square size"), std::string::npos);
+  params = ValidParams();
+  params["board"]["type"] = "circles";
+  EXPECT_NE(ValidationError(params).find("board.type"), std::string::npos);
+  params = ValidParams();
+  params["board"]["type"] = "charuco";
+  EXPECT_NE(ValidationError(params).find("board.marker_size_mm"), std::string::npos);
+  params = ValidParams();
+  params["options"] = {{"fix", {"k9"}}};
+  EXPECT_NE(ValidationError(params).find("options.fix"), std::string::npos);
+  params = ValidParams();
+  params["options"] = {{"max_num_iterations", 1.5}};
+  EXPECT_NE(ValidationError(params).find("options.max_num_iterations"), std::string::npos);
+  params = ValidParams();
+  params["options"] = {{"speed", "fast"}};
+  EXPECT_NE(ValidationError(params).find("options.speed"), std::string::npos);
+  params = ValidParams();
+  params["hints"] = {{"a.png", {{1, 2}, {3, 4}}}};
+  EXPECT_NE(ValidationError(params).find("hints.a.png"), std::string::npos);
+  params = ValidParams();
+  params["extra"] = 1;
+  EXPECT_NE(ValidationError(params).find("params.extra"), std::string::npos);
+  EXPECT_EQ(ValidationError(ValidParams()), "");
+}
+
+TEST(CalibrationJson, ResultHasTheIssuesKeys) {
+  CameraModel camera;
+  camera.width = 1024;
+  camera.height = 768;
+  camera.intrinsics.params = {0.9, 300, 300, 512, 384, 0, -0.1, 0.02, 0, 0, 0};
+  BoardSpec board;
+  board.cols = 8;
+  board.rows = 6;
+  board.square_size_m = 0.04;
+  SyntheticCornerOptions synth;
+  synth.num_views = 6;
+  synth.noise_px = 0.1;
+  std::vector<CalibrationView> views = MakeSyntheticCornerSet(camera, board, synth).views;
+  views.push_back({"missing.png", {}});
+  views.back().detection.reason = "no checkerboard 8x6 (40 mm) found";
+  const json result = CalibrationReportToJson(
+      Calibrate(views, camera.width, camera.height, board, CalibrationOptions(), {}));
+  EXPECT_EQ(result["camera"]["model"], "unified");
+  EXPECT_EQ(result["camera"]["image_size"], json({1024, 768}));
+  for (const char* name : UnifiedIntrinsics::kNames) {
+    EXPECT_TRUE(result["camera"]["intrinsics"].contains(name)) << name;
+    EXPECT_TRUE(result["camera"]["intrinsics_std"].contains(name)) << name;
+  }
+  for (const char* key : {"rms_px", "mean_px", "std_px", "images", "solver"}) {
+    EXPECT_TRUE(result.contains(key)) << key;
+  }
+  ASSERT_EQ(result["images"].size(), 7u);
+  const json& used = result["images"][0];
+  EXPECT_EQ(used["name"], "view0");
+  EXPECT_TRUE(used["used"].get<bool>());
+  EXPECT_EQ(used["cam_from_board"]["rotation_wxyz"].size(), 4u);
+  EXPECT_EQ(used["cam_from_board"]["translation_m"].size(), 3u);
+  const json& unused = result["images"][6];
+  EXPECT_FALSE(unused["used"].get<bool>());
+  EXPECT_EQ(unused["reason"], "no checkerboard 8x6 (40 mm) found");
+  EXPECT_TRUE(unused["cam_from_board"].is_null());
+  EXPECT_EQ(result["solver"]["termination"], "CONVERGENCE");
+  // The camera part reads back with the shared camera JSON.
+  EXPECT_NEAR(CameraFromJson(result["camera"]).intrinsics.u0(),
+              result["camera"]["intrinsics"]["u0"].get<double>(), 0.0);
+}
+
+TEST(CalibrationJob, IsRegisteredAndFailsClearlyOnUnusableImages) {
+  RegisterCalibrationJobType();
+  const JobType* type = FindJobType("calibration");
+  ASSERT_NE(type, nullptr);
+  EXPECT_THROW(type->validate(json::object()), InvalidArgument);
+  EXPECT_TRUE(type->referenced_jobs(ValidParams()).empty());
+
+  const fs::path dir = fs::temp_directory_path() / ("omnirig_calib_job_" + std::to_string(::getpid()));
+  fs::create_directories(dir / "out");
+  cv::imwrite((dir / "blank.png").string(), cv::Mat(240, 320, CV_8UC1, cv::Scalar(128)));
+  std::ofstream((dir / "truncated.jpg").string()) << "\xff\xd8\xff\xe0 not really a jpeg";
+  JobContext context;
+  context.dataset_dir = dir;
+  context.image_names = {"blank.png", "truncated.jpg"};
+  context.output_dir = dir / "out";
+  int detect_reports = 0;
+  context.progress.report = [&](double, const std::string& stage, const std::string&) {
+    detect_reports += stage == "detect";
+  };
+  try {
+    type->run(ValidParams(), context);
+    FAIL() << "expected InvalidArgument";
+  } catch (const InvalidArgument& e) {
+    const std::string message = e.what();
+    EXPECT_NE(message.find("blank.png: no checkerboard 8x6"), std::string::npos) << message;
+    EXPECT_NE(message.find("truncated.jpg: cannot read the image"), std::string::npos) << message;
+  }
+  EXPECT_EQ(detect_reports, 2);  // one per image, readable or not
+  fs::remove_all(dir);
+}
+
+}  // namespace
+}  // namespace omnirig::api

@@ -1,0 +1,72 @@
+#pragma once
+// The `relative_pose` job type: the metric pose between a stereo rig's two cameras from image
+// pairs of a shared board (engine/stereo/relative_pose.h).
+//
+// Dataset: images named cam0/NAME and cam1/NAME, paired by NAME.
+// Params (unknown fields are refused):
+//   {"board": {"type": "checkerboard" | "charuco", "cols", "rows", "square_size_mm",
+//              "marker_size_mm", "aruco_dictionary"},             (api/calibration_json.h)
+//    "calibrations": {"cam0": JOB_ID, "cam1": JOB_ID},            (optional: without it both
+//                                                                  cameras are calibrated from
+//                                                                  their own images first)
+//    "refine_intrinsics": bool (default: true when the job calibrates the cameras itself, false
+//                               with given calibrations),
+//    "resolve_corner_order": bool, "huber_loss_px": number, "max_num_iterations": int}
+// Result:
+//   {"cam0_from_cam1": {"rotation_wxyz", "translation_m"}, "baseline_m", "baseline_std_m",
+//    "translation_std_m", "rotation_std_deg", "rms_px",
+//    "pairs": [{"name", "used", "reason", "rms_px", "num_corners", "cam1_corner_order",
+//               "cam0_from_board"}],
+//    "cameras": {"cam0": camera, "cam1": camera},  (the calibration results' `camera` objects,
+//                                                   or the refined ones)
+//    "linear_cam0_from_cam1", "averaged_cam0_from_cam1", "num_pairs_used",
+//    "spread_eigen_ratio", "calibrations": {...}, "solver": {...}}
+
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "api/job_types.h"
+#include "engine/calib/board.h"
+#include "engine/stereo/relative_pose.h"
+
+namespace omnirig::api {
+
+struct RelativePoseParams {
+  BoardSpec board;
+  std::optional<std::string> cam0_calibration_job;  // both or neither
+  std::optional<std::string> cam1_calibration_job;
+  RelativePoseOptions options;
+};
+
+// Throws InvalidArgument naming the field for unknown fields, wrong types, invalid values.
+RelativePoseParams RelativePoseParamsFromJson(const nlohmann::json& params);
+
+struct ImagePairNames {
+  std::string name;  // NAME
+  std::string cam0;  // "cam0/NAME"
+  std::string cam1;  // "cam1/NAME"
+};
+
+// Pairs a dataset's images by NAME. Throws InvalidArgument listing images without a partner,
+// and when there are no cam0/ or cam1/ images at all. Other images are ignored.
+std::vector<ImagePairNames> MatchImagePairs(const std::vector<std::string>& image_names);
+
+// The result JSON. camera0/camera1: the `camera` objects to report (the calibration results'
+// own, so that their extra keys such as intrinsics_std survive); replaced by the refined
+// cameras when the intrinsics were refined.
+nlohmann::json RelativePoseResultToJson(const RelativePoseReport& report,
+                                        const nlohmann::json& camera0,
+                                        const nlohmann::json& camera1, bool intrinsics_refined);
+
+// Runs the job: load or calibrate the cameras, read and check every image, detect, estimate.
+// Throws InvalidArgument for bad input (before any detection where it can) and when no rig
+// can be estimated (too few pairs, degenerate geometry), Cancelled on cancellation.
+nlohmann::json RunRelativePoseJob(const nlohmann::json& params, const JobContext& context);
+
+// Registers `relative_pose` with api/job_types.h.
+void RegisterRelativePoseJobType();
+
+}  // namespace omnirig::api

@@ -1,0 +1,220 @@
+#include "api/relpose_json.h"
+
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <string>
+
+#include <gtest/gtest.h>
+#include <opencv2/imgcodecs.hpp>
+
+#include "api/camera_json.h"
+#include "engine/util/check.h"
+
+namespace omnirig::api {
+namespace {
+
+using nlohmann::json;
+
+json Board() {
+  return {{"type", "checkerboard"}, {"cols", 9}, {"rows", 6}, {"square_size_mm", 24.23}};
+}
+
+// The message of the InvalidArgument that `f` throws ("" when it does not throw).
+template <typename F>
+std::string ErrorOf(F f) {
+  try {
+    f();
+  } catch (const InvalidArgument& e) {
+    return e.what();
+  }
+  return "";
+}
+
+TEST(RelposeJson, ParamsParseBoardCalibrationsAndOptions) {
+  const json params = {{"board", Board()},
+                       {"calibrations", {{"cam0", "job-a"}, {"cam1", "job-b"}}},
+                       {"refine_intrinsics", true},
+                       {"huber_loss_px", 0.5}};
+  const RelativePoseParams parsed = RelativePoseParamsFromJson(params);
+  EXPECT_EQ(parsed.board.cols, 9);
+  EXPECT_EQ(parsed.board.rows, 6);
+  EXPECT_NEAR(parsed.board.square_size_m, 0.02423, 1e-12);
+  EXPECT_EQ(*parsed.cam0_calibration_job, "job-a");
+  EXPECT_EQ(*parsed.cam1_calibration_job, "job-b");
+  EXPECT_TRUE(parsed.options.refine_intrinsics);
+  EXPECT_EQ(parsed.options.huber_loss_px, 0.5);
+  const RelativePoseParams self_calibrating = RelativePoseParamsFromJson({{"board", Board()}});
+  EXPECT_FALSE(self_calibrating.cam0_calibration_job);
+  EXPECT_TRUE(self_calibrating.options.refine_intrinsics);
+  EXPECT_FALSE(RelativePoseParamsFromJson(
+                   {{"board", Board()}, {"calibrations", {{"cam0", "a"}, {"cam1", "b"}}}})
+                   .options.refine_intrinsics);
+}
+
+TEST(RelposeJson, ParamsRefuseUnknownFieldsAndWrongTypesNamingTheField) {
+  EXPECT_NE(ErrorOf([] { RelativePoseParamsFromJson({{"board", Board()}, {"bord", 1}}); })
+                .find("params.bord"),
+            std::string::npos);
+  json board = Board();
+  board["cols"] = "9";
+  EXPECT_NE(ErrorOf([&] { RelativePoseParamsFromJson({{"board", board}}); }).find("board.cols"),
+            std::string::npos);
+  board = Board();
+  board["colour"] = "red";
+  EXPECT_NE(ErrorOf([&] { RelativePoseParamsFromJson({{"board", board}}); }).find("board.colour"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf([] { RelativePoseParamsFromJson(json::object()); }).find("params.board"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf([] {
+              RelativePoseParamsFromJson({{"board", Board()}, {"calibrations", {{"cam0", "a"}}}});
+            }).find("calibrations.cam1"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf([] {
+              RelativePoseParamsFromJson(
+                  {{"board", Board()}, {"calibrations", {{"cam0", "a"}, {"cam1", 7}}}});
+            }).find("calibrations.cam1"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf([] {
+              RelativePoseParamsFromJson({{"board", Board()}, {"refine_intrinsics", "yes"}});
+            }).find("refine_intrinsics"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf([] {
+              RelativePoseParamsFromJson({{"board", Board()}, {"huber_loss_px", -1}});
+            }).find("huber_loss_px"),
+            std::string::npos);
+  EXPECT_THROW(RelativePoseParamsFromJson(json::array()), InvalidArgument);
+}
+
+TEST(RelposeJson, JobTypeIsRegisteredAndNamesItsCalibrations) {
+  RegisterRelativePoseJobType();
+  const JobType* type = FindJobType("relative_pose");
+  ASSERT_NE(type, nullptr);
+  const json params = {{"board", Board()}, {"calibrations", {{"cam0", "c0"}, {"cam1", "c1"}}}};
+  EXPECT_NO_THROW(type->validate(params));
+  EXPECT_EQ(type->referenced_jobs(params), (std::vector<std::string>{"c0", "c1"}));
+  EXPECT_TRUE(type->referenced_jobs({{"board", Board()}}).empty());
+  EXPECT_THROW(type->validate({{"board", Board()}, {"extra", 1}}), InvalidArgument);
+}
+
+TEST(RelposeJson, PairsMatchByNameAndMissingPartnersAreRefused) {
+  const auto pairs = MatchImagePairs({"cam0/b.png", "cam1/a.png", "cam0/a.png", "cam1/b.png",
+                                      "notes.txt", "cam2/a.png"});
+  ASSERT_EQ(pairs.size(), 2u);
+  EXPECT_EQ(pairs[0].name, "a.png");
+  EXPECT_EQ(pairs[0].cam0, "cam0/a.png");
+  EXPECT_EQ(pairs[0].cam1, "cam1/a.png");
+  const std::string missing =
+      ErrorOf([] { MatchImagePairs({"cam0/a.png", "cam1/a.png", "cam0/c.png", "cam1/d.png"}); });
+  EXPECT_NE(missing.find("cam0/c.png has no cam1/c.png"), std::string::npos) << missing;
+  EXPECT_NE(missing.find("cam1/d.png has no cam0/d.png"), std::string::npos) << missing;
+  EXPECT_NE(ErrorOf([] { MatchImagePairs({"cam0/a.png", "left/a.png"}); }).find("cam1/"),
+            std::string::npos);
+}
+
+TEST(RelposeJson, ResultHasTheIssueKeys) {
+  RelativePoseReport report;
+  report.success = true;
+  report.rig.cam0_from_cam1 = Rigid3d(Eigen::Quaterniond::Identity(), Eigen::Vector3d(0, 0, 0.1));
+  report.rig.cam0.width = report.rig.cam1.width = 640;
+  report.rig.cam0.height = report.rig.cam1.height = 480;
+  report.baseline_m = 0.1;
+  report.baseline_std_m = 1e-5;
+  report.rms_px = 0.2;
+  report.pairs.resize(2);
+  report.pairs[0] = {"a", true, "", 0.19, 54, 1, Rigid3d()};
+  report.pairs[1].name = "b";
+  report.pairs[1].reason = "board seen by cam0 only";
+  const json camera0 = {{"model", "unified"}, {"marker", 0}};
+  const json result = RelativePoseResultToJson(report, camera0, camera0, false);
+  EXPECT_EQ(result["cam0_from_cam1"]["rotation_wxyz"].size(), 4u);
+  EXPECT_EQ(result["cam0_from_cam1"]["translation_m"][2].get<double>(), 0.1);
+  EXPECT_EQ(result["baseline_m"].get<double>(), 0.1);
+  EXPECT_EQ(result["baseline_std_m"].get<double>(), 1e-5);
+  EXPECT_EQ(result["rms_px"].get<double>(), 0.2);
+  EXPECT_EQ(result["cameras"]["cam0"], camera0);  // the calibration's own object
+  ASSERT_EQ(result["pairs"].size(), 2u);
+  EXPECT_EQ(result["pairs"][0]["name"], "a");
+  EXPECT_TRUE(result["pairs"][0]["used"].get<bool>());
+  EXPECT_EQ(result["pairs"][0]["cam1_corner_order"], 1);
+  EXPECT_FALSE(result["pairs"][1]["used"].get<bool>());
+  EXPECT_TRUE(result["pairs"][1]["rms_px"].is_null());
+  EXPECT_EQ(result["pairs"][1]["reason"], "board seen by cam0 only");
+  // With refined intrinsics the cameras are the refined ones.
+  const json refined = RelativePoseResultToJson(report, camera0, camera0, true);
+  EXPECT_EQ(refined["cameras"]["cam0"]["image_size"][0], 640);
+}
+
+// A dataset folder with small images, for the checks that run before any detection.
+class RelposeJobInput : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = std::filesystem::temp_directory_path() /
+           ("omnirig_relpose_test_" + std::to_string(std::random_device()()));
+    std::filesystem::create_directories(dir_ / "cam0");
+    std::filesystem::create_directories(dir_ / "cam1");
+    context_.dataset_dir = dir_;
+    camera_.width = 64;
+    camera_.height = 48;
+    camera_.intrinsics.params = {0.9, 20, 20, 32, 24, 0, 0, 0, 0, 0, 0};
+    context_.load_result = [this](const std::string& id) -> json {
+      if (id == "not-a-calibration") return {{"frames", 3}};
+      return {{"camera", CameraToJson(camera_)}};
+    };
+  }
+  void TearDown() override { std::filesystem::remove_all(dir_); }
+
+  void WriteImage(const std::string& name, int width, int height) {
+    cv::imwrite((dir_ / name).string(), cv::Mat(height, width, CV_8UC1, cv::Scalar(128)));
+    context_.image_names.push_back(name);
+  }
+  json Params() const {
+    return {{"board", Board()}, {"calibrations", {{"cam0", "c0"}, {"cam1", "c1"}}}};
+  }
+
+  std::filesystem::path dir_;
+  JobContext context_;
+  CameraModel camera_;
+};
+
+TEST_F(RelposeJobInput, ImageSizesDifferentFromTheCalibrationsAreRefused) {
+  WriteImage("cam0/a.png", 64, 48);
+  WriteImage("cam1/a.png", 64, 48);
+  WriteImage("cam0/b.png", 64, 48);
+  WriteImage("cam1/b.png", 80, 48);
+  const std::string error = ErrorOf([&] { RunRelativePoseJob(Params(), context_); });
+  EXPECT_NE(error.find("cam1/b.png is 80x48"), std::string::npos) << error;
+  EXPECT_NE(error.find("calibration"), std::string::npos) << error;
+}
+
+TEST_F(RelposeJobInput, MissingPartnersUnreadableImagesAndWrongJobsAreRefused) {
+  WriteImage("cam0/a.png", 64, 48);
+  context_.image_names.push_back("cam0/z.png");
+  WriteImage("cam1/a.png", 64, 48);
+  EXPECT_NE(ErrorOf([&] { RunRelativePoseJob(Params(), context_); }).find("cam0/z.png"),
+            std::string::npos);
+  context_.image_names.erase(context_.image_names.begin() + 1);  // cam0/z.png
+  std::ofstream(dir_ / "cam0/t.png") << "not an image";
+  std::ofstream(dir_ / "cam1/t.png") << "not an image";
+  context_.image_names.push_back("cam0/t.png");
+  context_.image_names.push_back("cam1/t.png");
+  EXPECT_NE(ErrorOf([&] { RunRelativePoseJob(Params(), context_); }).find("cannot be read"),
+            std::string::npos);
+  json params = Params();
+  params["calibrations"]["cam1"] = "not-a-calibration";
+  EXPECT_NE(ErrorOf([&] { RunRelativePoseJob(params, context_); }).find("not-a-calibration"),
+            std::string::npos);
+}
+
+TEST_F(RelposeJobInput, NoBoardAnywhereFailsWithEachPairsReason) {
+  WriteImage("cam0/a.png", 64, 48);
+  WriteImage("cam1/a.png", 64, 48);
+  WriteImage("cam0/b.png", 64, 48);
+  WriteImage("cam1/b.png", 64, 48);
+  const std::string error = ErrorOf([&] { RunRelativePoseJob(Params(), context_); });
+  EXPECT_NE(error.find("too few usable pairs"), std::string::npos) << error;
+  EXPECT_NE(error.find("a.png: board not found in either camera"), std::string::npos) << error;
+}
+
+}  // namespace
+}  // namespace omnirig::api

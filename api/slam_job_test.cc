@@ -1,0 +1,161 @@
+// End to end: a short synthetic stereo sequence written as a dataset, run through the `slam`
+// job type, evaluated against its ground truth. Label integration (renders images).
+
+#include <filesystem>
+#include <fstream>
+
+#include <gtest/gtest.h>
+#include <opencv2/imgcodecs.hpp>
+
+#include "api/camera_json.h"
+#include "api/slam_json.h"
+#include "engine/slam/map_io.h"
+#include "engine/synth/presets.h"
+
+namespace omnirig::api {
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+class SlamJob : public ::testing::Test {
+ protected:
+  // Renders and writes the dataset once for every test of the suite.
+  static void SetUpTestSuite() {
+    synth::StereoSequenceOptions options;
+    options.num_frames = 12;
+    options.path_length_m = 1.65;  // ~20 cm steps along the curving path
+    options.width = 640;
+    options.height = 480;
+    options.render.noise_sigma = 1.0;
+    sequence_ = new synth::StereoSequence(synth::MakeStereoSequence(options));
+    dir_ = new fs::path(fs::temp_directory_path() /
+                        ("omnirig_slam_job_" + std::to_string(::getpid())));
+    fs::remove_all(*dir_);
+    for (const char* camera : {"cam0", "cam1"}) fs::create_directories(*dir_ / "data" / camera);
+    image_names_ = new std::vector<std::string>();
+    std::vector<slam::StampedPose> gt;
+    for (size_t i = 0; i < sequence_->names.size(); ++i) {
+      for (int c = 0; c < 2; ++c) {
+        const std::string name = "cam" + std::to_string(c) + "/" + sequence_->names[i] + ".png";
+        cv::imwrite((*dir_ / "data" / name).string(), sequence_->images[c][i]);
+        image_names_->push_back(name);
+      }
+      gt.push_back({sequence_->timestamps_s[i], sequence_->world_from_rig[i]});
+    }
+    std::sort(image_names_->begin(), image_names_->end());
+    slam::WriteTum(*dir_ / "data" / "gt.tum", gt);
+  }
+  static void TearDownTestSuite() {
+    fs::remove_all(*dir_);
+    delete sequence_;
+    delete dir_;
+    delete image_names_;
+  }
+
+  void SetUp() override {
+    context_.image_names = *image_names_;
+    context_.job_id = "slam-test";
+    context_.dataset_dir = *dir_ / "data";
+    context_.output_dir = *dir_ / ("out_" + std::string(::testing::UnitTest::GetInstance()
+                                                           ->current_test_info()->name()));
+    context_.num_threads = 2;
+    const json rig = RigToJson(sequence_->rig);
+    context_.load_result = [rig](const std::string& id) {
+      if (id != "rig-job") throw InvalidArgument("no job " + id);
+      return rig;
+    };
+  }
+
+  static synth::StereoSequence* sequence_;
+  static fs::path* dir_;
+  static std::vector<std::string>* image_names_;
+  JobContext context_;
+};
+
+synth::StereoSequence* SlamJob::sequence_ = nullptr;
+fs::path* SlamJob::dir_ = nullptr;
+std::vector<std::string>* SlamJob::image_names_ = nullptr;
+
+TEST_F(SlamJob, TracksTheSequenceWithSmallDriftAndWritesArtifacts) {
+  std::vector<double> fractions;
+  context_.progress.report = [&](double f, const std::string&, const std::string&) {
+    fractions.push_back(f);
+  };
+  RegisterSlamJobType();
+  const JobType* type = FindJobType("slam");
+  ASSERT_NE(type, nullptr);
+  const json params = {{"rig", "rig-job"}, {"ground_truth", "gt.tum"}};
+  type->validate(params);
+  const json result = type->run(params, context_);
+
+  EXPECT_EQ(result["num_frames"], 12);
+  EXPECT_EQ(result["num_tracked"], 12);
+  for (const json& frame : result["frames"]) {
+    EXPECT_NE(frame["state"], "lost") << frame["name"] << ": " << frame["reason"];
+  }
+  const json& evaluation = result["evaluation"];
+  double gt_length = 0;
+  for (size_t i = 1; i < sequence_->world_from_rig.size(); ++i) {
+    gt_length += (sequence_->world_from_rig[i].translation -
+                  sequence_->world_from_rig[i - 1].translation).norm();
+  }
+  EXPECT_NEAR(evaluation["path_length_m"].get<double>(), gt_length, 1e-6);
+  EXPECT_LT(evaluation["final_drift_percent"].get<double>(), 3.0) << evaluation.dump(2);
+  EXPECT_LT(evaluation["ate_rmse_m"].get<double>(), 0.02);
+  EXPECT_GT(result["num_map_points"].get<int>(), 500);
+  ASSERT_FALSE(result["global_bundle_adjustment"].is_null());
+  EXPECT_LT(result["global_bundle_adjustment"]["final_rms_px"].get<double>(), 1.0);
+
+  // Artifacts: trajectory.json (one entry per frame), TUM (one line per tracked frame), PLY.
+  std::ifstream trajectory_file(context_.output_dir / "trajectory.json");
+  const json trajectory = json::parse(trajectory_file);
+  EXPECT_EQ(trajectory["frames"].size(), 12u);
+  EXPECT_EQ(trajectory["frames"][3]["world_from_rig"]["rotation_wxyz"].size(), 4u);
+  EXPECT_EQ(slam::ReadTum(context_.output_dir / "trajectory.tum").size(), 12u);
+  std::ifstream ply(context_.output_dir / "map.ply", std::ios::binary);
+  std::string line;
+  std::getline(ply, line);
+  EXPECT_EQ(line, "ply");
+  std::getline(ply, line);
+  EXPECT_EQ(line, "format binary_little_endian 1.0");
+  EXPECT_TRUE(fs::exists(context_.output_dir / "report.json"));
+
+  ASSERT_FALSE(fractions.empty());
+  EXPECT_TRUE(std::is_sorted(fractions.begin(), fractions.end()));
+}
+
+TEST_F(SlamJob, ABlackFrameIsLostAndTheSequenceGoesOn) {
+  const fs::path black = context_.dataset_dir / ("cam0/" + sequence_->names[5] + ".png");
+  cv::imwrite(black.string(), cv::Mat(sequence_->images[0][5].size(), CV_8UC3, cv::Scalar::all(0)));
+  json result;
+  try {
+    result = RunSlamJob({{"rig", "rig-job"}, {"ground_truth", "gt.tum"}}, context_);
+  } catch (...) {
+    cv::imwrite(black.string(), sequence_->images[0][5]);
+    throw;
+  }
+  cv::imwrite(black.string(), sequence_->images[0][5]);  // the other tests use the real frame
+  const json& frames = result["frames"];
+  EXPECT_EQ(frames[5]["state"], "lost");
+  EXPECT_NE(frames[5]["reason"].get<std::string>().find("black"), std::string::npos);
+  EXPECT_TRUE(frames[5]["world_from_rig"].is_null());
+  for (int i = 6; i < 12; ++i) EXPECT_NE(frames[i]["state"], "lost") << i;
+  EXPECT_EQ(result["num_tracked"], 11);
+  EXPECT_LT(result["evaluation"]["final_drift_percent"].get<double>(), 5.0);
+}
+
+TEST_F(SlamJob, CancellationStopsTheRun) {
+  int reports = 0;
+  context_.progress.report = [&](double, const std::string&, const std::string&) { ++reports; };
+  context_.progress.is_cancelled = [&] { return reports >= 3; };
+  EXPECT_THROW(RunSlamJob({{"rig", "rig-job"}}, context_), Cancelled);
+  EXPECT_LT(reports, 6);
+}
+
+TEST_F(SlamJob, RefusesAnUnknownRigJob) {
+  EXPECT_THROW(RunSlamJob({{"rig", "nope"}}, context_), InvalidArgument);
+}
+
+}  // namespace
+}  // namespace omnirig::api

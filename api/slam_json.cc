@@ -1,0 +1,398 @@
+#include "api/slam_json.h"
+
+#include <algorithm>
+#include <cctype>
+#include <fstream>
+#include <map>
+#include <set>
+#include <sstream>
+
+#include <opencv2/imgcodecs.hpp>
+
+#include "api/camera_json.h"
+#include "engine/slam/evaluation.h"
+#include "engine/slam/map_io.h"
+#include "engine/util/check.h"
+
+namespace omnirig::api {
+namespace {
+
+using nlohmann::json;
+namespace fs = std::filesystem;
+
+const std::set<std::string> kOptionFields = {
+    "max_features", "contrast_threshold", "detection_scale", "max_epipolar_error_rad",
+    "temporal_max_descriptor_ratio", "temporal_gate_rad", "essential_max_angular_error_rad",
+    "local_window_frames", "local_max_iterations", "global_bundle_adjustment", "huber_scale_px",
+    "max_reprojection_error_px", "min_features", "min_stereo_points", "min_matches",
+    "min_tracked_landmarks", "seed"};
+
+double Number(const json& object, const std::string& key) {
+  OMNIRIG_CHECK(object[key].is_number(), "field 'options." << key << "' must be a number");
+  return object[key].get<double>();
+}
+
+int Integer(const json& object, const std::string& key) {
+  OMNIRIG_CHECK(object[key].is_number_integer(),
+                "field 'options." << key << "' must be an integer");
+  return object[key].get<int>();
+}
+
+// Width and height from a PNG's IHDR or a JPEG's SOF marker, without decoding the pixels;
+// nullopt for other formats.
+std::optional<std::pair<int, int>> SizeFromHeader(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return std::nullopt;
+  unsigned char head[24] = {};
+  in.read(reinterpret_cast<char*>(head), sizeof(head));
+  if (in.gcount() == 24 && head[0] == 0x89 && head[1] == 'P' && head[2] == 'N' && head[3] == 'G') {
+    auto be32 = [&](int at) {
+      return (head[at] << 24) | (head[at + 1] << 16) | (head[at + 2] << 8) | head[at + 3];
+    };
+    return std::make_pair(be32(16), be32(20));
+  }
+  if (head[0] != 0xFF || head[1] != 0xD8) return std::nullopt;
+  in.clear();
+  in.seekg(2);
+  for (;;) {
+    unsigned char marker[4];
+    if (!in.read(reinterpret_cast<char*>(marker), 4) || marker[0] != 0xFF) return std::nullopt;
+    const int length = (marker[2] << 8) | marker[3];
+    const unsigned char type = marker[1];
+    const bool is_sof = type >= 0xC0 && type <= 0xCF && type != 0xC4 && type != 0xC8 && type != 0xCC;
+    if (is_sof) {
+      unsigned char sof[5];
+      if (!in.read(reinterpret_cast<char*>(sof), 5)) return std::nullopt;
+      return std::make_pair((sof[3] << 8) | sof[4], (sof[1] << 8) | sof[2]);
+    }
+    in.seekg(length - 2, std::ios::cur);
+  }
+}
+
+std::pair<int, int> ImageSize(const fs::path& dataset_dir, const std::string& name) {
+  const fs::path path = dataset_dir / name;
+  OMNIRIG_CHECK(fs::is_regular_file(path), "image " << name << " is missing from the dataset");
+  if (const auto size = SizeFromHeader(path)) return *size;
+  const cv::Mat image = cv::imread(path.string(), cv::IMREAD_UNCHANGED);
+  OMNIRIG_CHECK(!image.empty(), "image " << name << " cannot be read (truncated or not an image)");
+  return {image.cols, image.rows};
+}
+
+json BundleAdjustmentToJson(const slam::BundleAdjustmentReport& r) {
+  return {{"num_free_poses", r.num_free_poses},     {"num_constant_poses", r.num_constant_poses},
+          {"num_points", r.num_points},             {"num_residuals", r.num_residuals},
+          {"iterations", r.iterations},             {"initial_rms_px", r.initial_rms_px},
+          {"final_rms_px", r.final_rms_px},         {"num_observations_pruned", r.num_observations_pruned},
+          {"num_points_pruned", r.num_points_pruned}, {"linear_solver", r.linear_solver},
+          {"termination", r.termination},           {"time_s", r.time_s}};
+}
+
+json TimesToJson(const slam::StageTimes& t) {
+  return {{"load", t.load_s},   {"detect", t.detect_s}, {"stereo", t.stereo_s},
+          {"match", t.match_s}, {"motion", t.motion_s}, {"map", t.map_s},
+          {"local_ba", t.local_ba_s}};
+}
+
+json FrameToJson(const slam::FrameReport& f) {
+  return {{"name", f.name},
+          {"state", f.state},
+          {"reason", f.reason},
+          {"motion_source", f.motion_source},
+          {"num_features", {f.num_features[0], f.num_features[1]}},
+          {"num_stereo_points", f.num_stereo_points},
+          {"num_matches", f.num_matches},
+          {"num_essential_inliers", f.num_essential_inliers},
+          {"num_scale_inliers", f.num_scale_inliers},
+          {"num_tracked_landmarks", f.num_tracked_landmarks},
+          {"num_new_landmarks", f.num_new_landmarks},
+          {"times_s", TimesToJson(f.times)},
+          {"local_bundle_adjustment", f.local_bundle_adjustment
+                                          ? BundleAdjustmentToJson(*f.local_bundle_adjustment)
+                                          : json(nullptr)},
+          {"world_from_rig", f.world_from_rig ? PoseToJson(*f.world_from_rig) : json(nullptr)}};
+}
+
+json EvaluationToJson(const slam::TrajectoryErrors& e) {
+  return {{"num_poses", e.num_poses},
+          {"path_length_m", e.path_length_m},
+          {"ate_rmse_m", e.ate_rmse_m},
+          {"ate_max_m", e.ate_max_m},
+          {"rpe_translation_rmse_m", e.rpe_translation_rmse_m},
+          {"rpe_rotation_rmse_deg", e.rpe_rotation_rmse_deg},
+          {"final_drift_percent", e.final_drift_percent},
+          {"max_drift_percent", e.max_drift_percent},
+          {"gt_from_estimate", PoseToJson(e.gt_from_estimate)}};
+}
+
+// Timestamps for the TUM file: the ground truth's when given, else NAME read as a number
+// (datasets often name frames by time), else the frame index in seconds.
+std::vector<double> Timestamps(const std::vector<std::string>& names,
+                               const std::vector<slam::StampedPose>& ground_truth) {
+  std::vector<double> stamps(names.size());
+  for (size_t i = 0; i < names.size(); ++i) {
+    if (!ground_truth.empty()) {
+      stamps[i] = ground_truth[i].timestamp_s;
+      continue;
+    }
+    const std::string stem = fs::path(names[i]).stem().string();
+    char* end = nullptr;
+    const double value = std::strtod(stem.c_str(), &end);
+    stamps[i] = (!stem.empty() && end == stem.c_str() + stem.size()) ? value : static_cast<double>(i);
+  }
+  return stamps;
+}
+
+json WriteArtifacts(const StereoRig& rig, const slam::SlamResult& result,
+                    const std::vector<double>& stamps, const fs::path& output_dir) {
+  fs::create_directories(output_dir);
+  json frames = json::array();
+  std::vector<slam::StampedPose> tum;
+  for (size_t i = 0; i < result.frames.size(); ++i) {
+    const slam::FrameReport& f = result.frames[i];
+    frames.push_back({{"name", f.name},
+                      {"state", f.state},
+                      {"reason", f.reason},
+                      {"timestamp_s", stamps[i]},
+                      {"world_from_rig",
+                       f.world_from_rig ? PoseToJson(*f.world_from_rig) : json(nullptr)}});
+    if (f.world_from_rig) tum.push_back({stamps[i], *f.world_from_rig});
+  }
+  const json trajectory = {
+      {"world_frame", "the rig frame (cam0's frame) of the first tracked frame"},
+      {"frames", frames},
+      {"rig", RigToJson(rig)}};
+  std::ofstream(output_dir / "trajectory.json") << trajectory.dump(2) << "\n";
+  slam::WriteTum(output_dir / "trajectory.tum", tum);
+  slam::WritePly(output_dir / "map.ply", result.map);
+  return {{"trajectory_json", "trajectory.json"},
+          {"trajectory_tum", "trajectory.tum"},
+          {"map_ply", "map.ply"},
+          {"report_json", "report.json"}};
+}
+
+std::vector<slam::StampedPose> ReadGroundTruth(const fs::path& path, size_t num_frames) {
+  OMNIRIG_CHECK(fs::is_regular_file(path),
+                "ground truth " << path.filename().string() << " is not in the dataset");
+  std::vector<slam::StampedPose> poses = slam::ReadTum(path);
+  OMNIRIG_CHECK(poses.size() == num_frames,
+                "ground truth " << path.filename().string() << " has " << poses.size()
+                                << " poses but the sequence has " << num_frames
+                                << " stereo frames (one pose per frame, in order)");
+  return poses;
+}
+
+}  // namespace
+
+slam::SlamOptions SlamOptionsFromJson(const json& object) {
+  OMNIRIG_CHECK(object.is_object(), "'options' must be a JSON object");
+  for (const auto& [key, value] : object.items()) {
+    OMNIRIG_CHECK(kOptionFields.count(key) > 0, "unknown field 'options." << key << "'");
+  }
+  slam::SlamOptions o;
+  auto has = [&](const char* key) { return object.contains(key); };
+  if (has("max_features")) o.features.max_features = Integer(object, "max_features");
+  if (has("contrast_threshold")) o.features.contrast_threshold = Number(object, "contrast_threshold");
+  if (has("detection_scale")) o.features.detection_scale = Number(object, "detection_scale");
+  if (has("max_epipolar_error_rad")) o.stereo.max_epipolar_error_rad = Number(object, "max_epipolar_error_rad");
+  if (has("temporal_max_descriptor_ratio")) {
+    o.temporal_max_descriptor_ratio = Number(object, "temporal_max_descriptor_ratio");
+  }
+  if (has("temporal_gate_rad")) o.temporal_gate_rad = Number(object, "temporal_gate_rad");
+  if (has("essential_max_angular_error_rad")) {
+    o.essential.max_angular_error_rad = Number(object, "essential_max_angular_error_rad");
+  }
+  if (has("local_window_frames")) o.local_window_frames = Integer(object, "local_window_frames");
+  if (has("local_max_iterations")) o.local_max_iterations = Integer(object, "local_max_iterations");
+  if (has("global_bundle_adjustment")) {
+    OMNIRIG_CHECK(object["global_bundle_adjustment"].is_boolean(),
+                  "field 'options.global_bundle_adjustment' must be true or false");
+    o.global_bundle_adjustment = object["global_bundle_adjustment"].get<bool>();
+  }
+  if (has("huber_scale_px")) o.bundle_adjustment.huber_scale_px = Number(object, "huber_scale_px");
+  if (has("max_reprojection_error_px")) {
+    o.bundle_adjustment.max_reprojection_error_px = Number(object, "max_reprojection_error_px");
+  }
+  if (has("min_features")) o.min_features = Integer(object, "min_features");
+  if (has("min_stereo_points")) o.min_stereo_points = Integer(object, "min_stereo_points");
+  if (has("min_matches")) o.min_matches = Integer(object, "min_matches");
+  if (has("min_tracked_landmarks")) o.min_tracked_landmarks = Integer(object, "min_tracked_landmarks");
+  if (has("seed")) {
+    OMNIRIG_CHECK(object["seed"].is_number_unsigned() || object["seed"].is_number_integer(),
+                  "field 'options.seed' must be a non-negative integer");
+    OMNIRIG_CHECK(object["seed"].get<long long>() >= 0, "field 'options.seed' must not be negative");
+    o.essential.seed = object["seed"].get<std::uint64_t>();
+    o.scale.seed = o.essential.seed;
+  }
+  try {
+    o.Check();
+  } catch (const InvalidArgument& e) {
+    throw InvalidArgument(std::string("invalid 'options': ") + e.what());
+  }
+  return o;
+}
+
+SlamParams SlamParamsFromJson(const json& params) {
+  OMNIRIG_CHECK(params.is_object(), "params must be a JSON object");
+  for (const auto& [key, value] : params.items()) {
+    OMNIRIG_CHECK(key == "rig" || key == "ground_truth" || key == "options",
+                  "unknown field 'params." << key << "'");
+  }
+  SlamParams parsed;
+  OMNIRIG_CHECK(params.contains("rig"), "missing field 'params.rig' (a relative_pose job id)");
+  OMNIRIG_CHECK(params["rig"].is_string() && !params["rig"].get<std::string>().empty(),
+                "field 'params.rig' must be a job id (a non-empty string)");
+  parsed.rig_job = params["rig"].get<std::string>();
+  if (params.contains("ground_truth")) {
+    OMNIRIG_CHECK(params["ground_truth"].is_string() &&
+                      !params["ground_truth"].get<std::string>().empty(),
+                  "field 'params.ground_truth' must be a file name in the dataset");
+    const std::string name = params["ground_truth"].get<std::string>();
+    OMNIRIG_CHECK(name.find("..") == std::string::npos && name.front() != '/',
+                  "field 'params.ground_truth' must name a file inside the dataset");
+    parsed.ground_truth = name;
+  }
+  if (params.contains("options")) parsed.options = SlamOptionsFromJson(params["options"]);
+  return parsed;
+}
+
+SlamSequence PrepareSlamSequence(const StereoRig& rig, const fs::path& dataset_dir,
+                                 const std::vector<std::string>& image_names) {
+  std::map<std::string, std::string> cams[2];
+  for (const std::string& name : image_names) {
+    for (int c = 0; c < 2; ++c) {
+      const std::string prefix = "cam" + std::to_string(c) + "/";
+      if (name.rfind(prefix, 0) == 0 && name.size() > prefix.size()) {
+        cams[c][name.substr(prefix.size())] = name;
+      }
+    }
+  }
+  OMNIRIG_CHECK(!cams[0].empty() || !cams[1].empty(),
+                "the dataset has no stereo images (expected cam0/NAME and cam1/NAME)");
+  std::ostringstream missing;
+  int num_missing = 0;
+  for (int c = 0; c < 2; ++c) {
+    for (const auto& [name, path] : cams[c]) {
+      if (cams[1 - c].count(name)) continue;
+      if (num_missing++ < 5) missing << " " << path << " has no cam" << (1 - c) << "/" << name << ";";
+    }
+  }
+  OMNIRIG_CHECK(num_missing == 0, num_missing << " image(s) without a partner:" << missing.str());
+  SlamSequence sequence;
+  const CameraModel* camera[2] = {&rig.cam0, &rig.cam1};
+  std::ostringstream sizes;
+  int num_bad = 0;
+  for (const auto& [name, path0] : cams[0]) {
+    sequence.names.push_back(name);
+    sequence.cam0.push_back(path0);
+    sequence.cam1.push_back(cams[1][name]);
+    for (int c = 0; c < 2; ++c) {
+      const std::string& path = c == 0 ? path0 : cams[1][name];
+      const auto [width, height] = ImageSize(dataset_dir, path);
+      if (width == camera[c]->width && height == camera[c]->height) continue;
+      if (num_bad++ < 5) {
+        sizes << " " << path << " is " << width << "x" << height << " but the rig's cam" << c
+              << " is calibrated for " << camera[c]->width << "x" << camera[c]->height << ";";
+      }
+    }
+  }
+  OMNIRIG_CHECK(num_bad == 0, num_bad << " image(s) do not match the rig's calibration:"
+                                      << sizes.str());
+  return sequence;
+}
+
+json RunSlamOnDataset(const StereoRig& rig, const fs::path& dataset_dir,
+                      const std::vector<std::string>& image_names,
+                      const slam::SlamOptions& options,
+                      const std::optional<fs::path>& ground_truth, const fs::path& output_dir,
+                      const ProgressSink& progress,
+                      const std::function<void(const std::string&)>& log) {
+  options.Check();
+  const SlamSequence sequence = PrepareSlamSequence(rig, dataset_dir, image_names);
+  std::vector<slam::StampedPose> gt;
+  if (ground_truth) gt = ReadGroundTruth(*ground_truth, sequence.names.size());
+  auto load = [&](int i) {
+    slam::StereoImages images;
+    cv::Mat* targets[2] = {&images.cam0, &images.cam1};
+    const std::string* names[2] = {&sequence.cam0[i], &sequence.cam1[i]};
+    for (int c = 0; c < 2; ++c) {
+      *targets[c] = cv::imread((dataset_dir / *names[c]).string(), cv::IMREAD_COLOR);
+      OMNIRIG_CHECK(!targets[c]->empty(), "image " << *names[c] << " cannot be read");
+    }
+    return images;
+  };
+  const ProgressSink frame_progress{
+      [&](double fraction, const std::string& stage, const std::string& message) {
+        progress.Report(fraction, stage, message);
+        if (log && !message.empty()) log(message);
+      },
+      progress.is_cancelled};
+  const slam::SlamResult result = slam::RunSlam(rig, sequence.names, load, options, frame_progress);
+
+  json report;
+  report["artifacts"] = WriteArtifacts(rig, result, Timestamps(sequence.names, gt), output_dir);
+  report["num_frames"] = result.frames.size();
+  report["num_tracked"] = result.num_tracked;
+  report["num_lost"] = result.num_lost;
+  report["num_map_points"] = result.map.size();
+  report["frames_per_second"] = result.total_s > 0 ? result.frames.size() / result.total_s : 0.0;
+  json timings = TimesToJson(result.stage_totals);
+  timings["global_ba"] = result.global_ba_s;
+  timings["total"] = result.total_s;
+  report["timings_s"] = timings;
+  // CPU seconds of the threads that ran each stage: the stable measure on a shared machine.
+  json cpu_timings = TimesToJson(result.cpu_stage_totals);
+  cpu_timings["global_ba"] = result.global_ba_cpu_s;
+  cpu_timings["total"] = result.total_cpu_s;
+  report["cpu_timings_s"] = cpu_timings;
+  report["global_bundle_adjustment"] = result.global_bundle_adjustment
+                                           ? BundleAdjustmentToJson(*result.global_bundle_adjustment)
+                                           : json(nullptr);
+  json frames = json::array();
+  for (const slam::FrameReport& f : result.frames) frames.push_back(FrameToJson(f));
+  report["frames"] = frames;
+  if (!gt.empty()) {
+    std::vector<Rigid3d> estimate, truth;
+    for (size_t i = 0; i < result.frames.size(); ++i) {
+      if (!result.frames[i].world_from_rig) continue;
+      estimate.push_back(*result.frames[i].world_from_rig);
+      truth.push_back(gt[i].world_from_rig);
+    }
+    report["evaluation"] = estimate.size() >= 2
+                               ? EvaluationToJson(slam::EvaluateTrajectory(estimate, truth))
+                               : json(nullptr);
+  }
+  std::ofstream(output_dir / "report.json") << report.dump(2) << "\n";
+  return report;
+}
+
+json RunSlamJob(const json& params, const JobContext& context) {
+  const SlamParams parsed = SlamParamsFromJson(params);
+  OMNIRIG_CHECK(static_cast<bool>(context.load_result),
+                "this job cannot read other jobs' results (no rig loader)");
+  StereoRig rig;
+  try {
+    rig = RigFromJson(context.load_result(parsed.rig_job));
+  } catch (const InvalidArgument& e) {
+    throw InvalidArgument("rig job " + parsed.rig_job + " is not a usable relative_pose result: " +
+                          e.what());
+  }
+  slam::SlamOptions options = parsed.options;
+  options.num_threads = std::max(1, context.num_threads);
+  std::optional<fs::path> ground_truth;
+  if (parsed.ground_truth) ground_truth = context.dataset_dir / *parsed.ground_truth;
+  return RunSlamOnDataset(rig, context.dataset_dir, context.image_names, options, ground_truth,
+                          context.output_dir, context.progress, context.log);
+}
+
+void RegisterSlamJobType() {
+  JobType type;
+  type.name = "slam";
+  type.validate = [](const json& params) { SlamParamsFromJson(params); };
+  type.referenced_jobs = [](const json& params) {
+    return std::vector<std::string>{SlamParamsFromJson(params).rig_job};
+  };
+  type.run = RunSlamJob;
+  RegisterJobType(std::move(type));
+}
+
+}  // namespace omnirig::api

@@ -1,0 +1,92 @@
+#pragma once
+// The `slam` job type and the `omnirig slam` command: trajectory and metric map from a stereo
+// sequence (engine/slam/slam.h).
+//
+// Dataset: images named cam0/NAME and cam1/NAME, paired by NAME and ordered by NAME; optionally
+// a ground-truth trajectory (TUM format, one pose per frame in the same order).
+// Params (unknown fields are refused):
+//   {"rig": JOB_ID,                 a succeeded relative_pose job (its cam0_from_cam1, cameras)
+//    "ground_truth": "NAME.tum",    optional, a file of the dataset
+//    "options": {...}}              optional, see SlamOptionsFromJson
+// Artifacts written to the output folder:
+//   trajectory.json  {"world_frame", "frames": [{"name", "state", "reason", "timestamp_s",
+//                     "world_from_rig": {"rotation_wxyz", "translation_m"} | null}], "rig"}
+//   trajectory.tum   "timestamp tx ty tz qx qy qz qw" per frame with a pose (world_from_rig)
+//   map.ply          binary little-endian: float x y z (m), uchar red green blue,
+//                    int num_observations
+//   report.json      the result below
+// Result:
+//   {"artifacts": {"trajectory_json", "trajectory_tum", "map_ply", "report_json"},
+//    "num_frames", "num_tracked", "num_lost", "num_map_points", "frames_per_second",
+//    "frames": [{"name", "state", "reason", "motion_source", "num_features": [cam0, cam1],
+//                "num_stereo_points", "num_matches", "num_essential_inliers",
+//                "num_scale_inliers", "num_tracked_landmarks", "num_new_landmarks",
+//                "times_s": {...}, "local_bundle_adjustment": {...} | null,
+//                "world_from_rig": pose | null}],
+//    "timings_s": {"load", "detect", "stereo", "match", "motion", "map", "local_ba",
+//                  "global_ba", "total"},            (wall clock)
+//    "cpu_timings_s": {...},                          (same keys, CPU seconds)
+//    "global_bundle_adjustment": {...} | null,
+//    "evaluation": {"ate_rmse_m", "ate_max_m", "rpe_translation_rmse_m",
+//                   "rpe_rotation_rmse_deg", "final_drift_percent", "max_drift_percent",
+//                   "path_length_m", "num_poses", "gt_from_estimate"}   (with a ground truth)}
+
+#include <filesystem>
+#include <functional>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "api/job_types.h"
+#include "engine/geometry/camera_model.h"
+#include "engine/slam/slam.h"
+
+namespace omnirig::api {
+
+// The "options" object: {"max_features", "contrast_threshold", "detection_scale",
+// "max_epipolar_error_rad", "temporal_max_descriptor_ratio", "temporal_gate_rad",
+// "essential_max_angular_error_rad", "local_window_frames", "local_max_iterations",
+// "global_bundle_adjustment", "huber_scale_px", "max_reprojection_error_px", "min_features",
+// "min_stereo_points", "min_matches", "min_tracked_landmarks", "seed"}; every field optional.
+// Throws InvalidArgument naming the field (unknown, mistyped, or failing SlamOptions::Check).
+slam::SlamOptions SlamOptionsFromJson(const nlohmann::json& options);
+
+struct SlamParams {
+  std::string rig_job;
+  std::optional<std::string> ground_truth;  // a file name in the dataset
+  slam::SlamOptions options;
+};
+SlamParams SlamParamsFromJson(const nlohmann::json& params);
+
+// The sequence's frames after the checks that run before any work.
+struct SlamSequence {
+  std::vector<std::string> names;  // NAME, sorted
+  std::vector<std::string> cam0;   // "cam0/NAME"
+  std::vector<std::string> cam1;   // "cam1/NAME"
+};
+
+// Pairs the dataset's images and checks, without decoding them, that every image exists and
+// has its camera's calibrated size. Throws InvalidArgument naming missing partners, unreadable
+// images, and size mismatches (e.g. "cam1/0003.png is 800x600 but the rig's cam1 is 1024x768").
+SlamSequence PrepareSlamSequence(const StereoRig& rig, const std::filesystem::path& dataset_dir,
+                                 const std::vector<std::string>& image_names);
+
+// Runs SLAM over a prepared dataset, writes the artifacts into output_dir and returns the
+// result JSON. A ground truth (TUM file) is read and checked (one pose per frame) before any
+// work. `log` may be empty.
+nlohmann::json RunSlamOnDataset(const StereoRig& rig, const std::filesystem::path& dataset_dir,
+                                const std::vector<std::string>& image_names,
+                                const slam::SlamOptions& options,
+                                const std::optional<std::filesystem::path>& ground_truth,
+                                const std::filesystem::path& output_dir,
+                                const ProgressSink& progress,
+                                const std::function<void(const std::string&)>& log);
+
+nlohmann::json RunSlamJob(const nlohmann::json& params, const JobContext& context);
+
+// Registers `slam` with api/job_types.h.
+void RegisterSlamJobType();
+
+}  // namespace omnirig::api

@@ -1,0 +1,170 @@
+#include "api/slam_json.h"
+
+#include <filesystem>
+#include <fstream>
+
+#include <gtest/gtest.h>
+#include <opencv2/imgcodecs.hpp>
+
+#include "api/camera_json.h"
+#include "engine/util/check.h"
+
+namespace omnirig::api {
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+StereoRig TinyRig(int width, int height) {
+  StereoRig rig;
+  for (CameraModel* camera : {&rig.cam0, &rig.cam1}) {
+    camera->width = width;
+    camera->height = height;
+    camera->intrinsics.params = {0.9, 0.3 * height, 0.3 * height, width / 2.0, height / 2.0, 0,
+                                 0, 0, 0, 0, 0};
+  }
+  rig.cam0_from_cam1 = Rigid3d(Eigen::Quaterniond::Identity(), Eigen::Vector3d(0, 0, 0.1));
+  return rig;
+}
+
+class TempDataset : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() /
+           ("omnirig_slam_json_" + std::to_string(::getpid()) + "_" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_ / "cam0");
+    fs::create_directories(dir_ / "cam1");
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  void WriteImage(const std::string& name, int width, int height, int grey = 0) {
+    cv::imwrite((dir_ / name).string(), cv::Mat(height, width, CV_8UC3, cv::Scalar::all(grey)));
+    names_.push_back(name);
+    std::sort(names_.begin(), names_.end());
+  }
+  std::string ExpectInvalid(const std::function<void()>& f) {
+    try {
+      f();
+    } catch (const InvalidArgument& e) {
+      return e.what();
+    }
+    ADD_FAILURE() << "expected InvalidArgument";
+    return "";
+  }
+  fs::path dir_;
+  std::vector<std::string> names_;
+};
+
+TEST(SlamOptionsFromJson, ReadsFieldsAndRefusesUnknownOrInvalidOnes) {
+  const slam::SlamOptions options =
+      SlamOptionsFromJson({{"max_features", 500}, {"local_window_frames", 3}, {"seed", 7}});
+  EXPECT_EQ(options.features.max_features, 500);
+  EXPECT_EQ(options.local_window_frames, 3);
+  EXPECT_EQ(options.essential.seed, 7u);
+  try {
+    SlamOptionsFromJson({{"max_feature", 500}});
+    FAIL();
+  } catch (const InvalidArgument& e) {
+    EXPECT_NE(std::string(e.what()).find("options.max_feature"), std::string::npos);
+  }
+  EXPECT_THROW(SlamOptionsFromJson({{"detection_scale", 2.0}}), InvalidArgument);
+  EXPECT_THROW(SlamOptionsFromJson({{"min_matches", "many"}}), InvalidArgument);
+}
+
+TEST(SlamParamsFromJson, NeedsARigJob) {
+  EXPECT_EQ(SlamParamsFromJson({{"rig", "job-1"}}).rig_job, "job-1");
+  EXPECT_THROW(SlamParamsFromJson(json::object()), InvalidArgument);
+  EXPECT_THROW(SlamParamsFromJson({{"rig", 3}}), InvalidArgument);
+  EXPECT_THROW(SlamParamsFromJson({{"rig", "a"}, {"extra", 1}}), InvalidArgument);
+  EXPECT_THROW(SlamParamsFromJson({{"rig", "a"}, {"ground_truth", "../etc/passwd"}}),
+               InvalidArgument);
+  EXPECT_EQ(*SlamParamsFromJson({{"rig", "a"}, {"ground_truth", "gt.tum"}}).ground_truth, "gt.tum");
+}
+
+TEST_F(TempDataset, PairsFramesByName) {
+  WriteImage("cam0/b.png", 64, 48);
+  WriteImage("cam1/b.png", 64, 48);
+  WriteImage("cam0/a.png", 64, 48);
+  WriteImage("cam1/a.png", 64, 48);
+  names_.push_back("gt.tum");  // other files are ignored
+  const SlamSequence sequence = PrepareSlamSequence(TinyRig(64, 48), dir_, names_);
+  EXPECT_EQ(sequence.names, (std::vector<std::string>{"a.png", "b.png"}));
+  EXPECT_EQ(sequence.cam1[1], "cam1/b.png");
+}
+
+TEST_F(TempDataset, RefusesMissingPartners) {
+  WriteImage("cam0/a.png", 64, 48);
+  WriteImage("cam1/a.png", 64, 48);
+  WriteImage("cam0/b.png", 64, 48);
+  const std::string message =
+      ExpectInvalid([&] { PrepareSlamSequence(TinyRig(64, 48), dir_, names_); });
+  EXPECT_NE(message.find("cam0/b.png has no cam1/b.png"), std::string::npos) << message;
+}
+
+TEST_F(TempDataset, RefusesMismatchedImageSizes) {
+  WriteImage("cam0/a.png", 64, 48);
+  WriteImage("cam1/a.png", 64, 48);
+  WriteImage("cam0/b.jpg", 64, 48);
+  WriteImage("cam1/b.jpg", 80, 48);
+  const std::string message =
+      ExpectInvalid([&] { PrepareSlamSequence(TinyRig(64, 48), dir_, names_); });
+  EXPECT_NE(message.find("cam1/b.jpg is 80x48"), std::string::npos) << message;
+}
+
+TEST_F(TempDataset, RefusesARigCalibratedForAnotherSize) {
+  WriteImage("cam0/a.png", 64, 48);
+  WriteImage("cam1/a.png", 64, 48);
+  const std::string message =
+      ExpectInvalid([&] { PrepareSlamSequence(TinyRig(1024, 768), dir_, names_); });
+  EXPECT_NE(message.find("calibrated for 1024x768"), std::string::npos) << message;
+}
+
+TEST_F(TempDataset, RefusesAGroundTruthOfTheWrongLengthBeforeWork) {
+  WriteImage("cam0/a.png", 64, 48);
+  WriteImage("cam1/a.png", 64, 48);
+  std::ofstream(dir_ / "gt.tum") << "0 0 0 0 0 0 0 1\n1 0 0 0 0 0 0 1\n";
+  const std::string message = ExpectInvalid([&] {
+    RunSlamOnDataset(TinyRig(64, 48), dir_, names_, slam::SlamOptions(), dir_ / "gt.tum",
+                     dir_ / "out", ProgressSink(), nullptr);
+  });
+  EXPECT_NE(message.find("2 poses but the sequence has 1"), std::string::npos) << message;
+  EXPECT_FALSE(fs::exists(dir_ / "out" / "map.ply"));
+}
+
+TEST_F(TempDataset, BlackFramesAreReportedLostNotFatal) {
+  for (const char* name : {"a.png", "b.png", "c.png"}) {
+    WriteImage(std::string("cam0/") + name, 64, 48);
+    WriteImage(std::string("cam1/") + name, 64, 48);
+  }
+  std::vector<double> fractions;
+  const ProgressSink progress{[&](double f, const std::string&, const std::string&) {
+                                fractions.push_back(f);
+                              },
+                              nullptr};
+  const json result = RunSlamOnDataset(TinyRig(64, 48), dir_, names_, slam::SlamOptions(),
+                                       std::nullopt, dir_ / "out", progress, nullptr);
+  EXPECT_EQ(result["num_frames"], 3);
+  EXPECT_EQ(result["num_tracked"], 0);
+  for (const json& frame : result["frames"]) {
+    EXPECT_EQ(frame["state"], "lost");
+    EXPECT_NE(frame["reason"].get<std::string>().find("black"), std::string::npos);
+    EXPECT_TRUE(frame["world_from_rig"].is_null());
+  }
+  EXPECT_TRUE(fs::exists(dir_ / "out" / "trajectory.json"));
+  EXPECT_TRUE(fs::exists(dir_ / "out" / "map.ply"));
+  ASSERT_FALSE(fractions.empty());
+  EXPECT_TRUE(std::is_sorted(fractions.begin(), fractions.end()));
+  EXPECT_DOUBLE_EQ(fractions.back(), 1.0);
+}
+
+TEST(SlamJobType, IsRegisteredAndValidates) {
+  RegisterSlamJobType();
+  const JobType* type = FindJobType("slam");
+  ASSERT_NE(type, nullptr);
+  EXPECT_THROW(type->validate(json::object()), InvalidArgument);
+  EXPECT_EQ(type->referenced_jobs({{"rig", "r1"}}), std::vector<std::string>{"r1"});
+}
+
+}  // namespace
+}  // namespace omnirig::api

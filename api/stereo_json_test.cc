@@ -1,0 +1,153 @@
+#include "api/stereo_json.h"
+
+#include <filesystem>
+#include <fstream>
+
+#include <unistd.h>
+
+#include <gtest/gtest.h>
+#include <opencv2/imgcodecs.hpp>
+
+#include "api/camera_json.h"
+#include "engine/geometry/unified_camera.h"
+#include "engine/util/check.h"
+
+namespace omnirig::api {
+namespace {
+
+using nlohmann::json;
+
+StereoRig Rig() {
+  StereoRig rig;
+  for (CameraModel* camera : {&rig.cam0, &rig.cam1}) {
+    camera->intrinsics.params = {0.94, 75.0, 75.5, 160.0, 120.0, 0.0, -0.06, 0.012, 0, 0, 0};
+    camera->width = 320;
+    camera->height = 240;
+  }
+  rig.cam0_from_cam1 = Rigid3d(Eigen::Quaterniond::Identity(), Eigen::Vector3d(0, 0, 0.1));
+  return rig;
+}
+
+TEST(StereoJson, ParsesParamsAndRefusesBadOnes) {
+  const StereoReconstructParams parsed = StereoReconstructParamsFromJson(
+      {{"rig", "job-1"}, {"ratio_test", 0.7}, {"max_features", 1000}, {"mutual_check", false}});
+  EXPECT_EQ(parsed.rig_job, "job-1");
+  EXPECT_EQ(parsed.options.ratio_test, 0.7);
+  EXPECT_EQ(parsed.options.max_features, 1000);
+  EXPECT_FALSE(parsed.options.mutual_check);
+  EXPECT_THROW(StereoReconstructParamsFromJson(json::object()), InvalidArgument);
+  EXPECT_THROW(StereoReconstructParamsFromJson({{"rig", 5}}), InvalidArgument);
+  EXPECT_THROW(StereoReconstructParamsFromJson({{"rig", "a"}, {"ratio", 0.7}}), InvalidArgument);
+  EXPECT_THROW(StereoReconstructParamsFromJson({{"rig", "a"}, {"ratio_test", "x"}}),
+               InvalidArgument);
+  EXPECT_THROW(StereoReconstructParamsFromJson({{"rig", "a"}, {"ratio_test", 2.0}}),
+               InvalidArgument);
+  EXPECT_THROW(StereoReconstructParamsFromJson({{"rig", "a"}, {"max_features", 1.5}}),
+               InvalidArgument);
+  try {
+    StereoReconstructParamsFromJson({{"rig", "a"}, {"bogus", 1}});
+  } catch (const InvalidArgument& e) {
+    EXPECT_NE(std::string(e.what()).find("params.bogus"), std::string::npos);
+  }
+}
+
+TEST(StereoJson, RegistersTheJobType) {
+  RegisterStereoReconstructJobType();
+  const JobType* type = FindJobType("stereo_reconstruct");
+  ASSERT_NE(type, nullptr);
+  EXPECT_EQ(type->referenced_jobs({{"rig", "abc"}}), std::vector<std::string>{"abc"});
+  EXPECT_THROW(type->validate(json::object()), InvalidArgument);
+}
+
+TEST(StereoJson, EpipolarCurveJson) {
+  json result = RigToJson(Rig());
+  result["rms_px"] = 0.1;  // a relative_pose result holds more keys than the rig
+  const json curve = EpipolarCurveJson(result, 0, 220.0, 120.0);
+  EXPECT_EQ(curve["from"], "cam0");
+  EXPECT_EQ(curve["to"], "cam1");
+  EXPECT_EQ(curve["pixel"], json::array({220.0, 120.0}));
+  ASSERT_TRUE(curve["polylines"].is_array());
+  ASSERT_FALSE(curve["polylines"].empty());
+  for (const json& line : curve["polylines"]) {
+    ASSERT_GE(line.size(), 2u);
+    for (const json& p : line) {
+      ASSERT_EQ(p.size(), 2u);
+      EXPECT_TRUE(p[0].is_number() && p[1].is_number());
+    }
+  }
+  EXPECT_EQ(EpipolarCurveJson(result, 1, 220.0, 120.0)["to"], "cam0");
+  EXPECT_THROW(EpipolarCurveJson(result, 2, 220.0, 120.0), InvalidArgument);
+  EXPECT_THROW(EpipolarCurveJson(result, 0, NAN, 384.0), InvalidArgument);
+  EXPECT_THROW(EpipolarCurveJson(json::object(), 0, 220.0, 120.0), InvalidArgument);
+}
+
+class StereoJobTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    root_ = std::filesystem::temp_directory_path() /
+            ("omnirig_stereo_job_" + std::to_string(::getpid()));
+    std::filesystem::remove_all(root_);
+    std::filesystem::create_directories(root_ / "data" / "cam0");
+    std::filesystem::create_directories(root_ / "data" / "cam1");
+    std::filesystem::create_directories(root_ / "out");
+    context_.dataset_dir = root_ / "data";
+    context_.output_dir = root_ / "out";
+    context_.progress.report = [this](double fraction, const std::string&, const std::string&) {
+      EXPECT_GE(fraction, last_fraction_);
+      last_fraction_ = fraction;
+    };
+    context_.load_result = [](const std::string& id) -> json {
+      if (id == "rig") return RigToJson(Rig());
+      if (id == "calib") return {{"camera", CameraToJson(Rig().cam0)}};
+      throw InvalidArgument("no result for job " + id);
+    };
+  }
+  void TearDown() override { std::filesystem::remove_all(root_); }
+
+  void AddImage(const std::string& name, int width, int height) {
+    cv::imwrite((context_.dataset_dir / name).string(),
+                cv::Mat(height, width, CV_8UC3, cv::Scalar(6, 6, 6)));
+    context_.image_names.push_back(name);
+    std::sort(context_.image_names.begin(), context_.image_names.end());
+  }
+
+  std::filesystem::path root_;
+  JobContext context_;
+  double last_fraction_ = 0.0;
+};
+
+TEST_F(StereoJobTest, RunsAndWritesThePly) {
+  AddImage("cam0/a.png", 320, 240);
+  AddImage("cam1/a.png", 320, 240);
+  const json result = RunStereoReconstructJob({{"rig", "rig"}}, context_);
+  EXPECT_EQ(result["artifact"], "cloud.ply");
+  EXPECT_EQ(result["num_points"], 0);  // dark images: nothing to match, but a valid result
+  ASSERT_EQ(result["pairs"].size(), 1u);
+  EXPECT_EQ(result["pairs"][0]["name"], "a.png");
+  EXPECT_TRUE(std::filesystem::exists(context_.output_dir / "cloud.ply"));
+  EXPECT_EQ(last_fraction_, 1.0);
+}
+
+// The InvalidArgument message of running the job, or "" when it does not throw one.
+std::string RunError(const json& params, const JobContext& context) {
+  try {
+    RunStereoReconstructJob(params, context);
+  } catch (const InvalidArgument& e) {
+    return e.what();
+  }
+  return "";
+}
+
+TEST_F(StereoJobTest, RefusesBadInput) {
+  AddImage("cam0/a.png", 320, 240);
+  AddImage("cam1/a.png", 640, 480);
+  EXPECT_NE(RunError({{"rig", "rig"}}, context_).find("cam1 image is 640x480"), std::string::npos);
+  // A job whose result holds no rig, and a job without a result.
+  EXPECT_NE(RunError({{"rig", "calib"}}, context_).find("holds no stereo rig"), std::string::npos);
+  EXPECT_NE(RunError({{"rig", "missing"}}, context_).find("no result"), std::string::npos);
+  AddImage("cam0/b.png", 320, 240);  // no partner
+  EXPECT_NE(RunError({{"rig", "rig"}}, context_).find("without a partner"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace omnirig::api

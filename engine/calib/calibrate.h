@@ -1,0 +1,123 @@
+#pragma once
+// Calibration of a catadioptric camera with Mei's unified model (the paper's section 3):
+// detect -> initialise (closed form) -> build problem (eq. 7) -> solve -> reject outliers ->
+// re-solve -> evaluate.
+
+#include <array>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "engine/calib/board.h"
+#include "engine/calib/detect.h"
+#include "engine/geometry/camera_model.h"
+#include "engine/geometry/rigid3.h"
+#include "engine/util/progress.h"
+
+namespace omnirig {
+
+// One image's detection, by name.
+struct CalibrationView {
+  std::string name;
+  BoardDetection detection;
+};
+
+struct CalibrationOptions {
+  // Parameters held at their initial value, indexed like UnifiedIntrinsics::params. By default
+  // skew and k5 are fixed at zero, so that exports to OpenCV omnidir and Kalibr are exact.
+  std::array<bool, UnifiedIntrinsics::kNumParams> fixed{};
+  // Initial principal point; when absent it comes from the mirror rim circle (if given) or the
+  // image centre, whichever initialises better.
+  std::optional<Eigen::Vector2d> principal_point_px;
+  // Mirror rim circle in the image (centre u, v and radius, pixels), a better principal point.
+  std::optional<Eigen::Vector3d> rim_circle_px;
+
+  // Robust loss (Huber) scale on pixel residuals; 0 for plain least squares.
+  double huber_loss_px = 1.0;
+  // A corner whose error exceeds max(outlier_sigmas * robust std, min_outlier_px) after a solve
+  // is rejected and the problem re-solved, at most max_rejection_rounds times.
+  double outlier_sigmas = 4.0;
+  double min_outlier_px = 1.0;
+  int max_rejection_rounds = 3;
+  // A view whose RMS after rejection exceeds this (px) is dropped entirely.
+  double max_view_rms_px = 5.0;
+  // Views need this many corners to be used; a calibration needs this many views.
+  int min_corners_per_view = 6;
+  int min_views = 3;
+
+  int max_num_iterations = 200;
+  int num_threads = 1;
+
+  CalibrationOptions() {
+    fixed[UnifiedIntrinsics::kAlpha] = true;
+    fixed[UnifiedIntrinsics::kK5] = true;
+  }
+  // Fixes or frees a parameter by its name in UnifiedIntrinsics::kNames, or the groups
+  // "skew" (alpha), "tangential" (k3, k4), "principal_point" (u0, v0), "gamma" (both).
+  // Throws InvalidArgument for an unknown name.
+  void SetFixed(const std::string& name, bool fix);
+  void Check() const;
+};
+
+struct CalibrationImageReport {
+  std::string name;
+  bool used = false;
+  std::string reason;  // why not used (empty when used)
+  std::string detector;  // BoardDetection::method
+  double rms_px = 0.0;  // RMS of this view's inlier corner errors (px)
+  Rigid3d cam_from_board;
+  std::vector<Eigen::Vector2d> corners_px;    // detected
+  std::vector<int> corner_ids;                // into BoardSpec::ObjectPoints()
+  std::vector<Eigen::Vector2d> reprojected_px;  // the model's prediction of each corner
+  std::vector<bool> inlier;                   // false for corners rejected as outliers
+};
+
+struct CalibrationSolverSummary {
+  int num_rounds = 0;  // solves (1 + re-solves after rejection)
+  int iterations = 0;  // LM iterations over every round
+  double initial_cost = 0.0;
+  double final_cost = 0.0;
+  std::string termination;
+  int num_residuals = 0;
+  int num_parameters = 0;
+  int num_rejected_corners = 0;
+  int num_rejected_views = 0;
+  std::string brief;  // Ceres' BriefReport() of the last round
+};
+
+struct CalibrationTimings {
+  double init_s = 0.0;
+  double solve_s = 0.0;
+  double covariance_s = 0.0;
+  double total_s = 0.0;
+};
+
+struct CalibrationReport {
+  CameraModel camera;
+  // Standard deviation of each intrinsic (UnifiedIntrinsics order) from the Ceres covariance
+  // scaled by the residual variance; 0 for fixed parameters.
+  std::array<double, UnifiedIntrinsics::kNumParams> intrinsics_std{};
+  // Over every inlier corner of the used views: rms_px = sqrt(mean(|e|^2)); mean_px and std_px
+  // are the mean and standard deviation of the Euclidean error |e| (px).
+  double rms_px = 0.0;
+  double mean_px = 0.0;
+  double std_px = 0.0;
+  // RMS over every corner of the used views, outliers included (px).
+  double rms_all_px = 0.0;
+  int num_views_used = 0;
+  std::vector<CalibrationImageReport> images;  // in the order of the input views
+  CalibrationSolverSummary solver;
+  CalibrationTimings timings;
+};
+
+// Calibrates a camera of `width` x `height` pixels from board detections. Views whose detection
+// failed are reported as unused with the detection's reason. Throws InvalidArgument, listing
+// each image's reason, when fewer than options.min_views views are usable; Cancelled when the
+// sink cancels. Progress: stage "init", then "solve" per LM iteration.
+CalibrationReport Calibrate(const std::vector<CalibrationView>& views, int width, int height,
+                            const BoardSpec& board, const CalibrationOptions& options,
+                            const ProgressSink& progress);
+
+}  // namespace omnirig

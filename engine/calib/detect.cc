@@ -1,0 +1,503 @@
+#include "engine/calib/detect.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include <opencv2/aruco/charuco.hpp>
+#include <opencv2/calib3d.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "engine/calib/board_pose.h"
+#include "engine/calib/calibrate.h"
+#include "engine/calib/initialize.h"
+
+namespace omnirig {
+namespace {
+
+cv::Mat ToGrey(const cv::Mat& image) {
+  cv::Mat grey;
+  if (image.channels() == 3) {
+    cv::cvtColor(image, grey, cv::COLOR_BGR2GRAY);
+  } else if (image.channels() == 4) {
+    cv::cvtColor(image, grey, cv::COLOR_BGRA2GRAY);
+  } else {
+    grey = image;
+  }
+  if (grey.depth() != CV_8U) {
+    cv::Mat converted;
+    cv::normalize(grey, converted, 0, 255, cv::NORM_MINMAX, CV_8U);
+    grey = converted;
+  }
+  return grey;
+}
+
+// Distance from corner `id` to its nearest grid neighbour (the local square size in pixels).
+double LocalSquarePx(const std::vector<Eigen::Vector2d>& grid, const BoardSpec& board, int id) {
+  const int row = id / board.cols, col = id % board.cols;
+  double best = std::numeric_limits<double>::infinity();
+  const int offsets[4][2] = {{0, 1}, {0, -1}, {1, 0}, {-1, 0}};
+  for (const auto& offset : offsets) {
+    const int r = row + offset[0], c = col + offset[1];
+    if (r < 0 || c < 0 || r >= board.rows || c >= board.cols) continue;
+    best = std::min(best, (grid[r * board.cols + c] - grid[id]).norm());
+  }
+  return best;
+}
+
+// True when the intensities on a circle around `center` alternate dark/light four times, as
+// around an inner checkerboard corner (an outer board corner or an edge alternates twice).
+bool LooksLikeXCorner(const cv::Mat& grey, const Eigen::Vector2d& center, double radius) {
+  constexpr int kSamples = 32;
+  std::vector<double> values;
+  for (int i = 0; i < kSamples; ++i) {
+    const double angle = 2.0 * M_PI * i / kSamples;
+    const int u = static_cast<int>(std::lround(center.x() + radius * std::cos(angle)));
+    const int v = static_cast<int>(std::lround(center.y() + radius * std::sin(angle)));
+    if (u < 0 || v < 0 || u >= grey.cols || v >= grey.rows) return false;
+    values.push_back(grey.at<uint8_t>(v, u));
+  }
+  const auto [lo, hi] = std::minmax_element(values.begin(), values.end());
+  if (*hi - *lo < 30.0) return false;
+  const double threshold = 0.5 * (*hi + *lo);
+  int changes = 0;
+  for (int i = 0; i < kSamples; ++i) {
+    changes += (values[i] > threshold) != (values[(i + 1) % kSamples] > threshold);
+  }
+  return changes == 4;
+}
+
+// A full grid is a sub-board of a larger board when, along some edge, the points one square
+// beyond the edge are inner corners too.
+bool ExtendsBeyondAnEdge(const cv::Mat& grey, const std::vector<Eigen::Vector2d>& grid,
+                         const BoardSpec& board) {
+  auto at = [&](int r, int c) { return grid[r * board.cols + c]; };
+  auto edge_extends = [&](int n, auto edge, auto inner) {
+    int hits = 0;
+    for (int i = 0; i < n; ++i) {
+      const Eigen::Vector2d beyond = 2.0 * edge(i) - inner(i);
+      const double radius = 0.3 * (edge(i) - inner(i)).norm();
+      hits += radius >= 2.0 && LooksLikeXCorner(grey, beyond, radius);
+    }
+    return 2 * hits > n;
+  };
+  const int R = board.rows, C = board.cols;
+  return edge_extends(C, [&](int c) { return at(0, c); }, [&](int c) { return at(1, c); }) ||
+         edge_extends(C, [&](int c) { return at(R - 1, c); }, [&](int c) { return at(R - 2, c); }) ||
+         edge_extends(R, [&](int r) { return at(r, 0); }, [&](int r) { return at(r, 1); }) ||
+         edge_extends(R, [&](int r) { return at(r, C - 1); }, [&](int r) { return at(r, C - 2); });
+}
+
+// Refines each corner with cornerSubPix in a window scaled to its local square size. Returns
+// the largest shift.
+double RefineCorners(const cv::Mat& grey,
+                     std::vector<Eigen::Vector2d>* corners, const std::vector<double>& square_px) {
+  double max_shift = 0.0;
+  for (size_t i = 0; i < corners->size(); ++i) {
+    const int half = std::clamp(static_cast<int>(std::lround(0.4 * square_px[i])), 2, 15);
+    std::vector<cv::Point2f> point = {
+        cv::Point2f(static_cast<float>((*corners)[i].x()), static_cast<float>((*corners)[i].y()))};
+    const cv::Point2f before = point[0];
+    if (before.x < half + 1 || before.y < half + 1 || before.x > grey.cols - half - 2 ||
+        before.y > grey.rows - half - 2) {
+      continue;
+    }
+    cv::cornerSubPix(grey, point, cv::Size(half, half), cv::Size(-1, -1),
+                     cv::TermCriteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 40, 1e-3));
+    (*corners)[i] = Eigen::Vector2d(point[0].x, point[0].y);
+    max_shift = std::max(max_shift, static_cast<double>(cv::norm(point[0] - before)));
+  }
+
+
+  return max_shift;
+}
+
+void RefineGrid(const cv::Mat& grey, const BoardSpec& board, BoardDetection* detection) {
+  std::vector<double> square_px;
+  for (int id : detection->corner_ids) {
+    square_px.push_back(LocalSquarePx(detection->corners_px, board, id));
+  }
+  RefineCorners(grey, &detection->corners_px, square_px);
+}
+
+std::string ValidateGridImpl(const cv::Mat& grey, const BoardSpec& board,
+                         const std::vector<Eigen::Vector2d>& grid) {
+  if (static_cast<int>(grid.size()) != board.NumCorners()) return "wrong corner count";
+  for (int id = 0; id < board.NumCorners(); ++id) {
+    const Eigen::Vector2d& p = grid[id];
+    if (!(p.x() >= 0 && p.y() >= 0 && p.x() <= grey.cols - 1 && p.y() <= grey.rows - 1)) {
+      return "corner outside the image";
+    }
+    if (!(LocalSquarePx(grid, board, id) > 1.5)) return "collapsed squares";
+  }
+  if (ExtendsBeyondAnEdge(grey, grid, board)) {
+    return "the pattern extends beyond " + std::to_string(board.cols) + "x" +
+           std::to_string(board.rows) +
+           " inner corners (a sub-board of a larger board: check cols and rows)";
+  }
+  return "";
+}
+
+// One attempt of an OpenCV detector on a (possibly upsampled) image; corners are mapped back to
+// the original's pixel convention (centre of the top-left pixel at (0, 0)).
+bool RunOpenCvDetector(const cv::Mat& image, double scale, const BoardSpec& board, bool sb,
+                       int flags, std::vector<Eigen::Vector2d>* grid) {
+  std::vector<cv::Point2f> corners;
+  const cv::Size pattern(board.cols, board.rows);
+  const bool found = sb ? cv::findChessboardCornersSB(image, pattern, corners, flags)
+                        : cv::findChessboardCorners(image, pattern, corners, flags);
+  if (!found || static_cast<int>(corners.size()) != board.NumCorners()) return false;
+  grid->clear();
+  for (const auto& c : corners) {
+    grid->emplace_back((c.x + 0.5) / scale - 0.5, (c.y + 0.5) / scale - 0.5);
+  }
+  return true;
+}
+
+BoardDetection DetectCheckerboard(const cv::Mat& grey, const BoardSpec& board,
+                                  const DetectOptions& options) {
+  struct Variant {
+    cv::Mat image;
+    double scale;
+  };
+  // Small images (squares of a few pixels) need upsampling; on large ones it costs seconds.
+  const bool small = std::max(grey.cols, grey.rows) <= 800;
+  std::vector<Variant> variants = {{grey, 1.0}};
+  if (options.try_enhanced) {
+    cv::Mat equalised;
+    cv::createCLAHE(3.0, cv::Size(8, 8))->apply(grey, equalised);
+    variants.push_back({equalised, 1.0});
+    if (small) {
+      cv::Mat upsampled;
+      cv::resize(grey, upsampled, cv::Size(), 2.0, 2.0, cv::INTER_CUBIC);
+      variants.push_back({upsampled, 2.0});
+    }
+  }
+  struct Attempt {
+    bool sb;
+    int flags;
+    const char* name;
+  };
+  // Cheapest first: the classic detector with its fast check, then the sector-based one (its
+  // ACCURACY flag, an internal upsampling, finds more boards on small images).
+  const std::vector<Attempt> attempts = {
+      {false,
+       cv::CALIB_CB_ADAPTIVE_THRESH | cv::CALIB_CB_NORMALIZE_IMAGE | cv::CALIB_CB_FAST_CHECK,
+       "classic"},
+      {true, cv::CALIB_CB_NORMALIZE_IMAGE | (small ? cv::CALIB_CB_ACCURACY : 0), "sb"}};
+  std::string last_reason;
+  auto try_one = [&](const Variant& variant, const Attempt& attempt) -> std::optional<BoardDetection> {
+    std::vector<Eigen::Vector2d> grid;
+    if (!RunOpenCvDetector(variant.image, variant.scale, board, attempt.sb, attempt.flags, &grid)) {
+      return std::nullopt;
+    }
+    last_reason = ValidateGridImpl(grey, board, grid);
+    if (!last_reason.empty()) return std::nullopt;
+    BoardDetection detection;
+    detection.found = true;
+    detection.corners_px = grid;
+    for (int id = 0; id < board.NumCorners(); ++id) detection.corner_ids.push_back(id);
+    detection.method = attempt.name;
+    if (variant.scale != 1.0) detection.method += "-upsampled";
+    return detection;
+  };
+  for (const Variant& variant : variants) {
+    for (Attempt attempt : attempts) {
+      // The fast check misses boards that only the upsampled image resolves.
+      if (variant.scale != 1.0) attempt.flags &= ~cv::CALIB_CB_FAST_CHECK;
+      if (auto detection = try_one(variant, attempt)) return *detection;
+    }
+  }
+  if (options.allow_exhaustive) {
+    const Attempt exhaustive = {true, cv::CALIB_CB_NORMALIZE_IMAGE | cv::CALIB_CB_EXHAUSTIVE,
+                                "sb-exhaustive"};
+    if (auto detection = try_one(variants.front(), exhaustive)) return *detection;
+  }
+  BoardDetection detection;
+  detection.reason = last_reason.empty() ? "no " + board.Describe() + " found"
+                                         : "rejected candidate: " + last_reason;
+  return detection;
+}
+
+BoardDetection DetectCharuco(const cv::Mat& grey, const BoardSpec& board,
+                             const DetectOptions& options) {
+  const cv::Ptr<cv::aruco::Dictionary> dictionary = cv::aruco::getPredefinedDictionary(
+      static_cast<cv::aruco::PREDEFINED_DICTIONARY_NAME>(board.aruco_dictionary));
+  const cv::Ptr<cv::aruco::CharucoBoard> charuco = cv::aruco::CharucoBoard::create(
+      board.cols + 1, board.rows + 1, static_cast<float>(board.square_size_m),
+      static_cast<float>(board.marker_size_m), dictionary);
+  std::vector<std::vector<cv::Point2f>> marker_corners;
+  std::vector<int> marker_ids;
+  cv::aruco::detectMarkers(grey, dictionary, marker_corners, marker_ids);
+  BoardDetection detection;
+  detection.method = "charuco";
+  if (marker_ids.empty()) {
+    detection.reason = "no aruco markers found";
+    return detection;
+  }
+  std::vector<cv::Point2f> corners;
+  std::vector<int> ids;
+  cv::aruco::interpolateCornersCharuco(marker_corners, marker_ids, grey, charuco, corners, ids);
+  if (static_cast<int>(ids.size()) < options.min_charuco_corners) {
+    detection.reason = "only " + std::to_string(ids.size()) + " charuco corners found";
+    return detection;
+  }
+  for (size_t i = 0; i < ids.size(); ++i) {
+    detection.corners_px.emplace_back(corners[i].x, corners[i].y);
+    detection.corner_ids.push_back(ids[i]);
+  }
+  detection.found = true;
+  return detection;
+}
+
+// A rough model for the hint path: xi = 1, principal point at the image centre, and the gamma
+// under which a board pose explains the four hinted corners best.
+std::optional<std::pair<CameraModel, Rigid3d>> ModelFromHint(
+    const cv::Mat& grey, const BoardSpec& board, const std::array<Eigen::Vector2d, 4>& hint) {
+  const std::vector<Eigen::Vector3d> all = board.ObjectPoints();
+  const std::vector<Eigen::Vector3d> outer = {all[0], all[board.cols - 1], all.back(),
+                                              all[(board.rows - 1) * board.cols]};
+  const std::vector<Eigen::Vector2d> pixels(hint.begin(), hint.end());
+  std::optional<std::pair<CameraModel, Rigid3d>> best;
+  double best_rms = std::numeric_limits<double>::infinity();
+  const double size = std::max(grey.cols, grey.rows);
+  for (double factor = 0.05; factor < 3.0; factor *= 1.1) {
+    CameraModel camera;
+    camera.width = grey.cols;
+    camera.height = grey.rows;
+    camera.intrinsics.params = {1.0, factor * size, factor * size, (grey.cols - 1) / 2.0,
+                                (grey.rows - 1) / 2.0, 0, 0, 0, 0, 0, 0};
+    double rms = 0.0;
+    const auto cam_from_board = EstimateBoardPose(camera, outer, pixels, &rms);
+    if (cam_from_board && rms < best_rms) {
+      best_rms = rms;
+      best = std::make_pair(camera, *cam_from_board);
+    }
+  }
+  return best;
+}
+
+// Gamma and the board pose fitted to a single view's corners with everything else fixed at the
+// rough model (xi = 1, principal point at the image centre, no distortion).
+std::optional<std::pair<CameraModel, Rigid3d>> RefitRoughModel(const cv::Mat& grey,
+                                                               const BoardSpec& board,
+                                                               const BoardDetection& detection) {
+  CalibrationOptions options;
+  options.min_views = 1;
+  options.min_corners_per_view = 8;
+  options.max_rejection_rounds = 1;
+  options.fixed.fill(true);
+  options.fixed[UnifiedIntrinsics::kGammaU] = options.fixed[UnifiedIntrinsics::kGammaV] = false;
+  BoardDetection partial = detection;
+  partial.found = true;  // a partial grid is all this fit needs
+  try {
+    const CalibrationReport report =
+        Calibrate({{"hint", partial}}, grey.cols, grey.rows, board, options, ProgressSink());
+    if (!report.images[0].used) return std::nullopt;
+    return std::make_pair(report.camera, report.images[0].cam_from_board);
+  } catch (const InvalidArgument&) {
+    return std::nullopt;
+  }
+}
+
+BoardDetection DetectFromHint(const cv::Mat& grey, const BoardSpec& board,
+                              const DetectOptions& options) {
+  const std::array<Eigen::Vector2d, 4>& hint = *options.outer_corners_hint_px;
+  const std::vector<Eigen::Vector3d> all = board.ObjectPoints();
+  const std::vector<Eigen::Vector3d> outer = {all[0], all[board.cols - 1], all.back(),
+                                              all[(board.rows - 1) * board.cols]};
+  const std::vector<Eigen::Vector2d> pixels(hint.begin(), hint.end());
+  BoardDetection detection;
+  detection.method = "hint";
+  std::optional<std::pair<CameraModel, Rigid3d>> guess;
+  if (options.model) {
+    const auto cam_from_board = EstimateBoardPose(*options.model, outer, pixels);
+    if (cam_from_board) guess = std::make_pair(*options.model, *cam_from_board);
+  } else {
+    guess = ModelFromHint(grey, board, hint);
+  }
+  if (!guess) {
+    detection.reason = "the four hinted corners fit no board pose";
+    return detection;
+  }
+  detection = DetectBoardFromPose(grey, board, guess->first, guess->second, options);
+  // Without a model the first prediction bends wrongly between the hinted corners. Each further
+  // pass fits gamma and the pose (xi = 1, no distortion) to every corner found so far and
+  // predicts again, while that finds more corners.
+  for (int pass = 0; pass < 4 && !options.model && detection.corners_px.size() >= 8 &&
+                     static_cast<int>(detection.corners_px.size()) < board.NumCorners();
+       ++pass) {
+    const auto refit = RefitRoughModel(grey, board, detection);
+    if (!refit) break;
+    BoardDetection again = DetectBoardFromPose(grey, board, refit->first, refit->second, options);
+    if (again.corners_px.size() <= detection.corners_px.size()) break;
+    detection = std::move(again);
+  }
+  detection.method = "hint";
+  return detection;
+}
+
+// The eight symmetries of a sub-grid of sub_cols x sub_rows placed on the board at (dc, dr):
+// the board id of sub-grid corner (c, r), or -1 when it falls off the board.
+int PlacedId(const BoardSpec& board, int sub_cols, int sub_rows, int symmetry, int dc, int dr,
+             int c, int r) {
+  if (symmetry & 1) c = sub_cols - 1 - c;
+  if (symmetry & 2) r = sub_rows - 1 - r;
+  int col = c, row = r;
+  if (symmetry & 4) std::swap(col, row);
+  col += dc;
+  row += dr;
+  if (col < 0 || row < 0 || col >= board.cols || row >= board.rows) return -1;
+  return row * board.cols + col;
+}
+
+// A partial grid of sub_cols x sub_rows corners found by OpenCV without validation.
+std::optional<std::vector<Eigen::Vector2d>> FindPartialGrid(const cv::Mat& grey, int sub_cols,
+                                                            int sub_rows) {
+  BoardSpec sub;
+  sub.cols = sub_cols;
+  sub.rows = sub_rows;
+  std::vector<Eigen::Vector2d> grid;
+  const int classic =
+      cv::CALIB_CB_ADAPTIVE_THRESH | cv::CALIB_CB_NORMALIZE_IMAGE | cv::CALIB_CB_FAST_CHECK;
+  if (RunOpenCvDetector(grey, 1.0, sub, false, classic, &grid)) return grid;
+  const bool small = std::max(grey.cols, grey.rows) <= 800;
+  const int sb = cv::CALIB_CB_NORMALIZE_IMAGE | (small ? cv::CALIB_CB_ACCURACY : 0);
+  if (RunOpenCvDetector(grey, 1.0, sub, true, sb, &grid)) return grid;
+  return std::nullopt;
+}
+
+// Every placement of a partial grid on the board, scored by the corners the model confirms.
+BoardDetection BestPlacement(const cv::Mat& grey, const BoardSpec& board,
+                             const CameraModel& model, const std::vector<Eigen::Vector2d>& grid,
+                             int sub_cols, int sub_rows, const DetectOptions& options) {
+  const std::vector<Eigen::Vector3d> object_points = board.ObjectPoints();
+  BoardDetection best;
+  const int span = std::max(board.cols, board.rows);
+  for (int symmetry = 0; symmetry < 8; ++symmetry) {
+    for (int dr = 0; dr < span; ++dr) {
+      for (int dc = 0; dc < span; ++dc) {
+        std::vector<Eigen::Vector3d> points;
+        bool fits = true;
+        for (int i = 0; i < sub_cols * sub_rows && fits; ++i) {
+          const int id = PlacedId(board, sub_cols, sub_rows, symmetry, dc, dr, i % sub_cols,
+                                  i / sub_cols);
+          fits = id >= 0;
+          if (fits) points.push_back(object_points[id]);
+        }
+        if (!fits) continue;
+        double rms = 0.0;
+        const auto cam_from_board = EstimateBoardPose(model, points, grid, &rms);
+        if (!cam_from_board || rms > 3.0) continue;
+        BoardDetection candidate = DetectBoardFromPose(grey, board, model, *cam_from_board, options);
+        if (candidate.corners_px.size() > best.corners_px.size()) best = std::move(candidate);
+      }
+    }
+  }
+  return best;
+}
+
+}  // namespace
+
+std::string ValidateBoardGrid(const cv::Mat& image, const BoardSpec& board,
+                              const std::vector<Eigen::Vector2d>& grid) {
+  board.Check();
+  OMNIRIG_CHECK(!image.empty(), "detect: empty image");
+  return ValidateGridImpl(ToGrey(image), board, grid);
+}
+
+void DetectOptions::Check() const {
+  OMNIRIG_CHECK(min_charuco_corners >= 4, "detect: min_charuco_corners must be >= 4");
+  if (outer_corners_hint_px) {
+    for (const auto& corner : *outer_corners_hint_px) {
+      OMNIRIG_CHECK(corner.allFinite(), "detect: hint corners must be finite");
+    }
+  }
+  if (model) model->intrinsics.Check();
+}
+
+BoardDetection DetectBoard(const cv::Mat& image, const BoardSpec& board,
+                           const DetectOptions& options) {
+  board.Check();
+  options.Check();
+  OMNIRIG_CHECK(!image.empty(), "detect: empty image");
+  const cv::Mat grey = ToGrey(image);
+  BoardDetection detection;
+  if (board.type == BoardSpec::Type::kCharuco) {
+    detection = DetectCharuco(grey, board, options);
+  } else if (options.outer_corners_hint_px) {
+    detection = DetectFromHint(grey, board, options);
+  } else {
+    detection = DetectCheckerboard(grey, board, options);
+  }
+  if (detection.found && options.refine_subpixel && detection.method != "hint" &&
+      detection.method != "charuco") {
+    RefineGrid(grey, board, &detection);
+  }
+  return detection;
+}
+
+BoardDetection DetectBoardFromPose(const cv::Mat& image, const BoardSpec& board,
+                                   const CameraModel& model, const Rigid3d& cam_from_board,
+                                   const DetectOptions& options) {
+  board.Check();
+  options.Check();
+  OMNIRIG_CHECK(!image.empty(), "detect: empty image");
+  const cv::Mat grey = ToGrey(image);
+  const std::vector<Eigen::Vector3d> object_points = board.ObjectPoints();
+  std::vector<Eigen::Vector2d> predicted(object_points.size(), Eigen::Vector2d::Constant(-1e9));
+  for (size_t i = 0; i < object_points.size(); ++i) {
+    const auto pixel = Project(model.intrinsics, cam_from_board * object_points[i]);
+    if (pixel) predicted[i] = *pixel;
+  }
+  BoardDetection detection;
+  detection.method = "model";
+  for (int id = 0; id < board.NumCorners(); ++id) {
+    const double square_px = LocalSquarePx(predicted, board, id);
+    if (!(square_px > 4.0) || !std::isfinite(square_px)) continue;
+    std::vector<Eigen::Vector2d> corner = {predicted[id]};
+    if (!LooksLikeXCorner(grey, corner[0], 0.3 * square_px)) continue;
+    RefineCorners(grey, &corner, {square_px});
+    // A refinement that wanders off by more than a third of a square found something else.
+    if ((corner[0] - predicted[id]).norm() > square_px / 3.0) continue;
+    detection.corners_px.push_back(corner[0]);
+    detection.corner_ids.push_back(id);
+  }
+  detection.found = 2 * static_cast<int>(detection.corner_ids.size()) >= board.NumCorners();
+  if (!detection.found) {
+    detection.reason = "only " + std::to_string(detection.corner_ids.size()) + " of " +
+                       std::to_string(board.NumCorners()) + " predicted corners confirmed";
+  }
+  return detection;
+}
+
+}  // namespace omnirig
+
+namespace omnirig {
+
+BoardDetection RedetectWithModel(const cv::Mat& image, const BoardSpec& board,
+                                 const CameraModel& model, const DetectOptions& options) {
+  board.Check();
+  options.Check();
+  OMNIRIG_CHECK(!image.empty(), "detect: empty image");
+  const cv::Mat grey = ToGrey(image);
+  const int sizes[][2] = {{-1, -1}, {-1, 0}, {0, -1}, {-2, -2}, {-2, -1}, {-1, -2}, {-3, -3}};
+  for (const auto& shrink : sizes) {
+    const int sub_cols = board.cols + shrink[0], sub_rows = board.rows + shrink[1];
+    if (sub_cols < 3 || sub_rows < 3) continue;
+    const auto grid = FindPartialGrid(grey, sub_cols, sub_rows);
+    if (!grid) continue;
+    BoardDetection detection =
+        BestPlacement(grey, board, model, *grid, sub_cols, sub_rows, options);
+    if (detection.found) {
+      detection.method = "model-grown";
+      return detection;
+    }
+  }
+  BoardDetection detection;
+  detection.reason = "no " + board.Describe() + " found, also not by growing a partial grid "
+                     "with the model of the other views";
+  return detection;
+}
+
+}  // namespace omnirig

@@ -1,0 +1,84 @@
+#pragma once
+// Detection of a calibration board's corners in a (strongly distorted) omnidirectional image.
+//
+// Checkerboards are found fully automatically: OpenCV's detectors run on the image and on
+// contrast-normalised and upsampled versions; a candidate must have every corner (sub-boards
+// are rejected by the count and the board's extent), a consistent row-major ordering (no
+// flipped or mirrored grids) and is refined to sub-pixel with a window adapted to the local
+// square size. With a model from an earlier calibration, or with the four outer corners given
+// by the user, every corner is predicted and refined instead (the paper's tool's hint path).
+// ChArUco boards go through OpenCV aruco and may be partial.
+
+#include <array>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+#include <opencv2/core.hpp>
+
+#include "engine/calib/board.h"
+#include "engine/geometry/camera_model.h"
+#include "engine/geometry/rigid3.h"
+
+namespace omnirig {
+
+struct BoardDetection {
+  bool found = false;
+  std::string reason;  // why not found (empty when found)
+  // Pixel positions (centre of the top-left pixel is (0, 0)) and the index of each corner in
+  // BoardSpec::ObjectPoints().
+  std::vector<Eigen::Vector2d> corners_px;
+  std::vector<int> corner_ids;
+  std::string method;  // which detector found it ("sb", "classic", "hint", "model", "charuco")
+};
+
+struct DetectOptions {
+  // Sub-pixel refinement of every corner.
+  bool refine_subpixel = true;
+  // Also try 2x upsampled and contrast-normalised images when the plain image fails.
+  bool try_enhanced = true;
+  // Allow OpenCV's exhaustive search as the last resort (can take minutes on a large image
+  // without the board, hence off by default).
+  bool allow_exhaustive = false;
+  // A ChArUco detection needs at least this many corners.
+  int min_charuco_corners = 6;
+  // The board's four outer corners given by the user, in this order: corner id 0, id cols-1
+  // (end of the first row), id rows*cols-1 (last), id (rows-1)*cols (start of the last row).
+  std::optional<std::array<Eigen::Vector2d, 4>> outer_corners_hint_px;
+  // With a hint and no model, the hint's corners predict the others through a homography,
+  // which the distortion of a mirror bends; with a model (from other views) the prediction
+  // goes through the model and a board pose fitted to the hint.
+  std::optional<CameraModel> model;
+
+  void Check() const;
+};
+
+// Detects `board` in `image` (8-bit grey or BGR). Never throws for a missing board: the result
+// says why. Throws InvalidArgument for an empty image or invalid options.
+BoardDetection DetectBoard(const cv::Mat& image, const BoardSpec& board,
+                           const DetectOptions& options);
+
+// The re-detection pass for views the automatic detector missed, once a model exists from
+// other views: finds a smaller grid inside the board (OpenCV's detectors find partial boards
+// when asked for fewer corners), tries every placement and orientation of it on the board,
+// fits the board pose with the model, predicts every corner and refines it, and keeps the
+// placement that confirms the most corners. Returns found = false with a reason otherwise.
+BoardDetection RedetectWithModel(const cv::Mat& image, const BoardSpec& board,
+                                 const CameraModel& model, const DetectOptions& options);
+
+// Checks a full grid (corner id i at grid[i]): every corner inside the image, no collapsed
+// squares, and no sub-board of a larger pattern (the points one square beyond an edge must not
+// look like inner corners). Returns the reason it fails, or "" when it passes.
+std::string ValidateBoardGrid(const cv::Mat& image, const BoardSpec& board,
+                              const std::vector<Eigen::Vector2d>& grid);
+
+// Predicts every corner of `board` at `cam_from_board` with `model` and refines each in
+// `image`; corners that do not project or whose refinement moves too far are left out.
+// found requires at least half of the corners. Used by the re-detection pass of Calibrate
+// callers and by the hint path.
+BoardDetection DetectBoardFromPose(const cv::Mat& image, const BoardSpec& board,
+                                   const CameraModel& model, const Rigid3d& cam_from_board,
+                                   const DetectOptions& options);
+
+}  // namespace omnirig

@@ -1,0 +1,163 @@
+#include "engine/calib/detect.h"
+
+#include <gtest/gtest.h>
+#include <opencv2/aruco/charuco.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "engine/synth/presets.h"
+
+namespace omnirig {
+namespace {
+
+BoardSpec ToBoardSpec(const synth::CheckerboardSpec& spec) {
+  BoardSpec board;
+  board.cols = spec.cols;
+  board.rows = spec.rows;
+  board.square_size_m = spec.square_size_m;
+  return board;
+}
+
+// A few rendered views, shared by the tests (rendering dominates their time).
+const synth::MonoCalibrationSet& RenderedSet() {
+  static const synth::MonoCalibrationSet set = [] {
+    synth::MonoCalibrationOptions options;
+    options.num_views = 3;
+    options.width = 640;
+    options.height = 480;
+    options.render.supersampling = 2;
+    options.render.noise_sigma = 2.0;
+    options.render.num_threads = 2;
+    options.seed = 3;
+    return synth::MakeMonoCalibrationSet(options);
+  }();
+  return set;
+}
+
+// Mean corner error against the truth. A checkerboard's numbering is defined up to the 180
+// degree turn of the board (both are rigid poses), so the better of the two is taken.
+double MeanCornerError(const BoardDetection& detection,
+                       const std::vector<Eigen::Vector2d>& truth) {
+  double direct = 0.0, turned = 0.0;
+  const int n = static_cast<int>(truth.size());
+  for (size_t i = 0; i < detection.corners_px.size(); ++i) {
+    const int id = detection.corner_ids[i];
+    direct += (detection.corners_px[i] - truth[id]).norm();
+    turned += (detection.corners_px[i] - truth[n - 1 - id]).norm();
+  }
+  return std::min(direct, turned) / std::max<size_t>(1, detection.corners_px.size());
+}
+
+TEST(Detect, FindsEveryRenderedViewToSubpixel) {
+  const auto& set = RenderedSet();
+  const BoardSpec board = ToBoardSpec(set.board);
+  for (size_t v = 0; v < set.images.size(); ++v) {
+    const BoardDetection detection = DetectBoard(set.images[v], board, DetectOptions());
+    ASSERT_TRUE(detection.found) << set.names[v] << ": " << detection.reason;
+    ASSERT_EQ(static_cast<int>(detection.corners_px.size()), board.NumCorners());
+    EXPECT_LT(MeanCornerError(detection, set.corners_px[v]), 0.15) << set.names[v];
+  }
+}
+
+TEST(Detect, ValidationRejectsASubBoard) {
+  const auto& set = RenderedSet();
+  const BoardSpec board = ToBoardSpec(set.board);
+  const auto& truth = set.corners_px[0];
+  EXPECT_EQ(ValidateBoardGrid(set.images[0], board, truth), "");
+  // The inner (cols - 2) x (rows - 2) corners: a sub-board extending beyond every edge.
+  BoardSpec smaller = board;
+  smaller.cols -= 2;
+  smaller.rows -= 2;
+  std::vector<Eigen::Vector2d> sub;
+  for (int r = 1; r + 1 < board.rows; ++r) {
+    for (int c = 1; c + 1 < board.cols; ++c) sub.push_back(truth[r * board.cols + c]);
+  }
+  EXPECT_NE(ValidateBoardGrid(set.images[0], smaller, sub).find("sub-board"), std::string::npos);
+  // A sub-board flush with three edges still extends beyond the fourth.
+  BoardSpec narrower = board;
+  narrower.cols -= 1;
+  sub.clear();
+  for (int r = 0; r < board.rows; ++r) {
+    for (int c = 0; c + 1 < board.cols; ++c) sub.push_back(truth[r * board.cols + c]);
+  }
+  EXPECT_NE(ValidateBoardGrid(set.images[0], narrower, sub).find("sub-board"), std::string::npos);
+}
+
+TEST(Detect, HintPredictsAndRefinesEveryCorner) {
+  const auto& set = RenderedSet();
+  const BoardSpec board = ToBoardSpec(set.board);
+  const int c = board.cols, n = board.NumCorners();
+  for (size_t v = 0; v < set.images.size(); ++v) {
+    const auto& truth = set.corners_px[v];
+    DetectOptions options;
+    // A user's clicks: the outer corners, off by a pixel or two.
+    options.outer_corners_hint_px = std::array<Eigen::Vector2d, 4>{
+        truth[0] + Eigen::Vector2d(1.5, -1.0), truth[c - 1] + Eigen::Vector2d(-1.0, 1.5),
+        truth[n - 1] + Eigen::Vector2d(1.0, 1.0), truth[n - c] + Eigen::Vector2d(-1.5, -1.5)};
+    const BoardDetection detection = DetectBoard(set.images[v], board, options);
+    ASSERT_TRUE(detection.found) << set.names[v] << ": " << detection.reason;
+    EXPECT_EQ(static_cast<int>(detection.corners_px.size()), n) << set.names[v];
+    for (size_t i = 0; i < detection.corners_px.size(); ++i) {
+      EXPECT_LT((detection.corners_px[i] - truth[detection.corner_ids[i]]).norm(), 0.5)
+          << set.names[v] << " corner " << detection.corner_ids[i];
+    }
+  }
+}
+
+TEST(Detect, PredictionFromAModelAndPose) {
+  const auto& set = RenderedSet();
+  const BoardSpec board = ToBoardSpec(set.board);
+  const BoardDetection detection = DetectBoardFromPose(
+      set.images[0], board, set.camera.model, set.cam_from_board[0], DetectOptions());
+  ASSERT_TRUE(detection.found) << detection.reason;
+  EXPECT_EQ(static_cast<int>(detection.corners_px.size()), board.NumCorners());
+  EXPECT_LT(MeanCornerError(detection, set.corners_px[0]), 0.15);
+}
+
+TEST(Detect, ImageWithoutBoardSaysWhy) {
+  cv::Mat blank(480, 640, CV_8UC1, cv::Scalar(128));
+  cv::circle(blank, cv::Point(320, 240), 100, cv::Scalar(30), -1);
+  BoardSpec board;
+  board.cols = 8;
+  board.rows = 6;
+  board.square_size_m = 0.04;
+  DetectOptions options;
+  options.allow_exhaustive = false;
+  const BoardDetection detection = DetectBoard(blank, board, options);
+  EXPECT_FALSE(detection.found);
+  EXPECT_NE(detection.reason.find("no checkerboard 8x6"), std::string::npos) << detection.reason;
+  EXPECT_THROW(DetectBoard(cv::Mat(), board, options), InvalidArgument);
+  board.rows = 0;
+  EXPECT_THROW(DetectBoard(blank, board, options), InvalidArgument);
+}
+
+TEST(Detect, CharucoCornersCarryTheBoardIds) {
+  BoardSpec board;
+  board.type = BoardSpec::Type::kCharuco;
+  board.cols = 6;  // 7 x 5 squares
+  board.rows = 4;
+  board.square_size_m = 0.04;
+  board.marker_size_m = 0.03;
+  board.aruco_dictionary = cv::aruco::DICT_4X4_50;
+  const auto charuco = cv::aruco::CharucoBoard::create(
+      7, 5, 0.04f, 0.03f, cv::aruco::getPredefinedDictionary(cv::aruco::DICT_4X4_50));
+  cv::Mat image;
+  charuco->draw(cv::Size(700, 500), image, 0);  // 100 px squares starting at (0, 0)
+  const BoardDetection detection = DetectBoard(image, board, DetectOptions());
+  ASSERT_TRUE(detection.found) << detection.reason;
+  EXPECT_EQ(static_cast<int>(detection.corner_ids.size()), board.NumCorners());
+  const std::vector<Eigen::Vector3d> object_points = board.ObjectPoints();
+  for (size_t i = 0; i < detection.corner_ids.size(); ++i) {
+    // Inner corner (c, r) sits between pixels (c + 1) * 100 - 1 and (c + 1) * 100, at
+    // ((c + 1) * 100 - 0.5, (r + 1) * 100 - 0.5).
+    const Eigen::Vector3d& p = object_points[detection.corner_ids[i]];
+    const Eigen::Vector2d expected = (p.head<2>() / 0.04 + Eigen::Vector2d::Ones()) * 100.0 -
+                                     Eigen::Vector2d::Constant(0.5);
+    // This checks the id mapping: a wrong id is off by a whole square (100 px). OpenCV's ChArUco
+    // interpolation itself lands about 0.5 px from the drawn edge on this synthetic image.
+    EXPECT_LT((detection.corners_px[i] - expected).norm(), 1.0)
+        << detection.corner_ids[i] << ": " << detection.corners_px[i].transpose();
+  }
+}
+
+}  // namespace
+}  // namespace omnirig

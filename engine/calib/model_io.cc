@@ -1,0 +1,205 @@
+#include "engine/calib/model_io.h"
+
+#include <iomanip>
+#include <map>
+#include <sstream>
+
+#include <opencv2/core.hpp>
+
+#include "engine/util/check.h"
+
+namespace omnirig {
+namespace {
+
+using I = UnifiedIntrinsics;
+
+// Reads a numeric node that OpenCV may store as a number or as a 1x1 matrix.
+double ReadScalar(const cv::FileNode& node, const std::string& name) {
+  OMNIRIG_CHECK(!node.empty(), "opencv omnidir: missing node '" << name << "'");
+  if (node.isReal() || node.isInt()) return static_cast<double>(node);
+  cv::Mat m;
+  node >> m;
+  OMNIRIG_CHECK(m.total() == 1, "opencv omnidir: node '" << name << "' must be a scalar");
+  m.convertTo(m, CV_64F);
+  return m.at<double>(0);
+}
+
+cv::Mat ReadMatrix(const cv::FileStorage& fs, const std::vector<std::string>& names, int total) {
+  for (const std::string& name : names) {
+    const cv::FileNode node = fs[name];
+    if (node.empty()) continue;
+    cv::Mat m;
+    node >> m;
+    OMNIRIG_CHECK(static_cast<int>(m.total()) == total,
+                  "opencv omnidir: node '" << name << "' must have " << total << " elements");
+    m.convertTo(m, CV_64F);
+    return m.reshape(1, 1);
+  }
+  OMNIRIG_CHECK(false, "opencv omnidir: missing node '" << names.front() << "'");
+}
+
+// The bracketed numbers after "key:" in a YAML flow sequence, e.g. "intrinsics: [1, 2, 3]".
+std::vector<double> ParseFlowSequence(const std::string& value, const std::string& key) {
+  const size_t open = value.find('['), close = value.find(']');
+  OMNIRIG_CHECK(open != std::string::npos && close != std::string::npos && open < close,
+                "kalibr: '" << key << "' must be a [..] list");
+  std::string inner = value.substr(open + 1, close - open - 1);
+  for (char& c : inner) {
+    if (c == ',') c = ' ';
+  }
+  std::istringstream is(inner);
+  std::vector<double> numbers;
+  double x;
+  while (is >> x) numbers.push_back(x);
+  OMNIRIG_CHECK(is.eof(), "kalibr: '" << key << "' holds a non-number");
+  return numbers;
+}
+
+// key -> value text of the camera block `camera_name` (indented lines after "camera_name:").
+std::map<std::string, std::string> KalibrCameraBlock(const std::string& text,
+                                                     const std::string& camera_name) {
+  std::istringstream is(text);
+  std::string line;
+  bool inside = false;
+  std::map<std::string, std::string> block;
+  while (std::getline(is, line)) {
+    const size_t hash = line.find('#');
+    if (hash != std::string::npos) line = line.substr(0, hash);
+    if (line.find_first_not_of(" \t\r") == std::string::npos) continue;
+    const bool indented = line[0] == ' ' || line[0] == '\t';
+    if (!indented) {
+      inside = line.substr(0, line.find(':')) == camera_name;
+      continue;
+    }
+    const size_t colon = line.find(':');
+    if (!inside || colon == std::string::npos) continue;
+    const size_t start = line.find_first_not_of(" \t");
+    block[line.substr(start, colon - start)] = line.substr(colon + 1);
+  }
+  OMNIRIG_CHECK(!block.empty(), "kalibr: no camera '" << camera_name << "'");
+  return block;
+}
+
+std::string Trimmed(const std::string& s) {
+  const size_t a = s.find_first_not_of(" \t\r\"'");
+  const size_t b = s.find_last_not_of(" \t\r\"'");
+  return a == std::string::npos ? "" : s.substr(a, b - a + 1);
+}
+
+}  // namespace
+
+std::vector<std::string> ExportWarnings(const CameraModel& camera, bool format_has_skew) {
+  std::vector<std::string> warnings;
+  std::ostringstream os;
+  os << std::setprecision(6);
+  if (camera.intrinsics.k(5) != 0.0) {
+    os << "k5 = " << camera.intrinsics.k(5)
+       << " is not representable and was dropped; calibrate with k5 fixed at 0 for an exact "
+          "export";
+    warnings.push_back(os.str());
+    os.str("");
+  }
+  if (!format_has_skew && camera.intrinsics.alpha() != 0.0) {
+    os << "skew alpha = " << camera.intrinsics.alpha()
+       << " is not representable and was dropped; calibrate with skew fixed at 0 for an exact "
+          "export";
+    warnings.push_back(os.str());
+  }
+  return warnings;
+}
+
+std::string ToOpenCvOmnidir(const CameraModel& camera, std::vector<std::string>* warnings) {
+  const UnifiedIntrinsics& in = camera.intrinsics;
+  const std::vector<std::string> dropped = ExportWarnings(camera, /*format_has_skew=*/true);
+  if (warnings) *warnings = dropped;
+  cv::FileStorage fs(".yml", cv::FileStorage::WRITE | cv::FileStorage::MEMORY);
+  fs.writeComment("Mei unified model exported by omnirig for cv::omnidir");
+  for (const std::string& warning : dropped) fs.writeComment("WARNING: " + warning);
+  fs << "image_width" << camera.width << "image_height" << camera.height;
+  const cv::Matx33d k(in.gamma_u(), in.gamma_u() * in.alpha(), in.u0(), 0.0, in.gamma_v(),
+                      in.v0(), 0.0, 0.0, 1.0);
+  fs << "camera_matrix" << cv::Mat(k);
+  fs << "distortion_coefficients" << cv::Mat(cv::Matx14d(in.k(1), in.k(2), in.k(3), in.k(4)));
+  fs << "xi" << in.xi();
+  return fs.releaseAndGetString();
+}
+
+CameraModel FromOpenCvOmnidir(const std::string& text) {
+  cv::FileStorage fs;
+  try {
+    fs.open(text, cv::FileStorage::READ | cv::FileStorage::MEMORY);
+  } catch (const cv::Exception& e) {
+    OMNIRIG_CHECK(false, "opencv omnidir: cannot parse the document: " << e.what());
+  }
+  OMNIRIG_CHECK(fs.isOpened(), "opencv omnidir: cannot parse the document");
+  const cv::Mat k = ReadMatrix(fs, {"camera_matrix", "K"}, 9);
+  const cv::Mat d = ReadMatrix(fs, {"distortion_coefficients", "D"}, 4);
+  CameraModel camera;
+  UnifiedIntrinsics& in = camera.intrinsics;
+  in.xi() = ReadScalar(fs["xi"], "xi");
+  in.gamma_u() = k.at<double>(0);
+  in.alpha() = k.at<double>(1) / k.at<double>(0);
+  in.u0() = k.at<double>(2);
+  in.gamma_v() = k.at<double>(4);
+  in.v0() = k.at<double>(5);
+  for (int i = 0; i < 4; ++i) in.k(i + 1) = d.at<double>(i);
+  in.k(5) = 0.0;
+  if (!fs["image_width"].empty()) camera.width = static_cast<int>(fs["image_width"]);
+  if (!fs["image_height"].empty()) camera.height = static_cast<int>(fs["image_height"]);
+  in.Check();
+  return camera;
+}
+
+std::string ToKalibrOmniRadtan(const CameraModel& camera, std::vector<std::string>* warnings,
+                               const std::string& camera_name) {
+  const UnifiedIntrinsics& in = camera.intrinsics;
+  const std::vector<std::string> dropped = ExportWarnings(camera, /*format_has_skew=*/false);
+  if (warnings) *warnings = dropped;
+  std::ostringstream os;
+  os << std::setprecision(17);
+  os << "# Mei unified model exported by omnirig for Kalibr (omni-radtan)\n";
+  for (const std::string& warning : dropped) os << "# WARNING: " << warning << "\n";
+  os << camera_name << ":\n"
+     << "  camera_model: omni\n"
+     << "  intrinsics: [" << in.xi() << ", " << in.gamma_u() << ", " << in.gamma_v() << ", "
+     << in.u0() << ", " << in.v0() << "]\n"
+     << "  distortion_model: radtan\n"
+     << "  distortion_coeffs: [" << in.k(1) << ", " << in.k(2) << ", " << in.k(3) << ", "
+     << in.k(4) << "]\n"
+     << "  resolution: [" << camera.width << ", " << camera.height << "]\n";
+  return os.str();
+}
+
+CameraModel FromKalibrOmniRadtan(const std::string& text, const std::string& camera_name) {
+  const std::map<std::string, std::string> block = KalibrCameraBlock(text, camera_name);
+  auto get = [&](const std::string& key) -> const std::string& {
+    const auto it = block.find(key);
+    OMNIRIG_CHECK(it != block.end(), "kalibr: camera '" << camera_name << "' has no '" << key
+                                                        << "'");
+    return it->second;
+  };
+  OMNIRIG_CHECK(Trimmed(get("camera_model")) == "omni",
+                "kalibr: camera_model must be omni, got '" << Trimmed(get("camera_model")) << "'");
+  OMNIRIG_CHECK(Trimmed(get("distortion_model")) == "radtan",
+                "kalibr: distortion_model must be radtan, got '"
+                    << Trimmed(get("distortion_model")) << "'");
+  const std::vector<double> intrinsics = ParseFlowSequence(get("intrinsics"), "intrinsics");
+  const std::vector<double> distortion =
+      ParseFlowSequence(get("distortion_coeffs"), "distortion_coeffs");
+  OMNIRIG_CHECK(intrinsics.size() == 5, "kalibr: intrinsics must hold 5 numbers");
+  OMNIRIG_CHECK(distortion.size() == 4, "kalibr: distortion_coeffs must hold 4 numbers");
+  CameraModel camera;
+  camera.intrinsics.params = {intrinsics[0], intrinsics[1], intrinsics[2], intrinsics[3],
+                              intrinsics[4], 0.0, distortion[0], distortion[1], distortion[2],
+                              distortion[3], 0.0};
+  if (block.count("resolution")) {
+    const std::vector<double> resolution = ParseFlowSequence(get("resolution"), "resolution");
+    OMNIRIG_CHECK(resolution.size() == 2, "kalibr: resolution must hold 2 numbers");
+    camera.width = static_cast<int>(resolution[0]);
+    camera.height = static_cast<int>(resolution[1]);
+  }
+  camera.intrinsics.Check();
+  return camera;
+}
+
+}  // namespace omnirig

@@ -1,0 +1,34 @@
+#pragma once
+// Import and export of the unified model in other tools' formats:
+//   OpenCV omnidir FileStorage (YAML or XML): K (camera_matrix), D = (k1, k2, p1, p2)
+//     (distortion_coefficients) and xi, as cv::omnidir::calibrate's sample writes them.
+//     K(0, 1) = s = gamma_u * alpha; (p1, p2) = the paper's (k3, k4).
+//   Kalibr camchain YAML, camera_model "omni" with distortion_model "radtan":
+//     intrinsics [xi, fu, fv, pu, pv], distortion_coeffs [k1, k2, r1, r2], resolution [w, h].
+// Neither format has k5; Kalibr has no skew. Exports return a warning for each parameter they
+// drop (and write it into the file as a comment); CalibrationOptions fixes k5 and skew at zero
+// by default so that exports are exact.
+
+#include <string>
+#include <vector>
+
+#include "engine/geometry/camera_model.h"
+
+namespace omnirig {
+
+// Warnings for the parameters a format cannot hold ("k5 = 0.01 is not representable ...").
+std::vector<std::string> ExportWarnings(const CameraModel& camera, bool format_has_skew);
+
+// The FileStorage document as text (YAML). `warnings` receives what the format drops.
+std::string ToOpenCvOmnidir(const CameraModel& camera, std::vector<std::string>* warnings);
+// Parses an OpenCV omnidir FileStorage document (YAML or XML text). Throws InvalidArgument
+// naming the missing or malformed node.
+CameraModel FromOpenCvOmnidir(const std::string& text);
+
+std::string ToKalibrOmniRadtan(const CameraModel& camera, std::vector<std::string>* warnings,
+                               const std::string& camera_name = "cam0");
+// Parses the camera `camera_name` of a Kalibr camchain YAML. Throws InvalidArgument for another
+// camera or distortion model or missing keys.
+CameraModel FromKalibrOmniRadtan(const std::string& text, const std::string& camera_name = "cam0");
+
+}  // namespace omnirig

@@ -1,0 +1,222 @@
+#include "engine/calib/pipeline.h"
+
+#include <atomic>
+#include <mutex>
+#include <sstream>
+#include <thread>
+
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+namespace omnirig {
+namespace {
+
+cv::Point2d ToCv(const Eigen::Vector2d& p) { return cv::Point2d(p.x(), p.y()); }
+
+// Reads one image; an empty Mat (with `reason` set) when it is unreadable or of another size.
+cv::Mat ReadImage(const std::filesystem::path& path, int* width, int* height,
+                  std::string* reason) {
+  cv::Mat image;
+  try {
+    image = cv::imread(path.string(), cv::IMREAD_COLOR);
+  } catch (const cv::Exception&) {
+    image = cv::Mat();
+  }
+  if (image.empty()) {
+    *reason = "cannot read the image (missing, unreadable or truncated file)";
+    return image;
+  }
+  if (*width == 0) {
+    *width = image.cols;
+    *height = image.rows;
+  } else if (image.cols != *width || image.rows != *height) {
+    std::ostringstream os;
+    os << "image size " << image.cols << "x" << image.rows << " differs from the first image's "
+       << *width << "x" << *height;
+    *reason = os.str();
+    return cv::Mat();
+  }
+  return image;
+}
+
+ProgressSink ScaledSink(const ProgressSink& progress, double from, double to) {
+  ProgressSink scaled;
+  scaled.is_cancelled = progress.is_cancelled;
+  scaled.report = [&progress, from, to](double fraction, const std::string& stage,
+                                        const std::string& message) {
+    progress.Report(from + (to - from) * fraction, stage, message);
+  };
+  return scaled;
+}
+
+
+// Detects the board in every image, on options.calibrate.num_threads threads. The first
+// readable image fixes the expected size (images are read in order before detection).
+std::vector<CalibrationView> DetectAll(const std::filesystem::path& dir,
+                                       const std::vector<std::string>& names,
+                                       const BoardSpec& board,
+                                       const ImageCalibrationOptions& options, int* width,
+                                       int* height, const ProgressSink& progress) {
+  std::vector<CalibrationView> views(names.size());
+  std::vector<cv::Mat> images(names.size());
+  for (size_t i = 0; i < names.size(); ++i) {
+    progress.ThrowIfCancelled();
+    views[i].name = names[i];
+    images[i] = ReadImage(dir / names[i], width, height, &views[i].detection.reason);
+  }
+  std::mutex mutex;
+  std::atomic<size_t> next{0};
+  size_t done = 0;
+  std::exception_ptr error;
+  auto worker = [&]() {
+    for (size_t i = next++; i < names.size(); i = next++) {
+      {
+        const std::lock_guard<std::mutex> lock(mutex);
+        if (progress.IsCancelled()) return;
+      }
+      try {
+        if (!images[i].empty()) {
+          DetectOptions detect = options.detect;
+          const auto hint = options.hints.find(names[i]);
+          if (hint != options.hints.end()) detect.outer_corners_hint_px = hint->second;
+          views[i].detection = DetectBoard(images[i], board, detect);
+        }
+        images[i].release();
+        const std::lock_guard<std::mutex> lock(mutex);
+        ++done;
+        progress.Report(0.5 * done / names.size(), "detect",
+                        names[i] + (views[i].detection.found ? ": found"
+                                                             : ": " + views[i].detection.reason));
+      } catch (...) {
+        const std::lock_guard<std::mutex> lock(mutex);
+        if (!error) error = std::current_exception();
+        return;
+      }
+    }
+  };
+  const int num_threads =
+      std::max(1, std::min<int>(options.calibrate.num_threads, static_cast<int>(names.size())));
+  std::vector<std::thread> threads;
+  for (int t = 1; t < num_threads; ++t) threads.emplace_back(worker);
+  worker();
+  for (std::thread& thread : threads) thread.join();
+  if (error) std::rethrow_exception(error);
+  progress.ThrowIfCancelled();
+  return views;
+}
+
+// Re-detects the views the detector missed with the model of a first calibration. Returns true
+// when it found any.
+bool RedetectMissed(const std::filesystem::path& dir, const BoardSpec& board,
+                    const ImageCalibrationOptions& options, const CameraModel& model,
+                    const ProgressSink& progress, std::vector<CalibrationView>* views) {
+  bool grown = false;
+  for (CalibrationView& view : *views) {
+    progress.ThrowIfCancelled();
+    if (view.detection.found || options.hints.count(view.name)) continue;
+    const cv::Mat image = cv::imread((dir / view.name).string(), cv::IMREAD_COLOR);
+    if (image.empty() || image.cols != model.width || image.rows != model.height) continue;
+    BoardDetection detection = RedetectWithModel(image, board, model, options.detect);
+    progress.Report(0.8, "redetect",
+                    view.name + (detection.found ? ": found by growing a partial grid"
+                                                 : ": " + detection.reason));
+    if (detection.found) {
+      view.detection = std::move(detection);
+      grown = true;
+    } else {
+      view.detection.reason = detection.reason;
+    }
+  }
+  return grown;
+}
+
+}  // namespace
+
+void ImageCalibrationOptions::Check() const {
+  detect.Check();
+  calibrate.Check();
+  OMNIRIG_CHECK(overlay_error_scale > 0.0, "overlay_error_scale must be positive");
+  for (const auto& [name, hint] : hints) {
+    for (const auto& corner : hint) {
+      OMNIRIG_CHECK(corner.allFinite(), "hint for '" << name << "' is not finite");
+    }
+  }
+}
+
+std::string OverlayFileName(const std::string& image_name) {
+  std::string name = image_name;
+  for (char& c : name) {
+    if (c == '/' || c == '\\') c = '_';
+  }
+  return "overlay_" + name + ".png";
+}
+
+cv::Mat DrawCalibrationOverlay(const cv::Mat& image, const CalibrationImageReport& report,
+                               double error_scale) {
+  cv::Mat overlay;
+  if (image.channels() == 1) {
+    cv::cvtColor(image, overlay, cv::COLOR_GRAY2BGR);
+  } else {
+    overlay = image.clone();
+  }
+  const cv::Scalar green(0, 255, 0), red(0, 0, 255), yellow(0, 255, 255), magenta(255, 0, 255);
+  for (size_t i = 0; i < report.corners_px.size(); ++i) {
+    const bool inlier = i >= report.inlier.size() || report.inlier[i];
+    cv::circle(overlay, ToCv(report.corners_px[i]), 3, inlier ? green : magenta, 1, cv::LINE_AA);
+    if (i >= report.reprojected_px.size()) continue;
+    const Eigen::Vector2d error = report.reprojected_px[i] - report.corners_px[i];
+    cv::drawMarker(overlay, ToCv(report.reprojected_px[i]), red, cv::MARKER_CROSS, 5, 1);
+    cv::line(overlay, ToCv(report.corners_px[i]),
+             ToCv(report.corners_px[i] + error_scale * error), yellow, 1, cv::LINE_AA);
+  }
+  std::ostringstream caption;
+  caption.precision(3);
+  if (report.used) {
+    caption << report.name << ": RMS " << report.rms_px << " px, errors x" << error_scale;
+  } else {
+    caption << report.name << ": not used (" << report.reason << ")";
+  }
+  cv::putText(overlay, caption.str(), cv::Point(8, 20), cv::FONT_HERSHEY_SIMPLEX, 0.5,
+              cv::Scalar(0, 0, 0), 3, cv::LINE_AA);
+  cv::putText(overlay, caption.str(), cv::Point(8, 20), cv::FONT_HERSHEY_SIMPLEX, 0.5,
+              cv::Scalar(255, 255, 255), 1, cv::LINE_AA);
+  return overlay;
+}
+
+CalibrationReport CalibrateImages(const std::filesystem::path& dir,
+                                  const std::vector<std::string>& names, const BoardSpec& board,
+                                  const ImageCalibrationOptions& options,
+                                  const std::filesystem::path& overlay_dir,
+                                  const ProgressSink& progress) {
+  board.Check();
+  options.Check();
+  OMNIRIG_CHECK(!names.empty(), "calibration: no images");
+  for (const auto& [name, hint] : options.hints) {
+    OMNIRIG_CHECK(std::find(names.begin(), names.end(), name) != names.end(),
+                  "hints: no image named '" << name << "'");
+  }
+  int width = 0, height = 0;
+  std::vector<CalibrationView> views =
+      DetectAll(dir, names, board, options, &width, &height, progress);
+  OMNIRIG_CHECK(width > 0, "calibration: none of the " << names.size()
+                                                       << " images could be read");
+  CalibrationReport report = Calibrate(views, width, height, board, options.calibrate,
+                                       ScaledSink(progress, 0.5, 0.8));
+  if (options.redetect_with_model && RedetectMissed(dir, board, options, report.camera, progress,
+                                                    &views)) {
+    report = Calibrate(views, width, height, board, options.calibrate,
+                       ScaledSink(progress, 0.85, 1.0));
+  }
+  if (!overlay_dir.empty()) {
+    std::filesystem::create_directories(overlay_dir);
+    for (const CalibrationImageReport& image_report : report.images) {
+      const cv::Mat image = cv::imread((dir / image_report.name).string(), cv::IMREAD_COLOR);
+      if (image.empty()) continue;
+      cv::imwrite((overlay_dir / OverlayFileName(image_report.name)).string(),
+                  DrawCalibrationOverlay(image, image_report, options.overlay_error_scale));
+    }
+  }
+  return report;
+}
+
+}  // namespace omnirig

@@ -1,0 +1,51 @@
+#pragma once
+// The whole calibration of a set of image files, as the CLI and the `calibration` job run it:
+// read -> detect (per image, with optional hints) -> calibrate -> overlays.
+
+#include <array>
+#include <filesystem>
+#include <map>
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "engine/calib/calibrate.h"
+
+namespace omnirig {
+
+struct ImageCalibrationOptions {
+  DetectOptions detect;
+  CalibrationOptions calibrate;
+  // Four outer corners per image name (see DetectOptions::outer_corners_hint_px).
+  std::map<std::string, std::array<Eigen::Vector2d, 4>> hints;
+  // After a first calibration, views the detector missed are searched again by growing a
+  // partial grid with the model (RedetectWithModel), and the calibration is re-run.
+  bool redetect_with_model = true;
+  // Overlays: error vectors are drawn this many times longer than they are.
+  double overlay_error_scale = 20.0;
+
+  void Check() const;
+};
+
+// Reads `dir / name` for every name, detects the board, calibrates, and (when `overlay_dir` is
+// not empty) writes overlay_<name>.png there, '/' in names replaced by '_'. Unreadable images
+// and images of another size than the first readable one are reported as unused with the
+// reason. Progress: "detect" per image over [0, 0.5], then Calibrate's stages over [0.5, 1]
+// (with a "redetect" pass and a second calibration when views were missed).
+CalibrationReport CalibrateImages(const std::filesystem::path& dir,
+                                  const std::vector<std::string>& names, const BoardSpec& board,
+                                  const ImageCalibrationOptions& options,
+                                  const std::filesystem::path& overlay_dir,
+                                  const ProgressSink& progress);
+
+// The overlay of one image: detected corners (green circles), the model's reprojections (red
+// crosses), error vectors magnified `error_scale` times (yellow), outliers in magenta, and a
+// caption with the image's RMS. Works on unused images too (detected corners only).
+cv::Mat DrawCalibrationOverlay(const cv::Mat& image, const CalibrationImageReport& report,
+                               double error_scale);
+
+// "overlay_<name>.png" with '/' and '\\' replaced by '_'.
+std::string OverlayFileName(const std::string& image_name);
+
+}  // namespace omnirig

@@ -1,0 +1,132 @@
+// Calibration on the real data sets of ../shared/data/real (skipped when absent), against the
+// cv::omnidir::calibrate numbers of that folder's README.
+
+#include <cstdlib>
+#include <filesystem>
+#include <iostream>
+
+#include <gtest/gtest.h>
+#include <opencv2/core.hpp>
+
+#include "engine/calib/pipeline.h"
+
+namespace omnirig {
+namespace {
+
+namespace fs = std::filesystem;
+
+fs::path RealDataDir() {
+  const char* source = std::getenv("OMNIRIG_SOURCE_DIR");
+  return fs::path(source ? source : ".") / ".." / "shared" / "data" / "real";
+}
+
+std::vector<std::string> ImageNames(const fs::path& dir) {
+  std::vector<std::string> names;
+  for (const auto& entry : fs::directory_iterator(dir)) {
+    if (entry.path().extension() == ".jpg") names.push_back(entry.path().filename().string());
+  }
+  std::sort(names.begin(), names.end());
+  return names;
+}
+
+BoardSpec Checkerboard(int cols, int rows, double square_m) {
+  BoardSpec board;
+  board.cols = cols;
+  board.rows = rows;
+  board.square_size_m = square_m;
+  return board;
+}
+
+// The same parameters as cv::omnidir (skew estimated, no k5), for a like-for-like RMS.
+ImageCalibrationOptions OmnidirLikeOptions() {
+  ImageCalibrationOptions options;
+  options.calibrate.SetFixed("skew", false);
+  options.calibrate.num_threads = 2;
+  return options;
+}
+
+#define SKIP_WITHOUT(dir) \
+  if (!fs::is_directory(dir)) GTEST_SKIP() << "real data not found at " << (dir)
+
+TEST(RealData, VmrEveryViewAndRmsNoHigherThanOmnidir) {
+  const fs::path dir = RealDataDir() / "ocamcalib-vmr";
+  SKIP_WITHOUT(dir);
+  const CalibrationReport report = CalibrateImages(
+      dir, ImageNames(dir), Checkerboard(6, 7, 0.03), OmnidirLikeOptions(), "", {});
+  EXPECT_EQ(report.num_views_used, 10);
+  for (const auto& image : report.images) EXPECT_TRUE(image.used) << image.name << ": " << image.reason;
+  EXPECT_LE(report.rms_px, 0.3273);  // README: cv::omnidir 0.3273 px
+  EXPECT_LE(report.rms_all_px, 0.3273);
+}
+
+TEST(RealData, VmrSubBoardTrapIsRejected) {
+  const fs::path dir = RealDataDir() / "ocamcalib-vmr";
+  SKIP_WITHOUT(dir);
+  // 5 x 6 is a sub-board of the real 6 x 7 board: findChessboardCorners "finds" it.
+  try {
+    CalibrateImages(dir, ImageNames(dir), Checkerboard(5, 6, 0.03), OmnidirLikeOptions(), "", {});
+    FAIL() << "a 5x6 calibration must not succeed on a 6x7 board";
+  } catch (const InvalidArgument& e) {
+    const std::string message = e.what();
+    size_t count = 0;
+    for (size_t at = message.find("sub-board"); at != std::string::npos;
+         at = message.find("sub-board", at + 1)) {
+      ++count;
+    }
+    EXPECT_GE(count, 5u) << message;
+    EXPECT_NE(message.find("got 0"), std::string::npos) << message;
+  }
+}
+
+TEST(RealData, KaidanOmniRmsNoHigherThanOmnidir) {
+  const fs::path dir = RealDataDir() / "ocamcalib-kaidanomni";
+  SKIP_WITHOUT(dir);
+  const CalibrationReport report = CalibrateImages(
+      dir, ImageNames(dir), Checkerboard(7, 11, 0.03), OmnidirLikeOptions(), "", {});
+  EXPECT_GE(report.num_views_used, 16);  // README: cv::omnidir's detection found 16 of 17
+  for (const auto& image : report.images) {
+    if (!image.used) std::cerr << image.name << ": " << image.reason << "\n";
+  }
+  EXPECT_LE(report.rms_px, 0.4503);     // README: cv::omnidir 0.4503 px
+}
+
+// The tutorial's corners: objectPoints / imagePoints per view, board 6 x 9, spacing 0.2.
+std::vector<CalibrationView> TutorialViews(const fs::path& file, const BoardSpec& board) {
+  cv::FileStorage fs(file.string(), cv::FileStorage::READ);
+  std::vector<cv::Mat> object_points, image_points;
+  fs["objectPoints"] >> object_points;
+  fs["imagePoints"] >> image_points;
+  std::vector<CalibrationView> views;
+  for (size_t v = 0; v < object_points.size(); ++v) {
+    object_points[v].convertTo(object_points[v], CV_64F);  // stored as 3d
+    image_points[v].convertTo(image_points[v], CV_64F);    // stored as 2f
+    CalibrationView view;
+    view.name = "view" + std::to_string(v);
+    view.detection.found = true;
+    for (int i = 0; i < static_cast<int>(object_points[v].total()); ++i) {
+      const cv::Vec3d p = object_points[v].at<cv::Vec3d>(i);
+      const cv::Vec2d q = image_points[v].at<cv::Vec2d>(i);
+      const int col = static_cast<int>(std::lround(p[0] / board.square_size_m));
+      const int row = static_cast<int>(std::lround(p[1] / board.square_size_m));
+      view.detection.corner_ids.push_back(row * board.cols + col);
+      view.detection.corners_px.emplace_back(q[0], q[1]);
+    }
+    views.push_back(view);
+  }
+  return views;
+}
+
+TEST(RealData, OpencvTutorialCornersRmsNoHigherThanOmnidir) {
+  const fs::path file = RealDataDir() / "opencv-omnidir-tutorial" / "omni_calib_data.xml";
+  if (!fs::exists(file)) GTEST_SKIP() << "real data not found at " << file;
+  const BoardSpec board = Checkerboard(6, 9, 0.2);
+  const std::vector<CalibrationView> views = TutorialViews(file, board);
+  ASSERT_EQ(views.size(), 15u);
+  const CalibrationReport report =
+      Calibrate(views, 1280, 960, board, OmnidirLikeOptions().calibrate, {});
+  EXPECT_EQ(report.num_views_used, 15);
+  EXPECT_LE(report.rms_px, 0.8118);  // README: cv::omnidir 0.8118 px
+}
+
+}  // namespace
+}  // namespace omnirig

@@ -1,0 +1,193 @@
+#include "engine/slam/bundle_adjustment.h"
+
+#include <random>
+
+#include <ceres/autodiff_cost_function.h>
+#include <gtest/gtest.h>
+
+namespace omnirig::slam {
+namespace {
+
+// A vertical catadioptric rig like the paper's: cam1 100 mm above cam0, both looking up
+// their mirror axis (z), 1024x768 images.
+StereoRig MakeRig() {
+  StereoRig rig;
+  for (CameraModel* camera : {&rig.cam0, &rig.cam1}) {
+    camera->width = 1024;
+    camera->height = 768;
+    camera->intrinsics.params = {0.9, 280, 280, 512, 384, 0, -0.02, 0.001, 0, 0, 0};
+  }
+  rig.cam1.intrinsics.params[UnifiedIntrinsics::kU0] = 509;
+  rig.cam0_from_cam1 = Rigid3d(Eigen::Quaterniond(Eigen::AngleAxisd(0.01, Eigen::Vector3d::UnitX())),
+                               Eigen::Vector3d(0.002, -0.001, 0.1));
+  return rig;
+}
+
+TEST(RigReprojectionCost, AnalyticJacobiansMatchAutoDiff) {
+  const StereoRig rig = MakeRig();
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> u(-1, 1);
+  for (int trial = 0; trial < 50; ++trial) {
+    const int camera = trial % 2;
+    // A non-unit quaternion too: the analytic Jacobian differentiates Eigen's expression.
+    std::array<double, 7> pose = {u(rng), u(rng), u(rng), 1.5 + u(rng), u(rng), u(rng), u(rng)};
+    if (trial % 3 == 0) {
+      const double n = std::sqrt(pose[0] * pose[0] + pose[1] * pose[1] + pose[2] * pose[2] +
+                                 pose[3] * pose[3]);
+      for (int i = 0; i < 4; ++i) pose[i] /= n;
+    }
+    std::array<double, 3> point = {2 * u(rng), 2 * u(rng), 1 + u(rng)};
+    const Eigen::Vector2d observed(500 + 100 * u(rng), 300 + 100 * u(rng));
+    const CameraModel& model = camera == 0 ? rig.cam0 : rig.cam1;
+    RigReprojectionCost analytic(model.intrinsics, CamFromRig(rig, camera), observed);
+    ceres::AutoDiffCostFunction<RigReprojectionAutoDiff, 2, 7, 3> autodiff(
+        new RigReprojectionAutoDiff(model.intrinsics, CamFromRig(rig, camera), observed));
+    const double* params[2] = {pose.data(), point.data()};
+    double r_a[2], r_b[2], j0_a[14], j0_b[14], j1_a[6], j1_b[6];
+    double* j_a[2] = {j0_a, j1_a};
+    double* j_b[2] = {j0_b, j1_b};
+    const bool ok_a = analytic.Evaluate(params, r_a, j_a);
+    const bool ok_b = autodiff.Evaluate(params, r_b, j_b);
+    ASSERT_EQ(ok_a, ok_b);
+    if (!ok_a) continue;
+    for (int i = 0; i < 2; ++i) EXPECT_NEAR(r_a[i], r_b[i], 1e-9);
+    for (int i = 0; i < 14; ++i) EXPECT_NEAR(j0_a[i], j0_b[i], 1e-7 * (1 + std::abs(j0_b[i])));
+    for (int i = 0; i < 6; ++i) EXPECT_NEAR(j1_a[i], j1_b[i], 1e-7 * (1 + std::abs(j1_b[i])));
+  }
+}
+
+struct SyntheticScene {
+  SlamMap map;
+  std::vector<Rigid3d> true_rig_from_world;
+  std::vector<Eigen::Vector3d> true_points;
+  int num_outliers = 0;
+};
+
+// Six rig poses along x through a box of points 2-4 m away; noisy observations in both
+// cameras, some gross outliers, and perturbed initial values.
+SyntheticScene MakeScene(const StereoRig& rig, double noise_px, double outlier_fraction) {
+  SyntheticScene scene;
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> u(-1, 1);
+  std::normal_distribution<double> noise(0, noise_px);
+  for (int f = 0; f < 6; ++f) {
+    const Rigid3d world_from_rig(
+        Eigen::Quaterniond(Eigen::AngleAxisd(0.05 * f, Eigen::Vector3d::UnitZ())),
+        Eigen::Vector3d(0.15 * f, 0.02 * f, 0));
+    scene.true_rig_from_world.push_back(world_from_rig.Inverse());
+    scene.map.AddFrame();
+    scene.map.has_pose[f] = true;
+  }
+  for (int i = 0; i < 300; ++i) {
+    const double angle = M_PI * u(rng), range = 3 + u(rng);
+    scene.true_points.emplace_back(range * std::cos(angle), range * std::sin(angle), 1.2 * u(rng));
+    Landmark landmark;
+    for (int f = 0; f < 6; ++f) {
+      for (int c = 0; c < 2; ++c) {
+        const CameraModel& camera = c == 0 ? rig.cam0 : rig.cam1;
+        const auto pixel = Project(camera.intrinsics, CamFromRig(rig, c) *
+                                                          (scene.true_rig_from_world[f] *
+                                                           scene.true_points.back()));
+        if (!pixel) continue;
+        Observation o{f, c, i, *pixel + Eigen::Vector2d(noise(rng), noise(rng))};
+        if (u(rng) < 2 * outlier_fraction - 1) {
+          o.pixel += Eigen::Vector2d(30 + 20 * u(rng), -25 + 10 * u(rng));
+          ++scene.num_outliers;
+        }
+        landmark.observations.push_back(o);
+      }
+    }
+    landmark.point_in_world = scene.true_points.back() + 0.05 * Eigen::Vector3d(u(rng), u(rng), u(rng));
+    scene.map.landmarks.push_back(landmark);
+  }
+  for (int f = 0; f < 6; ++f) {
+    const Rigid3d perturbation(
+        Eigen::Quaterniond(Eigen::AngleAxisd(f == 0 ? 0 : 0.01, Eigen::Vector3d(u(rng), u(rng), u(rng)).normalized())),
+        f == 0 ? Eigen::Vector3d::Zero() : Eigen::Vector3d(0.04 * u(rng), 0.04 * u(rng), 0.04 * u(rng)));
+    scene.map.rig_from_world[f] = perturbation * scene.true_rig_from_world[f];
+  }
+  return scene;
+}
+
+TEST(BundleAdjust, ConvergesToTruthWithNoiseAndPrunesOutliers) {
+  const StereoRig rig = MakeRig();
+  SyntheticScene scene = MakeScene(rig, 0.3, 0.03);
+  ASSERT_GT(scene.num_outliers, 20);
+  BundleAdjustmentOptions options;
+  const BundleAdjustmentReport report = BundleAdjust(rig, {0, 1, 2, 3, 4, 5}, options, &scene.map);
+  EXPECT_EQ(report.num_constant_poses, 1);  // the gauge
+  EXPECT_EQ(report.num_free_poses, 5);
+  EXPECT_GT(report.initial_rms_px, 5.0);
+  EXPECT_LT(report.final_rms_px, 0.45);
+  EXPECT_GE(report.num_observations_pruned, scene.num_outliers * 9 / 10);
+  EXPECT_LE(report.num_observations_pruned, scene.num_outliers + 10);
+  EXPECT_EQ(report.linear_solver, "DENSE_SCHUR");
+  for (int f = 1; f < 6; ++f) {
+    const Rigid3d& estimate = scene.map.rig_from_world[f];
+    const Rigid3d& truth = scene.true_rig_from_world[f];
+    EXPECT_LT((estimate.Inverse().translation - truth.Inverse().translation).norm(), 0.003)
+        << "frame " << f;
+    EXPECT_LT(RotationDistanceRad(estimate.rotation, truth.rotation), 2e-4) << "frame " << f;
+  }
+  // Depth noise grows with range squared over the 0.75 m of travel: judge the median point.
+  std::vector<double> point_errors;
+  for (size_t i = 0; i < scene.true_points.size(); ++i) {
+    if (!scene.map.landmarks[i].valid) continue;
+    point_errors.push_back((scene.map.landmarks[i].point_in_world - scene.true_points[i]).norm());
+  }
+  ASSERT_GT(point_errors.size(), 250u);
+  std::nth_element(point_errors.begin(), point_errors.begin() + point_errors.size() / 2,
+                   point_errors.end());
+  EXPECT_LT(point_errors[point_errors.size() / 2], 0.015);
+}
+
+TEST(BundleAdjust, RecoversMetricScaleFromTheStereoBaseline) {
+  // Scale every pose and point by 1.1: only the 100 mm baseline says the truth.
+  const StereoRig rig = MakeRig();
+  SyntheticScene scene = MakeScene(rig, 0.0, 0.0);
+  for (int f = 0; f < 6; ++f) {
+    scene.map.rig_from_world[f] = scene.true_rig_from_world[f];
+    scene.map.rig_from_world[f].translation *= 1.1;
+  }
+  for (size_t i = 0; i < scene.true_points.size(); ++i) {
+    scene.map.landmarks[i].point_in_world = 1.1 * scene.true_points[i];
+  }
+  BundleAdjustmentOptions options;
+  options.max_iterations = 100;
+  BundleAdjust(rig, {0, 1, 2, 3, 4, 5}, options, &scene.map);
+  const double true_length = scene.true_rig_from_world[5].Inverse().translation.norm();
+  const double length = scene.map.rig_from_world[5].Inverse().translation.norm();
+  EXPECT_NEAR(length / true_length, 1.0, 1e-4);
+}
+
+TEST(RefineRigPose, RecoversAPerturbedPoseAndFlagsOutliers) {
+  const StereoRig rig = MakeRig();
+  const SyntheticScene scene = MakeScene(rig, 0.3, 0.05);
+  std::vector<Observation> observations;
+  std::vector<Eigen::Vector3d> points;
+  for (size_t i = 0; i < scene.true_points.size(); ++i) {
+    for (const Observation& o : scene.map.landmarks[i].observations) {
+      if (o.frame != 3) continue;
+      observations.push_back(o);
+      points.push_back(scene.true_points[i]);
+    }
+  }
+  std::vector<bool> inliers;
+  const Rigid3d refined = RefineRigPose(rig, scene.map.rig_from_world[3], observations, points,
+                                        BundleAdjustmentOptions(), &inliers);
+  const Rigid3d& truth = scene.true_rig_from_world[3];
+  EXPECT_LT((refined.Inverse().translation - truth.Inverse().translation).norm(), 0.003);
+  EXPECT_LT(RotationDistanceRad(refined.rotation, truth.rotation), 3e-4);
+  const int num_inliers = static_cast<int>(std::count(inliers.begin(), inliers.end(), true));
+  EXPECT_LT(num_inliers, static_cast<int>(observations.size()));
+  EXPECT_GT(num_inliers, static_cast<int>(observations.size()) * 8 / 10);
+}
+
+TEST(BundleAdjustmentOptions, RejectsNonsense) {
+  BundleAdjustmentOptions options;
+  options.huber_scale_px = 0;
+  EXPECT_THROW(options.Check(), InvalidArgument);
+}
+
+}  // namespace
+}  // namespace omnirig::slam

@@ -1,0 +1,90 @@
+#include "engine/slam/evaluation.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include <Eigen/SVD>
+
+#include "engine/util/check.h"
+
+namespace omnirig::slam {
+
+Rigid3d AlignRigid(const std::vector<Eigen::Vector3d>& src,
+                   const std::vector<Eigen::Vector3d>& dst) {
+  OMNIRIG_CHECK(!src.empty() && src.size() == dst.size(),
+                "AlignRigid needs two equally long, non-empty point lists");
+  const double n = static_cast<double>(src.size());
+  Eigen::Vector3d mean_src = Eigen::Vector3d::Zero(), mean_dst = Eigen::Vector3d::Zero();
+  for (size_t i = 0; i < src.size(); ++i) {
+    mean_src += src[i] / n;
+    mean_dst += dst[i] / n;
+  }
+  Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();
+  for (size_t i = 0; i < src.size(); ++i) {
+    covariance += (dst[i] - mean_dst) * (src[i] - mean_src).transpose();
+  }
+  const Eigen::JacobiSVD<Eigen::Matrix3d> svd(covariance,
+                                              Eigen::ComputeFullU | Eigen::ComputeFullV);
+  // Umeyama's sign correction keeps a proper rotation when the best orthogonal fit reflects.
+  Eigen::Matrix3d s = Eigen::Matrix3d::Identity();
+  if (svd.matrixU().determinant() * svd.matrixV().determinant() < 0) s(2, 2) = -1;
+  const Eigen::Matrix3d rotation = svd.matrixU() * s * svd.matrixV().transpose();
+  return Rigid3d(Eigen::Quaterniond(rotation), mean_dst - rotation * mean_src);
+}
+
+TrajectoryErrors EvaluateTrajectory(const std::vector<Rigid3d>& estimate,
+                                    const std::vector<Rigid3d>& gt) {
+  OMNIRIG_CHECK(estimate.size() == gt.size(),
+                "trajectory has " << estimate.size() << " poses, ground truth " << gt.size());
+  OMNIRIG_CHECK(gt.size() >= 2, "evaluation needs at least two poses");
+  TrajectoryErrors errors;
+  errors.num_poses = static_cast<int>(gt.size());
+
+  std::vector<Eigen::Vector3d> est_positions, gt_positions;
+  for (size_t i = 0; i < gt.size(); ++i) {
+    est_positions.push_back(estimate[i].translation);
+    gt_positions.push_back(gt[i].translation);
+  }
+  errors.gt_from_estimate = AlignRigid(est_positions, gt_positions);
+  double sum_sq = 0;
+  for (size_t i = 0; i < gt.size(); ++i) {
+    const double e = (errors.gt_from_estimate * est_positions[i] - gt_positions[i]).norm();
+    sum_sq += e * e;
+    errors.ate_max_m = std::max(errors.ate_max_m, e);
+  }
+  errors.ate_rmse_m = std::sqrt(sum_sq / gt.size());
+
+  double rpe_t_sq = 0, rpe_r_sq = 0;
+  for (size_t i = 0; i + 1 < gt.size(); ++i) {
+    const Rigid3d gt_delta = gt[i].Inverse() * gt[i + 1];
+    const Rigid3d est_delta = estimate[i].Inverse() * estimate[i + 1];
+    const Rigid3d error = gt_delta.Inverse() * est_delta;
+    rpe_t_sq += error.translation.squaredNorm();
+    const double angle_deg = RotationDistanceRad(gt_delta.rotation, est_delta.rotation) * 180 / M_PI;
+    rpe_r_sq += angle_deg * angle_deg;
+  }
+  errors.rpe_translation_rmse_m = std::sqrt(rpe_t_sq / (gt.size() - 1));
+  errors.rpe_rotation_rmse_deg = std::sqrt(rpe_r_sq / (gt.size() - 1));
+
+  // Anchor both at their first pose: gt_from_est_anchor maps the estimate's first pose onto
+  // the ground truth's. The largest drift only counts poses past a quarter of the path, where
+  // a percentage of the distance so far is meaningful.
+  const Rigid3d gt_from_est_anchor = gt.front() * estimate.front().Inverse();
+  std::vector<double> distance_so_far(gt.size(), 0.0);
+  for (size_t i = 1; i < gt.size(); ++i) {
+    distance_so_far[i] =
+        distance_so_far[i - 1] + (gt[i].translation - gt[i - 1].translation).norm();
+  }
+  errors.path_length_m = distance_so_far.back();
+  if (errors.path_length_m <= 1e-9) return errors;
+  for (size_t i = 1; i < gt.size(); ++i) {
+    const double e = (gt_from_est_anchor * estimate[i].translation - gt[i].translation).norm();
+    if (distance_so_far[i] >= 0.25 * errors.path_length_m) {
+      errors.max_drift_percent = std::max(errors.max_drift_percent, 100.0 * e / distance_so_far[i]);
+    }
+    if (i + 1 == gt.size()) errors.final_drift_percent = 100.0 * e / errors.path_length_m;
+  }
+  return errors;
+}
+
+}  // namespace omnirig::slam

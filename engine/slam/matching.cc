@@ -1,0 +1,171 @@
+#include "engine/slam/matching.h"
+
+#include <cmath>
+#include <limits>
+
+#include <opencv2/features2d.hpp>
+
+#include "engine/stereo/epipolar.h"
+#include "engine/stereo/essential.h"
+#include "engine/stereo/triangulation.h"
+#include "engine/util/check.h"
+
+namespace omnirig::slam {
+namespace {
+
+struct Best {
+  float distance = std::numeric_limits<float>::max();
+  float second = std::numeric_limits<float>::max();
+  int index = -1;
+  void Offer(float d, int i) {
+    if (d < distance) {
+      second = distance;
+      distance = d;
+      index = i;
+    } else if (d < second) {
+      second = d;
+    }
+  }
+  // Distances are squared: the ratio and the bound are squared too.
+  bool Passes(double ratio, double max_distance) const {
+    return index >= 0 && distance <= max_distance * max_distance &&
+           (second == std::numeric_limits<float>::max() || distance < ratio * ratio * second);
+  }
+};
+
+float SquaredDistance(const float* a, const float* b, int n) {
+  float sum = 0;
+  for (int i = 0; i < n; ++i) {
+    const float d = a[i] - b[i];
+    sum += d * d;
+  }
+  return sum;
+}
+
+}  // namespace
+
+void StereoMatchOptions::Check() const {
+  OMNIRIG_CHECK(max_epipolar_error_rad > 0, "max_epipolar_error_rad must be positive");
+  OMNIRIG_CHECK(max_descriptor_ratio > 0 && max_descriptor_ratio <= 1,
+                "max_descriptor_ratio must be in (0, 1]");
+  OMNIRIG_CHECK(max_descriptor_distance > 0, "max_descriptor_distance must be positive");
+  OMNIRIG_CHECK(min_parallax_rad >= 0, "min_parallax_rad must not be negative");
+  OMNIRIG_CHECK(max_range_m > 0, "max_range_m must be positive");
+}
+
+std::vector<StereoPoint> MatchStereo(const StereoRig& rig, const CameraFeatures& features0,
+                                     const CameraFeatures& features1,
+                                     const StereoMatchOptions& options) {
+  options.Check();
+  // Camera 1 of the epipolar convention is cam0, camera 2 is cam1.
+  const Rigid3d cam1_from_cam0 = rig.cam0_from_cam1.Inverse();
+  const Eigen::Matrix3d E = EssentialFromPose(cam1_from_cam0);
+  const Eigen::Vector3d cam1_centre_in_cam0 = rig.cam0_from_cam1.translation;
+  const int n0 = features0.size(), n1 = features1.size();
+  // The epipolar plane normal of each cam0 bearing, in cam1: |b1 . n| is the sine of the
+  // angle between b1 and the plane (eq. 16).
+  std::vector<Eigen::Vector3d> normals(n0);
+  for (int i = 0; i < n0; ++i) normals[i] = (E * features0.bearings[i]).normalized();
+  const double max_sine = std::sin(options.max_epipolar_error_rad);
+  const int dims = features0.descriptors.cols;
+  std::vector<Best> best0(n0), best1(n1);
+  for (int i = 0; i < n0; ++i) {
+    const float* d0 = features0.descriptors.ptr<float>(i);
+    const Eigen::Vector3d& b0 = features0.bearings[i];
+    for (int j = 0; j < n1; ++j) {
+      if (std::abs(features1.bearings[j].dot(normals[i])) > max_sine) continue;
+      // On the curve's right half: the cam1 ray, seen from cam0, must turn towards b0 from
+      // the baseline (rays that meet behind a camera are on the other half of the circle).
+      const Eigen::Vector3d b1_in_cam0 = rig.cam0_from_cam1.rotation * features1.bearings[j];
+      if (b0.cross(b1_in_cam0).dot(b0.cross(cam1_centre_in_cam0)) > 0 &&
+          b0.cross(b1_in_cam0).norm() > 1e-3) {
+        continue;
+      }
+      const float d = SquaredDistance(d0, features1.descriptors.ptr<float>(j), dims);
+      best0[i].Offer(d, j);
+      best1[j].Offer(d, i);
+    }
+  }
+  TriangulationOptions triangulation;
+  triangulation.min_parallax_rad = options.min_parallax_rad;
+  triangulation.max_angular_error_rad = 2 * options.max_epipolar_error_rad;
+  triangulation.bearing_std_rad = 0.5 / rig.cam0.intrinsics.gamma_u();
+  std::vector<StereoPoint> points;
+  for (int i = 0; i < n0; ++i) {
+    const int j = best0[i].index;
+    if (!best0[i].Passes(options.max_descriptor_ratio, options.max_descriptor_distance) ||
+        best1[j].index != i ||
+        !best1[j].Passes(options.max_descriptor_ratio, options.max_descriptor_distance)) {
+      continue;
+    }
+    const TriangulatedPoint point = TriangulateMidpoint(cam1_from_cam0, features0.bearings[i],
+                                                        features1.bearings[j], triangulation);
+    if (!point.valid || point.point_in_cam1.norm() > options.max_range_m) continue;
+    points.push_back({i, j, point.point_in_cam1, point.range_std_m});
+  }
+  return points;
+}
+
+std::vector<std::pair<int, int>> MatchDescriptors(const cv::Mat& descriptors_a,
+                                                  const cv::Mat& descriptors_b,
+                                                  double max_ratio, double max_distance) {
+  std::vector<std::pair<int, int>> matches;
+  if (descriptors_a.rows < 2 || descriptors_b.rows < 2) return matches;
+  cv::BFMatcher matcher(cv::NORM_L2);
+  std::vector<std::vector<cv::DMatch>> ab, ba;
+  matcher.knnMatch(descriptors_a, descriptors_b, ab, 2);
+  matcher.knnMatch(descriptors_b, descriptors_a, ba, 2);
+  std::vector<int> best_of_b(descriptors_b.rows, -1);
+  for (const auto& m : ba) {
+    if (m.size() == 2 && m[0].distance < max_ratio * m[1].distance) {
+      best_of_b[m[0].queryIdx] = m[0].trainIdx;
+    }
+  }
+  for (const auto& m : ab) {
+    if (m.size() < 2 || !(m[0].distance < max_ratio * m[1].distance) ||
+        m[0].distance > max_distance) {
+      continue;
+    }
+    if (best_of_b[m[0].trainIdx] == m[0].queryIdx) matches.emplace_back(m[0].queryIdx, m[0].trainIdx);
+  }
+  return matches;
+}
+
+std::vector<std::pair<int, int>> MatchDescriptorsGated(const CameraFeatures& a,
+                                                       const CameraFeatures& b,
+                                                       const Eigen::Matrix3d& b_from_a_rotation,
+                                                       double max_angle_rad, double max_ratio,
+                                                       double max_distance) {
+  const int na = a.size(), nb = b.size();
+  std::vector<std::pair<int, int>> matches;
+  if (na == 0 || nb == 0) return matches;
+  // Bearings of b as contiguous floats: the gate is the inner loop's first and cheapest test.
+  std::vector<float> bearings_b(3 * nb);
+  for (int j = 0; j < nb; ++j) {
+    for (int k = 0; k < 3; ++k) bearings_b[3 * j + k] = static_cast<float>(b.bearings[j][k]);
+  }
+  const float min_cos = static_cast<float>(std::cos(max_angle_rad));
+  const int dims = a.descriptors.cols;
+  std::vector<Best> best_a(na), best_b(nb);
+  for (int i = 0; i < na; ++i) {
+    const Eigen::Vector3f r = (b_from_a_rotation * a.bearings[i]).cast<float>();
+    const float* da = a.descriptors.ptr<float>(i);
+    for (int j = 0; j < nb; ++j) {
+      const float* bj = &bearings_b[3 * j];
+      if (r.x() * bj[0] + r.y() * bj[1] + r.z() * bj[2] < min_cos) continue;
+      const float d = SquaredDistance(da, b.descriptors.ptr<float>(j), dims);
+      best_a[i].Offer(d, j);
+      best_b[j].Offer(d, i);
+    }
+  }
+  for (int i = 0; i < na; ++i) {
+    const int j = best_a[i].index;
+    if (best_a[i].Passes(max_ratio, max_distance) && best_b[j].index == i &&
+        best_b[j].Passes(max_ratio, max_distance)) {
+      matches.emplace_back(i, j);
+    }
+  }
+  return matches;
+}
+
+}  // namespace omnirig::slam

@@ -1,0 +1,338 @@
+#include "engine/stereo/relative_pose.h"
+
+#include <algorithm>
+#include <cmath>
+#include <optional>
+#include <set>
+#include <sstream>
+
+#include "engine/calib/board_pose.h"
+#include "engine/stereo/relpose_corner_order.h"
+#include "engine/stereo/relpose_linear.h"
+#include "engine/stereo/relpose_refine.h"
+
+namespace omnirig {
+
+void RelativePoseOptions::Check() const {
+  OMNIRIG_CHECK(consensus_rotation_deg > 0.0 && consensus_rotation_deg < 90.0,
+                "consensus_rotation_deg must be in (0, 90), got " << consensus_rotation_deg);
+  OMNIRIG_CHECK(consensus_translation_fraction > 0.0 && consensus_translation_fraction < 1.0,
+                "consensus_translation_fraction must be in (0, 1), got "
+                    << consensus_translation_fraction);
+  OMNIRIG_CHECK(max_board_pose_rms_px > 0.0,
+                "max_board_pose_rms_px must be positive, got " << max_board_pose_rms_px);
+  OMNIRIG_CHECK(max_pair_rms_ratio > 1.0,
+                "max_pair_rms_ratio must be > 1, got " << max_pair_rms_ratio);
+  OMNIRIG_CHECK(min_rejected_pair_rms_px >= 0.0,
+                "min_rejected_pair_rms_px must be >= 0, got " << min_rejected_pair_rms_px);
+  OMNIRIG_CHECK(huber_loss_px >= 0.0, "huber_loss_px must be >= 0, got " << huber_loss_px);
+  OMNIRIG_CHECK(max_num_iterations >= 1 && max_num_iterations <= 10000,
+                "max_num_iterations must be in [1, 10000], got " << max_num_iterations);
+  OMNIRIG_CHECK(num_threads >= 1, "num_threads must be >= 1, got " << num_threads);
+  OMNIRIG_CHECK(min_num_pairs >= 1, "min_num_pairs must be >= 1, got " << min_num_pairs);
+  OMNIRIG_CHECK(min_spread_eigen_ratio >= 0.0 && min_spread_eigen_ratio < 1.0,
+                "min_spread_eigen_ratio must be in [0, 1), got " << min_spread_eigen_ratio);
+}
+
+namespace {
+
+// One pair's board poses as estimated per camera, before the corner order is settled.
+struct PairPoses {
+  bool ok = false;
+  Rigid3d cam0_from_board;
+  Rigid3d cam1_from_board_as_detected;
+  double board_distance_m = 0.0;
+  std::vector<Rigid3d> candidates;  // cam0_from_cam1 per corner order (BoardSymmetry)
+};
+
+std::vector<Eigen::Vector3d> PointsOf(const std::vector<Eigen::Vector3d>& object_points,
+                                      const std::vector<int>& ids) {
+  std::vector<Eigen::Vector3d> points;
+  points.reserve(ids.size());
+  for (int id : ids) points.push_back(object_points[id]);
+  return points;
+}
+
+std::string NotFoundReason(const StereoBoardPair& pair) {
+  if (!pair.cam0.found && !pair.cam1.found) {
+    return "board not found in either camera (cam0: " + pair.cam0.reason +
+           "; cam1: " + pair.cam1.reason + ")";
+  }
+  if (!pair.cam0.found) return "board seen by cam1 only (cam0: " + pair.cam0.reason + ")";
+  if (!pair.cam1.found) return "board seen by cam0 only (cam1: " + pair.cam1.reason + ")";
+  return "";
+}
+
+bool ValidIds(const BoardDetection& detection, int num_corners) {
+  if (detection.corner_ids.size() != detection.corners_px.size()) return false;
+  for (int id : detection.corner_ids) {
+    if (id < 0 || id >= num_corners) return false;
+  }
+  return true;
+}
+
+// Step 1 for one pair: the board's pose in each camera, then one rig candidate per order.
+PairPoses EstimatePairPoses(const CameraModel& cam0, const CameraModel& cam1,
+                            const BoardSpec& board, const std::vector<BoardSymmetry>& symmetries,
+                            const StereoBoardPair& pair, const RelativePoseOptions& options,
+                            RelativePosePairReport* report) {
+  PairPoses poses;
+  report->reason = NotFoundReason(pair);
+  if (!report->reason.empty()) return poses;
+  if (!ValidIds(pair.cam0, board.NumCorners()) || !ValidIds(pair.cam1, board.NumCorners())) {
+    report->reason = "corner ids do not match the board " + board.Describe();
+    return poses;
+  }
+  const std::vector<Eigen::Vector3d> object_points = board.ObjectPoints();
+  double rms0 = 0.0, rms1 = 0.0;
+  const auto cam0_from_board = EstimateBoardPose(
+      cam0, PointsOf(object_points, pair.cam0.corner_ids), pair.cam0.corners_px, &rms0);
+  const auto cam1_from_board = EstimateBoardPose(
+      cam1, PointsOf(object_points, pair.cam1.corner_ids), pair.cam1.corners_px, &rms1);
+  std::ostringstream reason;
+  if (!cam0_from_board || !cam1_from_board) {
+    reason << "no board pose in " << (!cam0_from_board ? "cam0" : "cam1")
+           << " (the corners do not fit the camera model)";
+  } else if (rms0 > options.max_board_pose_rms_px || rms1 > options.max_board_pose_rms_px) {
+    reason << "board pose fit too poor (cam0 " << rms0 << " px, cam1 " << rms1 << " px; limit "
+           << options.max_board_pose_rms_px << " px)";
+  }
+  report->reason = reason.str();
+  if (!report->reason.empty()) return poses;
+
+  poses.ok = true;
+  poses.cam0_from_board = *cam0_from_board;
+  poses.cam1_from_board_as_detected = *cam1_from_board;
+  Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+  for (const auto& p : object_points) centroid += p;
+  centroid /= static_cast<double>(object_points.size());
+  poses.board_distance_m = (*cam0_from_board * centroid).norm();
+  // Detected id `id` really being corner permutation[id] means
+  // cam1_from_board = cam1_from_board_as_detected * board_from_board^-1.
+  for (const BoardSymmetry& symmetry : symmetries) {
+    poses.candidates.push_back(*cam0_from_board * symmetry.board_from_board *
+                               cam1_from_board->Inverse());
+  }
+  return poses;
+}
+
+// Step 2's output for one used pair: cam1's ids relabelled, the corners for the refinement and
+// the common corners in both cameras' frames for eq. (9).
+void BuildPairCorners(const BoardSpec& board, const StereoBoardPair& pair,
+                      const BoardSymmetry& symmetry, const PairPoses& poses,
+                      RigPairCorners* corners, std::vector<Eigen::Vector3d>* points_in_cam0,
+                      std::vector<Eigen::Vector3d>* points_in_cam1, int* num_common) {
+  const std::vector<Eigen::Vector3d> object_points = board.ObjectPoints();
+  const Rigid3d cam1_from_board =
+      poses.cam1_from_board_as_detected * symmetry.board_from_board.Inverse();
+  std::set<int> ids0(pair.cam0.corner_ids.begin(), pair.cam0.corner_ids.end());
+  corners->points_in_board0 = PointsOf(object_points, pair.cam0.corner_ids);
+  corners->pixels0 = pair.cam0.corners_px;
+  *num_common = 0;
+  for (size_t c = 0; c < pair.cam1.corner_ids.size(); ++c) {
+    const int id = symmetry.permutation[pair.cam1.corner_ids[c]];
+    corners->points_in_board1.push_back(object_points[id]);
+    corners->pixels1.push_back(pair.cam1.corners_px[c]);
+    if (ids0.count(id) == 0) continue;
+    points_in_cam0->push_back(poses.cam0_from_board * object_points[id]);
+    points_in_cam1->push_back(cam1_from_board * object_points[id]);
+    ++*num_common;
+  }
+}
+
+std::string UsedPairsMessage(const RelativePoseReport& report) {
+  std::ostringstream os;
+  os << report.num_pairs_used << " of " << report.pairs.size() << " pairs usable";
+  for (const RelativePosePairReport& pair : report.pairs) {
+    if (!pair.used) os << "; " << pair.name << ": " << pair.reason;
+  }
+  return os.str();
+}
+
+// The pairs that enter the estimate, with what steps 3 and 4 need of each.
+struct UsedPairs {
+  std::vector<size_t> index;  // into the input pairs
+  std::vector<RigPairCorners> corners;
+  std::vector<Rigid3d> cam0_from_board;
+  std::vector<Rigid3d> per_pair_rigs;  // cam0_from_cam1 of each pair alone
+  std::vector<Eigen::Vector3d> points_in_cam0, points_in_cam1;  // common corners, eq. (9)
+};
+
+// Step 2's bookkeeping: every pair with poses and a consistent order, except `excluded`.
+UsedPairs CollectUsedPairs(const BoardSpec& board, const std::vector<StereoBoardPair>& pairs,
+                           const std::vector<BoardSymmetry>& symmetries,
+                           const std::vector<PairPoses>& poses, const std::vector<int>& chosen,
+                           RelativePoseReport* report) {
+  UsedPairs used;
+  for (size_t i = 0; i < pairs.size(); ++i) {
+    RelativePosePairReport& pair_report = report->pairs[i];
+    pair_report.used = false;
+    if (!poses[i].ok || !pair_report.reason.empty()) continue;
+    if (chosen[i] < 0) {
+      pair_report.reason = "disagrees with the other pairs on the rig pose (board moved between "
+                           "the two exposures, or wrong corners)";
+      continue;
+    }
+    RigPairCorners corners;
+    BuildPairCorners(board, pairs[i], symmetries[chosen[i]], poses[i], &corners,
+                     &used.points_in_cam0, &used.points_in_cam1, &pair_report.num_corners);
+    pair_report.used = true;
+    pair_report.cam1_order = chosen[i];
+    used.index.push_back(i);
+    used.corners.push_back(std::move(corners));
+    used.cam0_from_board.push_back(poses[i].cam0_from_board);
+    used.per_pair_rigs.push_back(poses[i].candidates[chosen[i]]);
+  }
+  report->num_pairs_used = static_cast<int>(used.index.size());
+  return used;
+}
+
+// Step 3: eq. (9) and the degeneracy test on the same points. False (with the message) when
+// the geometry cannot give a confident rig.
+bool SolveLinear(const UsedPairs& used, const RelativePoseOptions& options,
+                 RelativePoseReport* report) {
+  report->averaged_cam0_from_cam1 = AverageRigidPoses(used.per_pair_rigs);
+  report->spread_eigen_ratio = SpreadEigenRatio(used.points_in_cam1);
+  const std::optional<Rigid3d> linear =
+      SolveRelativePoseLinear(used.points_in_cam0, used.points_in_cam1);
+  if (linear && report->spread_eigen_ratio >= options.min_spread_eigen_ratio) {
+    report->linear_cam0_from_cam1 = *linear;
+    return true;
+  }
+  report->degenerate = true;
+  std::ostringstream os;
+  os << "degenerate geometry: the board's corners over all " << report->num_pairs_used
+     << " used pairs are (nearly) coplanar (spread ratio " << report->spread_eigen_ratio
+     << ", need " << options.min_spread_eigen_ratio
+     << "), as when every pair shows the board at one pose; move or tilt the board between pairs";
+  report->message = os.str();
+  return false;
+}
+
+// Step 4: the joint refinement from the linear estimate, and the per-pair and overall RMS.
+bool SolveJoint(UsedPairs* used, const RelativePoseOptions& options, const ProgressSink& progress,
+                RelativePoseReport* report) {
+  StereoRig rig = report->rig;
+  rig.cam0_from_cam1 = report->linear_cam0_from_cam1;
+  RigRefinementOptions refine_options;
+  refine_options.refine_intrinsics = options.refine_intrinsics;
+  refine_options.huber_loss_px = options.huber_loss_px;
+  refine_options.max_num_iterations = options.max_num_iterations;
+  refine_options.num_threads = options.num_threads;
+  RigUncertainty uncertainty;
+  const RigRefinementSummary summary = RefineRig(used->corners, refine_options, &rig,
+                                                 &used->cam0_from_board, &uncertainty, progress);
+  report->solver = {summary.initial_cost, summary.final_cost, summary.num_iterations,
+                    summary.termination, summary.time_s};
+  if (!summary.usable) {
+    report->message = "the joint refinement failed (" + summary.termination + ")";
+    return false;
+  }
+  report->rig = rig;
+  report->baseline_m = rig.cam0_from_cam1.translation.norm();
+  report->baseline_std_m = uncertainty.baseline_std_m;
+  report->translation_std_m = uncertainty.translation_std_m;
+  report->rotation_std_deg = uncertainty.rotation_std_deg;
+  double sum_squares = 0.0;
+  size_t count = 0;
+  for (size_t u = 0; u < used->index.size(); ++u) {
+    RelativePosePairReport& pair_report = report->pairs[used->index[u]];
+    pair_report.cam0_from_board = used->cam0_from_board[u];
+    pair_report.rms_px = PairRmsPx(rig, used->cam0_from_board[u], used->corners[u]);
+    const size_t n = used->corners[u].pixels0.size() + used->corners[u].pixels1.size();
+    sum_squares += pair_report.rms_px * pair_report.rms_px * n;
+    count += n;
+  }
+  report->rms_px = count > 0 ? std::sqrt(sum_squares / count) : 0.0;
+  return true;
+}
+
+// Marks used pairs whose joint RMS exceeds max_pair_rms_ratio times the median (and
+// min_rejected_pair_rms_px) as unused (the
+// two images disagree: the board moved between exposures, or corners are wrong). Returns the
+// number rejected; none when that would leave fewer than min_num_pairs.
+int RejectInconsistentPairs(const UsedPairs& used, const RelativePoseOptions& options,
+                            RelativePoseReport* report) {
+  std::vector<double> rms;
+  for (size_t i : used.index) rms.push_back(report->pairs[i].rms_px);
+  if (rms.size() < 3) return 0;
+  std::vector<double> sorted = rms;
+  std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+  const double threshold = std::max(options.max_pair_rms_ratio * sorted[sorted.size() / 2],
+                                    options.min_rejected_pair_rms_px);
+  std::vector<size_t> rejected;
+  for (size_t u = 0; u < rms.size(); ++u) {
+    if (rms[u] > threshold) rejected.push_back(used.index[u]);
+  }
+  if (static_cast<int>(used.index.size() - rejected.size()) < options.min_num_pairs) return 0;
+  for (size_t i : rejected) {
+    std::ostringstream os;
+    os << "inconsistent between the two cameras: RMS " << report->pairs[i].rms_px
+       << " px in the joint fit, over " << options.max_pair_rms_ratio
+       << " x the median pair's (the board moved between the two exposures, or wrong corners)";
+    report->pairs[i].reason = os.str();
+    report->pairs[i].rms_px = -1.0;
+  }
+  return static_cast<int>(rejected.size());
+}
+
+}  // namespace
+
+RelativePoseReport EstimateRelativePose(const CameraModel& cam0, const CameraModel& cam1,
+                                        const BoardSpec& board,
+                                        const std::vector<StereoBoardPair>& pairs,
+                                        const RelativePoseOptions& options,
+                                        const ProgressSink& progress) {
+  options.Check();
+  board.Check();
+  cam0.intrinsics.Check();
+  cam1.intrinsics.Check();
+  RelativePoseReport report;
+  report.rig.cam0 = cam0;
+  report.rig.cam1 = cam1;
+
+  // Step 1: board poses per camera, rig candidates per corner order.
+  std::vector<BoardSymmetry> symmetries = BoardGridSymmetries(board);
+  if (!options.resolve_corner_order || board.type == BoardSpec::Type::kCharuco) {
+    symmetries.resize(1);
+  }
+  std::vector<PairPoses> poses(pairs.size());
+  std::vector<std::vector<Rigid3d>> candidates(pairs.size());
+  std::vector<double> scales(pairs.size(), 1.0);
+  report.pairs.resize(pairs.size());
+  for (size_t i = 0; i < pairs.size(); ++i) {
+    progress.ThrowIfCancelled();
+    report.pairs[i].name = pairs[i].name;
+    poses[i] = EstimatePairPoses(cam0, cam1, board, symmetries, pairs[i], options,
+                                 &report.pairs[i]);
+    candidates[i] = poses[i].candidates;
+    scales[i] = poses[i].board_distance_m;
+    progress.Report(0.5 * (i + 1.0) / pairs.size(), "board_pose", pairs[i].name);
+  }
+  // Step 2: one corner order per pair, consistent across pairs.
+  const std::vector<int> chosen =
+      ChooseConsistentCandidates(candidates, scales, options.consensus_rotation_deg,
+                                 options.consensus_translation_fraction);
+  // Steps 3 and 4, once more without the pairs the joint fit shows to be inconsistent.
+  for (int round = 0; round < 2; ++round) {
+    UsedPairs used = CollectUsedPairs(board, pairs, symmetries, poses, chosen, &report);
+    if (report.num_pairs_used < options.min_num_pairs) {
+      report.message = "too few usable pairs (need " + std::to_string(options.min_num_pairs) +
+                       "): " + UsedPairsMessage(report);
+      return report;
+    }
+    if (!SolveLinear(used, options, &report)) return report;
+    const ProgressSink refine_progress{
+        [&progress, round](double fraction, const std::string& stage, const std::string& message) {
+          progress.Report(0.5 + 0.25 * (round + fraction), stage, message);
+        },
+        progress.is_cancelled};
+    if (!SolveJoint(&used, options, refine_progress, &report)) return report;
+    if (round == 0 && RejectInconsistentPairs(used, options, &report) == 0) break;
+  }
+  report.success = true;
+  progress.Report(1.0, "done");
+  return report;
+}
+
+}  // namespace omnirig

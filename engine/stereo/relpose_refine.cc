@@ -1,0 +1,197 @@
+#include "engine/stereo/relpose_refine.h"
+
+#include <cmath>
+#include <memory>
+
+#include <ceres/ceres.h>
+
+#include "engine/calib/ceres_util.h"
+#include "engine/stereo/relpose_cost.h"
+
+namespace omnirig {
+namespace {
+
+// Cancels the solve between iterations and reports progress.
+class ProgressCallback : public ceres::IterationCallback {
+ public:
+  ProgressCallback(const ProgressSink& progress, int max_iterations)
+      : progress_(progress), max_iterations_(max_iterations) {}
+  ceres::CallbackReturnType operator()(const ceres::IterationSummary& summary) override {
+    if (progress_.IsCancelled()) {
+      cancelled_ = true;
+      return ceres::SOLVER_ABORT;
+    }
+    progress_.Report(std::min(1.0, (summary.iteration + 1.0) / max_iterations_), "refine",
+                     "iteration " + std::to_string(summary.iteration) + ", cost " +
+                         std::to_string(summary.cost));
+    return ceres::SOLVER_CONTINUE;
+  }
+  bool cancelled() const { return cancelled_; }
+
+ private:
+  const ProgressSink& progress_;
+  int max_iterations_;
+  bool cancelled_ = false;
+};
+
+struct RigBlocks {
+  std::array<double, 7> cam0_from_cam1;
+  std::vector<std::array<double, 7>> cam0_from_board;
+  std::array<double, UnifiedIntrinsics::kNumParams> intrinsics0, intrinsics1;
+};
+
+void AddResiduals(const std::vector<RigPairCorners>& pairs, const RigRefinementOptions& options,
+                  RigBlocks* blocks, ceres::Problem* problem) {
+  ceres::LossFunction* loss = options.huber_loss_px > 0.0
+                                  ? new ceres::HuberLoss(options.huber_loss_px)
+                                  : nullptr;
+  for (size_t i = 0; i < pairs.size(); ++i) {
+    double* board = blocks->cam0_from_board[i].data();
+    for (size_t c = 0; c < pairs[i].pixels0.size(); ++c) {
+      problem->AddResidualBlock(
+          RigCam0CornerCost::Create(pairs[i].pixels0[c], pairs[i].points_in_board0[c]), loss,
+          board, blocks->intrinsics0.data());
+    }
+    for (size_t c = 0; c < pairs[i].pixels1.size(); ++c) {
+      problem->AddResidualBlock(
+          RigCam1CornerCost::Create(pairs[i].pixels1[c], pairs[i].points_in_board1[c]), loss,
+          board, blocks->cam0_from_cam1.data(), blocks->intrinsics1.data());
+    }
+    problem->SetManifold(board, NewPoseManifold());
+  }
+  problem->SetManifold(blocks->cam0_from_cam1.data(), NewPoseManifold());
+  for (double* intrinsics : {blocks->intrinsics0.data(), blocks->intrinsics1.data()}) {
+    if (!options.refine_intrinsics) {
+      problem->SetParameterBlockConstant(intrinsics);
+    } else {
+      // Skew and k5 are not observable enough to be worth freeing here; they keep the values
+      // of the per-camera calibrations.
+      problem->SetManifold(intrinsics, new ceres::SubsetManifold(UnifiedIntrinsics::kNumParams,
+                                                                 {UnifiedIntrinsics::kAlpha,
+                                                                  UnifiedIntrinsics::kK5}));
+    }
+  }
+}
+
+double SumSquaredResiduals(ceres::Problem* problem, int* num_residuals) {
+  ceres::Problem::EvaluateOptions evaluate;
+  evaluate.apply_loss_function = false;
+  std::vector<double> residuals;
+  problem->Evaluate(evaluate, nullptr, &residuals, nullptr, nullptr);
+  double sum = 0.0;
+  for (double r : residuals) sum += r * r;
+  *num_residuals = static_cast<int>(residuals.size());
+  return sum;
+}
+
+int NumFreeParameters(const ceres::Problem& problem) {
+  std::vector<double*> blocks;
+  problem.GetParameterBlocks(&blocks);
+  int count = 0;
+  for (double* block : blocks) {
+    if (!problem.IsParameterBlockConstant(block)) count += problem.ParameterBlockTangentSize(block);
+  }
+  return count;
+}
+
+RigUncertainty EstimateUncertainty(ceres::Problem* problem, RigBlocks* blocks) {
+  RigUncertainty uncertainty;
+  ceres::Covariance::Options covariance_options;
+  covariance_options.algorithm_type = ceres::DENSE_SVD;
+  covariance_options.null_space_rank = -1;  // weakly observable intrinsics get a pseudo-inverse
+  ceres::Covariance covariance(covariance_options);
+  const double* rig = blocks->cam0_from_cam1.data();
+  const std::vector<std::pair<const double*, const double*>> blocks_wanted = {{rig, rig}};
+  if (!covariance.Compute(blocks_wanted, problem)) return uncertainty;
+  Eigen::Matrix<double, 6, 6, Eigen::RowMajor> tangent;
+  if (!covariance.GetCovarianceBlockInTangentSpace(rig, rig, tangent.data())) return uncertainty;
+  int num_residuals = 0;
+  const double sum_squares = SumSquaredResiduals(problem, &num_residuals);
+  const int dof = num_residuals - NumFreeParameters(*problem);
+  if (dof <= 0) return uncertainty;
+  const double sigma2 = sum_squares / dof;
+  const Eigen::Matrix<double, 6, 6> scaled = tangent * sigma2;
+  // EigenQuaternionManifold's tangent d rotates by exp(d) as a quaternion: an angle of 2|d|.
+  const Eigen::Matrix3d rotation_cov = 4.0 * scaled.topLeftCorner<3, 3>();
+  const Eigen::Matrix3d translation_cov = scaled.bottomRightCorner<3, 3>();
+  const Eigen::Vector3d t(rig[4], rig[5], rig[6]);
+  const Eigen::Vector3d direction = t.norm() > 0 ? Eigen::Vector3d(t.normalized())
+                                                 : Eigen::Vector3d::UnitX();
+  uncertainty.translation_std_m = translation_cov.diagonal().cwiseMax(0.0).cwiseSqrt();
+  uncertainty.baseline_std_m = std::sqrt(std::max(0.0, direction.dot(translation_cov * direction)));
+  uncertainty.rotation_std_deg = std::sqrt(std::max(0.0, rotation_cov.trace())) * 180.0 / M_PI;
+  uncertainty.valid = true;
+  return uncertainty;
+}
+
+}  // namespace
+
+RigRefinementSummary RefineRig(const std::vector<RigPairCorners>& pairs,
+                               const RigRefinementOptions& options, StereoRig* rig,
+                               std::vector<Rigid3d>* cam0_from_board, RigUncertainty* uncertainty,
+                               const ProgressSink& progress) {
+  OMNIRIG_CHECK(cam0_from_board->size() == pairs.size(), "one board pose per pair expected");
+  RigBlocks blocks;
+  blocks.cam0_from_cam1 = rig->cam0_from_cam1.ToParams();
+  for (const Rigid3d& pose : *cam0_from_board) blocks.cam0_from_board.push_back(pose.ToParams());
+  blocks.intrinsics0 = rig->cam0.intrinsics.params;
+  blocks.intrinsics1 = rig->cam1.intrinsics.params;
+
+  ceres::Problem problem;
+  AddResiduals(pairs, options, &blocks, &problem);
+
+  ceres::Solver::Options solver_options;
+  // Board poses form the Schur complement's eliminated group; the rig pose and intrinsics are
+  // few, so the reduced system is small and dense.
+  solver_options.linear_solver_type = ceres::DENSE_SCHUR;
+  solver_options.max_num_iterations = options.max_num_iterations;
+  solver_options.num_threads = std::max(1, options.num_threads);
+  solver_options.function_tolerance = 1e-12;
+  solver_options.gradient_tolerance = 1e-14;
+  solver_options.parameter_tolerance = 1e-12;
+  solver_options.logging_type = ceres::SILENT;
+  ProgressCallback callback(progress, options.max_num_iterations);
+  solver_options.callbacks.push_back(&callback);
+  ceres::Solver::Summary summary;
+  ceres::Solve(solver_options, &problem, &summary);
+  if (callback.cancelled()) throw Cancelled();
+
+  RigRefinementSummary result;
+  result.initial_cost = summary.initial_cost;
+  result.final_cost = summary.final_cost;
+  result.num_iterations = static_cast<int>(summary.iterations.size());
+  result.termination = ceres::TerminationTypeToString(summary.termination_type);
+  result.time_s = summary.total_time_in_seconds;
+  result.usable = summary.IsSolutionUsable();
+  if (!result.usable) return result;
+
+  rig->cam0_from_cam1 = Rigid3d::FromParams(blocks.cam0_from_cam1.data());
+  for (size_t i = 0; i < pairs.size(); ++i) {
+    (*cam0_from_board)[i] = Rigid3d::FromParams(blocks.cam0_from_board[i].data());
+  }
+  rig->cam0.intrinsics.params = blocks.intrinsics0;
+  rig->cam1.intrinsics.params = blocks.intrinsics1;
+  if (uncertainty != nullptr) *uncertainty = EstimateUncertainty(&problem, &blocks);
+  return result;
+}
+
+double PairRmsPx(const StereoRig& rig, const Rigid3d& cam0_from_board,
+                 const RigPairCorners& pair) {
+  const Rigid3d cam1_from_board = rig.cam0_from_cam1.Inverse() * cam0_from_board;
+  double sum = 0.0;
+  int count = 0;
+  const auto accumulate = [&](const CameraModel& camera, const Rigid3d& cam_from_board,
+                              const std::vector<Eigen::Vector3d>& points,
+                              const std::vector<Eigen::Vector2d>& pixels) {
+    for (size_t c = 0; c < pixels.size(); ++c) {
+      const auto projected = Project(camera.intrinsics, cam_from_board * points[c]);
+      sum += projected ? (*projected - pixels[c]).squaredNorm() : 1e6;
+      ++count;
+    }
+  };
+  accumulate(rig.cam0, cam0_from_board, pair.points_in_board0, pair.pixels0);
+  accumulate(rig.cam1, cam1_from_board, pair.points_in_board1, pair.pixels1);
+  return count > 0 ? std::sqrt(sum / count) : 0.0;
+}
+
+}  // namespace omnirig

@@ -1,0 +1,60 @@
+#pragma once
+// The joint refinement of a stereo rig as one device (the paper's eq. 20 minimised as eq. 19):
+// cam0_from_cam1 and one board pose per pair, optionally both cameras' intrinsics.
+
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "engine/geometry/camera_model.h"
+#include "engine/geometry/rigid3.h"
+#include "engine/util/progress.h"
+
+namespace omnirig {
+
+// The corners of one pair, with cam1's ids already made consistent with cam0's.
+struct RigPairCorners {
+  std::vector<Eigen::Vector3d> points_in_board0;  // cam0's corners in the board frame
+  std::vector<Eigen::Vector2d> pixels0;
+  std::vector<Eigen::Vector3d> points_in_board1;  // cam1's corners in the board frame
+  std::vector<Eigen::Vector2d> pixels1;
+};
+
+struct RigRefinementOptions {
+  bool refine_intrinsics = false;  // skew and k5 stay fixed
+  double huber_loss_px = 1.0;
+  int max_num_iterations = 100;
+  int num_threads = 1;
+};
+
+struct RigRefinementSummary {
+  double initial_cost = 0.0;
+  double final_cost = 0.0;
+  int num_iterations = 0;
+  std::string termination;
+  double time_s = 0.0;
+  bool usable = false;  // the solver ended with a usable solution
+};
+
+// The standard deviations of cam0_from_cam1 from the inverse of the Gauss-Newton Hessian,
+// scaled by the residuals' variance (sum of squares / degrees of freedom).
+struct RigUncertainty {
+  bool valid = false;
+  Eigen::Vector3d translation_std_m = Eigen::Vector3d::Zero();
+  double baseline_std_m = 0.0;    // along cam0_from_cam1.translation's direction
+  double rotation_std_deg = 0.0;  // RMS angle: sqrt(trace) of the rotation-vector covariance
+};
+
+// Refines `rig` (cam0_from_cam1, and intrinsics when asked) and `cam0_from_board` (one per
+// pair) in place. Cancellable between solver iterations (throws Cancelled).
+RigRefinementSummary RefineRig(const std::vector<RigPairCorners>& pairs,
+                               const RigRefinementOptions& options, StereoRig* rig,
+                               std::vector<Rigid3d>* cam0_from_board, RigUncertainty* uncertainty,
+                               const ProgressSink& progress = {});
+
+// RMS (pixels) over one pair's corners in both images; a corner that does not project counts
+// as a residual of 1e3 px (never silently dropped).
+double PairRmsPx(const StereoRig& rig, const Rigid3d& cam0_from_board,
+                 const RigPairCorners& pair);
+
+}  // namespace omnirig

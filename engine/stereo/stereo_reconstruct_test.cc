@@ -1,0 +1,220 @@
+#include "engine/stereo/stereo_reconstruct.h"
+
+#include <cstring>
+#include <fstream>
+#include <random>
+#include <sstream>
+
+#include <unistd.h>
+
+#include <gtest/gtest.h>
+#include <opencv2/imgproc.hpp>
+
+#include "engine/geometry/unified_camera.h"
+#include "engine/util/check.h"
+
+namespace omnirig {
+namespace {
+
+CameraModel Camera(double u0, double v0) {
+  CameraModel camera;
+  camera.intrinsics.params = {0.94, 240.0, 241.0, u0, v0, 0.0, -0.06, 0.012, 0.0005, -0.0003, 0.0};
+  camera.width = 1024;
+  camera.height = 768;
+  return camera;
+}
+
+// A vertical rig: cam1 100 mm along cam0's +z axis, slightly turned.
+StereoRig Rig() {
+  StereoRig rig;
+  rig.cam0 = Camera(514.0, 380.0);
+  rig.cam1 = Camera(509.0, 387.0);
+  rig.cam0_from_cam1 =
+      Rigid3d(Eigen::Quaterniond(Eigen::AngleAxisd(0.005, Eigen::Vector3d(1, 1, 0.3).normalized())),
+              Eigen::Vector3d(0.0, 0.0, 0.1));
+  return rig;
+}
+
+// Features of points around the rig, each with a random descriptor seen (with a little noise)
+// by both cameras, in shuffled order; returns the true cam0 -> cam1 index map.
+struct SyntheticFeatures {
+  LiftedFeatures f0, f1;
+  std::vector<int> true_match_of0;  // -1 when the point is not seen by cam1
+};
+
+cv::Mat RandomDescriptor(std::mt19937_64& rng) {
+  std::uniform_real_distribution<float> u(0.f, 1.f);
+  cv::Mat d(1, 128, CV_32F);
+  for (int k = 0; k < 128; ++k) d.at<float>(0, k) = u(rng);
+  return d;
+}
+
+SyntheticFeatures MakeFeatures(const StereoRig& rig, int n, uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<double> g(0.0, 1.0);
+  std::normal_distribution<float> noise(0.f, 0.02f);
+  std::uniform_real_distribution<double> range(1.0, 4.0);
+  SyntheticFeatures s;
+  const Rigid3d cam1_from_cam0 = rig.cam0_from_cam1.Inverse();
+  std::vector<std::pair<Eigen::Vector3d, cv::Mat>> seen_by_1;
+  std::vector<int> owner;
+  for (int k = 0; k < n; ++k) {
+    // Points around the horizon band, as a catadioptric sensor sees them.
+    const Eigen::Vector3d dir = Eigen::Vector3d(g(rng), g(rng), 0.3 * g(rng)).normalized();
+    const Eigen::Vector3d p0 = range(rng) * dir;
+    const cv::Mat desc = RandomDescriptor(rng);
+    s.f0.bearings.push_back(p0.normalized());
+    s.f0.keypoints.emplace_back(cv::Point2f(0, 0), 1.f);
+    s.f0.descriptors.push_back(desc);
+    s.true_match_of0.push_back(-1);
+    if (k % 5 == 4) continue;  // every fifth point is occluded in cam1
+    cv::Mat noisy = desc.clone();
+    for (int c = 0; c < 128; ++c) noisy.at<float>(0, c) += noise(rng);
+    seen_by_1.emplace_back((cam1_from_cam0 * p0).normalized(), noisy);
+    owner.push_back(k);
+  }
+  std::vector<int> order(seen_by_1.size());
+  for (size_t k = 0; k < order.size(); ++k) order[k] = static_cast<int>(k);
+  std::shuffle(order.begin(), order.end(), rng);
+  for (size_t pos = 0; pos < order.size(); ++pos) {
+    s.f1.bearings.push_back(seen_by_1[order[pos]].first);
+    s.f1.keypoints.emplace_back(cv::Point2f(0, 0), 1.f);
+    s.f1.descriptors.push_back(seen_by_1[order[pos]].second);
+    s.true_match_of0[owner[order[pos]]] = static_cast<int>(pos);
+  }
+  return s;
+}
+
+TEST(StereoMatching, MatchesFollowTheEpipolarConstraint) {
+  const StereoRig rig = Rig();
+  const SyntheticFeatures s = MakeFeatures(rig, 500, 1);
+  StereoReconstructOptions options;
+  int candidates = 0;
+  const std::vector<StereoMatch> matches =
+      MatchAlongEpipolarCurves(s.f0, s.f1, rig.cam0_from_cam1.Inverse(), options, &candidates);
+  int correct = 0;
+  for (const StereoMatch& m : matches) {
+    correct += s.true_match_of0[m.index0] == m.index1;
+    EXPECT_LE(m.epipolar_error_rad, options.max_epipolar_error_rad);
+  }
+  EXPECT_EQ(correct, static_cast<int>(matches.size()));  // no wrong match
+  EXPECT_GT(correct, 390);                               // of 400 visible points
+  // The constraint prunes: far fewer candidates than all 500 x 400 pairs.
+  EXPECT_LT(candidates, 500 * 400 / 20);
+}
+
+TEST(StereoMatching, EpipolarConstraintResolvesRepeatedTexture) {
+  // Two features in cam1 with the same descriptor (repeated texture): a plain ratio test would
+  // reject both, the epipolar constraint keeps only the one on the curve.
+  const StereoRig rig = Rig();
+  const Rigid3d cam1_from_cam0 = rig.cam0_from_cam1.Inverse();
+  std::mt19937_64 rng(2);
+  const cv::Mat desc = RandomDescriptor(rng);
+  const Eigen::Vector3d point(1.5, 0.4, 0.2);
+  LiftedFeatures f0, f1;
+  f0.bearings = {point.normalized()};
+  f0.keypoints = {cv::KeyPoint(cv::Point2f(0, 0), 1.f)};
+  f0.descriptors = desc.clone();
+  const Eigen::Vector3d elsewhere = Eigen::AngleAxisd(0.5, Eigen::Vector3d::UnitZ()) * point;
+  f1.bearings = {(cam1_from_cam0 * elsewhere).normalized(), (cam1_from_cam0 * point).normalized()};
+  f1.keypoints = {cv::KeyPoint(cv::Point2f(0, 0), 1.f), cv::KeyPoint(cv::Point2f(0, 0), 1.f)};
+  f1.descriptors.push_back(desc);
+  f1.descriptors.push_back(desc);
+  const std::vector<StereoMatch> matches =
+      MatchAlongEpipolarCurves(f0, f1, cam1_from_cam0, StereoReconstructOptions{});
+  ASSERT_EQ(matches.size(), 1u);
+  EXPECT_EQ(matches[0].index1, 1);
+  // The antipodal half of the epipolar great circle is not the curve: a feature there does
+  // not match (the rays would meet behind the cameras).
+  f1.bearings = {-(cam1_from_cam0 * point).normalized()};
+  f1.descriptors = desc.clone();
+  f1.keypoints.resize(1);
+  EXPECT_TRUE(MatchAlongEpipolarCurves(f0, f1, cam1_from_cam0, StereoReconstructOptions{}).empty());
+  // Empty inputs give no matches.
+  EXPECT_TRUE(
+      MatchAlongEpipolarCurves(LiftedFeatures{}, f1, cam1_from_cam0, StereoReconstructOptions{})
+          .empty());
+}
+
+TEST(MirrorMask, MasksRimAndHoleButKeepsDarkSceneInside) {
+  const CameraModel camera = Camera(512, 384);
+  cv::Mat image(768, 1024, CV_8UC3, cv::Scalar(6, 6, 6));
+  cv::circle(image, cv::Point(512, 384), 360, cv::Scalar(150, 160, 170), cv::FILLED);
+  cv::circle(image, cv::Point(512, 384), 80, cv::Scalar(6, 6, 6), cv::FILLED);
+  cv::rectangle(image, cv::Rect(700, 300, 40, 40), cv::Scalar(3, 3, 3), cv::FILLED);  // dark object
+  StereoReconstructOptions options;
+  const cv::Mat mask = MirrorMask(image, camera, options);
+  EXPECT_EQ(mask.at<uint8_t>(5, 5), 0);           // outside the rim
+  EXPECT_EQ(mask.at<uint8_t>(384, 512), 0);       // the hole
+  EXPECT_EQ(mask.at<uint8_t>(384, 512 + 83), 0);  // hole edge + margin
+  EXPECT_EQ(mask.at<uint8_t>(384, 512 + 200), 255);
+  EXPECT_EQ(mask.at<uint8_t>(320, 720), 255);      // the dark object inside the mirror
+  EXPECT_EQ(mask.at<uint8_t>(384, 512 + 357), 0);  // within the margin of the rim
+  EXPECT_EQ(mask.at<uint8_t>(384, 512 + 350), 255);
+}
+
+TEST(StereoReconstruct, ImageSizeMismatchIsAnError) {
+  const StereoRig rig = Rig();
+  const cv::Mat small(100, 100, CV_8UC3, cv::Scalar(0, 0, 0));
+  const cv::Mat right(768, 1024, CV_8UC3, cv::Scalar(0, 0, 0));
+  EXPECT_THROW(ReconstructStereoPair(rig, small, right, {}), InvalidArgument);
+  EXPECT_THROW(ReconstructStereoPair(rig, right, small, {}), InvalidArgument);
+  // All-dark images: nothing to match, an empty report rather than an error (small images
+  // keep SIFT's pyramid cheap under the sanitizers).
+  StereoRig small_rig = rig;
+  small_rig.cam0.width = small_rig.cam1.width = 320;
+  small_rig.cam0.height = small_rig.cam1.height = 240;
+  const cv::Mat dark(240, 320, CV_8UC3, cv::Scalar(0, 0, 0));
+  const StereoPairReport report = ReconstructStereoPair(small_rig, dark, dark, {});
+  EXPECT_EQ(report.num_keypoints0, 0);
+  EXPECT_TRUE(report.points.empty());
+  StereoReconstructOptions bad;
+  bad.ratio_test = 1.5;
+  EXPECT_THROW(bad.Check(), InvalidArgument);
+}
+
+TEST(StereoReconstruct, WritesBinaryLittleEndianPly) {
+  std::vector<StereoPoint> points(2);
+  points[0].point_in_cam0 = Eigen::Vector3d(1.5, -2.25, 3.0);
+  points[0].rgb = {10, 20, 30};
+  points[1].point_in_cam0 = Eigen::Vector3d(0.0, 0.5, -1.0);
+  points[1].rgb = {255, 0, 128};
+  const std::filesystem::path path = std::filesystem::temp_directory_path() /
+                                     ("omnirig_ply_test_" + std::to_string(::getpid()) + ".ply");
+  WriteColoredPly(path, points);
+  std::ifstream in(path, std::ios::binary);
+  std::stringstream buffer;
+  buffer << in.rdbuf();
+  const std::string data = buffer.str();
+  std::filesystem::remove(path);
+  const std::string end = "end_header\n";
+  const size_t body = data.find(end);
+  ASSERT_NE(body, std::string::npos);
+  const std::string header = data.substr(0, body);
+  EXPECT_NE(header.find("format binary_little_endian 1.0"), std::string::npos);
+  EXPECT_NE(header.find("element vertex 2"), std::string::npos);
+  EXPECT_NE(header.find("property float x\nproperty float y\nproperty float z\nproperty uchar red\n"
+                        "property uchar green\nproperty uchar blue\n"),
+            std::string::npos);
+  const size_t start = body + end.size();
+  ASSERT_EQ(data.size() - start, 2u * 15u);
+  const auto read_float = [&](size_t offset) {
+    uint32_t bits = 0;
+    for (int k = 0; k < 4; ++k)
+      bits |= static_cast<uint32_t>(static_cast<uint8_t>(data[offset + k])) << (8 * k);
+    float value;
+    std::memcpy(&value, &bits, sizeof(value));
+    return value;
+  };
+  EXPECT_EQ(read_float(start), 1.5f);
+  EXPECT_EQ(read_float(start + 4), -2.25f);
+  EXPECT_EQ(read_float(start + 8), 3.0f);
+  EXPECT_EQ(static_cast<uint8_t>(data[start + 12]), 10);
+  EXPECT_EQ(static_cast<uint8_t>(data[start + 14]), 30);
+  EXPECT_EQ(read_float(start + 15 + 8), -1.0f);
+  EXPECT_EQ(static_cast<uint8_t>(data[start + 15 + 12]), 255);
+  EXPECT_EQ(static_cast<uint8_t>(data[start + 15 + 14]), 128);
+}
+
+}  // namespace
+}  // namespace omnirig

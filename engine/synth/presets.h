@@ -1,0 +1,162 @@
+#pragma once
+// Ready-made synthetic data sets with ground truth, in memory. api/synth_json.h writes them to a
+// folder (PNG images + ground_truth.json); `omnirig synth` is the command line.
+//
+//   MakeMonoCalibrationSet   one camera, a board waved around it (world frame = camera frame)
+//   MakeStereoBoardSet       a vertical stereo rig, boards seen by both cameras
+//                            (world frame = cam0 frame)
+//   MakeStereoSequence       the rig moving through a textured room or along a street front
+//
+// Board views imitate a person waving a board around a catadioptric sensor: azimuths spread all
+// around the mirror, distances 0.35-1.2 m, tilts up to 50 degrees, the board roughly upright;
+// every view keeps the whole board (margin included) inside the mirror annulus of every camera,
+// clear of the rim and hole by min_margin_px, with squares at least min_square_px wide.
+
+#include <array>
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+#include <opencv2/core.hpp>
+
+#include "engine/geometry/camera_model.h"
+#include "engine/geometry/rigid3.h"
+#include "engine/synth/render.h"
+#include "engine/synth/scene.h"
+#include "engine/synth/synth_camera.h"
+#include "engine/util/progress.h"
+
+namespace omnirig::synth {
+
+// How board views are drawn (shared by the mono and stereo board sets).
+struct BoardPoseOptions {
+  double min_distance_m = 0.35;  // camera centre to board centre
+  double max_distance_m = 1.2;
+  double max_tilt_deg = 50.0;  // angle between the board normal and the line of sight
+  double max_roll_deg = 30.0;  // in-plane turn away from upright
+  double min_margin_px = 8.0;  // of the board outline from the rim and the hole
+  double min_square_px = 6.0;  // shortest distance between neighbouring corners in the image
+
+  void Check() const;
+};
+
+// Draws cam_from_board for view `index` of `num_views` (azimuths stratified around the mirror)
+// such that the board is fully visible in every camera of `cam_from_cam0` (cam0 itself first,
+// as identity). Deterministic in (seed, index). Throws InvalidArgument when no pose fits after
+// many attempts (a board too big for the mirror).
+Rigid3d SampleBoardPose(const std::vector<SynthCamera>& cameras,
+                        const std::vector<Rigid3d>& cam_from_cam0, const CheckerboardSpec& board,
+                        const BoardPoseOptions& options, int index, int num_views, uint64_t seed);
+
+// Exact pixel projections of the board's inner corners (BoardCorners order); NaN for a corner
+// that does not project into the annulus.
+std::vector<Eigen::Vector2d> ProjectBoardCorners(const SynthCamera& camera,
+                                                 const Rigid3d& cam_from_board,
+                                                 const CheckerboardSpec& board);
+
+// A room around the origin with low-contrast (kSoft) walls, used behind calibration boards.
+Scene MakeCalibrationBackground(uint64_t seed);
+
+struct MonoCalibrationOptions {
+  int num_views = 20;
+  int width = 1024;
+  int height = 768;
+  std::optional<SynthCamera> camera;  // default: DefaultCamera(width, height)
+  CheckerboardSpec board;
+  BoardPoseOptions poses;
+  bool textured_background = true;  // a soft-textured room; otherwise plain background
+  RenderOptions render;             // noise, blur, supersampling, threads (render.seed is
+                                    // replaced per view by a value derived from seed)
+  uint64_t seed = 0;
+
+  void Check() const;
+};
+
+struct MonoCalibrationSet {
+  SynthCamera camera;
+  CheckerboardSpec board;
+  Scene background;                // the scene without the board (camera frame = world)
+  std::vector<std::string> names;  // "view_000", ...
+  std::vector<cv::Mat> images;
+  std::vector<Rigid3d> cam_from_board;
+  std::vector<std::vector<Eigen::Vector2d>> corners_px;  // per view, all corners, exact
+};
+
+MonoCalibrationSet MakeMonoCalibrationSet(const MonoCalibrationOptions& options,
+                                          const ProgressSink& progress = ProgressSink());
+
+// The default rig: cam0 = DefaultCamera, cam1 = DefaultSecondCamera, mounted vertically with
+// cam1 100 mm along cam0's +z axis (below cam0 when upright: cam0 is the upper sensor), turned by
+// a small misalignment of 0.3 degrees about an oblique axis as in a real mount.
+Rigid3d DefaultCam0FromCam1();
+
+struct StereoBoardOptions {
+  int num_pairs = 20;
+  int width = 1024;
+  int height = 768;
+  std::optional<std::array<SynthCamera, 2>> cameras;  // default: DefaultCamera, DefaultSecondCamera
+  Rigid3d cam0_from_cam1 = DefaultCam0FromCam1();
+  CheckerboardSpec board;
+  BoardPoseOptions poses;
+  bool textured_background = true;
+  RenderOptions render;
+  uint64_t seed = 0;
+
+  void Check() const;
+};
+
+struct StereoBoardSet {
+  StereoRig rig;                       // rig.cam0/cam1 == cameras[0/1].model
+  std::array<SynthCamera, 2> cameras;  // with the mirror radii
+  CheckerboardSpec board;
+  Scene background;                // world frame = cam0 frame
+  std::vector<std::string> names;  // "pair_000", ...; images[0][i] and images[1][i]
+  std::array<std::vector<cv::Mat>, 2> images;
+  std::vector<Rigid3d> cam0_from_board;  // cam1_from_board = rig.cam0_from_cam1.Inverse() * it
+  std::array<std::vector<std::vector<Eigen::Vector2d>>, 2> corners_px;
+};
+
+StereoBoardSet MakeStereoBoardSet(const StereoBoardOptions& options,
+                                  const ProgressSink& progress = ProgressSink());
+
+struct StereoSequenceOptions {
+  enum class Environment { kRoom, kStreet };
+  Environment environment = Environment::kRoom;
+  int num_frames = 40;
+  double path_length_m = 6.0;     // along a gently curving path
+  double frame_interval_s = 0.1;  // timestamps i * interval
+  double sensor_height_m = 1.0;   // of cam0 above the floor
+  int width = 1024;
+  int height = 768;
+  std::optional<std::array<SynthCamera, 2>> cameras;
+  Rigid3d cam0_from_cam1 = DefaultCam0FromCam1();
+  RenderOptions render;
+  uint64_t seed = 0;
+
+  void Check() const;
+};
+
+struct StereoSequence {
+  StereoRig rig;
+  std::array<SynthCamera, 2> cameras;
+  Scene scene;                     // z-up world, floor at z = 0
+  std::vector<std::string> names;  // "frame_000", ...
+  std::vector<double> timestamps_s;
+  std::vector<Rigid3d> world_from_rig;  // the rig frame is cam0's frame
+  std::array<std::vector<cv::Mat>, 2> images;
+};
+
+StereoSequence MakeStereoSequence(const StereoSequenceOptions& options,
+                                  const ProgressSink& progress = ProgressSink());
+
+// The scenes of MakeStereoSequence, for tests that render their own views.
+Scene MakeRoomScene(uint64_t seed);    // 10 m x 7 m x 2.8 m room with furniture and pillars
+Scene MakeStreetScene(uint64_t seed);  // a street between building fronts, with poles and cars
+
+// Writes `image` as a PNG file at `path`, creating missing parent folders. Throws
+// std::runtime_error when the file cannot be written.
+void WritePng(const cv::Mat& image, const std::string& path);
+
+}  // namespace omnirig::synth

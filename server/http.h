@@ -1,0 +1,110 @@
+#pragma once
+// A thin wrapper over cpp-httplib, so that routes never see httplib types and every handler
+// runs inside one exception wrapper: whatever a handler throws, the client gets a real status
+// code and {"error": {"code", "message", "details"}}. It also checks the bearer token and
+// counts requests by route and status for /metrics.
+
+#include <atomic>
+#include <filesystem>
+#include <functional>
+#include <map>
+#include <memory>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <thread>
+
+#include <nlohmann/json.hpp>
+
+namespace omnirig::server {
+
+// Thrown by handlers for an error response: status 4xx/5xx, a machine-friendly code.
+class HttpError : public std::runtime_error {
+ public:
+  HttpError(int status, std::string code, const std::string& message,
+            nlohmann::json details = nlohmann::json::object())
+      : std::runtime_error(message),
+        status(status),
+        code(std::move(code)),
+        details(std::move(details)) {}
+  int status;
+  std::string code;
+  nlohmann::json details;
+};
+
+// One part of a multipart/form-data body, as announced before its bytes arrive.
+struct MultipartPart {
+  std::string field;
+  std::string filename;
+  std::string content_type;
+};
+
+struct HttpRequest {
+  std::string method;
+  std::string path;
+  std::map<std::string, std::string> path_params;  // "{id}" -> value
+  std::multimap<std::string, std::string> query;
+  std::string body;                                       // empty for streaming routes
+  std::function<std::string(const std::string&)> header;  // "" when absent
+  // Streaming routes only: reads the body chunk by chunk (return false to stop).
+  std::function<bool(const std::function<bool(const char*, size_t)>&)> read_body;
+  // Streaming routes only: multipart bodies part by part.
+  std::function<bool(const std::function<bool(const MultipartPart&)>&,
+                     const std::function<bool(const char*, size_t)>&)>
+      read_multipart;
+  bool is_multipart = false;
+
+  const std::string& Param(const std::string& name) const { return path_params.at(name); }
+  std::optional<std::string> Query(const std::string& name) const;
+};
+
+struct HttpResponse {
+  int status = 200;
+  std::multimap<std::string, std::string> headers;
+  std::string body;
+  std::string content_type = "application/json";
+  // When set, the file is streamed instead of `body` (Range requests served by the library).
+  std::optional<std::filesystem::path> file;
+  int64_t file_size = 0;
+
+  void Json(int status_code, const nlohmann::json& json);
+};
+
+using HttpHandler = std::function<void(const HttpRequest&, HttpResponse&)>;
+
+struct HttpServerOptions {
+  int num_threads = 64;                // connection threads (one per open keep-alive connection)
+  int64_t max_body_bytes = 1LL << 30;  // larger bodies are refused (413) before reading
+  std::string token;                   // bearer token required under /api/ and /metrics when set
+};
+
+// Request counters by (route pattern, status), rendered by Metrics.
+using RequestCounter = std::function<void(const std::string& route, int status, double seconds)>;
+
+class HttpServer {
+ public:
+  explicit HttpServer(const HttpServerOptions& options, RequestCounter counter);
+  ~HttpServer();
+
+  // Pattern: literal segments and "{name}" (one segment) or "{name+}" (the rest, with '/').
+  // `streaming`: the body is not buffered; the handler reads it via read_body/read_multipart.
+  void Route(const std::string& method, const std::string& pattern, HttpHandler handler,
+             bool streaming = false);
+  // Serves files of `dir` under `prefix` ("/" -> index.html); false when dir does not exist.
+  bool MountStatic(const std::string& prefix, const std::filesystem::path& dir);
+
+  // Binds (port 0 picks a free one) and returns the bound port; throws on failure.
+  int Bind(const std::string& host, int port);
+  // Serves on a background thread until Stop().
+  void Start();
+  void Stop();
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+// True for 127.0.0.0/8, ::1 and "localhost".
+bool IsLoopbackHost(const std::string& host);
+
+}  // namespace omnirig::server

@@ -1,0 +1,229 @@
+#include "server/job_runner.h"
+
+#include <chrono>
+#include <cstdio>
+#include <mutex>
+
+#include <nlohmann/json.hpp>
+
+#include "api/job_types.h"
+#include "api/service_json.h"
+#include "engine/util/check.h"
+#include "storage/atomic_file.h"
+#include "storage/image_header.h"
+
+namespace omnirig::server {
+namespace fs = std::filesystem;
+using storage::JobState;
+
+namespace {
+
+// The per-attempt log file: timestamped lines, flushed as written, fsynced on close.
+class JobLog {
+ public:
+  explicit JobLog(const fs::path& path) : path_(path), file_(std::fopen(path.c_str(), "a")) {}
+  ~JobLog() { Close(); }
+  void Write(const std::string& line) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (!file_) return;
+    const std::string stamp = api::TimeJson(storage::NowSeconds()).get<std::string>();
+    std::fprintf(file_, "%s %s\n", stamp.c_str(), line.c_str());
+    std::fflush(file_);
+  }
+  void Close() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (!file_) return;
+    std::fclose(file_);
+    file_ = nullptr;
+    storage::FsyncPath(path_);
+  }
+
+ private:
+  fs::path path_;
+  std::mutex mutex_;
+  FILE* file_;
+};
+
+// Writes progress to the store at most once per interval (and on every stage change), with an
+// ETA from the attempt's elapsed time. Store errors are logged, never thrown into the engine.
+class ProgressWriter {
+ public:
+  ProgressWriter(storage::JobStore& store, std::string job_id, double interval_s, JobLog& log)
+      : store_(store), job_id_(std::move(job_id)), interval_s_(interval_s), log_(log) {}
+
+  void Report(double fraction, const std::string& stage, const std::string& message) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    const auto now = std::chrono::steady_clock::now();
+    const double since_write = std::chrono::duration<double>(now - last_write_).count();
+    if (since_write < interval_s_ && stage == last_stage_ && fraction < 1) return;
+    storage::JobProgress progress{std::clamp(fraction, 0.0, 1.0), stage, message, std::nullopt};
+    const double elapsed = std::chrono::duration<double>(now - start_).count();
+    if (progress.fraction >= 0.01) {
+      progress.eta_s = elapsed * (1 - progress.fraction) / progress.fraction;
+    }
+    try {
+      store_.UpdateProgress(job_id_, progress);
+    } catch (const std::exception& e) {
+      log_.Write(std::string("progress not stored: ") + e.what());
+    }
+    if (stage != last_stage_)
+      log_.Write("stage " + stage + (message.empty() ? "" : ": " + message));
+    last_write_ = now;
+    last_stage_ = stage;
+  }
+
+ private:
+  storage::JobStore& store_;
+  std::string job_id_;
+  double interval_s_;
+  JobLog& log_;
+  std::mutex mutex_;
+  std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now();
+  std::chrono::steady_clock::time_point last_write_{};
+  std::string last_stage_;
+};
+
+api::JobContext BuildContext(const storage::JobRecord& job, storage::JobStore& store,
+                             const storage::DataDir& data_dir, const JobRunOptions& options,
+                             const JobRunFlags& flags, const fs::path& output_dir,
+                             ProgressWriter& progress, JobLog& log) {
+  api::JobContext context;
+  context.job_id = job.id;
+  context.dataset_dir = data_dir.ImagesDir(job.dataset_id);
+  for (const storage::ImageRecord& image : store.ListImages(job.dataset_id)) {
+    context.image_names.push_back(image.name);
+  }
+  context.output_dir = output_dir;
+  context.num_threads = options.num_threads;
+  context.progress.report = [&progress](double fraction, const std::string& stage,
+                                        const std::string& message) {
+    progress.Report(fraction, stage, message);
+  };
+  context.progress.is_cancelled = [flags] {
+    return (flags.cancel && flags.cancel->load()) || (flags.interrupt && flags.interrupt->load());
+  };
+  context.log = [&log](const std::string& line) { log.Write(line); };
+  context.load_result = [&store](const std::string& job_id) {
+    const auto other = store.GetJob(job_id);
+    if (!other || other->state != JobState::kSucceeded) {
+      throw InvalidArgument("job " + job_id +
+                            " has no result (it does not exist or has not "
+                            "succeeded)");
+    }
+    return nlohmann::json::parse(store.GetResult(job_id).value_or("null"));
+  };
+  return context;
+}
+
+storage::JobOutcome Failed(const std::string& code, const std::string& message) {
+  storage::JobOutcome outcome;
+  outcome.state = JobState::kFailed;
+  outcome.error = storage::JobError{code, message};
+  return outcome;
+}
+
+storage::JobOutcome RunJobType(const storage::JobRecord& job, const api::JobContext& context,
+                               const fs::path& output_dir, const fs::path& data_root) {
+  const api::JobType* type = api::FindJobType(job.type);
+  if (!type) return Failed("unknown_type", "no job type '" + job.type + "' in this server");
+  const nlohmann::json params = nlohmann::json::parse(job.params);
+  context.progress.ThrowIfCancelled();
+  const nlohmann::json result = type->run(params, context);
+  storage::JobOutcome outcome;
+  outcome.state = JobState::kSucceeded;
+  outcome.result = result.dump();
+  storage::WriteFileAtomically(output_dir / "result.json", result.dump(2));
+  outcome.artifacts = CollectArtifacts(output_dir, data_root);
+  return outcome;
+}
+
+}  // namespace
+
+std::vector<storage::ArtifactRecord> CollectArtifacts(const fs::path& dir,
+                                                      const fs::path& data_root) {
+  std::vector<storage::ArtifactRecord> artifacts;
+  for (const auto& entry : fs::recursive_directory_iterator(dir)) {
+    if (!entry.is_regular_file()) continue;
+    const std::string name = fs::relative(entry.path(), dir).generic_string();
+    if (storage::IsTemporaryFileName(entry.path().filename().string())) continue;
+    storage::FsyncPath(entry.path());
+    const storage::FileDigest digest = storage::DigestFile(entry.path());
+    artifacts.push_back(
+        storage::ArtifactRecord{name, fs::relative(entry.path(), data_root).generic_string(),
+                                digest.size, digest.sha256, storage::ContentTypeForName(name)});
+  }
+  storage::FsyncPath(dir);
+  std::sort(artifacts.begin(), artifacts.end(),
+            [](const auto& a, const auto& b) { return a.name < b.name; });
+  return artifacts;
+}
+
+namespace {
+
+// Output folders of earlier attempts (interrupted by a crash or a drain) hold nothing the
+// records point to once this attempt has ended.
+void RemoveOtherAttempts(const fs::path& job_dir, const fs::path& keep) {
+  std::error_code error;
+  for (const auto& entry : fs::directory_iterator(job_dir, error)) {
+    if (entry.path() != keep) fs::remove_all(entry.path(), error);
+  }
+}
+
+}  // namespace
+
+storage::JobOutcome RunJobAttempt(const storage::JobRecord& job, storage::JobStore& store,
+                                  const storage::DataDir& data_dir, const JobRunOptions& options,
+                                  const JobRunFlags& flags) {
+  const fs::path output_dir = data_dir.AttemptDir(job.id, job.attempts);
+  std::error_code ignored;
+  fs::remove_all(output_dir, ignored);
+  fs::create_directories(output_dir);
+  JobLog log(output_dir / "log.txt");
+  log.Write("job " + job.id + " (" + job.type + ") attempt " + std::to_string(job.attempts) +
+            " with " + std::to_string(options.num_threads) + " thread(s)");
+  ProgressWriter progress(store, job.id, options.progress_interval_s, log);
+  storage::JobOutcome outcome;
+  try {
+    const api::JobContext context =
+        BuildContext(job, store, data_dir, options, flags, output_dir, progress, log);
+    outcome = RunJobType(job, context, output_dir, data_dir.root());
+  } catch (const Cancelled&) {
+    outcome.state = JobState::kCanceled;
+  } catch (const InvalidArgument& e) {
+    outcome = Failed("invalid_input", e.what());
+  } catch (const std::exception& e) {
+    outcome = Failed("job_failed", e.what());
+  } catch (...) {
+    outcome = Failed("job_failed", "unknown error");
+  }
+  log.Write(
+      std::string("finished: ") + storage::JobStateName(outcome.state) +
+      (outcome.error ? " (" + outcome.error->code + ": " + outcome.error->message + ")" : ""));
+  log.Close();
+  if (outcome.state != JobState::kSucceeded) {
+    try {
+      outcome.artifacts.clear();
+      for (auto& artifact : CollectArtifacts(output_dir, data_dir.root())) {
+        if (artifact.name == "log.txt") outcome.artifacts.push_back(artifact);
+      }
+    } catch (const std::exception&) {
+      // The log is a courtesy for failed jobs; the outcome itself must still be recorded.
+    }
+  } else {
+    // The log grew after the artifacts were collected: record its final size and hash.
+    try {
+      for (auto& artifact : outcome.artifacts) {
+        if (artifact.name != "log.txt") continue;
+        const auto digest = storage::DigestFile(output_dir / "log.txt");
+        artifact.size = digest.size;
+        artifact.sha256 = digest.sha256;
+      }
+    } catch (const std::exception& e) {
+      outcome = Failed("job_failed", std::string("cannot record the log: ") + e.what());
+    }
+  }
+  RemoveOtherAttempts(data_dir.JobDir(job.id), output_dir);
+  return outcome;
+}
+
+}  // namespace omnirig::server

@@ -1,0 +1,33 @@
+#pragma once
+// Runs one claimed job attempt: builds its JobContext, calls the job type, and turns the
+// outcome (result, Cancelled, InvalidArgument, any other exception) into a JobOutcome with
+// artifacts. Separate from the pool so the pool only schedules.
+
+#include <atomic>
+#include <string>
+
+#include "storage/data_dir.h"
+#include "storage/job_store.h"
+
+namespace omnirig::server {
+
+struct JobRunFlags {
+  const std::atomic<bool>* cancel = nullptr;     // user cancel
+  const std::atomic<bool>* interrupt = nullptr;  // server draining
+};
+
+struct JobRunOptions {
+  int num_threads = 1;
+  double progress_interval_s = 0.2;
+};
+
+// Runs `job` (already claimed: state running, attempts counted). Never throws.
+storage::JobOutcome RunJobAttempt(const storage::JobRecord& job, storage::JobStore& store,
+                                  const storage::DataDir& data_dir, const JobRunOptions& options,
+                                  const JobRunFlags& flags);
+
+// Every regular file under `dir` as an artifact (name relative to dir), fsynced and hashed.
+std::vector<storage::ArtifactRecord> CollectArtifacts(const std::filesystem::path& dir,
+                                                      const std::filesystem::path& data_root);
+
+}  // namespace omnirig::server

@@ -1,0 +1,26 @@
+#pragma once
+// JSON forms of the stored records, as issue 6 names them:
+//   dataset:  {"id", "name", "created_at", "image_count", "total_bytes"[, "images": [image]]}
+//   image:    {"name", "size", "width", "height", "sha256", "content_type"}
+//   job:      {"id", "type", "dataset", "params", "state", "progress": {"fraction", "stage",
+//              "message", "eta_s"}, "created_at", "started_at", "finished_at", "attempts",
+//              "cancel_requested", "error": null | {"code", "message"}}
+//   artifact: {"name", "size", "content_type", "sha256"}
+// Times are ISO 8601 UTC strings (null when not reached yet).
+
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "storage/records.h"
+
+namespace omnirig::server {
+
+nlohmann::json DatasetJson(const storage::DatasetRecord& dataset);
+nlohmann::json DatasetJson(const storage::DatasetRecord& dataset,
+                           const std::vector<storage::ImageRecord>& images);
+nlohmann::json ImageJson(const storage::ImageRecord& image);
+nlohmann::json JobJson(const storage::JobRecord& job);
+nlohmann::json ArtifactJson(const storage::ArtifactRecord& artifact);
+
+}  // namespace omnirig::server

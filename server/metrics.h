@@ -1,0 +1,38 @@
+#pragma once
+// Counters for GET /metrics in the Prometheus text format: HTTP requests by route and status,
+// job run durations by type and final state; job counts by state and the queue depth come from
+// the store when the page is rendered.
+
+#include <map>
+#include <mutex>
+#include <string>
+#include <tuple>
+#include <vector>
+
+#include "storage/job_store.h"
+
+namespace omnirig::server {
+
+class Metrics {
+ public:
+  Metrics();
+  // `route` is "METHOD /pattern" (or "static", "unmatched", "auth").
+  void CountRequest(const std::string& route, int status, double seconds);
+  void ObserveJobDuration(const std::string& type, const std::string& state, double seconds);
+  // The whole exposition text; `busy_workers` is the number of jobs running in this process.
+  std::string Render(storage::JobStore& store, int busy_workers, int num_workers) const;
+
+ private:
+  struct Histogram {
+    std::vector<int64_t> bucket_counts;  // cumulative counts are computed when rendering
+    double sum = 0;
+    int64_t count = 0;
+  };
+  mutable std::mutex mutex_;
+  std::vector<double> request_bounds_s_, job_bounds_s_;
+  std::map<std::pair<std::string, int>, int64_t> requests_;
+  std::map<std::string, Histogram> request_durations_;
+  std::map<std::pair<std::string, std::string>, Histogram> job_durations_;
+};
+
+}  // namespace omnirig::server

@@ -1,0 +1,245 @@
+// Jobs: create (validated by the job type), list, get, cancel, delete, retry, result and
+// artifacts (with Content-Length, ETag and Range).
+
+#include <cmath>
+
+#include "api/job_types.h"
+#include "api/service_json.h"
+#include "api/stereo_json.h"
+#include "engine/util/check.h"
+#include "server/json_views.h"
+#include "server/service.h"
+
+namespace omnirig::server {
+namespace {
+
+storage::JobRecord RequireJob(ServiceState& state, const std::string& id) {
+  auto job = state.store->GetJob(id);
+  if (!job) throw HttpError(404, "job_not_found", "no job " + id);
+  return *job;
+}
+
+void CheckReferencedJobs(ServiceState& state, const api::JobType& type,
+                         const nlohmann::json& params) {
+  if (!type.referenced_jobs) return;
+  for (const std::string& id : type.referenced_jobs(params)) {
+    const auto job = state.store->GetJob(id);
+    if (!job) {
+      throw HttpError(404, "job_not_found", "referenced job " + id + " does not exist",
+                      {{"job", id}});
+    }
+    if (job->state != storage::JobState::kSucceeded) {
+      throw HttpError(409, "dependency_not_ready",
+                      "referenced job " + id + " has not succeeded (state " +
+                          storage::JobStateName(job->state) + ")",
+                      {{"job", id}, {"state", storage::JobStateName(job->state)}});
+    }
+  }
+}
+
+void CreateJob(ServiceState& state, const HttpRequest& request, HttpResponse& response) {
+  const api::CreateJobRequest parsed = api::ParseCreateJobRequest(request.body);
+  const api::JobType* type = api::FindJobType(parsed.type);
+  if (!type) {
+    const auto known = api::JobTypeNames();
+    std::string list;
+    for (const auto& name : known) list += (list.empty() ? "" : ", ") + name;
+    throw HttpError(
+        400, "unknown_job_type",
+        "unknown job type '" + parsed.type + "' (known: " + (list.empty() ? "none" : list) + ")",
+        {{"known_types", known}});
+  }
+  if (!state.store->GetDataset(parsed.dataset)) {
+    throw HttpError(404, "dataset_not_found", "no dataset " + parsed.dataset,
+                    {{"dataset", parsed.dataset}});
+  }
+  try {
+    if (type->validate) type->validate(parsed.params);
+  } catch (const InvalidArgument& e) {
+    throw HttpError(400, "invalid_params", e.what());
+  }
+  CheckReferencedJobs(state, *type, parsed.params);
+  const int64_t queued = state.store->CountJobsByState().at(storage::JobState::kQueued);
+  if (queued >= state.options.max_queued_jobs) {
+    response.headers.emplace("Retry-After", "10");
+    throw HttpError(503, "queue_full",
+                    "the queue already holds " + std::to_string(queued) + " jobs",
+                    {{"limit", state.options.max_queued_jobs}});
+  }
+  const storage::JobRecord job =
+      state.store->CreateJob(parsed.type, parsed.dataset, parsed.params.dump());
+  state.workers->Notify();
+  response.headers.emplace("Location", "/api/v1/jobs/" + job.id);
+  response.Json(202, JobJson(job));
+}
+
+void ListJobs(ServiceState& state, const HttpRequest& request, HttpResponse& response) {
+  storage::JobFilter filter;
+  if (const auto state_name = request.Query("state")) {
+    filter.state = storage::ParseJobState(*state_name);
+    if (!filter.state) {
+      throw HttpError(
+          400, "invalid_argument",
+          "unknown state '" + *state_name + "' (queued, running, succeeded, failed, canceled)");
+    }
+  }
+  filter.type = request.Query("type");
+  filter.dataset_id = request.Query("dataset");
+  if (const auto limit = request.Query("limit")) {
+    char* end = nullptr;
+    const long value = std::strtol(limit->c_str(), &end, 10);
+    if (end == limit->c_str() || *end != '\0' || value < 1 || value > 10000) {
+      throw HttpError(400, "invalid_argument", "limit must be an integer in [1, 10000]");
+    }
+    filter.limit = static_cast<int>(value);
+  }
+  nlohmann::json list = nlohmann::json::array();
+  for (const auto& job : state.store->ListJobs(filter)) list.push_back(JobJson(job));
+  response.Json(200, list);
+}
+
+void CancelJob(ServiceState& state, const HttpRequest& request, HttpResponse& response) {
+  const std::string& id = request.Param("id");
+  const storage::JobRecord before = RequireJob(state, id);
+  if (storage::IsTerminal(before.state)) {
+    throw HttpError(409, "job_finished",
+                    "job " + id + " already " + storage::JobStateName(before.state),
+                    {{"state", storage::JobStateName(before.state)}});
+  }
+  const auto after = state.store->RequestCancel(id);
+  if (after == storage::JobState::kRunning) state.workers->Cancel(id);
+  response.Json(after == storage::JobState::kRunning ? 202 : 200, JobJson(RequireJob(state, id)));
+}
+
+void DeleteJob(ServiceState& state, const HttpRequest& request, HttpResponse& response) {
+  const std::string& id = request.Param("id");
+  const storage::JobRecord job = RequireJob(state, id);
+  if (job.state == storage::JobState::kRunning || !state.store->DeleteJob(id)) {
+    throw HttpError(409, "job_running", "job " + id + " is running: cancel it first");
+  }
+  std::error_code ignored;
+  std::filesystem::remove_all(state.data_dir->JobDir(id), ignored);
+  response.status = 204;
+}
+
+void RetryJob(ServiceState& state, const HttpRequest& request, HttpResponse& response) {
+  const std::string& id = request.Param("id");
+  const storage::JobRecord job = RequireJob(state, id);
+  if (!state.store->GetDataset(job.dataset_id)) {
+    throw HttpError(409, "dataset_not_found",
+                    "job " + id + " cannot run again: its dataset " + job.dataset_id +
+                        " was deleted");
+  }
+  if (!state.store->RetryJob(id)) {
+    throw HttpError(409, "job_not_retryable",
+                    "only failed or canceled jobs are retried; job " + id + " is " +
+                        storage::JobStateName(job.state),
+                    {{"state", storage::JobStateName(job.state)}});
+  }
+  state.workers->Notify();
+  response.Json(202, JobJson(RequireJob(state, id)));
+}
+
+void GetResult(ServiceState& state, const HttpRequest& request, HttpResponse& response) {
+  const std::string& id = request.Param("id");
+  const storage::JobRecord job = RequireJob(state, id);
+  const auto result =
+      job.state == storage::JobState::kSucceeded ? state.store->GetResult(id) : std::nullopt;
+  if (!result) {
+    throw HttpError(409, "job_not_succeeded",
+                    "job " + id + " has no result: it is " + storage::JobStateName(job.state),
+                    {{"state", storage::JobStateName(job.state)}});
+  }
+  response.content_type = "application/json";
+  response.body = *result;
+}
+
+void GetArtifact(ServiceState& state, const HttpRequest& request, HttpResponse& response) {
+  const std::string& id = request.Param("id");
+  RequireJob(state, id);
+  const std::string& name = request.Param("name");
+  for (const storage::ArtifactRecord& artifact : state.store->ListArtifacts(id)) {
+    if (artifact.name != name) continue;
+    const std::string etag = "\"" + artifact.sha256 + "\"";
+    response.headers.emplace("ETag", etag);
+    response.headers.emplace("Accept-Ranges", "bytes");
+    if (request.header("If-None-Match") == etag) {
+      response.status = 304;
+      return;
+    }
+    response.content_type = artifact.content_type;
+    response.file = state.data_dir->root() / artifact.path;
+    response.file_size = artifact.size;
+    return;
+  }
+  throw HttpError(404, "artifact_not_found", "job " + id + " has no artifact " + name);
+}
+
+double RequiredNumber(const HttpRequest& request, const std::string& name) {
+  const auto text = request.Query(name);
+  if (!text) throw HttpError(400, "invalid_argument", "missing query parameter '" + name + "'");
+  char* end = nullptr;
+  const double value = std::strtod(text->c_str(), &end);
+  if (end == text->c_str() || *end != '\0' || !std::isfinite(value)) {
+    throw HttpError(400, "invalid_argument", "query parameter '" + name + "' must be a number");
+  }
+  return value;
+}
+
+// The epipolar curve of a pixel, for a succeeded relative_pose job (api/stereo_json.h).
+void GetEpipolar(ServiceState& state, const HttpRequest& request, HttpResponse& response) {
+  const std::string& id = request.Param("id");
+  const storage::JobRecord job = RequireJob(state, id);
+  if (job.type != "relative_pose") {
+    throw HttpError(400, "invalid_argument",
+                    "epipolar curves need a relative_pose job; job " + id + " is " + job.type);
+  }
+  const auto result =
+      job.state == storage::JobState::kSucceeded ? state.store->GetResult(id) : std::nullopt;
+  if (!result) {
+    throw HttpError(409, "job_not_succeeded",
+                    "job " + id + " has no result: it is " + storage::JobStateName(job.state),
+                    {{"state", storage::JobStateName(job.state)}});
+  }
+  const std::string from = request.Query("from").value_or("cam0");
+  if (from != "cam0" && from != "cam1") {
+    throw HttpError(400, "invalid_argument", "query parameter 'from' must be cam0 or cam1");
+  }
+  const double u = RequiredNumber(request, "u");
+  const double v = RequiredNumber(request, "v");
+  response.Json(
+      200, api::EpipolarCurveJson(nlohmann::json::parse(*result), from == "cam0" ? 0 : 1, u, v));
+}
+
+}  // namespace
+
+void AddJobRoutes(HttpServer& http, ServiceState& state) {
+  const auto bind = [&state](void (*handler)(ServiceState&, const HttpRequest&, HttpResponse&)) {
+    return [&state, handler](const HttpRequest& request, HttpResponse& response) {
+      handler(state, request, response);
+    };
+  };
+  http.Route("POST", "/api/v1/jobs", bind(CreateJob));
+  http.Route("GET", "/api/v1/jobs", bind(ListJobs));
+  http.Route("GET", "/api/v1/jobs/{id}",
+             [&state](const HttpRequest& request, HttpResponse& response) {
+               response.Json(200, JobJson(RequireJob(state, request.Param("id"))));
+             });
+  http.Route("POST", "/api/v1/jobs/{id}/cancel", bind(CancelJob));
+  http.Route("DELETE", "/api/v1/jobs/{id}", bind(DeleteJob));
+  http.Route("POST", "/api/v1/jobs/{id}/retry", bind(RetryJob));
+  http.Route("GET", "/api/v1/jobs/{id}/result", bind(GetResult));
+  http.Route("GET", "/api/v1/jobs/{id}/artifacts",
+             [&state](const HttpRequest& request, HttpResponse& response) {
+               RequireJob(state, request.Param("id"));
+               nlohmann::json list = nlohmann::json::array();
+               for (const auto& artifact : state.store->ListArtifacts(request.Param("id"))) {
+                 list.push_back(ArtifactJson(artifact));
+               }
+               response.Json(200, list);
+             });
+  http.Route("GET", "/api/v1/jobs/{id}/artifacts/{name+}", bind(GetArtifact));
+  http.Route("GET", "/api/v1/jobs/{id}/epipolar", bind(GetEpipolar));
+}
+
+}  // namespace omnirig::server

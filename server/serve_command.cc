@@ -1,0 +1,125 @@
+#include "server/serve_command.h"
+
+#include <fcntl.h>
+#include <signal.h>
+#include <unistd.h>
+
+#include <cerrno>
+
+#include <cstdlib>
+#include <iostream>
+
+#include "server/cli/args.h"
+#include "server/service.h"
+
+#ifndef OMNIRIG_WEB_DIR
+#define OMNIRIG_WEB_DIR "web"
+#endif
+
+namespace omnirig::server {
+namespace {
+
+void DeclareOptions(cli::ArgParser& parser) {
+  parser.AddOption("host", "127.0.0.1", "address to bind (non-loopback needs --token)");
+  parser.AddOption("port", "8080", "TCP port (0 picks a free one, printed on stdout)");
+  parser.AddOption("data", "./data", "folder holding the SQLite database and all files");
+  parser.AddOption("web", OMNIRIG_WEB_DIR, "folder of the web page's static files");
+  parser.AddOption("token", "",
+                   "bearer token required for every API call (default: $OMNIRIG_TOKEN)");
+  parser.AddOption("workers", std::to_string(DefaultWorkers()),
+                   "jobs run at the same time (half the cores by default)");
+  parser.AddOption("threads-per-job", "", "solver threads per job (default: cores / workers)");
+  parser.AddOption("http-threads", "128", "HTTP connection threads");
+  parser.AddOption("max-attempts", "3",
+                   "runs a job may start before crashes make it fail ('interrupted')");
+  parser.AddOption("max-file-mb", "256", "largest image upload, MB");
+  parser.AddOption("max-dataset-mb", "8192", "largest dataset, MB");
+  parser.AddOption("max-images", "20000", "most images in one dataset");
+  parser.AddOption("max-queued-jobs", "1000", "most jobs waiting in the queue (then 503)");
+  parser.AddOption("min-free-mb", "256", "free disk space to keep; uploads beyond get 507");
+  parser.AddOption("drain-timeout", "20",
+                   "seconds SIGTERM waits for running jobs before re-queuing them");
+}
+
+int64_t Megabytes(const cli::ArgParser& parser, const std::string& name) {
+  return static_cast<int64_t>(parser.GetDouble(name) * 1024 * 1024);
+}
+
+ServiceOptions ToOptions(const cli::ArgParser& parser) {
+  ServiceOptions options;
+  options.host = parser.Get("host");
+  options.port = parser.GetInt("port");
+  options.data_dir = parser.Get("data");
+  options.web_dir = parser.Get("web");
+  options.token = parser.Get("token");
+  if (options.token.empty() && std::getenv("OMNIRIG_TOKEN")) {
+    options.token = std::getenv("OMNIRIG_TOKEN");
+  }
+  options.num_workers = parser.GetInt("workers");
+  options.threads_per_job = parser.Get("threads-per-job").empty()
+                                ? DefaultThreadsPerJob(options.num_workers)
+                                : parser.GetInt("threads-per-job");
+  options.http_threads = parser.GetInt("http-threads");
+  options.max_attempts = parser.GetInt("max-attempts");
+  options.max_file_bytes = Megabytes(parser, "max-file-mb");
+  options.max_dataset_bytes = Megabytes(parser, "max-dataset-mb");
+  options.max_images_per_dataset = parser.GetInt("max-images");
+  options.max_queued_jobs = parser.GetInt("max-queued-jobs");
+  options.min_free_bytes = Megabytes(parser, "min-free-mb");
+  return options;
+}
+
+int signal_pipe[2] = {-1, -1};
+
+extern "C" void OnStopSignal(int signal_number) {
+  const char byte = static_cast<char>(signal_number);
+  [[maybe_unused]] const ssize_t ignored = ::write(signal_pipe[1], &byte, 1);
+}
+
+void InstallStopSignalHandlers() {
+  if (::pipe2(signal_pipe, O_CLOEXEC) != 0) throw std::runtime_error("cannot create a pipe");
+  struct sigaction action {};
+  action.sa_handler = OnStopSignal;
+  sigemptyset(&action.sa_mask);
+  action.sa_flags = SA_RESTART;
+  sigaction(SIGTERM, &action, nullptr);
+  sigaction(SIGINT, &action, nullptr);
+}
+
+int WaitForSignal() {
+  char byte = 0;
+  while (::read(signal_pipe[0], &byte, 1) < 0 && errno == EINTR) {
+  }
+  return byte;
+}
+
+}  // namespace
+
+int ServeCommand(const std::vector<std::string>& args) {
+  cli::ArgParser parser("serve",
+                        "Runs the omnirig HTTP service: REST API under /api/v1, job workers, "
+                        "/metrics and the web page.");
+  DeclareOptions(parser);
+  if (!parser.Parse(args)) return parser.exit_code();
+  const ServiceOptions options = ToOptions(parser);
+  const double drain_timeout_s = parser.GetDouble("drain-timeout");
+
+  // SIGTERM/SIGINT write to a pipe that this thread waits on. A handler (rather than a blocked
+  // mask and sigwait) works whichever thread the kernel picks, including threads that libraries
+  // start before this point.
+  InstallStopSignalHandlers();
+  signal(SIGPIPE, SIG_IGN);
+
+  Service service(options);
+  const int port = service.Start();
+  std::cout << "omnirig listening on http://" << options.host << ":" << port << std::endl;
+  const int received = WaitForSignal();
+  std::cerr << "omnirig: " << (received == SIGTERM ? "SIGTERM" : "SIGINT") << ": draining (up to "
+            << drain_timeout_s << " s)" << std::endl;
+  const int requeued = service.Drain(drain_timeout_s);
+  std::cerr << "omnirig: stopped; " << requeued << " running job(s) handed back to the queue"
+            << std::endl;
+  return 0;
+}
+
+}  // namespace omnirig::server

@@ -1,0 +1,14 @@
+#pragma once
+// `omnirig serve`: options -> ServiceOptions, start, wait for SIGTERM/SIGINT, drain.
+
+#include <string>
+#include <vector>
+
+namespace omnirig::server {
+
+// Runs the service until SIGTERM or SIGINT; returns the process exit code. Prints
+// "omnirig listening on http://HOST:PORT" on stdout once the port is bound (with --port 0 the
+// line names the port the system chose).
+int ServeCommand(const std::vector<std::string>& args);
+
+}  // namespace omnirig::server

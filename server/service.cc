@@ -1,0 +1,109 @@
+#include "server/service.h"
+
+#include <iostream>
+#include <thread>
+
+#include "api/job_types.h"
+#include "engine/util/check.h"
+
+namespace omnirig::server {
+
+void ServiceOptions::Check() const {
+  OMNIRIG_CHECK(port >= 0 && port <= 65535, "--port must be in [0, 65535], got " << port);
+  OMNIRIG_CHECK(!data_dir.empty(), "--data must name a folder");
+  OMNIRIG_CHECK(num_workers >= 1 && num_workers <= 256, "--workers must be in [1, 256]");
+  OMNIRIG_CHECK(threads_per_job >= 1, "--threads-per-job must be at least 1");
+  OMNIRIG_CHECK(http_threads >= 2, "--http-threads must be at least 2");
+  OMNIRIG_CHECK(max_attempts >= 1, "--max-attempts must be at least 1");
+  OMNIRIG_CHECK(max_file_bytes > 0 && max_dataset_bytes >= max_file_bytes,
+                "--max-file-mb must be positive and at most --max-dataset-mb");
+  OMNIRIG_CHECK(max_images_per_dataset >= 1 && max_queued_jobs >= 1,
+                "--max-images and --max-queued-jobs must be at least 1");
+  OMNIRIG_CHECK(min_free_bytes >= 0, "--min-free-mb must not be negative");
+  OMNIRIG_CHECK(IsLoopbackHost(host) || !token.empty(),
+                "refusing to listen on non-loopback address "
+                    << host << " without a bearer token (--token or OMNIRIG_TOKEN)");
+}
+
+int DefaultWorkers() {
+  const int cores = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  return std::max(1, cores / 2);
+}
+
+int DefaultThreadsPerJob(int num_workers) {
+  const int cores = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  return std::max(1, cores / std::max(1, num_workers));
+}
+
+namespace {
+
+void PrintStartupReport(const ServiceState& state) {
+  const auto& consistency = state.consistency;
+  const auto& recovery = state.recovery;
+  std::cerr << "omnirig: data in " << state.data_dir->root().string() << ", integrity "
+            << consistency.integrity << ", " << consistency.temporary_files_removed
+            << " interrupted write(s) removed, " << consistency.missing_images.size()
+            << " missing image(s) dropped, " << consistency.missing_artifacts.size()
+            << " missing artifact(s); recovery: " << recovery.requeued.size() << " requeued, "
+            << recovery.failed.size() << " failed, " << recovery.canceled.size() << " canceled"
+            << std::endl;
+  for (const auto& name : consistency.missing_artifacts) {
+    std::cerr << "omnirig: artifact missing or resized on disk: " << name << std::endl;
+  }
+}
+
+}  // namespace
+
+Service::Service(const ServiceOptions& options) : state_(std::make_unique<ServiceState>()) {
+  options.Check();
+  api::RegisterBuiltinJobTypes();
+  ServiceState& state = *state_;
+  state.options = options;
+  state.started_at = storage::NowSeconds();
+  state.data_dir = std::make_unique<storage::DataDir>(options.data_dir);
+  state.store = std::make_unique<storage::SqliteJobStore>(state.data_dir->DatabasePath().string());
+  state.consistency = storage::CheckConsistency(*state.data_dir, *state.store);
+  if (state.consistency.integrity != "ok") {
+    throw std::runtime_error("the database " + state.data_dir->DatabasePath().string() +
+                             " fails its integrity check: " + state.consistency.integrity);
+  }
+  state.recovery = state.store->RecoverInterruptedJobs(options.max_attempts);
+  PrintStartupReport(state);
+  WorkerPoolOptions pool_options;
+  pool_options.num_workers = options.num_workers;
+  pool_options.threads_per_job = options.threads_per_job;
+  pool_options.progress_interval_s = options.progress_interval_s;
+  state.workers =
+      std::make_unique<WorkerPool>(*state.store, *state.data_dir, state.metrics, pool_options);
+
+  HttpServerOptions http_options;
+  http_options.num_threads = options.http_threads;
+  http_options.max_body_bytes = options.max_dataset_bytes;
+  http_options.token = options.token;
+  http_ = std::make_unique<HttpServer>(
+      http_options, [&state](const std::string& route, int status, double seconds) {
+        state.metrics.CountRequest(route, status, seconds);
+      });
+  AddSystemRoutes(*http_, state);
+  AddDatasetRoutes(*http_, state);
+  AddJobRoutes(*http_, state);
+}
+
+Service::~Service() {
+  if (http_) http_->Stop();
+  if (state_ && state_->workers) state_->workers->Drain(0);
+}
+
+int Service::Start() {
+  const int port = http_->Bind(state_->options.host, state_->options.port);
+  state_->workers->Start();
+  http_->Start();
+  return port;
+}
+
+int Service::Drain(double timeout_s) {
+  http_->Stop();
+  return state_->workers->Drain(timeout_s);
+}
+
+}  // namespace omnirig::server

@@ -1,0 +1,82 @@
+#pragma once
+// The omnirig service: storage, worker pool and HTTP routes wired together. `omnirig serve`
+// and the integration tests both run it through this class.
+
+#include <filesystem>
+#include <memory>
+#include <mutex>
+#include <string>
+
+#include "server/http.h"
+#include "server/metrics.h"
+#include "server/worker_pool.h"
+#include "storage/data_dir.h"
+#include "storage/sqlite_job_store.h"
+
+namespace omnirig::server {
+
+struct ServiceOptions {
+  std::string host = "127.0.0.1";
+  int port = 8080;  // 0 picks a free port
+  std::filesystem::path data_dir = "./data";
+  std::filesystem::path web_dir;  // static files; empty: none
+  std::string token;              // bearer token; required for non-loopback hosts
+  int num_workers = 1;
+  int threads_per_job = 1;
+  int http_threads = 128;
+  int max_attempts = 3;  // runs started before a crash-looping job fails
+  int64_t max_file_bytes = 256LL << 20;
+  int64_t max_dataset_bytes = 8LL << 30;
+  int64_t max_images_per_dataset = 20000;
+  int64_t max_queued_jobs = 1000;
+  int64_t min_free_bytes = 256LL << 20;  // uploads leaving less free disk get 507
+  double progress_interval_s = 0.2;
+  void Check() const;  // throws InvalidArgument
+};
+
+// Default worker count for this machine: half the cores (at least 1), so a solver can use two.
+int DefaultWorkers();
+// Cores per job: the machine's cores shared among the workers.
+int DefaultThreadsPerJob(int num_workers);
+
+// Shared by the route files.
+struct ServiceState {
+  ServiceOptions options;
+  std::unique_ptr<storage::DataDir> data_dir;
+  std::unique_ptr<storage::SqliteJobStore> store;
+  Metrics metrics;
+  std::unique_ptr<WorkerPool> workers;
+  storage::ConsistencyReport consistency;
+  storage::RecoveryReport recovery;
+  double started_at = 0;
+  // Serialises the commit of an uploaded file (rename + record) with dataset deletion, so a
+  // file and its record always describe the same upload.
+  std::mutex files_mutex;
+};
+
+class Service {
+ public:
+  // Opens the data folder, checks consistency, recovers interrupted jobs and registers routes.
+  // Throws on a bad configuration or an unusable data folder.
+  explicit Service(const ServiceOptions& options);
+  ~Service();
+
+  // Binds, starts workers and the HTTP thread; returns the bound port.
+  int Start();
+  // SIGTERM: stops the HTTP listener, lets running jobs finish for up to `timeout_s`, then
+  // re-queues the rest. Returns the number re-queued.
+  int Drain(double timeout_s);
+
+  ServiceState& state() { return *state_; }
+
+ private:
+  std::unique_ptr<ServiceState> state_;
+  std::unique_ptr<HttpServer> http_;
+};
+
+// Route registration (routes_*.cc).
+void AddSystemRoutes(HttpServer& http, ServiceState& state);
+void AddDatasetRoutes(HttpServer& http, ServiceState& state);
+void AddJobRoutes(HttpServer& http, ServiceState& state);
+
+}  // namespace omnirig::server

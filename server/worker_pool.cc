@@ -1,0 +1,136 @@
+#include "server/worker_pool.h"
+
+#include <sys/resource.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <iostream>
+
+#include "engine/util/check.h"
+#include "server/job_runner.h"
+
+namespace omnirig::server {
+
+void WorkerPoolOptions::Check() const {
+  OMNIRIG_CHECK(num_workers >= 1, "--workers must be at least 1, got " << num_workers);
+  OMNIRIG_CHECK(threads_per_job >= 1, "threads per job must be at least 1");
+  OMNIRIG_CHECK(progress_interval_s >= 0 && idle_poll_s > 0, "invalid worker intervals");
+}
+
+WorkerPool::WorkerPool(storage::JobStore& store, const storage::DataDir& data_dir, Metrics& metrics,
+                       const WorkerPoolOptions& options)
+    : store_(store), data_dir_(data_dir), metrics_(metrics), options_(options) {
+  options_.Check();
+}
+
+WorkerPool::~WorkerPool() { Drain(0); }
+
+void WorkerPool::Start() {
+  for (int i = 0; i < options_.num_workers; ++i) threads_.emplace_back([this] { WorkerLoop(); });
+}
+
+void WorkerPool::Notify() {
+  std::lock_guard<std::mutex> lock(mutex_);
+  ++generation_;
+  wake_.notify_all();
+}
+
+bool WorkerPool::Cancel(const std::string& job_id) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  const auto it = running_.find(job_id);
+  if (it == running_.end()) return false;
+  it->second->cancel = true;
+  return true;
+}
+
+int WorkerPool::Drain(double timeout_s) {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    stopping_ = true;
+    wake_.notify_all();
+  }
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
+  int interrupted = 0;
+  {
+    std::unique_lock<std::mutex> lock(mutex_);
+    wake_.wait_until(lock, deadline, [this] { return running_.empty(); });
+    for (auto& [id, job] : running_) {
+      job->interrupt = true;
+      ++interrupted;
+    }
+  }
+  for (std::thread& thread : threads_) {
+    if (thread.joinable()) thread.join();
+  }
+  threads_.clear();
+  return interrupted;
+}
+
+void WorkerPool::WaitForWork(uint64_t seen_generation) {
+  std::unique_lock<std::mutex> lock(mutex_);
+  wake_.wait_for(lock, std::chrono::duration<double>(options_.idle_poll_s),
+                 [&] { return stopping_ || generation_ != seen_generation; });
+}
+
+void WorkerPool::WorkerLoop() {
+  // Workers (and the solver threads they start, which inherit it) yield the CPU to the HTTP
+  // threads, so status polls stay fast while every core computes. Linux nice is per thread.
+  if (options_.nice > 0) ::setpriority(PRIO_PROCESS, static_cast<id_t>(::gettid()), options_.nice);
+  while (true) {
+    uint64_t generation;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (stopping_) return;
+      generation = generation_;
+    }
+    std::optional<storage::JobRecord> job;
+    try {
+      job = store_.ClaimNextJob();
+    } catch (const std::exception& e) {
+      std::cerr << "omnirig: cannot claim a job: " << e.what() << std::endl;
+    }
+    if (job) {
+      RunJob(*job);
+    } else {
+      WaitForWork(generation);
+    }
+  }
+}
+
+void WorkerPool::RunJob(const storage::JobRecord& job) {
+  auto running = std::make_shared<RunningJob>();
+  running->cancel = job.cancel_requested;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    running_[job.id] = running;
+    // Claimed while Drain() began: hand it straight back rather than run it to the end.
+    if (stopping_) running->interrupt = true;
+  }
+  ++busy_;
+  const auto start = std::chrono::steady_clock::now();
+  const JobRunOptions run_options{options_.threads_per_job, options_.progress_interval_s};
+  const storage::JobOutcome outcome = RunJobAttempt(
+      job, store_, data_dir_, run_options, JobRunFlags{&running->cancel, &running->interrupt});
+  const bool handed_back =
+      outcome.state == storage::JobState::kCanceled && running->interrupt && !running->cancel;
+  try {
+    if (handed_back) {
+      store_.RequeueJob(job.id);
+    } else {
+      store_.FinishJob(job.id, outcome);
+      metrics_.ObserveJobDuration(
+          job.type, storage::JobStateName(outcome.state),
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+    }
+  } catch (const std::exception& e) {
+    // The job stays `running` in the store; start-up recovery re-queues it.
+    std::cerr << "omnirig: cannot record the end of job " << job.id << ": " << e.what()
+              << std::endl;
+  }
+  --busy_;
+  std::lock_guard<std::mutex> lock(mutex_);
+  running_.erase(job.id);
+  wake_.notify_all();
+}
+
+}  // namespace omnirig::server

@@ -1,0 +1,127 @@
+#include "storage/atomic_file.h"
+
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstring>
+#include <random>
+#include <stdexcept>
+#include <vector>
+
+namespace omnirig::storage {
+namespace {
+
+[[noreturn]] void ThrowErrno(const std::string& what, const std::filesystem::path& path) {
+  throw std::runtime_error(what + " " + path.string() + ": " + std::strerror(errno));
+}
+
+std::string RandomSuffix() {
+  thread_local std::mt19937_64 engine{std::random_device{}()};
+  static const char kHex[] = "0123456789abcdef";
+  std::string suffix;
+  uint64_t bits = engine();
+  for (int i = 0; i < 12; ++i, bits >>= 4) suffix.push_back(kHex[bits & 15]);
+  return suffix;
+}
+
+}  // namespace
+
+AtomicFileWriter::AtomicFileWriter(std::filesystem::path final_path)
+    : final_path_(std::move(final_path)) {
+  std::filesystem::create_directories(final_path_.parent_path());
+  temp_path_ = final_path_.parent_path() /
+               ("." + final_path_.filename().string() + ".part-" + RandomSuffix());
+  fd_ = ::open(temp_path_.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
+  if (fd_ < 0) ThrowErrno("cannot create", temp_path_);
+}
+
+AtomicFileWriter::~AtomicFileWriter() {
+  if (fd_ >= 0) ::close(fd_);
+  if (!committed_) ::unlink(temp_path_.c_str());
+}
+
+void AtomicFileWriter::Append(const char* data, size_t size) {
+  constexpr size_t kBufferBytes = 1 << 20;
+  hasher_.Update(data, size);
+  size_ += static_cast<int64_t>(size);
+  if (buffer_.size() + size > kBufferBytes) Flush();
+  if (size >= kBufferBytes) {
+    buffer_.assign(data, size);
+    Flush();
+  } else {
+    buffer_.append(data, size);
+  }
+}
+
+void AtomicFileWriter::Flush() {
+  const char* data = buffer_.data();
+  size_t size = buffer_.size();
+  while (size > 0) {
+    const ssize_t written = ::write(fd_, data, size);
+    if (written < 0) {
+      if (errno == EINTR) continue;
+      ThrowErrno("cannot write", temp_path_);
+    }
+    data += written;
+    size -= static_cast<size_t>(written);
+  }
+  buffer_.clear();
+}
+
+FileDigest AtomicFileWriter::Commit() {
+  Flush();
+  if (::fsync(fd_) != 0) ThrowErrno("cannot fsync", temp_path_);
+  if (::close(fd_) != 0) {
+    fd_ = -1;
+    ThrowErrno("cannot close", temp_path_);
+  }
+  fd_ = -1;
+  if (::rename(temp_path_.c_str(), final_path_.c_str()) != 0) {
+    ThrowErrno("cannot rename onto", final_path_);
+  }
+  committed_ = true;
+  FsyncPath(final_path_.parent_path());
+  return FileDigest{size_, hasher_.HexDigest()};
+}
+
+FileDigest WriteFileAtomically(const std::filesystem::path& path, std::string_view content) {
+  AtomicFileWriter writer(path);
+  writer.Append(content);
+  return writer.Commit();
+}
+
+FileDigest DigestFile(const std::filesystem::path& path) {
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) ThrowErrno("cannot open", path);
+  Sha256 hasher;
+  std::vector<char> buffer(1 << 20);
+  int64_t size = 0;
+  while (true) {
+    const ssize_t got = ::read(fd, buffer.data(), buffer.size());
+    if (got < 0 && errno == EINTR) continue;
+    if (got < 0) {
+      ::close(fd);
+      ThrowErrno("cannot read", path);
+    }
+    if (got == 0) break;
+    hasher.Update(buffer.data(), static_cast<size_t>(got));
+    size += got;
+  }
+  ::close(fd);
+  return FileDigest{size, hasher.HexDigest()};
+}
+
+void FsyncPath(const std::filesystem::path& path) {
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) ThrowErrno("cannot open", path);
+  const int status = ::fsync(fd);
+  ::close(fd);
+  if (status != 0) ThrowErrno("cannot fsync", path);
+}
+
+bool IsTemporaryFileName(const std::string& file_name) {
+  return !file_name.empty() && file_name[0] == '.' && file_name.find(".part-") != std::string::npos;
+}
+
+}  // namespace omnirig::storage

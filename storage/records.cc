@@ -1,0 +1,40 @@
+#include "storage/records.h"
+
+#include <chrono>
+
+namespace omnirig::storage {
+
+const char* JobStateName(JobState state) {
+  switch (state) {
+    case JobState::kQueued:
+      return "queued";
+    case JobState::kRunning:
+      return "running";
+    case JobState::kSucceeded:
+      return "succeeded";
+    case JobState::kFailed:
+      return "failed";
+    case JobState::kCanceled:
+      return "canceled";
+  }
+  return "unknown";
+}
+
+std::optional<JobState> ParseJobState(const std::string& name) {
+  for (JobState state : AllJobStates()) {
+    if (name == JobStateName(state)) return state;
+  }
+  return std::nullopt;
+}
+
+std::vector<JobState> AllJobStates() {
+  return {JobState::kQueued, JobState::kRunning, JobState::kSucceeded, JobState::kFailed,
+          JobState::kCanceled};
+}
+
+double NowSeconds() {
+  const auto now = std::chrono::system_clock::now().time_since_epoch();
+  return std::chrono::duration<double>(now).count();
+}
+
+}  // namespace omnirig::storage

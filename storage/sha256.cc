@@ -1,0 +1,47 @@
+#include "storage/sha256.h"
+
+#include <openssl/evp.h>
+
+#include <stdexcept>
+
+namespace omnirig::storage {
+
+struct Sha256::Impl {
+  EVP_MD_CTX* context = nullptr;
+};
+
+Sha256::Sha256() : impl_(std::make_unique<Impl>()) {
+  impl_->context = EVP_MD_CTX_new();
+  if (impl_->context == nullptr || EVP_DigestInit_ex(impl_->context, EVP_sha256(), nullptr) != 1) {
+    EVP_MD_CTX_free(impl_->context);
+    throw std::runtime_error("cannot initialise SHA-256");
+  }
+}
+
+Sha256::~Sha256() { EVP_MD_CTX_free(impl_->context); }
+
+void Sha256::Update(const void* data, size_t size) {
+  if (size > 0) EVP_DigestUpdate(impl_->context, data, size);
+}
+
+std::string Sha256::HexDigest() {
+  unsigned char digest[EVP_MAX_MD_SIZE];
+  unsigned int length = 0;
+  EVP_DigestFinal_ex(impl_->context, digest, &length);
+  static const char kHex[] = "0123456789abcdef";
+  std::string hex;
+  hex.reserve(2 * length);
+  for (unsigned int i = 0; i < length; ++i) {
+    hex.push_back(kHex[digest[i] >> 4]);
+    hex.push_back(kHex[digest[i] & 15]);
+  }
+  return hex;
+}
+
+std::string Sha256Hex(std::string_view data) {
+  Sha256 hasher;
+  hasher.Update(data);
+  return hasher.HexDigest();
+}
+
+}  // namespace omnirig::storage

@@ -1,0 +1,476 @@
+#include "storage/sqlite_job_store.h"
+
+#include <random>
+
+namespace omnirig::storage {
+namespace {
+
+// Schema migrations, applied in order; user_version counts the applied ones. Never edit a
+// shipped entry: append a new one.
+const char* const kMigrations[] = {
+    R"sql(
+CREATE TABLE datasets(
+  id TEXT PRIMARY KEY,
+  name TEXT NOT NULL,
+  created_at REAL NOT NULL);
+CREATE TABLE images(
+  dataset_id TEXT NOT NULL REFERENCES datasets(id) ON DELETE CASCADE,
+  name TEXT NOT NULL,
+  size INTEGER NOT NULL,
+  sha256 TEXT NOT NULL,
+  width INTEGER NOT NULL,
+  height INTEGER NOT NULL,
+  content_type TEXT NOT NULL,
+  PRIMARY KEY(dataset_id, name));
+CREATE TABLE jobs(
+  id TEXT PRIMARY KEY,
+  type TEXT NOT NULL,
+  dataset_id TEXT NOT NULL,
+  params TEXT NOT NULL,
+  state TEXT NOT NULL CHECK(state IN ('queued','running','succeeded','failed','canceled')),
+  progress_fraction REAL NOT NULL DEFAULT 0,
+  progress_stage TEXT NOT NULL DEFAULT '',
+  progress_message TEXT NOT NULL DEFAULT '',
+  eta_s REAL,
+  created_at REAL NOT NULL,
+  queued_at REAL NOT NULL,
+  started_at REAL,
+  finished_at REAL,
+  attempts INTEGER NOT NULL DEFAULT 0,
+  error_code TEXT,
+  error_message TEXT,
+  result TEXT,
+  cancel_requested INTEGER NOT NULL DEFAULT 0);
+CREATE INDEX jobs_by_state ON jobs(state, queued_at);
+CREATE INDEX jobs_by_dataset ON jobs(dataset_id);
+CREATE TABLE artifacts(
+  job_id TEXT NOT NULL REFERENCES jobs(id) ON DELETE CASCADE,
+  name TEXT NOT NULL,
+  path TEXT NOT NULL,
+  size INTEGER NOT NULL,
+  sha256 TEXT NOT NULL,
+  content_type TEXT NOT NULL,
+  PRIMARY KEY(job_id, name));
+)sql",
+};
+
+constexpr char kJobColumns[] =
+    "id, type, dataset_id, params, state, progress_fraction, progress_stage, progress_message, "
+    "eta_s, created_at, started_at, finished_at, attempts, error_code, error_message, "
+    "cancel_requested";
+
+JobRecord ReadJob(const Statement& row) {
+  JobRecord job;
+  job.id = row.Text(0);
+  job.type = row.Text(1);
+  job.dataset_id = row.Text(2);
+  job.params = row.Text(3);
+  job.state = ParseJobState(row.Text(4)).value_or(JobState::kFailed);
+  job.progress = JobProgress{row.Double(5), row.Text(6), row.Text(7), row.OptionalDouble(8)};
+  job.created_at = row.Double(9);
+  job.started_at = row.OptionalDouble(10);
+  job.finished_at = row.OptionalDouble(11);
+  job.attempts = static_cast<int>(row.Int(12));
+  if (!row.IsNull(13)) job.error = JobError{row.Text(13), row.Text(14)};
+  job.cancel_requested = row.Int(15) != 0;
+  return job;
+}
+
+std::optional<JobRecord> SelectJob(Connection& db, const std::string& id) {
+  Statement select(db.handle(), std::string("SELECT ") + kJobColumns + " FROM jobs WHERE id = ?");
+  select.Bind(1, id);
+  if (!select.Step()) return std::nullopt;
+  return ReadJob(select);
+}
+
+DatasetRecord ReadDataset(const Statement& row) {
+  return DatasetRecord{row.Text(0), row.Text(1), row.Double(2), row.Int(3), row.Int(4)};
+}
+
+constexpr char kDatasetSelect[] =
+    "SELECT d.id, d.name, d.created_at, COUNT(i.name), COALESCE(SUM(i.size), 0) "
+    "FROM datasets d LEFT JOIN images i ON i.dataset_id = d.id ";
+
+}  // namespace
+
+std::string NewId() {
+  thread_local std::mt19937_64 engine{std::random_device{}()};
+  static const char kHex[] = "0123456789abcdef";
+  std::string id;
+  uint64_t bits = engine();
+  for (int i = 0; i < 16; ++i, bits >>= 4) id.push_back(kHex[bits & 15]);
+  return id;
+}
+
+class SqliteJobStore::ReaderLease {
+ public:
+  ReaderLease(SqliteJobStore& store, std::unique_ptr<Connection> connection)
+      : store_(&store), connection_(std::move(connection)) {}
+  ReaderLease(ReaderLease&& other) noexcept = default;
+  ~ReaderLease() {
+    if (!connection_) return;
+    std::lock_guard<std::mutex> lock(store_->readers_mutex_);
+    store_->idle_readers_.push_back(std::move(connection_));
+    store_->readers_available_.notify_one();
+  }
+  Connection& operator*() { return *connection_; }
+  sqlite3* handle() { return connection_->handle(); }
+
+ private:
+  SqliteJobStore* store_;
+  std::unique_ptr<Connection> connection_;
+};
+
+SqliteJobStore::SqliteJobStore(const std::string& path, int num_readers) : path_(path) {
+  writer_ = std::make_unique<Connection>(path);
+  Migrate();
+  for (int i = 0; i < std::max(1, num_readers); ++i) {
+    idle_readers_.push_back(std::make_unique<Connection>(path));
+  }
+}
+
+SqliteJobStore::~SqliteJobStore() = default;
+
+int SqliteJobStore::SchemaVersion() {
+  return static_cast<int>(sizeof(kMigrations) / sizeof(kMigrations[0]));
+}
+
+SqliteJobStore::ReaderLease SqliteJobStore::Reader() {
+  std::unique_lock<std::mutex> lock(readers_mutex_);
+  readers_available_.wait(lock, [this] { return !idle_readers_.empty(); });
+  std::unique_ptr<Connection> connection = std::move(idle_readers_.back());
+  idle_readers_.pop_back();
+  return ReaderLease(*this, std::move(connection));
+}
+
+void SqliteJobStore::Migrate() {
+  std::lock_guard<std::mutex> lock(writer_mutex_);
+  Statement version_query(writer_->handle(), "PRAGMA user_version");
+  version_query.Step();
+  const int version = static_cast<int>(version_query.Int(0));
+  if (version > SchemaVersion()) {
+    throw SqliteError("database " + path_ + " has schema version " + std::to_string(version) +
+                      ", newer than this build's " + std::to_string(SchemaVersion()));
+  }
+  for (int next = version; next < SchemaVersion(); ++next) {
+    Transaction transaction(*writer_);
+    writer_->Exec(kMigrations[next]);
+    writer_->Exec("PRAGMA user_version = " + std::to_string(next + 1));
+    transaction.Commit();
+  }
+}
+
+DatasetRecord SqliteJobStore::CreateDataset(const std::string& name) {
+  DatasetRecord dataset{NewId(), name, NowSeconds(), 0, 0};
+  std::lock_guard<std::mutex> lock(writer_mutex_);
+  Statement insert(writer_->handle(), "INSERT INTO datasets(id, name, created_at) VALUES(?,?,?)");
+  insert.Bind(1, dataset.id).Bind(2, dataset.name).Bind(3, dataset.created_at).Run();
+  return dataset;
+}
+
+std::vector<DatasetRecord> SqliteJobStore::ListDatasets() {
+  ReaderLease db = Reader();
+  Statement select(db.handle(),
+                   std::string(kDatasetSelect) + "GROUP BY d.id ORDER BY d.created_at DESC");
+  std::vector<DatasetRecord> datasets;
+  while (select.Step()) datasets.push_back(ReadDataset(select));
+  return datasets;
+}
+
+std::optional<DatasetRecord> SqliteJobStore::GetDataset(const std::string& id) {
+  ReaderLease db = Reader();
+  Statement select(db.handle(), std::string(kDatasetSelect) + "WHERE d.id = ? GROUP BY d.id");
+  select.Bind(1, id);
+  if (!select.Step()) return std::nullopt;
+  return ReadDataset(select);
+}
+
+bool SqliteJobStore::DeleteDataset(const std::string& id) {
+  std::lock_guard<std::mutex> lock(writer_mutex_);
+  Statement remove(writer_->handle(), "DELETE FROM datasets WHERE id = ?");
+  remove.Bind(1, id).Run();
+  return writer_->changes() > 0;
+}
+
+void SqliteJobStore::PutImage(const std::string& dataset_id, const ImageRecord& image) {
+  std::lock_guard<std::mutex> lock(writer_mutex_);
+  Statement upsert(writer_->handle(),
+                   "INSERT OR REPLACE INTO images(dataset_id, name, size, sha256, width, height, "
+                   "content_type) VALUES(?,?,?,?,?,?,?)");
+  upsert.Bind(1, dataset_id).Bind(2, image.name).Bind(3, image.size).Bind(4, image.sha256);
+  upsert.Bind(5, image.width).Bind(6, image.height).Bind(7, image.content_type).Run();
+}
+
+bool SqliteJobStore::DeleteImage(const std::string& dataset_id, const std::string& name) {
+  std::lock_guard<std::mutex> lock(writer_mutex_);
+  Statement remove(writer_->handle(), "DELETE FROM images WHERE dataset_id = ? AND name = ?");
+  remove.Bind(1, dataset_id).Bind(2, name).Run();
+  return writer_->changes() > 0;
+}
+
+std::vector<ImageRecord> SqliteJobStore::ListImages(const std::string& dataset_id) {
+  ReaderLease db = Reader();
+  Statement select(db.handle(),
+                   "SELECT name, size, sha256, width, height, content_type FROM images "
+                   "WHERE dataset_id = ? ORDER BY name");
+  select.Bind(1, dataset_id);
+  std::vector<ImageRecord> images;
+  while (select.Step()) {
+    images.push_back(ImageRecord{select.Text(0), select.Int(1), select.Text(2),
+                                 static_cast<int>(select.Int(3)), static_cast<int>(select.Int(4)),
+                                 select.Text(5)});
+  }
+  return images;
+}
+
+std::optional<ImageRecord> SqliteJobStore::GetImage(const std::string& dataset_id,
+                                                    const std::string& name) {
+  ReaderLease db = Reader();
+  Statement select(db.handle(),
+                   "SELECT name, size, sha256, width, height, content_type FROM images "
+                   "WHERE dataset_id = ? AND name = ?");
+  select.Bind(1, dataset_id).Bind(2, name);
+  if (!select.Step()) return std::nullopt;
+  return ImageRecord{select.Text(0),
+                     select.Int(1),
+                     select.Text(2),
+                     static_cast<int>(select.Int(3)),
+                     static_cast<int>(select.Int(4)),
+                     select.Text(5)};
+}
+
+JobRecord SqliteJobStore::CreateJob(const std::string& type, const std::string& dataset_id,
+                                    const std::string& params) {
+  JobRecord job;
+  job.id = NewId();
+  job.type = type;
+  job.dataset_id = dataset_id;
+  job.params = params;
+  job.created_at = NowSeconds();
+  std::lock_guard<std::mutex> lock(writer_mutex_);
+  Statement insert(writer_->handle(),
+                   "INSERT INTO jobs(id, type, dataset_id, params, state, created_at, queued_at) "
+                   "VALUES(?,?,?,?,'queued',?,?)");
+  insert.Bind(1, job.id).Bind(2, type).Bind(3, dataset_id).Bind(4, params);
+  insert.Bind(5, job.created_at).Bind(6, job.created_at).Run();
+  return job;
+}
+
+std::optional<JobRecord> SqliteJobStore::GetJob(const std::string& id) {
+  ReaderLease db = Reader();
+  return SelectJob(*db, id);
+}
+
+std::vector<JobRecord> SqliteJobStore::ListJobs(const JobFilter& filter) {
+  ReaderLease db = Reader();
+  Statement select(db.handle(),
+                   std::string("SELECT ") + kJobColumns +
+                       " FROM jobs WHERE (?1 IS NULL OR state = ?1) AND (?2 IS NULL OR type = ?2)"
+                       " AND (?3 IS NULL OR dataset_id = ?3) ORDER BY created_at DESC LIMIT ?4");
+  if (filter.state) select.Bind(1, std::string(JobStateName(*filter.state)));
+  select.Bind(2, filter.type).Bind(3, filter.dataset_id).Bind(4, filter.limit);
+  std::vector<JobRecord> jobs;
+  while (select.Step()) jobs.push_back(ReadJob(select));
+  return jobs;
+}
+
+std::optional<JobRecord> SqliteJobStore::ClaimNextJob() {
+  std::lock_guard<std::mutex> lock(writer_mutex_);
+  Transaction transaction(*writer_);
+  Statement next(writer_->handle(),
+                 "SELECT id FROM jobs WHERE state = 'queued' ORDER BY queued_at, rowid LIMIT 1");
+  if (!next.Step()) return std::nullopt;
+  const std::string id = next.Text(0);
+  Statement claim(writer_->handle(),
+                  "UPDATE jobs SET state = 'running', started_at = ?, finished_at = NULL, "
+                  "attempts = attempts + 1, progress_fraction = 0, progress_stage = 'starting', "
+                  "progress_message = '', eta_s = NULL WHERE id = ?");
+  claim.Bind(1, NowSeconds()).Bind(2, id).Run();
+  std::optional<JobRecord> job = SelectJob(*writer_, id);
+  transaction.Commit();
+  return job;
+}
+
+void SqliteJobStore::UpdateProgress(const std::string& id, const JobProgress& progress) {
+  std::lock_guard<std::mutex> lock(writer_mutex_);
+  Statement update(writer_->handle(),
+                   "UPDATE jobs SET progress_fraction = ?, progress_stage = ?, "
+                   "progress_message = ?, eta_s = ? WHERE id = ? AND state = 'running'");
+  update.Bind(1, progress.fraction).Bind(2, progress.stage).Bind(3, progress.message);
+  update.Bind(4, progress.eta_s).Bind(5, id).Run();
+}
+
+std::optional<JobState> SqliteJobStore::RequestCancel(const std::string& id) {
+  std::lock_guard<std::mutex> lock(writer_mutex_);
+  Transaction transaction(*writer_);
+  std::optional<JobRecord> job = SelectJob(*writer_, id);
+  if (!job) return std::nullopt;
+  if (job->state == JobState::kQueued) {
+    Statement cancel(writer_->handle(),
+                     "UPDATE jobs SET state = 'canceled', finished_at = ?, cancel_requested = 1 "
+                     "WHERE id = ?");
+    cancel.Bind(1, NowSeconds()).Bind(2, id).Run();
+    job->state = JobState::kCanceled;
+  } else if (job->state == JobState::kRunning) {
+    Statement flag(writer_->handle(), "UPDATE jobs SET cancel_requested = 1 WHERE id = ?");
+    flag.Bind(1, id).Run();
+  }
+  transaction.Commit();
+  return job->state;
+}
+
+bool SqliteJobStore::FinishJob(const std::string& id, const JobOutcome& outcome) {
+  std::lock_guard<std::mutex> lock(writer_mutex_);
+  Transaction transaction(*writer_);
+  Statement finish(writer_->handle(),
+                   "UPDATE jobs SET state = ?, finished_at = ?, error_code = ?, error_message = ?, "
+                   "result = ?, eta_s = NULL, progress_fraction = CASE WHEN ? THEN 1 ELSE "
+                   "progress_fraction END WHERE id = ? AND state = 'running'");
+  finish.Bind(1, std::string(JobStateName(outcome.state))).Bind(2, NowSeconds());
+  if (outcome.error) {
+    finish.Bind(3, outcome.error->code).Bind(4, outcome.error->message);
+  } else {
+    finish.BindNull(3).BindNull(4);
+  }
+  finish.Bind(5, outcome.result).Bind(6, outcome.state == JobState::kSucceeded ? 1 : 0);
+  finish.Bind(7, id).Run();
+  if (writer_->changes() == 0) return false;
+  Statement clear(writer_->handle(), "DELETE FROM artifacts WHERE job_id = ?");
+  clear.Bind(1, id).Run();
+  for (const ArtifactRecord& artifact : outcome.artifacts) {
+    Statement insert(writer_->handle(),
+                     "INSERT INTO artifacts(job_id, name, path, size, sha256, content_type) "
+                     "VALUES(?,?,?,?,?,?)");
+    insert.Bind(1, id).Bind(2, artifact.name).Bind(3, artifact.path).Bind(4, artifact.size);
+    insert.Bind(5, artifact.sha256).Bind(6, artifact.content_type).Run();
+  }
+  transaction.Commit();
+  return true;
+}
+
+bool SqliteJobStore::RequeueJob(const std::string& id) {
+  std::lock_guard<std::mutex> lock(writer_mutex_);
+  Statement requeue(writer_->handle(),
+                    "UPDATE jobs SET state = 'queued', attempts = MAX(attempts - 1, 0), "
+                    "started_at = NULL, progress_stage = 'requeued', eta_s = NULL "
+                    "WHERE id = ? AND state = 'running'");
+  requeue.Bind(1, id).Run();
+  return writer_->changes() > 0;
+}
+
+bool SqliteJobStore::RetryJob(const std::string& id) {
+  std::lock_guard<std::mutex> lock(writer_mutex_);
+  Transaction transaction(*writer_);
+  Statement retry(writer_->handle(),
+                  "UPDATE jobs SET state = 'queued', queued_at = ?, attempts = 0, started_at = "
+                  "NULL, finished_at = NULL, error_code = NULL, error_message = NULL, result = "
+                  "NULL, cancel_requested = 0, progress_fraction = 0, progress_stage = '', "
+                  "progress_message = '', eta_s = NULL "
+                  "WHERE id = ? AND state IN ('failed', 'canceled')");
+  retry.Bind(1, NowSeconds()).Bind(2, id).Run();
+  if (writer_->changes() == 0) return false;
+  Statement clear(writer_->handle(), "DELETE FROM artifacts WHERE job_id = ?");
+  clear.Bind(1, id).Run();
+  transaction.Commit();
+  return true;
+}
+
+bool SqliteJobStore::DeleteJob(const std::string& id) {
+  std::lock_guard<std::mutex> lock(writer_mutex_);
+  Statement remove(writer_->handle(), "DELETE FROM jobs WHERE id = ? AND state != 'running'");
+  remove.Bind(1, id).Run();
+  return writer_->changes() > 0;
+}
+
+std::optional<std::string> SqliteJobStore::GetResult(const std::string& id) {
+  ReaderLease db = Reader();
+  Statement select(db.handle(), "SELECT result FROM jobs WHERE id = ? AND state = 'succeeded'");
+  select.Bind(1, id);
+  if (!select.Step()) return std::nullopt;
+  return select.OptionalText(0);
+}
+
+std::vector<ArtifactRecord> SqliteJobStore::ListArtifacts(const std::string& job_id) {
+  ReaderLease db = Reader();
+  Statement select(db.handle(),
+                   "SELECT name, path, size, sha256, content_type FROM artifacts "
+                   "WHERE job_id = ? ORDER BY name");
+  select.Bind(1, job_id);
+  std::vector<ArtifactRecord> artifacts;
+  while (select.Step()) {
+    artifacts.push_back(ArtifactRecord{select.Text(0), select.Text(1), select.Int(2),
+                                       select.Text(3), select.Text(4)});
+  }
+  return artifacts;
+}
+
+RecoveryReport SqliteJobStore::RecoverInterruptedJobs(int max_attempts) {
+  std::lock_guard<std::mutex> lock(writer_mutex_);
+  Transaction transaction(*writer_);
+  RecoveryReport report;
+  Statement running(writer_->handle(),
+                    "SELECT id, attempts, cancel_requested FROM jobs WHERE state = 'running'");
+  const double now = NowSeconds();
+  while (running.Step()) {
+    const std::string id = running.Text(0);
+    const int64_t attempts = running.Int(1);
+    if (running.Int(2) != 0) {
+      Statement cancel(writer_->handle(),
+                       "UPDATE jobs SET state = 'canceled', finished_at = ? WHERE id = ?");
+      cancel.Bind(1, now).Bind(2, id).Run();
+      report.canceled.push_back(id);
+    } else if (attempts >= max_attempts) {
+      Statement fail(writer_->handle(),
+                     "UPDATE jobs SET state = 'failed', finished_at = ?, error_code = "
+                     "'interrupted', error_message = ? WHERE id = ?");
+      fail.Bind(1, now)
+          .Bind(2, "the server stopped during each of the job's " + std::to_string(attempts) +
+                       " attempts (maximum " + std::to_string(max_attempts) + ")")
+          .Bind(3, id)
+          .Run();
+      report.failed.push_back(id);
+    } else {
+      Statement requeue(writer_->handle(),
+                        "UPDATE jobs SET state = 'queued', started_at = NULL, progress_stage = "
+                        "'requeued', eta_s = NULL WHERE id = ?");
+      requeue.Bind(1, id).Run();
+      report.requeued.push_back(id);
+    }
+  }
+  transaction.Commit();
+  return report;
+}
+
+std::map<JobState, int64_t> SqliteJobStore::CountJobsByState() {
+  ReaderLease db = Reader();
+  std::map<JobState, int64_t> counts;
+  for (JobState state : AllJobStates()) counts[state] = 0;
+  Statement select(db.handle(), "SELECT state, COUNT(*) FROM jobs GROUP BY state");
+  while (select.Step()) {
+    if (auto state = ParseJobState(select.Text(0))) counts[*state] = select.Int(1);
+  }
+  return counts;
+}
+
+int64_t SqliteJobStore::CountActiveJobs(const std::string& dataset_id) {
+  ReaderLease db = Reader();
+  Statement select(db.handle(),
+                   "SELECT COUNT(*) FROM jobs WHERE dataset_id = ? AND state IN "
+                   "('queued', 'running')");
+  select.Bind(1, dataset_id);
+  select.Step();
+  return select.Int(0);
+}
+
+std::string SqliteJobStore::IntegrityCheck() {
+  ReaderLease db = Reader();
+  Statement check(db.handle(), "PRAGMA integrity_check");
+  std::string problems;
+  while (check.Step()) {
+    if (!problems.empty()) problems += "; ";
+    problems += check.Text(0);
+  }
+  return problems;
+}
+
+}  // namespace omnirig::storage

@@ -1,0 +1,792 @@
+// Browser tests of the web page: the real `omnirig serve` on an ephemeral loopback port with a
+// temporary data folder, Debian's chromium (headless) driven by playwright-core.
+//
+//   node browser_test.mjs --omnirig BUILD/server/omnirig --step STEP [--out DIR] [--url URL]
+//
+// STEP is one of:
+//   datasets    create a dataset, upload a folder (cam0/ kept), resume (nothing re-sent),
+//               thumbnails, a non-image refused with the server's JSON message shown
+//   calibration upload a calibration set, submit a calibration job from the form, watch its
+//               progress reach done, read the report (RMS, intrinsics, chart, overlays)
+//   stereo      upload a stereo board set, run relative_pose, read the report, click a pixel in
+//               each image and check that an epipolar curve is drawn in the other; then a
+//               stereo_reconstruct job with that rig, its cloud drawn in the 3D viewer
+//   viewer_ply  open a 2-million-point PLY in the 3D viewer, check from the canvas pixels that
+//               points were drawn
+//   viewer_slam a slam job on a synthetic sequence: cloud, trajectory, top view against the
+//               ground truth, per-frame statistics (needs omnirig synth)
+//   auth        a server with --token: the page asks for the token, then uploads and shows images
+// Exit codes: 0 passed, 1 failed, 77 skipped (ctest SKIP_RETURN_CODE) with the reason printed,
+// e.g. when the server does not know a job type yet. Screenshots go to --out.
+// --url runs against an already running server instead of starting one (for development).
+
+import { spawn, spawnSync } from 'node:child_process';
+import fs from 'node:fs';
+import os from 'node:os';
+import path from 'node:path';
+import { fileURLToPath } from 'node:url';
+
+const HERE = path.dirname(fileURLToPath(import.meta.url));
+const SOURCE_DIR = process.env.OMNIRIG_SOURCE_DIR || path.resolve(HERE, '../..');
+const WEB_DIR = path.join(SOURCE_DIR, 'web');
+const REAL_DATA = path.resolve(SOURCE_DIR, '../shared/data/real');
+const CHROMIUM = process.env.OMNIRIG_CHROMIUM || '/usr/bin/chromium';
+const SKIP = 77;
+const JOB_TIMEOUT_MS = 120000;
+
+class Skip extends Error {}
+
+function parseArgs(argv) {
+  const args = { step: '', omnirig: '', out: '', url: '' };
+  for (let i = 0; i < argv.length; i += 1) {
+    const key = argv[i].replace(/^--/, '');
+    if (!(key in args)) throw new Error(`unknown argument ${argv[i]}`);
+    args[key] = argv[++i];
+  }
+  if (!args.step) throw new Error('--step is required');
+  if (!args.url && !args.omnirig) throw new Error('--omnirig (or --url) is required');
+  args.out = args.out || path.join(process.env.OMNIRIG_BINARY_DIR || os.tmpdir(), 'test-output', 'browser');
+  return args;
+}
+
+const T0 = Date.now();
+const log = (...parts) => console.log(`[browser/${ARGS.step} ${((Date.now() - T0) / 1000).toFixed(1)} s]`, ...parts);
+const ARGS = parseArgs(process.argv.slice(2));
+const TEMP = fs.mkdtempSync(path.join(os.tmpdir(), 'omnirig-browser-'));
+
+// ---- the server ---------------------------------------------------------------------------------
+
+async function startServer(extraArgs = []) {
+  if (ARGS.url) return { url: ARGS.url.replace(/\/$/, ''), stop: async () => {} };
+  const dataDir = path.join(TEMP, 'data');
+  fs.mkdirSync(dataDir);
+  const child = spawn(ARGS.omnirig, ['serve', '--host', '127.0.0.1', '--port', '0', '--data', dataDir, ...extraArgs],
+    { stdio: ['ignore', 'pipe', 'pipe'], env: { ...process.env, OMNIRIG_TOKEN: '' } });
+  const output = [];
+  const url = await new Promise((resolve, reject) => {
+    const timer = setTimeout(() => reject(new Error(`server did not announce its address:\n${output.join('')}`)), 20000);
+    const onData = (chunk) => {
+      output.push(chunk.toString());
+      const match = output.join('').match(/http:\/\/127\.0\.0\.1:(\d+)/);
+      if (match && Number(match[1]) > 0) {
+        clearTimeout(timer);
+        resolve(`http://127.0.0.1:${match[1]}`);
+      }
+    };
+    child.stdout.on('data', onData);
+    child.stderr.on('data', onData);
+    child.on('exit', (code) => reject(new Error(`server exited with ${code}:\n${output.join('')}`)));
+  });
+  child.stdout.removeAllListeners('data');
+  child.stderr.removeAllListeners('data');
+  child.stdout.on('data', (c) => fs.appendFileSync(path.join(TEMP, 'server.log'), c));
+  child.stderr.on('data', (c) => fs.appendFileSync(path.join(TEMP, 'server.log'), c));
+  await waitFor(async () => [200, 401].includes((await fetch(`${url}/api/v1/health`)).status), 10000, 'the server health check');
+  log('server at', url);
+  return {
+    url,
+    stop: () => new Promise((resolve) => {
+      child.removeAllListeners('exit');
+      child.on('exit', resolve);
+      child.kill('SIGTERM');
+      setTimeout(() => child.kill('SIGKILL'), 5000).unref();
+    }),
+  };
+}
+
+async function waitFor(predicate, timeoutMs, what) {
+  const deadline = Date.now() + timeoutMs;
+  let lastError = null;
+  while (Date.now() < deadline) {
+    try {
+      const value = await predicate();
+      if (value) return value;
+    } catch (e) {
+      lastError = e;
+    }
+    await new Promise((r) => setTimeout(r, 100));
+  }
+  throw new Error(`timed out waiting for ${what}${lastError ? ` (${lastError.message})` : ''}`);
+}
+
+// ---- test data ----------------------------------------------------------------------------------
+
+// Small renders keep the browser tests short: 640x480, 2x2 supersampling, few views; a
+// sequence of 10 frames 0.15 m apart (the default spacing of the 40-frame preset).
+const SYNTH_ARGS = {
+  'mono-calib': ['--views', '6'],
+  'stereo-board': ['--views', '8'],
+  'stereo-sequence': ['--frames', '10', '--path-length', '1.5'],
+};
+
+// A synthetic set from `omnirig synth --preset PRESET`, or null when synth is not available.
+function synth(preset) {
+  if (ARGS.url && !ARGS.omnirig) return null;
+  const out = path.join(TEMP, preset);
+  const args = ['synth', '--preset', preset, '--out', out, '--width', '640', '--height', '480', '--supersampling', '2', ...SYNTH_ARGS[preset]];
+  const started = Date.now();
+  const run = spawnSync(ARGS.omnirig, args, { encoding: 'utf8', timeout: 120000 });
+  if (run.status !== 0) {
+    log(`omnirig synth --preset ${preset} is not available (${(run.stderr || run.error || '').toString().trim()})`);
+    return null;
+  }
+  log(`omnirig ${args.slice(1).join(' ')}: ${Date.now() - started} ms`);
+  const groundTruth = path.join(out, 'ground_truth.json');
+  return { dir: out, groundTruth: fs.existsSync(groundTruth) ? JSON.parse(fs.readFileSync(groundTruth, 'utf8')) : null };
+}
+
+// Copies files into a fresh folder under their new names: {newName: sourcePath} (copies, not
+// links: playwright's folder upload skips symbolic links).
+function copySet(name, files) {
+  const dir = path.join(TEMP, name);
+  for (const [to, from] of Object.entries(files)) {
+    fs.mkdirSync(path.dirname(path.join(dir, to)), { recursive: true });
+    fs.copyFileSync(from, path.join(dir, to));
+  }
+  return dir;
+}
+
+function imagesIn(dir) {
+  const out = [];
+  const walk = (d, prefix) => {
+    for (const entry of fs.readdirSync(d, { withFileTypes: true })) {
+      const rel = prefix ? `${prefix}/${entry.name}` : entry.name;
+      const full = path.join(d, entry.name);
+      if (entry.isDirectory()) walk(full, rel);
+      else if (/\.(png|jpe?g)$/i.test(entry.name)) out.push(rel);
+    }
+  };
+  walk(dir, '');
+  return out;
+}
+
+// Board spec of a synthetic set from its ground truth, with the documented fallbacks.
+// (api/synth_json.h: "board": {"cols", "rows" (inner corners), "square_size_m", ...}).
+function boardOf(groundTruth, fallback) {
+  const b = groundTruth && groundTruth.board;
+  if (!b || !b.cols || !b.rows) return fallback;
+  const squareMm = b.square_size_m !== undefined ? b.square_size_m * 1000 : b.square_size_mm;
+  return { cols: b.cols, rows: b.rows, square_size_mm: Number((squareMm ?? fallback.square_size_mm).toFixed(6)) };
+}
+
+// A mono calibration set: synthetic when synth exists, else the real VMR catadioptric images.
+function calibrationSet() {
+  const s = synth('mono-calib');
+  if (s) return { dir: s.dir, board: boardOf(s.groundTruth, { cols: 8, rows: 6, square_size_mm: 40 }), source: 'omnirig synth --preset mono-calib', maxRmsPx: 0.5 };
+  const vmr = path.join(REAL_DATA, 'ocamcalib-vmr');
+  if (!fs.existsSync(vmr)) throw new Skip(`neither omnirig synth nor ${vmr} is available`);
+  const files = {};
+  for (const f of fs.readdirSync(vmr).filter((n) => /\.jpg$/i.test(n)).sort()) files[f] = path.join(vmr, f);
+  return { dir: copySet('vmr', files), board: { cols: 6, rows: 7, square_size_mm: 30 }, source: 'real ocamcalib-vmr images', maxRmsPx: 2.0 };
+}
+
+// A stereo board set with cam0/ and cam1/: synthetic, else the real fisheye pairs (left -> cam0).
+// At most `maxPairs` pairs, so that the jobs on it stay short.
+function stereoSet(maxPairs = 12) {
+  const s = synth('stereo-board');
+  const files = {};
+  if (s) {
+    const names = fs.readdirSync(path.join(s.dir, 'cam0')).filter((n) => fs.existsSync(path.join(s.dir, 'cam1', n))).sort();
+    for (const name of names.slice(0, maxPairs)) {
+      for (const cam of ['cam0', 'cam1']) files[`${cam}/${name}`] = path.join(s.dir, cam, name);
+    }
+    return { dir: copySet('synth-stereo', files), board: boardOf(s.groundTruth, { cols: 8, rows: 6, square_size_mm: 40 }),
+      source: `omnirig synth --preset stereo-board (${Math.min(maxPairs, names.length)} pairs)`, groundTruth: s.groundTruth };
+  }
+  const pairs = path.join(REAL_DATA, 'fisheye-stereo-pairs');
+  if (!fs.existsSync(pairs)) throw new Skip(`neither omnirig synth nor ${pairs} is available`);
+  for (let i = 1; i <= maxPairs; i += 1) {
+    const name = `${String(i).padStart(3, '0')}.jpg`;
+    files[`cam0/${name}`] = path.join(pairs, `left${i}.jpg`);
+    files[`cam1/${name}`] = path.join(pairs, `right${i}.jpg`);
+  }
+  return { dir: copySet('fisheye', files), board: { cols: 9, rows: 6, square_size_mm: 24.23 }, source: `real fisheye-stereo-pairs (${maxPairs} pairs)` };
+}
+
+// ---- the browser --------------------------------------------------------------------------------
+
+async function launchBrowser() {
+  const { chromium } = await import(path.join(WEB_DIR, 'node_modules/playwright-core/index.mjs'));
+  const userDataDir = path.join(TEMP, 'chromium-profile');
+  const context = await chromium.launchPersistentContext(userDataDir, {
+    executablePath: CHROMIUM,
+    headless: true,
+    viewport: { width: 1366, height: 900 },
+    args: ['--headless', '--no-sandbox', '--disable-gpu', '--disable-quic', '--no-first-run',
+      '--disable-background-networking', '--disable-component-update', '--disable-sync'],
+  });
+  const page = context.pages()[0] || await context.newPage();
+  page.pageErrors = [];
+  page.on('pageerror', (e) => page.pageErrors.push(e.message));
+  page.on('console', (m) => {
+    if (m.type() === 'error' && !m.text().startsWith('Failed to load resource')) log('console error:', m.text());
+  });
+  page.on('response', (r) => {
+    if (r.status() >= 400) log(`HTTP ${r.status()} ${r.request().method()} ${r.url().replace(/^https?:\/\/[^/]+/, '')}`);
+  });
+  page.setDefaultTimeout(30000);
+  return { context, page };
+}
+
+async function screenshot(page, name) {
+  fs.mkdirSync(ARGS.out, { recursive: true });
+  const file = path.join(ARGS.out, `${name}.png`);
+  await page.screenshot({ path: file, fullPage: true });
+  log('screenshot', file);
+}
+
+function check(condition, message) {
+  if (!condition) throw new Error(`check failed: ${message}`);
+}
+
+// ---- steps --------------------------------------------------------------------------------------
+
+// Creates a dataset from the page and uploads `dir` with the folder picker; returns its id.
+async function uploadDataset(page, server, name, dir) {
+  await page.goto(`${server.url}/#/datasets`);
+  await page.fill('input[name=name]', name);
+  await page.click('button:has-text("Create dataset")');
+  await page.waitForURL(/#\/datasets\/.+/);
+  const id = decodeURIComponent(page.url().split('#/datasets/')[1]);
+  const expected = imagesIn(dir).length;
+  const started = Date.now();
+  await page.setInputFiles('input[name=folder]', dir);
+  await page.waitForSelector('#upload-finished', { timeout: 60000 });
+  const finished = await page.textContent('#upload-finished');
+  check(/Upload finished\.$/.test(finished.trim()), `upload finished cleanly (${finished})`);
+  await page.waitForFunction((n) => document.querySelector('#image-count')?.textContent === String(n), expected);
+  log(`uploaded ${expected} images into dataset ${id} in ${Date.now() - started} ms`);
+  return { id, count: expected };
+}
+
+// Uploads one more file to the dataset page that is open; returns null when stored, else the
+// error the page shows.
+async function uploadOneMore(page, file) {
+  const before = await page.$$eval('.upload-row', (r) => r.length);
+  await page.setInputFiles('input[name=files]', file);
+  const row = await page.waitForSelector(`.upload-row:nth-child(${before + 1}).done, .upload-row:nth-child(${before + 1}).failed`);
+  return (await row.evaluate((r) => r.classList.contains('failed'))) ? (await row.textContent()).trim() : null;
+}
+
+// Submits a job from the Jobs page form; returns the job id, or throws Skip when the server
+// does not know the job type.
+async function submitJob(page, server, datasetId, type, fill) {
+  await page.goto(`${server.url}/#/jobs?dataset=${encodeURIComponent(datasetId)}`);
+  await page.waitForSelector('#job-form');
+  await page.selectOption('#job-form select[name=type]', type);
+  await page.selectOption('#job-form select[name=dataset]', datasetId);
+  if (fill) await fill(page);
+  await page.click('#job-form button[type=submit]');
+  const outcome = await page.waitForSelector('#job-form .notice a, #job-form .error');
+  const text = await outcome.textContent();
+  if (await outcome.evaluate((n) => n.closest('.error') !== null)) {
+    const message = await page.textContent('#job-form .error');
+    if (/unknown|not (a )?known|unsupported|no such/i.test(message) && message.includes(type)) {
+      throw new Skip(`the server does not run "${type}" jobs yet: ${message.trim()}`);
+    }
+    throw new Error(`the server refused the ${type} job: ${message.trim()}`);
+  }
+  log(`submitted ${type} job ${text}`);
+  return text.trim();
+}
+
+async function fillBoard(page, board) {
+  await page.fill('#job-form input[name=cols]', String(board.cols));
+  await page.fill('#job-form input[name=rows]', String(board.rows));
+  await page.fill('#job-form input[name=square_size_mm]', String(board.square_size_mm));
+}
+
+// Opens the job's page and follows it to a terminal state; checks that the progress bar moved
+// monotonically and reached 100 %. Returns the final state.
+async function followJob(page, server, jobId, screenshotName) {
+  await page.goto(`${server.url}/#/jobs/${encodeURIComponent(jobId)}`);
+  await page.waitForSelector('#job-status');
+  const seen = [];
+  const deadline = Date.now() + JOB_TIMEOUT_MS;
+  let state = '';
+  let shotRunning = false;
+  for (;;) {
+    const status = await page.$eval('#job-status', (n) => ({
+      state: n.dataset.state, percent: Number(n.querySelector('[role=progressbar]')?.getAttribute('aria-valuenow')),
+      stage: n.querySelector('.grow > div:nth-child(3)')?.textContent || '' }));
+    state = status.state;
+    if (!seen.length || seen[seen.length - 1].percent !== status.percent || seen[seen.length - 1].state !== state) seen.push(status);
+    if (state === 'running' && !shotRunning && screenshotName) {
+      await screenshot(page, `${screenshotName}-running`);
+      shotRunning = true;
+    }
+    if (['succeeded', 'failed', 'canceled', 'cancelled'].includes(state)) break;
+    check(Date.now() < deadline, `job ${jobId} finished within ${JOB_TIMEOUT_MS / 1000} s (last: ${JSON.stringify(status)})`);
+    await page.waitForTimeout(150);
+  }
+  log(`job ${jobId} progress seen:`, seen.map((s) => `${s.state} ${s.percent}%${s.stage ? ` (${s.stage.trim().slice(0, 40)})` : ''}`).join(' -> '));
+  if (state === 'failed') {
+    const why = await page.textContent('#job-error').catch(() => '');
+    if (screenshotName) await screenshot(page, `${screenshotName}-failed`);
+    throw new Error(`job ${jobId} failed: ${why}`);
+  }
+  check(state === 'succeeded', `job ${jobId} succeeded (state ${state})`);
+  const percents = seen.map((s) => s.percent);
+  check(percents.every((p, i) => i === 0 || p >= percents[i - 1]), `progress never went back (${percents.join(', ')})`);
+  check(percents[percents.length - 1] === 100, 'the progress bar reached 100 %');
+  return state;
+}
+
+async function stepDatasets(page, server) {
+  const s = calibrationSet();
+  // A folder with cam0/ and cam1/ and a stray non-image, to check names, skipping and errors.
+  const files = {};
+  const images = imagesIn(s.dir).slice(0, 4);
+  images.forEach((f, i) => { files[`cam${i % 2}/${path.basename(f)}`] = path.join(s.dir, f); });
+  const dir = copySet('mixed', files);
+  const { id, count } = await uploadDataset(page, server, 'browser-datasets', dir);
+  const listing = await (await fetch(`${server.url}/api/v1/datasets/${id}`)).json();
+  const names = listing.images.map((i) => i.name).sort();
+  check(JSON.stringify(names) === JSON.stringify(Object.keys(files).sort()), `server names keep cam0/ and cam1/ (${names})`);
+  await page.waitForFunction((n) => [...document.querySelectorAll('.thumbs img')].filter((i) => i.complete && i.naturalWidth > 0).length === n, count);
+  await screenshot(page, 'datasets-uploaded');
+
+  // Resume: sending the same folder again uploads nothing and says so.
+  const rowsBefore = await page.$$eval('.upload-row', (r) => r.length);
+  await page.setInputFiles('input[name=folder]', dir);
+  await page.waitForSelector(`.notice:has-text("${count} already on the server")`);
+  check(await page.$$eval('.upload-row', (r) => r.length) === rowsBefore, 'a resumed upload sends nothing already on the server');
+
+  // Drag and drop of a file on the drop zone (a synthetic drop: playwright cannot drag from the desktop).
+  const extra = imagesIn(s.dir)[4];
+  await page.evaluate(async ({ name, b64 }) => {
+    const bytes = Uint8Array.from(atob(b64), (c) => c.charCodeAt(0));
+    const transfer = new DataTransfer();
+    transfer.items.add(new File([bytes], name, { type: 'image/jpeg' }));
+    const zone = document.querySelector('#dropzone');
+    for (const type of ['dragover', 'drop']) zone.dispatchEvent(new DragEvent(type, { dataTransfer: transfer, bubbles: true, cancelable: true }));
+  }, { name: path.basename(extra), b64: fs.readFileSync(path.join(s.dir, extra)).toString('base64') });
+  await page.waitForSelector(`.upload-row.done[data-name="${path.basename(extra)}"]`);
+  await page.waitForFunction((n) => document.querySelector('#image-count')?.textContent === String(n), count + 1);
+
+  // A file that is not an image, named like one: the server refuses it, the page shows its message.
+  const fake = path.join(TEMP, 'fake', 'not-an-image.png');
+  fs.mkdirSync(path.dirname(fake), { recursive: true });
+  fs.writeFileSync(fake, 'this is text, not a PNG');
+  await page.setInputFiles('input[name=files]', fake);
+  const errorText = await (await page.waitForSelector('.upload-row.failed .error')).textContent();
+  log('non-image upload refused with:', errorText.trim());
+  // The page shows the server's JSON message, not a bare status line.
+  check(!/HTTP \d{3}/.test(errorText), `the error shows the server's message (${errorText})`);
+  await page.goto(`${server.url}/#/datasets`);
+  await page.waitForSelector(`tr[data-dataset-id="${id}"]`);
+  await screenshot(page, 'datasets-list');
+  const errors = await jobErrors(page, server, id);
+  return `uploaded ${count} images (${s.source}), resume skipped all, one dropped, non-image refused: ${errorText.trim()}; ${errors}`;
+}
+
+// Errors on the Jobs page: a refused submission shows the server's message naming the field, and
+// a job that fails (relative_pose on images without partners) shows why on its page.
+async function jobErrors(page, server, datasetId) {
+  await page.goto(`${server.url}/#/jobs?dataset=${encodeURIComponent(datasetId)}`);
+  await page.waitForSelector('#job-form');
+  await page.fill('#job-form textarea[name=extra]', '{"bogus_field": 1}');
+  await page.click('#job-form button[type=submit]');
+  const refused = (await (await page.waitForSelector('#job-form .error')).textContent()).trim();
+  log('refused submission:', refused);
+  check(refused.includes('bogus_field'), `the refusal names the unknown field (${refused})`);
+  await page.fill('#job-form textarea[name=extra]', '');
+  let failed;
+  try {
+    const jobId = await submitJob(page, server, datasetId, 'relative_pose', (p) => fillBoard(p, { cols: 6, rows: 7, square_size_mm: 30 }));
+    await followJob(page, server, jobId, null).then(() => check(false, 'relative_pose on unpaired images fails'), (e) => {
+      if (!/failed: /.test(e.message)) throw e;
+    });
+    failed = (await page.textContent('#job-error')).trim();
+    log('failed job shows:', failed);
+    check(failed.length > 20, 'the failed job explains why');
+    await screenshot(page, 'job-failed');
+  } catch (e) {
+    if (!(e instanceof Skip)) throw e;
+    failed = `not checked (${e.message})`;
+  }
+  return `refused job: "${refused}"; failed job: "${failed}"`;
+}
+
+async function stepCalibration(page, server) {
+  const s = calibrationSet();
+  log('calibration data:', s.source, JSON.stringify(s.board));
+  const { id } = await uploadDataset(page, server, 'browser-calibration', s.dir);
+  const jobId = await submitJob(page, server, id, 'calibration', (p) => fillBoard(p, s.board));
+  const second = await cancelFromList(page, jobId);
+  await followJob(page, server, jobId, 'calibration');
+  await page.waitForSelector('#calibration-report');
+  const rms = Number((await page.textContent('#rms')).replace(/[^0-9.eE+-]/g, ''));
+  const intrinsics = await page.$$eval('#intrinsics tbody tr', (rows) => rows.map((r) => r.dataset.name));
+  const used = await page.$$eval('#image-overlays figure[data-used=true]', (f) => f.length);
+  log(`report: RMS ${rms} px, intrinsics ${intrinsics.join(' ')}, ${used} images used`);
+  check(Number.isFinite(rms) && rms > 0 && rms < s.maxRmsPx, `RMS ${rms} px is under ${s.maxRmsPx} px`);
+  for (const name of ['xi', 'gamma_u', 'gamma_v', 'u0', 'v0']) check(intrinsics.includes(name), `intrinsic ${name} shown`);
+  check(used >= 3, 'at least three images used');
+  const chartInk = await page.$eval('#error-chart', (c) => {
+    const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+    let n = 0;
+    for (let i = 0; i < d.length; i += 4) if (d[i + 3] > 0 && d[i + 2] > 200 && d[i] < 120) n += 1;  // blue bars
+    return n;
+  });
+  check(chartInk > 100, `the per-image error chart has bars (${chartInk} blue pixels)`);
+  await page.waitForFunction(() => [...document.querySelectorAll('#image-overlays img')].slice(0, 4).every((i) => i.complete && i.naturalWidth > 0));
+  await page.waitForSelector('#artifacts tr[data-artifact]');
+  await screenshot(page, 'calibration-report');
+  const hinted = await rerunWithHint(page, server, jobId, s.board);
+  const retried = await retryAndDelete(page, server, second);
+  return `calibration job on ${s.source}: RMS ${rms} px, ${used} images used; ${hinted}; ${retried}`;
+}
+
+// From the Jobs page just after submitting `first`: submits the same job again and cancels it
+// with its Cancel button. Returns {id, canceled} (canceled false when it finished first).
+async function cancelFromList(page, first) {
+  await page.click('#job-form button[type=submit]');
+  await page.waitForFunction((f) => {
+    const link = document.querySelector('#job-form .notice a');
+    return link && link.textContent !== f;
+  }, first);
+  const id = (await page.textContent('#job-form .notice a')).trim();
+  const row = `#job-list tr[data-job-id="${id}"]`;
+  await page.waitForSelector(row);
+  await screenshot(page, 'jobs-list');
+  const cancel = await page.$(`${row} button[data-action=cancel]`);
+  if (cancel) await cancel.click().catch(() => {});
+  await page.waitForSelector(`${row}[data-state=canceled], ${row}[data-state=succeeded]`, { timeout: JOB_TIMEOUT_MS });
+  const state = await page.$eval(row, (r) => r.dataset.state);
+  log(state === 'canceled' ? `job ${id} canceled from the list` : `job ${id} finished before Cancel could be clicked`);
+  return { id, canceled: state === 'canceled' };
+}
+
+// Retries the canceled job from its page (it must then succeed) and deletes it from the list.
+async function retryAndDelete(page, server, { id, canceled }) {
+  let retried = 'retry not exercised (the job finished before it could be canceled)';
+  if (canceled) {
+    await page.goto(`${server.url}/#/jobs/${encodeURIComponent(id)}`);
+    await page.click('#job-status button[data-action=retry]');
+    await page.waitForSelector('#job-status:not([data-state=canceled])');
+    await followJob(page, server, id, null);
+    retried = `job ${id} canceled, retried to success`;
+  }
+  await page.goto(`${server.url}/#/jobs`);
+  page.once('dialog', (dialog) => dialog.accept());
+  await page.click(`#job-list tr[data-job-id="${id}"] button[data-action=delete]`);
+  await page.waitForSelector(`#job-list tr[data-job-id="${id}"]`, { state: 'detached' });
+  const response = await fetch(`${server.url}/api/v1/jobs/${id}`);
+  check(response.status === 404, `a deleted job is gone (HTTP ${response.status})`);
+  return `${retried}, then deleted`;
+}
+
+// The paper's manual hint: click the four outer corners of one image (where the first run found
+// them) on the report page, re-run, and check that the new job used the hint for that image.
+async function hintCorners(result, board) {
+  const ids = [0, board.cols - 1, board.rows * board.cols - 1, (board.rows - 1) * board.cols];
+  for (const image of result.images) {
+    if (!image.used || !image.corners_px || !image.corner_ids) continue;
+    const byId = new Map(image.corner_ids.map((id, k) => [id, image.corners_px[k]]));
+    if (ids.every((id) => byId.has(id))) return { name: image.name, corners: ids.map((id) => byId.get(id)) };
+  }
+  return null;
+}
+
+async function rerunWithHint(page, server, jobId, board) {
+  const api = async (p) => (await fetch(`${server.url}/api/v1${p}`)).json();
+  const target = await hintCorners(await api(`/jobs/${jobId}/result`), board);
+  check(target, 'an image with all four outer corners detected, to hint');
+  await page.click(`#image-overlays figure[data-image="${target.name}"] .hint-button`);
+  const img = await page.waitForSelector(`.hint-editor[data-image="${target.name}"] img`);
+  await page.waitForFunction((i) => i.complete && i.naturalWidth > 0, img);
+  await img.scrollIntoViewIfNeeded();
+  const box = await img.boundingBox();
+  const natural = await img.evaluate((i) => [i.naturalWidth, i.naturalHeight]);
+  for (const [u, v] of target.corners) {
+    await page.mouse.click(box.x + ((u + 0.5) / natural[0]) * box.width, box.y + ((v + 0.5) / natural[1]) * box.height);
+  }
+  await screenshot(page, 'calibration-hint');
+  await page.click('#hint-rerun');
+  await page.waitForURL((url) => url.hash.startsWith('#/jobs/') && !url.hash.includes(jobId));
+  const newJob = decodeURIComponent(page.url().split('#/jobs/')[1]);
+  await followJob(page, server, newJob, null);
+  const job = await api(`/jobs/${newJob}`);
+  const hint = job.params && job.params.hints && job.params.hints[target.name];
+  check(hint && hint.length === 4, `the new job carries four hinted corners for ${target.name}`);
+  // Clicks land on whole CSS pixels: up to one per axis, each (natural / shown width) image pixels.
+  const tolerance = Math.SQRT2 * Math.max(1, natural[0] / box.width) + 0.05;
+  const worst = Math.max(...hint.map(([u, v], k) => Math.hypot(u - target.corners[k][0], v - target.corners[k][1])));
+  check(worst <= tolerance, `the clicks landed on the corners (worst ${worst.toFixed(2)} px, tolerance ${tolerance.toFixed(2)} px)`);
+  const image = (await api(`/jobs/${newJob}/result`)).images.find((i) => i.name === target.name);
+  log(`hinted re-run ${newJob}: ${target.name} detector "${image.detector}", used ${image.used}, RMS ${image.rms_px}`);
+  check(image.used, `the hinted image ${target.name} is used (${image.reason})`);
+  if (image.detector !== undefined) check(image.detector === 'hint', `${target.name} was found through the hint (detector "${image.detector}")`);
+  return `hint re-run on ${target.name}: clicks within ${worst.toFixed(2)} px, image used with RMS ${Number(image.rms_px).toFixed(3)} px`;
+}
+
+async function runRelativePose(page, server, s) {
+  const { id } = await uploadDataset(page, server, 'browser-stereo', s.dir);
+  const jobId = await submitJob(page, server, id, 'relative_pose', (p) => fillBoard(p, s.board));
+  await followJob(page, server, jobId, 'stereo');
+  return { datasetId: id, jobId };
+}
+
+async function clickAndCheckCurve(page, from, to, fu, fv) {
+  const img = await page.waitForSelector(`#epipolar-explorer figure[data-camera=${from}] img`);
+  await page.waitForFunction((i) => i.complete && i.naturalWidth > 0, img);
+  await img.scrollIntoViewIfNeeded();
+  const box = await img.boundingBox();
+  await page.mouse.click(box.x + box.width * fu, box.y + box.height * fv);
+  await page.waitForSelector(`#epipolar-status[data-from=${from}], #epipolar-explorer .error`);
+  const status = await page.$('#epipolar-status');
+  check(status, `the epipolar request succeeded (${await page.textContent('#epipolar-explorer').catch(() => '')})`);
+  const points = await page.$$eval(`#epipolar-explorer figure[data-camera=${to}] svg polyline.curve`,
+    (lines) => lines.map((l) => l.points.numberOfItems));
+  return { points, text: (await status.textContent()).trim() };
+}
+
+async function stepStereo(page, server) {
+  const s = stereoSet(8);
+  log('stereo data:', s.source, JSON.stringify(s.board));
+  const { datasetId, jobId } = await runRelativePose(page, server, s);
+  await page.waitForSelector('#stereo-report');
+  const baseline = (await page.textContent('#baseline')).trim();
+  const result = await (await fetch(`${server.url}/api/v1/jobs/${jobId}/result`)).json();
+  const truth = s.groundTruth && s.groundTruth.rig && s.groundTruth.rig.baseline_m;
+  log(`baseline shown: ${baseline}; result ${result.baseline_m} m${truth ? `; ground truth ${truth} m` : ''}`);
+  check(baseline.startsWith(`${(result.baseline_m * 1000).toFixed(3)} mm`), 'the page shows the result\'s baseline in mm');
+  // Click pixels around the image until one has a curve in the other image (a pixel outside the
+  // mirror disk has none, and the page says so).
+  let found = null;
+  for (const [fu, fv] of [[0.3, 0.5], [0.7, 0.4], [0.5, 0.25], [0.5, 0.75], [0.25, 0.3]]) {
+    const r = await clickAndCheckCurve(page, 'cam0', 'cam1', fu, fv);
+    log(`cam0 click at (${fu}, ${fv}): ${r.text}`);
+    if (r.points.some((n) => n > 1)) {
+      found = r;
+      break;
+    }
+  }
+  check(found, 'a click on cam0 drew an epipolar curve on cam1');
+  await screenshot(page, 'stereo-epipolar-cam0-to-cam1');
+  const back = await clickAndCheckCurve(page, 'cam1', 'cam0', 0.5, 0.3);
+  log(`cam1 click: ${back.text}`);
+  check(back.points.some((n) => n > 1), 'a click on cam1 drew an epipolar curve on cam0');
+  await screenshot(page, 'stereo-epipolar-cam1-to-cam0');
+  const instant = await reconstructAndView(page, server, datasetId, jobId);
+  return `relative_pose on ${s.source}: baseline ${baseline}; cam0 click -> ${found.text}; cam1 click -> ${back.text}; ${instant}`;
+}
+
+// Counts canvas pixels that differ from the viewer's background.
+async function drawnPixels(page) {
+  return page.$eval('#viewer canvas', (canvas) => {
+    const copy = document.createElement('canvas');
+    copy.width = canvas.width;
+    copy.height = canvas.height;
+    const ctx = copy.getContext('2d');
+    ctx.drawImage(canvas, 0, 0);
+    const d = ctx.getImageData(0, 0, copy.width, copy.height).data;
+    let n = 0;
+    for (let i = 0; i < d.length; i += 4) if (Math.abs(d[i] - 0x0b) + Math.abs(d[i + 1] - 0x0f) + Math.abs(d[i + 2] - 0x17) > 30) n += 1;
+    return { n, total: d.length / 4 };
+  });
+}
+
+// Runs in the page: makes a coloured binary PLY of `count` points on a sphere of radius 2 m
+// (deterministic) and gives it to the viewer's file input as if the user had chosen it (made in
+// the page, because sending 38 MB through playwright's setInputFiles takes longer than the rest).
+function chooseSpherePly(count) {
+  const header = new TextEncoder().encode(`ply\nformat binary_little_endian 1.0\ncomment omnirig browser test\n` +
+    `element vertex ${count}\nproperty float x\nproperty float y\nproperty float z\n` +
+    'property uchar red\nproperty uchar green\nproperty uchar blue\nproperty uint observations\nend_header\n');
+  const bytes = new Uint8Array(header.length + count * 19);
+  bytes.set(header);
+  const view = new DataView(bytes.buffer);
+  const golden = Math.PI * (3 - Math.sqrt(5));
+  for (let i = 0; i < count; i += 1) {
+    const y = 1 - (2 * (i + 0.5)) / count;
+    const r = Math.sqrt(1 - y * y);
+    const o = header.length + i * 19;
+    view.setFloat32(o, 2 * r * Math.cos(golden * i), true);
+    view.setFloat32(o + 4, 2 * y, true);
+    view.setFloat32(o + 8, 2 * r * Math.sin(golden * i), true);
+    bytes[o + 12] = 255;
+    bytes[o + 13] = Math.round(127 + 127 * y);
+    bytes[o + 14] = 60;
+    view.setUint32(o + 15, 2, true);
+  }
+  const transfer = new DataTransfer();
+  transfer.items.add(new File([bytes], 'sphere.ply'));
+  const input = document.querySelector('#ply-file');
+  input.files = transfer.files;
+  input.dispatchEvent(new Event('change', { bubbles: true }));
+  return bytes.length;
+}
+
+async function stepViewerPly(page, server) {
+  const count = 2000000;
+  await page.goto(`${server.url}/#/viewer`);
+  await page.waitForSelector('#ply-file');
+  log('viewer page loaded (three.js included)');
+  const started = Date.now();
+  const size = await page.evaluate(chooseSpherePly, count);
+  log(`a ${(size / 1e6).toFixed(1)} MB PLY of ${count} points made and chosen in ${Date.now() - started} ms`);
+  await page.waitForFunction(() => Number(document.querySelector('#viewer')?.dataset.frames || 0) > 0, null, { timeout: 60000 });
+  const loadMs = Date.now() - started;
+  const hud = await page.innerText('#viewer .hud');
+  check(hud.includes(count.toLocaleString('en-US')) || hud.includes('2,000,000') || hud.includes(String(count)), `HUD shows ${count} points (${hud})`);
+  const before = await drawnPixels(page);
+  log(`2,000,000 points: loaded and drawn in ${loadMs} ms; ${before.n} of ${before.total} pixels drawn`);
+  check(before.n > 1000, `points were drawn (${before.n} pixels differ from the background)`);
+  // The point size control makes the drawing bigger (a full redraw: its time is the draw time).
+  const framesNow = async () => Number(await page.$eval('#viewer', (v) => v.dataset.frames));
+  let frames = await framesNow();
+  const sizeChanged = Date.now();
+  await page.$eval('#point-size', (input) => {
+    input.value = '4';
+    input.dispatchEvent(new Event('input'));
+  });
+  await page.waitForFunction((f) => Number(document.querySelector('#viewer').dataset.frames) > f, frames, { polling: 20 });
+  const fullMs = Date.now() - sizeChanged;
+  const after = await drawnPixels(page);
+  check(after.n > before.n, `a larger point size covers more pixels (${before.n} -> ${after.n})`);
+  // Orbit with the mouse: while the button is held the subsample is drawn, then the full cloud.
+  const canvas = await page.$('#viewer canvas');
+  await canvas.scrollIntoViewIfNeeded();
+  const box = await canvas.boundingBox();
+  frames = await framesNow();
+  await page.mouse.move(box.x + box.width / 2, box.y + box.height / 2);
+  await page.mouse.down();
+  await page.mouse.move(box.x + box.width / 2 + 200, box.y + box.height / 2 + 50, { steps: 2 });
+  await page.waitForFunction((f) => Number(document.querySelector('#viewer').dataset.frames) > f, frames);
+  const moving = await drawnPixels(page);
+  check(moving.n > 1000, `points drawn while orbiting (${moving.n} pixels)`);
+  const movingMs = await page.$eval('#viewer', (v) => v.measureDrawMs(true));  // GPU waited for
+  frames = await framesNow();
+  await page.mouse.up();
+  await page.waitForFunction((f) => Number(document.querySelector('#viewer').dataset.frames) > f, frames);
+  const orbited = await drawnPixels(page);
+  check(orbited.n > moving.n, `the full cloud is drawn again when the mouse is released (${moving.n} -> ${orbited.n} pixels)`);
+  log(`a redraw of 2,000,000 points at size 4: ${fullMs} ms; while moving (subsample): ${movingMs.toFixed(0)} ms ` +
+    '(software GL: headless chromium without a GPU)');
+  await screenshot(page, 'viewer-2M-points');
+  return `2M-point PLY: drawn ${loadMs} ms after making and choosing the file, ${after.n} pixels lit at size 4, ` +
+    `redraw ${fullMs} ms full, ${movingMs.toFixed(0)} ms while moving (software GL)`;
+}
+
+// Instant 3D: a stereo_reconstruct job with the rig just measured; its page shows the cloud.
+async function reconstructAndView(page, server, datasetId, rigJob) {
+  const jobId = await submitJob(page, server, datasetId, 'stereo_reconstruct', async (p) => {
+    await p.selectOption('#job-form select[name=rig]', rigJob);
+  });
+  await followJob(page, server, jobId, 'reconstruct');
+  await page.waitForFunction(() => Number(document.querySelector('#viewer')?.dataset.frames || 0) > 0, null, { timeout: 60000 });
+  const drawn = await drawnPixels(page);
+  const hud = (await page.innerText('#viewer .hud')).split('\n').slice(0, 2).join(' ');
+  log(`viewer on job ${jobId}: ${hud}; ${drawn.n} pixels drawn`);
+  check(drawn.n > 50, `points were drawn (${drawn.n} pixels)`);
+  await screenshot(page, 'viewer-stereo-reconstruct');
+  return `stereo_reconstruct job ${jobId}: ${hud}, ${drawn.n} pixels drawn`;
+}
+
+// SLAM on a synthetic sequence: the rig from a stereo-board set, the sequence uploaded with its
+// ground truth, the job's page with the cloud, the trajectory, the top view and per-frame stats.
+async function stepViewerSlam(page, server) {
+  const sequence = synth('stereo-sequence');
+  if (!sequence) throw new Skip('omnirig synth --preset stereo-sequence is not available');
+  const { jobId: rigJob } = await runRelativePose(page, server, stereoSet(6));
+  const tum = path.join(sequence.dir, 'trajectory.tum');
+  const images = path.join(TEMP, 'sequence-images');
+  fs.mkdirSync(images);
+  for (const cam of ['cam0', 'cam1']) fs.cpSync(path.join(sequence.dir, cam), path.join(images, cam), { recursive: true });
+  const { id } = await uploadDataset(page, server, 'browser-slam', images);
+  const refused = fs.existsSync(tum) ? await uploadOneMore(page, tum) : 'no trajectory.tum';
+  if (refused) log(`ground truth not in the dataset: ${refused}`);
+  const jobId = await submitJob(page, server, id, 'slam', async (p) => {
+    await p.selectOption('#job-form select[name=rig]', rigJob);
+    if (!refused) await p.fill('#job-form input[name=ground_truth]', 'trajectory.tum');
+  });
+  await followJob(page, server, jobId, 'slam');
+  await page.waitForFunction(() => Number(document.querySelector('#viewer')?.dataset.frames || 0) > 0, null, { timeout: 60000 });
+  const drawn = await drawnPixels(page);
+  const hud = (await page.innerText('#viewer .hud')).replace(/\s+/g, ' ').trim();
+  check(drawn.n > 50, `map points were drawn (${drawn.n} pixels)`);
+  const topInk = await page.$eval('#top-view', (c) => {
+    const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+    let blue = 0;
+    let orange = 0;
+    for (let i = 0; i < d.length; i += 4) {
+      if (d[i + 2] > 180 && d[i] < 80) blue += 1;
+      if (d[i] > 200 && d[i + 1] > 120 && d[i + 1] < 180 && d[i + 2] < 60) orange += 1;
+    }
+    return { blue, orange };
+  });
+  check(topInk.blue > 50, `the top view draws the trajectory (${topInk.blue} blue pixels)`);
+  if (!refused) check(topInk.orange > 50, `the top view draws the ground truth (${topInk.orange} orange pixels)`);
+  const rows = await page.$$eval('#frame-stats tbody tr', (r) => r.length);
+  const frames = sequence.groundTruth.frames.length;
+  check(rows === frames, `per-frame statistics list every frame (${rows} of ${frames})`);
+  await screenshot(page, 'viewer-slam');
+  return `slam job ${jobId}: ${hud}; ${drawn.n} pixels drawn; top view ${topInk.blue} estimate / ${topInk.orange} ground-truth pixels; ${rows} frame rows` +
+    (refused ? `; ground truth not uploaded (${refused})` : '');
+}
+
+// A server with a bearer token: the page asks for it, then works (API calls, an upload, a
+// thumbnail fetched with the token).
+const TOKEN = 'browser-test-token';
+async function stepAuth(page, server) {
+  await page.goto(`${server.url}/#/datasets`);
+  await page.waitForSelector('#auth input[type=password]');
+  await screenshot(page, 'auth-asked');
+  await page.fill('#auth input[type=password]', TOKEN);
+  await page.click('#auth button[type=submit]');
+  await page.waitForSelector('#health.ok');
+  const s = calibrationSet();
+  const files = {};
+  for (const f of imagesIn(s.dir).slice(0, 2)) files[`cam0/${path.basename(f)}`] = path.join(s.dir, f);
+  const { id, count } = await uploadDataset(page, server, 'browser-auth', copySet('auth', files));
+  await page.waitForFunction((n) => [...document.querySelectorAll('.thumbs img')].filter((i) => i.complete && i.naturalWidth > 0).length === n, count);
+  const anonymous = await fetch(`${server.url}/api/v1/datasets/${id}`);
+  check(anonymous.status === 401, `the API refuses calls without the token (HTTP ${anonymous.status})`);
+  await screenshot(page, 'auth-dataset');
+  return `token asked for, then ${count} images uploaded and shown as thumbnails through the token`;
+}
+
+const STEPS = { datasets: stepDatasets, calibration: stepCalibration, stereo: stepStereo, viewer_ply: stepViewerPly, viewer_slam: stepViewerSlam, auth: stepAuth };
+
+async function main() {
+  const step = STEPS[ARGS.step];
+  if (!step) throw new Error(`unknown step ${ARGS.step}; one of ${Object.keys(STEPS).join(', ')}`);
+  if (!fs.existsSync(path.join(WEB_DIR, 'node_modules/playwright-core'))) {
+    throw new Skip(`playwright-core is not installed in ${WEB_DIR}/node_modules (run ./omnirig.sh or npm ci in web/)`);
+  }
+  if (!fs.existsSync(CHROMIUM)) throw new Skip(`no chromium at ${CHROMIUM}`);
+  const server = await startServer(ARGS.step === 'auth' ? ['--token', TOKEN] : []);
+  let browser = null;
+  try {
+    browser = await launchBrowser();
+    log('chromium started');
+    try {
+      const summary = await step(browser.page, server);
+      check(!browser.page.pageErrors.length, `no uncaught errors in the page (${browser.page.pageErrors.join('; ')})`);
+      log('PASSED:', summary);
+    } catch (e) {
+      if (!(e instanceof Skip)) await screenshot(browser.page, `${ARGS.step}-failure`).catch(() => {});
+      throw e;
+    }
+  } finally {
+    if (browser) await browser.context.close().catch(() => {});
+    await server.stop();
+  }
+}
+
+main().then(() => {
+  fs.rmSync(TEMP, { recursive: true, force: true });
+  process.exit(0);
+}, (e) => {
+  const logFile = path.join(TEMP, 'server.log');
+  if (!(e instanceof Skip) && fs.existsSync(logFile)) console.log('--- server log (tail) ---\n' + fs.readFileSync(logFile, 'utf8').slice(-3000));
+  fs.rmSync(TEMP, { recursive: true, force: true });
+  if (e instanceof Skip) {
+    log('SKIPPED:', e.message);
+    process.exit(SKIP);
+  }
+  console.error(`[browser/${ARGS.step}] FAILED:`, e.stack || e.message);
+  process.exit(1);
+});

@@ -1,0 +1,496 @@
+// The REST API end to end: the real service on an ephemeral loopback port with a temporary
+// data folder, driven through a real HTTP client. Covers every endpoint and the bad inputs of
+// issue 6. Jobs use the test-only "test_sleep" type (server_test_util.h).
+
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <cstdlib>
+#include <fstream>
+#include <set>
+#include <thread>
+
+#include "api/job_types.h"
+#include "engine/util/check.h"
+#include "server/service.h"
+#include "storage/sha256.h"
+#include "tests/server_test_util.h"
+
+namespace omnirig::testing {
+namespace {
+
+using nlohmann::json;
+
+class ServerApiTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    RegisterSleepJobType();
+    std::filesystem::create_directories(dir_.path() / "web");
+    std::ofstream(dir_.path() / "web" / "index.html") << "<html>omnirig test page</html>";
+  }
+
+  server::ServiceOptions Options() const {
+    server::ServiceOptions options;
+    options.host = "127.0.0.1";
+    options.port = 0;
+    options.data_dir = dir_.path() / "data";
+    options.web_dir = dir_.path() / "web";
+    options.num_workers = 2;
+    options.threads_per_job = 1;
+    options.http_threads = 8;
+    options.min_free_bytes = 0;
+    options.progress_interval_s = 0.02;
+    return options;
+  }
+
+  // Starts a service with `options` (default Options()) and returns a client for it.
+  httplib::Client& Start(const server::ServiceOptions& options) {
+    service_ = std::make_unique<server::Service>(options);
+    port_ = service_->Start();
+    client_ = MakeClient(port_, options.token);
+    return *client_;
+  }
+  httplib::Client& Start() { return Start(Options()); }
+
+  std::string CreateDataset(httplib::Client& client, const std::string& name = "rig") {
+    const auto result =
+        client.Post("/api/v1/datasets", json{{"name", name}}.dump(), "application/json");
+    EXPECT_EQ(result->status, 201);
+    return JsonOf(result)["id"];
+  }
+
+  json SubmitSleep(httplib::Client& client, const std::string& dataset, const json& params,
+                   int expected_status = 202) {
+    const auto result =
+        client.Post("/api/v1/jobs",
+                    json{{"type", "test_sleep"}, {"dataset", dataset}, {"params", params}}.dump(),
+                    "application/json");
+    EXPECT_EQ(result->status, expected_status) << result->body;
+    return JsonOf(result);
+  }
+
+  TempDir dir_;
+  std::unique_ptr<server::Service> service_;
+  std::unique_ptr<httplib::Client> client_;
+  int port_ = 0;
+};
+
+void ExpectError(const httplib::Result& result, int status, const std::string& code) {
+  ASSERT_TRUE(result) << httplib::to_string(result.error());
+  EXPECT_EQ(result->status, status) << result->body;
+  const json body = json::parse(result->body, nullptr, false);
+  ASSERT_TRUE(body.is_object()) << result->body;
+  ASSERT_TRUE(body.contains("error")) << result->body;
+  EXPECT_EQ(body["error"]["code"], code) << result->body;
+  EXPECT_TRUE(body["error"]["message"].is_string());
+  EXPECT_TRUE(body["error"]["details"].is_object());
+}
+
+TEST_F(ServerApiTest, HealthMetricsAndStaticPage) {
+  auto& client = Start();
+  const json health = JsonOf(client.Get("/api/v1/health"));
+  EXPECT_EQ(health["status"], "ok");
+  EXPECT_EQ(health["integrity"], "ok");
+  EXPECT_EQ(health["workers"], 2);
+  const auto page = client.Get("/");
+  ASSERT_EQ(page->status, 200);
+  EXPECT_NE(page->body.find("omnirig test page"), std::string::npos);
+  ExpectError(client.Get("/api/v1/nothing-here"), 404, "not_found");
+  const auto metrics = client.Get("/metrics");
+  ASSERT_EQ(metrics->status, 200);
+  EXPECT_NE(metrics->body.find("omnirig_jobs{state=\"queued\"} 0"), std::string::npos);
+  EXPECT_NE(metrics->body.find("omnirig_queue_depth 0"), std::string::npos);
+  EXPECT_NE(metrics->body.find(
+                "omnirig_http_requests_total{route=\"GET /api/v1/health\",status=\"200\"} 1"),
+            std::string::npos)
+      << metrics->body;
+  EXPECT_NE(metrics->body.find("route=\"unmatched\",status=\"404\""), std::string::npos);
+}
+
+TEST_F(ServerApiTest, DatasetLifecycleAndIdempotentUpload) {
+  auto& client = Start();
+  const std::string id = CreateDataset(client);
+  const std::string png = PngBytes(64, 48);
+  const auto first =
+      client.Put(("/api/v1/datasets/" + id + "/images/cam0/000001.png").c_str(), png, "image/png");
+  ASSERT_EQ(first->status, 201) << first->body;
+  const json image = JsonOf(first);
+  EXPECT_EQ(image["name"], "cam0/000001.png");
+  EXPECT_EQ(image["width"], 64);
+  EXPECT_EQ(image["height"], 48);
+  EXPECT_EQ(image["sha256"], storage::Sha256Hex(png));
+  const auto again =
+      client.Put(("/api/v1/datasets/" + id + "/images/cam0/000001.png").c_str(), png, "image/png");
+  EXPECT_EQ(again->status, 200);
+  const json dataset = JsonOf(client.Get(("/api/v1/datasets/" + id).c_str()));
+  EXPECT_EQ(dataset["image_count"], 1);
+  EXPECT_EQ(dataset["total_bytes"], png.size());
+  ASSERT_EQ(dataset["images"].size(), 1u);
+  EXPECT_EQ(dataset["images"][0]["size"], png.size());
+  const auto download = client.Get(("/api/v1/datasets/" + id + "/images/cam0/000001.png").c_str());
+  ASSERT_EQ(download->status, 200);
+  EXPECT_EQ(download->body, png);
+  EXPECT_EQ(download->get_header_value("Content-Type"), "image/png");
+  const json list = JsonOf(client.Get("/api/v1/datasets"));
+  ASSERT_EQ(list.size(), 1u);
+  EXPECT_EQ(list[0]["id"], id);
+  EXPECT_EQ(client.Delete(("/api/v1/datasets/" + id).c_str())->status, 204);
+  ExpectError(client.Get(("/api/v1/datasets/" + id).c_str()), 404, "dataset_not_found");
+  EXPECT_FALSE(std::filesystem::exists(dir_.path() / "data" / "datasets" / id));
+}
+
+TEST_F(ServerApiTest, MultipartUpload) {
+  auto& client = Start();
+  const std::string id = CreateDataset(client);
+  httplib::MultipartFormDataItems items;
+  for (int i = 0; i < 3; ++i) {
+    items.push_back(
+        {"files", PngBytes(32, 32, i), "img" + std::to_string(i) + ".png", "image/png"});
+  }
+  const auto result = client.Post(("/api/v1/datasets/" + id + "/images").c_str(), items);
+  ASSERT_EQ(result->status, 201) << result->body;
+  EXPECT_EQ(JsonOf(result)["images"].size(), 3u);
+  EXPECT_EQ(JsonOf(client.Get(("/api/v1/datasets/" + id).c_str()))["image_count"], 3);
+  ExpectError(client.Post(("/api/v1/datasets/" + id + "/images").c_str(), "x", "text/plain"), 415,
+              "unsupported_media_type");
+}
+
+TEST_F(ServerApiTest, RefusesBadUploads) {
+  auto options = Options();
+  options.max_file_bytes = 4096;
+  auto& client = Start(options);
+  const std::string id = CreateDataset(client);
+  const std::string base = "/api/v1/datasets/" + id + "/images/";
+  ExpectError(client.Put((base + "a.png").c_str(), "just some text", "image/png"), 415,
+              "unsupported_media_type");
+  ExpectError(client.Put((base + "b.png").c_str(), PngBytes(8, 8).substr(0, 16), "image/png"), 422,
+              "corrupt_image");
+  ExpectError(client.Put((base + "..%2F..%2Fescape.png").c_str(), PngBytes(8, 8), "image/png"), 400,
+              "invalid_name");
+  ExpectError(client.Put((base + ".hidden.png").c_str(), PngBytes(8, 8), "image/png"), 400,
+              "invalid_name");
+  ExpectError(client.Put((base + "a/b/c.png").c_str(), PngBytes(8, 8), "image/png"), 400,
+              "invalid_name");
+  ExpectError(client.Put((base + "big.png").c_str(), std::string(5000, 'x'), "image/png"), 413,
+              "payload_too_large");
+  ExpectError(client.Put("/api/v1/datasets/missing/images/a.png", PngBytes(8, 8), "image/png"), 404,
+              "dataset_not_found");
+  EXPECT_EQ(JsonOf(client.Get(("/api/v1/datasets/" + id).c_str()))["image_count"], 0);
+  ExpectError(client.Post("/api/v1/datasets", "{\"name\": ", "application/json"), 400,
+              "invalid_argument");
+  ExpectError(client.Post("/api/v1/datasets", R"({"name": "a", "x": 1})", "application/json"), 400,
+              "invalid_argument");
+  // Nothing half-written is left behind.
+  for (const auto& entry : std::filesystem::recursive_directory_iterator(dir_.path() / "data")) {
+    EXPECT_EQ(entry.path().filename().string().find(".part-"), std::string::npos) << entry.path();
+  }
+}
+
+TEST_F(ServerApiTest, ImageCountAndMultipartSizeLimits) {
+  auto options = Options();
+  options.max_images_per_dataset = 2;
+  options.max_file_bytes = 4096;
+  auto& client = Start(options);
+  const std::string id = CreateDataset(client);
+  const std::string base = "/api/v1/datasets/" + id + "/images/";
+  EXPECT_EQ(client.Put((base + "a.png").c_str(), PngBytes(8, 8), "image/png")->status, 201);
+  EXPECT_EQ(client.Put((base + "b.png").c_str(), PngBytes(8, 8), "image/png")->status, 201);
+  ExpectError(client.Put((base + "c.png").c_str(), PngBytes(8, 8), "image/png"), 413,
+              "payload_too_large");
+  // Replacing an image the dataset already holds is still allowed at the limit.
+  EXPECT_EQ(client.Put((base + "a.png").c_str(), PngBytes(8, 8, 1), "image/png")->status, 200);
+  const std::string other = CreateDataset(client, "other");
+  httplib::MultipartFormDataItems items = {
+      {"files", std::string(8000, 'x'), "big.png", "image/png"}};
+  ExpectError(client.Post(("/api/v1/datasets/" + other + "/images").c_str(), items), 413,
+              "payload_too_large");
+  EXPECT_EQ(JsonOf(client.Get(("/api/v1/datasets/" + other).c_str()))["image_count"], 0);
+  const auto image = client.Get((base + "b.png").c_str());
+  ASSERT_EQ(image->status, 200);
+  EXPECT_EQ(client.Get((base + "b.png").c_str(), {{"If-None-Match", image->get_header_value("ETag")}})
+                ->status,
+            304);
+}
+
+TEST_F(ServerApiTest, RefusesUploadsWhenDiskIsShort) {
+  auto options = Options();
+  options.min_free_bytes = int64_t{1} << 60;
+  auto& client = Start(options);
+  const std::string id = CreateDataset(client);
+  ExpectError(
+      client.Put(("/api/v1/datasets/" + id + "/images/a.png").c_str(), PngBytes(8, 8), "image/png"),
+      507, "insufficient_storage");
+}
+
+TEST_F(ServerApiTest, JobRunsAndServesResultAndArtifacts) {
+  auto& client = Start();
+  const std::string dataset = CreateDataset(client);
+  client.Put(("/api/v1/datasets/" + dataset + "/images/a.png").c_str(), PngBytes(8, 8),
+             "image/png");
+  const json created =
+      SubmitSleep(client, dataset, {{"steps", 5}, {"step_ms", 20}, {"output_kb", 64}});
+  EXPECT_EQ(created["state"], "queued");
+  EXPECT_EQ(created["attempts"], 0);
+  const std::string id = created["id"];
+  const json done = WaitForJob(client, id, 20);
+  ASSERT_EQ(done["state"], "succeeded") << done.dump();
+  EXPECT_EQ(done["attempts"], 1);
+  EXPECT_DOUBLE_EQ(done["progress"]["fraction"].get<double>(), 1.0);
+  EXPECT_TRUE(done["started_at"].is_string());
+  EXPECT_TRUE(done["finished_at"].is_string());
+  EXPECT_TRUE(done["error"].is_null());
+  const json result = JsonOf(client.Get(("/api/v1/jobs/" + id + "/result").c_str()));
+  EXPECT_EQ(result["steps"], 5);
+  EXPECT_EQ(result["images"], json::array({"a.png"}));
+  const json artifacts = JsonOf(client.Get(("/api/v1/jobs/" + id + "/artifacts").c_str()));
+  std::set<std::string> names;
+  for (const auto& artifact : artifacts) names.insert(artifact["name"]);
+  EXPECT_EQ(names, (std::set<std::string>{"log.txt", "out.bin", "result.json"}));
+
+  const std::string expected = SleepJobOutput(64);
+  const std::string url = "/api/v1/jobs/" + id + "/artifacts/out.bin";
+  const auto full = client.Get(url.c_str());
+  ASSERT_EQ(full->status, 200);
+  EXPECT_EQ(full->body, expected);
+  EXPECT_EQ(full->get_header_value("Content-Length"), std::to_string(expected.size()));
+  const std::string etag = full->get_header_value("ETag");
+  EXPECT_EQ(etag, "\"" + storage::Sha256Hex(expected) + "\"");
+  EXPECT_EQ(client.Get(url.c_str(), {{"If-None-Match", etag}})->status, 304);
+  const auto part = client.Get(url.c_str(), {{"Range", "bytes=100-199"}});
+  ASSERT_EQ(part->status, 206);
+  EXPECT_EQ(part->body, expected.substr(100, 100));
+  EXPECT_EQ(part->get_header_value("Content-Range"),
+            "bytes 100-199/" + std::to_string(expected.size()));
+  ExpectError(client.Get(url.c_str(), {{"Range", "bytes=999999-"}}), 416, "range_not_satisfiable");
+  ExpectError(client.Get(("/api/v1/jobs/" + id + "/artifacts/none.bin").c_str()), 404,
+              "artifact_not_found");
+  const auto log = client.Get(("/api/v1/jobs/" + id + "/artifacts/log.txt").c_str());
+  EXPECT_NE(log->body.find("slept 5 steps"), std::string::npos) << log->body;
+}
+
+TEST_F(ServerApiTest, RefusesBadJobs) {
+  auto& client = Start();
+  const std::string dataset = CreateDataset(client);
+  const auto post = [&](const std::string& body) {
+    return client.Post("/api/v1/jobs", body, "application/json");
+  };
+  ExpectError(post("{\"type\": "), 400, "invalid_argument");
+  ExpectError(post(R"({"type": "test_sleep", "dataset": ")" + dataset + R"(", "colour": 1})"), 400,
+              "invalid_argument");
+  ExpectError(post(R"({"type": 7, "dataset": "x"})"), 400, "invalid_argument");
+  const auto unknown = post(R"({"type": "teleport", "dataset": ")" + dataset + R"("})");
+  ExpectError(unknown, 400, "unknown_job_type");
+  EXPECT_NE(unknown->body.find("test_sleep"), std::string::npos);  // lists the known types
+  ExpectError(post(R"({"type": "test_sleep", "dataset": "missing"})"), 404, "dataset_not_found");
+  const auto bad_params =
+      post(R"({"type": "test_sleep", "dataset": ")" + dataset + R"(", "params": {"steps": "x"}})");
+  ExpectError(bad_params, 400, "invalid_params");
+  EXPECT_NE(bad_params->body.find("params.steps"), std::string::npos);
+  ExpectError(post(R"({"type": "test_sleep", "dataset": ")" + dataset +
+                   R"(", "params": {"after": "nope"}})"),
+              404, "job_not_found");
+  ExpectError(client.Get("/api/v1/jobs/missing"), 404, "job_not_found");
+  ExpectError(client.Get("/api/v1/jobs?state=bogus"), 400, "invalid_argument");
+}
+
+TEST_F(ServerApiTest, ResultIs409UntilSucceededAndProgressIsStored) {
+  auto& client = Start();
+  const std::string dataset = CreateDataset(client);
+  const std::string id = SubmitSleep(client, dataset, {{"steps", 50}, {"step_ms", 20}})["id"];
+  ExpectError(client.Get(("/api/v1/jobs/" + id + "/result").c_str()), 409, "job_not_succeeded");
+  // A dependent job is refused while its reference has not succeeded.
+  ExpectError(
+      client.Post(
+          "/api/v1/jobs",
+          json{{"type", "test_sleep"}, {"dataset", dataset}, {"params", {{"after", id}}}}.dump(),
+          "application/json"),
+      409, "dependency_not_ready");
+  json job;
+  for (int i = 0; i < 500; ++i) {
+    job = JsonOf(client.Get(("/api/v1/jobs/" + id).c_str()));
+    if (job["progress"]["fraction"].get<double>() > 0.1) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  EXPECT_EQ(job["state"], "running");
+  EXPECT_EQ(job["progress"]["stage"], "sleep");
+  EXPECT_GT(job["progress"]["fraction"].get<double>(), 0.1);
+  EXPECT_TRUE(job["progress"]["eta_s"].is_number());
+  const json done = WaitForJob(client, id, 20);
+  ASSERT_EQ(done["state"], "succeeded");
+  const json after = SubmitSleep(client, dataset, {{"after", id}});
+  const json dependent = WaitForJob(client, after["id"], 20);
+  ASSERT_EQ(dependent["state"], "succeeded");
+  EXPECT_EQ(JsonOf(client.Get(("/api/v1/jobs/" + after["id"].get<std::string>() + "/result")
+                                  .c_str()))["after"]["steps"],
+            50);
+}
+
+TEST_F(ServerApiTest, CancelStopsARunningJobWithinASecond) {
+  auto options = Options();
+  options.num_workers = 1;
+  auto& client = Start(options);
+  const std::string dataset = CreateDataset(client);
+  const std::string running =
+      SubmitSleep(client, dataset, {{"steps", 1000}, {"step_ms", 50}})["id"];
+  const std::string queued = SubmitSleep(client, dataset, {{"steps", 1}})["id"];
+  ASSERT_EQ(WaitForJob(client, running, 10, "running")["state"], "running");
+  const auto queued_cancel = client.Post(("/api/v1/jobs/" + queued + "/cancel").c_str());
+  ASSERT_EQ(queued_cancel->status, 200) << queued_cancel->body;
+  EXPECT_EQ(JsonOf(queued_cancel)["state"], "canceled");
+
+  const auto start = std::chrono::steady_clock::now();
+  const auto cancel = client.Post(("/api/v1/jobs/" + running + "/cancel").c_str());
+  ASSERT_EQ(cancel->status, 202) << cancel->body;
+  EXPECT_TRUE(JsonOf(cancel)["cancel_requested"].get<bool>());
+  const json canceled = WaitForJob(client, running, 5);
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  EXPECT_EQ(canceled["state"], "canceled");
+  EXPECT_LT(seconds, 1.0);
+  ExpectError(client.Post(("/api/v1/jobs/" + running + "/cancel").c_str()), 409, "job_finished");
+  // The log of a canceled job is still an artifact.
+  const json artifacts = JsonOf(client.Get(("/api/v1/jobs/" + running + "/artifacts").c_str()));
+  ASSERT_EQ(artifacts.size(), 1u);
+  EXPECT_EQ(artifacts[0]["name"], "log.txt");
+}
+
+TEST_F(ServerApiTest, RetryDeleteAndFilters) {
+  auto& client = Start();
+  const std::string dataset = CreateDataset(client);
+  const std::string failing = SubmitSleep(client, dataset, {{"fail", true}})["id"];
+  const json failed = WaitForJob(client, failing, 10);
+  ASSERT_EQ(failed["state"], "failed");
+  EXPECT_EQ(failed["error"]["code"], "invalid_input");
+  EXPECT_EQ(failed["error"]["message"], "asked to fail");
+  const auto retry = client.Post(("/api/v1/jobs/" + failing + "/retry").c_str());
+  ASSERT_EQ(retry->status, 202);
+  EXPECT_EQ(JsonOf(retry)["state"], "queued");
+  EXPECT_EQ(WaitForJob(client, failing, 10)["state"], "failed");
+
+  const std::string good = SubmitSleep(client, dataset, {{"steps", 1}})["id"];
+  ASSERT_EQ(WaitForJob(client, good, 10)["state"], "succeeded");
+  ExpectError(client.Post(("/api/v1/jobs/" + good + "/retry").c_str()), 409, "job_not_retryable");
+  EXPECT_EQ(JsonOf(client.Get("/api/v1/jobs?state=succeeded")).size(), 1u);
+  EXPECT_EQ(JsonOf(client.Get("/api/v1/jobs?state=failed&type=test_sleep")).size(), 1u);
+  EXPECT_EQ(JsonOf(client.Get("/api/v1/jobs?type=other")).size(), 0u);
+  EXPECT_EQ(JsonOf(client.Get(("/api/v1/jobs?dataset=" + dataset).c_str())).size(), 2u);
+
+  const std::string slow = SubmitSleep(client, dataset, {{"steps", 1000}, {"step_ms", 20}})["id"];
+  WaitForJob(client, slow, 10, "running");
+  ExpectError(client.Delete(("/api/v1/jobs/" + slow).c_str()), 409, "job_running");
+  ExpectError(client.Delete(("/api/v1/datasets/" + dataset).c_str()), 409, "dataset_in_use");
+  client.Post(("/api/v1/jobs/" + slow + "/cancel").c_str());
+  WaitForJob(client, slow, 5);
+  EXPECT_EQ(client.Delete(("/api/v1/jobs/" + good).c_str())->status, 204);
+  ExpectError(client.Get(("/api/v1/jobs/" + good).c_str()), 404, "job_not_found");
+  EXPECT_FALSE(std::filesystem::exists(dir_.path() / "data" / "jobs" / good));
+}
+
+TEST_F(ServerApiTest, QueueLimitGives503) {
+  auto options = Options();
+  options.num_workers = 1;
+  options.max_queued_jobs = 2;
+  auto& client = Start(options);
+  const std::string dataset = CreateDataset(client);
+  const std::string blocker =
+      SubmitSleep(client, dataset, {{"steps", 1000}, {"step_ms", 20}})["id"];
+  WaitForJob(client, blocker, 10, "running");
+  SubmitSleep(client, dataset, json::object());
+  SubmitSleep(client, dataset, json::object());
+  const auto full =
+      client.Post("/api/v1/jobs", json{{"type", "test_sleep"}, {"dataset", dataset}}.dump(),
+                  "application/json");
+  ExpectError(full, 503, "queue_full");
+  client.Post(("/api/v1/jobs/" + blocker + "/cancel").c_str());
+}
+
+TEST_F(ServerApiTest, BearerToken) {
+  auto options = Options();
+  options.token = "s3cret";
+  Start(options);
+  auto anonymous = MakeClient(port_);
+  ExpectError(anonymous->Get("/api/v1/health"), 401, "unauthorized");
+  ExpectError(anonymous->Get("/metrics"), 401, "unauthorized");
+  auto wrong = MakeClient(port_, "guess");
+  ExpectError(wrong->Get("/api/v1/datasets"), 401, "unauthorized");
+  EXPECT_EQ(client_->Get("/api/v1/datasets")->status, 200);
+  EXPECT_EQ(anonymous->Get("/")->status, 200);  // the page itself is public; its API calls are not
+}
+
+TEST_F(ServerApiTest, RefusesNonLoopbackWithoutToken) {
+  auto options = Options();
+  options.host = "0.0.0.0";
+  EXPECT_THROW({ server::Service service(options); }, omnirig::InvalidArgument);
+  options.token = "t";
+  EXPECT_NO_THROW({ server::Service service(options); });
+}
+
+TEST_F(ServerApiTest, DrainHandsRunningJobsBackAndRestartFinishesThem) {
+  auto options = Options();
+  options.num_workers = 1;
+  auto& client = Start(options);
+  const std::string dataset = CreateDataset(client);
+  const std::string id = SubmitSleep(client, dataset, {{"steps", 20}, {"step_ms", 25}})["id"];
+  ASSERT_EQ(WaitForJob(client, id, 10, "running")["state"], "running");
+  EXPECT_EQ(service_->Drain(0.0), 1);
+  client_.reset();
+  service_.reset();
+  auto& restarted = Start(options);
+  const json job = WaitForJob(restarted, id, 20);
+  EXPECT_EQ(job["state"], "succeeded");
+  EXPECT_EQ(job["attempts"], 1);  // a drain does not count as an attempt
+}
+
+TEST_F(ServerApiTest, EpipolarRouteRefusesWrongJobs) {
+  auto& client = Start();
+  const std::string dataset = CreateDataset(client);
+  const std::string id = SubmitSleep(client, dataset, {{"steps", 1}})["id"];
+  WaitForJob(client, id, 10);
+  ExpectError(client.Get("/api/v1/jobs/missing/epipolar?from=cam0&u=1&v=2"), 404, "job_not_found");
+  ExpectError(client.Get(("/api/v1/jobs/" + id + "/epipolar?from=cam0&u=1&v=2").c_str()), 400,
+              "invalid_argument");
+}
+
+// The real `calibration` job type through the service, on real catadioptric images, when both
+// the job type and the data are present.
+TEST_F(ServerApiTest, RealCalibrationJob) {
+  auto options = Options();
+  options.num_workers = 1;
+  options.threads_per_job = 2;
+  auto& client = Start(options);
+  if (!api::FindJobType("calibration")) GTEST_SKIP() << "no calibration job type in this build";
+  const char* source = std::getenv("OMNIRIG_SOURCE_DIR");
+  const std::filesystem::path data = std::filesystem::path(source ? source : ".") / ".." /
+                                     "shared" / "data" / "real" / "ocamcalib-vmr";
+  if (!std::filesystem::exists(data)) GTEST_SKIP() << "real data absent: " << data;
+  const std::string dataset = CreateDataset(client, "vmr");
+  httplib::MultipartFormDataItems items;
+  for (const auto& entry : std::filesystem::directory_iterator(data)) {
+    if (entry.path().extension() != ".jpg") continue;
+    std::ifstream in(entry.path(), std::ios::binary);
+    std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    items.push_back({"files", bytes, entry.path().filename().string(), "image/jpeg"});
+  }
+  const auto upload = client.Post(("/api/v1/datasets/" + dataset + "/images").c_str(), items);
+  ASSERT_EQ(upload->status, 201) << upload->body;
+  ASSERT_EQ(JsonOf(upload)["images"].size(), 10u);
+  EXPECT_EQ(JsonOf(upload)["images"][0]["width"], 1024);
+  const json board = {{"type", "checkerboard"}, {"cols", 6}, {"rows", 7}, {"square_size_mm", 30}};
+  const auto created = client.Post(
+      "/api/v1/jobs",
+      json{{"type", "calibration"}, {"dataset", dataset}, {"params", {{"board", board}}}}.dump(),
+      "application/json");
+  ASSERT_EQ(created->status, 202) << created->body;
+  const std::string id = JsonOf(created)["id"];
+  const json job = WaitForJob(client, id, 240);
+  ASSERT_EQ(job["state"], "succeeded") << job.dump();
+  const json result = JsonOf(client.Get(("/api/v1/jobs/" + id + "/result").c_str()));
+  EXPECT_TRUE(result.contains("camera")) << result.dump().substr(0, 500);
+  const json artifacts = JsonOf(client.Get(("/api/v1/jobs/" + id + "/artifacts").c_str()));
+  std::set<std::string> names;
+  for (const auto& artifact : artifacts) names.insert(artifact["name"]);
+  EXPECT_TRUE(names.count("log.txt") && names.count("result.json"));
+}
+
+}  // namespace
+}  // namespace omnirig::testing

@@ -1,0 +1,27 @@
+// A job's artifacts: every file downloadable, with its size and type.
+
+import { artifactUrl, asList, downloadLink, get } from './api.js';
+import { clear, el, errorBox, formatBytes } from './ui.js';
+
+export async function listArtifacts(jobId) {
+  return asList(await get(`/jobs/${encodeURIComponent(jobId)}/artifacts`), 'artifacts');
+}
+
+export async function renderArtifacts(container, jobId) {
+  let artifacts;
+  try {
+    artifacts = await listArtifacts(jobId);
+  } catch (err) {
+    clear(container, el('h2', 'Artifacts'), errorBox(err, 'Could not list the artifacts'));
+    return;
+  }
+  const total = artifacts.reduce((s, a) => s + (a.size || 0), 0);
+  clear(container, el('h2', `Artifacts (${artifacts.length}, ${formatBytes(total)})`),
+    artifacts.length ? el('div.table-scroll', el('table',
+      el('thead', el('tr', el('th', 'File'), el('th.num', 'Size'), el('th', 'Type'), el('th', 'sha256'))),
+      el('tbody', artifacts.map((a) => el('tr', { dataset: { artifact: a.name } },
+        el('td', downloadLink(artifactUrl(jobId, a.name), a.name.split('/').pop(), a.name)),
+        el('td.num', formatBytes(a.size)), el('td', a.content_type || ''),
+        el('td.mono.muted', { title: a.sha256 || '' }, (a.sha256 || '').slice(0, 12))))))) :
+      el('p.muted', 'This job wrote no artifacts.'));
+}

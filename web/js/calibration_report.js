@@ -1,0 +1,152 @@
+// Calibration report: intrinsics with their standard deviations, RMS and mean +- std of the
+// corner error, a per-image error chart, each image's overlay (detected and reprojected corners),
+// the mirror-rim (SVP) overlay, and the paper's manual hint: click the board's four outer corners
+// on an image where detection failed, then re-run the job with them.
+
+import { artifactUrl, get, imageUrl, post } from './api.js';
+import { listArtifacts } from './artifacts.js';
+import { apiImage, clear, el, errorBox, formatNumber, formatSignificant } from './ui.js';
+import { drawBarChart } from './chart.js';
+import { clickableImage } from './image_overlay.js';
+
+const INTRINSICS = ['xi', 'gamma_u', 'gamma_v', 'u0', 'v0', 'alpha', 'k1', 'k2', 'k3', 'k4', 'k5'];
+// Artifacts of the mirror-rim check: svp or rim as a word of the name (not the "rim" in "VMRImage").
+const SVP_NAME = /(^|[_\-/.])(svp|rim)([_\-/.]|$)/i;
+const UNITS = { gamma_u: 'px', gamma_v: 'px', u0: 'px', v0: 'px' };
+
+export async function renderJobReport(container, job) {
+  const [result, artifacts] = await Promise.all([
+    get(`/jobs/${encodeURIComponent(job.id)}/result`), listArtifacts(job.id).catch(() => [])]);
+  renderCalibration(container, job, result, artifacts);
+  return null;
+}
+
+export function renderCalibration(container, job, result, artifacts) {
+  const camera = result.camera || {};
+  const images = result.images || [];
+  const used = images.filter((i) => i.used);
+  const chart = el('canvas.chart#error-chart', { width: 1000, height: 220 });
+  clear(container,
+    el('div.card#calibration-report',
+      el('h2', 'Calibration'),
+      el('div.row',
+        el('dl.kv.grow',
+          el('dt', 'RMS reprojection error'), el('dd.big#rms', `${formatNumber(result.rms_px, 3)} px`),
+          el('dt', 'Mean ± std of the Euclidean corner error'),
+          el('dd#mean-std', `${formatNumber(result.mean_px, 3)} ± ${formatNumber(result.std_px, 3)} px`),
+          el('dt', 'Images used'), el('dd', `${used.length} of ${images.length}`),
+          el('dt', 'Image size'), el('dd', camera.image_size ? camera.image_size.join(' × ') : '–'),
+          el('dt', 'Model'), el('dd', camera.model || '–')),
+        el('div.grow', intrinsicsTable(camera)))),
+    el('div.card', el('h2', 'Per-image RMS error'), chart,
+      el('p.muted', 'Bars: RMS corner error of each image (px); grey: image not used; the line is the overall RMS.')),
+    solverCard(result.solver),
+    svpCard(job, artifacts, result),
+    el('div.card', el('h2', 'Images'), imagesGrid(job, images, artifacts)));
+  drawBarChart(chart, images.map((i) => ({
+    label: i.name, value: i.used ? i.rms_px : 0, muted: !i.used, note: i.used ? '' : '×',
+  })), { reference: result.rms_px, unit: 'px' });
+}
+
+function intrinsicsTable(camera) {
+  const values = camera.intrinsics || {};
+  const stds = camera.intrinsics_std || {};
+  const names = [...INTRINSICS, ...Object.keys(values).filter((k) => !INTRINSICS.includes(k))];
+  return el('table#intrinsics',
+    el('thead', el('tr', el('th', 'Intrinsic'), el('th.num', 'Value'), el('th.num', '± std'), el('th', ''))),
+    el('tbody', names.filter((n) => n in values).map((n) => el('tr', { dataset: { name: n } },
+      el('td.mono', n), el('td.num', formatNumber(values[n], 5)),
+      el('td.num', stds[n] === undefined ? '–' : `± ${formatSignificant(stds[n], 2)}`),
+      el('td.muted', UNITS[n] || '')))));
+}
+
+function solverCard(solver) {
+  if (!solver) return null;
+  return el('div.card', el('details', el('summary', 'Solver summary'),
+    el('pre.mono', JSON.stringify(solver, null, 2))));
+}
+
+function svpCard(job, artifacts, result) {
+  const svp = artifacts.filter((a) => SVP_NAME.test(a.name) && /image\//.test(a.content_type || guessType(a.name)));
+  if (!svp.length && !result.svp) return null;
+  return el('div.card#svp', el('h2', 'Mirror rim (single-viewpoint check)'),
+    result.svp ? el('pre.mono', JSON.stringify(result.svp, null, 2)) : null,
+    el('div.overlays', svp.map((a) => el('figure',
+      apiImage(artifactUrl(job.id, a.name), { loading: 'lazy', alt: a.name }), el('figcaption', a.name)))));
+}
+
+function guessType(name) {
+  return /\.(png|jpe?g)$/i.test(name) ? 'image/png' : '';
+}
+
+// The overlay artifact of an image: a PNG whose name contains the image's name (folders flattened).
+export function overlayFor(imageName, artifacts) {
+  const stem = imageName.replace(/\.[^.]+$/, '');
+  const keys = [stem, stem.replace(/\//g, '_'), stem.replace(/\//g, '-'), stem.split('/').pop()];
+  const pngs = artifacts.filter((a) => /\.png$/i.test(a.name) && !SVP_NAME.test(a.name));
+  for (const key of keys) {
+    const match = pngs.find((a) => a.name.includes(key));
+    if (match) return match;
+  }
+  return null;
+}
+
+function imagesGrid(job, images, artifacts) {
+  const datasetId = job.dataset ?? job.dataset_id;
+  return el('div.overlays#image-overlays', images.map((image) => {
+    const overlay = (image.overlay && artifacts.find((a) => a.name === image.overlay)) || overlayFor(image.name, artifacts);
+    const src = overlay ? artifactUrl(job.id, overlay.name) : imageUrl(datasetId, image.name);
+    const caption = image.used
+      ? `${image.name}: RMS ${formatNumber(image.rms_px, 3)} px`
+      : `${image.name}: not used — ${image.reason || 'no reason given'}`;
+    const figure = el('figure', { dataset: { image: image.name, used: String(!!image.used) } },
+      el('a', { href: src, target: '_blank', title: 'full size' }, apiImage(src, { loading: 'lazy', alt: image.name })),
+      el('figcaption', caption));
+    // The manual hint helps where detection failed, and also where it found the wrong grid.
+    figure.append(el('button.hint-button', { onclick: () => openHintEditor(figure, job, image.name) },
+      image.used ? 'Correct the corners by hand…' : 'Give the board corners by hand…'));
+    return figure;
+  }));
+}
+
+// The manual hint: four clicks on the raw image, then a new calibration job with params.hints.
+function openHintEditor(figure, job, imageName) {
+  const datasetId = job.dataset ?? job.dataset_id;
+  const points = [];
+  const messages = el('div');
+  const counter = el('span');
+  const rerun = el('button.primary#hint-rerun', { disabled: true, onclick: submit }, 'Re-run calibration with these corners');
+  const picker = clickableImage(imageUrl(datasetId, imageName), (u, v) => {
+    if (points.length >= 4) return;
+    points.push([u, v]);
+    update();
+  });
+  const update = () => {
+    picker.clear();
+    points.forEach(([u, v], i) => picker.marker(u, v, String(i + 1), '#f59e0b'));
+    if (points.length > 1) picker.polyline([...points, ...(points.length === 4 ? [points[0]] : [])], '#f59e0b');
+    counter.textContent = `${points.length} of 4 corners`;
+    rerun.disabled = points.length !== 4;
+  };
+  const editor = el('div.card.hint-editor', { dataset: { image: imageName } },
+    el('p', el('strong', imageName), ': click the four outermost inner corners of the board in this order: ',
+      'the first corner, the end of the first row, the last corner, the start of the last row. ', counter),
+    picker.node,
+    el('p', el('button', { onclick: () => { points.length = 0; update(); } }, 'Start again'), ' ', rerun),
+    messages);
+  figure.replaceWith(editor);
+  update();
+
+  async function submit() {
+    const params = structuredClone(job.params || {});
+    params.hints = { ...(params.hints || {}), [imageName]: points.map(([u, v]) => [round2(u), round2(v)]) };
+    try {
+      const newJob = await post('/jobs', { type: job.type, dataset: datasetId, params });
+      location.hash = `#/jobs/${encodeURIComponent(newJob.id)}`;
+    } catch (err) {
+      clear(messages, errorBox(err, 'The server refused the new job'));
+    }
+  }
+}
+
+const round2 = (x) => Math.round(x * 100) / 100;

@@ -1,0 +1,266 @@
+// Datasets page: create and list datasets; for one dataset, upload images by drag and drop of
+// files or whole folders (cam0/ and cam1/ kept), with per-file progress, resume of an interrupted
+// upload (names already on the server with the same size are skipped) and thumbnails.
+
+import { asList, del, get, imageUrl, post, putImage } from './api.js';
+import { apiImage, clear, el, errorBox, formatBytes, formatTime, progressBar, showError } from './ui.js';
+
+// What a dataset holds: the images the server decodes, and TUM trajectories (a SLAM job's
+// optional ground truth is a file of its dataset).
+const DATASET_FILES = /\.(png|jpe?g|bmp|pgm|ppm|pnm|tum)$/i;
+const PARALLEL_UPLOADS = 3;
+const THUMBNAILS_SHOWN = 120;
+
+export async function render(view, id) {
+  return id ? renderDataset(view, id) : renderList(view);
+}
+
+// ---- the list --------------------------------------------------------------------------------
+
+function datasetStats(dataset) {
+  const images = Array.isArray(dataset.images) ? dataset.images : null;
+  const count = images ? images.length : dataset.image_count ?? dataset.num_images ?? '?';
+  const bytes = images ? images.reduce((s, i) => s + (i.size || 0), 0) : dataset.total_bytes ?? dataset.size;
+  return { count, bytes };
+}
+
+async function renderList(view) {
+  const nameInput = el('input', { name: 'name', placeholder: 'e.g. rig-calibration-2026-11', required: true, size: 32 });
+  const form = el('form.row', {
+    onsubmit: async (e) => {
+      e.preventDefault();
+      try {
+        const dataset = await post('/datasets', { name: nameInput.value.trim() });
+        location.hash = `#/datasets/${encodeURIComponent(dataset.id)}`;
+      } catch (err) {
+        showError(form.parentElement, err, 'Could not create the dataset');
+      }
+    },
+  }, nameInput, el('button.primary', { type: 'submit' }, 'Create dataset'));
+  const table = el('div.table-scroll');
+  clear(view, el('h1', 'Datasets'), el('div.card', el('h2', 'New dataset'), form), el('div.card', table));
+  await refreshList(table);
+}
+
+async function refreshList(container) {
+  let datasets;
+  try {
+    datasets = asList(await get('/datasets'), 'datasets');
+  } catch (err) {
+    clear(container, errorBox(err, 'Could not list the datasets'));
+    return;
+  }
+  if (!datasets.length) {
+    clear(container, el('p.muted', 'No datasets yet: create one above, then drop images on it.'));
+    return;
+  }
+  const rows = datasets.map((d) => {
+    const { count, bytes } = datasetStats(d);
+    return el('tr', { dataset: { datasetId: d.id } },
+      el('td', el('a', { href: `#/datasets/${encodeURIComponent(d.id)}` }, d.name || d.id)),
+      el('td.mono', d.id), el('td.num', count), el('td.num', formatBytes(bytes)),
+      el('td', formatTime(d.created_at)),
+      el('td', el('button.danger', {
+        onclick: async () => {
+          if (!confirm(`Delete dataset "${d.name || d.id}" and its images?`)) return;
+          try {
+            await del(`/datasets/${encodeURIComponent(d.id)}`);
+            await refreshList(container);
+          } catch (err) {
+            showError(container, err, 'Could not delete the dataset');
+          }
+        },
+      }, 'Delete')));
+  });
+  clear(container, el('table',
+    el('thead', el('tr', ['Name', 'Id', 'Images', 'Size', 'Created', ''].map((h, i) =>
+      el(i === 2 || i === 3 ? 'th.num' : 'th', h)))),
+    el('tbody', rows)));
+}
+
+// ---- one dataset -----------------------------------------------------------------------------
+
+async function renderDataset(view, id) {
+  const summary = el('div');
+  const thumbs = el('div');
+  const uploads = el('div.uploads');
+  const status = el('div');
+  const state = { id, listed: new Map(), queue: [], running: 0, stopped: false };
+
+  const refresh = async () => {
+    try {
+      const dataset = await get(`/datasets/${encodeURIComponent(id)}`);
+      state.listed = new Map((dataset.images || []).map((i) => [i.name, i.size]));
+      renderSummary(summary, dataset);
+      renderThumbnails(thumbs, dataset);
+    } catch (err) {
+      clear(summary, errorBox(err, 'Could not load the dataset'));
+    }
+  };
+  state.refresh = refresh;
+
+  const fileInput = el('input', { type: 'file', multiple: true, accept: 'image/*', name: 'files',
+    onchange: (e) => enqueueFiles(state, [...e.target.files].map((f) => ({ file: f, path: f.name })), uploads, status) });
+  const folderInput = el('input', { type: 'file', multiple: true, webkitdirectory: true, name: 'folder',
+    onchange: (e) => enqueueFiles(state, [...e.target.files].map((f) => ({ file: f, path: f.webkitRelativePath || f.name })), uploads, status) });
+  const dropzone = el('div.dropzone#dropzone',
+    el('p', el('strong', 'Drop image files or whole folders here'), ' (a folder holding cam0/ and cam1/ keeps them).'),
+    el('p', 'or choose ', el('label', 'files ', fileInput), ' or a ', el('label', 'folder ', folderInput)),
+    el('p.muted', 'An interrupted upload resumes: drop the same files again and only what the server lacks is sent.'));
+  wireDropzone(dropzone, (entries) => enqueueFiles(state, entries, uploads, status));
+
+  clear(view,
+    el('p', el('a', { href: '#/datasets' }, '← all datasets')),
+    summary,
+    el('div.card', el('h2', 'Upload'), dropzone, status, uploads,
+      el('p', el('a.button', { href: `#/jobs?dataset=${encodeURIComponent(id)}` }, 'Submit a job on this dataset →'))),
+    el('div.card', el('h2', 'Images'), thumbs));
+  await refresh();
+  return () => { state.stopped = true; };
+}
+
+function renderSummary(container, dataset) {
+  const images = dataset.images || [];
+  const byFolder = new Map();
+  for (const image of images) {
+    const folder = image.name.includes('/') ? image.name.split('/')[0] : '(top level)';
+    byFolder.set(folder, (byFolder.get(folder) || 0) + 1);
+  }
+  const sizes = new Set(images.filter((i) => i.width).map((i) => `${i.width}×${i.height}`));
+  const { bytes } = datasetStats(dataset);
+  clear(container, el('h1', `Dataset ${dataset.name || dataset.id}`),
+    el('dl.kv.card#dataset-summary',
+      el('dt', 'Id'), el('dd.mono', dataset.id),
+      el('dt', 'Images'), el('dd#image-count', String(images.length)),
+      el('dt', 'Folders'), el('dd', [...byFolder].map(([f, n]) => `${f}: ${n}`).join(', ') || '–'),
+      el('dt', 'Total size'), el('dd', formatBytes(bytes)),
+      el('dt', 'Image sizes'), el('dd', [...sizes].join(', ') || '–'),
+      el('dt', 'Created'), el('dd', formatTime(dataset.created_at))));
+}
+
+function renderThumbnails(container, dataset, showAll = false) {
+  const images = dataset.images || [];
+  if (!images.length) {
+    clear(container, el('p.muted', 'No images yet.'));
+    return;
+  }
+  const shown = showAll ? images : images.slice(0, THUMBNAILS_SHOWN);
+  const grid = el('div.thumbs', shown.map((image) => el('figure.thumb',
+    el('a', { href: imageUrl(dataset.id, image.name), target: '_blank' }, image.width
+      ? apiImage(imageUrl(dataset.id, image.name), { loading: 'lazy', alt: image.name })
+      : el('div.file-icon', image.name.split('.').pop())),
+    el('figcaption', el('div', image.name),
+      el('div.muted', `${image.width ? `${image.width}×${image.height}, ` : ''}${formatBytes(image.size)}`)))));
+  const more = images.length > shown.length
+    ? el('button', { onclick: () => renderThumbnails(container, dataset, true) }, `Show all ${images.length}`)
+    : null;
+  clear(container, grid, more);
+}
+
+// The name an image gets on the server: its file name, kept under its camera folder when it is in
+// one (cam0/000012.png); the server allows one folder level.
+export function imageNameFor(path) {
+  const parts = path.split('/').filter(Boolean);
+  const file = parts[parts.length - 1];
+  const folder = parts.length > 1 ? parts[parts.length - 2] : '';
+  return /^cam\d+$/i.test(folder) ? `${folder}/${file}` : file;
+}
+
+function wireDropzone(zone, onEntries) {
+  zone.addEventListener('dragover', (e) => {
+    e.preventDefault();
+    zone.classList.add('over');
+  });
+  zone.addEventListener('dragleave', () => zone.classList.remove('over'));
+  zone.addEventListener('drop', async (e) => {
+    e.preventDefault();
+    zone.classList.remove('over');
+    const items = [...(e.dataTransfer.items || [])];
+    const roots = items.map((i) => i.webkitGetAsEntry && i.webkitGetAsEntry()).filter(Boolean);
+    if (roots.length) {
+      const entries = [];
+      for (const root of roots) await walkEntry(root, '', entries);
+      onEntries(entries);
+    } else {
+      onEntries([...e.dataTransfer.files].map((f) => ({ file: f, path: f.name })));
+    }
+  });
+}
+
+// Collects {file, path} of every file under a dropped file or folder entry.
+async function walkEntry(entry, prefix, out) {
+  const path = prefix ? `${prefix}/${entry.name}` : entry.name;
+  if (entry.isFile) {
+    const file = await new Promise((resolve, reject) => entry.file(resolve, reject));
+    out.push({ file, path });
+    return;
+  }
+  const reader = entry.createReader();
+  for (;;) {
+    const batch = await new Promise((resolve, reject) => reader.readEntries(resolve, reject));
+    if (!batch.length) break;
+    for (const child of batch) await walkEntry(child, path, out);
+  }
+}
+
+function enqueueFiles(state, entries, list, status) {
+  let skippedOther = 0;
+  let resumed = 0;
+  for (const { file, path } of entries) {
+    const name = imageNameFor(path);
+    if (name.split('/').some((p) => p.startsWith('.')) || !DATASET_FILES.test(name)) {
+      skippedOther += 1;
+      continue;
+    }
+    if (state.listed.get(name) === file.size) {
+      resumed += 1;
+      continue;
+    }
+    const row = el('div.upload-row', { dataset: { name } });
+    list.append(row);
+    const item = { name, file, row };
+    showUploadRow(item, 0, 'queued');
+    state.queue.push(item);
+  }
+  const notes = [];
+  if (resumed) notes.push(`${resumed} already on the server (same name and size), skipped`);
+  if (skippedOther) notes.push(`${skippedOther} neither an image nor a .tum trajectory (or hidden), skipped`);
+  clear(status, notes.length ? el('p.notice', notes.join('; ') + '.') : null);
+  pump(state, status);
+}
+
+function showUploadRow(item, fraction, label) {
+  clear(item.row, el('div.row',
+    el('span.mono.grow', item.name), el('span.muted', formatBytes(item.file.size)),
+    el('div', { style: 'flex: 0 0 200px' }, progressBar(fraction, label))));
+}
+
+// Runs up to PARALLEL_UPLOADS PUTs at once; refreshes the listing when the queue drains.
+function pump(state, status) {
+  while (!state.stopped && state.running < PARALLEL_UPLOADS && state.queue.length) {
+    const item = state.queue.shift();
+    state.running += 1;
+    putImage(state.id, item.name, item.file, (sent, total) =>
+      showUploadRow(item, total ? sent / total : 0, `${Math.round((100 * sent) / (total || 1))}%`))
+      .then(() => {
+        showUploadRow(item, 1, 'done');
+        item.row.classList.add('done');
+        state.listed.set(item.name, item.file.size);
+      })
+      .catch((err) => {
+        item.row.classList.add('failed');
+        item.row.append(errorBox(err, item.name));
+      })
+      .finally(() => {
+        state.running -= 1;
+        if (!state.queue.length && !state.running) {
+          const failed = item.row.parentElement ? item.row.parentElement.querySelectorAll('.failed').length : 0;
+          status.append(el('p.notice#upload-finished', failed
+            ? `Upload finished with ${failed} failed file(s): drop them again to retry.`
+            : 'Upload finished.'));
+          state.refresh();
+        }
+        pump(state, status);
+      });
+  }
+}

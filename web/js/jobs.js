@@ -1,0 +1,321 @@
+// Jobs page: a form per job type, the live list of jobs (progress bar, stage, ETA, cancel, retry,
+// delete, errors in plain words), and one job's page with its report and artifacts.
+
+import { asList, del, get, post } from './api.js';
+import { clear, el, errorBox, explainJobError, formatDuration, formatTime, poll, progressBar, showError } from './ui.js';
+import { renderArtifacts } from './artifacts.js';
+
+export const JOB_TYPES = {
+  calibration: 'Calibration of one camera (unified model)',
+  relative_pose: 'Stereo rig: relative pose of cam1 in cam0',
+  stereo_reconstruct: 'Instant 3D from one stereo pair',
+  slam: 'Stereo SLAM on a sequence',
+};
+const TERMINAL = new Set(['succeeded', 'failed', 'canceled', 'cancelled']);
+const POLL_MS = 1000;
+const LIST_LIMIT = 200;  // the newest jobs shown in the list
+
+export async function render(view, id, query) {
+  return id ? renderJob(view, id) : renderJobs(view, query);
+}
+
+// ---- the form ---------------------------------------------------------------------------------
+
+function boardFields() {
+  return el('fieldset.full.board', el('legend', 'Board'),
+    el('label', 'type ', el('select', { name: 'board_type' },
+      el('option', { value: 'checkerboard' }, 'checkerboard'), el('option', { value: 'charuco' }, 'ChArUco'))), ' ',
+    el('label', 'inner corners: cols ', el('input', { name: 'cols', type: 'number', min: 2, value: 8, style: 'width:5em' })), ' ',
+    el('label', 'rows ', el('input', { name: 'rows', type: 'number', min: 2, value: 6, style: 'width:5em' })), ' ',
+    el('label', 'square (mm) ', el('input', { name: 'square_size_mm', type: 'number', min: 0.1, step: 'any', value: 40, style: 'width:6em' })),
+    el('span.charuco', ' ',
+      el('label', 'marker (mm) ', el('input', { name: 'marker_size_mm', type: 'number', min: 0.1, step: 'any', value: 30, style: 'width:6em' })), ' ',
+      el('label', 'ArUco dictionary (OpenCV id) ', el('input', { name: 'aruco_dictionary', type: 'number', min: 0, value: 0, style: 'width:5em' }))));
+}
+
+function jobOption(job) {
+  const label = `${job.id} · ${job.type} · dataset ${job.dataset ?? job.dataset_id ?? ''} · ${formatTime(job.finished_at || job.created_at)}`;
+  return el('option', { value: job.id }, label);
+}
+
+// The fields that depend on the job type; earlier results are offered from succeeded jobs.
+function typeFields(type, succeeded) {
+  const calibrations = succeeded.filter((j) => j.type === 'calibration');
+  const rigs = succeeded.filter((j) => j.type === 'relative_pose');
+  const pick = (name, jobs, optional) => el('select', { name },
+    optional ? el('option', { value: '' }, optional) : null, jobs.map(jobOption));
+  const none = (what) => el('span.muted', `no succeeded ${what} job yet`);
+  switch (type) {
+    case 'calibration':
+      return [boardFields()];
+    case 'relative_pose':
+      return [boardFields(),
+        el('label', 'cam0 calibration'), calibrations.length ? pick('cal_cam0', calibrations, 'calibrate inside this job') : none('calibration'),
+        el('label', 'cam1 calibration'), calibrations.length ? pick('cal_cam1', calibrations, 'calibrate inside this job') : none('calibration')];
+    case 'stereo_reconstruct':
+      return [el('label', 'Rig (relative pose)'), rigs.length ? pick('rig', rigs) : none('relative_pose')];
+    case 'slam':
+      return [el('label', 'Rig (relative pose)'), rigs.length ? pick('rig', rigs) : none('relative_pose'),
+        el('label', 'Ground truth'), el('input', { name: 'ground_truth', placeholder: 'optional: a TUM file of the dataset, e.g. ground_truth.tum' })];
+    default:
+      return [];
+  }
+}
+
+// Builds the job's params from the form; `extra` (JSON) is merged last so any option can be set.
+export function paramsFromForm(type, form) {
+  const value = (name) => (form.elements[name] ? form.elements[name].value.trim() : '');
+  const params = {};
+  if (form.elements.cols) {
+    params.board = { type: value('board_type'), cols: Number(value('cols')), rows: Number(value('rows')),
+      square_size_mm: Number(value('square_size_mm')) };
+    if (params.board.type === 'charuco') {
+      params.board.marker_size_mm = Number(value('marker_size_mm'));
+      params.board.aruco_dictionary = Number(value('aruco_dictionary'));
+    }
+  }
+  if (type === 'relative_pose' && (value('cal_cam0') || value('cal_cam1'))) {
+    params.calibrations = { cam0: value('cal_cam0'), cam1: value('cal_cam1') };
+  }
+  if ((type === 'stereo_reconstruct' || type === 'slam') && value('rig')) params.rig = value('rig');
+  if (type === 'slam' && value('ground_truth')) params.ground_truth = value('ground_truth');
+  const extra = value('extra');
+  if (extra) Object.assign(params, JSON.parse(extra));
+  return params;
+}
+
+async function renderForm(container, datasets, jobs, preselectedDataset, onSubmitted) {
+  const succeeded = jobs.filter((j) => j.state === 'succeeded');
+  const typeSelect = el('select', { name: 'type' },
+    Object.entries(JOB_TYPES).map(([value, label]) => el('option', { value }, `${value} — ${label}`)));
+  const datasetSelect = el('select', { name: 'dataset', required: true },
+    datasets.map((d) => el('option', { value: d.id, selected: d.id === preselectedDataset }, `${d.name || d.id} (${d.id})`)));
+  const specific = el('div.full.type-fields', { style: 'display:contents' });
+  const messages = el('div.full');
+  const form = el('form.grid#job-form', { onsubmit: submit },
+    el('label', 'Job type'), typeSelect,
+    el('label', 'Dataset'), datasets.length ? datasetSelect : el('span.muted', 'no dataset yet: create one first'),
+    specific,
+    el('label.full', 'Other parameters (JSON object, merged into params): ',
+      el('textarea', { name: 'extra', placeholder: '{"options": {"fix": ["k5", "alpha"]}}' })),
+    el('div.full', el('button.primary', { type: 'submit' }, 'Submit job')),
+    messages);
+  const showType = () => {
+    clear(specific, typeFields(typeSelect.value, succeeded));
+    const boardType = form.elements.board_type;
+    const charuco = specific.querySelector('.charuco');
+    if (boardType && charuco) {
+      const toggle = () => { charuco.hidden = boardType.value !== 'charuco'; };
+      boardType.addEventListener('change', toggle);
+      toggle();
+    }
+  };
+  typeSelect.addEventListener('change', showType);
+  showType();
+  clear(container, el('h2', 'New job'), form);
+
+  async function submit(e) {
+    e.preventDefault();
+    clear(messages);
+    let params;
+    try {
+      params = paramsFromForm(typeSelect.value, form);
+    } catch (err) {
+      messages.append(errorBox(err, 'The extra parameters are not valid JSON'));
+      return;
+    }
+    try {
+      const job = await post('/jobs', { type: typeSelect.value, dataset: datasetSelect.value, params });
+      messages.append(el('p.notice', 'Submitted job ', el('a', { href: `#/jobs/${encodeURIComponent(job.id)}` }, job.id), '.'));
+      onSubmitted(job);
+    } catch (err) {
+      messages.append(errorBox(err, 'The server refused the job'));
+    }
+  }
+}
+
+// ---- the live list ----------------------------------------------------------------------------
+
+export function stateBadge(state) {
+  return el(`span.state.state-${state}`, { dataset: { state } }, state);
+}
+
+function progressCell(job) {
+  const p = job.progress || {};
+  if (job.state === 'succeeded') return progressBar(1, 'done');
+  if (TERMINAL.has(job.state)) return progressBar(p.fraction || 0, job.state);
+  return progressBar(p.fraction || 0);
+}
+
+// The stage and message of the progress; in lists, a failed job's explanation instead.
+function stageText(job, explainFailure = true) {
+  const p = job.progress || {};
+  if (job.state === 'failed' && explainFailure) return el('span.error-text', explainJobError(job.error));
+  return [p.stage ? el('strong', p.stage) : null, p.message ? ` ${p.message}` : ''];
+}
+
+function etaText(job) {
+  const eta = job.progress && job.progress.eta_s;
+  return job.state === 'running' && eta !== undefined && eta !== null ? formatDuration(eta) : '';
+}
+
+// Cancel / retry / delete buttons for one job; onChange runs after a successful action.
+export function jobActions(job, onChange, errorTarget) {
+  const act = (label, cls, fn) => el(`button.${cls}`, {
+    dataset: { action: label.toLowerCase() },
+    onclick: async () => {
+      try {
+        await fn();
+        onChange && onChange();
+      } catch (err) {
+        showError(errorTarget, err, `${label} failed`);
+      }
+    },
+  }, label);
+  const id = encodeURIComponent(job.id);
+  return el('span.actions',
+    TERMINAL.has(job.state) ? null : act('Cancel', 'warn', () => post(`/jobs/${id}/cancel`)),
+    job.state === 'failed' || job.state === 'canceled' || job.state === 'cancelled'
+      ? act('Retry', 'plain', () => post(`/jobs/${id}/retry`)) : null,
+    job.state === 'running' ? null : act('Delete', 'danger', async () => {
+      if (confirm(`Delete job ${job.id} and its results?`)) await del(`/jobs/${id}`);
+    }));
+}
+
+function jobRow(job, refresh, errorTarget) {
+  return el('tr', { dataset: { jobId: job.id, state: job.state } },
+    el('td', el('a.mono', { href: `#/jobs/${encodeURIComponent(job.id)}` }, job.id)),
+    el('td', job.type),
+    el('td', { title: job.dataset ?? job.dataset_id ?? '' }, job.dataset_name || el('span.mono', job.dataset ?? job.dataset_id ?? '')),
+    el('td', stateBadge(job.state), job.attempts > 1 ? el('span.muted', ` (attempt ${job.attempts})`) : null),
+    el('td', { style: 'min-width:150px' }, progressCell(job)),
+    el('td', stageText(job)),
+    el('td.num', etaText(job)),
+    el('td', formatTime(job.created_at)),
+    el('td', jobActions(job, refresh, errorTarget)));
+}
+
+async function renderJobs(view, query) {
+  const formCard = el('div.card');
+  const stateFilter = el('select', { name: 'state' }, ['', 'queued', 'running', 'succeeded', 'failed', 'canceled']
+    .map((s) => el('option', { value: s }, s || 'any state')));
+  const typeFilter = el('select', { name: 'type' }, ['', ...Object.keys(JOB_TYPES)]
+    .map((t) => el('option', { value: t }, t || 'any type')));
+  const listErrors = el('div');
+  const table = el('div.table-scroll#job-list');
+  const listCard = el('div.card', el('h2', 'Jobs'), el('div.row', stateFilter, typeFilter), listErrors, table);
+  clear(view, el('h1', 'Jobs'), formCard, listCard);
+
+  let shown = '';  // the list as last drawn: redraw only on change, so buttons stay clickable
+  const datasetNames = new Map();
+  const refresh = async () => {
+    const filter = new URLSearchParams({ limit: String(LIST_LIMIT) });
+    if (stateFilter.value) filter.set('state', stateFilter.value);
+    if (typeFilter.value) filter.set('type', typeFilter.value);
+    try {
+      const jobs = asList(await get(`/jobs?${filter}`), 'jobs');
+      clear(listErrors);
+      const snapshot = JSON.stringify(jobs);
+      if (snapshot === shown) return jobs;
+      shown = snapshot;
+      for (const job of jobs) job.dataset_name = datasetNames.get(job.dataset ?? job.dataset_id);
+      clear(table, jobs.length ? el('table',
+        el('thead', el('tr', ['Job', 'Type', 'Dataset', 'State', 'Progress', 'Stage', 'ETA', 'Created', ''].map((h) => el('th', h)))),
+        el('tbody', jobs.map((j) => jobRow(j, refresh, listErrors)))) : el('p.muted', 'No jobs.'));
+      return jobs;
+    } catch (err) {
+      clear(listErrors, errorBox(err, 'Could not list the jobs'));
+      return [];
+    }
+  };
+  stateFilter.addEventListener('change', refresh);
+  typeFilter.addEventListener('change', refresh);
+
+  try {
+    const [datasets, jobs] = await Promise.all([get('/datasets'), get(`/jobs?limit=${LIST_LIMIT}`)]);
+    for (const d of asList(datasets, 'datasets')) datasetNames.set(d.id, d.name);
+    await renderForm(formCard, asList(datasets, 'datasets'), asList(jobs, 'jobs'), query && query.get('dataset'), refresh);
+  } catch (err) {
+    clear(formCard, errorBox(err, 'Could not load datasets and jobs'));
+  }
+  return poll(table, POLL_MS, refresh);
+}
+
+// ---- one job ----------------------------------------------------------------------------------
+
+function statusCard(job, refresh, container) {
+  const p = job.progress || {};
+  return el('div.card#job-status', { dataset: { state: job.state } },
+    el('div.row',
+      el('div.grow',
+        el('div.big', stateBadge(job.state), ' ', el('span.muted', job.type)),
+        el('div', { style: 'margin:0.5rem 0' }, progressCell(job)),
+        el('div', stageText(job, false)),
+        etaText(job) ? el('div.muted', `about ${etaText(job)} left`) : null),
+      el('dl.kv',
+        el('dt', 'Dataset'), el('dd', el('a.mono', { href: `#/datasets/${encodeURIComponent(job.dataset ?? job.dataset_id ?? '')}` }, job.dataset ?? job.dataset_id ?? '')),
+        el('dt', 'Created'), el('dd', formatTime(job.created_at)),
+        el('dt', 'Started'), el('dd', formatTime(job.started_at) || '–'),
+        el('dt', 'Finished'), el('dd', formatTime(job.finished_at) || '–'),
+        el('dt', 'Attempts'), el('dd', String(job.attempts ?? '–')))),
+    job.state === 'failed' ? el('div.error#job-error', el('strong', 'Why it failed: '), explainJobError(job.error)) : null,
+    el('p', jobActions(job, refresh, container)),
+    el('details', el('summary', 'Parameters'), el('pre.mono', JSON.stringify(job.params ?? {}, null, 2))));
+}
+
+// The report shown under a succeeded job, by type.
+async function renderReport(container, job) {
+  const loaders = {
+    calibration: () => import('./calibration_report.js'),
+    relative_pose: () => import('./stereo_report.js'),
+    stereo_reconstruct: () => import('./viewer.js'),
+    slam: () => import('./viewer.js'),
+  };
+  const loader = loaders[job.type];
+  if (!loader) return null;
+  const module = await loader();
+  return module.renderJobReport(container, job);
+}
+
+async function renderJob(view, id) {
+  const status = el('div');
+  const report = el('div#report');
+  const artifacts = el('div.card#artifacts');
+  clear(view, el('p', el('a', { href: '#/jobs' }, '← all jobs')), el('h1', `Job ${id}`), status, report, artifacts);
+  let shownState = null;
+  let shownJob = '';
+  let reportCleanup = null;
+  const refresh = async () => {
+    let job;
+    try {
+      job = await get(`/jobs/${encodeURIComponent(id)}`);
+    } catch (err) {
+      clear(status, errorBox(err, 'Could not load the job'));
+      return;
+    }
+    const snapshot = JSON.stringify(job);
+    if (snapshot !== shownJob) clear(status, statusCard(job, refresh, status));
+    shownJob = snapshot;
+    if (job.state === shownState) return;
+    shownState = job.state;
+    if (reportCleanup) reportCleanup();
+    reportCleanup = null;
+    clear(report);
+    clear(artifacts);
+    if (job.state === 'succeeded') {
+      try {
+        reportCleanup = await renderReport(report, job);
+      } catch (err) {
+        clear(report, errorBox(err, 'Could not show the report'));
+      }
+    }
+    if (TERMINAL.has(job.state)) await renderArtifacts(artifacts, job.id);
+  };
+  const stop = poll(status, POLL_MS, async () => {
+    if (!TERMINAL.has(shownState)) await refresh();
+  });
+  return () => {
+    stop();
+    if (reportCleanup) reportCleanup();
+  };
+}

@@ -1,0 +1,115 @@
+// Stereo report: the rig's relative pose (baseline and rotation with their uncertainties), the
+// pairs used, and the epipolar explorer (the paper's Fig. 14): click a pixel in one camera's image
+// and its epipolar curve, computed by the server from the calibrated rig, is drawn on the other.
+
+import { get, imageUrl } from './api.js';
+import { clear, el, errorBox, formatNumber, formatSignificant, quaternionToAxisAngle, quaternionToRpyDeg } from './ui.js';
+import { clickableImage } from './image_overlay.js';
+import { drawBarChart } from './chart.js';
+
+export async function renderJobReport(container, job) {
+  const result = await get(`/jobs/${encodeURIComponent(job.id)}/result`);
+  renderStereo(container, job, result);
+  return null;
+}
+
+export function renderStereo(container, job, result) {
+  const pose = result.cam0_from_cam1 || {};
+  const q = pose.rotation_wxyz || [1, 0, 0, 0];
+  const t = pose.translation_m || [0, 0, 0];
+  const { angleDeg, axis } = quaternionToAxisAngle(q);
+  const rpy = quaternionToRpyDeg(q);
+  const pairs = result.pairs || [];
+  const chart = el('canvas.chart', { width: 1000, height: 200 });
+  clear(container,
+    el('div.card#stereo-report', el('h2', 'Stereo rig: pose of cam1 in cam0 (cam0_from_cam1)'),
+      el('div.row',
+        el('dl.kv.grow',
+          el('dt', 'Baseline'), el('dd.big#baseline', `${formatNumber(result.baseline_m * 1000, 3)} mm`,
+            result.baseline_std_m !== undefined ? ` ± ${formatNumber(result.baseline_std_m * 1000, 3)} mm` : ''),
+          el('dt', 'Translation (mm)'), el('dd.mono', t.map((x) => (x * 1000).toFixed(3)).join(', '),
+            withStd(result.translation_std_m && [].concat(result.translation_std_m).map((x) => x * 1000), ' mm')),
+          el('dt', 'Rotation angle'), el('dd', `${formatNumber(angleDeg, 4)}° about [${axis.map((x) => formatNumber(x, 3)).join(', ')}]`,
+            withStd(result.rotation_std_deg, '°')),
+          el('dt', 'Roll, pitch, yaw'), el('dd', rpy.map((a) => `${formatNumber(a, 4)}°`).join(', ')),
+          el('dt', 'Quaternion (w, x, y, z)'), el('dd.mono', q.map((x) => formatNumber(x, 6)).join(', ')),
+          el('dt', 'RMS reprojection error'), el('dd', `${formatNumber(result.rms_px, 3)} px`),
+          el('dt', 'Pairs used'), el('dd', `${pairs.filter((p) => p.used).length} of ${pairs.length}`)),
+        el('div.grow', uncertaintyList(result)))),
+    el('div.card', el('h2', 'Per-pair RMS error'), chart),
+    el('div.card#epipolar-explorer', el('h2', 'Epipolar explorer'), epipolarExplorer(job, result)),
+    camerasCard(result.cameras));
+  drawBarChart(chart, pairs.map((p) => ({ label: p.name, value: p.used ? p.rms_px : 0, muted: !p.used, note: p.used ? '' : '×' })),
+    { reference: result.rms_px, unit: 'px' });
+}
+
+// " ± std" after a value (a number or one per axis), or nothing when the result has none.
+function withStd(std, unit) {
+  if (std === undefined || std === null) return null;
+  const text = Array.isArray(std) ? `[${std.map((x) => formatSignificant(x, 2)).join(', ')}]` : formatSignificant(std, 2);
+  return el('span.muted', ` ± ${text}${unit}`);
+}
+
+// The rig's uncertainties: top-level keys holding "std" or "sigma" (baseline_std_m,
+// translation_std_m, rotation_std_deg, ...), and those inside cam0_from_cam1.
+function uncertaintyList(result) {
+  const rows = [];
+  const add = (key, value) => {
+    if (!/std|sigma/i.test(key) || value === null || typeof value === 'object' && !Array.isArray(value)) return;
+    rows.push([key, Array.isArray(value) ? value.map((x) => formatSignificant(x, 3)).join(', ') : formatSignificant(value, 3)]);
+  };
+  for (const [k, v] of Object.entries(result)) add(k, v);
+  for (const [k, v] of Object.entries(result.cam0_from_cam1 || {})) add(`cam0_from_cam1.${k}`, v);
+  if (!rows.length) return el('p.muted', 'No uncertainties in this result.');
+  return el('div', el('h3', 'Uncertainties (1 σ)'), el('dl.kv#uncertainties', rows.map(([k, v]) => [el('dt.mono', k), el('dd', v)])));
+}
+
+function camerasCard(cameras) {
+  if (!cameras) return null;
+  return el('div.card', el('details', el('summary', 'The two cameras\' calibrations'),
+    el('pre.mono', JSON.stringify(cameras, null, 2))));
+}
+
+// The pair's base name: pairs are matched by NAME in cam0/NAME and cam1/NAME.
+const pairBase = (name) => name.replace(/^cam\d+\//, '');
+
+function epipolarExplorer(job, result) {
+  const pairs = (result.pairs || []).filter((p) => p.used);
+  const choices = [...(pairs.length ? pairs : result.pairs || [])].sort((a, b) => a.name.localeCompare(b.name));
+  if (!choices.length) return el('p.muted', 'No image pairs in this result.');
+  const datasetId = job.dataset ?? job.dataset_id;
+  const select = el('select#epipolar-pair', choices.map((p) => el('option', { value: pairBase(p.name) }, pairBase(p.name))));
+  const messages = el('div');
+  const panes = el('div.epipolar');
+  const show = () => renderPair(panes, messages, job.id, datasetId, select.value);
+  select.addEventListener('change', show);
+  show();
+  return el('div', el('p', 'Click a pixel in either image: its epipolar curve appears in the other one. Pair ', select),
+    messages, panes);
+}
+
+function renderPair(panes, messages, jobId, datasetId, base) {
+  const views = {};
+  const onClick = (from) => async (u, v) => {
+    const to = from === 'cam0' ? 'cam1' : 'cam0';
+    views.cam0.clear();
+    views.cam1.clear();
+    views[from].marker(u, v, `(${u.toFixed(1)}, ${v.toFixed(1)})`);
+    clear(messages, el('p.muted', 'Computing the epipolar curve…'));
+    try {
+      const answer = await get(`/jobs/${encodeURIComponent(jobId)}/epipolar?from=${from}&u=${u.toFixed(2)}&v=${v.toFixed(2)}`);
+      const polylines = answer.polylines || [];
+      for (const line of polylines) if (line.length > 1) views[answer.to || to].polyline(line);
+      clear(messages, el('p.muted#epipolar-status', { dataset: { from, count: String(polylines.length) } },
+        polylines.length ? `Epipolar curve of ${from} pixel (${u.toFixed(1)}, ${v.toFixed(1)}) in ${answer.to || to}: ` +
+          `${polylines.length} piece(s), ${polylines.reduce((s, l) => s + l.length, 0)} points.`
+          : `The epipolar curve of this pixel does not cross ${to}'s image.`));
+    } catch (err) {
+      clear(messages, errorBox(err, 'Could not compute the epipolar curve'));
+    }
+  };
+  for (const cam of ['cam0', 'cam1']) views[cam] = clickableImage(imageUrl(datasetId, `${cam}/${base}`), onClick(cam));
+  clear(panes,
+    el('figure', { dataset: { camera: 'cam0' } }, el('figcaption', `cam0/${base}`), views.cam0.node),
+    el('figure', { dataset: { camera: 'cam1' } }, el('figcaption', `cam1/${base}`), views.cam1.node));
+}

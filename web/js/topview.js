@@ -1,0 +1,114 @@
+// Trajectories in 2D: reading them (trajectory.json, TUM) and drawing a top view of the estimate
+// against the ground truth.
+
+// A trajectory is [{name, state, t: [x, y, z], q: [w, x, y, z]}] with world_from_rig poses.
+export function trajectoryFromJson(json) {
+  const frames = Array.isArray(json) ? json : json.frames || json.trajectory || json.poses || [];
+  return frames.map((f, i) => {
+    const pose = 'world_from_rig' in f ? f.world_from_rig : f.pose || f;
+    if (!pose) return null;  // a frame that could not be tracked has no pose
+    return {
+      name: f.name ?? String(i),
+      state: f.state,
+      t: pose.translation_m || pose.t || [0, 0, 0],
+      q: pose.rotation_wxyz || pose.q || [1, 0, 0, 0],
+    };
+  }).filter((p) => p && p.t.every(Number.isFinite));
+}
+
+// Quaternion helpers for world_from_rig poses {t, q (w, x, y, z)}.
+function rotate([w, x, y, z], [px, py, pz]) {
+  // v' = v + 2 w (u x v) + 2 u x (u x v), u = (x, y, z)
+  const cx = y * pz - z * py;
+  const cy = z * px - x * pz;
+  const cz = x * py - y * px;
+  return [px + 2 * (w * cx + y * cz - z * cy), py + 2 * (w * cy + z * cx - x * cz), pz + 2 * (w * cz + x * cy - y * cx)];
+}
+
+function multiply([aw, ax, ay, az], [bw, bx, by, bz]) {
+  return [aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
+    aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw];
+}
+
+// The inverse of a {rotation_wxyz, translation_m} pose, as the same kind of object.
+export function inversePose(pose) {
+  const [w, x, y, z] = pose.rotation_wxyz;
+  const q = [w, -x, -y, -z];
+  const t = rotate(q, pose.translation_m).map((v) => -v);
+  return { rotation_wxyz: q, translation_m: t };
+}
+
+// Applies a_from_b (a {rotation_wxyz, translation_m} pose) to a trajectory given in frame b.
+export function transformTrajectory(poses, aFromB) {
+  const q = aFromB.rotation_wxyz;
+  const t = aFromB.translation_m;
+  return poses.map((p) => ({ ...p, t: rotate(q, p.t).map((v, k) => v + t[k]), q: multiply(q, p.q) }));
+}
+
+// TUM: "timestamp tx ty tz qx qy qz qw" per line; '#' starts a comment.
+export function parseTum(text) {
+  return text.split('\n').map((l) => l.trim()).filter((l) => l && !l.startsWith('#')).map((line) => {
+    const [time, tx, ty, tz, qx, qy, qz, qw] = line.split(/\s+/).map(Number);
+    return { name: String(time), t: [tx, ty, tz], q: [qw, qx, qy, qz] };
+  }).filter((p) => p.t.every(Number.isFinite));
+}
+
+// The two axes along which the trajectories spread most: the "ground plane" whatever the
+// convention (y down for camera frames, z up for a robot).
+function planeAxes(poses) {
+  const spread = [0, 1, 2].map((k) => {
+    const values = poses.map((p) => p.t[k]);
+    return Math.max(...values) - Math.min(...values);
+  });
+  return [0, 1, 2].sort((a, b) => spread[b] - spread[a]).slice(0, 2).sort((a, b) => a - b);
+}
+
+export function drawTopView(canvas, estimate, groundTruth) {
+  const ctx = canvas.getContext('2d');
+  const w = canvas.width;
+  const h = canvas.height;
+  ctx.clearRect(0, 0, w, h);
+  const all = [...estimate, ...(groundTruth || [])];
+  if (!all.length) return;
+  const [a, b] = planeAxes(all);
+  const us = all.map((p) => p.t[a]);
+  const vs = all.map((p) => p.t[b]);
+  const [uMin, uMax, vMin, vMax] = [Math.min(...us), Math.max(...us), Math.min(...vs), Math.max(...vs)];
+  const span = Math.max(uMax - uMin, vMax - vMin, 1e-6);
+  const scale = (Math.min(w, h) - 60) / span;
+  const toCanvas = (p) => [w / 2 + (p.t[a] - (uMin + uMax) / 2) * scale, h / 2 - (p.t[b] - (vMin + vMax) / 2) * scale];
+  drawScaleBar(ctx, w, h, scale, 'xyz'[a], 'xyz'[b]);
+  const line = (poses, color, width) => {
+    ctx.strokeStyle = color;
+    ctx.lineWidth = width;
+    ctx.beginPath();
+    poses.forEach((p, i) => {
+      const [x, y] = toCanvas(p);
+      if (i) ctx.lineTo(x, y);
+      else ctx.moveTo(x, y);
+    });
+    ctx.stroke();
+    if (poses.length) {
+      const [x, y] = toCanvas(poses[0]);
+      ctx.fillStyle = color;
+      ctx.fillRect(x - 3, y - 3, 6, 6);
+    }
+  };
+  if (groundTruth && groundTruth.length) line(groundTruth, '#f59e0b', 3);
+  line(estimate, '#2563eb', 2);
+}
+
+function drawScaleBar(ctx, w, h, scale, axisU, axisV) {
+  const metres = 10 ** Math.floor(Math.log10(Math.max(1e-6, (w * 0.25) / scale)));
+  const length = metres * scale;
+  ctx.strokeStyle = '#111';
+  ctx.fillStyle = '#111';
+  ctx.lineWidth = 2;
+  ctx.beginPath();
+  ctx.moveTo(20, h - 20);
+  ctx.lineTo(20 + length, h - 20);
+  ctx.stroke();
+  ctx.font = '12px system-ui, sans-serif';
+  ctx.fillText(`${metres >= 1 ? metres : metres.toPrecision(1)} m`, 20, h - 28);
+  ctx.fillText(`horizontal: ${axisU}, vertical: ${axisV}`, w - 160, h - 14);
+}
