@@ -10,6 +10,7 @@
 #include <set>
 #include <thread>
 
+#include "api/camera_json.h"
 #include "api/job_types.h"
 #include "engine/util/check.h"
 #include "server/service.h"
@@ -207,9 +208,10 @@ TEST_F(ServerApiTest, ImageCountAndMultipartSizeLimits) {
   EXPECT_EQ(JsonOf(client.Get(("/api/v1/datasets/" + other).c_str()))["image_count"], 0);
   const auto image = client.Get((base + "b.png").c_str());
   ASSERT_EQ(image->status, 200);
-  EXPECT_EQ(client.Get((base + "b.png").c_str(), {{"If-None-Match", image->get_header_value("ETag")}})
-                ->status,
-            304);
+  EXPECT_EQ(
+      client.Get((base + "b.png").c_str(), {{"If-None-Match", image->get_header_value("ETag")}})
+          ->status,
+      304);
 }
 
 TEST_F(ServerApiTest, RefusesUploadsWhenDiskIsShort) {
@@ -449,6 +451,45 @@ TEST_F(ServerApiTest, EpipolarRouteRefusesWrongJobs) {
   ExpectError(client.Get("/api/v1/jobs/missing/epipolar?from=cam0&u=1&v=2"), 404, "job_not_found");
   ExpectError(client.Get(("/api/v1/jobs/" + id + "/epipolar?from=cam0&u=1&v=2").c_str()), 400,
               "invalid_argument");
+}
+
+// The epipolar route on a relative_pose result. The test stands in a relative_pose job type that
+// returns a known rig (registered after the service started, so it replaces the real one in
+// this test binary only), because the route's contract is the result JSON, not the solver.
+TEST_F(ServerApiTest, EpipolarCurveOfARelativePoseResult) {
+  auto& client = Start();
+  api::JobType fake;
+  fake.name = "relative_pose";
+  fake.validate = [](const json&) {};
+  fake.run = [](const json&, const api::JobContext&) {
+    StereoRig rig;
+    for (CameraModel* camera : {&rig.cam0, &rig.cam1}) {
+      camera->intrinsics.params = {1.0, 300, 300, 320, 240, 0, 0, 0, 0, 0, 0};
+      camera->width = 640;
+      camera->height = 480;
+    }
+    rig.cam0_from_cam1 = Rigid3d(Eigen::Quaterniond::Identity(), Eigen::Vector3d(0, 0.1, 0));
+    return api::RigToJson(rig);
+  };
+  api::RegisterJobType(fake);
+  const std::string dataset = CreateDataset(client);
+  const auto created =
+      client.Post("/api/v1/jobs", json{{"type", "relative_pose"}, {"dataset", dataset}}.dump(),
+                  "application/json");
+  ASSERT_EQ(created->status, 202) << created->body;
+  const std::string id = JsonOf(created)["id"];
+  ASSERT_EQ(WaitForJob(client, id, 10)["state"], "succeeded");
+  const std::string url = "/api/v1/jobs/" + id + "/epipolar";
+  const auto curve = client.Get((url + "?from=cam0&u=400&v=250").c_str());
+  ASSERT_EQ(curve->status, 200) << curve->body;
+  const json body = JsonOf(curve);
+  EXPECT_EQ(body["from"], "cam0");
+  EXPECT_EQ(body["to"], "cam1");
+  ASSERT_TRUE(body["polylines"].is_array());
+  EXPECT_FALSE(body["polylines"].empty());
+  ExpectError(client.Get((url + "?from=cam2&u=1&v=2").c_str()), 400, "invalid_argument");
+  ExpectError(client.Get((url + "?from=cam1&u=1").c_str()), 400, "invalid_argument");
+  ExpectError(client.Get((url + "?from=cam1&u=abc&v=2").c_str()), 400, "invalid_argument");
 }
 
 // The real `calibration` job type through the service, on real catadioptric images, when both

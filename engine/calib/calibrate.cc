@@ -433,17 +433,18 @@ CalibrationReport Calibrate(const std::vector<CalibrationView>& views, int width
   timer.Restart();
   ceres::Solver::Summary summary;
   auto problem = std::make_unique<ceres::Problem>();
+  // Robust rounds, each followed by outlier rejection, then one plain least-squares solve over
+  // the inliers (the maximum-likelihood estimate, whose covariance the report gives).
   for (int round = 0;; ++round) {
     problem = std::make_unique<ceres::Problem>();
-    const bool last = round > options.max_rejection_rounds;
-    summary = Solve(options, !last, round, progress, &intrinsics, &states, problem.get());
+    const bool robust = round < options.max_rejection_rounds;
+    summary = Solve(options, robust, round, progress, &intrinsics, &states, problem.get());
     if (round == 0) report.solver.initial_cost = summary.initial_cost;
     report.solver.iterations += static_cast<int>(summary.iterations.size()) - 1;
     report.solver.num_rounds = round + 1;
-    if (last) break;
+    if (!robust) break;
     if (!RejectOutliers(intrinsics, options, &states, &report.images, &report.solver)) {
-      // Nothing rejected: one last plain least-squares solve over the inliers.
-      round = options.max_rejection_rounds;
+      round = options.max_rejection_rounds - 1;  // nothing rejected: the plain solve is next
     }
     if (static_cast<int>(states.size()) < options.min_views) {
       ThrowTooFewViews(report.images, static_cast<int>(states.size()), options);

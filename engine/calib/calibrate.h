@@ -37,7 +37,8 @@ struct CalibrationOptions {
   // Robust loss (Huber) scale on pixel residuals; 0 for plain least squares.
   double huber_loss_px = 1.0;
   // A corner whose error exceeds max(outlier_sigmas * robust std, min_outlier_px) after a solve
-  // is rejected and the problem re-solved, at most max_rejection_rounds times.
+  // is rejected and the problem re-solved, at most max_rejection_rounds times; 0 turns
+  // rejection (and the robust loss) off.
   double outlier_sigmas = 4.0;
   double min_outlier_px = 1.0;
   int max_rejection_rounds = 3;

@@ -24,9 +24,9 @@ inline ceres::Solver::Options MakeCalibrationSolverOptions(int num_parameter_blo
   options.max_num_iterations = max_num_iterations;
   options.num_threads = num_threads;
   // Tolerances tight enough to reach the minimum on every set, without tuning per set.
-  options.function_tolerance = 1e-12;
-  options.gradient_tolerance = 1e-12;
-  options.parameter_tolerance = 1e-12;
+  options.function_tolerance = 1e-10;
+  options.gradient_tolerance = 1e-10;
+  options.parameter_tolerance = 1e-10;
   options.logging_type = ceres::SILENT;
   return options;
 }

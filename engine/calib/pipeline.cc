@@ -205,7 +205,7 @@ CalibrationReport CalibrateImages(const std::filesystem::path& dir,
   if (options.redetect_with_model && RedetectMissed(dir, board, options, report.camera, progress,
                                                     &views)) {
     report = Calibrate(views, width, height, board, options.calibrate,
-                       ScaledSink(progress, 0.85, 1.0));
+                       ScaledSink(progress, 0.85, 0.95));
   }
   if (!overlay_dir.empty()) {
     std::filesystem::create_directories(overlay_dir);
@@ -216,6 +216,9 @@ CalibrationReport CalibrateImages(const std::filesystem::path& dir,
                   DrawCalibrationOverlay(image, image_report, options.overlay_error_scale));
     }
   }
+  progress.Report(1.0, "done",
+                  std::to_string(report.num_views_used) + " views, RMS " +
+                      std::to_string(report.rms_px) + " px");
   return report;
 }
 

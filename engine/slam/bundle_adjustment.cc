@@ -269,8 +269,10 @@ BundleAdjustmentReport BundleAdjust(const StereoRig& rig, const std::vector<int>
       SolveOnce(rig, free_set, candidates, options, options.max_iterations, map, &report);
   report.iterations = static_cast<int>(summary.iterations.size());
   RmsAndPrune(rig, free_set, candidates, options.max_reprojection_error_px, true, map, &report);
-  if (report.num_observations_pruned > 0) {
-    // A second, shorter solve without the pruned outliers' pull.
+  // A second, shorter solve without the pruned outliers' pull, when they were more than a few:
+  // under the robust loss a handful of outliers barely moves the solution.
+  const int num_observations = report.num_residuals / 2;
+  if (report.num_observations_pruned > std::max(10, num_observations / 500)) {
     summary = SolveOnce(rig, free_set, candidates, options,
                         std::max(5, options.max_iterations / 2), map, &report);
     report.iterations += static_cast<int>(summary.iterations.size());

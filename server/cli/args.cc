@@ -33,7 +33,7 @@ std::string ArgParser::Help() const {
      << summary_ << "\n\noptions:\n";
   for (const auto& name : order_) {
     const Option& option = options_.at(name);
-    os << "  --" << name << (option.is_flag ? "" : " VALUE") << "\n      " << option.help;
+    os << "  " << (name.size() == 1 ? "-" : "--") << name << (option.is_flag ? "" : " VALUE") << "\n      " << option.help;
     if (!option.is_flag && !option.default_value.empty()) {
       os << " (default: " << option.default_value << ")";
     }
@@ -52,8 +52,10 @@ bool ArgParser::Parse(const std::vector<std::string>& args) {
       exit_code_ = 0;
       return false;
     }
-    if (arg.rfind("--", 0) == 0 && arg.size() > 2) {
-      std::string name = arg.substr(2), value;
+    // Options are `--name VALUE`, `--name=VALUE`, or `-x VALUE` for one-letter names.
+    const bool short_option = arg.size() == 2 && arg[0] == '-' && arg[1] != '-';
+    if ((arg.rfind("--", 0) == 0 && arg.size() > 2) || short_option) {
+      std::string name = arg.substr(short_option ? 1 : 2), value;
       const auto eq = name.find('=');
       bool has_inline_value = false;
       if (eq != std::string::npos) {
@@ -63,7 +65,7 @@ bool ArgParser::Parse(const std::vector<std::string>& args) {
       }
       const auto it = options_.find(name);
       if (it == options_.end()) {
-        std::cerr << "omnirig " << command_ << ": unknown option --" << name
+        std::cerr << "omnirig " << command_ << ": unknown option " << arg
                   << " (see --help)\n";
         exit_code_ = 2;
         return false;

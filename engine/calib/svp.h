@@ -1,0 +1,51 @@
+#pragma once
+// Single-viewpoint check (the paper's section 2.2, Fig. 3): a catadioptric sensor has a single
+// viewpoint only when the camera sits at the mirror's second focus. Then the mirror's rim, a
+// circle of known radius at a known height above the mirror's focus, projects where the
+// calibrated model predicts it. This predicts the rim circle in the image, finds the actual rim
+// (radial intensity profiles around the prediction, strongest dark-bright edge, robust circle
+// fit) and reports the offset.
+
+#include <optional>
+#include <string>
+
+#include <Eigen/Core>
+#include <opencv2/core.hpp>
+
+#include "engine/geometry/camera_model.h"
+
+namespace omnirig {
+
+// The mirror's rim in the model (mirror) frame: a circle of radius rim_radius_m in the plane
+// z = rim_height_m, centred on the z axis. For a hyperbolic mirror z^2/a^2 - r^2/b^2 = 1 with its
+// focus at the origin, rim_height_m is the rim's z minus the focus' z.
+struct MirrorRim {
+  double rim_radius_m = 0.0;
+  double rim_height_m = 0.0;
+  void Check() const;
+};
+
+struct SvpCheckOptions {
+  double search_margin_px = 40.0;  // radial search range around the predicted rim
+  int num_profiles = 360;          // radial profiles, evenly spaced in angle
+  double inlier_px = 2.0;          // circle-fit inlier distance
+  void Check() const;
+};
+
+struct SvpCheckReport {
+  Eigen::Vector3d predicted_circle_px = Eigen::Vector3d::Zero();  // u, v, radius
+  std::optional<Eigen::Vector3d> found_circle_px;                 // nullopt when not found
+  double centre_offset_px = 0.0;  // |found centre - predicted centre|
+  double radius_offset_px = 0.0;  // found radius - predicted radius
+  int num_edge_points = 0;        // inliers of the fit
+  std::string reason;             // why the rim was not found
+};
+
+// Throws InvalidArgument for an empty image, a rim that does not project, or invalid options.
+SvpCheckReport CheckSingleViewpoint(const cv::Mat& image, const CameraModel& camera,
+                                    const MirrorRim& rim, const SvpCheckOptions& options);
+
+// The image with the predicted rim (red) and the found rim (green), and the offsets as text.
+cv::Mat DrawSvpOverlay(const cv::Mat& image, const SvpCheckReport& report);
+
+}  // namespace omnirig
