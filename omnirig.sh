@@ -13,6 +13,8 @@ APT_PACKAGES=(build-essential cmake ninja-build ccache pkg-config git
   nlohmann-json3-dev libsqlite3-dev sqlite3 googletest libgtest-dev libbenchmark-dev
   nodejs npm chromium curl)
 JOBS=${OMNIRIG_JOBS:-$(nproc)}
+# Cache compiles by paths relative to the checkout, so that a second clone reuses them.
+export CCACHE_BASEDIR="$ROOT"
 
 log() { printf '\033[1m[omnirig]\033[0m %s\n' "$*" >&2; }
 
