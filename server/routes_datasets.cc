@@ -1,6 +1,7 @@
 // Datasets and their images: create, list, get, delete; idempotent PUT of one image and
 // multipart POST of many, streamed to disk with limits checked before the body is read.
 
+#include <algorithm>
 #include <cstdlib>
 
 #include "api/service_json.h"
@@ -75,7 +76,7 @@ class ImageUpload {
   }
 
   storage::ImageRecord Commit() {
-    const storage::ImageHeader header = storage::ProbeImageHeader(head_);
+    const storage::ImageHeader header = ProbeUpload();
     if (header.status == storage::ImageHeader::Status::kNotAnImage) {
       throw HttpError(415, "unsupported_media_type", name_ + ": " + header.problem,
                       {{"name", name_}});
@@ -96,6 +97,26 @@ class ImageUpload {
   }
 
  private:
+  // Images, and one kind of text file: a ground-truth trajectory in TUM format (NAME.tum) that a
+  // slam job can evaluate against; the job parses it and names any bad line.
+  storage::ImageHeader ProbeUpload() const {
+    const std::string suffix = ".tum";
+    if (name_.size() > suffix.size() &&
+        name_.compare(name_.size() - suffix.size(), suffix.size(), suffix) == 0) {
+      storage::ImageHeader header;
+      const bool text = std::all_of(head_.begin(), head_.end(), [](char c) {
+        return c == '\n' || c == '\r' || c == '\t' || (c >= 32 && c < 127);
+      });
+      header.status = text ? storage::ImageHeader::Status::kOk
+                           : storage::ImageHeader::Status::kNotAnImage;
+      header.format = "tum";
+      header.content_type = "text/plain";
+      header.problem = text ? "" : "a .tum trajectory must be plain text";
+      return header;
+    }
+    return storage::ProbeImageHeader(head_);
+  }
+
   void CheckCount() {
     const auto current = state_.store->GetDataset(dataset_.id);
     if (current && current->image_count >= state_.options.max_images_per_dataset &&

@@ -187,6 +187,22 @@ TEST_F(ServerApiTest, RefusesBadUploads) {
   }
 }
 
+TEST_F(ServerApiTest, AcceptsATumTrajectoryBesideTheImages) {
+  auto& client = Start(Options());
+  const std::string id = CreateDataset(client);
+  const std::string base = "/api/v1/datasets/" + id + "/images/";
+  const auto stored = client.Put((base + "trajectory.tum").c_str(),
+                                 "# t tx ty tz qx qy qz qw\n0.0 0 0 0 0 0 0 1\n", "text/plain");
+  ASSERT_TRUE(stored);
+  EXPECT_EQ(stored->status, 201) << stored->body;
+  EXPECT_EQ(JsonOf(stored)["content_type"], "text/plain");
+  ExpectError(client.Put((base + "binary.tum").c_str(), std::string("\x89\x01\x02", 3),
+                         "text/plain"),
+              415, "unsupported_media_type");
+  ExpectError(client.Put((base + "notes.txt").c_str(), "text", "text/plain"), 415,
+              "unsupported_media_type");
+}
+
 TEST_F(ServerApiTest, ImageCountAndMultipartSizeLimits) {
   auto options = Options();
   options.max_images_per_dataset = 2;

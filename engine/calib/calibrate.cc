@@ -309,8 +309,9 @@ std::array<double, I::kNumParams> IntrinsicsStd(ceres::Problem* problem,
   const int dof = num_residuals - num_free_parameters;
   if (dof <= 0 || problem->IsParameterBlockConstant(intrinsics->params.data())) return stds;
   ceres::Covariance::Options covariance_options;
-  covariance_options.algorithm_type = ceres::DENSE_SVD;
-  covariance_options.null_space_rank = -1;
+  // SPARSE_QR: DENSE_SVD would run Ceres' own instantiation of Eigen's SVD next to ours (one
+  // definition, two allocation settings: AddressSanitizer reports a bad free).
+  covariance_options.algorithm_type = ceres::SPARSE_QR;
   ceres::Covariance covariance(covariance_options);
   const double* block = intrinsics->params.data();
   const std::vector<std::pair<const double*, const double*>> blocks = {{block, block}};

@@ -97,8 +97,10 @@ int NumFreeParameters(const ceres::Problem& problem) {
 RigUncertainty EstimateUncertainty(ceres::Problem* problem, RigBlocks* blocks) {
   RigUncertainty uncertainty;
   ceres::Covariance::Options covariance_options;
-  covariance_options.algorithm_type = ceres::DENSE_SVD;
-  covariance_options.null_space_rank = -1;  // weakly observable intrinsics get a pseudo-inverse
+  // SPARSE_QR (SuiteSparse) rather than DENSE_SVD: the static libceres' Eigen SVD
+  // instantiations clash with ours under AddressSanitizer (a bad free inside BDCSVD). A
+  // rank-deficient Jacobian makes Compute() fail, and the uncertainty is then reported invalid.
+  covariance_options.algorithm_type = ceres::SPARSE_QR;
   ceres::Covariance covariance(covariance_options);
   const double* rig = blocks->cam0_from_cam1.data();
   const std::vector<std::pair<const double*, const double*>> blocks_wanted = {{rig, rig}};

@@ -144,12 +144,7 @@ int RunCalibrate(const Args& argv) {
   args.AddOption("overlays", "", "write overlay_<image>.png files into this directory");
   args.AddOption("threads", "2", "solver threads");
   args.SetPositional("IMAGES...", "board images (paths)");
-  // The issue spells the output option "-o"; the shared parser knows only "--name".
-  Args normalised = argv;
-  for (std::string& arg : normalised) {
-    if (arg == "-o") arg = "--o";
-  }
-  if (!args.Parse(normalised)) return args.exit_code();
+  if (!args.Parse(argv)) return args.exit_code();
   try {
     OMNIRIG_CHECK(!args.positional().empty(), "no images given (see --help)");
     api::CalibrationRequest request = api::CalibrationRequestFromJson(ParamsFromArgs(args));

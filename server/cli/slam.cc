@@ -62,12 +62,7 @@ int RunSlam(const Args& raw_args) {
   args.AddOption("options", "", "JSON file with the job's \"options\" object");
   args.AddOption("threads", "2", "worker threads");
   args.SetPositional("DIR", "folder with cam0/ and cam1/ images, paired and ordered by name");
-  // The issue spells the output option "-o"; the shared parser knows only "--name".
-  Args normalised = raw_args;
-  for (std::string& arg : normalised) {
-    if (arg == "-o") arg = "--o";
-  }
-  if (!args.Parse(normalised)) return args.exit_code();
+  if (!args.Parse(raw_args)) return args.exit_code();
   OMNIRIG_CHECK(args.positional().size() == 1, "expected one DIR (see --help)");
   OMNIRIG_CHECK(args.Has("rig"), "--rig is required (a relative_pose result JSON)");
   const StereoRig rig = api::RigFromJson(ReadJsonFile(args.Get("rig"), "--rig"));
