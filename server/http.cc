@@ -2,9 +2,11 @@
 
 #include <httplib.h>
 
+#include <atomic>
 #include <chrono>
 #include <fstream>
 #include <regex>
+#include <thread>
 #include <vector>
 
 #include "api/service_json.h"
@@ -128,6 +130,7 @@ struct HttpServer::Impl {
   RequestCounter counter;
   httplib::Server server;
   std::thread thread;
+  std::atomic<bool> listen_returned{false};
 
   void Dispatch(const RouteInfo& route, const httplib::Request& req, httplib::Response& res,
                 const httplib::ContentReader* reader);
@@ -288,7 +291,16 @@ int HttpServer::Bind(const std::string& host, int port) {
 }
 
 void HttpServer::Start() {
-  impl_->thread = std::thread([this] { impl_->server.listen_after_bind(); });
+  impl_->listen_returned = false;
+  impl_->thread = std::thread([this] {
+    impl_->server.listen_after_bind();
+    impl_->listen_returned = true;
+  });
+  // httplib's stop() does nothing until the listening thread has marked the server running, so a
+  // Stop() right after Start() would leave accept() blocked forever: wait for that mark.
+  while (!impl_->server.is_running() && !impl_->listen_returned) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
 }
 
 void HttpServer::Stop() {
