@@ -236,10 +236,8 @@ void RegisterCalibrationJobType() {
     const CalibrationReport report =
         CalibrateImages(context.dataset_dir, context.image_names, request.board, request.options,
                         context.output_dir, context.progress);
-    if (context.log) {
-      context.log("calibration: RMS " + std::to_string(report.rms_px) + " px over " +
-                  std::to_string(report.num_views_used) + " views; " + report.solver.brief);
-    }
+    context.Log("calibration: RMS " + std::to_string(report.rms_px) + " px over " +
+                std::to_string(report.num_views_used) + " views; " + report.solver.brief);
     return CalibrationReportToJson(report);
   };
   RegisterJobType(std::move(type));

@@ -26,7 +26,22 @@ struct JobContext {
   // Loads the result JSON of an earlier succeeded job (e.g. the calibrations a relative pose
   // job uses); throws InvalidArgument naming the job when it has none.
   std::function<nlohmann::json(const std::string& job_id)> load_result;
+
+  // Appends a line to the job's log when the service gave it one.
+  void Log(const std::string& line) const {
+    if (log) log(line);
+  }
 };
+
+// A sink for one part of a job: its fractions in [0, 1] map onto [begin, end] of `progress`,
+// sharing its cancellation.
+inline ProgressSink SubRange(const ProgressSink& progress, double begin, double end) {
+  return {[progress, begin, end](double fraction, const std::string& stage,
+                                 const std::string& message) {
+            progress.Report(begin + (end - begin) * fraction, stage, message);
+          },
+          progress.is_cancelled};
+}
 
 struct JobType {
   std::string name;

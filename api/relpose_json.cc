@@ -166,18 +166,6 @@ struct CameraSource {
   json provenance;
 };
 
-// Progress over [begin, end) of the whole job.
-ProgressSink SubRange(const ProgressSink& progress, double begin, double end) {
-  return {[progress, begin, end](double fraction, const std::string& stage,
-                                 const std::string& message) {
-            progress.Report(begin + (end - begin) * fraction, stage, message);
-          },
-          progress.is_cancelled};
-}
-
-void Log(const JobContext& context, const std::string& line) {
-  if (context.log) context.log(line);
-}
 
 CameraSource LoadCalibration(const JobContext& context, const std::string& job_id,
                              const std::string& camera) {
@@ -288,7 +276,7 @@ json RunRelativePoseJob(const json& params, const JobContext& context) {
     detections[c] = DetectAll(images[c], names[c], parsed.board,
                               SubRange(context.progress, 0.1 + 0.3 * c, 0.35 + 0.3 * c));
     if (!cameras[c]) {
-      Log(context, "calibrating cam" + std::to_string(c) + " from its own images");
+      context.Log("calibrating cam" + std::to_string(c) + " from its own images");
       cameras[c] = CalibrateFromOwnImages(names[c], detections[c], images[c][0].cols,
                                           images[c][0].rows, parsed.board, context,
                                           SubRange(context.progress, 0.35 + 0.3 * c, 0.4 + 0.3 * c));
@@ -304,9 +292,9 @@ json RunRelativePoseJob(const json& params, const JobContext& context) {
       EstimateRelativePose(cameras[0]->model, cameras[1]->model, parsed.board, board_pairs,
                            options, SubRange(context.progress, 0.7, 1.0));
   if (!report.success) throw InvalidArgument("no relative pose: " + report.message);
-  Log(context, "baseline " + std::to_string(report.baseline_m * 1e3) + " mm from " +
-                   std::to_string(report.num_pairs_used) + " pairs, RMS " +
-                   std::to_string(report.rms_px) + " px");
+  context.Log("baseline " + std::to_string(report.baseline_m * 1e3) + " mm from " +
+              std::to_string(report.num_pairs_used) + " pairs, RMS " +
+              std::to_string(report.rms_px) + " px");
   json result = RelativePoseResultToJson(report, cameras[0]->camera_json, cameras[1]->camera_json,
                                          options.refine_intrinsics);
   result["calibrations"] = {{"cam0", cameras[0]->provenance}, {"cam1", cameras[1]->provenance}};

@@ -95,19 +95,6 @@ json PairJson(const std::string& name, const StereoPairReport& report) {
           {"median_range_std_m", Median(stds)}};
 }
 
-// Maps a pair's progress in [0, 1] onto its share [begin, end] of the job.
-ProgressSink SubProgress(const ProgressSink& progress, double begin, double end) {
-  return {[progress, begin, end](double fraction, const std::string& stage,
-                                 const std::string& message) {
-            progress.Report(begin + (end - begin) * fraction, stage, message);
-          },
-          progress.is_cancelled};
-}
-
-void Log(const JobContext& context, const std::string& line) {
-  if (context.log) context.log(line);
-}
-
 }  // namespace
 
 StereoReconstructParams StereoReconstructParamsFromJson(const json& params) {
@@ -170,8 +157,8 @@ json RunStereoReconstructJob(const json& params, const JobContext& context) {
     try {
       report =
           ReconstructStereoPair(rig, image0, image1, parsed.options,
-                                SubProgress(context.progress, static_cast<double>(k) / pairs.size(),
-                                            static_cast<double>(k + 1) / pairs.size()));
+                                SubRange(context.progress, static_cast<double>(k) / pairs.size(),
+                                         static_cast<double>(k + 1) / pairs.size()));
     } catch (const InvalidArgument& e) {
       throw InvalidArgument("pair '" + pairs[k].name + "': " + e.what());
     }
@@ -181,8 +168,8 @@ json RunStereoReconstructJob(const json& params, const JobContext& context) {
       WriteColoredPly(context.output_dir / artifact, report.points);
       pair["artifact"] = artifact;
     }
-    Log(context, "pair " + pairs[k].name + ": " + std::to_string(report.num_matches) +
-                     " matches, " + std::to_string(report.points.size()) + " points");
+    context.Log("pair " + pairs[k].name + ": " + std::to_string(report.num_matches) +
+                " matches, " + std::to_string(report.points.size()) + " points");
     result["pairs"].push_back(pair);
     all_points.insert(all_points.end(), report.points.begin(), report.points.end());
   }
