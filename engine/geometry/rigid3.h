@@ -8,7 +8,7 @@
 //
 // Parameter blocks: Ceres problems hold a pose as one block of 7 doubles in Eigen's storage
 // order [qx, qy, qz, qw, tx, ty, tz] with ceres::EigenQuaternionManifold on the first four
-// (see PoseManifold() in engine/geometry/ceres_pose.h). The paper and JSON use (w, x, y, z);
+// (see NewPoseManifold() in engine/calib/ceres_util.h). The paper and JSON use (w, x, y, z);
 // the conversion happens only in ToWxyz()/FromWxyz() below.
 
 #include <array>
