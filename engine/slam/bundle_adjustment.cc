@@ -5,6 +5,7 @@
 #include <map>
 #include <set>
 
+#include "engine/calib/ceres_util.h"
 #include "engine/util/check.h"
 #include "engine/util/timer.h"
 
@@ -35,10 +36,6 @@ bool Adjustable(const Landmark& landmark, const FrameFlags& free_frames, const S
     two_frames = two_frames || o.frame != first_frame;
   }
   return seen_by_free && two_frames;
-}
-
-ceres::Manifold* NewPoseManifold() {
-  return new ceres::ProductManifold<ceres::EigenQuaternionManifold, ceres::EuclideanManifold<3>>();
 }
 
 // Squared pixel error of one observation, or nullopt when the point does not project.
