@@ -97,15 +97,26 @@ TEST_F(ServerApiTest, HealthMetricsAndStaticPage) {
   ASSERT_EQ(page->status, 200);
   EXPECT_NE(page->body.find("omnirig test page"), std::string::npos);
   ExpectError(client.Get("/api/v1/nothing-here"), 404, "not_found");
-  const auto metrics = client.Get("/metrics");
+  // Requests are counted by httplib's logger, which runs after the response has been written
+  // (on another connection's thread), so poll until the earlier requests show up.
+  const std::string health_line =
+      "omnirig_http_requests_total{route=\"GET /api/v1/health\",status=\"200\"} 1";
+  const std::string not_found_line = "route=\"unmatched\",status=\"404\"";
+  httplib::Result metrics = client.Get("/metrics");
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(5);
+  while (metrics && metrics->status == 200 &&
+         (metrics->body.find(health_line) == std::string::npos ||
+          metrics->body.find(not_found_line) == std::string::npos) &&
+         std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    metrics = client.Get("/metrics");
+  }
+  ASSERT_TRUE(metrics);
   ASSERT_EQ(metrics->status, 200);
   EXPECT_NE(metrics->body.find("omnirig_jobs{state=\"queued\"} 0"), std::string::npos);
   EXPECT_NE(metrics->body.find("omnirig_queue_depth 0"), std::string::npos);
-  EXPECT_NE(metrics->body.find(
-                "omnirig_http_requests_total{route=\"GET /api/v1/health\",status=\"200\"} 1"),
-            std::string::npos)
-      << metrics->body;
-  EXPECT_NE(metrics->body.find("route=\"unmatched\",status=\"404\""), std::string::npos);
+  EXPECT_NE(metrics->body.find(health_line), std::string::npos) << metrics->body;
+  EXPECT_NE(metrics->body.find(not_found_line), std::string::npos) << metrics->body;
 }
 
 TEST_F(ServerApiTest, DatasetLifecycleAndIdempotentUpload) {
