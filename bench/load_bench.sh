@@ -5,7 +5,9 @@
 #   2. upload throughput: a 200 MB dataset (50 PNG files of 4 MB) PUT over loopback;
 #   3. SIGKILL-and-restart cycles during a batch of jobs (tests/server_crash with 20 cycles).
 # Usage: bench/load_bench.sh [BUILD_DIR]   (default: build). Needs wrk, curl, python3.
+# LOAD_BENCH_PARTS (default "poll upload crash") picks the parts to run.
 set -euo pipefail
+PARTS=${LOAD_BENCH_PARTS:-poll upload crash}
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
 BUILD=$(cd "${1:-$ROOT/build}" && pwd)
 OMNIRIG=$BUILD/server/omnirig
@@ -33,13 +35,27 @@ start_server() {  # args...
   [[ -n $PORT ]] || { cat "$WORK/serve.err" >&2; exit 1; }
   URL=http://127.0.0.1:$PORT
 }
+# CPU seconds (user + system) the server process has used so far.
+server_cpu_s() { awk -v hz="$(getconf CLK_TCK)" '{printf "%.2f", ($14 + $15) / hz}' "/proc/$SERVER_PID/stat"; }
+# CPU seconds of the server's threads at niceness 0 (HTTP, not the niced workers and solvers),
+# from the scheduler's exact run times (schedstat), not tick samples.
+http_cpu_s() {
+  local total=0 task
+  for task in /proc/"$SERVER_PID"/task/*; do
+    [[ $(sed 's/^.*) //' "$task/stat" 2>/dev/null | cut -d' ' -f17) == 0 ]] || continue
+    total=$(( total + $(cut -d' ' -f1 "$task/schedstat" 2>/dev/null || echo 0) ))
+  done
+  python3 -c "print(f'{$total / 1e9:.3f}')"
+}
 json_field() { python3 -c "import json,sys; print(json.load(sys.stdin)[sys.argv[1]])" "$1"; }
 
 echo "== omnirig load benchmark ($(nproc) cores, $(date -u +%FT%TZ))"
-start_server --http-threads 256
+echo "load_average_start $(cut -d' ' -f1-3 /proc/loadavg)"
+start_server --http-threads 256 ${LOAD_BENCH_SERVE_ARGS:-}  # e.g. "--worker-nice 19"
 echo "server on $URL"
 
 # 1. Polling while the worker computes.
+if [[ $PARTS == *poll* ]]; then
 DATASET=$(curl -sf -X POST "$URL/api/v1/datasets" -d '{"name": "load"}' | json_field id)
 BUSY=no
 if [[ -d $REAL ]] && curl -sf "$URL/api/v1/health" | grep -q '"calibration"'; then
@@ -47,7 +63,8 @@ if [[ -d $REAL ]] && curl -sf "$URL/api/v1/health" | grep -q '"calibration"'; th
     curl -sf -X PUT --data-binary @"$image" "$URL/api/v1/datasets/$DATASET/images/$(basename "$image")" > /dev/null
   done
   PARAMS='{"board": {"type": "checkerboard", "cols": 6, "rows": 7, "square_size_mm": 30}}'
-  for _ in $(seq 14); do
+  # Enough jobs that the worker is still busy when polling ends (one takes ~1.5-3 s).
+  for _ in $(seq 60); do
     JOB=$(curl -sf -X POST "$URL/api/v1/jobs" \
       -d "{\"type\": \"calibration\", \"dataset\": \"$DATASET\", \"params\": $PARAMS}" | json_field id)
   done
@@ -56,11 +73,27 @@ if [[ -d $REAL ]] && curl -sf "$URL/api/v1/health" | grep -q '"calibration"'; th
 fi
 POLL_JOB=${JOB:-missing}
 echo "polling job $POLL_JOB with workers busy: $BUSY"
+CPU_START=$(server_cpu_s)
+HTTP_CPU_START=$(http_cpu_s)
 DELAY_MS=100 wrk -t2 -c200 -d20s -s "$ROOT/bench/load_poll.lua" "$URL/api/v1/jobs/$POLL_JOB" \
   | tee "$WORK/wrk.txt" | grep -E '^poll_|Requests/sec|Socket errors|Non-2xx'
+# Server CPU over the run includes the busy worker; the idle-server cost per poll is measured
+# separately below, with the queue empty.
+echo "poll_server_cpu_s $(python3 -c "print(f'{$(server_cpu_s) - $CPU_START:.2f}')")"
+REQUESTS=$(sed -n 's/^poll_requests //p' "$WORK/wrk.txt")
+python3 -c "print(f'poll_http_cpu_us_per_request {($(http_cpu_s) - $HTTP_CPU_START) * 1e6 / max(1, $REQUESTS):.0f}')"
+echo "poll_niced_threads $(cat /proc/"$SERVER_PID"/task/*/stat | sed 's/^.*) //' | awk '$17 > 0' | wc -l)"
+echo "poll_load_average $(cut -d' ' -f1-3 /proc/loadavg)"
 echo "busy workers after polling: $(curl -sf "$URL/api/v1/health" | json_field busy_workers)"
+# The upload is measured with the workers idle: cancel what is left of the batch.
+for job in $(curl -sf "$URL/api/v1/jobs?limit=10000" |
+    python3 -c "import json,sys; print(' '.join(j['id'] for j in json.load(sys.stdin) if j['state'] in ('queued', 'running')))"); do
+  curl -sf -o /dev/null -X POST "$URL/api/v1/jobs/$job/cancel" || true
+done
+fi
 
 # 2. Upload throughput: 50 x 4 MB PNG (random pixels, stored uncompressed-ish by zlib level 0).
+if [[ $PARTS == *upload* ]]; then
 python3 - "$WORK/upload" <<'PY'
 import os, struct, sys, zlib
 out = sys.argv[1]; os.makedirs(out)
@@ -76,15 +109,30 @@ PY
 UPLOAD_DATASET=$(curl -sf -X POST "$URL/api/v1/datasets" -d '{"name": "upload"}' | json_field id)
 BYTES=$(du -cb "$WORK"/upload/*.png | tail -1 | cut -f1)
 START=$(date +%s.%N)
-ls "$WORK"/upload/*.png | xargs -P 4 -I{} sh -c \
-  'curl -sf -o /dev/null -H "Expect:" -X PUT --data-binary @"$1" "$2/$(basename "$1")"' _ {} \
-  "$URL/api/v1/datasets/$UPLOAD_DATASET/images"
+CPU_START=$(server_cpu_s)
+# 4 parallel clients, each one curl with a keep-alive connection PUTting its share of the
+# files in turn (as `omnirig submit` does), so the client's process start-up is not measured.
+LANE_PIDS=()
+for lane in 0 1 2 3; do
+  ARGS=()
+  i=0
+  for image in "$WORK"/upload/*.png; do
+    (( i++ % 4 == lane )) && ARGS+=(-T "$image" "$URL/api/v1/datasets/$UPLOAD_DATASET/images/$(basename "$image")")
+  done
+  curl -sf -H "Expect:" "${ARGS[@]}" > /dev/null &
+  LANE_PIDS+=($!)
+done
+for pid in "${LANE_PIDS[@]}"; do wait "$pid"; done
 END=$(date +%s.%N)
 python3 -c "import sys; b, t = int(sys.argv[1]), float(sys.argv[3]) - float(sys.argv[2]); print(f'upload_mb {b/1e6:.0f}\nupload_s {t:.2f}\nupload_mb_per_s {b/1e6/t:.0f}')" "$BYTES" "$START" "$END"
+echo "upload_server_cpu_s $(python3 -c "print(f'{$(server_cpu_s) - $CPU_START:.2f}')")"
 curl -sf "$URL/api/v1/datasets/$UPLOAD_DATASET" | python3 -c "import json,sys; d=json.load(sys.stdin); print('uploaded_images', d['image_count'])"
+echo "upload_load_average $(cut -d' ' -f1-3 /proc/loadavg)"
+fi
 kill -TERM "$SERVER_PID"; wait "$SERVER_PID" || true; SERVER_PID=
 
 # 3. Kill-restart cycles (the crash integration test, scaled up).
+if [[ $PARTS == *crash* ]]; then
 START=$(date +%s.%N)
 if OMNIRIG_CRASH_CYCLES=20 OMNIRIG_CRASH_JOBS=10 "$CRASH_TEST" --gtest_filter='*Repeated*' > "$WORK/crash.txt" 2>&1; then
   RESULT=passed
@@ -93,3 +141,4 @@ else
 fi
 END=$(date +%s.%N)
 python3 -c "import sys; print(f'kill_restart_cycles 20\nkill_restart_result {sys.argv[1]}\nkill_restart_s {float(sys.argv[3]) - float(sys.argv[2]):.1f}')" "$RESULT" "$START" "$END"
+fi

@@ -1,7 +1,9 @@
 #include "server/job_runner.h"
 
+#include <atomic>
 #include <chrono>
 #include <cstdio>
+#include <memory>
 #include <mutex>
 
 #include <nlohmann/json.hpp>
@@ -83,6 +85,47 @@ class ProgressWriter {
   std::string last_stage_;
 };
 
+// A cancel recorded in the store by another process (a server on another machine sharing the
+// queue): engine threads ask often, so the store is read at most once per interval, by
+// whichever thread asks first after it has passed. Thread-safe and lock-free.
+class StoreCancelWatcher {
+ public:
+  StoreCancelWatcher(storage::JobStore& store, std::string job_id, double interval_s)
+      : store_(store),
+        job_id_(std::move(job_id)),
+        interval_ns_(static_cast<int64_t>(interval_s * 1e9)),
+        next_check_ns_(NowNs() + interval_ns_) {}
+
+  bool CancelRequested() {
+    if (seen_.load(std::memory_order_relaxed)) return true;
+    if (interval_ns_ <= 0) return false;
+    const int64_t now = NowNs();
+    int64_t next = next_check_ns_.load(std::memory_order_relaxed);
+    if (now < next || !next_check_ns_.compare_exchange_strong(next, now + interval_ns_)) {
+      return false;
+    }
+    try {
+      const auto job = store_.GetJob(job_id_);
+      if (job && job->cancel_requested) seen_ = true;
+    } catch (const std::exception&) {
+      // A store hiccup must not stop the job; the next check asks again.
+    }
+    return seen_.load();
+  }
+
+ private:
+  static int64_t NowNs() {
+    return std::chrono::duration_cast<std::chrono::nanoseconds>(
+               std::chrono::steady_clock::now().time_since_epoch())
+        .count();
+  }
+  storage::JobStore& store_;
+  std::string job_id_;
+  int64_t interval_ns_;
+  std::atomic<int64_t> next_check_ns_;
+  std::atomic<bool> seen_{false};
+};
+
 api::JobContext BuildContext(const storage::JobRecord& job, storage::JobStore& store,
                              const storage::DataDir& data_dir, const JobRunOptions& options,
                              const JobRunFlags& flags, const fs::path& output_dir,
@@ -99,8 +142,10 @@ api::JobContext BuildContext(const storage::JobRecord& job, storage::JobStore& s
                                         const std::string& message) {
     progress.Report(fraction, stage, message);
   };
-  context.progress.is_cancelled = [flags] {
-    return (flags.cancel && flags.cancel->load()) || (flags.interrupt && flags.interrupt->load());
+  auto watcher = std::make_shared<StoreCancelWatcher>(store, job.id, options.store_cancel_check_s);
+  context.progress.is_cancelled = [flags, watcher] {
+    return (flags.cancel && flags.cancel->load()) ||
+           (flags.interrupt && flags.interrupt->load()) || watcher->CancelRequested();
   };
   context.log = [&log](const std::string& line) { log.Write(line); };
   context.load_result = [&store](const std::string& job_id) {

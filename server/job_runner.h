@@ -19,6 +19,9 @@ struct JobRunFlags {
 struct JobRunOptions {
   int num_threads = 1;
   double progress_interval_s = 0.2;
+  // How often a running job re-reads its cancel flag from the store, to see a cancel written
+  // by another process; 0 turns the check off.
+  double store_cancel_check_s = 0.2;
 };
 
 // Runs `job` (already claimed: state running, attempts counted). Never throws.

@@ -2,6 +2,7 @@
 // artifacts (with Content-Length, ETag and Range).
 
 #include <cmath>
+#include <filesystem>
 
 #include "api/job_types.h"
 #include "api/service_json.h"
@@ -9,6 +10,7 @@
 #include "engine/util/check.h"
 #include "server/json_views.h"
 #include "server/service.h"
+#include "storage/image_header.h"
 
 namespace omnirig::server {
 namespace {
@@ -154,9 +156,25 @@ void GetResult(ServiceState& state, const HttpRequest& request, HttpResponse& re
   response.body = *result;
 }
 
+// The log of a job that has not ended yet: the running attempt's log.txt as written so far
+// (JobLog flushes every line). It becomes a recorded artifact, with a hash, when the job ends.
+bool ServeLiveLog(ServiceState& state, const storage::JobRecord& job, HttpResponse& response) {
+  if (storage::IsTerminal(job.state) || job.attempts < 1) return false;
+  const std::filesystem::path path = state.data_dir->AttemptDir(job.id, job.attempts) / "log.txt";
+  std::error_code error;
+  const auto size = std::filesystem::file_size(path, error);
+  if (error) return false;
+  response.headers.emplace("Cache-Control", "no-store");
+  response.headers.emplace("Accept-Ranges", "bytes");
+  response.content_type = storage::ContentTypeForName("log.txt");
+  response.file = path;
+  response.file_size = static_cast<int64_t>(size);
+  return true;
+}
+
 void GetArtifact(ServiceState& state, const HttpRequest& request, HttpResponse& response) {
   const std::string& id = request.Param("id");
-  RequireJob(state, id);
+  const storage::JobRecord job = RequireJob(state, id);
   const std::string& name = request.Param("name");
   for (const storage::ArtifactRecord& artifact : state.store->ListArtifacts(id)) {
     if (artifact.name != name) continue;
@@ -172,6 +190,7 @@ void GetArtifact(ServiceState& state, const HttpRequest& request, HttpResponse& 
     response.file_size = artifact.size;
     return;
   }
+  if (name == "log.txt" && ServeLiveLog(state, job, response)) return;
   throw HttpError(404, "artifact_not_found", "job " + id + " has no artifact " + name);
 }
 

@@ -30,6 +30,8 @@ void DeclareOptions(cli::ArgParser& parser) {
                    "jobs run at the same time (half the cores by default)");
   parser.AddOption("threads-per-job", "", "solver threads per job (default: cores / workers)");
   parser.AddOption("http-threads", "128", "HTTP connection threads");
+  parser.AddOption("worker-nice", "10",
+                   "niceness of job threads (0-19), so status polls stay fast while jobs run");
   parser.AddOption("max-attempts", "3",
                    "runs a job may start before crashes make it fail ('interrupted')");
   parser.AddOption("max-file-mb", "256", "largest image upload, MB");
@@ -60,6 +62,7 @@ ServiceOptions ToOptions(const cli::ArgParser& parser) {
                                 ? DefaultThreadsPerJob(options.num_workers)
                                 : parser.GetInt("threads-per-job");
   options.http_threads = parser.GetInt("http-threads");
+  options.worker_nice = parser.GetInt("worker-nice");
   options.max_attempts = parser.GetInt("max-attempts");
   options.max_file_bytes = Megabytes(parser, "max-file-mb");
   options.max_dataset_bytes = Megabytes(parser, "max-dataset-mb");

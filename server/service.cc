@@ -14,6 +14,7 @@ void ServiceOptions::Check() const {
   OMNIRIG_CHECK(num_workers >= 1 && num_workers <= 256, "--workers must be in [1, 256]");
   OMNIRIG_CHECK(threads_per_job >= 1, "--threads-per-job must be at least 1");
   OMNIRIG_CHECK(http_threads >= 2, "--http-threads must be at least 2");
+  OMNIRIG_CHECK(worker_nice >= 0 && worker_nice <= 19, "--worker-nice must be in [0, 19]");
   OMNIRIG_CHECK(max_attempts >= 1, "--max-attempts must be at least 1");
   OMNIRIG_CHECK(max_file_bytes > 0 && max_dataset_bytes >= max_file_bytes,
                 "--max-file-mb must be positive and at most --max-dataset-mb");
@@ -73,6 +74,7 @@ Service::Service(const ServiceOptions& options) : state_(std::make_unique<Servic
   pool_options.num_workers = options.num_workers;
   pool_options.threads_per_job = options.threads_per_job;
   pool_options.progress_interval_s = options.progress_interval_s;
+  pool_options.nice = options.worker_nice;
   state.workers =
       std::make_unique<WorkerPool>(*state.store, *state.data_dir, state.metrics, pool_options);
 

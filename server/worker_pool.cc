@@ -111,8 +111,16 @@ void WorkerPool::RunJob(const storage::JobRecord& job) {
   const JobRunOptions run_options{options_.threads_per_job, options_.progress_interval_s};
   const storage::JobOutcome outcome = RunJobAttempt(
       job, store_, data_dir_, run_options, JobRunFlags{&running->cancel, &running->interrupt});
-  const bool handed_back =
+  bool handed_back =
       outcome.state == storage::JobState::kCanceled && running->interrupt && !running->cancel;
+  if (handed_back) {
+    // A drain interrupted it, unless a cancel was also written to the store by another process.
+    try {
+      const auto current = store_.GetJob(job.id);
+      handed_back = !(current && current->cancel_requested);
+    } catch (const std::exception&) {
+    }
+  }
   try {
     if (handed_back) {
       store_.RequeueJob(job.id);

@@ -41,6 +41,7 @@ class AtomicFileWriter {
   std::string buffer_;  // batches small appends (HTTP bodies arrive in 4 KiB pieces)
   int fd_ = -1;
   int64_t size_ = 0;
+  int64_t flushed_ = 0;  // bytes handed to the kernel (and queued for writeback)
   Sha256 hasher_;
   bool committed_ = false;
 };

@@ -16,7 +16,35 @@ Statement::Statement(sqlite3* db, const std::string& sql) : db_(db) {
   }
 }
 
-Statement::~Statement() { sqlite3_finalize(statement_); }
+Statement::Statement(Connection& connection, const std::string& sql) : db_(connection.handle()) {
+  Connection::CachedStatement& cached = connection.statements_[sql];
+  if (cached.in_use) {  // the same query nested in itself: a private copy
+    if (sqlite3_prepare_v2(db_, sql.c_str(), static_cast<int>(sql.size()), &statement_,
+                           nullptr) != SQLITE_OK) {
+      Throw(db_, "cannot prepare '" + sql + "'");
+    }
+    return;
+  }
+  if (!cached.statement && sqlite3_prepare_v2(db_, sql.c_str(), static_cast<int>(sql.size()),
+                                              &cached.statement, nullptr) != SQLITE_OK) {
+    connection.statements_.erase(sql);
+    Throw(db_, "cannot prepare '" + sql + "'");
+  }
+  statement_ = cached.statement;
+  cached.in_use = true;
+  cached_in_use_ = &cached.in_use;
+}
+
+Statement::~Statement() {
+  if (cached_in_use_) {
+    // Ends the statement's read transaction and frees its bound values for the next user.
+    sqlite3_reset(statement_);
+    sqlite3_clear_bindings(statement_);
+    *cached_in_use_ = false;
+  } else {
+    sqlite3_finalize(statement_);
+  }
+}
 
 Statement& Statement::Bind(int index, const std::string& value) {
   if (sqlite3_bind_text(statement_, index, value.data(), static_cast<int>(value.size()),
@@ -90,7 +118,10 @@ Connection::Connection(const std::string& path) {
   Exec("PRAGMA foreign_keys=ON");
 }
 
-Connection::~Connection() { sqlite3_close(db_); }
+Connection::~Connection() {
+  for (auto& [sql, cached] : statements_) sqlite3_finalize(cached.statement);
+  sqlite3_close(db_);
+}
 
 void Connection::Exec(const std::string& sql) {
   char* error = nullptr;

@@ -8,8 +8,11 @@
 #include <optional>
 #include <stdexcept>
 #include <string>
+#include <unordered_map>
 
 namespace omnirig::storage {
+
+class Connection;
 
 class SqliteError : public std::runtime_error {
  public:
@@ -19,6 +22,9 @@ class SqliteError : public std::runtime_error {
 class Statement {
  public:
   Statement(sqlite3* db, const std::string& sql);
+  // Reuses the connection's prepared copy of `sql` (reset when this Statement ends): a status
+  // poll then skips SQLite's parser and planner, most of its cost.
+  Statement(Connection& connection, const std::string& sql);
   ~Statement();
   Statement(const Statement&) = delete;
   Statement& operator=(const Statement&) = delete;
@@ -49,6 +55,7 @@ class Statement {
  private:
   sqlite3* db_;
   sqlite3_stmt* statement_ = nullptr;
+  bool* cached_in_use_ = nullptr;  // the cache entry's flag when borrowed from the cache
 };
 
 class Connection {
@@ -65,7 +72,13 @@ class Connection {
   int64_t changes() const { return sqlite3_changes(db_); }
 
  private:
+  friend class Statement;
+  struct CachedStatement {
+    sqlite3_stmt* statement = nullptr;
+    bool in_use = false;
+  };
   sqlite3* db_ = nullptr;
+  std::unordered_map<std::string, CachedStatement> statements_;
 };
 
 // BEGIN IMMEDIATE on construction (takes the write lock up front, so read-then-write

@@ -77,7 +77,7 @@ JobRecord ReadJob(const Statement& row) {
 }
 
 std::optional<JobRecord> SelectJob(Connection& db, const std::string& id) {
-  Statement select(db.handle(), std::string("SELECT ") + kJobColumns + " FROM jobs WHERE id = ?");
+  Statement select(db, std::string("SELECT ") + kJobColumns + " FROM jobs WHERE id = ?");
   select.Bind(1, id);
   if (!select.Step()) return std::nullopt;
   return ReadJob(select);
@@ -145,7 +145,7 @@ SqliteJobStore::ReaderLease SqliteJobStore::Reader() {
 
 void SqliteJobStore::Migrate() {
   std::lock_guard<std::mutex> lock(writer_mutex_);
-  Statement version_query(writer_->handle(), "PRAGMA user_version");
+  Statement version_query(*writer_, "PRAGMA user_version");
   version_query.Step();
   const int version = static_cast<int>(version_query.Int(0));
   if (version > SchemaVersion()) {
@@ -163,14 +163,14 @@ void SqliteJobStore::Migrate() {
 DatasetRecord SqliteJobStore::CreateDataset(const std::string& name) {
   DatasetRecord dataset{NewId(), name, NowSeconds(), 0, 0};
   std::lock_guard<std::mutex> lock(writer_mutex_);
-  Statement insert(writer_->handle(), "INSERT INTO datasets(id, name, created_at) VALUES(?,?,?)");
+  Statement insert(*writer_, "INSERT INTO datasets(id, name, created_at) VALUES(?,?,?)");
   insert.Bind(1, dataset.id).Bind(2, dataset.name).Bind(3, dataset.created_at).Run();
   return dataset;
 }
 
 std::vector<DatasetRecord> SqliteJobStore::ListDatasets() {
   ReaderLease db = Reader();
-  Statement select(db.handle(),
+  Statement select(*db,
                    std::string(kDatasetSelect) + "GROUP BY d.id ORDER BY d.created_at DESC");
   std::vector<DatasetRecord> datasets;
   while (select.Step()) datasets.push_back(ReadDataset(select));
@@ -179,7 +179,7 @@ std::vector<DatasetRecord> SqliteJobStore::ListDatasets() {
 
 std::optional<DatasetRecord> SqliteJobStore::GetDataset(const std::string& id) {
   ReaderLease db = Reader();
-  Statement select(db.handle(), std::string(kDatasetSelect) + "WHERE d.id = ? GROUP BY d.id");
+  Statement select(*db, std::string(kDatasetSelect) + "WHERE d.id = ? GROUP BY d.id");
   select.Bind(1, id);
   if (!select.Step()) return std::nullopt;
   return ReadDataset(select);
@@ -187,14 +187,14 @@ std::optional<DatasetRecord> SqliteJobStore::GetDataset(const std::string& id) {
 
 bool SqliteJobStore::DeleteDataset(const std::string& id) {
   std::lock_guard<std::mutex> lock(writer_mutex_);
-  Statement remove(writer_->handle(), "DELETE FROM datasets WHERE id = ?");
+  Statement remove(*writer_, "DELETE FROM datasets WHERE id = ?");
   remove.Bind(1, id).Run();
   return writer_->changes() > 0;
 }
 
 void SqliteJobStore::PutImage(const std::string& dataset_id, const ImageRecord& image) {
   std::lock_guard<std::mutex> lock(writer_mutex_);
-  Statement upsert(writer_->handle(),
+  Statement upsert(*writer_,
                    "INSERT OR REPLACE INTO images(dataset_id, name, size, sha256, width, height, "
                    "content_type) VALUES(?,?,?,?,?,?,?)");
   upsert.Bind(1, dataset_id).Bind(2, image.name).Bind(3, image.size).Bind(4, image.sha256);
@@ -203,14 +203,14 @@ void SqliteJobStore::PutImage(const std::string& dataset_id, const ImageRecord& 
 
 bool SqliteJobStore::DeleteImage(const std::string& dataset_id, const std::string& name) {
   std::lock_guard<std::mutex> lock(writer_mutex_);
-  Statement remove(writer_->handle(), "DELETE FROM images WHERE dataset_id = ? AND name = ?");
+  Statement remove(*writer_, "DELETE FROM images WHERE dataset_id = ? AND name = ?");
   remove.Bind(1, dataset_id).Bind(2, name).Run();
   return writer_->changes() > 0;
 }
 
 std::vector<ImageRecord> SqliteJobStore::ListImages(const std::string& dataset_id) {
   ReaderLease db = Reader();
-  Statement select(db.handle(),
+  Statement select(*db,
                    "SELECT name, size, sha256, width, height, content_type FROM images "
                    "WHERE dataset_id = ? ORDER BY name");
   select.Bind(1, dataset_id);
@@ -226,7 +226,7 @@ std::vector<ImageRecord> SqliteJobStore::ListImages(const std::string& dataset_i
 std::optional<ImageRecord> SqliteJobStore::GetImage(const std::string& dataset_id,
                                                     const std::string& name) {
   ReaderLease db = Reader();
-  Statement select(db.handle(),
+  Statement select(*db,
                    "SELECT name, size, sha256, width, height, content_type FROM images "
                    "WHERE dataset_id = ? AND name = ?");
   select.Bind(1, dataset_id).Bind(2, name);
@@ -248,7 +248,7 @@ JobRecord SqliteJobStore::CreateJob(const std::string& type, const std::string& 
   job.params = params;
   job.created_at = NowSeconds();
   std::lock_guard<std::mutex> lock(writer_mutex_);
-  Statement insert(writer_->handle(),
+  Statement insert(*writer_,
                    "INSERT INTO jobs(id, type, dataset_id, params, state, created_at, queued_at) "
                    "VALUES(?,?,?,?,'queued',?,?)");
   insert.Bind(1, job.id).Bind(2, type).Bind(3, dataset_id).Bind(4, params);
@@ -263,7 +263,7 @@ std::optional<JobRecord> SqliteJobStore::GetJob(const std::string& id) {
 
 std::vector<JobRecord> SqliteJobStore::ListJobs(const JobFilter& filter) {
   ReaderLease db = Reader();
-  Statement select(db.handle(),
+  Statement select(*db,
                    std::string("SELECT ") + kJobColumns +
                        " FROM jobs WHERE (?1 IS NULL OR state = ?1) AND (?2 IS NULL OR type = ?2)"
                        " AND (?3 IS NULL OR dataset_id = ?3) ORDER BY created_at DESC LIMIT ?4");
@@ -277,11 +277,11 @@ std::vector<JobRecord> SqliteJobStore::ListJobs(const JobFilter& filter) {
 std::optional<JobRecord> SqliteJobStore::ClaimNextJob() {
   std::lock_guard<std::mutex> lock(writer_mutex_);
   Transaction transaction(*writer_);
-  Statement next(writer_->handle(),
+  Statement next(*writer_,
                  "SELECT id FROM jobs WHERE state = 'queued' ORDER BY queued_at, rowid LIMIT 1");
   if (!next.Step()) return std::nullopt;
   const std::string id = next.Text(0);
-  Statement claim(writer_->handle(),
+  Statement claim(*writer_,
                   "UPDATE jobs SET state = 'running', started_at = ?, finished_at = NULL, "
                   "attempts = attempts + 1, progress_fraction = 0, progress_stage = 'starting', "
                   "progress_message = '', eta_s = NULL WHERE id = ?");
@@ -293,7 +293,7 @@ std::optional<JobRecord> SqliteJobStore::ClaimNextJob() {
 
 void SqliteJobStore::UpdateProgress(const std::string& id, const JobProgress& progress) {
   std::lock_guard<std::mutex> lock(writer_mutex_);
-  Statement update(writer_->handle(),
+  Statement update(*writer_,
                    "UPDATE jobs SET progress_fraction = ?, progress_stage = ?, "
                    "progress_message = ?, eta_s = ? WHERE id = ? AND state = 'running'");
   update.Bind(1, progress.fraction).Bind(2, progress.stage).Bind(3, progress.message);
@@ -306,13 +306,13 @@ std::optional<JobState> SqliteJobStore::RequestCancel(const std::string& id) {
   std::optional<JobRecord> job = SelectJob(*writer_, id);
   if (!job) return std::nullopt;
   if (job->state == JobState::kQueued) {
-    Statement cancel(writer_->handle(),
+    Statement cancel(*writer_,
                      "UPDATE jobs SET state = 'canceled', finished_at = ?, cancel_requested = 1 "
                      "WHERE id = ?");
     cancel.Bind(1, NowSeconds()).Bind(2, id).Run();
     job->state = JobState::kCanceled;
   } else if (job->state == JobState::kRunning) {
-    Statement flag(writer_->handle(), "UPDATE jobs SET cancel_requested = 1 WHERE id = ?");
+    Statement flag(*writer_, "UPDATE jobs SET cancel_requested = 1 WHERE id = ?");
     flag.Bind(1, id).Run();
   }
   transaction.Commit();
@@ -322,7 +322,7 @@ std::optional<JobState> SqliteJobStore::RequestCancel(const std::string& id) {
 bool SqliteJobStore::FinishJob(const std::string& id, const JobOutcome& outcome) {
   std::lock_guard<std::mutex> lock(writer_mutex_);
   Transaction transaction(*writer_);
-  Statement finish(writer_->handle(),
+  Statement finish(*writer_,
                    "UPDATE jobs SET state = ?, finished_at = ?, error_code = ?, error_message = ?, "
                    "result = ?, eta_s = NULL, progress_fraction = CASE WHEN ? THEN 1 ELSE "
                    "progress_fraction END WHERE id = ? AND state = 'running'");
@@ -335,10 +335,10 @@ bool SqliteJobStore::FinishJob(const std::string& id, const JobOutcome& outcome)
   finish.Bind(5, outcome.result).Bind(6, outcome.state == JobState::kSucceeded ? 1 : 0);
   finish.Bind(7, id).Run();
   if (writer_->changes() == 0) return false;
-  Statement clear(writer_->handle(), "DELETE FROM artifacts WHERE job_id = ?");
+  Statement clear(*writer_, "DELETE FROM artifacts WHERE job_id = ?");
   clear.Bind(1, id).Run();
   for (const ArtifactRecord& artifact : outcome.artifacts) {
-    Statement insert(writer_->handle(),
+    Statement insert(*writer_,
                      "INSERT INTO artifacts(job_id, name, path, size, sha256, content_type) "
                      "VALUES(?,?,?,?,?,?)");
     insert.Bind(1, id).Bind(2, artifact.name).Bind(3, artifact.path).Bind(4, artifact.size);
@@ -350,7 +350,7 @@ bool SqliteJobStore::FinishJob(const std::string& id, const JobOutcome& outcome)
 
 bool SqliteJobStore::RequeueJob(const std::string& id) {
   std::lock_guard<std::mutex> lock(writer_mutex_);
-  Statement requeue(writer_->handle(),
+  Statement requeue(*writer_,
                     "UPDATE jobs SET state = 'queued', attempts = MAX(attempts - 1, 0), "
                     "started_at = NULL, progress_stage = 'requeued', eta_s = NULL "
                     "WHERE id = ? AND state = 'running'");
@@ -361,7 +361,7 @@ bool SqliteJobStore::RequeueJob(const std::string& id) {
 bool SqliteJobStore::RetryJob(const std::string& id) {
   std::lock_guard<std::mutex> lock(writer_mutex_);
   Transaction transaction(*writer_);
-  Statement retry(writer_->handle(),
+  Statement retry(*writer_,
                   "UPDATE jobs SET state = 'queued', queued_at = ?, attempts = 0, started_at = "
                   "NULL, finished_at = NULL, error_code = NULL, error_message = NULL, result = "
                   "NULL, cancel_requested = 0, progress_fraction = 0, progress_stage = '', "
@@ -369,7 +369,7 @@ bool SqliteJobStore::RetryJob(const std::string& id) {
                   "WHERE id = ? AND state IN ('failed', 'canceled')");
   retry.Bind(1, NowSeconds()).Bind(2, id).Run();
   if (writer_->changes() == 0) return false;
-  Statement clear(writer_->handle(), "DELETE FROM artifacts WHERE job_id = ?");
+  Statement clear(*writer_, "DELETE FROM artifacts WHERE job_id = ?");
   clear.Bind(1, id).Run();
   transaction.Commit();
   return true;
@@ -377,14 +377,14 @@ bool SqliteJobStore::RetryJob(const std::string& id) {
 
 bool SqliteJobStore::DeleteJob(const std::string& id) {
   std::lock_guard<std::mutex> lock(writer_mutex_);
-  Statement remove(writer_->handle(), "DELETE FROM jobs WHERE id = ? AND state != 'running'");
+  Statement remove(*writer_, "DELETE FROM jobs WHERE id = ? AND state != 'running'");
   remove.Bind(1, id).Run();
   return writer_->changes() > 0;
 }
 
 std::optional<std::string> SqliteJobStore::GetResult(const std::string& id) {
   ReaderLease db = Reader();
-  Statement select(db.handle(), "SELECT result FROM jobs WHERE id = ? AND state = 'succeeded'");
+  Statement select(*db, "SELECT result FROM jobs WHERE id = ? AND state = 'succeeded'");
   select.Bind(1, id);
   if (!select.Step()) return std::nullopt;
   return select.OptionalText(0);
@@ -392,7 +392,7 @@ std::optional<std::string> SqliteJobStore::GetResult(const std::string& id) {
 
 std::vector<ArtifactRecord> SqliteJobStore::ListArtifacts(const std::string& job_id) {
   ReaderLease db = Reader();
-  Statement select(db.handle(),
+  Statement select(*db,
                    "SELECT name, path, size, sha256, content_type FROM artifacts "
                    "WHERE job_id = ? ORDER BY name");
   select.Bind(1, job_id);
@@ -408,19 +408,19 @@ RecoveryReport SqliteJobStore::RecoverInterruptedJobs(int max_attempts) {
   std::lock_guard<std::mutex> lock(writer_mutex_);
   Transaction transaction(*writer_);
   RecoveryReport report;
-  Statement running(writer_->handle(),
+  Statement running(*writer_,
                     "SELECT id, attempts, cancel_requested FROM jobs WHERE state = 'running'");
   const double now = NowSeconds();
   while (running.Step()) {
     const std::string id = running.Text(0);
     const int64_t attempts = running.Int(1);
     if (running.Int(2) != 0) {
-      Statement cancel(writer_->handle(),
+      Statement cancel(*writer_,
                        "UPDATE jobs SET state = 'canceled', finished_at = ? WHERE id = ?");
       cancel.Bind(1, now).Bind(2, id).Run();
       report.canceled.push_back(id);
     } else if (attempts >= max_attempts) {
-      Statement fail(writer_->handle(),
+      Statement fail(*writer_,
                      "UPDATE jobs SET state = 'failed', finished_at = ?, error_code = "
                      "'interrupted', error_message = ? WHERE id = ?");
       fail.Bind(1, now)
@@ -430,7 +430,7 @@ RecoveryReport SqliteJobStore::RecoverInterruptedJobs(int max_attempts) {
           .Run();
       report.failed.push_back(id);
     } else {
-      Statement requeue(writer_->handle(),
+      Statement requeue(*writer_,
                         "UPDATE jobs SET state = 'queued', started_at = NULL, progress_stage = "
                         "'requeued', eta_s = NULL WHERE id = ?");
       requeue.Bind(1, id).Run();
@@ -445,7 +445,7 @@ std::map<JobState, int64_t> SqliteJobStore::CountJobsByState() {
   ReaderLease db = Reader();
   std::map<JobState, int64_t> counts;
   for (JobState state : AllJobStates()) counts[state] = 0;
-  Statement select(db.handle(), "SELECT state, COUNT(*) FROM jobs GROUP BY state");
+  Statement select(*db, "SELECT state, COUNT(*) FROM jobs GROUP BY state");
   while (select.Step()) {
     if (auto state = ParseJobState(select.Text(0))) counts[*state] = select.Int(1);
   }
@@ -454,7 +454,7 @@ std::map<JobState, int64_t> SqliteJobStore::CountJobsByState() {
 
 int64_t SqliteJobStore::CountActiveJobs(const std::string& dataset_id) {
   ReaderLease db = Reader();
-  Statement select(db.handle(),
+  Statement select(*db,
                    "SELECT COUNT(*) FROM jobs WHERE dataset_id = ? AND state IN "
                    "('queued', 'running')");
   select.Bind(1, dataset_id);
@@ -464,7 +464,7 @@ int64_t SqliteJobStore::CountActiveJobs(const std::string& dataset_id) {
 
 std::string SqliteJobStore::IntegrityCheck() {
   ReaderLease db = Reader();
-  Statement check(db.handle(), "PRAGMA integrity_check");
+  Statement check(*db, "PRAGMA integrity_check");
   std::string problems;
   while (check.Step()) {
     if (!problems.empty()) problems += "; ";

@@ -162,5 +162,27 @@ TEST_F(SqliteJobStoreTest, FiltersJobs) {
   EXPECT_EQ(store.CountActiveJobs("d1"), 1);
 }
 
+// Two stores on one file stand for two server processes sharing the queue: a cancel written by
+// one is seen by the other's next read (its cached statements must not keep an old snapshot).
+TEST_F(SqliteJobStoreTest, SecondStoreSeesCancelAndProgressOfTheFirst) {
+  SqliteJobStore worker_side(DbPath());
+  SqliteJobStore api_side(DbPath());
+  const std::string dataset = worker_side.CreateDataset("rig").id;
+  const JobRecord job = api_side.CreateJob("calibration", dataset, "{}");
+  ASSERT_TRUE(worker_side.ClaimNextJob());
+  for (int poll = 0; poll < 3; ++poll) {  // warm both sides' cached statements
+    ASSERT_FALSE(worker_side.GetJob(job.id)->cancel_requested);
+    ASSERT_EQ(api_side.GetJob(job.id)->state, JobState::kRunning);
+  }
+  worker_side.UpdateProgress(job.id, JobProgress{0.5, "solve", "half", 3.0});
+  EXPECT_DOUBLE_EQ(api_side.GetJob(job.id)->progress.fraction, 0.5);
+  EXPECT_EQ(api_side.RequestCancel(job.id), JobState::kRunning);
+  EXPECT_TRUE(worker_side.GetJob(job.id)->cancel_requested);
+  JobOutcome outcome;
+  outcome.state = JobState::kCanceled;
+  EXPECT_TRUE(worker_side.FinishJob(job.id, outcome));
+  EXPECT_EQ(api_side.GetJob(job.id)->state, JobState::kCanceled);
+}
+
 }  // namespace
 }  // namespace omnirig::storage

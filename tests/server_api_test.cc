@@ -2,7 +2,12 @@
 // data folder, driven through a real HTTP client. Covers every endpoint and the bad inputs of
 // issue 6. Jobs use the test-only "test_sleep" type (server_test_util.h).
 
+#include <arpa/inet.h>
 #include <gtest/gtest.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <sys/time.h>
+#include <unistd.h>
 
 #include <chrono>
 #include <cstdlib>
@@ -15,6 +20,7 @@
 #include "engine/util/check.h"
 #include "server/service.h"
 #include "storage/sha256.h"
+#include "storage/sqlite_job_store.h"
 #include "tests/server_test_util.h"
 
 namespace omnirig::testing {
@@ -85,6 +91,91 @@ void ExpectError(const httplib::Result& result, int status, const std::string& c
   EXPECT_EQ(body["error"]["code"], code) << result->body;
   EXPECT_TRUE(body["error"]["message"].is_string());
   EXPECT_TRUE(body["error"]["details"].is_object());
+}
+
+// A raw TCP connection to the server, for what httplib's client cannot send: pipelined
+// requests and "Expect: 100-continue".
+class RawConnection {
+ public:
+  explicit RawConnection(int port) : fd_(::socket(AF_INET, SOCK_STREAM, 0)) {
+    sockaddr_in address{};
+    address.sin_family = AF_INET;
+    address.sin_port = htons(static_cast<uint16_t>(port));
+    address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    connected_ = ::connect(fd_, reinterpret_cast<sockaddr*>(&address), sizeof(address)) == 0;
+    const timeval timeout{5, 0};
+    ::setsockopt(fd_, SOL_SOCKET, SO_RCVTIMEO, &timeout, sizeof(timeout));
+  }
+  ~RawConnection() { ::close(fd_); }
+  bool connected() const { return connected_; }
+  void Send(const std::string& bytes) {
+    ASSERT_EQ(::send(fd_, bytes.data(), bytes.size(), MSG_NOSIGNAL),
+              static_cast<ssize_t>(bytes.size()));
+  }
+  // Reads until `count` occurrences of `marker` arrived (or 5 s pass); returns all bytes read.
+  std::string ReadUntil(const std::string& marker, int count = 1) {
+    std::string received;
+    char buffer[4096];
+    while (Count(received, marker) < count) {
+      const ssize_t got = ::recv(fd_, buffer, sizeof(buffer), 0);
+      if (got <= 0) break;
+      received.append(buffer, static_cast<size_t>(got));
+    }
+    return received;
+  }
+  static int Count(const std::string& text, const std::string& marker) {
+    int count = 0;
+    for (size_t at = text.find(marker); at != std::string::npos; at = text.find(marker, at + 1)) {
+      ++count;
+    }
+    return count;
+  }
+
+ private:
+  int fd_;
+  bool connected_ = false;
+};
+
+TEST_F(ServerApiTest, KeepAlivePipeliningAndExpectContinue) {
+  auto& client = Start();
+  const std::string dataset = CreateDataset(client);
+  // Many requests on one keep-alive connection.
+  httplib::Client keep_alive("127.0.0.1", port_);
+  keep_alive.set_keep_alive(true);
+  for (int i = 0; i < 50; ++i) {
+    const auto health = keep_alive.Get("/api/v1/health");
+    ASSERT_TRUE(health);
+    ASSERT_EQ(health->status, 200);
+  }
+  // Two pipelined requests in one segment: both answered, in order.
+  RawConnection pipelined(port_);
+  ASSERT_TRUE(pipelined.connected());
+  const std::string get = "GET /api/v1/datasets/" + dataset + " HTTP/1.1\r\nHost: x\r\n\r\n";
+  pipelined.Send(get + get);
+  const std::string both = pipelined.ReadUntil("\"name\":\"rig\"", 2);
+  EXPECT_EQ(RawConnection::Count(both, "HTTP/1.1 200"), 2) << both;
+  // curl's default for large uploads: the server must send "100 Continue" before the body.
+  const std::string png = PngBytes(64, 48);
+  RawConnection upload(port_);
+  ASSERT_TRUE(upload.connected());
+  upload.Send("PUT /api/v1/datasets/" + dataset + "/images/a.png HTTP/1.1\r\nHost: x\r\n" +
+              "Content-Length: " + std::to_string(png.size()) +
+              "\r\nExpect: 100-continue\r\n\r\n");
+  const auto start = std::chrono::steady_clock::now();
+  const std::string interim = upload.ReadUntil("\r\n\r\n");
+  EXPECT_EQ(interim.rfind("HTTP/1.1 100 Continue", 0), 0u) << interim;
+  EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(), 1.0);
+  upload.Send(png);
+  const std::string created = upload.ReadUntil("\"sha256\"");
+  EXPECT_NE(created.find("HTTP/1.1 201"), std::string::npos) << created;
+  EXPECT_NE(created.find(storage::Sha256Hex(png)), std::string::npos) << created;
+  // An idle keep-alive connection does not hold up shutdown.
+  RawConnection idle(port_);
+  ASSERT_TRUE(idle.connected());
+  const auto stop_start = std::chrono::steady_clock::now();
+  service_.reset();
+  EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - stop_start).count(),
+            2.0);
 }
 
 TEST_F(ServerApiTest, HealthMetricsAndStaticPage) {
@@ -381,6 +472,66 @@ TEST_F(ServerApiTest, CancelStopsARunningJobWithinASecond) {
   const json artifacts = JsonOf(client.Get(("/api/v1/jobs/" + running + "/artifacts").c_str()));
   ASSERT_EQ(artifacts.size(), 1u);
   EXPECT_EQ(artifacts[0]["name"], "log.txt");
+}
+
+// A multi-machine deployment cancels through the shared store: a cancel written there by
+// another process (a second store on the same database file) stops the job within a second.
+TEST_F(ServerApiTest, CancelWrittenToTheStoreByAnotherProcessStopsTheJob) {
+  auto options = Options();
+  options.num_workers = 1;
+  auto& client = Start(options);
+  const std::string dataset = CreateDataset(client);
+  const std::string running =
+      SubmitSleep(client, dataset, {{"steps", 1000}, {"step_ms", 50}})["id"];
+  ASSERT_EQ(WaitForJob(client, running, 10, "running")["state"], "running");
+  storage::SqliteJobStore other_process(
+      service_->state().data_dir->DatabasePath().string(), 1);
+  const auto start = std::chrono::steady_clock::now();
+  ASSERT_EQ(other_process.RequestCancel(running), storage::JobState::kRunning);
+  const json canceled = WaitForJob(client, running, 5);
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  EXPECT_EQ(canceled["state"], "canceled");
+  EXPECT_LT(seconds, 1.0);
+  EXPECT_EQ(other_process.GetJob(running)->state, storage::JobState::kCanceled);
+}
+
+// The log of a running job is downloadable as it grows; it becomes a hashed artifact at the end.
+TEST_F(ServerApiTest, LogOfARunningJobIsDownloadable) {
+  auto& client = Start();
+  const std::string dataset = CreateDataset(client);
+  const std::string id = SubmitSleep(client, dataset, {{"steps", 1000}, {"step_ms", 20}})["id"];
+  const std::string log_url = "/api/v1/jobs/" + id + "/artifacts/log.txt";
+  int status = 0;
+  std::string body;
+  std::string content_type;
+  std::string cache_control;
+  for (int i = 0; i < 500; ++i) {
+    const auto log = client.Get(log_url.c_str());
+    ASSERT_TRUE(log);
+    status = log->status;
+    body = log->body;
+    content_type = log->get_header_value("Content-Type");
+    cache_control = log->get_header_value("Cache-Control");
+    if (status == 200 && body.find("stage sleep") != std::string::npos) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  ASSERT_EQ(status, 200) << body;
+  EXPECT_NE(body.find("job " + id + " (test_sleep) attempt 1"), std::string::npos) << body;
+  EXPECT_NE(body.find("stage sleep"), std::string::npos) << body;
+  EXPECT_EQ(content_type.rfind("text/plain", 0), 0u) << content_type;
+  EXPECT_EQ(cache_control, "no-store");
+  EXPECT_EQ(JsonOf(client.Get(("/api/v1/jobs/" + id).c_str()))["state"], "running");
+  // Other artifacts do not exist before the job ends.
+  ExpectError(client.Get(("/api/v1/jobs/" + id + "/artifacts/out.bin").c_str()), 404,
+              "artifact_not_found");
+  client.Post(("/api/v1/jobs/" + id + "/cancel").c_str());
+  ASSERT_EQ(WaitForJob(client, id, 5)["state"], "canceled");
+  const auto final_log = client.Get(log_url.c_str());
+  ASSERT_EQ(final_log->status, 200);
+  EXPECT_EQ(final_log->body.rfind(body, 0), 0u) << "the final log extends the live one";
+  EXPECT_NE(final_log->body.find("finished: canceled"), std::string::npos) << final_log->body;
+  EXPECT_FALSE(final_log->get_header_value("ETag").empty());
 }
 
 TEST_F(ServerApiTest, RetryDeleteAndFilters) {
