@@ -21,14 +21,16 @@ json ValidParams() {
 
 TEST(CalibrationJob, RunsOnTheVmrSetWithOverlays) {
   const char* source = std::getenv("OMNIRIG_SOURCE_DIR");
-  const fs::path data = fs::path(source ? source : ".") / ".." / "shared" / "data" / "real" /
-                        "ocamcalib-vmr";
+  const fs::path data =
+      fs::path(source ? source : ".") / ".." / "shared" / "data" / "real" / "ocamcalib-vmr";
   if (!fs::is_directory(data)) GTEST_SKIP() << "real data not found at " << data;
   RegisterCalibrationJobType();
-  const fs::path out = fs::temp_directory_path() / ("omnirig_calib_vmr_" + std::to_string(::getpid()));
+  const fs::path out =
+      fs::temp_directory_path() / ("omnirig_calib_vmr_" + std::to_string(::getpid()));
   JobContext context;
   context.dataset_dir = data;
-  for (int i = 0; i < 10; ++i) context.image_names.push_back("VMRImage" + std::to_string(i) + ".jpg");
+  for (int i = 0; i < 10; ++i)
+    context.image_names.push_back("VMRImage" + std::to_string(i) + ".jpg");
   context.output_dir = out;
   context.num_threads = 2;
   int solve_reports = 0;
@@ -37,6 +39,7 @@ TEST(CalibrationJob, RunsOnTheVmrSetWithOverlays) {
   };
   json params = ValidParams();
   params["board"] = {{"cols", 6}, {"rows", 7}, {"square_size_mm", 30}};
+  params["svp"] = json::object();  // find the rim, no mirror dimensions
   const json result = FindJobType("calibration")->run(params, context);
   EXPECT_EQ(result["num_views_used"], 10);
   EXPECT_LT(result["rms_px"].get<double>(), 0.5);
@@ -44,6 +47,15 @@ TEST(CalibrationJob, RunsOnTheVmrSetWithOverlays) {
   for (const auto& image : result["images"]) {
     EXPECT_TRUE(fs::exists(out / image["overlay"].get<std::string>())) << image["overlay"];
   }
+  // The VMR mirror's rim is a full circle of radius ~452 px centred within ~2 px of the
+  // calibrated principal point (the sensor is close to single-viewpoint).
+  const json& svp = result["svp"];
+  ASSERT_TRUE(svp["found"].get<bool>()) << svp.dump();
+  EXPECT_EQ(svp["image"], "VMRImage0.jpg");
+  EXPECT_NEAR(svp["found_circle_px"][2].get<double>(), 452.0, 5.0);
+  EXPECT_LT(svp["principal_point_offset_px"].get<double>(), 5.0);
+  EXPECT_TRUE(svp["predicted_circle_px"].is_null());
+  EXPECT_TRUE(fs::exists(out / svp["overlay"].get<std::string>()));
   fs::remove_all(out);
 }
 

@@ -37,16 +37,14 @@ int GetInt(const json& object, const std::string& key, const std::string& path, 
     OMNIRIG_CHECK(!required, "missing field '" << path << "." << key << "'");
     return fallback;
   }
-  OMNIRIG_CHECK(it->is_number_integer(), "field '" << path << "." << key
-                                                   << "' must be an integer");
+  OMNIRIG_CHECK(it->is_number_integer(), "field '" << path << "." << key << "' must be an integer");
   const int64_t value = it->get<int64_t>();
   OMNIRIG_CHECK(value >= -1000000 && value <= 1000000,
                 "field '" << path << "." << key << "' is out of range");
   return static_cast<int>(value);
 }
 
-bool GetBool(const json& object, const std::string& key, const std::string& path,
-             bool fallback) {
+bool GetBool(const json& object, const std::string& key, const std::string& path, bool fallback) {
   const auto it = object.find(key);
   if (it == object.end()) return fallback;
   OMNIRIG_CHECK(it->is_boolean(), "field '" << path << "." << key << "' must be a boolean");
@@ -100,7 +98,8 @@ ImageCalibrationOptions OptionsFromJson(const json& options) {
   c.min_views = GetInt(options, "min_views", p, c.min_views);
   c.max_num_iterations = GetInt(options, "max_num_iterations", p, c.max_num_iterations);
   if (options.contains("principal_point_px")) {
-    c.principal_point_px = GetVector<2>(options["principal_point_px"], "options.principal_point_px");
+    c.principal_point_px =
+        GetVector<2>(options["principal_point_px"], "options.principal_point_px");
   }
   if (options.contains("rim_circle_px")) {
     c.rim_circle_px = GetVector<3>(options["rim_circle_px"], "options.rim_circle_px");
@@ -125,6 +124,56 @@ void HintsFromJson(const json& hints, ImageCalibrationOptions* options) {
     }
     options->hints[name] = hint;
   }
+}
+
+// "svp": {"mirror": {"rim_radius_mm", "rim_height_mm"}, "image", "search_margin_px",
+// "num_profiles", "inlier_px"} (all optional; {} finds the rim without a prediction).
+SvpOptions SvpFromJson(const json& svp) {
+  RequireObject(svp, "svp", {"mirror", "image", "search_margin_px", "num_profiles", "inlier_px"});
+  SvpOptions out;
+  if (svp.contains("mirror")) {
+    const json& mirror = svp["mirror"];
+    RequireObject(mirror, "svp.mirror", {"rim_radius_mm", "rim_height_mm"});
+    MirrorRim rim;
+    rim.rim_radius_m = GetNumber(mirror, "rim_radius_mm", "svp.mirror", 0.0, true) * 1e-3;
+    rim.rim_height_m = GetNumber(mirror, "rim_height_mm", "svp.mirror", 0.0, true) * 1e-3;
+    out.mirror = rim;
+  }
+  if (svp.contains("image")) {
+    OMNIRIG_CHECK(svp["image"].is_string(), "field 'svp.image' must be a string");
+    out.image = svp["image"].get<std::string>();
+  }
+  out.check.search_margin_px =
+      GetNumber(svp, "search_margin_px", "svp", out.check.search_margin_px);
+  out.check.num_profiles = GetInt(svp, "num_profiles", "svp", out.check.num_profiles);
+  out.check.inlier_px = GetNumber(svp, "inlier_px", "svp", out.check.inlier_px);
+  try {
+    out.Check();
+  } catch (const InvalidArgument& e) {
+    throw InvalidArgument(std::string("field 'svp': ") + e.what());
+  }
+  return out;
+}
+
+json CircleToJson(const std::optional<Eigen::Vector3d>& circle) {
+  return circle ? json({circle->x(), circle->y(), circle->z()}) : json(nullptr);
+}
+
+json SvpToJson(const CalibrationReport& report) {
+  const SvpCheckReport& svp = *report.svp;
+  return {
+      {"image", report.svp_image},
+      {"found", svp.found_circle_px.has_value()},
+      {"reason", svp.reason},
+      {"predicted_circle_px", CircleToJson(svp.predicted_circle_px)},
+      {"found_circle_px", CircleToJson(svp.found_circle_px)},
+      {"centre_offset_px", svp.predicted_circle_px ? json(svp.centre_offset_px) : json(nullptr)},
+      {"radius_offset_px", svp.predicted_circle_px ? json(svp.radius_offset_px) : json(nullptr)},
+      {"principal_point_px", {svp.principal_point_px.x(), svp.principal_point_px.y()}},
+      {"principal_point_offset_px", svp.principal_point_offset_px},
+      {"num_edge_points", svp.num_edge_points},
+      {"overlay", kSvpOverlayFileName},
+      {"circle_format", "[u, v, radius] in pixels"}};
 }
 
 json ImageToJson(const CalibrationImageReport& image) {
@@ -172,12 +221,13 @@ BoardSpec BoardFromJson(const json& board) {
 }
 
 CalibrationRequest CalibrationRequestFromJson(const json& params) {
-  RequireObject(params, "params", {"board", "options", "hints"});
+  RequireObject(params, "params", {"board", "options", "hints", "svp"});
   OMNIRIG_CHECK(params.contains("board"), "missing field 'board'");
   CalibrationRequest request;
   request.board = BoardFromJson(params["board"]);
   if (params.contains("options")) request.options = OptionsFromJson(params["options"]);
   if (params.contains("hints")) HintsFromJson(params["hints"], &request.options);
+  if (params.contains("svp")) request.options.svp = SvpFromJson(params["svp"]);
   try {
     request.options.Check();
   } catch (const InvalidArgument& e) {
@@ -196,33 +246,38 @@ json CalibrationReportToJson(const CalibrationReport& report) {
   json images = json::array();
   for (const auto& image : report.images) images.push_back(ImageToJson(image));
   const CalibrationSolverSummary& s = report.solver;
-  return {{"camera", camera},
-          {"rms_px", report.rms_px},
-          {"mean_px", report.mean_px},
-          {"std_px", report.std_px},
-          {"rms_all_px", report.rms_all_px},
-          {"error_definitions",
-           "over the inlier corners of the used views, e = reprojected - detected (px): rms_px = "
-           "sqrt(mean |e|^2); mean_px and std_px are the mean and standard deviation of |e|; "
-           "rms_all_px includes the rejected outlier corners"},
-          {"num_views_used", report.num_views_used},
-          {"images", images},
-          {"solver",
-           {{"num_rounds", s.num_rounds},
-            {"iterations", s.iterations},
-            {"initial_cost", s.initial_cost},
-            {"final_cost", s.final_cost},
-            {"termination", s.termination},
-            {"num_residuals", s.num_residuals},
-            {"num_parameters", s.num_parameters},
-            {"num_rejected_corners", s.num_rejected_corners},
-            {"num_rejected_views", s.num_rejected_views},
-            {"brief", s.brief}}},
-          {"timings_s",
-           {{"init", report.timings.init_s},
-            {"solve", report.timings.solve_s},
-            {"covariance", report.timings.covariance_s},
-            {"calibrate_total", report.timings.total_s}}}};
+  json result = {
+      {"camera", camera},
+      {"rms_px", report.rms_px},
+      {"mean_px", report.mean_px},
+      {"std_px", report.std_px},
+      {"rms_all_px", report.rms_all_px},
+      {"error_definitions",
+       "over the inlier corners of the used views, e = reprojected - detected (px): rms_px = "
+       "sqrt(mean |e|^2); mean_px and std_px are the mean and standard deviation of |e|; "
+       "rms_all_px includes the rejected outlier corners"},
+      {"num_views_used", report.num_views_used},
+      {"images", images},
+      {"solver",
+       {{"num_rounds", s.num_rounds},
+        {"iterations", s.iterations},
+        {"initial_cost", s.initial_cost},
+        {"final_cost", s.final_cost},
+        {"termination", s.termination},
+        {"num_residuals", s.num_residuals},
+        {"num_parameters", s.num_parameters},
+        {"num_rejected_corners", s.num_rejected_corners},
+        {"num_rejected_views", s.num_rejected_views},
+        {"brief", s.brief}}},
+      {"timings_s",
+       {{"detect", report.timings.detect_s},
+        {"redetect", report.timings.redetect_s},
+        {"init", report.timings.init_s},
+        {"solve", report.timings.solve_s},
+        {"covariance", report.timings.covariance_s},
+        {"calibrate_total", report.timings.total_s}}}};
+  if (report.svp) result["svp"] = SvpToJson(report);
+  return result;
 }
 
 void RegisterCalibrationJobType() {

@@ -10,12 +10,18 @@
 //                      "principal_point_px": [u, v], "rim_circle_px": [u, v, r],
 //                      "refine_subpixel", "try_enhanced", "allow_exhaustive", "redetect",
 //                      "overlay_error_scale"},
-//          "hints": {"IMAGE_NAME": [[u, v] x 4]}}   (all but "board" optional)
+//          "hints": {"IMAGE_NAME": [[u, v] x 4]},
+//          "svp": {"mirror": {"rim_radius_mm", "rim_height_mm"}, "image", "search_margin_px",
+//                  "num_profiles", "inlier_px"}}   (all but "board" optional; "svp" runs the
+//          single-viewpoint check, {} to find the rim without the mirror's dimensions)
 // result: {"camera": {"model", "image_size", "intrinsics", "intrinsics_std"}, "rms_px",
 //          "mean_px", "std_px", "rms_all_px", "error_definitions", "num_views_used",
 //          "images": [{"name", "used", "reason", "rms_px", "cam_from_board", "num_corners",
 //                      "num_inliers", "detector", "overlay", "corners_px", "corner_ids"}],
-//          "solver": {...}, "timings_s": {...}}
+//          "solver": {...}, "timings_s": {...},
+//          "svp": {"image", "found", "reason", "predicted_circle_px", "found_circle_px",
+//                  "centre_offset_px", "radius_offset_px", "principal_point_px",
+//                  "principal_point_offset_px", "num_edge_points", "overlay"}}  (when asked)
 
 #include <string>
 

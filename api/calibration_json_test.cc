@@ -1,5 +1,6 @@
 #include "api/calibration_json.h"
 
+#include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -35,8 +36,11 @@ std::string ValidationError(const json& params) {
 
 TEST(CalibrationJson, ParsesBoardOptionsAndHints) {
   json params = ValidParams();
-  params["options"] = {{"fix", {"xi", "tangential"}}, {"free", {"k5"}}, {"huber_loss_px", 2.0},
-                       {"principal_point_px", {320, 240}}, {"redetect", false}};
+  params["options"] = {{"fix", {"xi", "tangential"}},
+                       {"free", {"k5"}},
+                       {"huber_loss_px", 2.0},
+                       {"principal_point_px", {320, 240}},
+                       {"redetect", false}};
   params["hints"] = {{"a.png", {{1, 2}, {3, 4}, {5, 6}, {7, 8}}}};
   const CalibrationRequest request = CalibrationRequestFromJson(params);
   EXPECT_EQ(request.board.cols, 8);
@@ -48,8 +52,27 @@ TEST(CalibrationJson, ParsesBoardOptionsAndHints) {
   EXPECT_TRUE(fixed[UnifiedIntrinsics::kAlpha]);  // default
   EXPECT_EQ(request.options.calibrate.huber_loss_px, 2.0);
   EXPECT_FALSE(request.options.redetect_with_model);
+  EXPECT_FALSE(request.options.svp);
   ASSERT_EQ(request.options.hints.count("a.png"), 1u);
   EXPECT_EQ(request.options.hints.at("a.png")[3], Eigen::Vector2d(7, 8));
+}
+
+TEST(CalibrationJson, ParsesTheSvpCheck) {
+  json params = ValidParams();
+  params["svp"] = {{"mirror", {{"rim_radius_mm", 30}, {"rim_height_mm", 12.5}}},
+                   {"image", "b.png"},
+                   {"search_margin_px", 25}};
+  const CalibrationRequest request = CalibrationRequestFromJson(params);
+  ASSERT_TRUE(request.options.svp);
+  ASSERT_TRUE(request.options.svp->mirror);
+  EXPECT_DOUBLE_EQ(request.options.svp->mirror->rim_radius_m, 0.03);
+  EXPECT_DOUBLE_EQ(request.options.svp->mirror->rim_height_m, 0.0125);
+  EXPECT_EQ(request.options.svp->image, "b.png");
+  EXPECT_DOUBLE_EQ(request.options.svp->check.search_margin_px, 25.0);
+  params["svp"] = json::object();
+  const CalibrationRequest rim_only = CalibrationRequestFromJson(params);
+  ASSERT_TRUE(rim_only.options.svp);
+  EXPECT_FALSE(rim_only.options.svp->mirror);
 }
 
 TEST(CalibrationJson, ValidationNamesTheField) {
@@ -82,6 +105,13 @@ TEST(CalibrationJson, ValidationNamesTheField) {
   params["hints"] = {{"a.png", {{1, 2}, {3, 4}}}};
   EXPECT_NE(ValidationError(params).find("hints.a.png"), std::string::npos);
   params = ValidParams();
+  params["svp"] = {{"mirror", {{"rim_radius_mm", 30}}}};
+  EXPECT_NE(ValidationError(params).find("svp.mirror.rim_height_mm"), std::string::npos);
+  params["svp"] = {{"mirror", {{"rim_radius_mm", -3}, {"rim_height_mm", 10}}}};
+  EXPECT_NE(ValidationError(params).find("field 'svp'"), std::string::npos);
+  params["svp"] = {{"margin", 3}};
+  EXPECT_NE(ValidationError(params).find("svp.margin"), std::string::npos);
+  params = ValidParams();
   params["extra"] = 1;
   EXPECT_NE(ValidationError(params).find("params.extra"), std::string::npos);
   EXPECT_EQ(ValidationError(ValidParams()), "");
@@ -102,8 +132,23 @@ TEST(CalibrationJson, ResultHasTheIssuesKeys) {
   std::vector<CalibrationView> views = MakeSyntheticCornerSet(camera, board, synth).views;
   views.push_back({"missing.png", {}});
   views.back().detection.reason = "no checkerboard 8x6 (40 mm) found";
-  const json result = CalibrationReportToJson(
-      Calibrate(views, camera.width, camera.height, board, CalibrationOptions(), {}));
+  CalibrationReport report =
+      Calibrate(views, camera.width, camera.height, board, CalibrationOptions(), {});
+  const json result = CalibrationReportToJson(report);
+  EXPECT_FALSE(result.contains("svp"));  // only when asked for
+  report.svp.emplace();
+  report.svp->predicted_circle_px = Eigen::Vector3d(510, 380, 300);
+  report.svp->found_circle_px = Eigen::Vector3d(512, 381, 302);
+  report.svp->centre_offset_px = std::hypot(2.0, 1.0);
+  report.svp->radius_offset_px = 2.0;
+  report.svp_image = "view0";
+  const json svp = CalibrationReportToJson(report)["svp"];
+  EXPECT_TRUE(svp["found"].get<bool>());
+  EXPECT_EQ(svp["found_circle_px"], json({512.0, 381.0, 302.0}));
+  EXPECT_EQ(svp["predicted_circle_px"], json({510.0, 380.0, 300.0}));
+  EXPECT_DOUBLE_EQ(svp["radius_offset_px"].get<double>(), 2.0);
+  EXPECT_EQ(svp["image"], "view0");
+  EXPECT_EQ(svp["overlay"], "svp_overlay.png");
   EXPECT_EQ(result["camera"]["model"], "unified");
   EXPECT_EQ(result["camera"]["image_size"], json({1024, 768}));
   for (const char* name : UnifiedIntrinsics::kNames) {
@@ -136,7 +181,8 @@ TEST(CalibrationJob, IsRegisteredAndFailsClearlyOnUnusableImages) {
   EXPECT_THROW(type->validate(json::object()), InvalidArgument);
   EXPECT_TRUE(type->referenced_jobs(ValidParams()).empty());
 
-  const fs::path dir = fs::temp_directory_path() / ("omnirig_calib_job_" + std::to_string(::getpid()));
+  const fs::path dir =
+      fs::temp_directory_path() / ("omnirig_calib_job_" + std::to_string(::getpid()));
   fs::create_directories(dir / "out");
   cv::imwrite((dir / "blank.png").string(), cv::Mat(240, 320, CV_8UC1, cv::Scalar(128)));
   std::ofstream((dir / "truncated.jpg").string()) << "\xff\xd8\xff\xe0 not really a jpeg";

@@ -12,6 +12,7 @@
 
 #include "engine/calib/board.h"
 #include "engine/calib/detect.h"
+#include "engine/calib/svp.h"
 #include "engine/geometry/camera_model.h"
 #include "engine/geometry/rigid3.h"
 #include "engine/util/progress.h"
@@ -65,14 +66,14 @@ struct CalibrationOptions {
 struct CalibrationImageReport {
   std::string name;
   bool used = false;
-  std::string reason;  // why not used (empty when used)
+  std::string reason;    // why not used (empty when used)
   std::string detector;  // BoardDetection::method
-  double rms_px = 0.0;  // RMS of this view's inlier corner errors (px)
+  double rms_px = 0.0;   // RMS of this view's inlier corner errors (px)
   Rigid3d cam_from_board;
-  std::vector<Eigen::Vector2d> corners_px;    // detected
-  std::vector<int> corner_ids;                // into BoardSpec::ObjectPoints()
+  std::vector<Eigen::Vector2d> corners_px;      // detected
+  std::vector<int> corner_ids;                  // into BoardSpec::ObjectPoints()
   std::vector<Eigen::Vector2d> reprojected_px;  // the model's prediction of each corner
-  std::vector<bool> inlier;                   // false for corners rejected as outliers
+  std::vector<bool> inlier;                     // false for corners rejected as outliers
 };
 
 struct CalibrationSolverSummary {
@@ -88,7 +89,11 @@ struct CalibrationSolverSummary {
   std::string brief;  // Ceres' BriefReport() of the last round
 };
 
+// Wall-clock seconds. detect_s and redetect_s are filled by CalibrateImages (reading the images
+// and detecting the board, in parallel; the model-based second pass), the rest by Calibrate.
 struct CalibrationTimings {
+  double detect_s = 0.0;
+  double redetect_s = 0.0;
   double init_s = 0.0;
   double solve_s = 0.0;
   double covariance_s = 0.0;
@@ -111,6 +116,10 @@ struct CalibrationReport {
   std::vector<CalibrationImageReport> images;  // in the order of the input views
   CalibrationSolverSummary solver;
   CalibrationTimings timings;
+  // The single-viewpoint check that CalibrateImages runs on request (ImageCalibrationOptions::
+  // svp), on the image named svp_image.
+  std::optional<SvpCheckReport> svp;
+  std::string svp_image;
 };
 
 // Calibrates a camera of `width` x `height` pixels from board detections. Views whose detection

@@ -82,16 +82,20 @@ bool ExtendsBeyondAnEdge(const cv::Mat& grey, const std::vector<Eigen::Vector2d>
     return 2 * hits > n;
   };
   const int R = board.rows, C = board.cols;
-  return edge_extends(C, [&](int c) { return at(0, c); }, [&](int c) { return at(1, c); }) ||
-         edge_extends(C, [&](int c) { return at(R - 1, c); }, [&](int c) { return at(R - 2, c); }) ||
-         edge_extends(R, [&](int r) { return at(r, 0); }, [&](int r) { return at(r, 1); }) ||
-         edge_extends(R, [&](int r) { return at(r, C - 1); }, [&](int r) { return at(r, C - 2); });
+  return edge_extends(
+             C, [&](int c) { return at(0, c); }, [&](int c) { return at(1, c); }) ||
+         edge_extends(
+             C, [&](int c) { return at(R - 1, c); }, [&](int c) { return at(R - 2, c); }) ||
+         edge_extends(
+             R, [&](int r) { return at(r, 0); }, [&](int r) { return at(r, 1); }) ||
+         edge_extends(
+             R, [&](int r) { return at(r, C - 1); }, [&](int r) { return at(r, C - 2); });
 }
 
 // Refines each corner with cornerSubPix in a window scaled to its local square size. Returns
 // the largest shift.
-double RefineCorners(const cv::Mat& grey,
-                     std::vector<Eigen::Vector2d>* corners, const std::vector<double>& square_px) {
+double RefineCorners(const cv::Mat& grey, std::vector<Eigen::Vector2d>* corners,
+                     const std::vector<double>& square_px) {
   double max_shift = 0.0;
   for (size_t i = 0; i < corners->size(); ++i) {
     const int half = std::clamp(static_cast<int>(std::lround(0.4 * square_px[i])), 2, 15);
@@ -108,7 +112,6 @@ double RefineCorners(const cv::Mat& grey,
     max_shift = std::max(max_shift, static_cast<double>(cv::norm(point[0] - before)));
   }
 
-
   return max_shift;
 }
 
@@ -121,7 +124,7 @@ void RefineGrid(const cv::Mat& grey, const BoardSpec& board, BoardDetection* det
 }
 
 std::string ValidateGridImpl(const cv::Mat& grey, const BoardSpec& board,
-                         const std::vector<Eigen::Vector2d>& grid) {
+                             const std::vector<Eigen::Vector2d>& grid) {
   if (static_cast<int>(grid.size()) != board.NumCorners()) return "wrong corner count";
   for (int id = 0; id < board.NumCorners(); ++id) {
     const Eigen::Vector2d& p = grid[id];
@@ -154,33 +157,44 @@ bool RunOpenCvDetector(const cv::Mat& image, double scale, const BoardSpec& boar
   return true;
 }
 
-BoardDetection DetectCheckerboard(const cv::Mat& grey, const BoardSpec& board,
-                                  const DetectOptions& options) {
-  struct Variant {
-    cv::Mat image;
-    double scale;
-  };
-  // Small images (squares of a few pixels) need upsampling; on large ones it costs seconds.
-  const bool small = std::max(grey.cols, grey.rows) <= 800;
-  std::vector<Variant> variants;
+// An image OpenCV's detectors search, and its scale relative to the original.
+struct DetectorImage {
+  cv::Mat image;
+  double scale;
+};
+
+// The image itself, after a half-size copy on large images (a half-size search is several times
+// faster; the corners are refined at full resolution afterwards).
+std::vector<DetectorImage> PlainImages(const cv::Mat& grey) {
+  std::vector<DetectorImage> images;
   if (std::max(grey.cols, grey.rows) > 1000) {
-    // Large images: a half-size search first is several times faster; the corners are refined
-    // at full resolution afterwards.
     cv::Mat half;
     cv::resize(grey, half, cv::Size(), 0.5, 0.5, cv::INTER_AREA);
-    variants.push_back({half, 0.5});
+    images.push_back({half, 0.5});
   }
-  variants.push_back({grey, 1.0});
-  if (options.try_enhanced) {
-    cv::Mat equalised;
-    cv::createCLAHE(3.0, cv::Size(8, 8))->apply(grey, equalised);
-    variants.push_back({equalised, 1.0});
-    if (small) {
-      cv::Mat upsampled;
-      cv::resize(grey, upsampled, cv::Size(), 2.0, 2.0, cv::INTER_CUBIC);
-      variants.push_back({upsampled, 2.0});
-    }
+  images.push_back({grey, 1.0});
+  return images;
+}
+
+// Built only when the plain images fail: a contrast-equalised copy and, on small images
+// (squares of a few pixels), a 2x upsampled one (on large ones upsampling costs seconds).
+std::vector<DetectorImage> EnhancedImages(const cv::Mat& grey, bool small) {
+  std::vector<DetectorImage> images;
+  cv::Mat equalised;
+  cv::createCLAHE(3.0, cv::Size(8, 8))->apply(grey, equalised);
+  images.push_back({equalised, 1.0});
+  if (small) {
+    cv::Mat upsampled;
+    cv::resize(grey, upsampled, cv::Size(), 2.0, 2.0, cv::INTER_CUBIC);
+    images.push_back({upsampled, 2.0});
   }
+  return images;
+}
+
+BoardDetection DetectCheckerboard(const cv::Mat& grey, const BoardSpec& board,
+                                  const DetectOptions& options) {
+  const bool small = std::max(grey.cols, grey.rows) <= 800;
+  const std::vector<DetectorImage> plain = PlainImages(grey);
   struct Attempt {
     bool sb;
     int flags;
@@ -189,12 +203,12 @@ BoardDetection DetectCheckerboard(const cv::Mat& grey, const BoardSpec& board,
   // Cheapest first: the classic detector with its fast check, then the sector-based one (its
   // ACCURACY flag, an internal upsampling, finds more boards on small images).
   const std::vector<Attempt> attempts = {
-      {false,
-       cv::CALIB_CB_ADAPTIVE_THRESH | cv::CALIB_CB_NORMALIZE_IMAGE | cv::CALIB_CB_FAST_CHECK,
+      {false, cv::CALIB_CB_ADAPTIVE_THRESH | cv::CALIB_CB_NORMALIZE_IMAGE | cv::CALIB_CB_FAST_CHECK,
        "classic"},
       {true, cv::CALIB_CB_NORMALIZE_IMAGE | (small ? cv::CALIB_CB_ACCURACY : 0), "sb"}};
   std::string last_reason;
-  auto try_one = [&](const Variant& variant, const Attempt& attempt) -> std::optional<BoardDetection> {
+  auto try_one = [&](const DetectorImage& variant,
+                     const Attempt& attempt) -> std::optional<BoardDetection> {
     std::vector<Eigen::Vector2d> grid;
     if (!RunOpenCvDetector(variant.image, variant.scale, board, attempt.sb, attempt.flags, &grid)) {
       return std::nullopt;
@@ -210,17 +224,27 @@ BoardDetection DetectCheckerboard(const cv::Mat& grey, const BoardSpec& board,
     if (variant.scale < 1.0) detection.method += "-half";
     return detection;
   };
-  for (const Variant& variant : variants) {
-    for (Attempt attempt : attempts) {
-      // The fast check misses boards that only the upsampled image resolves.
-      if (variant.scale > 1.0) attempt.flags &= ~cv::CALIB_CB_FAST_CHECK;
+  // The classic detector on every plain image before the sector-based one: it takes
+  // milliseconds against a tenth of a second, and where the half-size image shrinks the squares
+  // too far for it, the full-size one usually still works.
+  for (const Attempt& attempt : attempts) {
+    for (const DetectorImage& variant : plain) {
       if (auto detection = try_one(variant, attempt)) return *detection;
+    }
+  }
+  if (options.try_enhanced) {
+    for (const DetectorImage& variant : EnhancedImages(grey, small)) {
+      for (Attempt attempt : attempts) {
+        // The fast check misses boards that only the upsampled image resolves.
+        if (variant.scale > 1.0) attempt.flags &= ~cv::CALIB_CB_FAST_CHECK;
+        if (auto detection = try_one(variant, attempt)) return *detection;
+      }
     }
   }
   if (options.allow_exhaustive) {
     const Attempt exhaustive = {true, cv::CALIB_CB_NORMALIZE_IMAGE | cv::CALIB_CB_EXHAUSTIVE,
                                 "sb-exhaustive"};
-    if (auto detection = try_one(variants.front(), exhaustive)) return *detection;
+    if (auto detection = try_one(plain.front(), exhaustive)) return *detection;
   }
   BoardDetection detection;
   detection.reason = last_reason.empty() ? "no " + board.Describe() + " found"
@@ -274,8 +298,17 @@ std::optional<std::pair<CameraModel, Rigid3d>> ModelFromHint(
     CameraModel camera;
     camera.width = grey.cols;
     camera.height = grey.rows;
-    camera.intrinsics.params = {1.0, factor * size, factor * size, (grey.cols - 1) / 2.0,
-                                (grey.rows - 1) / 2.0, 0, 0, 0, 0, 0, 0};
+    camera.intrinsics.params = {1.0,
+                                factor * size,
+                                factor * size,
+                                (grey.cols - 1) / 2.0,
+                                (grey.rows - 1) / 2.0,
+                                0,
+                                0,
+                                0,
+                                0,
+                                0,
+                                0};
     double rms = 0.0;
     const auto cam_from_board = EstimateBoardPose(camera, outer, pixels, &rms);
     if (cam_from_board && rms < best_rms) {
@@ -376,10 +409,31 @@ std::optional<std::vector<Eigen::Vector2d>> FindPartialGrid(const cv::Mat& grey,
   return std::nullopt;
 }
 
+// The sub-grid sizes a partial view may show, largest first, down to 40% of the board's
+// corners. Occlusions take whole rows or columns off either dimension (KaidanOmni8: the
+// camera's reflection and a hand hide 4 of the 11 rows; a 6 x 7 grid remains), so every
+// combination is tried, not just one or two rows less. OpenCV finds a w x h pattern in either
+// orientation, so w <= h.
+std::vector<std::pair<int, int>> PartialGridSizes(const BoardSpec& board) {
+  const int short_side = std::min(board.cols, board.rows);
+  const int long_side = std::max(board.cols, board.rows);
+  std::vector<std::pair<int, int>> sizes;
+  for (int w = 3; w <= short_side; ++w) {
+    for (int h = w; h <= long_side; ++h) {
+      const bool whole = w == short_side && h == long_side;
+      if (!whole && 5 * w * h >= 2 * board.NumCorners()) sizes.emplace_back(w, h);
+    }
+  }
+  std::stable_sort(sizes.begin(), sizes.end(), [](const auto& a, const auto& b) {
+    return a.first * a.second > b.first * b.second;
+  });
+  return sizes;
+}
+
 // Every placement of a partial grid on the board, scored by the corners the model confirms.
-BoardDetection BestPlacement(const cv::Mat& grey, const BoardSpec& board,
-                             const CameraModel& model, const std::vector<Eigen::Vector2d>& grid,
-                             int sub_cols, int sub_rows, const DetectOptions& options) {
+BoardDetection BestPlacement(const cv::Mat& grey, const BoardSpec& board, const CameraModel& model,
+                             const std::vector<Eigen::Vector2d>& grid, int sub_cols, int sub_rows,
+                             const DetectOptions& options) {
   const std::vector<Eigen::Vector3d> object_points = board.ObjectPoints();
   BoardDetection best;
   const int span = std::max(board.cols, board.rows);
@@ -389,8 +443,8 @@ BoardDetection BestPlacement(const cv::Mat& grey, const BoardSpec& board,
         std::vector<Eigen::Vector3d> points;
         bool fits = true;
         for (int i = 0; i < sub_cols * sub_rows && fits; ++i) {
-          const int id = PlacedId(board, sub_cols, sub_rows, symmetry, dc, dr, i % sub_cols,
-                                  i / sub_cols);
+          const int id =
+              PlacedId(board, sub_cols, sub_rows, symmetry, dc, dr, i % sub_cols, i / sub_cols);
           fits = id >= 0;
           if (fits) points.push_back(object_points[id]);
         }
@@ -398,7 +452,8 @@ BoardDetection BestPlacement(const cv::Mat& grey, const BoardSpec& board,
         double rms = 0.0;
         const auto cam_from_board = EstimateBoardPose(model, points, grid, &rms);
         if (!cam_from_board || rms > 3.0) continue;
-        BoardDetection candidate = DetectBoardFromPose(grey, board, model, *cam_from_board, options);
+        BoardDetection candidate =
+            DetectBoardFromPose(grey, board, model, *cam_from_board, options);
         if (candidate.corners_px.size() > best.corners_px.size()) best = std::move(candidate);
       }
     }
@@ -490,10 +545,7 @@ BoardDetection RedetectWithModel(const cv::Mat& image, const BoardSpec& board,
   options.Check();
   OMNIRIG_CHECK(!image.empty(), "detect: empty image");
   const cv::Mat grey = ToGrey(image);
-  const int sizes[][2] = {{-1, -1}, {-1, 0}, {0, -1}, {-2, -2}, {-2, -1}, {-1, -2}, {-3, -3}};
-  for (const auto& shrink : sizes) {
-    const int sub_cols = board.cols + shrink[0], sub_rows = board.rows + shrink[1];
-    if (sub_cols < 3 || sub_rows < 3) continue;
+  for (const auto& [sub_cols, sub_rows] : PartialGridSizes(board)) {
     const auto grid = FindPartialGrid(grey, sub_cols, sub_rows);
     if (!grid) continue;
     BoardDetection detection =
@@ -504,7 +556,8 @@ BoardDetection RedetectWithModel(const cv::Mat& image, const BoardSpec& board,
     }
   }
   BoardDetection detection;
-  detection.reason = "no " + board.Describe() + " found, also not by growing a partial grid "
+  detection.reason = "no " + board.Describe() +
+                     " found, also not by growing a partial grid "
                      "with the model of the other views";
   return detection;
 }

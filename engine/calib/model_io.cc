@@ -1,5 +1,6 @@
 #include "engine/calib/model_io.h"
 
+#include <cmath>
 #include <iomanip>
 #include <map>
 #include <sstream>
@@ -116,8 +117,8 @@ std::string ToOpenCvOmnidir(const CameraModel& camera, std::vector<std::string>*
   fs.writeComment("Mei unified model exported by omnirig for cv::omnidir");
   for (const std::string& warning : dropped) fs.writeComment("WARNING: " + warning);
   fs << "image_width" << camera.width << "image_height" << camera.height;
-  const cv::Matx33d k(in.gamma_u(), in.gamma_u() * in.alpha(), in.u0(), 0.0, in.gamma_v(),
-                      in.v0(), 0.0, 0.0, 1.0);
+  const cv::Matx33d k(in.gamma_u(), in.gamma_u() * in.alpha(), in.u0(), 0.0, in.gamma_v(), in.v0(),
+                      0.0, 0.0, 1.0);
   fs << "camera_matrix" << cv::Mat(k);
   fs << "distortion_coefficients" << cv::Mat(cv::Matx14d(in.k(1), in.k(2), in.k(3), in.k(4)));
   fs << "xi" << in.xi();
@@ -164,8 +165,8 @@ std::string ToKalibrOmniRadtan(const CameraModel& camera, std::vector<std::strin
      << "  intrinsics: [" << in.xi() << ", " << in.gamma_u() << ", " << in.gamma_v() << ", "
      << in.u0() << ", " << in.v0() << "]\n"
      << "  distortion_model: radtan\n"
-     << "  distortion_coeffs: [" << in.k(1) << ", " << in.k(2) << ", " << in.k(3) << ", "
-     << in.k(4) << "]\n"
+     << "  distortion_coeffs: [" << in.k(1) << ", " << in.k(2) << ", " << in.k(3) << ", " << in.k(4)
+     << "]\n"
      << "  resolution: [" << camera.width << ", " << camera.height << "]\n";
   return os.str();
 }
@@ -174,24 +175,32 @@ CameraModel FromKalibrOmniRadtan(const std::string& text, const std::string& cam
   const std::map<std::string, std::string> block = KalibrCameraBlock(text, camera_name);
   auto get = [&](const std::string& key) -> const std::string& {
     const auto it = block.find(key);
-    OMNIRIG_CHECK(it != block.end(), "kalibr: camera '" << camera_name << "' has no '" << key
-                                                        << "'");
+    OMNIRIG_CHECK(it != block.end(),
+                  "kalibr: camera '" << camera_name << "' has no '" << key << "'");
     return it->second;
   };
   OMNIRIG_CHECK(Trimmed(get("camera_model")) == "omni",
                 "kalibr: camera_model must be omni, got '" << Trimmed(get("camera_model")) << "'");
-  OMNIRIG_CHECK(Trimmed(get("distortion_model")) == "radtan",
-                "kalibr: distortion_model must be radtan, got '"
-                    << Trimmed(get("distortion_model")) << "'");
+  OMNIRIG_CHECK(
+      Trimmed(get("distortion_model")) == "radtan",
+      "kalibr: distortion_model must be radtan, got '" << Trimmed(get("distortion_model")) << "'");
   const std::vector<double> intrinsics = ParseFlowSequence(get("intrinsics"), "intrinsics");
   const std::vector<double> distortion =
       ParseFlowSequence(get("distortion_coeffs"), "distortion_coeffs");
   OMNIRIG_CHECK(intrinsics.size() == 5, "kalibr: intrinsics must hold 5 numbers");
   OMNIRIG_CHECK(distortion.size() == 4, "kalibr: distortion_coeffs must hold 4 numbers");
   CameraModel camera;
-  camera.intrinsics.params = {intrinsics[0], intrinsics[1], intrinsics[2], intrinsics[3],
-                              intrinsics[4], 0.0, distortion[0], distortion[1], distortion[2],
-                              distortion[3], 0.0};
+  camera.intrinsics.params = {intrinsics[0],
+                              intrinsics[1],
+                              intrinsics[2],
+                              intrinsics[3],
+                              intrinsics[4],
+                              0.0,
+                              distortion[0],
+                              distortion[1],
+                              distortion[2],
+                              distortion[3],
+                              0.0};
   if (block.count("resolution")) {
     const std::vector<double> resolution = ParseFlowSequence(get("resolution"), "resolution");
     OMNIRIG_CHECK(resolution.size() == 2, "kalibr: resolution must hold 2 numbers");
@@ -200,6 +209,60 @@ CameraModel FromKalibrOmniRadtan(const std::string& text, const std::string& cam
   }
   camera.intrinsics.Check();
   return camera;
+}
+
+std::vector<CalibrationView> ReadOpenCvCornerViews(const std::string& path, const BoardSpec& board,
+                                                   double object_points_to_m) {
+  board.Check();
+  OMNIRIG_CHECK(object_points_to_m > 0.0, "corner file: object_points_to_m must be positive");
+  cv::FileStorage fs;
+  try {
+    fs.open(path, cv::FileStorage::READ);
+  } catch (const cv::Exception& e) {
+    OMNIRIG_CHECK(false,
+                  "corner file '" << path << "' is not a FileStorage document: " << e.what());
+  }
+  OMNIRIG_CHECK(fs.isOpened(), "cannot read the corner file '" << path << "'");
+  std::vector<cv::Mat> object_points, image_points;
+  try {
+    fs["objectPoints"] >> object_points;
+    fs["imagePoints"] >> image_points;
+  } catch (const cv::Exception& e) {
+    OMNIRIG_CHECK(false, "corner file '" << path << "': malformed points: " << e.what());
+  }
+  OMNIRIG_CHECK(!object_points.empty() && object_points.size() == image_points.size(),
+                "corner file '" << path << "' needs as many objectPoints as imagePoints views ("
+                                << object_points.size() << " vs " << image_points.size() << ")");
+  std::vector<CalibrationView> views;
+  for (size_t v = 0; v < object_points.size(); ++v) {
+    OMNIRIG_CHECK(object_points[v].channels() == 3 && image_points[v].channels() == 2 &&
+                      object_points[v].total() == image_points[v].total(),
+                  "corner file '" << path << "', view " << v
+                                  << ": expected matching 3-channel object and 2-channel image "
+                                     "points");
+    cv::Mat object, image;
+    object_points[v].convertTo(object, CV_64F);  // stored as 3d or 3f
+    image_points[v].convertTo(image, CV_64F);    // stored as 2d or 2f
+    CalibrationView view;
+    view.name = "view" + std::to_string(v);
+    view.detection.found = true;
+    view.detection.method = "file";
+    for (int i = 0; i < static_cast<int>(object.total()); ++i) {
+      const cv::Vec3d p = object.at<cv::Vec3d>(i) * object_points_to_m;
+      const cv::Vec2d q = image.at<cv::Vec2d>(i);
+      const double col = p[0] / board.square_size_m, row = p[1] / board.square_size_m;
+      const int c = static_cast<int>(std::lround(col)), r = static_cast<int>(std::lround(row));
+      OMNIRIG_CHECK(std::abs(col - c) < 0.01 && std::abs(row - r) < 0.01 &&
+                        std::abs(p[2]) < 0.01 * board.square_size_m && c >= 0 && c < board.cols &&
+                        r >= 0 && r < board.rows,
+                    "corner file '" << path << "', view " << v << ", point " << i
+                                    << " is not on the " << board.Describe() << "'s grid");
+      view.detection.corner_ids.push_back(r * board.cols + c);
+      view.detection.corners_px.emplace_back(q[0], q[1]);
+    }
+    views.push_back(std::move(view));
+  }
+  return views;
 }
 
 }  // namespace omnirig

@@ -8,10 +8,13 @@
 // Neither format has k5; Kalibr has no skew. Exports return a warning for each parameter they
 // drop (and write it into the file as a comment); CalibrationOptions fixes k5 and skew at zero
 // by default so that exports are exact.
+// Also reads board corners stored the way OpenCV's calibration samples store them.
 
 #include <string>
 #include <vector>
 
+#include "engine/calib/board.h"
+#include "engine/calib/calibrate.h"
 #include "engine/geometry/camera_model.h"
 
 namespace omnirig {
@@ -30,5 +33,16 @@ std::string ToKalibrOmniRadtan(const CameraModel& camera, std::vector<std::strin
 // Parses the camera `camera_name` of a Kalibr camchain YAML. Throws InvalidArgument for another
 // camera or distortion model or missing keys.
 CameraModel FromKalibrOmniRadtan(const std::string& text, const std::string& camera_name = "cam0");
+
+// The corners of a FileStorage file (YAML or XML) holding the sequences "objectPoints" (per
+// view, board points in the board's plane z = 0, as 3-channel matrices) and "imagePoints" (per
+// view, pixels as 2-channel matrices), as OpenCV's omnidir tutorial data and
+// cv::omnidir::calibrate's inputs are stored. Object points times `object_points_to_m` must lie
+// on `board`'s corner grid (x along the columns, y along the rows, spacing square_size_m); they
+// become corner ids. Views are named "view0", "view1", ... and marked found. Throws
+// InvalidArgument for an unreadable file, missing or mismatched sequences, or a point off the
+// grid.
+std::vector<CalibrationView> ReadOpenCvCornerViews(const std::string& path, const BoardSpec& board,
+                                                   double object_points_to_m = 1.0);
 
 }  // namespace omnirig

@@ -1,5 +1,8 @@
 #include "engine/calib/model_io.h"
 
+#include <cstdlib>
+#include <filesystem>
+
 #include <gtest/gtest.h>
 #include <opencv2/ccalib/omnidir.hpp>
 
@@ -10,8 +13,8 @@ CameraModel Camera() {
   CameraModel camera;
   camera.width = 1280;
   camera.height = 960;
-  camera.intrinsics.params = {1.05, 420.5, 418.25, 641.5, 479.75, 0.0, -0.21, 0.043, 1.5e-3,
-                              -7.5e-4, 0.0};
+  camera.intrinsics.params = {1.05,  420.5, 418.25, 641.5,   479.75, 0.0,
+                              -0.21, 0.043, 1.5e-3, -7.5e-4, 0.0};
   return camera;
 }
 
@@ -96,10 +99,92 @@ TEST(ModelIo, MalformedInputsThrow) {
   EXPECT_THROW(FromOpenCvOmnidir("%YAML:1.0\nxi: 1.0\n"), InvalidArgument);
   EXPECT_THROW(FromOpenCvOmnidir("not a document"), InvalidArgument);
   EXPECT_THROW(FromKalibrOmniRadtan("cam0:\n  camera_model: omni\n"), InvalidArgument);
-  EXPECT_THROW(FromKalibrOmniRadtan(
-                   "cam0:\n  camera_model: omni\n  intrinsics: [1, 2, x, 4, 5]\n"
-                   "  distortion_model: radtan\n  distortion_coeffs: [0, 0, 0, 0]\n"),
-               InvalidArgument);
+  EXPECT_THROW(
+      FromKalibrOmniRadtan("cam0:\n  camera_model: omni\n  intrinsics: [1, 2, x, 4, 5]\n"
+                           "  distortion_model: radtan\n  distortion_coeffs: [0, 0, 0, 0]\n"),
+      InvalidArgument);
+}
+
+// Writes two views of a 3 x 2 board (spacing 30 mm, stored in mm) as OpenCV FileStorage.
+std::filesystem::path WriteCornerFile(const std::string& name, double off_grid_x_mm) {
+  const std::filesystem::path path = std::filesystem::temp_directory_path() / name;
+  cv::FileStorage fs(path.string(), cv::FileStorage::WRITE);
+  std::vector<cv::Mat> object_points, image_points;
+  for (int v = 0; v < 2; ++v) {
+    cv::Mat object(6, 1, CV_64FC3), image(6, 1, CV_32FC2);
+    for (int i = 0; i < 6; ++i) {
+      // Stored in reverse order: ids come from the positions, not from the order.
+      const int id = 5 - i;
+      object.at<cv::Vec3d>(i) = cv::Vec3d(30.0 * (id % 3), 30.0 * (id / 3), 0.0);
+      image.at<cv::Vec2f>(i) = cv::Vec2f(100.0f * v + id, 0.5f * id);
+    }
+    object_points.push_back(object);
+    image_points.push_back(image);
+  }
+  object_points[1].at<cv::Vec3d>(2)[0] += off_grid_x_mm;
+  fs << "objectPoints" << object_points << "imagePoints" << image_points;
+  return path;
+}
+
+TEST(ModelIo, ReadsOpenCvCornerViews) {
+  BoardSpec board;
+  board.cols = 3;
+  board.rows = 2;
+  board.square_size_m = 0.03;
+  const auto path = WriteCornerFile("omnirig_model_io_corners.yml", 0.0);
+  const std::vector<CalibrationView> views = ReadOpenCvCornerViews(path.string(), board, 1e-3);
+  ASSERT_EQ(views.size(), 2u);
+  EXPECT_EQ(views[1].name, "view1");
+  EXPECT_TRUE(views[1].detection.found);
+  ASSERT_EQ(views[1].detection.corner_ids.size(), 6u);
+  for (int i = 0; i < 6; ++i) {
+    EXPECT_EQ(views[1].detection.corner_ids[i], 5 - i);
+    EXPECT_EQ(views[1].detection.corners_px[i], Eigen::Vector2d(100.0 + (5 - i), 0.5 * (5 - i)));
+  }
+  // In metres the same points are 1000 squares apart: off the grid.
+  EXPECT_THROW(ReadOpenCvCornerViews(path.string(), board), InvalidArgument);
+  std::filesystem::remove(path);
+}
+
+TEST(ModelIo, OpenCvCornerViewsRejectBadFiles) {
+  BoardSpec board;
+  board.cols = 3;
+  board.rows = 2;
+  board.square_size_m = 0.03;
+  const auto off_grid = WriteCornerFile("omnirig_model_io_off_grid.yml", 7.0);
+  EXPECT_THROW(ReadOpenCvCornerViews(off_grid.string(), board, 1e-3), InvalidArgument);
+  std::filesystem::remove(off_grid);
+  EXPECT_THROW(ReadOpenCvCornerViews("/nonexistent/corners.yml", board), InvalidArgument);
+  board.cols = 2;  // the points' third column falls off a 2 x 2 board
+  const auto path = WriteCornerFile("omnirig_model_io_small_board.yml", 0.0);
+  EXPECT_THROW(ReadOpenCvCornerViews(path.string(), board, 1e-3), InvalidArgument);
+  std::filesystem::remove(path);
+}
+
+// The two real corner files of ../shared/data/real (skipped when absent).
+TEST(ModelIo, ReadsTheRealCornerFiles) {
+  const char* source = std::getenv("OMNIRIG_SOURCE_DIR");
+  const std::filesystem::path real =
+      std::filesystem::path(source ? source : ".") / ".." / "shared" / "data" / "real";
+  const auto tutorial = real / "opencv-omnidir-tutorial" / "omni_calib_data.xml";
+  const auto vmr = real / "ocamcalib-vmr" / "toolbox_corners.yml";
+  if (!std::filesystem::exists(tutorial) || !std::filesystem::exists(vmr)) {
+    GTEST_SKIP() << "real data not found at " << real;
+  }
+  BoardSpec board;
+  board.cols = 6;
+  board.rows = 9;
+  board.square_size_m = 0.2;  // the tutorial's spacing, unit not stated
+  const auto tutorial_views = ReadOpenCvCornerViews(tutorial.string(), board);
+  ASSERT_EQ(tutorial_views.size(), 15u);
+  for (const auto& view : tutorial_views) EXPECT_EQ(view.detection.corner_ids.size(), 54u);
+  // The toolbox's x axis runs along the board's 7-corner side.
+  board.cols = 7;
+  board.rows = 6;
+  board.square_size_m = 0.03;
+  const auto vmr_views = ReadOpenCvCornerViews(vmr.string(), board, 1e-3);  // stored in mm
+  ASSERT_EQ(vmr_views.size(), 10u);
+  for (const auto& view : vmr_views) EXPECT_EQ(view.detection.corner_ids.size(), 42u);
 }
 
 }  // namespace

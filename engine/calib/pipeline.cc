@@ -8,35 +8,42 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "engine/util/timer.h"
+
 namespace omnirig {
 namespace {
 
 cv::Point2d ToCv(const Eigen::Vector2d& p) { return cv::Point2d(p.x(), p.y()); }
 
-// Reads one image; an empty Mat (with `reason` set) when it is unreadable or of another size.
-cv::Mat ReadImage(const std::filesystem::path& path, int* width, int* height,
-                  std::string* reason) {
+// Reads one image; an empty Mat (with `reason` set) when it is missing, unreadable or truncated.
+cv::Mat ReadImage(const std::filesystem::path& path, std::string* reason) {
   cv::Mat image;
   try {
     image = cv::imread(path.string(), cv::IMREAD_COLOR);
   } catch (const cv::Exception&) {
     image = cv::Mat();
   }
-  if (image.empty()) {
-    *reason = "cannot read the image (missing, unreadable or truncated file)";
-    return image;
-  }
-  if (*width == 0) {
-    *width = image.cols;
-    *height = image.rows;
-  } else if (image.cols != *width || image.rows != *height) {
-    std::ostringstream os;
-    os << "image size " << image.cols << "x" << image.rows << " differs from the first image's "
-       << *width << "x" << *height;
-    *reason = os.str();
-    return cv::Mat();
-  }
+  if (image.empty()) *reason = "cannot read the image (missing, unreadable or truncated file)";
   return image;
+}
+
+// The first readable image fixes the size; views of another size become unused with the reason
+// (their detections, made in parallel before the size was known, are dropped).
+void CheckImageSizes(const std::vector<cv::Size>& sizes, std::vector<CalibrationView>* views,
+                     int* width, int* height) {
+  for (size_t i = 0; i < sizes.size(); ++i) {
+    if (sizes[i].empty()) continue;
+    if (*width == 0) {
+      *width = sizes[i].width;
+      *height = sizes[i].height;
+    } else if (sizes[i].width != *width || sizes[i].height != *height) {
+      std::ostringstream os;
+      os << "image size " << sizes[i].width << "x" << sizes[i].height
+         << " differs from the first image's " << *width << "x" << *height;
+      (*views)[i].detection = BoardDetection();
+      (*views)[i].detection.reason = os.str();
+    }
+  }
 }
 
 ProgressSink ScaledSink(const ProgressSink& progress, double from, double to) {
@@ -49,44 +56,44 @@ ProgressSink ScaledSink(const ProgressSink& progress, double from, double to) {
   return scaled;
 }
 
-
-// Detects the board in every image, on options.calibrate.num_threads threads. The first
-// readable image fixes the expected size (images are read in order before detection).
+// Reads each image and detects the board in it, on options.calibrate.num_threads threads
+// (images are independent; each worker holds one image at a time). The results are in input
+// order whatever the scheduling.
 std::vector<CalibrationView> DetectAll(const std::filesystem::path& dir,
                                        const std::vector<std::string>& names,
                                        const BoardSpec& board,
                                        const ImageCalibrationOptions& options, int* width,
                                        int* height, const ProgressSink& progress) {
   std::vector<CalibrationView> views(names.size());
-  std::vector<cv::Mat> images(names.size());
-  for (size_t i = 0; i < names.size(); ++i) {
-    progress.ThrowIfCancelled();
-    views[i].name = names[i];
-    images[i] = ReadImage(dir / names[i], width, height, &views[i].detection.reason);
-  }
+  std::vector<cv::Size> sizes(names.size());
   std::mutex mutex;
   std::atomic<size_t> next{0};
   size_t done = 0;
   std::exception_ptr error;
+  auto detect_one = [&](size_t i) {
+    views[i].name = names[i];
+    const cv::Mat image = ReadImage(dir / names[i], &views[i].detection.reason);
+    if (image.empty()) return;
+    sizes[i] = image.size();
+    DetectOptions detect = options.detect;
+    const auto hint = options.hints.find(names[i]);
+    if (hint != options.hints.end()) detect.outer_corners_hint_px = hint->second;
+    views[i].detection = DetectBoard(image, board, detect);
+  };
   auto worker = [&]() {
     for (size_t i = next++; i < names.size(); i = next++) {
       {
+        // The sink's callbacks need not be thread-safe: every call is under the lock.
         const std::lock_guard<std::mutex> lock(mutex);
         if (progress.IsCancelled()) return;
       }
       try {
-        if (!images[i].empty()) {
-          DetectOptions detect = options.detect;
-          const auto hint = options.hints.find(names[i]);
-          if (hint != options.hints.end()) detect.outer_corners_hint_px = hint->second;
-          views[i].detection = DetectBoard(images[i], board, detect);
-        }
-        images[i].release();
+        detect_one(i);
         const std::lock_guard<std::mutex> lock(mutex);
         ++done;
-        progress.Report(0.5 * done / names.size(), "detect",
-                        names[i] + (views[i].detection.found ? ": found"
-                                                             : ": " + views[i].detection.reason));
+        progress.Report(
+            0.5 * done / names.size(), "detect",
+            names[i] + (views[i].detection.found ? ": found" : ": " + views[i].detection.reason));
       } catch (...) {
         const std::lock_guard<std::mutex> lock(mutex);
         if (!error) error = std::current_exception();
@@ -102,6 +109,7 @@ std::vector<CalibrationView> DetectAll(const std::filesystem::path& dir,
   for (std::thread& thread : threads) thread.join();
   if (error) std::rethrow_exception(error);
   progress.ThrowIfCancelled();
+  CheckImageSizes(sizes, &views, width, height);
   return views;
 }
 
@@ -130,12 +138,47 @@ bool RedetectMissed(const std::filesystem::path& dir, const BoardSpec& board,
   return grown;
 }
 
+// The SVP check on the requested image (or the first used one) with the calibrated model.
+void RunSvpCheck(const std::filesystem::path& dir, const SvpOptions& svp,
+                 const std::filesystem::path& overlay_dir, CalibrationReport* report) {
+  std::string name = svp.image;
+  for (const CalibrationImageReport& image : report->images) {
+    if (name.empty() && image.used) name = image.name;
+  }
+  report->svp_image = name;
+  report->svp.emplace();
+  report->svp->principal_point_px =
+      Eigen::Vector2d(report->camera.intrinsics.u0(), report->camera.intrinsics.v0());
+  std::string reason;
+  const cv::Mat image = ReadImage(dir / name, &reason);
+  if (image.empty()) {
+    report->svp->reason = name + ": " + reason;
+    return;
+  }
+  try {
+    *report->svp = svp.mirror ? CheckSingleViewpoint(image, report->camera, *svp.mirror, svp.check)
+                              : DetectRim(image, report->camera, svp.check);
+  } catch (const InvalidArgument& e) {
+    report->svp->reason = e.what();  // e.g. the rim does not project with this model
+  }
+  if (!overlay_dir.empty()) {
+    std::filesystem::create_directories(overlay_dir);
+    cv::imwrite((overlay_dir / kSvpOverlayFileName).string(), DrawSvpOverlay(image, *report->svp));
+  }
+}
+
 }  // namespace
+
+void SvpOptions::Check() const {
+  if (mirror) mirror->Check();
+  check.Check();
+}
 
 void ImageCalibrationOptions::Check() const {
   detect.Check();
   calibrate.Check();
   OMNIRIG_CHECK(overlay_error_scale > 0.0, "overlay_error_scale must be positive");
+  if (svp) svp->Check();
   for (const auto& [name, hint] : hints) {
     for (const auto& corner : hint) {
       OMNIRIG_CHECK(corner.allFinite(), "hint for '" << name << "' is not finite");
@@ -166,8 +209,8 @@ cv::Mat DrawCalibrationOverlay(const cv::Mat& image, const CalibrationImageRepor
     if (i >= report.reprojected_px.size()) continue;
     const Eigen::Vector2d error = report.reprojected_px[i] - report.corners_px[i];
     cv::drawMarker(overlay, ToCv(report.reprojected_px[i]), red, cv::MARKER_CROSS, 5, 1);
-    cv::line(overlay, ToCv(report.corners_px[i]),
-             ToCv(report.corners_px[i] + error_scale * error), yellow, 1, cv::LINE_AA);
+    cv::line(overlay, ToCv(report.corners_px[i]), ToCv(report.corners_px[i] + error_scale * error),
+             yellow, 1, cv::LINE_AA);
   }
   std::ostringstream caption;
   caption.precision(3);
@@ -195,18 +238,29 @@ CalibrationReport CalibrateImages(const std::filesystem::path& dir,
     OMNIRIG_CHECK(std::find(names.begin(), names.end(), name) != names.end(),
                   "hints: no image named '" << name << "'");
   }
+  if (options.svp && !options.svp->image.empty()) {
+    OMNIRIG_CHECK(std::find(names.begin(), names.end(), options.svp->image) != names.end(),
+                  "svp: no image named '" << options.svp->image << "'");
+  }
   int width = 0, height = 0;
+  Timer timer;
   std::vector<CalibrationView> views =
       DetectAll(dir, names, board, options, &width, &height, progress);
-  OMNIRIG_CHECK(width > 0, "calibration: none of the " << names.size()
-                                                       << " images could be read");
-  CalibrationReport report = Calibrate(views, width, height, board, options.calibrate,
-                                       ScaledSink(progress, 0.5, 0.8));
-  if (options.redetect_with_model && RedetectMissed(dir, board, options, report.camera, progress,
-                                                    &views)) {
-    report = Calibrate(views, width, height, board, options.calibrate,
-                       ScaledSink(progress, 0.85, 0.95));
+  const double detect_s = timer.ElapsedSeconds();
+  OMNIRIG_CHECK(width > 0, "calibration: none of the " << names.size() << " images could be read");
+  CalibrationReport report =
+      Calibrate(views, width, height, board, options.calibrate, ScaledSink(progress, 0.5, 0.8));
+  timer.Restart();
+  if (options.redetect_with_model &&
+      RedetectMissed(dir, board, options, report.camera, progress, &views)) {
+    const double redetect_s = timer.ElapsedSeconds();
+    report =
+        Calibrate(views, width, height, board, options.calibrate, ScaledSink(progress, 0.85, 0.95));
+    report.timings.redetect_s = redetect_s;
+  } else {
+    report.timings.redetect_s = timer.ElapsedSeconds();
   }
+  report.timings.detect_s = detect_s;
   if (!overlay_dir.empty()) {
     std::filesystem::create_directories(overlay_dir);
     for (const CalibrationImageReport& image_report : report.images) {
@@ -215,6 +269,10 @@ CalibrationReport CalibrateImages(const std::filesystem::path& dir,
       cv::imwrite((overlay_dir / OverlayFileName(image_report.name)).string(),
                   DrawCalibrationOverlay(image, image_report, options.overlay_error_scale));
     }
+  }
+  if (options.svp) {
+    progress.Report(0.97, "svp", "single-viewpoint check");
+    RunSvpCheck(dir, *options.svp, overlay_dir, &report);
   }
   progress.Report(1.0, "done",
                   std::to_string(report.num_views_used) + " views, RMS " +

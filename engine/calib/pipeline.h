@@ -14,6 +14,17 @@
 
 namespace omnirig {
 
+// The single-viewpoint check after a calibration (svp.h): the rim predicted from the mirror's
+// dimensions and found in an image, or, without them, only found and compared with the
+// principal point.
+struct SvpOptions {
+  std::optional<MirrorRim> mirror;
+  std::string image;  // the image to check; empty: the first image used by the calibration
+  SvpCheckOptions check;
+
+  void Check() const;
+};
+
 struct ImageCalibrationOptions {
   DetectOptions detect;
   CalibrationOptions calibrate;
@@ -24,12 +35,19 @@ struct ImageCalibrationOptions {
   bool redetect_with_model = true;
   // Overlays: error vectors are drawn this many times longer than they are.
   double overlay_error_scale = 20.0;
+  // When set, the single-viewpoint check runs after the calibration and its overlay is written
+  // as kSvpOverlayFileName.
+  std::optional<SvpOptions> svp;
 
   void Check() const;
 };
 
+inline constexpr const char* kSvpOverlayFileName = "svp_overlay.png";
+
 // Reads `dir / name` for every name, detects the board, calibrates, and (when `overlay_dir` is
-// not empty) writes overlay_<name>.png there, '/' in names replaced by '_'. Unreadable images
+// not empty) writes overlay_<name>.png there, '/' in names replaced by '_', and the SVP check's
+// overlay when requested. An SVP check that cannot run (the rim does not project, the image is
+// unreadable) leaves its reason in report.svp and does not fail the calibration. Unreadable images
 // and images of another size than the first readable one are reported as unused with the
 // reason. Progress: "detect" per image over [0, 0.5], then Calibrate's stages over [0.5, 1]
 // (with a "redetect" pass and a second calibration when views were missed).

@@ -31,7 +31,8 @@ double Bilinear(const cv::Mat& grey, double u, double v) {
   const int u0 = static_cast<int>(std::floor(u)), v0 = static_cast<int>(std::floor(v));
   if (u0 < 0 || v0 < 0 || u0 + 1 >= grey.cols || v0 + 1 >= grey.rows) return -1.0;
   const double fu = u - u0, fv = v - v0;
-  return (1 - fu) * (1 - fv) * grey.at<uint8_t>(v0, u0) + fu * (1 - fv) * grey.at<uint8_t>(v0, u0 + 1) +
+  return (1 - fu) * (1 - fv) * grey.at<uint8_t>(v0, u0) +
+         fu * (1 - fv) * grey.at<uint8_t>(v0, u0 + 1) +
          (1 - fu) * fv * grey.at<uint8_t>(v0 + 1, u0) + fu * fv * grey.at<uint8_t>(v0 + 1, u0 + 1);
 }
 
@@ -60,6 +61,89 @@ std::vector<Eigen::Vector2d> RadialEdges(const cv::Mat& grey, const Eigen::Vecto
   return edges;
 }
 
+cv::Mat ToGreyImage(const cv::Mat& image) {
+  cv::Mat grey;
+  if (image.channels() == 3) {
+    cv::cvtColor(image, grey, cv::COLOR_BGR2GRAY);
+  } else if (image.channels() == 4) {
+    cv::cvtColor(image, grey, cv::COLOR_BGRA2GRAY);
+  } else {
+    grey = image;
+  }
+  OMNIRIG_CHECK(grey.depth() == CV_8U, "svp: expected an 8-bit image");
+  return grey;
+}
+
+// Finds the rim's edge on radial profiles around `guess` and fits a circle, re-fitting on the
+// inliers of the previous fit so that spurious edges (the scene) drop out.
+SvpCheckReport FitRimNear(const cv::Mat& grey, const CameraModel& camera,
+                          const Eigen::Vector3d& guess, const SvpCheckOptions& options) {
+  SvpCheckReport report;
+  report.principal_point_px = Eigen::Vector2d(camera.intrinsics.u0(), camera.intrinsics.v0());
+  std::vector<Eigen::Vector2d> edges = RadialEdges(grey, guess, options);
+  std::optional<Eigen::Vector3d> circle = FitCircle(edges);
+  for (int round = 0; round < 3 && circle; ++round) {
+    std::vector<Eigen::Vector2d> inliers;
+    for (const auto& p : edges) {
+      if (std::abs((p - circle->head<2>()).norm() - circle->z()) <
+          4.0 * options.inlier_px / (round + 1)) {
+        inliers.push_back(p);
+      }
+    }
+    edges = inliers;
+    circle = FitCircle(edges);
+  }
+  report.num_edge_points = static_cast<int>(edges.size());
+  if (!circle || report.num_edge_points < options.num_profiles / 4) {
+    report.reason = "no rim edge found around the expected circle (" +
+                    std::to_string(report.num_edge_points) + " edge points)";
+    return report;
+  }
+  report.found_circle_px = circle;
+  report.principal_point_offset_px = (circle->head<2>() - report.principal_point_px).norm();
+  return report;
+}
+
+// The radius around `centre` at which the intensity, averaged over the directions whose samples
+// lie in the image, changes most: a circle centred near `centre` (the rim) adds up over every
+// direction, the scene's edges do not.
+std::optional<double> StrongestCircularStep(const cv::Mat& grey, const Eigen::Vector2d& centre,
+                                            const SvpCheckOptions& options) {
+  const double max_radius = std::hypot(grey.cols, grey.rows);
+  const int num_radii = static_cast<int>(max_radius);
+  std::vector<double> sum(num_radii, 0.0);
+  std::vector<int> count(num_radii, 0);
+  for (int k = 0; k < options.num_profiles; ++k) {
+    const double angle = 2.0 * M_PI * k / options.num_profiles;
+    const Eigen::Vector2d direction(std::cos(angle), std::sin(angle));
+    double previous = -1.0;
+    for (int r = 0; r < num_radii; ++r) {
+      const Eigen::Vector2d p = centre + r * direction;
+      const double value = Bilinear(grey, p.x(), p.y());
+      if (value < 0) break;
+      if (previous >= 0) {
+        sum[r] += std::abs(value - previous);
+        ++count[r];
+      }
+      previous = value;
+    }
+  }
+  // Radii seen by fewer than a quarter of the directions (corners of the image) do not count;
+  // nor do the innermost ones (the camera's own reflection).
+  double best = 0.0;
+  int best_r = -1;
+  for (int r = std::max(4, num_radii / 20); r < num_radii; ++r) {
+    if (4 * count[r] < options.num_profiles) continue;
+    const double mean = sum[r] / count[r];
+    if (mean > best) {
+      best = mean;
+      best_r = r;
+    }
+  }
+  if (best_r < 0 || best < 5.0) return std::nullopt;
+  return best_r - 0.5;
+}
+
 }  // namespace
 
 void MirrorRim::Check() const {
@@ -83,44 +167,39 @@ SvpCheckReport CheckSingleViewpoint(const cv::Mat& image, const CameraModel& cam
   std::vector<Eigen::Vector2d> predicted;
   for (int k = 0; k < 72; ++k) {
     const double angle = 2.0 * M_PI * k / 72;
-    const auto pixel = Project(camera.intrinsics,
-                               Eigen::Vector3d(rim.rim_radius_m * std::cos(angle),
-                                               rim.rim_radius_m * std::sin(angle),
-                                               rim.rim_height_m));
+    const auto pixel = Project(
+        camera.intrinsics, Eigen::Vector3d(rim.rim_radius_m * std::cos(angle),
+                                           rim.rim_radius_m * std::sin(angle), rim.rim_height_m));
     OMNIRIG_CHECK(pixel, "svp: the rim does not project with this model");
     predicted.push_back(*pixel);
   }
-  SvpCheckReport report;
-  report.predicted_circle_px = *FitCircle(predicted);
-  cv::Mat grey;
-  if (image.channels() == 3) {
-    cv::cvtColor(image, grey, cv::COLOR_BGR2GRAY);
-  } else {
-    grey = image;
+  const std::optional<Eigen::Vector3d> predicted_circle = FitCircle(predicted);
+  OMNIRIG_CHECK(predicted_circle, "svp: the projected rim is not a circle");
+  SvpCheckReport report = FitRimNear(ToGreyImage(image), camera, *predicted_circle, options);
+  report.predicted_circle_px = predicted_circle;
+  if (report.found_circle_px) {
+    report.centre_offset_px =
+        (report.found_circle_px->head<2>() - predicted_circle->head<2>()).norm();
+    report.radius_offset_px = report.found_circle_px->z() - predicted_circle->z();
   }
-  std::vector<Eigen::Vector2d> edges = RadialEdges(grey, report.predicted_circle_px, options);
-  std::optional<Eigen::Vector3d> circle = FitCircle(edges);
-  // Re-fit on the inliers of the previous fit: spurious edges (the scene) drop out.
-  for (int round = 0; round < 3 && circle; ++round) {
-    std::vector<Eigen::Vector2d> inliers;
-    for (const auto& p : edges) {
-      if (std::abs((p - circle->head<2>()).norm() - circle->z()) < 4.0 * options.inlier_px / (round + 1)) {
-        inliers.push_back(p);
-      }
-    }
-    edges = inliers;
-    circle = FitCircle(edges);
-  }
-  report.num_edge_points = static_cast<int>(edges.size());
-  if (!circle || report.num_edge_points < options.num_profiles / 4) {
-    report.reason = "no rim edge found around the predicted circle (" +
-                    std::to_string(report.num_edge_points) + " edge points)";
+  return report;
+}
+
+SvpCheckReport DetectRim(const cv::Mat& image, const CameraModel& camera,
+                         const SvpCheckOptions& options) {
+  options.Check();
+  camera.intrinsics.Check();
+  OMNIRIG_CHECK(!image.empty(), "svp: empty image");
+  const cv::Mat grey = ToGreyImage(image);
+  const Eigen::Vector2d centre(camera.intrinsics.u0(), camera.intrinsics.v0());
+  const std::optional<double> radius = StrongestCircularStep(grey, centre, options);
+  if (!radius) {
+    SvpCheckReport report;
+    report.principal_point_px = centre;
+    report.reason = "no circular edge around the principal point";
     return report;
   }
-  report.found_circle_px = circle;
-  report.centre_offset_px = (circle->head<2>() - report.predicted_circle_px.head<2>()).norm();
-  report.radius_offset_px = circle->z() - report.predicted_circle_px.z();
-  return report;
+  return FitRimNear(grey, camera, Eigen::Vector3d(centre.x(), centre.y(), *radius), options);
 }
 
 cv::Mat DrawSvpOverlay(const cv::Mat& image, const SvpCheckReport& report) {
@@ -133,18 +212,30 @@ cv::Mat DrawSvpOverlay(const cv::Mat& image, const SvpCheckReport& report) {
   const auto draw = [&](const Eigen::Vector3d& c, const cv::Scalar& colour) {
     cv::circle(overlay, cv::Point(cvRound(c.x() * 16), cvRound(c.y() * 16)), cvRound(c.z() * 16),
                colour, 1, cv::LINE_AA, 4);
-    cv::drawMarker(overlay, cv::Point(cvRound(c.x()), cvRound(c.y())), colour, cv::MARKER_CROSS, 12);
+    cv::drawMarker(overlay, cv::Point(cvRound(c.x()), cvRound(c.y())), colour, cv::MARKER_CROSS,
+                   12);
   };
-  draw(report.predicted_circle_px, cv::Scalar(0, 0, 255));
+  if (report.predicted_circle_px) draw(*report.predicted_circle_px, cv::Scalar(0, 0, 255));
+  cv::drawMarker(
+      overlay,
+      cv::Point(cvRound(report.principal_point_px.x()), cvRound(report.principal_point_px.y())),
+      cv::Scalar(255, 128, 0), cv::MARKER_TILTED_CROSS, 12);
   std::ostringstream text;
   text.precision(3);
   if (report.found_circle_px) {
     draw(*report.found_circle_px, cv::Scalar(0, 255, 0));
-    text << "rim offset: centre " << report.centre_offset_px << " px, radius "
-         << report.radius_offset_px << " px (red predicted, green found)";
+    if (report.predicted_circle_px) {
+      text << "rim offset: centre " << report.centre_offset_px << " px, radius "
+           << report.radius_offset_px << " px (red predicted, green found)";
+    } else {
+      text << "rim (green) centre " << report.principal_point_offset_px
+           << " px from the principal point (blue)";
+    }
   } else {
     text << report.reason;
   }
+  cv::putText(overlay, text.str(), cv::Point(8, 20), cv::FONT_HERSHEY_SIMPLEX, 0.5,
+              cv::Scalar(0, 0, 0), 3, cv::LINE_AA);
   cv::putText(overlay, text.str(), cv::Point(8, 20), cv::FONT_HERSHEY_SIMPLEX, 0.5,
               cv::Scalar(255, 255, 255), 1, cv::LINE_AA);
   return overlay;

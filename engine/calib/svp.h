@@ -4,7 +4,9 @@
 // circle of known radius at a known height above the mirror's focus, projects where the
 // calibrated model predicts it. This predicts the rim circle in the image, finds the actual rim
 // (radial intensity profiles around the prediction, strongest dark-bright edge, robust circle
-// fit) and reports the offset.
+// fit) and reports the offset. Without the mirror's dimensions, DetectRim finds the rim around
+// the principal point alone and reports its centre against the principal point (for a
+// single-viewpoint sensor with a radially symmetric model they coincide).
 
 #include <optional>
 #include <string>
@@ -33,19 +35,30 @@ struct SvpCheckOptions {
 };
 
 struct SvpCheckReport {
-  Eigen::Vector3d predicted_circle_px = Eigen::Vector3d::Zero();  // u, v, radius
-  std::optional<Eigen::Vector3d> found_circle_px;                 // nullopt when not found
+  // u, v, radius (px). predicted_circle_px is absent when no mirror was given (DetectRim);
+  // found_circle_px when the rim was not found (see reason).
+  std::optional<Eigen::Vector3d> predicted_circle_px;
+  std::optional<Eigen::Vector3d> found_circle_px;
   double centre_offset_px = 0.0;  // |found centre - predicted centre|
   double radius_offset_px = 0.0;  // found radius - predicted radius
-  int num_edge_points = 0;        // inliers of the fit
-  std::string reason;             // why the rim was not found
+  Eigen::Vector2d principal_point_px = Eigen::Vector2d::Zero();  // (u0, v0) of the model
+  double principal_point_offset_px = 0.0;                        // |found centre - principal point|
+  int num_edge_points = 0;                                       // inliers of the fit
+  std::string reason;                                            // why the rim was not found
 };
 
 // Throws InvalidArgument for an empty image, a rim that does not project, or invalid options.
 SvpCheckReport CheckSingleViewpoint(const cv::Mat& image, const CameraModel& camera,
                                     const MirrorRim& rim, const SvpCheckOptions& options);
 
-// The image with the predicted rim (red) and the found rim (green), and the offsets as text.
+// The rim without the mirror's dimensions: the radius at which the intensity, averaged over
+// every direction around the principal point, steps most sharply, refined as in
+// CheckSingleViewpoint. Throws InvalidArgument for an empty image or invalid options.
+SvpCheckReport DetectRim(const cv::Mat& image, const CameraModel& camera,
+                         const SvpCheckOptions& options);
+
+// The image with the predicted rim (red), the found rim (green), the principal point (blue
+// cross), and the offsets as text.
 cv::Mat DrawSvpOverlay(const cv::Mat& image, const SvpCheckReport& report);
 
 }  // namespace omnirig
