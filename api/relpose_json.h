@@ -11,6 +11,11 @@
 //                                                                  their own images first)
 //    "refine_intrinsics": bool (default: true when the job calibrates the cameras itself, false
 //                               with given calibrations),
+//    "fixed_intrinsics": [names] (held fixed in the job's own calibrations and the joint
+//                                 refinement: UnifiedIntrinsics names or "skew", "tangential",
+//                                 "principal_point", "gamma"; default ["alpha", "k5"]; e.g.
+//                                 ["alpha", "k5", "tangential"] for a fisheye lens, whose
+//                                 tangential terms trade against the rig pose),
 //    "resolve_corner_order": bool, "huber_loss_px": number, "max_num_iterations": int}
 // Result:
 //   {"cam0_from_cam1": {"rotation_wxyz", "translation_m"}, "baseline_m", "baseline_std_m",

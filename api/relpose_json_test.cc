@@ -52,6 +52,27 @@ TEST(RelposeJson, ParamsParseBoardCalibrationsAndOptions) {
                    .options.refine_intrinsics);
 }
 
+TEST(RelposeJson, FixedIntrinsicsReplaceTheDefaultSet) {
+  const RelativePoseParams by_default = RelativePoseParamsFromJson({{"board", Board()}});
+  EXPECT_EQ(by_default.options.fixed_intrinsics, DefaultFixedIntrinsics());
+  const RelativePoseParams fisheye = RelativePoseParamsFromJson(
+      {{"board", Board()}, {"fixed_intrinsics", {"alpha", "k5", "tangential"}}});
+  std::array<bool, UnifiedIntrinsics::kNumParams> expected = DefaultFixedIntrinsics();
+  expected[UnifiedIntrinsics::kK3] = expected[UnifiedIntrinsics::kK4] = true;
+  EXPECT_EQ(fisheye.options.fixed_intrinsics, expected);
+  const RelativePoseParams none =
+      RelativePoseParamsFromJson({{"board", Board()}, {"fixed_intrinsics", json::array()}});
+  for (bool fixed : none.options.fixed_intrinsics) EXPECT_FALSE(fixed);
+  EXPECT_NE(ErrorOf([] {
+              RelativePoseParamsFromJson({{"board", Board()}, {"fixed_intrinsics", {"k9"}}});
+            }).find("k9"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf([] {
+              RelativePoseParamsFromJson({{"board", Board()}, {"fixed_intrinsics", "k5"}});
+            }).find("fixed_intrinsics"),
+            std::string::npos);
+}
+
 TEST(RelposeJson, ParamsRefuseUnknownFieldsAndWrongTypesNamingTheField) {
   EXPECT_NE(ErrorOf([] { RelativePoseParamsFromJson({{"board", Board()}, {"bord", 1}}); })
                 .find("params.bord"),

@@ -1,21 +1,30 @@
 // bench_relpose: accuracy of the stereo rig's relative pose (issue 4's targets), next to the
 // paper's method and cv::omnidir::stereoCalibrate on the same corners, in the same run.
 //
-//   1. Synthetic vertical rig (100 mm), 20 pairs rendered at 1024x768 (image noise of 2 grey
-//      levels, blur 0.5 px), corners from omnirig's own detector, once as detected and once
-//      with 0.2 px Gaussian noise added to every corner. Cameras known (the rig alone is
-//      measured) and calibrated from the same images (the whole chain). Baseline error (target
-//      < 0.01%) and rotation error (< 0.01 deg). Rows: the joint refinement (eq. 20), eq. (9)
-//      alone, the paper's average of per-pair poses, the joint refinement with both cameras'
-//      intrinsics, cv::omnidir::stereoCalibrate (its own initialisation, COUNT 300 / EPS 1e-8).
-//   2. Triangulation of the board corners of 10 new pairs about 1 m away with each estimated
-//      rig (target: mean error < 0.5% of the range).
-//   3. Real fisheye pairs (../shared/data/real/fisheye-stereo-pairs, left = cam0, right =
+//   1. Synthetic vertical rig (100 mm), 20 pairs rendered at 1024x768 per seed, 3 seeds, corners
+//      from omnirig's own detector, in three readings of "renders with 0.2 px noise": image
+//      noise of 2 grey levels with the corners as detected; the same + 0.2 px Gaussian noise on
+//      every corner; image noise of 19 grey levels (the detector's own error then 0.16 px
+//      RMS). Mean, spread and worst of the baseline error (target < 0.01 %) and rotation error
+//      (< 0.01 deg) over the seeds, and how many seeds meet both, for: known cameras (the rig
+//      alone), eq. (9) alone, the paper's average of per-pair poses, cameras calibrated per
+//      camera from the same images with and without the joint intrinsics refinement (the job's
+//      default), cv::omnidir::stereoCalibrate (its own initialisation, COUNT 300 / EPS 1e-8).
+//   2. The estimator's floor without rendering: exact corners + 0.2 px noise, cameras known,
+//      20 / 80 / 320 pairs, 20 seeds each: how many pairs the 0.01 % target needs at that noise.
+//   3. Triangulation of the board corners of 10 new pairs about 1 m away with each estimated
+//      rig (target: mean error < 0.5 % of the range).
+//   4. Real fisheye pairs (../shared/data/real/fisheye-stereo-pairs, left = cam0, right =
 //      cam1, 9 x 6 corners, 24.23 mm): baseline against the reference 109.96 mm (target within
-//      0.2%) and RMS (< 0.5 px).
+//      0.2 %) and RMS (< 0.5 px); the reference's own method (cv::fisheye::stereoCalibrate, the
+//      Kannala-Brandt model, its 12 iterations and converged) and cv::omnidir on our corners;
+//      what fixing / freeing k5, skew and the tangential terms, the robust loss, pair rejection
+//      and dropping outer corners do; the baseline without each pair and from each half.
 // RMS everywhere is sqrt(mean |e|^2) of the Euclidean corner error, as OpenCV reports it.
 //
-// Usage: bench_relpose [--quick] [--data DIR]   (DIR: the folder holding the real data sets)
+// Usage: bench_relpose [--quick] [--data DIR] [--only synthetic|floor|real]
+//   (DIR: the folder holding the real data sets; --only runs one part, "synthetic" includes
+//   the floor)
 
 #include <algorithm>
 #include <chrono>
@@ -23,9 +32,13 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <functional>
 #include <iostream>
+#include <iterator>
+#include <optional>
 #include <random>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -35,6 +48,7 @@
 #include <opencv2/core/eigen.hpp>
 #include <opencv2/imgcodecs.hpp>
 
+#include "engine/calib/board_pose.h"
 #include "engine/calib/calibrate.h"
 #include "engine/calib/detect.h"
 #include "engine/stereo/relative_pose.h"
@@ -63,16 +77,16 @@ struct Row {
 void PrintRows(const std::string& title, const std::vector<Row>& rows, const Rigid3d* truth,
                double reference_baseline_m) {
   std::printf("\n%s\n", title.c_str());
-  std::printf("| %-44s | %12s | %10s | %10s | %8s | %7s | %s\n", "method", "baseline mm",
-              "error %", "rot err deg", "RMS px", "time s", "note");
+  std::printf("| %-44s | %12s | %10s | %10s | %8s | %7s | %s\n", "method", "baseline mm", "error %",
+              "rot err deg", "RMS px", "time s", "note");
   std::printf("|%s|%s|%s|%s|%s|%s|---\n", std::string(46, '-').c_str(),
               std::string(14, '-').c_str(), std::string(12, '-').c_str(),
               std::string(12, '-').c_str(), std::string(10, '-').c_str(),
               std::string(9, '-').c_str());
   for (const Row& row : rows) {
     if (!row.ok) {
-      std::printf("| %-44s | %12s | %10s | %10s | %8s | %7s | %s\n", row.method.c_str(), "-",
-                  "-", "-", "-", "-", row.note.c_str());
+      std::printf("| %-44s | %12s | %10s | %10s | %8s | %7s | %s\n", row.method.c_str(), "-", "-",
+                  "-", "-", "-", row.note.c_str());
       continue;
     }
     const double baseline = row.cam0_from_cam1.translation.norm();
@@ -80,8 +94,7 @@ void PrintRows(const std::string& title, const std::vector<Row>& rows, const Rig
     char rotation[32] = "-";
     if (truth != nullptr) {
       std::snprintf(rotation, sizeof(rotation), "%.5f",
-                    RotationDistanceRad(row.cam0_from_cam1.rotation, truth->rotation) *
-                        kDegPerRad);
+                    RotationDistanceRad(row.cam0_from_cam1.rotation, truth->rotation) * kDegPerRad);
     }
     char rms[32] = "-";
     if (std::isfinite(row.rms_px)) std::snprintf(rms, sizeof(rms), "%.4f", row.rms_px);
@@ -122,10 +135,13 @@ void LabelByGroundTruth(const std::vector<Eigen::Vector2d>& truth, BoardDetectio
 
 std::vector<StereoBoardPair> DetectPairs(const synth::StereoBoardSet& set, const BoardSpec& board,
                                          double corner_noise_px, bool label_by_truth,
-                                         double* max_detection_error_px) {
-  std::mt19937 rng(42);
+                                         double* max_detection_error_px, uint64_t seed = 42,
+                                         double* rms_detection_error_px = nullptr) {
+  std::mt19937 rng(static_cast<uint32_t>(seed));
   std::vector<StereoBoardPair> pairs;
   *max_detection_error_px = 0.0;
+  double sum_squares = 0.0;
+  int count = 0;
   for (size_t i = 0; i < set.names.size(); ++i) {
     StereoBoardPair pair;
     pair.name = set.names[i];
@@ -136,24 +152,33 @@ std::vector<StereoBoardPair> DetectPairs(const synth::StereoBoardSet& set, const
       BoardDetection labelled = *detections[c];
       LabelByGroundTruth(set.corners_px[c][i], &labelled);
       for (size_t k = 0; k < labelled.corners_px.size(); ++k) {
-        *max_detection_error_px = std::max(
-            *max_detection_error_px,
-            (labelled.corners_px[k] - set.corners_px[c][i][labelled.corner_ids[k]]).norm());
+        const double error =
+            (labelled.corners_px[k] - set.corners_px[c][i][labelled.corner_ids[k]]).norm();
+        *max_detection_error_px = std::max(*max_detection_error_px, error);
+        sum_squares += error * error;
+        ++count;
       }
       if (label_by_truth) *detections[c] = labelled;
       AddCornerNoise(corner_noise_px, &rng, detections[c]);
     }
     pairs.push_back(pair);
   }
+  if (rms_detection_error_px != nullptr) {
+    *rms_detection_error_px = count > 0 ? std::sqrt(sum_squares / count) : NAN;
+  }
   return pairs;
 }
 
-// cv::omnidir::stereoCalibrate on the pairs that our estimate used, cam1's corners in the
-// order our estimate settled on (so that both methods see identical correspondences).
-Row RunOmnidirStereo(const BoardSpec& board, const std::vector<StereoBoardPair>& pairs,
-                     const RelativePoseReport& ours, cv::Size size0, cv::Size size1) {
-  Row row;
-  row.method = "cv::omnidir::stereoCalibrate";
+// The corners of the full detections of the pairs that our estimate used, as OpenCV's stereo
+// calibrations take them: cam1's corners in the order our estimate settled on, so that every
+// method sees identical correspondences.
+struct CvCorrespondences {
+  std::vector<cv::Mat> object_points, image_points0, image_points1;
+};
+
+CvCorrespondences BuildCvCorrespondences(const BoardSpec& board,
+                                         const std::vector<StereoBoardPair>& pairs,
+                                         const RelativePoseReport& ours) {
   const std::vector<BoardSymmetry> symmetries = BoardGridSymmetries(board);
   const std::vector<Eigen::Vector3d> object = board.ObjectPoints();
   std::vector<cv::Mat> object_points, image_points0, image_points1;
@@ -169,8 +194,8 @@ Row RunOmnidirStereo(const BoardSpec& board, const std::vector<StereoBoardPair>&
     for (int c = 0; c < n; ++c) {
       const int id = pairs[i].cam0.corner_ids[c];
       obj.at<cv::Vec3d>(0, c) = cv::Vec3d(object[id].x(), object[id].y(), object[id].z());
-      img0.at<cv::Vec2d>(0, c) = cv::Vec2d(pairs[i].cam0.corners_px[c].x(),
-                                           pairs[i].cam0.corners_px[c].y());
+      img0.at<cv::Vec2d>(0, c) =
+          cv::Vec2d(pairs[i].cam0.corners_px[c].x(), pairs[i].cam0.corners_px[c].y());
     }
     for (int c = 0; c < n; ++c) {
       const int id = permutation[pairs[i].cam1.corner_ids[c]];
@@ -178,13 +203,23 @@ Row RunOmnidirStereo(const BoardSpec& board, const std::vector<StereoBoardPair>&
       const int slot = static_cast<int>(
           std::find(pairs[i].cam0.corner_ids.begin(), pairs[i].cam0.corner_ids.end(), id) -
           pairs[i].cam0.corner_ids.begin());
-      img1.at<cv::Vec2d>(0, slot) = cv::Vec2d(pairs[i].cam1.corners_px[c].x(),
-                                              pairs[i].cam1.corners_px[c].y());
+      img1.at<cv::Vec2d>(0, slot) =
+          cv::Vec2d(pairs[i].cam1.corners_px[c].x(), pairs[i].cam1.corners_px[c].y());
     }
     object_points.push_back(obj);
     image_points0.push_back(img0);
     image_points1.push_back(img1);
   }
+  return {object_points, image_points0, image_points1};
+}
+
+// cv::omnidir::stereoCalibrate (Mei model, k1 k2 p1 p2, skew fixed) from its own
+// initialisation, run to convergence.
+Row RunOmnidirStereo(const BoardSpec& board, const std::vector<StereoBoardPair>& pairs,
+                     const RelativePoseReport& ours, cv::Size size0, cv::Size size1) {
+  Row row;
+  row.method = "cv::omnidir::stereoCalibrate";
+  auto [object_points, image_points0, image_points1] = BuildCvCorrespondences(board, pairs, ours);
   cv::Mat k0, k1, xi0, xi1, d0, d1, rvec, tvec, idx;
   std::vector<cv::Mat> rvecs, tvecs;
   const auto start = std::chrono::steady_clock::now();
@@ -221,48 +256,34 @@ Row RunOmnidirStereo(const BoardSpec& board, const std::vector<StereoBoardPair>&
   return row;
 }
 
-std::vector<Row> OurRows(const CameraModel& cam0, const CameraModel& cam1, const BoardSpec& board,
-                         const std::vector<StereoBoardPair>& pairs, const std::string& prefix,
-                         RelativePoseReport* fixed_report) {
-  std::vector<Row> rows;
-  for (bool refine : {false, true}) {
-    RelativePoseOptions options;
-    options.refine_intrinsics = refine;
-    const auto start = std::chrono::steady_clock::now();
-    const RelativePoseReport report = EstimateRelativePose(cam0, cam1, board, pairs, options);
-    const double time_s = Seconds(start);
-    if (!refine && fixed_report != nullptr) *fixed_report = report;
-    Row row;
-    row.method = prefix + (refine ? "omnirig joint + intrinsics" : "omnirig joint (eq. 20)");
-    row.ok = report.success;
-    row.cam0_from_cam1 = report.rig.cam0_from_cam1;
-    row.rms_px = report.rms_px;
-    row.time_s = time_s;
-    char note[160];
-    std::snprintf(note, sizeof(note), "%d/%zu pairs, baseline std %.4f mm, rot std %.5f deg",
-                  report.num_pairs_used, pairs.size(), report.baseline_std_m * 1e3,
-                  report.rotation_std_deg);
-    row.note = report.success ? note : report.message;
-    rows.push_back(row);
-    if (refine) continue;
-    Row linear{prefix + "omnirig eq. (9) + SVD, no refinement", report.success,
-               report.linear_cam0_from_cam1, NAN, NAN, ""};
-    Row average{prefix + "paper: average of per-pair poses", report.success,
-                report.averaged_cam0_from_cam1, NAN, NAN, ""};
-    rows.push_back(linear);
-    rows.push_back(average);
-  }
-  return rows;
+Row OurRow(const std::string& method, const CameraModel& cam0, const CameraModel& cam1,
+           const BoardSpec& board, const std::vector<StereoBoardPair>& pairs,
+           const RelativePoseOptions& options, RelativePoseReport* out = nullptr) {
+  const auto start = std::chrono::steady_clock::now();
+  const RelativePoseReport report = EstimateRelativePose(cam0, cam1, board, pairs, options);
+  Row row;
+  row.method = method;
+  row.time_s = Seconds(start);
+  row.ok = report.success;
+  row.cam0_from_cam1 = report.rig.cam0_from_cam1;
+  row.rms_px = report.rms_px;
+  char note[160];
+  std::snprintf(note, sizeof(note), "%d/%zu pairs, baseline std %.4f mm, rot std %.5f deg",
+                report.num_pairs_used, pairs.size(), report.baseline_std_m * 1e3,
+                report.rotation_std_deg);
+  row.note = report.success ? note : report.message;
+  if (out != nullptr) *out = report;
+  return row;
 }
 
 CameraModel CalibrateCamera(const std::vector<StereoBoardPair>& pairs, int camera, int width,
-                            int height, const BoardSpec& board, double* rms_px) {
+                            int height, const BoardSpec& board, double* rms_px,
+                            const CalibrationOptions& options = CalibrationOptions()) {
   std::vector<CalibrationView> views;
   for (const StereoBoardPair& pair : pairs) {
     views.push_back({pair.name, camera == 0 ? pair.cam0 : pair.cam1});
   }
-  const CalibrationReport report =
-      Calibrate(views, width, height, board, CalibrationOptions(), ProgressSink());
+  const CalibrationReport report = Calibrate(views, width, height, board, options, ProgressSink());
   *rms_px = report.rms_px;
   return report.camera;
 }
@@ -292,8 +313,8 @@ TriangulationStats TriangulateBoards(const synth::StereoBoardSet& set, const Boa
       const auto bearing0 = Lift(rig.cam0.intrinsics, pairs[i].cam0.corners_px[c]);
       const auto bearing1 = Lift(rig.cam1.intrinsics, pairs[i].cam1.corners_px[slot1[id]]);
       if (!bearing0 || !bearing1) continue;
-      const TriangulatedPoint point = TriangulateOptimalAngular(cam1_from_cam0, *bearing0,
-                                                                *bearing1);
+      const TriangulatedPoint point =
+          TriangulateOptimalAngular(cam1_from_cam0, *bearing0, *bearing1);
       if (!point.valid) continue;
       const Eigen::Vector3d truth = set.cam0_from_board[i] * object[id];
       const double error_pct = 100.0 * (point.point_in_cam1 - truth).norm() / truth.norm();
@@ -311,23 +332,151 @@ TriangulationStats TriangulateBoards(const synth::StereoBoardSet& set, const Boa
 }
 
 synth::StereoBoardSet RenderSet(int num_pairs, double min_distance_m, double max_distance_m,
-                                uint64_t seed) {
+                                uint64_t seed, double image_noise = 2.0) {
   synth::StereoBoardOptions options;
   options.num_pairs = num_pairs;
   options.poses.min_distance_m = min_distance_m;
   options.poses.max_distance_m = max_distance_m;
-  options.render.noise_sigma = 2.0;
+  options.render.noise_sigma = image_noise;
   options.render.blur_sigma_px = 0.5;
   options.render.grayscale = true;
   options.seed = seed;
   return synth::MakeStereoBoardSet(options);
 }
 
+// Errors of one method over several seeds.
+struct ErrorStats {
+  std::vector<double> error_pct, rotation_deg, reported_std_pct, rms_px;
+  int failures = 0;
+
+  void Add(const Row& row, const Rigid3d& truth, double reported_std_m) {
+    if (!row.ok) {
+      ++failures;
+      return;
+    }
+    const double baseline = truth.translation.norm();
+    error_pct.push_back(100.0 * (row.cam0_from_cam1.translation.norm() - baseline) / baseline);
+    rotation_deg.push_back(RotationDistanceRad(row.cam0_from_cam1.rotation, truth.rotation) *
+                           kDegPerRad);
+    reported_std_pct.push_back(100.0 * reported_std_m / baseline);
+    rms_px.push_back(row.rms_px);
+  }
+};
+
+double Mean(const std::vector<double>& v) {
+  double sum = 0.0;
+  for (double x : v) sum += x;
+  return v.empty() ? NAN : sum / v.size();
+}
+
+double StdDev(const std::vector<double>& v) {
+  if (v.size() < 2) return NAN;
+  const double mean = Mean(v);
+  double sum = 0.0;
+  for (double x : v) sum += (x - mean) * (x - mean);
+  return std::sqrt(sum / (v.size() - 1.0));
+}
+
+double MaxAbs(const std::vector<double>& v) {
+  double m = 0.0;
+  for (double x : v) m = std::max(m, std::abs(x));
+  return v.empty() ? NAN : m;
+}
+
+// "n of m runs" meeting both targets (|baseline error| < 0.01 %, rotation < 0.01 deg).
+int NumMeetingTargets(const ErrorStats& stats) {
+  int n = 0;
+  for (size_t k = 0; k < stats.error_pct.size(); ++k) {
+    n += std::abs(stats.error_pct[k]) < 0.01 && stats.rotation_deg[k] < 0.01;
+  }
+  return n;
+}
+
+void PrintStatsHeader(const std::string& title) {
+  std::printf("\n%s\n", title.c_str());
+  std::printf("| %-50s | %5s | %11s | %10s | %11s | %12s | %11s | %11s | %8s |\n", "method", "runs",
+              "mean err %", "std err %", "max |err| %", "mean rot deg", "max rot deg", "its std %",
+              "meet");
+  std::printf("|%s|%s|%s|%s|%s|%s|%s|%s|%s|\n", std::string(52, '-').c_str(),
+              std::string(7, '-').c_str(), std::string(13, '-').c_str(),
+              std::string(12, '-').c_str(), std::string(13, '-').c_str(),
+              std::string(14, '-').c_str(), std::string(13, '-').c_str(),
+              std::string(13, '-').c_str(), std::string(10, '-').c_str());
+}
+
+// "its std %": the baseline's standard deviation the estimator reports (covariance), to set
+// against the spread actually seen over the seeds. "meet": runs meeting both targets.
+void PrintStats(const std::string& method, const ErrorStats& stats) {
+  const size_t runs = stats.error_pct.size();
+  char meet[32];
+  std::snprintf(meet, sizeof(meet), "%d/%zu", NumMeetingTargets(stats), runs + stats.failures);
+  std::printf("| %-50s | %5zu | %+11.4f | %10.4f | %11.4f | %12.5f | %11.5f | %11.4f | %8s |\n",
+              method.c_str(), runs, Mean(stats.error_pct), StdDev(stats.error_pct),
+              MaxAbs(stats.error_pct), Mean(stats.rotation_deg), MaxAbs(stats.rotation_deg),
+              Mean(stats.reported_std_pct), meet);
+}
+
+// The renders' configurations: what "renders with 0.2 px noise" can mean.
+struct NoiseConfig {
+  std::string label;  // short, for the triangulation table
+  std::string name;
+  double image_noise;      // grey levels, in the render
+  double corner_noise_px;  // Gaussian, per coordinate, added to the detector's corners
+};
+
+// The methods compared on every seed, in print order.
+const std::vector<std::string>& SyntheticMethods() {
+  static const std::vector<std::string> methods = {
+      "known cameras: omnirig joint (eq. 20)",
+      "known cameras: omnirig eq. (9) + SVD",
+      "known cameras: paper, average of per-pair poses",
+      "calibrated per camera: omnirig joint, cameras fixed",
+      "calibrated: omnirig joint + intrinsics (job default)",
+      "cv::omnidir::stereoCalibrate"};
+  return methods;
+}
+
+// Runs every method on one seed's pairs, adding to `stats` (indexed like SyntheticMethods());
+// `rigs` receives the known-camera and calibrated rigs for the triangulation test.
+void RunSyntheticSeed(const synth::StereoBoardSet& set, const BoardSpec& board,
+                      const std::vector<StereoBoardPair>& pairs, std::vector<ErrorStats>* stats,
+                      std::vector<std::pair<std::string, StereoRig>>* rigs,
+                      const std::string& label) {
+  const Rigid3d truth = set.rig.cam0_from_cam1;
+  const RelativePoseOptions fixed_cameras;
+  RelativePoseOptions joint;
+  joint.refine_intrinsics = true;
+  RelativePoseReport known;
+  const Row known_row = OurRow(SyntheticMethods()[0], set.rig.cam0, set.rig.cam1, board, pairs,
+                               fixed_cameras, &known);
+  (*stats)[0].Add(known_row, truth, known.baseline_std_m);
+  (*stats)[1].Add({"", known.success, known.linear_cam0_from_cam1, NAN, NAN, ""}, truth, NAN);
+  (*stats)[2].Add({"", known.success, known.averaged_cam0_from_cam1, NAN, NAN, ""}, truth, NAN);
+  double rms0 = 0.0, rms1 = 0.0;
+  const CameraModel cam0 =
+      CalibrateCamera(pairs, 0, set.rig.cam0.width, set.rig.cam0.height, board, &rms0);
+  const CameraModel cam1 =
+      CalibrateCamera(pairs, 1, set.rig.cam1.width, set.rig.cam1.height, board, &rms1);
+  RelativePoseReport calibrated_fixed, calibrated;
+  const Row fixed_row = OurRow("", cam0, cam1, board, pairs, fixed_cameras, &calibrated_fixed);
+  (*stats)[3].Add(fixed_row, truth, calibrated_fixed.baseline_std_m);
+  const Row joint_row = OurRow("", cam0, cam1, board, pairs, joint, &calibrated);
+  (*stats)[4].Add(joint_row, truth, calibrated.baseline_std_m);
+  (*stats)[5].Add(
+      RunOmnidirStereo(board, pairs, known, cv::Size(set.rig.cam0.width, set.rig.cam0.height),
+                       cv::Size(set.rig.cam1.width, set.rig.cam1.height)),
+      truth, NAN);
+  if (rigs == nullptr) return;
+  if (known.success) rigs->push_back({label + ", known cameras", known.rig});
+  if (calibrated.success) rigs->push_back({label + ", calibrated + joint", calibrated.rig});
+}
+
 void PrintTriangulationHeader() {
-  std::printf("\nTriangulation of board corners about 1 m away (target: mean error < 0.5%% of "
-              "the range; optimal angular triangulation, corners labelled by the ground truth)\n");
-  std::printf("| %-48s | %8s | %10s | %14s | %12s |\n", "rig", "points", "range m",
-              "mean error %", "max error %");
+  std::printf(
+      "\nTriangulation of board corners about 1 m away (target: mean error < 0.5%% of "
+      "the range; optimal angular triangulation, corners labelled by the ground truth)\n");
+  std::printf("| %-48s | %8s | %10s | %14s | %12s |\n", "rig", "points", "range m", "mean error %",
+              "max error %");
   std::printf("|%s|%s|%s|%s|%s|\n", std::string(50, '-').c_str(), std::string(10, '-').c_str(),
               std::string(12, '-').c_str(), std::string(16, '-').c_str(),
               std::string(14, '-').c_str());
@@ -341,62 +490,270 @@ void PrintTriangulation(const std::string& name, const synth::StereoBoardSet& fa
               stats.mean_range_m, stats.mean_error_pct, stats.max_error_pct);
 }
 
+// The issue's synthetic target on renders, over several seeds (the estimator's spread at this
+// noise is larger than the target, so one seed alone could pass or fail by luck).
 void RunSynthetic(bool quick) {
-  auto start = std::chrono::steady_clock::now();
-  const synth::StereoBoardSet set = RenderSet(quick ? 8 : 20, 0.35, 1.2, 7);
+  const int num_pairs = quick ? 8 : 20;
+  // Three seeds per reading keep the run to minutes; the floor below gives the statistics of
+  // 20 seeds at the 0.2 px level without rendering.
+  const std::vector<uint64_t> seeds =
+      quick ? std::vector<uint64_t>{7} : std::vector<uint64_t>{7, 8, 9};
+  // Image noise of 19 grey levels makes the detector's own corner error 0.16 px RMS, near the
+  // literal "renders with 0.2 px noise" (the title prints the measured value). 28 grey levels
+  // give 0.23 px, but the detector then needs its slow fallbacks (20 s a pair).
+  const std::vector<NoiseConfig> configs = {
+      {"A", "renders, image noise 2 grey levels, detector corners as found", 2.0, 0.0},
+      {"B", "renders, image noise 2 grey levels, detector corners + 0.2 px Gaussian noise", 2.0,
+       0.2},
+      {"C", "renders, image noise 19 grey levels, detector corners as found", 19.0, 0.0}};
+  std::vector<std::pair<std::string, StereoRig>> triangulation_rigs;
   const synth::StereoBoardSet far = RenderSet(quick ? 4 : 10, 0.9, 1.1, 11);
-  const BoardSpec board = ToBoardSpec(set.board);
-  std::printf("rendered %zu + %zu pairs of %dx%d (noise 2 grey levels, blur 0.5 px) in %.1f s; "
-              "board %s\n",
-              set.names.size(), far.names.size(), set.rig.cam0.width, set.rig.cam0.height,
-              Seconds(start), board.Describe().c_str());
-  const Rigid3d truth = set.rig.cam0_from_cam1;
-  std::vector<std::pair<std::string, StereoRig>> triangulation_rigs = {{"ground truth rig",
-                                                                        set.rig}};
-  for (double corner_noise_px : {0.0, 0.2}) {
-    char label[64];
-    std::snprintf(label, sizeof(label), "corners + %.1f px noise", corner_noise_px);
-    double max_detection_error_px = 0.0;
-    const std::vector<StereoBoardPair> pairs =
-        DetectPairs(set, board, corner_noise_px, false, &max_detection_error_px);
-    RelativePoseReport known;
-    std::vector<Row> rows =
-        OurRows(set.rig.cam0, set.rig.cam1, board, pairs, "known cameras: ", &known);
-    rows.push_back(RunOmnidirStereo(board, pairs, known,
-                                    cv::Size(set.rig.cam0.width, set.rig.cam0.height),
-                                    cv::Size(set.rig.cam1.width, set.rig.cam1.height)));
-    double rms0 = 0.0, rms1 = 0.0;
-    const CameraModel cam0 = CalibrateCamera(pairs, 0, set.rig.cam0.width, set.rig.cam0.height,
-                                             board, &rms0);
-    const CameraModel cam1 = CalibrateCamera(pairs, 1, set.rig.cam1.width, set.rig.cam1.height,
-                                             board, &rms1);
-    RelativePoseReport calibrated;
-    for (const Row& row : OurRows(cam0, cam1, board, pairs, "calibrated: ", &calibrated)) {
-      rows.push_back(row);
+  triangulation_rigs.push_back({"ground truth rig", far.rig});
+  const BoardSpec board = ToBoardSpec(far.board);
+  for (const NoiseConfig& config : configs) {
+    std::vector<ErrorStats> stats(SyntheticMethods().size());
+    double detection_rms = 0.0;
+    const auto start = std::chrono::steady_clock::now();
+    for (size_t k = 0; k < seeds.size(); ++k) {
+      const synth::StereoBoardSet set =
+          RenderSet(num_pairs, 0.35, 1.2, seeds[k], config.image_noise);
+      double max_detection_error_px = 0.0, rms_detection_error_px = 0.0;
+      const std::vector<StereoBoardPair> pairs =
+          DetectPairs(set, board, config.corner_noise_px, false, &max_detection_error_px, seeds[k],
+                      &rms_detection_error_px);
+      detection_rms += rms_detection_error_px / seeds.size();
+      RunSyntheticSeed(set, board, pairs, &stats, k == 0 ? &triangulation_rigs : nullptr,
+                       "reading " + config.label);
     }
-    char title[400];
+    char title[512];
     std::snprintf(title, sizeof(title),
-                  "Synthetic vertical rig, detector corners + %.1f px Gaussian noise (detector "
-                  "error alone: max %.3f px); true baseline %.3f mm; per-camera calibration "
-                  "RMS %.4f / %.4f px (targets: |error| < 0.01%%, rotation < 0.01 deg)",
-                  corner_noise_px, max_detection_error_px, truth.translation.norm() * 1e3, rms0,
-                  rms1);
-    PrintRows(title, rows, &truth, truth.translation.norm());
-    if (known.success) triangulation_rigs.push_back({std::string(label) + ", known cameras",
-                                                     known.rig});
-    if (calibrated.success) {
-      triangulation_rigs.push_back({std::string(label) + ", calibrated", calibrated.rig});
-    }
+                  "Synthetic vertical rig (100 mm), reading %s, %s: %d pairs of 1024x768 per seed, "
+                  "%zu seeds; "
+                  "detector error %.3f px RMS before any added noise (%.0f s); targets: |error| < "
+                  "0.01%%, rotation < 0.01 deg",
+                  config.label.c_str(), config.name.c_str(), num_pairs, seeds.size(), detection_rms,
+                  Seconds(start));
+    PrintStatsHeader(title);
+    for (size_t m = 0; m < stats.size(); ++m) PrintStats(SyntheticMethods()[m], stats[m]);
   }
   double max_detection_error_px = 0.0;
   for (double corner_noise_px : {0.0, 0.2}) {
     const std::vector<StereoBoardPair> far_pairs =
         DetectPairs(far, board, corner_noise_px, true, &max_detection_error_px);
     PrintTriangulationHeader();
-    std::printf("(triangulated corners: detector + %.1f px noise)\n", corner_noise_px);
+    std::printf("(triangulated corners: detector + %.1f px noise; rigs from the first seed)\n",
+                corner_noise_px);
     for (const auto& [name, rig] : triangulation_rigs) {
       PrintTriangulation("rig: " + name, far, board, rig, far_pairs);
     }
+  }
+}
+
+// The estimator's statistical floor without rendering: exact projections of sampled board
+// poses plus 0.2 px Gaussian noise, cameras known, for several numbers of pairs. The spread
+// over seeds against the number of pairs shows what the 0.01 % target needs.
+void RunCornerLevelFloor(bool quick) {
+  const std::vector<synth::SynthCamera> cameras = {synth::DefaultCamera(),
+                                                   synth::DefaultSecondCamera()};
+  const Rigid3d truth = synth::DefaultCam0FromCam1();
+  const std::vector<Rigid3d> cam_from_cam0 = {Rigid3d(), truth.Inverse()};
+  const synth::CheckerboardSpec spec;
+  const BoardSpec board = ToBoardSpec(spec);
+  const int num_seeds = quick ? 4 : 20;
+  PrintStatsHeader(
+      "Estimator floor: exact corners + 0.2 px Gaussian noise, cameras known, "
+      "omnirig joint (eq. 20), " +
+      std::to_string(num_seeds) + " seeds per row");
+  for (int num_pairs : {20, 80, 320}) {
+    ErrorStats stats;
+    for (int seed = 0; seed < num_seeds; ++seed) {
+      std::mt19937 rng(1000 + seed);
+      std::normal_distribution<double> noise(0.0, 0.2);
+      std::vector<StereoBoardPair> pairs(num_pairs);
+      for (int i = 0; i < num_pairs; ++i) {
+        const Rigid3d cam0_from_board = synth::SampleBoardPose(
+            cameras, cam_from_cam0, spec, synth::BoardPoseOptions(), i, num_pairs, 500 + seed);
+        BoardDetection* detections[2] = {&pairs[i].cam0, &pairs[i].cam1};
+        for (int c = 0; c < 2; ++c) {
+          const auto corners =
+              synth::ProjectBoardCorners(cameras[c], cam_from_cam0[c] * cam0_from_board, spec);
+          for (size_t id = 0; id < corners.size(); ++id) {
+            if (!corners[id].allFinite()) continue;
+            detections[c]->corners_px.push_back(corners[id] +
+                                                Eigen::Vector2d(noise(rng), noise(rng)));
+            detections[c]->corner_ids.push_back(static_cast<int>(id));
+          }
+          detections[c]->found = true;
+        }
+        pairs[i].name = "pair" + std::to_string(i);
+      }
+      RelativePoseReport report;
+      const Row row = OurRow("", cameras[0].model, cameras[1].model, board, pairs,
+                             RelativePoseOptions(), &report);
+      stats.Add(row, truth, report.baseline_std_m);
+    }
+    PrintStats(std::to_string(num_pairs) + " pairs", stats);
+  }
+}
+
+// cv::fisheye::stereoCalibrate (Kannala-Brandt model, the reference's): each camera
+// calibrated first, then both jointly with the rig, for `max_iterations` LM iterations.
+Row RunFisheyeStereo(const std::string& method, const BoardSpec& board,
+                     const std::vector<StereoBoardPair>& pairs, const RelativePoseReport& ours,
+                     cv::Size size, const cv::TermCriteria& criteria) {
+  Row row;
+  row.method = method;
+  const CvCorrespondences cv_pairs = BuildCvCorrespondences(board, pairs, ours);
+  cv::Matx33d k0, k1, rotation_cv;
+  cv::Vec4d d0, d1;
+  cv::Vec3d translation_cv;
+  const auto start = std::chrono::steady_clock::now();
+  try {
+    row.rms_px = cv::fisheye::stereoCalibrate(
+        cv_pairs.object_points, cv_pairs.image_points0, cv_pairs.image_points1, k0, d0, k1, d1,
+        size, rotation_cv, translation_cv,
+        cv::fisheye::CALIB_RECOMPUTE_EXTRINSIC | cv::fisheye::CALIB_FIX_SKEW, criteria);
+  } catch (const cv::Exception& e) {
+    row.note = std::string("threw: ") + e.what();
+    return row;
+  }
+  row.time_s = Seconds(start);
+  Eigen::Matrix3d rotation;
+  Eigen::Vector3d translation;
+  cv::cv2eigen(cv::Mat(rotation_cv), rotation);
+  cv::cv2eigen(cv::Mat(translation_cv), translation);
+  // (R, T) maps its first camera (cam0) into its second: cam1_from_cam0.
+  row.cam0_from_cam1 = Rigid3d(Eigen::Quaterniond(rotation), translation).Inverse();
+  row.ok = std::isfinite(row.rms_px);
+  row.note = std::to_string(cv_pairs.object_points.size()) + " pairs";
+  return row;
+}
+
+// The numbers of the list after `key` (the first "[ ... ]" following it) in a small YAML file.
+std::vector<double> YamlNumbers(const std::string& text, const std::string& key) {
+  const size_t at = text.find("\n" + key + ":");
+  if (at == std::string::npos) return {};
+  const size_t open = text.find('[', at);
+  const size_t close = text.find(']', open);
+  if (open == std::string::npos || close == std::string::npos) return {};
+  std::string list = text.substr(open + 1, close - open - 1);
+  std::replace(list.begin(), list.end(), ',', ' ');
+  std::istringstream in(list);
+  std::vector<double> numbers;
+  for (double x; in >> x;) numbers.push_back(x);
+  return numbers;
+}
+
+// The reference's result: (R, T) of cv::fisheye::stereoCalibrate, cam1_from_cam0, metres.
+// Read by hand: the file was written by OpenCV 2/3, whose YAML OpenCV 4's parser refuses.
+std::optional<Rigid3d> ReadReference(const std::filesystem::path& path) {
+  std::ifstream in(path);
+  if (!in.good()) return std::nullopt;
+  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::vector<double> r = YamlNumbers(text, "R");
+  const std::vector<double> t = YamlNumbers(text, "T");
+  if (r.size() != 9 || t.size() != 3) return std::nullopt;
+  const Eigen::Matrix3d rotation =
+      Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(r.data());
+  const Eigen::Vector3d translation(t[0], t[1], t[2]);
+  return Rigid3d(Eigen::Quaterniond(rotation), translation).Inverse();
+}
+
+// Keeps only the corners seen at most `max_angle_deg` off the camera's axis (a detection left
+// with fewer than 12 corners counts as not found).
+BoardDetection WithinFieldAngle(const BoardDetection& detection, const CameraModel& camera,
+                                double max_angle_deg) {
+  BoardDetection kept = detection;
+  kept.corners_px.clear();
+  kept.corner_ids.clear();
+  for (size_t c = 0; c < detection.corners_px.size(); ++c) {
+    const auto bearing = Lift(camera.intrinsics, detection.corners_px[c]);
+    if (!bearing || std::acos(bearing->normalized().z()) * kDegPerRad > max_angle_deg) continue;
+    kept.corners_px.push_back(detection.corners_px[c]);
+    kept.corner_ids.push_back(detection.corner_ids[c]);
+  }
+  if (kept.corners_px.size() < 12) {
+    kept.found = false;
+    kept.reason = "fewer than 12 corners within the field angle";
+  }
+  return kept;
+}
+
+double MaxFieldAngleDeg(const std::vector<StereoBoardPair>& pairs, const CameraModel& cam0,
+                        const CameraModel& cam1) {
+  double max_angle = 0.0;
+  for (const auto& pair : pairs) {
+    for (const auto& [detection, camera] :
+         {std::pair{&pair.cam0, &cam0}, std::pair{&pair.cam1, &cam1}}) {
+      for (const auto& corner : detection->corners_px) {
+        const auto bearing = Lift(camera->intrinsics, corner);
+        if (bearing) max_angle = std::max(max_angle, std::acos(bearing->normalized().z()));
+      }
+    }
+  }
+  return max_angle * kDegPerRad;
+}
+
+std::vector<StereoBoardPair> LoadRealPairs(const std::filesystem::path& dir, const BoardSpec& board,
+                                           cv::Size* size) {
+  std::vector<StereoBoardPair> pairs;
+  for (int i = 1; i <= 29; ++i) {
+    const cv::Mat left =
+        cv::imread((dir / ("left" + std::to_string(i) + ".jpg")).string(), cv::IMREAD_GRAYSCALE);
+    const cv::Mat right =
+        cv::imread((dir / ("right" + std::to_string(i) + ".jpg")).string(), cv::IMREAD_GRAYSCALE);
+    if (left.empty() || right.empty()) continue;
+    *size = left.size();
+    pairs.push_back({"pair" + std::to_string(i), DetectBoard(left, board, DetectOptions()),
+                     DetectBoard(right, board, DetectOptions())});
+  }
+  return pairs;
+}
+
+// Leave-one-out and two halves of the used pairs: how far the baseline moves with the choice
+// of pairs (the data's own uncertainty, whatever the model).
+void PrintPairSubsets(const CameraModel& cam0, const CameraModel& cam1, const BoardSpec& board,
+                      const std::vector<StereoBoardPair>& pairs, const RelativePoseReport& all,
+                      const RelativePoseOptions& options) {
+  std::vector<double> baselines;
+  const std::vector<Eigen::Vector3d> object = board.ObjectPoints();
+  std::printf(
+      "per pair: baseline without it (mm) | RMS in the joint fit | RMS of each camera's "
+      "own board pose (px), refined cameras\n");
+  for (size_t leave = 0; leave < pairs.size(); ++leave) {
+    if (!all.pairs[leave].used) continue;
+    std::vector<StereoBoardPair> subset = pairs;
+    subset.erase(subset.begin() + static_cast<long>(leave));
+    const RelativePoseReport report = EstimateRelativePose(cam0, cam1, board, subset, options);
+    if (report.success) baselines.push_back(report.baseline_m * 1e3);
+    double mono_rms[2] = {-1.0, -1.0};
+    const BoardDetection* detections[2] = {&pairs[leave].cam0, &pairs[leave].cam1};
+    const CameraModel* cameras[2] = {&all.rig.cam0, &all.rig.cam1};
+    for (int c = 0; c < 2; ++c) {
+      std::vector<Eigen::Vector3d> points;
+      for (int id : detections[c]->corner_ids) points.push_back(object[id]);
+      EstimateBoardPose(*cameras[c], points, detections[c]->corners_px, &mono_rms[c]);
+    }
+    std::printf("  %s: %.3f | %.3f | %.3f / %.3f\n", pairs[leave].name.c_str(),
+                report.baseline_m * 1e3, all.pairs[leave].rms_px, mono_rms[0], mono_rms[1]);
+  }
+  double mean = 0.0, var = 0.0;
+  for (double b : baselines) mean += b / baselines.size();
+  for (double b : baselines) var += (b - mean) * (b - mean) / baselines.size();
+  const auto [lo, hi] = std::minmax_element(baselines.begin(), baselines.end());
+  std::printf(
+      "leave-one-pair-out (joint + intrinsics, %zu runs): baseline %.3f .. %.3f mm, "
+      "mean %.3f, std %.3f mm (jackknife std of the estimate %.3f mm)\n",
+      baselines.size(), *lo, *hi, mean, std::sqrt(var), std::sqrt(var * (baselines.size() - 1.0)));
+  for (int half = 0; half < 2; ++half) {
+    std::vector<StereoBoardPair> subset;
+    for (size_t i = half; i < pairs.size(); i += 2) subset.push_back(pairs[i]);
+    const RelativePoseReport report = EstimateRelativePose(cam0, cam1, board, subset, options);
+    std::printf(
+        "%s pairs only (joint + intrinsics): baseline %.3f mm +- %.3f, RMS %.3f px, %d "
+        "pairs used\n",
+        half == 0 ? "odd-numbered" : "even-numbered", report.baseline_m * 1e3,
+        report.baseline_std_m * 1e3, report.rms_px, report.num_pairs_used);
   }
 }
 
@@ -410,38 +767,116 @@ void RunRealFisheye(const std::filesystem::path& data_dir) {
   board.cols = 9;
   board.rows = 6;
   board.square_size_m = 0.02423;
-  std::vector<StereoBoardPair> pairs;
   cv::Size size;
   const auto start = std::chrono::steady_clock::now();
-  for (int i = 1; i <= 29; ++i) {
-    const cv::Mat left = cv::imread((dir / ("left" + std::to_string(i) + ".jpg")).string(),
-                                    cv::IMREAD_GRAYSCALE);
-    const cv::Mat right = cv::imread((dir / ("right" + std::to_string(i) + ".jpg")).string(),
-                                     cv::IMREAD_GRAYSCALE);
-    if (left.empty() || right.empty()) continue;
-    size = left.size();
-    pairs.push_back({"pair" + std::to_string(i), DetectBoard(left, board, DetectOptions()),
-                     DetectBoard(right, board, DetectOptions())});
-  }
+  const std::vector<StereoBoardPair> pairs = LoadRealPairs(dir, board, &size);
   int found0 = 0, found1 = 0;
   for (const auto& pair : pairs) found0 += pair.cam0.found, found1 += pair.cam1.found;
-  std::printf("\nReal fisheye pairs: %zu pairs, board found in %d left / %d right images "
-              "(%.1f s)\n", pairs.size(), found0, found1, Seconds(start));
-  double rms0 = 0.0, rms1 = 0.0;
+  std::printf(
+      "\nReal fisheye pairs: %zu pairs, board found in %d left / %d right images "
+      "(%.1f s)\n",
+      pairs.size(), found0, found1, Seconds(start));
+  const std::optional<Rigid3d> reference = ReadReference(dir / "reference_cv_fisheye_stereo.yml");
+  const double reference_baseline_m = reference ? reference->translation.norm() : 0.10996;
+
+  // The set holds the pairs only: each camera is calibrated from its 29 images of them.
+  double rms0 = 0.0, rms1 = 0.0, rms0_k5 = 0.0, rms1_k5 = 0.0, rms0_nt = 0.0, rms1_nt = 0.0;
   const CameraModel cam0 = CalibrateCamera(pairs, 0, size.width, size.height, board, &rms0);
   const CameraModel cam1 = CalibrateCamera(pairs, 1, size.width, size.height, board, &rms1);
-  RelativePoseReport fixed;
-  std::vector<Row> rows = OurRows(cam0, cam1, board, pairs, "", &fixed);
-  rows.push_back(RunOmnidirStereo(board, pairs, fixed, size, size));
-  PrintRows("Real fisheye pairs, reference baseline 109.96 mm (targets: within 0.2%, RMS < "
-            "0.5 px); per-camera calibration RMS " + std::to_string(rms0) + " / " +
-                std::to_string(rms1) + " px",
-            rows, nullptr, 0.10996);
-  std::printf("per-pair RMS (px, joint, cameras fixed):");
-  for (const auto& pair : fixed.pairs) {
-    std::printf(" %s=%.2f", pair.name.c_str(), pair.used ? pair.rms_px : -1.0);
+  CalibrationOptions free_k5;
+  free_k5.SetFixed("k5", false);
+  const CameraModel cam0_k5 =
+      CalibrateCamera(pairs, 0, size.width, size.height, board, &rms0_k5, free_k5);
+  const CameraModel cam1_k5 =
+      CalibrateCamera(pairs, 1, size.width, size.height, board, &rms1_k5, free_k5);
+  CalibrationOptions no_tangential;
+  no_tangential.SetFixed("tangential", true);
+  const CameraModel cam0_nt =
+      CalibrateCamera(pairs, 0, size.width, size.height, board, &rms0_nt, no_tangential);
+  const CameraModel cam1_nt =
+      CalibrateCamera(pairs, 1, size.width, size.height, board, &rms1_nt, no_tangential);
+  std::printf(
+      "per-camera calibration RMS (px), left / right: %.4f / %.4f (k5 and skew fixed, "
+      "the default); %.4f / %.4f (k5 free); %.4f / %.4f (tangential fixed); xi %.3f / "
+      "%.3f; largest corner field angle %.1f deg off the axis\n",
+      rms0, rms1, rms0_k5, rms1_k5, rms0_nt, rms1_nt, cam0.intrinsics.params[0],
+      cam1.intrinsics.params[0], MaxFieldAngleDeg(pairs, cam0, cam1));
+
+  RelativePoseOptions fixed_cameras;
+  RelativePoseOptions joint;
+  joint.refine_intrinsics = true;
+  RelativePoseReport fixed_report, joint_report;
+  std::vector<Row> rows;
+  rows.push_back(OurRow("omnirig joint (eq. 20), cameras fixed", cam0, cam1, board, pairs,
+                        fixed_cameras, &fixed_report));
+  rows.push_back({"omnirig eq. (9) + SVD, no refinement", fixed_report.success,
+                  fixed_report.linear_cam0_from_cam1, NAN, NAN, ""});
+  rows.push_back({"paper: average of per-pair poses", fixed_report.success,
+                  fixed_report.averaged_cam0_from_cam1, NAN, NAN, ""});
+  rows.push_back(OurRow("omnirig joint + intrinsics (the job's default)", cam0, cam1, board, pairs,
+                        joint, &joint_report));
+  RelativePoseOptions joint_k5 = joint;
+  joint_k5.fixed_intrinsics[UnifiedIntrinsics::kK5] = false;
+  rows.push_back(
+      OurRow("  ... k5 free (calibration and joint)", cam0_k5, cam1_k5, board, pairs, joint_k5));
+  RelativePoseOptions joint_skew = joint;
+  joint_skew.fixed_intrinsics[UnifiedIntrinsics::kAlpha] = false;
+  rows.push_back(OurRow("  ... skew free in the joint fit", cam0, cam1, board, pairs, joint_skew));
+  RelativePoseOptions joint_nt = joint;
+  joint_nt.fixed_intrinsics[UnifiedIntrinsics::kK3] = true;
+  joint_nt.fixed_intrinsics[UnifiedIntrinsics::kK4] = true;
+  rows.push_back(OurRow("  ... tangential fixed at 0", cam0_nt, cam1_nt, board, pairs, joint_nt));
+  RelativePoseOptions joint_l2 = joint;
+  joint_l2.huber_loss_px = 0.0;
+  rows.push_back(
+      OurRow("  ... plain least squares (no Huber)", cam0, cam1, board, pairs, joint_l2));
+  RelativePoseOptions joint_all = joint;
+  joint_all.max_pair_rms_ratio = 1e9;
+  rows.push_back(OurRow("  ... no pair rejection", cam0, cam1, board, pairs, joint_all));
+  for (double ratio : {2.0, 1.5}) {
+    RelativePoseOptions separate = joint;
+    separate.max_pair_separate_ratio = ratio;
+    char method[96];
+    std::snprintf(method, sizeof(method), "  ... reject joint RMS > %.1f x separate fits", ratio);
+    rows.push_back(OurRow(method, cam0, cam1, board, pairs, separate));
   }
-  std::printf("\n");
+  // The largest field angle of these corners is about 70 deg (printed above): the board never
+  // reaches the >180 deg lens's rim, so edge bias is tested by dropping the outer corners.
+  for (double max_angle : {60.0, 50.0}) {
+    std::vector<StereoBoardPair> central = pairs;
+    for (auto& pair : central) {
+      pair.cam0 = WithinFieldAngle(pair.cam0, cam0, max_angle);
+      pair.cam1 = WithinFieldAngle(pair.cam1, cam1, max_angle);
+    }
+    rows.push_back(OurRow("  ... corners within " + std::to_string(static_cast<int>(max_angle)) +
+                              " deg of the axis only",
+                          cam0, cam1, board, central, joint));
+  }
+  rows.push_back(RunOmnidirStereo(board, pairs, joint_report, size, size));
+  rows.push_back(RunFisheyeStereo("cv::fisheye::stereoCalibrate, as the reference", board, pairs,
+                                  joint_report, size, cv::TermCriteria(3, 12, 0)));
+  rows.push_back(RunFisheyeStereo(
+      "cv::fisheye::stereoCalibrate, converged", board, pairs, joint_report, size,
+      cv::TermCriteria(cv::TermCriteria::COUNT + cv::TermCriteria::EPS, 300, 1e-12)));
+  if (reference) rows.push_back({"reference (its yml)", true, *reference, NAN, NAN, ""});
+  PrintRows("Real fisheye pairs, reference baseline " +
+                std::to_string(reference_baseline_m * 1e3).substr(0, 6) +
+                " mm (targets: within 0.2%, RMS < 0.5 px); rot err = angle to the reference's "
+                "rotation",
+            rows, reference ? &*reference : nullptr, reference_baseline_m);
+  for (const auto& [name, report] : {std::pair{"cameras fixed", &fixed_report},
+                                     std::pair{"joint + intrinsics", &joint_report}}) {
+    std::printf("per-pair RMS (px, %s; cam1 corner order in brackets):", name);
+    for (const auto& pair : report->pairs) {
+      if (pair.used) {
+        std::printf(" %s=%.2f[%d]", pair.name.c_str(), pair.rms_px, pair.cam1_order);
+      } else {
+        std::printf(" %s=unused", pair.name.c_str());
+      }
+    }
+    std::printf("\n");
+  }
+  PrintPairSubsets(cam0, cam1, board, pairs, joint_report, joint);
 }
 
 }  // namespace
@@ -450,15 +885,20 @@ void RunRealFisheye(const std::filesystem::path& data_dir) {
 int main(int argc, char** argv) {
   std::setvbuf(stdout, nullptr, _IOLBF, 0);  // tables appear as they are measured
   bool quick = false;
-  std::filesystem::path data_dir = std::filesystem::path(OMNIRIG_SOURCE_DIR) / ".." / "shared" /
-                                   "data" / "real";
+  std::string only;  // "synthetic" or "real": one part alone
+  std::filesystem::path data_dir =
+      std::filesystem::path(OMNIRIG_SOURCE_DIR) / ".." / "shared" / "data" / "real";
   for (int i = 1; i < argc; ++i) {
     if (std::strcmp(argv[i], "--quick") == 0) quick = true;
     if (std::strcmp(argv[i], "--data") == 0 && i + 1 < argc) data_dir = argv[++i];
+    if (std::strcmp(argv[i], "--only") == 0 && i + 1 < argc) only = argv[++i];
   }
   try {
-    omnirig::RunSynthetic(quick);
-    omnirig::RunRealFisheye(data_dir);
+    if (only.empty() || only == "synthetic") omnirig::RunSynthetic(quick);
+    if (only.empty() || only == "synthetic" || only == "floor") {
+      omnirig::RunCornerLevelFloor(quick);
+    }
+    if (only.empty() || only == "real") omnirig::RunRealFisheye(data_dir);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "bench_relpose: %s\n", e.what());
     return 1;

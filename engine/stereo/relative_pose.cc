@@ -23,6 +23,8 @@ void RelativePoseOptions::Check() const {
                 "max_board_pose_rms_px must be positive, got " << max_board_pose_rms_px);
   OMNIRIG_CHECK(max_pair_rms_ratio > 1.0,
                 "max_pair_rms_ratio must be > 1, got " << max_pair_rms_ratio);
+  OMNIRIG_CHECK(max_pair_separate_ratio == 0.0 || max_pair_separate_ratio > 1.0,
+                "max_pair_separate_ratio must be 0 (off) or > 1, got " << max_pair_separate_ratio);
   OMNIRIG_CHECK(min_rejected_pair_rms_px >= 0.0,
                 "min_rejected_pair_rms_px must be >= 0, got " << min_rejected_pair_rms_px);
   OMNIRIG_CHECK(huber_loss_px >= 0.0, "huber_loss_px must be >= 0, got " << huber_loss_px);
@@ -216,6 +218,7 @@ bool SolveJoint(UsedPairs* used, const RelativePoseOptions& options, const Progr
   rig.cam0_from_cam1 = report->linear_cam0_from_cam1;
   RigRefinementOptions refine_options;
   refine_options.refine_intrinsics = options.refine_intrinsics;
+  refine_options.fixed_intrinsics = options.fixed_intrinsics;
   refine_options.huber_loss_px = options.huber_loss_px;
   refine_options.max_num_iterations = options.max_num_iterations;
   refine_options.num_threads = options.num_threads;
@@ -247,10 +250,43 @@ bool SolveJoint(UsedPairs* used, const RelativePoseOptions& options, const Progr
   return true;
 }
 
-// Marks used pairs whose joint RMS exceeds max_pair_rms_ratio times the median (and
-// min_rejected_pair_rms_px) as unused (the
-// two images disagree: the board moved between exposures, or corners are wrong). Returns the
-// number rejected; none when that would leave fewer than min_num_pairs.
+// RMS (pixels) of one pair's corners when each camera fits its own board pose: what the pair
+// would leave if the two exposures were not tied to one board pose by the rig.
+double SeparateFitRmsPx(const StereoRig& rig, const RigPairCorners& corners) {
+  double rms0 = 0.0, rms1 = 0.0;
+  if (!EstimateBoardPose(rig.cam0, corners.points_in_board0, corners.pixels0, &rms0) ||
+      !EstimateBoardPose(rig.cam1, corners.points_in_board1, corners.pixels1, &rms1)) {
+    return -1.0;
+  }
+  const double n0 = static_cast<double>(corners.pixels0.size());
+  const double n1 = static_cast<double>(corners.pixels1.size());
+  return std::sqrt((rms0 * rms0 * n0 + rms1 * rms1 * n1) / (n0 + n1));
+}
+
+// Why a pair is inconsistent between its two images, or "" when it is not: its joint RMS
+// exceeds max_pair_rms_ratio times the median pair's, or max_pair_separate_ratio times its own
+// separate fits' (each camera fitting the board alone fits well, the two together do not: the
+// board moved between two unsynchronised exposures). Never below min_rejected_pair_rms_px.
+std::string InconsistencyReason(double rms, double median, double separate,
+                                const RelativePoseOptions& options) {
+  if (rms <= options.min_rejected_pair_rms_px) return "";
+  std::ostringstream os;
+  os << "inconsistent between the two cameras: RMS " << rms << " px in the joint fit, over ";
+  if (rms > options.max_pair_rms_ratio * median) {
+    os << options.max_pair_rms_ratio << " x the median pair's " << median << " px";
+  } else if (options.max_pair_separate_ratio > 0.0 && separate > 0.0 &&
+             rms > options.max_pair_separate_ratio * separate) {
+    os << options.max_pair_separate_ratio << " x the " << separate
+       << " px of each camera fitting the board alone";
+  } else {
+    return "";
+  }
+  os << " (the board moved between the two exposures, or wrong corners)";
+  return os.str();
+}
+
+// Marks the used pairs that InconsistencyReason rejects as unused. Returns the number
+// rejected; none when that would leave fewer than min_num_pairs.
 int RejectInconsistentPairs(const UsedPairs& used, const RelativePoseOptions& options,
                             RelativePoseReport* report) {
   std::vector<double> rms;
@@ -258,19 +294,18 @@ int RejectInconsistentPairs(const UsedPairs& used, const RelativePoseOptions& op
   if (rms.size() < 3) return 0;
   std::vector<double> sorted = rms;
   std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
-  const double threshold = std::max(options.max_pair_rms_ratio * sorted[sorted.size() / 2],
-                                    options.min_rejected_pair_rms_px);
-  std::vector<size_t> rejected;
+  const double median = sorted[sorted.size() / 2];
+  std::vector<std::pair<size_t, std::string>> rejected;
   for (size_t u = 0; u < rms.size(); ++u) {
-    if (rms[u] > threshold) rejected.push_back(used.index[u]);
+    const double separate = options.max_pair_separate_ratio > 0.0
+                                ? SeparateFitRmsPx(report->rig, used.corners[u])
+                                : -1.0;
+    std::string reason = InconsistencyReason(rms[u], median, separate, options);
+    if (!reason.empty()) rejected.push_back({used.index[u], std::move(reason)});
   }
   if (static_cast<int>(used.index.size() - rejected.size()) < options.min_num_pairs) return 0;
-  for (size_t i : rejected) {
-    std::ostringstream os;
-    os << "inconsistent between the two cameras: RMS " << report->pairs[i].rms_px
-       << " px in the joint fit, over " << options.max_pair_rms_ratio
-       << " x the median pair's (the board moved between the two exposures, or wrong corners)";
-    report->pairs[i].reason = os.str();
+  for (auto& [i, reason] : rejected) {
+    report->pairs[i].reason = std::move(reason);
     report->pairs[i].rms_px = -1.0;
   }
   return static_cast<int>(rejected.size());

@@ -21,6 +21,7 @@
 // Frames: cam0_from_cam1 maps points in cam1's frame into cam0's (eq. 8); the board frame is
 // BoardSpec's (metres). Pixels: the centre of the top-left pixel is (0, 0).
 
+#include <array>
 #include <string>
 #include <vector>
 
@@ -30,6 +31,7 @@
 #include "engine/calib/detect.h"
 #include "engine/geometry/camera_model.h"
 #include "engine/geometry/rigid3.h"
+#include "engine/stereo/relpose_refine.h"
 #include "engine/util/progress.h"
 
 namespace omnirig {
@@ -53,12 +55,21 @@ struct RelativePoseOptions {
   double consensus_translation_fraction = 0.1;
   // A board pose whose own fit leaves a larger RMS is not used (bad corners or a wrong model).
   double max_board_pose_rms_px = 5.0;
-  // Refine both cameras' intrinsics with the rig (skew and k5 stay fixed).
+  // Refine both cameras' intrinsics with the rig...
   bool refine_intrinsics = false;
+  // ...except these (UnifiedIntrinsics order), which keep the given cameras' values. Skew and
+  // k5 by default, as in CalibrationOptions. On the real fisheye pairs (bench_relpose) freeing
+  // k5 or skew moves the baseline by under 0.05 mm, but fixing the tangential terms (k3, k4)
+  // moves it by +0.4 mm: they trade against the rig pose at almost the same RMS.
+  std::array<bool, UnifiedIntrinsics::kNumParams> fixed_intrinsics = DefaultFixedIntrinsics();
   // After the joint refinement, a pair whose RMS exceeds this multiple of the median pair's is
   // left out and the rig re-solved once: its two images disagree (the board moved between two
   // unsynchronised exposures, or a corner is wrong).
   double max_pair_rms_ratio = 3.0;
+  // A pair is also left out when its joint RMS exceeds this multiple of the RMS that each
+  // camera reaches fitting the board alone (same cameras): each image is fine, but the two do
+  // not show one board pose. 0 turns this test off.
+  double max_pair_separate_ratio = 0.0;
   // ...but a pair fitting better than this is always kept (exact or near-exact corners make
   // the median tiny).
   double min_rejected_pair_rms_px = 0.5;

@@ -339,6 +339,35 @@ TEST(RelativePose, SlightlyMovedBoardIsRejectedByItsRms) {
   EXPECT_LT(std::abs(report.baseline_m - scene.rig.cam0_from_cam1.translation.norm()), 3e-4);
 }
 
+// A pair whose board moved a little between the exposures: each camera alone fits it as well
+// as any other pair, so only the comparison with those separate fits singles it out.
+TEST(RelativePose, MovedBoardIsCaughtByTheSeparateFitsTest) {
+  Scene scene = MakeScene(0.1, 6, 31);
+  const Rigid3d cam0_from_board = BoardPose(scene.board, 360.0 * 3 / 6, 0.6 + 0.1 * 3,
+                                            15.0 + 7.0 * 0, -0.05 + 0.02 * 3);
+  const Rigid3d moved(cam0_from_board.rotation,
+                      cam0_from_board.translation + Eigen::Vector3d(0.0, 0.0045, 0.0));
+  std::mt19937 rng(2);
+  scene.pairs[3].cam1 =
+      Detect(scene.rig.cam1, scene.board, scene.rig.cam0_from_cam1.Inverse() * moved, 0.1, &rng);
+  RelativePoseOptions options;
+  options.min_rejected_pair_rms_px = 0.15;
+  const RelativePoseReport median_only = Estimate(scene, options);
+  ASSERT_TRUE(median_only.success) << median_only.message;
+  ASSERT_TRUE(median_only.pairs[3].used) << median_only.pairs[3].reason;
+  // Well over twice the 0.14 px that 0.1 px of noise per coordinate leaves in a separate fit.
+  EXPECT_GT(median_only.pairs[3].rms_px, 0.3);
+  options.max_pair_separate_ratio = 2.0;
+  const RelativePoseReport report = Estimate(scene, options);
+  ASSERT_TRUE(report.success) << report.message;
+  EXPECT_EQ(report.num_pairs_used, 5);
+  EXPECT_FALSE(report.pairs[3].used);
+  EXPECT_NE(report.pairs[3].reason.find("fitting the board alone"), std::string::npos)
+      << report.pairs[3].reason;
+  EXPECT_LT(report.rms_px, 0.16);
+  EXPECT_LT(std::abs(report.baseline_m - scene.rig.cam0_from_cam1.translation.norm()), 3e-4);
+}
+
 TEST(RelativePose, AllPairsAtOnePoseAreDegenerate) {
   Scene scene = MakeScene(0.2, 1, 17);
   std::mt19937 rng(5);
@@ -387,10 +416,40 @@ TEST(RelativePose, RefiningIntrinsicsRecoversPerturbedCameras) {
   EXPECT_NEAR(report.rig.cam0.intrinsics.u0(), scene.rig.cam0.intrinsics.u0(), 1e-2);
 }
 
+TEST(RelativePose, FixedIntrinsicsKeepTheirValues) {
+  const Scene scene = MakeScene(0.0, 5, 23);
+  CameraModel cam0 = scene.rig.cam0, cam1 = scene.rig.cam1;
+  cam0.intrinsics.u0() += 1.5;
+  cam0.intrinsics.gamma_v() *= 1.003;
+  cam0.intrinsics.params[UnifiedIntrinsics::kK5] = 1e-4;
+  RelativePoseOptions options;
+  options.refine_intrinsics = true;
+  const RelativePoseReport by_default =
+      EstimateRelativePose(cam0, cam1, scene.board, scene.pairs, options);
+  ASSERT_TRUE(by_default.success) << by_default.message;
+  EXPECT_EQ(by_default.rig.cam0.intrinsics.params[UnifiedIntrinsics::kK5], 1e-4);
+  EXPECT_EQ(by_default.rig.cam0.intrinsics.params[UnifiedIntrinsics::kAlpha], 0.0);
+  EXPECT_NE(by_default.rig.cam0.intrinsics.u0(), cam0.intrinsics.u0());
+  options.fixed_intrinsics.fill(true);
+  options.fixed_intrinsics[UnifiedIntrinsics::kU0] = false;
+  const RelativePoseReport only_u0 =
+      EstimateRelativePose(cam0, cam1, scene.board, scene.pairs, options);
+  ASSERT_TRUE(only_u0.success) << only_u0.message;
+  EXPECT_EQ(only_u0.rig.cam0.intrinsics.gamma_v(), cam0.intrinsics.gamma_v());
+  for (int p = 0; p < UnifiedIntrinsics::kNumParams; ++p) {
+    if (p == UnifiedIntrinsics::kU0) continue;  // free in both cameras
+    EXPECT_EQ(only_u0.rig.cam1.intrinsics.params[p], cam1.intrinsics.params[p]) << p;
+  }
+  EXPECT_NE(only_u0.rig.cam0.intrinsics.u0(), cam0.intrinsics.u0());
+}
+
 TEST(RelativePose, InvalidOptionsAndCancellationThrow) {
   const Scene scene = MakeScene(0.0, 4, 29);
   RelativePoseOptions options;
   options.huber_loss_px = -1.0;
+  EXPECT_THROW(Estimate(scene, options), InvalidArgument);
+  options = RelativePoseOptions();
+  options.max_pair_separate_ratio = 0.5;
   EXPECT_THROW(Estimate(scene, options), InvalidArgument);
   ProgressSink cancelled;
   cancelled.is_cancelled = [] { return true; };

@@ -9,6 +9,14 @@
 #include "engine/stereo/relpose_cost.h"
 
 namespace omnirig {
+
+std::array<bool, UnifiedIntrinsics::kNumParams> DefaultFixedIntrinsics() {
+  std::array<bool, UnifiedIntrinsics::kNumParams> fixed{};
+  fixed[UnifiedIntrinsics::kAlpha] = true;
+  fixed[UnifiedIntrinsics::kK5] = true;
+  return fixed;
+}
+
 namespace {
 
 // Cancels the solve between iterations and reports progress.
@@ -60,15 +68,16 @@ void AddResiduals(const std::vector<RigPairCorners>& pairs, const RigRefinementO
     problem->SetManifold(board, NewPoseManifold());
   }
   problem->SetManifold(blocks->cam0_from_cam1.data(), NewPoseManifold());
+  std::vector<int> fixed;
+  for (int p = 0; p < UnifiedIntrinsics::kNumParams; ++p) {
+    if (options.fixed_intrinsics[p]) fixed.push_back(p);
+  }
   for (double* intrinsics : {blocks->intrinsics0.data(), blocks->intrinsics1.data()}) {
-    if (!options.refine_intrinsics) {
+    if (!options.refine_intrinsics || fixed.size() == UnifiedIntrinsics::kNumParams) {
       problem->SetParameterBlockConstant(intrinsics);
-    } else {
-      // Skew and k5 are not observable enough to be worth freeing here; they keep the values
-      // of the per-camera calibrations.
-      problem->SetManifold(intrinsics, new ceres::SubsetManifold(UnifiedIntrinsics::kNumParams,
-                                                                 {UnifiedIntrinsics::kAlpha,
-                                                                  UnifiedIntrinsics::kK5}));
+    } else if (!fixed.empty()) {
+      problem->SetManifold(intrinsics,
+                           new ceres::SubsetManifold(UnifiedIntrinsics::kNumParams, fixed));
     }
   }
 }

@@ -2,6 +2,7 @@
 // The joint refinement of a stereo rig as one device (the paper's eq. 20 minimised as eq. 19):
 // cam0_from_cam1 and one board pose per pair, optionally both cameras' intrinsics.
 
+#include <array>
 #include <vector>
 
 #include <Eigen/Core>
@@ -20,8 +21,13 @@ struct RigPairCorners {
   std::vector<Eigen::Vector2d> pixels1;
 };
 
+// Skew (alpha) and k5 fixed, every other intrinsic free.
+std::array<bool, UnifiedIntrinsics::kNumParams> DefaultFixedIntrinsics();
+
 struct RigRefinementOptions {
-  bool refine_intrinsics = false;  // skew and k5 stay fixed
+  bool refine_intrinsics = false;
+  // With refine_intrinsics: the intrinsics (UnifiedIntrinsics order) that stay constant.
+  std::array<bool, UnifiedIntrinsics::kNumParams> fixed_intrinsics = DefaultFixedIntrinsics();
   double huber_loss_px = 1.0;
   int max_num_iterations = 100;
   int num_threads = 1;

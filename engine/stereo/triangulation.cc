@@ -71,6 +71,27 @@ TriangulatedPoint Degenerate(const char* reason) {
   return out;
 }
 
+// Both rays in camera 1's frame: ray 1 from the origin along d1, ray 2 from c2 along d2 (unit
+// directions). Both triangulations start here.
+struct Rays {
+  Eigen::Vector3d c2;
+  Eigen::Vector3d d1;
+  Eigen::Vector3d d2;
+};
+
+// False when a bearing has no direction (zero or not finite).
+bool SetUpRays(const Rigid3d& cam2_from_cam1, const Eigen::Vector3d& bearing1,
+               const Eigen::Vector3d& bearing2, Rays* rays) {
+  const double n1 = bearing1.norm();
+  const double n2 = bearing2.norm();
+  if (!(n1 > 0.0) || !(n2 > 0.0)) return false;
+  const Eigen::Quaterniond cam1_from_cam2_rotation = cam2_from_cam1.rotation.conjugate();
+  rays->c2 = -(cam1_from_cam2_rotation * cam2_from_cam1.translation);
+  rays->d1 = bearing1 / n1;
+  rays->d2 = cam1_from_cam2_rotation * (bearing2 / n2);
+  return true;
+}
+
 }  // namespace
 
 void TriangulationOptions::Check() const {
@@ -86,13 +107,9 @@ TriangulatedPoint TriangulateMidpoint(const Rigid3d& cam2_from_cam1,
                                       const Eigen::Vector3d& bearing1,
                                       const Eigen::Vector3d& bearing2,
                                       const TriangulationOptions& options) {
-  const Eigen::Quaterniond cam1_from_cam2_rotation = cam2_from_cam1.rotation.conjugate();
-  const Eigen::Vector3d c2 = -(cam1_from_cam2_rotation * cam2_from_cam1.translation);
-  const double n1 = bearing1.norm();
-  const double n2 = bearing2.norm();
-  if (!(n1 > 0.0) || !(n2 > 0.0)) return Degenerate("degenerate");
-  const Eigen::Vector3d d1 = bearing1 / n1;
-  const Eigen::Vector3d d2 = cam1_from_cam2_rotation * (bearing2 / n2);
+  Rays rays;
+  if (!SetUpRays(cam2_from_cam1, bearing1, bearing2, &rays)) return Degenerate("degenerate");
+  const auto& [c2, d1, d2] = rays;
   double lambda1, lambda2;
   if (!ClosestRayParameters(c2, d1, d2, &lambda1, &lambda2)) return Degenerate("parallax");
   const Eigen::Vector3d midpoint = 0.5 * (lambda1 * d1 + c2 + lambda2 * d2);
@@ -103,14 +120,11 @@ TriangulatedPoint TriangulateOptimalAngular(const Rigid3d& cam2_from_cam1,
                                             const Eigen::Vector3d& bearing1,
                                             const Eigen::Vector3d& bearing2,
                                             const TriangulationOptions& options) {
-  const Eigen::Quaterniond cam1_from_cam2_rotation = cam2_from_cam1.rotation.conjugate();
-  const Eigen::Vector3d c2 = -(cam1_from_cam2_rotation * cam2_from_cam1.translation);
-  const double n1 = bearing1.norm();
-  const double n2 = bearing2.norm();
+  Rays rays;
+  if (!SetUpRays(cam2_from_cam1, bearing1, bearing2, &rays)) return Degenerate("degenerate");
+  const auto& [c2, d1, d2] = rays;
   const double baseline = c2.norm();
-  if (!(n1 > 0.0) || !(n2 > 0.0) || !(baseline > 0.0)) return Degenerate("degenerate");
-  const Eigen::Vector3d d1 = bearing1 / n1;
-  const Eigen::Vector3d d2 = cam1_from_cam2_rotation * (bearing2 / n2);
+  if (!(baseline > 0.0)) return Degenerate("degenerate");
 
   // Every epipolar plane contains the baseline: its normal is n = cos(phi) e1 + sin(phi) e2
   // with e1, e2 spanning the baseline's orthogonal complement. sum_i (d_i . n)^2 = n^T M n is

@@ -107,7 +107,7 @@ void PrintSummary(const json& result) {
 
 }  // namespace
 
-int RunRelpose(const Args& raw_args) {
+int RunRelpose(const Args& args) {
   ArgParser parser("relpose",
                    "Measures the metric pose between a stereo rig's two cameras (cam0_from_cam1) "
                    "from image pairs in which both see the same board.");
@@ -121,25 +121,34 @@ int RunRelpose(const Args& raw_args) {
   parser.AddOption("calib1", "", "cam1's calibration JSON; without both, each camera is "
                                  "calibrated from its own images first");
   parser.AddFlag("refine-intrinsics", "refine both cameras' intrinsics with the rig");
+  parser.AddOption("fixed-intrinsics", "alpha,k5",
+                   "comma-separated intrinsics held fixed (names, or skew, tangential, "
+                   "principal_point, gamma); alpha,k5,tangential suits fisheye lenses");
   parser.AddOption("threads", "1", "solver threads");
-  parser.AddOption("output", "", "write the result JSON here (also -o); default: stdout");
+  parser.AddOption("o", "", "write the result JSON here (also --output); default: stdout");
+  parser.AddOption("output", "", "the same as -o");
   parser.SetPositional("DIR", "folder holding cam0/NAME and cam1/NAME images, paired by NAME");
-  Args args = raw_args;
-  for (std::string& arg : args) {
-    if (arg == "-o") arg = "--output";
-  }
   if (!parser.Parse(args)) return parser.exit_code();
   OMNIRIG_CHECK(parser.positional().size() == 1, "expected exactly one DIR (see --help)");
   OMNIRIG_CHECK(parser.Has("cols") && parser.Has("rows") && parser.Has("square-mm"),
                 "--cols, --rows and --square-mm are required");
   OMNIRIG_CHECK(parser.Has("calib0") == parser.Has("calib1"),
                 "give both --calib0 and --calib1, or neither");
+  OMNIRIG_CHECK(!(parser.Has("o") && parser.Has("output")), "give -o or --output, not both");
+  const std::string output = parser.Has("o") ? parser.Get("o") : parser.Get("output");
 
   json params = {{"board", BoardParams(parser)}};
   if (parser.Has("calib0")) {
     params["calibrations"] = {{"cam0", parser.Get("calib0")}, {"cam1", parser.Get("calib1")}};
   }
   if (parser.Has("refine-intrinsics")) params["refine_intrinsics"] = true;
+  if (parser.Has("fixed-intrinsics")) {
+    params["fixed_intrinsics"] = json::array();
+    std::istringstream names(parser.Get("fixed-intrinsics"));
+    for (std::string name; std::getline(names, name, ',');) {
+      if (!name.empty()) params["fixed_intrinsics"].push_back(name);
+    }
+  }
 
   api::JobContext context;
   context.job_id = "cli";
@@ -152,11 +161,11 @@ int RunRelpose(const Args& raw_args) {
 
   const json result = api::RunRelativePoseJob(params, context);
   PrintSummary(result);
-  if (parser.Has("output")) {
-    std::ofstream out(parser.Get("output"));
-    OMNIRIG_CHECK(out.good(), "cannot write '" << parser.Get("output") << "'");
+  if (!output.empty()) {
+    std::ofstream out(output);
+    OMNIRIG_CHECK(out.good(), "cannot write '" << output << "'");
     out << result.dump(2) << "\n";
-    std::cerr << "wrote " << parser.Get("output") << "\n";
+    std::cerr << "wrote " << output << "\n";
   } else {
     std::cout << result.dump(2) << "\n";
   }
