@@ -145,6 +145,54 @@ TEST_F(SlamJob, ABlackFrameIsLostAndTheSequenceGoesOn) {
   EXPECT_LT(result["evaluation"]["final_drift_percent"].get<double>(), 5.0);
 }
 
+TEST_F(SlamJob, AFrameThatCannotBeTrackedReinitialisesAndTheNextOneRelocalises) {
+  // Frame 5 shows another scene (a street seen by the same rig): it passes the front end but
+  // cannot be tracked, so it starts an unlinked segment. Frame 6 fails against it and is
+  // relocalised against frame 4, back in the first frame's world.
+  synth::StereoSequenceOptions street_options;
+  street_options.environment = synth::StereoSequenceOptions::Environment::kStreet;
+  street_options.num_frames = 1;
+  street_options.width = 640;
+  street_options.height = 480;
+  street_options.render.noise_sigma = 1.0;
+  const synth::StereoSequence street = synth::MakeStereoSequence(street_options);
+  fs::path replaced[2];
+  for (int c = 0; c < 2; ++c) {
+    replaced[c] = context_.dataset_dir / ("cam" + std::to_string(c) + "/" + sequence_->names[5] + ".png");
+    cv::imwrite(replaced[c].string(), street.images[c][0]);
+  }
+  auto restore = [&] {
+    for (int c = 0; c < 2; ++c) cv::imwrite(replaced[c].string(), sequence_->images[c][5]);
+  };
+  json result;
+  try {
+    result = RunSlamJob({{"rig", "rig-job"}, {"ground_truth", "gt.tum"}}, context_);
+  } catch (...) {
+    restore();
+    throw;
+  }
+  restore();
+  const json& frames = result["frames"];
+  EXPECT_EQ(frames[5]["state"], "reinitialised") << frames[5]["reason"];
+  EXPECT_FALSE(frames[5]["linked"].get<bool>());
+  EXPECT_EQ(frames[6]["state"], "relocalised") << frames[6]["reason"];
+  for (int i = 0; i < 12; ++i) {
+    if (i == 5) continue;
+    EXPECT_TRUE(frames[i]["linked"].get<bool>()) << i;
+    EXPECT_NE(frames[i]["state"], "reinitialised") << i;
+  }
+  // Frames after the break are in the first frame's world: their positions agree with the
+  // ground truth (the first pose anchors both).
+  const Rigid3d world_from_first = sequence_->world_from_rig[0];
+  for (int i : {6, 11}) {
+    const Eigen::Vector3d t(frames[i]["world_from_rig"]["translation_m"][0].get<double>(),
+                            frames[i]["world_from_rig"]["translation_m"][1].get<double>(),
+                            frames[i]["world_from_rig"]["translation_m"][2].get<double>());
+    const Eigen::Vector3d truth = world_from_first.Inverse() * sequence_->world_from_rig[i].translation;
+    EXPECT_LT((t - truth).norm(), 0.05) << i;
+  }
+}
+
 TEST_F(SlamJob, CancellationStopsTheRun) {
   int reports = 0;
   context_.progress.report = [&](double, const std::string&, const std::string&) { ++reports; };

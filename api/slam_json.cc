@@ -96,6 +96,7 @@ json TimesToJson(const slam::StageTimes& t) {
 json FrameToJson(const slam::FrameReport& f) {
   return {{"name", f.name},
           {"state", f.state},
+          {"linked", f.linked},
           {"reason", f.reason},
           {"motion_source", f.motion_source},
           {"num_features", {f.num_features[0], f.num_features[1]}},
@@ -151,6 +152,7 @@ json WriteArtifacts(const StereoRig& rig, const slam::SlamResult& result,
     const slam::FrameReport& f = result.frames[i];
     frames.push_back({{"name", f.name},
                       {"state", f.state},
+                      {"linked", f.linked},
                       {"reason", f.reason},
                       {"timestamp_s", stamps[i]},
                       {"world_from_rig",

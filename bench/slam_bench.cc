@@ -4,7 +4,13 @@
 // 2 cores end to end, global bundle adjustment under 1 s). Renders the sequence first (not
 // timed), then runs SLAM on the in-memory images and prints a table.
 //
+// End to end means from encoded images to the trajectory: the frames are PNG-encoded in memory
+// beforehand (as `omnirig synth` writes them) and decoded by the loader inside the timed run
+// (--no-decode hands SLAM the rendered images instead).
+//
 // usage: bench_slam [--frames N] [--width W] [--height H] [--threads T] [--street]
+//                   [--max-features N] [--local-window N] [--local-iterations N] [--no-decode]
+//                   [--black-frame I]
 
 #include <algorithm>
 #include <cstdio>
@@ -13,6 +19,8 @@
 #include <ctime>
 #include <string>
 #include <vector>
+
+#include <opencv2/imgcodecs.hpp>
 
 #include "engine/slam/evaluation.h"
 #include "engine/slam/slam.h"
@@ -29,6 +37,11 @@ struct Args {
   int height = 768;
   int threads = 2;
   bool street = false;
+  bool decode = true;
+  int max_features = -1;  // -1: the library defaults
+  int local_window = -1;
+  int local_iterations = -1;
+  int black_frame = -1;  // this frame's cam0 image is replaced by a black one (tracking loss)
 };
 
 Args ParseArgs(int argc, char** argv) {
@@ -41,6 +54,11 @@ Args ParseArgs(int argc, char** argv) {
     else if (a == "--height") args.height = next();
     else if (a == "--threads") args.threads = next();
     else if (a == "--street") args.street = true;
+    else if (a == "--no-decode") args.decode = false;
+    else if (a == "--black-frame") args.black_frame = next();
+    else if (a == "--max-features") args.max_features = next();
+    else if (a == "--local-window") args.local_window = next();
+    else if (a == "--local-iterations") args.local_iterations = next();
   }
   return args;
 }
@@ -59,17 +77,35 @@ int Run(const Args& args) {
   sequence_options.render.noise_sigma = 1.0;
   if (args.street) sequence_options.environment = synth::StereoSequenceOptions::Environment::kStreet;
   const Timer render_timer;
-  const synth::StereoSequence sequence = synth::MakeStereoSequence(sequence_options);
+  synth::StereoSequence sequence = synth::MakeStereoSequence(sequence_options);
+  if (args.black_frame >= 0 && args.black_frame < args.frames) {
+    sequence.images[0][args.black_frame].setTo(cv::Scalar::all(0));
+  }
   std::printf("rendered %d stereo frames %dx%d in %.1f s (not timed below)\n", args.frames,
               args.width, args.height, render_timer.ElapsedSeconds());
+
+  std::vector<std::vector<uchar>> png[2];
+  if (args.decode) {
+    for (int c = 0; c < 2; ++c) {
+      for (const cv::Mat& image : sequence.images[c]) {
+        png[c].emplace_back();
+        cv::imencode(".png", image, png[c].back());
+      }
+    }
+  }
+  auto load = [&](int i) {
+    if (!args.decode) return slam::StereoImages{sequence.images[0][i], sequence.images[1][i]};
+    return slam::StereoImages{cv::imdecode(png[0][i], cv::IMREAD_COLOR),
+                              cv::imdecode(png[1][i], cv::IMREAD_COLOR)};
+  };
 
   const std::clock_t cpu_start = std::clock();
   slam::SlamOptions options;
   options.num_threads = args.threads;
-  const slam::SlamResult result = slam::RunSlam(
-      sequence.rig, sequence.names,
-      [&](int i) { return slam::StereoImages{sequence.images[0][i], sequence.images[1][i]}; },
-      options);
+  if (args.max_features >= 0) options.features.max_features = args.max_features;
+  if (args.local_window >= 0) options.local_window_frames = args.local_window;
+  if (args.local_iterations > 0) options.local_max_iterations = args.local_iterations;
+  const slam::SlamResult result = slam::RunSlam(sequence.rig, sequence.names, load, options);
 
   const double cpu_s = static_cast<double>(std::clock() - cpu_start) / CLOCKS_PER_SEC;
   std::printf("\n%-10s %-13s %6s %6s %6s %6s %6s %6s %6s  %s\n", "frame", "state", "feat0",
@@ -132,7 +168,8 @@ int Run(const Args& args) {
   const struct {
     const char* name;
     double wall_s, cpu_s;
-  } stages[] = {{"detect (mask + SIFT)", t.detect_s, c.detect_s},
+  } stages[] = {{args.decode ? "load (PNG decode)" : "load", t.load_s, c.load_s},
+                {"detect (mask + SIFT)", t.detect_s, c.detect_s},
                 {"stereo match + triangulate", t.stereo_s, c.stereo_s},
                 {"temporal match", t.match_s, c.match_s},
                 {"motion (E + scale + pose)", t.motion_s, c.motion_s},
@@ -146,6 +183,11 @@ int Run(const Args& args) {
                 100 * stage.cpu_s / result.total_cpu_s);
   }
   std::printf("%-30s %10.3f %8s %10.3f\n", "total", result.total_s, "", result.total_cpu_s);
+  if (FILE* f = std::fopen("/proc/loadavg", "r")) {
+    double load1 = 0;
+    if (std::fscanf(f, "%lf", &load1) == 1) std::printf("load average (1 min) at the end: %.2f\n", load1);
+    std::fclose(f);
+  }
   std::printf("CPU per frame %.3f s; on 2 idle cores that is at best %.1f frames/s\n",
               result.total_cpu_s / args.frames, 2.0 * args.frames / result.total_cpu_s);
   return 0;

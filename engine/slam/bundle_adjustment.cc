@@ -66,6 +66,35 @@ ceres::Solver::Options SolverOptions(const BundleAdjustmentOptions& options, int
   return solver;
 }
 
+// Aborts the solver as soon as the sink is cancelled (Ceres calls this after every iteration,
+// well under a second apart even for the global adjustment) and reports the iterations.
+class ProgressCallback : public ceres::IterationCallback {
+ public:
+  // Iterations are counted from `offset` out of `budget` (the solves of one adjustment).
+  ProgressCallback(const ProgressSink& progress, int offset, int budget)
+      : progress_(progress), offset_(offset), budget_(budget) {}
+  ceres::CallbackReturnType operator()(const ceres::IterationSummary& summary) override {
+    if (progress_.IsCancelled()) return ceres::SOLVER_ABORT;
+    if (progress_.report) {
+      progress_.Report(std::min(1.0, (offset_ + summary.iteration) / static_cast<double>(budget_)),
+                       "bundle_adjustment",
+                       "iteration " + std::to_string(summary.iteration) + ", cost " +
+                           std::to_string(summary.cost));
+    }
+    return ceres::SOLVER_CONTINUE;
+  }
+
+ private:
+  const ProgressSink& progress_;
+  int offset_;
+  int budget_;
+};
+
+// Iterations of the first and the (optional) second solve of BundleAdjust().
+int SecondSolveIterations(const BundleAdjustmentOptions& options) {
+  return std::max(5, options.max_iterations / 2);
+}
+
 // Counts the constant poses; without any, holds the first pose constant (the gauge: stereo
 // fixes the scale, one pose the other six degrees of freedom).
 void FixGauge(const FrameFlags& free_frames, std::map<int, std::array<double, 7>>* poses,
@@ -85,7 +114,8 @@ void FixGauge(const FrameFlags& free_frames, std::map<int, std::array<double, 7>
 ceres::Solver::Summary SolveOnce(const StereoRig& rig, const FrameFlags& free_frames,
                                  const std::vector<int>& candidates,
                                  const BundleAdjustmentOptions& options, int max_iterations,
-                                 SlamMap* map, BundleAdjustmentReport* report) {
+                                 const ProgressSink& progress, int iteration_offset, SlamMap* map,
+                                 BundleAdjustmentReport* report) {
   std::map<int, std::array<double, 7>> poses;
   std::vector<int> landmark_ids;
   for (int id : candidates) {
@@ -133,7 +163,11 @@ ceres::Solver::Summary SolveOnce(const StereoRig& rig, const FrameFlags& free_fr
   }
   ceres::Solver::Options solver = SolverOptions(options, report->num_free_poses, max_iterations);
   solver.linear_solver_ordering = ordering;
+  ProgressCallback callback(progress, iteration_offset,
+                            options.max_iterations + SecondSolveIterations(options));
+  solver.callbacks.push_back(&callback);
   ceres::Solve(solver, &problem, &summary);
+  progress.ThrowIfCancelled();
 
   for (const auto& [frame, params] : poses) {
     map->rig_from_world[frame] = Rigid3d::FromParams(params.data());
@@ -244,8 +278,10 @@ void BundleAdjustmentOptions::Check() const {
 }
 
 BundleAdjustmentReport BundleAdjust(const StereoRig& rig, const std::vector<int>& free_frames,
-                                    const BundleAdjustmentOptions& options, SlamMap* map) {
+                                    const BundleAdjustmentOptions& options, SlamMap* map,
+                                    const ProgressSink& progress) {
   options.Check();
+  progress.ThrowIfCancelled();
   const Timer timer;
   BundleAdjustmentReport report;
   FrameFlags free_set(map->has_pose.size(), 0);
@@ -263,7 +299,8 @@ BundleAdjustmentReport BundleAdjust(const StereoRig& rig, const std::vector<int>
   }
   report.initial_rms_px = RmsAndPrune(rig, free_set, candidates, 0, false, map, &report);
   ceres::Solver::Summary summary =
-      SolveOnce(rig, free_set, candidates, options, options.max_iterations, map, &report);
+      SolveOnce(rig, free_set, candidates, options, options.max_iterations, progress, 0, map,
+                &report);
   report.iterations = static_cast<int>(summary.iterations.size());
   RmsAndPrune(rig, free_set, candidates, options.max_reprojection_error_px, true, map, &report);
   // A second, shorter solve without the pruned outliers' pull, when they were more than a few:
@@ -271,7 +308,7 @@ BundleAdjustmentReport BundleAdjust(const StereoRig& rig, const std::vector<int>
   const int num_observations = report.num_residuals / 2;
   if (report.num_observations_pruned > std::max(10, num_observations / 500)) {
     summary = SolveOnce(rig, free_set, candidates, options,
-                        std::max(5, options.max_iterations / 2), map, &report);
+                        SecondSolveIterations(options), progress, report.iterations, map, &report);
     report.iterations += static_cast<int>(summary.iterations.size());
   }
   report.final_rms_px = RmsAndPrune(rig, free_set, candidates, 0, false, map, &report);

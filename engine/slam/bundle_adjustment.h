@@ -13,6 +13,7 @@
 
 #include "engine/geometry/camera_model.h"
 #include "engine/slam/map.h"
+#include "engine/util/progress.h"
 
 namespace omnirig::slam {
 
@@ -89,9 +90,13 @@ struct BundleAdjustmentReport {
 // such constant pose exists, the first free frame is held constant (the gauge: stereo fixes
 // the scale, one pose fixes the other six degrees of freedom). Observations with a final error
 // above options.max_reprojection_error_px are removed from the map, and landmarks left with
-// fewer than two observations are marked invalid.
+// fewer than two observations are marked invalid. Reports every solver iteration to `progress`
+// (stage "bundle_adjustment", fractions increasing over both solves) and stops within one
+// iteration of a cancellation: the solver aborts and Cancelled is thrown, leaving the map as
+// it was before that solve.
 BundleAdjustmentReport BundleAdjust(const StereoRig& rig, const std::vector<int>& free_frames,
-                                    const BundleAdjustmentOptions& options, SlamMap* map);
+                                    const BundleAdjustmentOptions& options, SlamMap* map,
+                                    const ProgressSink& progress = ProgressSink());
 
 // Pose-only refinement of one frame against fixed landmarks (motion-only bundle adjustment):
 // `observations[i]` measures `points_in_world[i]`. Returns the refined rig_from_world and

@@ -1,6 +1,8 @@
 #include "engine/slam/bundle_adjustment.h"
 
+#include <algorithm>
 #include <random>
+#include <string>
 
 #include <ceres/autodiff_cost_function.h>
 #include <gtest/gtest.h>
@@ -158,6 +160,39 @@ TEST(BundleAdjust, RecoversMetricScaleFromTheStereoBaseline) {
   const double true_length = scene.true_rig_from_world[5].Inverse().translation.norm();
   const double length = scene.map.rig_from_world[5].Inverse().translation.norm();
   EXPECT_NEAR(length / true_length, 1.0, 1e-4);
+}
+
+TEST(BundleAdjust, ReportsIterationsAndAbortsWhenCancelled) {
+  const StereoRig rig = MakeRig();
+  BundleAdjustmentOptions options;
+  options.max_iterations = 100;
+  {
+    SyntheticScene scene = MakeScene(rig, 0.3, 0.0);
+    std::vector<double> fractions;
+    const ProgressSink progress{[&](double fraction, const std::string& stage, const std::string&) {
+                                  EXPECT_EQ(stage, "bundle_adjustment");
+                                  fractions.push_back(fraction);
+                                },
+                                nullptr};
+    const BundleAdjustmentReport report =
+        BundleAdjust(rig, {0, 1, 2, 3, 4, 5}, options, &scene.map, progress);
+    EXPECT_GE(static_cast<int>(fractions.size()), report.iterations);
+    EXPECT_GT(fractions.size(), 1u);
+    EXPECT_TRUE(std::is_sorted(fractions.begin(), fractions.end()));
+  }
+  // Cancelled after the second iteration: the solver stops there instead of converging.
+  SyntheticScene scene = MakeScene(rig, 0.3, 0.0);
+  const std::vector<Rigid3d> before = scene.map.rig_from_world;
+  int iterations_seen = 0;
+  const ProgressSink progress{[&](double, const std::string&, const std::string&) {
+                                ++iterations_seen;
+                              },
+                              [&] { return iterations_seen >= 2; }};
+  EXPECT_THROW(BundleAdjust(rig, {0, 1, 2, 3, 4, 5}, options, &scene.map, progress), Cancelled);
+  EXPECT_EQ(iterations_seen, 2);
+  for (int f = 0; f < 6; ++f) {
+    EXPECT_EQ(scene.map.rig_from_world[f].translation, before[f].translation) << "frame " << f;
+  }
 }
 
 TEST(RefineRigPose, RecoversAPerturbedPoseAndFlagsOutliers) {

@@ -14,7 +14,10 @@
 namespace omnirig::slam {
 
 struct FeatureOptions {
-  int max_features = 1500;          // per image, strongest first (0 = no limit)
+  // Per image, strongest first (0 = no limit). SIFT's descriptors cost ~35 us each and dominate
+  // the front end; on the synthetic room 1000 track as well as 1500 (drift and map accuracy
+  // unchanged) for two thirds of the detection time.
+  int max_features = 1000;
   double contrast_threshold = 0.03; // SIFT's, on the [0, 1] intensity scale
   // Grey level below which a pixel counts as outside the mirror (rim, central hole).
   double dark_level = 24.0;

@@ -92,7 +92,10 @@ struct KeyFrame {
 
 class Tracker {
  public:
-  Tracker(const StereoRig& rig, const SlamOptions& options) : rig_(rig), options_(options) {}
+  // `progress` is asked for cancellation only (inside the local bundle adjustment); RunSlam
+  // reports the frames.
+  Tracker(const StereoRig& rig, const SlamOptions& options, const ProgressSink& progress)
+      : rig_(rig), options_(options), cancellation_{nullptr, progress.is_cancelled} {}
 
   // The per-frame half that needs no map: load, mask, features, stereo points. Runs one frame
   // ahead of BackEnd() on a worker thread; never two FrontEnd() calls at once.
@@ -114,20 +117,32 @@ class Tracker {
   // Returns false (with report->reason) when the frame has too little to work with.
   bool DetectAndMatchStereo(const StereoImages& images, bool parallel_cameras, KeyFrame* frame,
                             FrameReport* report);
+  // Matches `frame` with `reference` (a tracked keyframe), estimates the motion between them
+  // and refines the pose against the reference's landmarks. `matches` are (reference feature,
+  // frame feature) in cam0; false with report->reason on failure.
+  bool TrackAgainst(const KeyFrame& reference, bool use_motion_prior, KeyFrame* frame,
+                    std::vector<std::pair<int, int>>* matches, FrameReport* report);
   // Estimates curr_from_prev with E + scale (or 3D-3D); false with the reason on failure.
-  bool EstimateMotion(const KeyFrame& frame, const std::vector<std::pair<int, int>>& matches,
-                      Rigid3d* curr_from_prev, FrameReport* report);
-  // Refines the new pose against the landmarks of the last frame; links confirmed ones.
-  bool TrackLandmarks(KeyFrame* frame, const std::vector<std::pair<int, int>>& matches,
+  bool EstimateMotion(const KeyFrame& reference, const KeyFrame& frame,
+                      const std::vector<std::pair<int, int>>& matches, Rigid3d* curr_from_prev,
                       FrameReport* report);
-  void AddNewLandmarks(KeyFrame* frame, const std::vector<std::pair<int, int>>& matches,
-                       FrameReport* report);
+  // Refines the new pose against the landmarks of the reference frame; links confirmed ones.
+  bool TrackLandmarks(const KeyFrame& reference, KeyFrame* frame,
+                      const std::vector<std::pair<int, int>>& matches, FrameReport* report);
+  // `reference` is null for a frame that starts a new segment.
+  void AddNewLandmarks(const KeyFrame* reference, KeyFrame* frame,
+                       const std::vector<std::pair<int, int>>& matches, FrameReport* report);
   void LocalBundleAdjustment(FrameReport* report);
 
   const StereoRig& rig_;
   const SlamOptions& options_;
+  const ProgressSink cancellation_;
   SlamMap map_;
   std::optional<KeyFrame> last_;
+  bool last_linked_ = false;  // last_ is in the first frame's world through tracked frames
+  // The last linked keyframe once a re-initialisation has replaced it as last_: frames that
+  // cannot be tracked against last_ try it before re-initialising (relocalisation).
+  std::optional<KeyFrame> anchor_;
   Rigid3d last_step_;  // curr_from_prev of the last tracked step: the motion prior
   cv::Mat masks_[2];
   std::vector<int> tracked_frames_;
@@ -219,11 +234,12 @@ bool Tracker::DetectAndMatchStereo(const StereoImages& images, bool parallel_cam
   return true;
 }
 
-bool Tracker::EstimateMotion(const KeyFrame& frame, const std::vector<std::pair<int, int>>& matches,
+bool Tracker::EstimateMotion(const KeyFrame& reference, const KeyFrame& frame,
+                             const std::vector<std::pair<int, int>>& matches,
                              Rigid3d* curr_from_prev, FrameReport* report) {
   std::vector<Eigen::Vector3d> bearings_prev, bearings_curr;
   for (const auto& [a, b] : matches) {
-    bearings_prev.push_back(last_->features[0].bearings[a]);
+    bearings_prev.push_back(reference.features[0].bearings[a]);
     bearings_curr.push_back(frame.features[0].bearings[b]);
   }
   EssentialRansacOptions essential = options_.essential;
@@ -232,11 +248,11 @@ bool Tracker::EstimateMotion(const KeyFrame& frame, const std::vector<std::pair<
   report->num_essential_inliers = e.num_inliers;
   std::vector<PointPair> pairs, inlier_pairs;
   for (size_t m = 0; m < matches.size(); ++m) {
-    const int sa = last_->stereo_of_feature0[matches[m].first];
+    const int sa = reference.stereo_of_feature0[matches[m].first];
     const int sb = frame.stereo_of_feature0[matches[m].second];
     if (sa < 0 || sb < 0) continue;
-    const PointPair pair{last_->stereo[sa].point_in_rig, frame.stereo[sb].point_in_rig,
-                         last_->stereo[sa].range_std_m, frame.stereo[sb].range_std_m};
+    const PointPair pair{reference.stereo[sa].point_in_rig, frame.stereo[sb].point_in_rig,
+                         reference.stereo[sa].range_std_m, frame.stereo[sb].range_std_m};
     pairs.push_back(pair);
     if (e.success && e.inlier_mask[m]) inlier_pairs.push_back(pair);
   }
@@ -271,13 +287,14 @@ bool Tracker::EstimateMotion(const KeyFrame& frame, const std::vector<std::pair<
   return false;
 }
 
-bool Tracker::TrackLandmarks(KeyFrame* frame, const std::vector<std::pair<int, int>>& matches,
+bool Tracker::TrackLandmarks(const KeyFrame& reference, KeyFrame* frame,
+                             const std::vector<std::pair<int, int>>& matches,
                              FrameReport* report) {
   std::vector<Observation> observations;
   std::vector<Eigen::Vector3d> points;
   std::vector<int> landmark_ids;
   for (const auto& [a, b] : matches) {
-    const int id = last_->landmark_of[0][a];
+    const int id = reference.landmark_of[0][a];
     if (id < 0 || !map_.landmarks[id].valid) continue;
     observations.push_back({frame->index, 0, b, frame->features[0].pixels[b]});
     points.push_back(map_.landmarks[id].point_in_world);
@@ -313,7 +330,8 @@ bool Tracker::TrackLandmarks(KeyFrame* frame, const std::vector<std::pair<int, i
   return true;
 }
 
-void Tracker::AddNewLandmarks(KeyFrame* frame, const std::vector<std::pair<int, int>>& matches,
+void Tracker::AddNewLandmarks(const KeyFrame* reference, KeyFrame* frame,
+                              const std::vector<std::pair<int, int>>& matches,
                               FrameReport* report) {
   std::vector<int> prev_of_feature0(frame->features[0].size(), -1);
   for (const auto& [a, b] : matches) prev_of_feature0[b] = a;
@@ -332,11 +350,13 @@ void Tracker::AddNewLandmarks(KeyFrame* frame, const std::vector<std::pair<int, 
     const int id = static_cast<int>(map_.landmarks.size());
     // The same feature in the last frame, if it did not belong to a landmark yet and agrees.
     const int a = prev_of_feature0[sp.feature0];
-    if (last_ && a >= 0 && last_->landmark_of[0][a] < 0) {
-      const Eigen::Vector3d in_prev = map_.rig_from_world[last_->index] * landmark.point_in_world;
+    if (reference && a >= 0 && reference->landmark_of[0][a] < 0) {
+      const Eigen::Vector3d in_prev =
+          map_.rig_from_world[reference->index] * landmark.point_in_world;
       const auto pixel = Project(rig_.cam0.intrinsics, in_prev);
-      if (pixel && (*pixel - last_->features[0].pixels[a]).squaredNorm() < max_sq) {
-        landmark.observations.push_back({last_->index, 0, a, last_->features[0].pixels[a]});
+      if (pixel && (*pixel - reference->features[0].pixels[a]).squaredNorm() < max_sq) {
+        landmark.observations.push_back(
+            {reference->index, 0, a, reference->features[0].pixels[a]});
       }
     }
     frame->landmark_of[0][sp.feature0] = id;
@@ -355,8 +375,40 @@ void Tracker::LocalBundleAdjustment(FrameReport* report) {
   local.max_iterations = options_.local_max_iterations;
   // The other core runs the next frame's front end meanwhile.
   local.num_threads = 1;
-  report->local_bundle_adjustment = BundleAdjust(rig_, window, local, &map_);
+  report->local_bundle_adjustment = BundleAdjust(rig_, window, local, &map_, cancellation_);
   timer.ChargeTo(&StageTimes::local_ba_s, report);
+}
+
+bool Tracker::TrackAgainst(const KeyFrame& reference, bool use_motion_prior, KeyFrame* frame,
+                           std::vector<std::pair<int, int>>* matches, FrameReport* report) {
+  for (int c = 0; c < 2; ++c) frame->landmark_of[c].assign(frame->features[c].size(), -1);
+  StageClock timer;
+  matches->clear();
+  if (use_motion_prior) {
+    *matches = MatchDescriptorsGated(reference.features[0], frame->features[0],
+                                     last_step_.RotationMatrix(), options_.temporal_gate_rad,
+                                     options_.temporal_max_descriptor_ratio,
+                                     options_.stereo.max_descriptor_distance);
+  }
+  if (static_cast<int>(matches->size()) < options_.min_matches) {
+    *matches = MatchDescriptors(reference.features[0].descriptors, frame->features[0].descriptors,
+                                options_.temporal_max_descriptor_ratio,
+                                options_.stereo.max_descriptor_distance);
+  }
+  report->num_matches = static_cast<int>(matches->size());
+  timer.ChargeTo(&StageTimes::match_s, report);
+  timer.Restart();
+  bool tracked = false;
+  Rigid3d curr_from_prev;
+  if (report->num_matches < options_.min_matches) {
+    report->reason = "too few matches with frame " + std::to_string(reference.index) + " (" +
+                     std::to_string(report->num_matches) + ")";
+  } else if (EstimateMotion(reference, *frame, *matches, &curr_from_prev, report)) {
+    map_.rig_from_world[frame->index] = curr_from_prev * map_.rig_from_world[reference.index];
+    tracked = TrackLandmarks(reference, frame, *matches, report);
+  }
+  timer.ChargeTo(&StageTimes::motion_s, report);
+  return tracked;
 }
 
 Tracker::FrontEndResult Tracker::FrontEnd(int index, const std::string& name,
@@ -384,41 +436,37 @@ FrameReport Tracker::BackEnd(FrontEndResult front) {
   }
   for (int c = 0; c < 2; ++c) frame.landmark_of[c].assign(frame.features[c].size(), -1);
   std::vector<std::pair<int, int>> matches;
-  bool tracked = false;
   // Where a re-initialised frame starts: the motion estimate when there is one, else a
   // constant-velocity prediction from the last tracked frame.
   std::optional<Rigid3d> restart_pose;
-  if (last_) restart_pose = last_step_ * map_.rig_from_world[last_->index];
+  const KeyFrame* reference = nullptr;
   if (last_) {
-    StageClock timer;
-    matches = MatchDescriptorsGated(last_->features[0], frame.features[0],
-                                    last_step_.RotationMatrix(), options_.temporal_gate_rad,
-                                    options_.temporal_max_descriptor_ratio,
-                                    options_.stereo.max_descriptor_distance);
-    if (static_cast<int>(matches.size()) < options_.min_matches) {
-      matches = MatchDescriptors(last_->features[0].descriptors, frame.features[0].descriptors,
-                                 options_.temporal_max_descriptor_ratio,
-                                 options_.stereo.max_descriptor_distance);
-    }
-    report.num_matches = static_cast<int>(matches.size());
-    timer.ChargeTo(&StageTimes::match_s, &report);
-    timer.Restart();
-    Rigid3d curr_from_prev;
-    if (report.num_matches < options_.min_matches) {
-      report.reason = "too few matches with the last tracked frame (" +
-                      std::to_string(report.num_matches) + ")";
-    } else if (EstimateMotion(frame, matches, &curr_from_prev, &report)) {
-      map_.rig_from_world[index] = curr_from_prev * map_.rig_from_world[last_->index];
+    restart_pose = last_step_ * map_.rig_from_world[last_->index];
+    if (TrackAgainst(*last_, /*use_motion_prior=*/true, &frame, &matches, &report)) {
+      reference = &*last_;
+      report.linked = last_linked_;
+    } else if (!report.motion_source.empty()) {
       restart_pose = map_.rig_from_world[index];
-      tracked = TrackLandmarks(&frame, matches, &report);
-      if (tracked) {
-        last_step_ = map_.rig_from_world[index] * map_.rig_from_world[last_->index].Inverse();
-      }
     }
-    timer.ChargeTo(&StageTimes::motion_s, &report);
+  }
+  if (!reference && anchor_ && !last_linked_) {
+    // Relocalisation: the last linked keyframe, without the motion prior (the motion since
+    // then is unknown).
+    FrameReport attempt = report;
+    attempt.reason.clear();
+    attempt.motion_source.clear();
+    std::vector<std::pair<int, int>> anchor_matches;
+    if (TrackAgainst(*anchor_, /*use_motion_prior=*/false, &frame, &anchor_matches, &attempt)) {
+      attempt.reason = "relocalised against frame " + std::to_string(anchor_->index) +
+                       " after: " + report.reason;
+      report = std::move(attempt);
+      matches = std::move(anchor_matches);
+      reference = &*anchor_;
+      report.linked = true;
+    }
   }
   const StageClock map_timer;
-  if (!tracked) {
+  if (!reference) {
     // A new start from this frame's stereo points: the trajectory continues from the restart
     // pose, the new landmarks are not tied to the old ones.
     for (int c = 0; c < 2; ++c) frame.landmark_of[c].assign(frame.features[c].size(), -1);
@@ -426,14 +474,18 @@ FrameReport Tracker::BackEnd(FrontEndResult front) {
     matches.clear();
     last_step_ = Rigid3d();
     report.state = last_ ? "reinitialised" : "initialised";
+    report.linked = !last_;
+    if (last_ && last_linked_) anchor_ = std::move(last_);
   } else {
-    report.state = "tracked";
+    last_step_ = map_.rig_from_world[index] * map_.rig_from_world[reference->index].Inverse();
+    report.state = reference == &*last_ ? "tracked" : "relocalised";
   }
   map_.has_pose[index] = true;
-  AddNewLandmarks(&frame, matches, &report);
+  AddNewLandmarks(reference, &frame, matches, &report);
   map_timer.ChargeTo(&StageTimes::map_s, &report);
   tracked_frames_.push_back(index);
-  if (tracked) LocalBundleAdjustment(&report);
+  if (reference) LocalBundleAdjustment(&report);
+  last_linked_ = report.linked;
   last_ = std::move(frame);
   return report;
 }
@@ -460,7 +512,7 @@ SlamResult RunSlam(const StereoRig& rig, const std::vector<std::string>& frame_n
   OMNIRIG_CHECK(!frame_names.empty(), "SLAM needs at least one stereo frame");
   const StageClock total(CLOCK_PROCESS_CPUTIME_ID);
   SlamResult result;
-  Tracker tracker(rig, options);
+  Tracker tracker(rig, options, progress);
   const int n = static_cast<int>(frame_names.size());
   // With two threads the front end of frame i + 1 (features of both cameras side by side,
   // stereo) runs while the back end of frame i (tracking, local bundle adjustment) does.
@@ -494,8 +546,13 @@ SlamResult RunSlam(const StereoRig& rig, const std::vector<std::string>& frame_n
     BundleAdjustmentOptions global = options.bundle_adjustment;
     global.max_iterations = std::max(global.max_iterations, 50);
     global.num_threads = options.num_threads;
+    const ProgressSink ba_progress{
+        [&](double fraction, const std::string& stage, const std::string& message) {
+          progress.Report(0.95 + 0.04 * fraction, stage, "global bundle adjustment: " + message);
+        },
+        progress.is_cancelled};
     const StageClock ba_timer(CLOCK_PROCESS_CPUTIME_ID);
-    result.global_bundle_adjustment = BundleAdjust(rig, all_frames, global, &map);
+    result.global_bundle_adjustment = BundleAdjust(rig, all_frames, global, &map, ba_progress);
     result.global_ba_s = ba_timer.WallSeconds();
     result.global_ba_cpu_s = ba_timer.CpuSeconds();
   }

@@ -6,7 +6,9 @@
 // the stereo points (eq. 18, robust), then the pose refined against the map's landmarks in both
 // cameras. A local bundle adjustment of the last frames follows every frame, a global one ends
 // the run. Frames that cannot be tracked are reported with the reason; the next good frame
-// re-initialises from its stereo points and the run goes on.
+// re-initialises from its stereo points and the run goes on. A frame that then fails against
+// the re-initialised one tries the last keyframe tied to the first frame's world
+// (relocalisation), which brings the trajectory back into that world.
 //
 // Frames: the rig frame is cam0's frame; the world frame is the rig frame of the first
 // tracked frame.
@@ -80,10 +82,14 @@ struct StageTimes {
 
 struct FrameReport {
   std::string name;
-  // "initialised" (first frame), "tracked", "reinitialised" (a new start from stereo after a
-  // tracking failure), "lost" (no pose).
+  // "initialised" (first frame), "tracked", "relocalised" (tracked against the last linked
+  // keyframe after failing against the last frame, which had been re-initialised),
+  // "reinitialised" (a new start from stereo after a tracking failure), "lost" (no pose).
   std::string state;
-  std::string reason;         // why lost or reinitialised
+  // Whether the pose is tied to the first frame's world through tracked frames. False from a
+  // re-initialisation until a relocalisation: such poses only continue a motion prediction.
+  bool linked = false;
+  std::string reason;         // why lost, reinitialised or relocalised
   std::string motion_source;  // "essential+scale", "3d-3d" or "" (no motion estimated)
   int num_features[2] = {0, 0};
   int num_stereo_points = 0;
