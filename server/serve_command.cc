@@ -9,6 +9,7 @@
 #include <cstdlib>
 #include <iostream>
 
+#include "engine/util/check.h"
 #include "server/cli/args.h"
 #include "server/service.h"
 
@@ -32,6 +33,9 @@ void DeclareOptions(cli::ArgParser& parser) {
   parser.AddOption("http-threads", "128", "HTTP connection threads");
   parser.AddOption("worker-nice", "10",
                    "niceness of job threads (0-19), so status polls stay fast while jobs run");
+  parser.AddOption("worker-sched", "idle",
+                   "scheduling of job threads: 'idle' (SCHED_IDLE, run only when the HTTP "
+                   "threads do not need the CPU) or 'normal' (only --worker-nice)");
   parser.AddOption("max-attempts", "3",
                    "runs a job may start before crashes make it fail ('interrupted')");
   parser.AddOption("max-file-mb", "256", "largest image upload, MB");
@@ -63,6 +67,12 @@ ServiceOptions ToOptions(const cli::ArgParser& parser) {
                                 : parser.GetInt("threads-per-job");
   options.http_threads = parser.GetInt("http-threads");
   options.worker_nice = parser.GetInt("worker-nice");
+  const std::string worker_sched = parser.Get("worker-sched");
+  if (worker_sched != "idle" && worker_sched != "normal") {
+    throw omnirig::InvalidArgument("--worker-sched must be 'idle' or 'normal', got '" +
+                                worker_sched + "'");
+  }
+  options.worker_idle_scheduling = worker_sched == "idle";
   options.max_attempts = parser.GetInt("max-attempts");
   options.max_file_bytes = Megabytes(parser, "max-file-mb");
   options.max_dataset_bytes = Megabytes(parser, "max-dataset-mb");

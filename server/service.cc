@@ -75,6 +75,7 @@ Service::Service(const ServiceOptions& options) : state_(std::make_unique<Servic
   pool_options.threads_per_job = options.threads_per_job;
   pool_options.progress_interval_s = options.progress_interval_s;
   pool_options.nice = options.worker_nice;
+  pool_options.idle_scheduling = options.worker_idle_scheduling;
   state.workers =
       std::make_unique<WorkerPool>(*state.store, *state.data_dir, state.metrics, pool_options);
 

@@ -24,6 +24,7 @@ struct ServiceOptions {
   int num_workers = 1;
   int threads_per_job = 1;
   int http_threads = 128;
+  bool worker_idle_scheduling = true;  // SCHED_IDLE for worker (and solver) threads
   int worker_nice = 10;  // niceness of worker (and solver) threads: HTTP threads come first
   int max_attempts = 3;  // runs started before a crash-looping job fails
   int64_t max_file_bytes = 256LL << 20;

@@ -1,9 +1,12 @@
 #include "server/worker_pool.h"
 
+#include <sched.h>
 #include <sys/resource.h>
 #include <unistd.h>
 
+#include <cerrno>
 #include <chrono>
+#include <cstring>
 #include <iostream>
 
 #include "engine/util/check.h"
@@ -76,6 +79,14 @@ void WorkerPool::WorkerLoop() {
   // Workers (and the solver threads they start, which inherit it) yield the CPU to the HTTP
   // threads, so status polls stay fast while every core computes. Linux nice is per thread.
   if (options_.nice > 0) ::setpriority(PRIO_PROCESS, static_cast<id_t>(::gettid()), options_.nice);
+  if (options_.idle_scheduling) {
+    sched_param param{};
+    param.sched_priority = 0;
+    if (::sched_setscheduler(0, SCHED_IDLE, &param) != 0) {  // 0: this thread (Linux)
+      std::cerr << "omnirig: SCHED_IDLE for a worker thread refused: " << std::strerror(errno)
+                << std::endl;
+    }
+  }
   while (true) {
     uint64_t generation;
     {

@@ -29,6 +29,9 @@ struct WorkerPoolOptions {
   double progress_interval_s = 0.2;  // at most one progress write per job per interval
   double idle_poll_s = 0.5;          // re-check the store this often when idle
   int nice = 10;                     // scheduling niceness of worker threads (0: unchanged)
+  // SCHED_IDLE for worker threads: they run only when no HTTP thread wants the CPU, and a
+  // waking HTTP thread preempts them at once (nice alone leaves a wake-up delay of a few ms).
+  bool idle_scheduling = true;
   void Check() const;
 };
 
