@@ -15,23 +15,6 @@
 namespace omnirig {
 namespace {
 
-cv::Mat ToGrey(const cv::Mat& image) {
-  cv::Mat grey;
-  if (image.channels() == 3) {
-    cv::cvtColor(image, grey, cv::COLOR_BGR2GRAY);
-  } else if (image.channels() == 4) {
-    cv::cvtColor(image, grey, cv::COLOR_BGRA2GRAY);
-  } else {
-    grey = image;
-  }
-  if (grey.depth() != CV_8U) {
-    cv::Mat converted;
-    cv::normalize(grey, converted, 0, 255, cv::NORM_MINMAX, CV_8U);
-    grey = converted;
-  }
-  return grey;
-}
-
 // Distance from corner `id` to its nearest grid neighbour (the local square size in pixels).
 double LocalSquarePx(const std::vector<Eigen::Vector2d>& grid, const BoardSpec& board, int id) {
   const int row = id / board.cols, col = id % board.cols;
@@ -463,11 +446,28 @@ BoardDetection BestPlacement(const cv::Mat& grey, const BoardSpec& board, const 
 
 }  // namespace
 
+cv::Mat ToGreyscale8(const cv::Mat& image) {
+  cv::Mat grey;
+  if (image.channels() == 3) {
+    cv::cvtColor(image, grey, cv::COLOR_BGR2GRAY);
+  } else if (image.channels() == 4) {
+    cv::cvtColor(image, grey, cv::COLOR_BGRA2GRAY);
+  } else {
+    grey = image;
+  }
+  if (grey.depth() != CV_8U) {
+    cv::Mat converted;
+    cv::normalize(grey, converted, 0, 255, cv::NORM_MINMAX, CV_8U);
+    grey = converted;
+  }
+  return grey;
+}
+
 std::string ValidateBoardGrid(const cv::Mat& image, const BoardSpec& board,
                               const std::vector<Eigen::Vector2d>& grid) {
   board.Check();
   OMNIRIG_CHECK(!image.empty(), "detect: empty image");
-  return ValidateGridImpl(ToGrey(image), board, grid);
+  return ValidateGridImpl(ToGreyscale8(image), board, grid);
 }
 
 void DetectOptions::Check() const {
@@ -485,7 +485,7 @@ BoardDetection DetectBoard(const cv::Mat& image, const BoardSpec& board,
   board.Check();
   options.Check();
   OMNIRIG_CHECK(!image.empty(), "detect: empty image");
-  const cv::Mat grey = ToGrey(image);
+  const cv::Mat grey = ToGreyscale8(image);
   BoardDetection detection;
   if (board.type == BoardSpec::Type::kCharuco) {
     detection = DetectCharuco(grey, board, options);
@@ -507,7 +507,7 @@ BoardDetection DetectBoardFromPose(const cv::Mat& image, const BoardSpec& board,
   board.Check();
   options.Check();
   OMNIRIG_CHECK(!image.empty(), "detect: empty image");
-  const cv::Mat grey = ToGrey(image);
+  const cv::Mat grey = ToGreyscale8(image);
   const std::vector<Eigen::Vector3d> object_points = board.ObjectPoints();
   std::vector<Eigen::Vector2d> predicted(object_points.size(), Eigen::Vector2d::Constant(-1e9));
   for (size_t i = 0; i < object_points.size(); ++i) {
@@ -544,7 +544,7 @@ BoardDetection RedetectWithModel(const cv::Mat& image, const BoardSpec& board,
   board.Check();
   options.Check();
   OMNIRIG_CHECK(!image.empty(), "detect: empty image");
-  const cv::Mat grey = ToGrey(image);
+  const cv::Mat grey = ToGreyscale8(image);
   for (const auto& [sub_cols, sub_rows] : PartialGridSizes(board)) {
     const auto grid = FindPartialGrid(grey, sub_cols, sub_rows);
     if (!grid) continue;

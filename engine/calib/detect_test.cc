@@ -47,6 +47,23 @@ double MeanCornerError(const BoardDetection& detection,
   return std::min(direct, turned) / std::max<size_t>(1, detection.corners_px.size());
 }
 
+TEST(Detect, GreyscaleViewOfColourAndDeepImages) {
+  cv::Mat bgr(2, 2, CV_8UC3, cv::Scalar(10, 200, 30));
+  const cv::Mat from_bgr = ToGreyscale8(bgr);
+  EXPECT_EQ(from_bgr.type(), CV_8UC1);
+  EXPECT_NEAR(from_bgr.at<uint8_t>(0, 0), 0.114 * 10 + 0.587 * 200 + 0.299 * 30, 1.0);
+  // A 16-bit image is stretched to the full 8-bit range rather than refused or truncated.
+  cv::Mat deep(1, 3, CV_16UC1);
+  deep.at<uint16_t>(0, 0) = 1000;
+  deep.at<uint16_t>(0, 1) = 3000;
+  deep.at<uint16_t>(0, 2) = 5000;
+  const cv::Mat from_deep = ToGreyscale8(deep);
+  ASSERT_EQ(from_deep.type(), CV_8UC1);
+  EXPECT_EQ(from_deep.at<uint8_t>(0, 0), 0);
+  EXPECT_NEAR(from_deep.at<uint8_t>(0, 1), 128, 1);
+  EXPECT_EQ(from_deep.at<uint8_t>(0, 2), 255);
+}
+
 TEST(Detect, FindsEveryRenderedViewToSubpixel) {
   const auto& set = RenderedSet();
   const BoardSpec board = ToBoardSpec(set.board);

@@ -6,6 +6,7 @@
 #include <Eigen/Dense>
 #include <opencv2/imgproc.hpp>
 
+#include "engine/calib/detect.h"
 #include "engine/util/check.h"
 
 namespace omnirig {
@@ -59,19 +60,6 @@ std::vector<Eigen::Vector2d> RadialEdges(const cv::Mat& grey, const Eigen::Vecto
     if (best > 20.0) edges.push_back(circle.head<2>() + best_r * direction);
   }
   return edges;
-}
-
-cv::Mat ToGreyImage(const cv::Mat& image) {
-  cv::Mat grey;
-  if (image.channels() == 3) {
-    cv::cvtColor(image, grey, cv::COLOR_BGR2GRAY);
-  } else if (image.channels() == 4) {
-    cv::cvtColor(image, grey, cv::COLOR_BGRA2GRAY);
-  } else {
-    grey = image;
-  }
-  OMNIRIG_CHECK(grey.depth() == CV_8U, "svp: expected an 8-bit image");
-  return grey;
 }
 
 // Finds the rim's edge on radial profiles around `guess` and fits a circle, re-fitting on the
@@ -175,7 +163,7 @@ SvpCheckReport CheckSingleViewpoint(const cv::Mat& image, const CameraModel& cam
   }
   const std::optional<Eigen::Vector3d> predicted_circle = FitCircle(predicted);
   OMNIRIG_CHECK(predicted_circle, "svp: the projected rim is not a circle");
-  SvpCheckReport report = FitRimNear(ToGreyImage(image), camera, *predicted_circle, options);
+  SvpCheckReport report = FitRimNear(ToGreyscale8(image), camera, *predicted_circle, options);
   report.predicted_circle_px = predicted_circle;
   if (report.found_circle_px) {
     report.centre_offset_px =
@@ -190,7 +178,7 @@ SvpCheckReport DetectRim(const cv::Mat& image, const CameraModel& camera,
   options.Check();
   camera.intrinsics.Check();
   OMNIRIG_CHECK(!image.empty(), "svp: empty image");
-  const cv::Mat grey = ToGreyImage(image);
+  const cv::Mat grey = ToGreyscale8(image);
   const Eigen::Vector2d centre(camera.intrinsics.u0(), camera.intrinsics.v0());
   const std::optional<double> radius = StrongestCircularStep(grey, centre, options);
   if (!radius) {
