@@ -125,6 +125,42 @@ TEST_F(SlamJob, TracksTheSequenceWithSmallDriftAndWritesArtifacts) {
   EXPECT_TRUE(std::is_sorted(fractions.begin(), fractions.end()));
 }
 
+TEST_F(SlamJob, RefinesAWrongFocalLengthAndReportsTheCalibrationBeforeAndAfter) {
+  // The rig job's cameras claim focal lengths 0.5 % too long (1 px at this size).
+  StereoRig given = sequence_->rig;
+  for (CameraModel* camera : {&given.cam0, &given.cam1}) {
+    camera->intrinsics.gamma_u() *= 1.005;
+    camera->intrinsics.gamma_v() *= 1.005;
+  }
+  const json rig = RigToJson(given);
+  context_.load_result = [rig](const std::string&) { return rig; };
+  RegisterSlamJobType();
+  const JobType* type = FindJobType("slam");
+  ASSERT_NE(type, nullptr);
+  const json params = {{"rig", "rig-job"}, {"options", {{"refine_calibration", "intrinsics"}}}};
+  type->validate(params);
+  const json result = type->run(params, context_);
+
+  const json& refinement = result["calibration_refinement"];
+  ASSERT_TRUE(refinement.is_object()) << result.dump();
+  EXPECT_TRUE(refinement["applied"].get<bool>()) << refinement["reason"];
+  EXPECT_EQ(refinement["refine"], "intrinsics");
+  EXPECT_EQ(refinement["before"]["cameras"], rig["cameras"]);
+  EXPECT_EQ(refinement["after"]["cam0_from_cam1"], rig["cam0_from_cam1"]);  // not refined
+  EXPECT_EQ(refinement["free_parameters"].size(), 8u);
+  const CameraModel* truth[2] = {&sequence_->rig.cam0, &sequence_->rig.cam1};
+  for (int c = 0; c < 2; ++c) {
+    const std::string cam = "cam" + std::to_string(c);
+    const double before = refinement["before"]["cameras"][cam]["intrinsics"]["gamma_u"];
+    const double after = refinement["after"]["cameras"][cam]["intrinsics"]["gamma_u"];
+    const double true_gamma = truth[c]->intrinsics.gamma_u();
+    EXPECT_LT(std::abs(after - true_gamma), 0.5 * std::abs(before - true_gamma)) << cam;
+    EXPECT_NEAR(refinement["change"][cam]["gamma_u"].get<double>(), after - before, 1e-9);
+  }
+  EXPECT_LT(refinement["reprojection_rms_px"]["final"].get<double>(),
+            refinement["reprojection_rms_px"]["initial"].get<double>());
+}
+
 TEST_F(SlamJob, ABlackFrameIsLostAndTheSequenceGoesOn) {
   const fs::path black = context_.dataset_dir / ("cam0/" + sequence_->names[5] + ".png");
   cv::imwrite(black.string(), cv::Mat(sequence_->images[0][5].size(), CV_8UC3, cv::Scalar::all(0)));

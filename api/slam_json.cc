@@ -10,6 +10,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "api/camera_json.h"
+#include "engine/calib/calibrate.h"
 #include "engine/slam/evaluation.h"
 #include "engine/slam/map_io.h"
 #include "engine/util/check.h"
@@ -25,7 +26,7 @@ const std::set<std::string> kOptionFields = {
     "temporal_max_descriptor_ratio", "temporal_gate_rad", "essential_max_angular_error_rad",
     "local_window_frames", "local_max_iterations", "global_bundle_adjustment", "huber_scale_px",
     "max_reprojection_error_px", "min_features", "min_stereo_points", "min_matches",
-    "min_tracked_landmarks", "seed"};
+    "min_tracked_landmarks", "seed", "refine_calibration", "fixed_intrinsics"};
 
 double Number(const json& object, const std::string& key) {
   OMNIRIG_CHECK(object[key].is_number(), "field 'options." << key << "' must be a number");
@@ -85,6 +86,54 @@ json BundleAdjustmentToJson(const slam::BundleAdjustmentReport& r) {
           {"final_rms_px", r.final_rms_px},         {"num_observations_pruned", r.num_observations_pruned},
           {"num_points_pruned", r.num_points_pruned}, {"linear_solver", r.linear_solver},
           {"termination", r.termination},           {"time_s", r.time_s}};
+}
+
+// Names (UnifiedIntrinsics::kNames or the calibration's groups "skew", "tangential",
+// "principal_point", "gamma") as the fixed set of the calibration refinement.
+std::array<bool, UnifiedIntrinsics::kNumParams> FixedIntrinsicsFromJson(const json& names) {
+  OMNIRIG_CHECK(names.is_array(), "field 'options.fixed_intrinsics' must be an array of names");
+  CalibrationOptions calibration;
+  calibration.fixed.fill(false);
+  for (const json& name : names) {
+    OMNIRIG_CHECK(name.is_string(),
+                  "field 'options.fixed_intrinsics' must hold names, got " << name.dump());
+    try {
+      calibration.SetFixed(name.get<std::string>(), true);
+    } catch (const InvalidArgument& e) {
+      throw InvalidArgument(std::string("field 'options.fixed_intrinsics': ") + e.what());
+    }
+  }
+  return calibration.fixed;
+}
+
+json CalibrationRefinementToJson(const slam::CalibrationRefinementReport& r,
+                                 const slam::BundleAdjustmentReport* global) {
+  json change = json::object();
+  const CameraModel* before[2] = {&r.before.cam0, &r.before.cam1};
+  const CameraModel* after[2] = {&r.after.cam0, &r.after.cam1};
+  for (int c = 0; c < 2; ++c) {
+    json delta = json::object();
+    for (int i = 0; i < UnifiedIntrinsics::kNumParams; ++i) {
+      const double d = after[c]->intrinsics.params[i] - before[c]->intrinsics.params[i];
+      if (d != 0.0) delta[UnifiedIntrinsics::kNames[i]] = d;
+    }
+    change["cam" + std::to_string(c)] = delta;
+  }
+  change["cam0_from_cam1_rotation_deg"] =
+      RotationDistanceRad(r.before.cam0_from_cam1.rotation, r.after.cam0_from_cam1.rotation) *
+      180.0 / M_PI;
+  return {{"refine", slam::CalibrationRefinementName(r.refine)},
+          {"applied", r.applied},
+          {"reason", r.reason},
+          {"free_parameters", r.free_parameters},
+          {"num_frames", r.num_frames},
+          {"num_observations", {r.num_observations[0], r.num_observations[1]}},
+          {"reprojection_rms_px",
+           global ? json{{"initial", global->initial_rms_px}, {"final", global->final_rms_px}}
+                  : json(nullptr)},
+          {"before", RigToJson(r.before)},
+          {"after", RigToJson(r.after)},
+          {"change", change}};
 }
 
 json TimesToJson(const slam::StageTimes& t) {
@@ -185,6 +234,23 @@ std::vector<slam::StampedPose> ReadGroundTruth(const fs::path& path, size_t num_
 
 }  // namespace
 
+slam::CalibrationRefinement CalibrationRefinementFromJson(const json& value) {
+  using slam::CalibrationRefinement;
+  if (value.is_boolean()) {
+    return value.get<bool>() ? CalibrationRefinement::kAll : CalibrationRefinement::kNone;
+  }
+  OMNIRIG_CHECK(value.is_string(), "field 'options.refine_calibration' must be one of \"none\", "
+                                   "\"intrinsics\", \"rig\", \"all\" (or true/false)");
+  const std::string name = value.get<std::string>();
+  for (CalibrationRefinement r : {CalibrationRefinement::kNone, CalibrationRefinement::kIntrinsics,
+                                  CalibrationRefinement::kRig, CalibrationRefinement::kAll}) {
+    if (name == slam::CalibrationRefinementName(r)) return r;
+  }
+  throw InvalidArgument("field 'options.refine_calibration' must be one of \"none\", "
+                        "\"intrinsics\", \"rig\", \"all\" (or true/false), not \"" +
+                        name + "\"");
+}
+
 slam::SlamOptions SlamOptionsFromJson(const json& object) {
   OMNIRIG_CHECK(object.is_object(), "'options' must be a JSON object");
   for (const auto& [key, value] : object.items()) {
@@ -213,6 +279,12 @@ slam::SlamOptions SlamOptionsFromJson(const json& object) {
   if (has("huber_scale_px")) o.bundle_adjustment.huber_scale_px = Number(object, "huber_scale_px");
   if (has("max_reprojection_error_px")) {
     o.bundle_adjustment.max_reprojection_error_px = Number(object, "max_reprojection_error_px");
+  }
+  if (has("refine_calibration")) {
+    o.calibration_refinement.refine = CalibrationRefinementFromJson(object["refine_calibration"]);
+  }
+  if (has("fixed_intrinsics")) {
+    o.calibration_refinement.fixed_intrinsics = FixedIntrinsicsFromJson(object["fixed_intrinsics"]);
   }
   if (has("min_features")) o.min_features = Integer(object, "min_features");
   if (has("min_stereo_points")) o.min_stereo_points = Integer(object, "min_stereo_points");
@@ -349,6 +421,13 @@ json RunSlamOnDataset(const StereoRig& rig, const fs::path& dataset_dir,
   report["global_bundle_adjustment"] = result.global_bundle_adjustment
                                            ? BundleAdjustmentToJson(*result.global_bundle_adjustment)
                                            : json(nullptr);
+  report["calibration_refinement"] =
+      result.calibration_refinement
+          ? CalibrationRefinementToJson(*result.calibration_refinement,
+                                        result.global_bundle_adjustment
+                                            ? &*result.global_bundle_adjustment
+                                            : nullptr)
+          : json(nullptr);
   json frames = json::array();
   for (const slam::FrameReport& f : result.frames) frames.push_back(FrameToJson(f));
   report["frames"] = frames;

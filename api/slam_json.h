@@ -27,6 +27,13 @@
 //                  "global_ba", "total"},            (wall clock)
 //    "cpu_timings_s": {...},                          (same keys, CPU seconds)
 //    "global_bundle_adjustment": {...} | null,
+//    "calibration_refinement": null (not asked for) |
+//        {"refine", "applied", "reason" (why not applied), "free_parameters": ["cam0.gamma_u",
+//         ..., "cam0_from_cam1.rotation"], "num_frames", "num_observations": [cam0, cam1],
+//         "reprojection_rms_px": {"initial", "final"} (the global adjustment's),
+//         "before": rig, "after": rig (rig = the relative_pose result's cam0_from_cam1,
+//         baseline_m, cameras), "change": {"cam0": {param: after - before}, "cam1": {...},
+//         "cam0_from_cam1_rotation_deg"}},
 //    "evaluation": {"ate_rmse_m", "ate_max_m", "rpe_translation_rmse_m",
 //                   "rpe_rotation_rmse_deg", "final_drift_percent", "max_drift_percent",
 //                   "path_length_m", "num_poses", "gt_from_estimate"}   (with a ground truth)}
@@ -49,9 +56,21 @@ namespace omnirig::api {
 // "max_epipolar_error_rad", "temporal_max_descriptor_ratio", "temporal_gate_rad",
 // "essential_max_angular_error_rad", "local_window_frames", "local_max_iterations",
 // "global_bundle_adjustment", "huber_scale_px", "max_reprojection_error_px", "min_features",
-// "min_stereo_points", "min_matches", "min_tracked_landmarks", "seed"}; every field optional.
+// "min_stereo_points", "min_matches", "min_tracked_landmarks", "seed", "refine_calibration",
+// "fixed_intrinsics"}; every field optional.
+//   "refine_calibration": what the global bundle adjustment refines of the rig's calibration:
+//     "none" (default), "intrinsics" (both cameras'), "rig" (cam0_from_cam1's rotation; the
+//     translation is the metric scale and stays), "all"; false/true mean "none"/"all".
+//     Refused (the result says why, the calibration stays) below 5 tracked frames or 500
+//     observations per camera.
+//   "fixed_intrinsics": names held when refining the intrinsics (UnifiedIntrinsics names or
+//     "skew", "tangential", "principal_point", "gamma"); default
+//     ["xi", "alpha", "k1", "k2", "k3", "k4", "k5"], i.e. gamma_u, gamma_v, u0, v0 refined
+//     (see slam::CalibrationRefinementOptions).
 // Throws InvalidArgument naming the field (unknown, mistyped, or failing SlamOptions::Check).
 slam::SlamOptions SlamOptionsFromJson(const nlohmann::json& options);
+// The value of "options.refine_calibration" (also the CLI's --refine-calibration).
+slam::CalibrationRefinement CalibrationRefinementFromJson(const nlohmann::json& value);
 
 struct SlamParams {
   std::string rig_job;

@@ -72,6 +72,45 @@ TEST(SlamOptionsFromJson, ReadsFieldsAndRefusesUnknownOrInvalidOnes) {
   EXPECT_THROW(SlamOptionsFromJson({{"min_matches", "many"}}), InvalidArgument);
 }
 
+TEST(SlamOptionsFromJson, ReadsTheCalibrationRefinement) {
+  using slam::CalibrationRefinement;
+  EXPECT_EQ(slam::SlamOptions().calibration_refinement.refine, CalibrationRefinement::kNone);
+  EXPECT_EQ(SlamOptionsFromJson({{"refine_calibration", "intrinsics"}}).calibration_refinement.refine,
+            CalibrationRefinement::kIntrinsics);
+  EXPECT_EQ(SlamOptionsFromJson({{"refine_calibration", "rig"}}).calibration_refinement.refine,
+            CalibrationRefinement::kRig);
+  EXPECT_EQ(SlamOptionsFromJson({{"refine_calibration", true}}).calibration_refinement.refine,
+            CalibrationRefinement::kAll);
+  EXPECT_EQ(SlamOptionsFromJson({{"refine_calibration", false}}).calibration_refinement.refine,
+            CalibrationRefinement::kNone);
+  const slam::SlamOptions fixed = SlamOptionsFromJson(
+      {{"refine_calibration", "all"}, {"fixed_intrinsics", {"xi", "alpha", "k5", "gamma"}}});
+  EXPECT_TRUE(fixed.calibration_refinement.fixed_intrinsics[UnifiedIntrinsics::kGammaV]);
+  EXPECT_FALSE(fixed.calibration_refinement.fixed_intrinsics[UnifiedIntrinsics::kK3]);
+  auto message = [](const json& options) {
+    try {
+      SlamOptionsFromJson(options);
+    } catch (const InvalidArgument& e) {
+      return std::string(e.what());
+    }
+    return std::string("accepted");
+  };
+  EXPECT_NE(message({{"refine_calibration", "focal"}}).find("options.refine_calibration"),
+            std::string::npos);
+  EXPECT_NE(message({{"refine_calibration", 1}}).find("options.refine_calibration"),
+            std::string::npos);
+  EXPECT_NE(message({{"fixed_intrinsics", {"focal"}}}).find("options.fixed_intrinsics"),
+            std::string::npos);
+  EXPECT_NE(message({{"refine_calibration", "all"}, {"global_bundle_adjustment", false}})
+                .find("global bundle adjustment"),
+            std::string::npos);
+  EXPECT_NE(message({{"refine_calibration", "intrinsics"},
+                     {"fixed_intrinsics", {"xi", "gamma", "principal_point", "alpha", "k1",
+                                           "k2", "k3", "k4", "k5"}}})
+                .find("free intrinsic"),
+            std::string::npos);
+}
+
 TEST(SlamParamsFromJson, NeedsARigJob) {
   EXPECT_EQ(SlamParamsFromJson({{"rig", "job-1"}}).rig_job, "job-1");
   EXPECT_THROW(SlamParamsFromJson(json::object()), InvalidArgument);
@@ -156,6 +195,26 @@ TEST_F(TempDataset, BlackFramesAreReportedLostNotFatal) {
   ASSERT_FALSE(fractions.empty());
   EXPECT_TRUE(std::is_sorted(fractions.begin(), fractions.end()));
   EXPECT_DOUBLE_EQ(fractions.back(), 1.0);
+  EXPECT_TRUE(result["calibration_refinement"].is_null());  // not asked for
+}
+
+TEST_F(TempDataset, ARefinementThatCannotRunSaysWhy) {
+  for (const char* name : {"a.png", "b.png"}) {
+    WriteImage(std::string("cam0/") + name, 64, 48);
+    WriteImage(std::string("cam1/") + name, 64, 48);
+  }
+  slam::SlamOptions options;
+  options.calibration_refinement.refine = slam::CalibrationRefinement::kIntrinsics;
+  const json result = RunSlamOnDataset(TinyRig(64, 48), dir_, names_, options, std::nullopt,
+                                       dir_ / "out", ProgressSink(), nullptr);
+  const json& refinement = result["calibration_refinement"];
+  ASSERT_TRUE(refinement.is_object());
+  EXPECT_EQ(refinement["refine"], "intrinsics");
+  EXPECT_FALSE(refinement["applied"].get<bool>());
+  EXPECT_NE(refinement["reason"].get<std::string>().find("0 tracked frame"), std::string::npos)
+      << refinement["reason"];
+  EXPECT_EQ(refinement["before"], refinement["after"]);
+  EXPECT_EQ(refinement["after"]["cameras"]["cam0"]["intrinsics"]["gamma_u"], 0.3 * 48);
 }
 
 TEST(SlamJobType, IsRegisteredAndValidates) {

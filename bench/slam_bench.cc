@@ -8,9 +8,14 @@
 // beforehand (as `omnirig synth` writes them) and decoded by the loader inside the timed run
 // (--no-decode hands SLAM the rendered images instead).
 //
+// After the timed run, two untimed ones with a wrong calibration (slam::PerturbedCalibration:
+// focal +0.5 %, principal points 1-1.5 px off, cam1 turned 0.2 deg; the stereo gate widened
+// to 0.02 rad for both), without and with the global adjustment's calibration refinement
+// (--no-calibration-runs skips them).
+//
 // usage: bench_slam [--frames N] [--width W] [--height H] [--threads T] [--street]
 //                   [--max-features N] [--local-window N] [--local-iterations N] [--no-decode]
-//                   [--black-frame I]
+//                   [--black-frame I] [--no-calibration-runs]
 
 #include <algorithm>
 #include <cstdio>
@@ -23,6 +28,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "engine/slam/evaluation.h"
+#include "engine/slam/sequence_accuracy.h"
 #include "engine/slam/slam.h"
 #include "engine/slam/surface_distance.h"
 #include "engine/synth/presets.h"
@@ -42,6 +48,7 @@ struct Args {
   int local_window = -1;
   int local_iterations = -1;
   int black_frame = -1;  // this frame's cam0 image is replaced by a black one (tracking loss)
+  bool calibration_runs = true;
 };
 
 Args ParseArgs(int argc, char** argv) {
@@ -56,6 +63,7 @@ Args ParseArgs(int argc, char** argv) {
     else if (a == "--street") args.street = true;
     else if (a == "--no-decode") args.decode = false;
     else if (a == "--black-frame") args.black_frame = next();
+    else if (a == "--no-calibration-runs") args.calibration_runs = false;
     else if (a == "--max-features") args.max_features = next();
     else if (a == "--local-window") args.local_window = next();
     else if (a == "--local-iterations") args.local_iterations = next();
@@ -67,6 +75,40 @@ double Median(std::vector<double> v) {
   if (v.empty()) return 0;
   std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
   return v[v.size() / 2];
+}
+
+// The untimed runs with PerturbedCalibration, without and with refinement: one table row each.
+void CalibrationRuns(const Args& args, const synth::StereoSequence& sequence,
+                     const slam::StereoFrameLoader& load) {
+  std::printf("\nwrong calibration (focal +0.5 %%, principal points 1-1.5 px, cam1 turned 0.2 deg; "
+              "stereo gate 0.02 rad), not timed; calibration error = RMS px over the mirror "
+              "vs the renderer's:\n");
+  std::printf("%-10s %9s %9s %9s %9s %9s %9s %9s %9s %8s %6s\n", "refine", "applied",
+              "cam0 px", "cam1 px", "rig deg", "BA rms", "drift %", "ATE m", "map %rng", "BA s",
+              "BA it");
+  const StereoRig given = slam::PerturbedCalibration(sequence.rig);
+  for (slam::CalibrationRefinement refine :
+       {slam::CalibrationRefinement::kNone, slam::CalibrationRefinement::kAll}) {
+    slam::SlamOptions options;
+    options.num_threads = args.threads;
+    options.stereo.max_epipolar_error_rad = 0.02;
+    options.calibration_refinement.refine = refine;
+    const slam::SlamResult result = slam::RunSlam(given, sequence.names, load, options);
+    const bool applied = result.calibration_refinement && result.calibration_refinement->applied;
+    const slam::SequenceAccuracy accuracy = slam::EvaluateOnSequence(
+        sequence, result, applied ? result.calibration_refinement->after : given);
+    std::printf("%-10s %9s %9.3f %9.3f %9.4f %9.3f %9.3f %9.4f %9.3f %8.3f %6d\n",
+                slam::CalibrationRefinementName(refine), applied ? "yes" : "no",
+                accuracy.calibration_rms_px[0], accuracy.calibration_rms_px[1],
+                accuracy.rig_rotation_error_deg,
+                result.global_bundle_adjustment ? result.global_bundle_adjustment->final_rms_px : 0.0,
+                accuracy.trajectory.final_drift_percent, accuracy.trajectory.ate_rmse_m,
+                accuracy.map_median_percent_of_range, result.global_ba_s,
+                result.global_bundle_adjustment ? result.global_bundle_adjustment->iterations : 0);
+    if (result.calibration_refinement && !applied) {
+      std::printf("  not refined: %s\n", result.calibration_refinement->reason.c_str());
+    }
+  }
 }
 
 int Run(const Args& args) {
@@ -190,6 +232,7 @@ int Run(const Args& args) {
   }
   std::printf("CPU per frame %.3f s; on 2 idle cores that is at best %.1f frames/s\n",
               result.total_cpu_s / args.frames, 2.0 * args.frames / result.total_cpu_s);
+  if (args.calibration_runs) CalibrationRuns(args, sequence, load);
   return 0;
 }
 

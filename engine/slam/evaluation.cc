@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
 
 #include <Eigen/SVD>
 
@@ -85,6 +86,27 @@ TrajectoryErrors EvaluateTrajectory(const std::vector<Rigid3d>& estimate,
     if (i + 1 == gt.size()) errors.final_drift_percent = 100.0 * e / errors.path_length_m;
   }
   return errors;
+}
+
+double CalibrationPixelRms(const UnifiedIntrinsics& truth, const UnifiedIntrinsics& estimate,
+                           double min_radius_px, double max_radius_px) {
+  const Eigen::Vector2d centre(truth.u0(), truth.v0());
+  double sum_sq = 0;
+  int count = 0;
+  for (double dv = -max_radius_px; dv <= max_radius_px; dv += 4) {
+    for (double du = -max_radius_px; du <= max_radius_px; du += 4) {
+      const double r = std::hypot(du, dv);
+      if (r < min_radius_px || r > max_radius_px) continue;
+      const Eigen::Vector2d pixel = centre + Eigen::Vector2d(du, dv);
+      const std::optional<Eigen::Vector3d> bearing = Lift(truth, pixel);
+      if (!bearing) continue;
+      const std::optional<Eigen::Vector2d> projected = Project(estimate, *bearing);
+      if (!projected) continue;
+      sum_sq += (*projected - pixel).squaredNorm();
+      ++count;
+    }
+  }
+  return count > 0 ? std::sqrt(sum_sq / count) : 0.0;
 }
 
 }  // namespace omnirig::slam

@@ -8,6 +8,7 @@
 #include <Eigen/Core>
 
 #include "engine/geometry/rigid3.h"
+#include "engine/geometry/unified_camera.h"
 
 namespace omnirig::slam {
 
@@ -34,5 +35,12 @@ struct TrajectoryErrors {
 // Throws InvalidArgument when the lengths differ or fewer than 2 poses are given.
 TrajectoryErrors EvaluateTrajectory(const std::vector<Rigid3d>& estimate_world_from_rig,
                                     const std::vector<Rigid3d>& gt_world_from_rig);
+
+// How far apart two calibrations of one camera image the same bearings: the RMS, over a
+// 4-pixel grid in the annulus [min_radius_px, max_radius_px] around truth's principal point,
+// of the distance between each pixel and the projection with `estimate` of the bearing
+// `truth` lifts it to. Pixels that do not lift or project are skipped; 0 when none remain.
+double CalibrationPixelRms(const UnifiedIntrinsics& truth, const UnifiedIntrinsics& estimate,
+                           double min_radius_px, double max_radius_px);
 
 }  // namespace omnirig::slam

@@ -27,6 +27,10 @@ void SlamOptions::Check() const {
   essential.Check();
   scale.Check();
   bundle_adjustment.Check();
+  calibration_refinement.Check();
+  OMNIRIG_CHECK(calibration_refinement.refine == CalibrationRefinement::kNone ||
+                    global_bundle_adjustment,
+                "refining the calibration needs the global bundle adjustment");
   OMNIRIG_CHECK(temporal_max_descriptor_ratio > 0 && temporal_max_descriptor_ratio <= 1,
                 "temporal_max_descriptor_ratio must be in (0, 1]");
   OMNIRIG_CHECK(local_window_frames >= 0, "local_window_frames must not be negative");
@@ -552,9 +556,27 @@ SlamResult RunSlam(const StereoRig& rig, const std::vector<std::string>& frame_n
         },
         progress.is_cancelled};
     const StageClock ba_timer(CLOCK_PROCESS_CPUTIME_ID);
-    result.global_bundle_adjustment = BundleAdjust(rig, all_frames, global, &map, ba_progress);
+    if (options.calibration_refinement.refine == CalibrationRefinement::kNone) {
+      result.global_bundle_adjustment = BundleAdjust(rig, all_frames, global, &map, ba_progress);
+    } else {
+      StereoRig refined = rig;
+      result.calibration_refinement.emplace();
+      result.global_bundle_adjustment =
+          BundleAdjustWithCalibration(options.calibration_refinement, all_frames, global,
+                                      &refined, &map, &*result.calibration_refinement,
+                                      ba_progress);
+    }
     result.global_ba_s = ba_timer.WallSeconds();
     result.global_ba_cpu_s = ba_timer.CpuSeconds();
+  }
+  if (options.calibration_refinement.refine != CalibrationRefinement::kNone &&
+      !result.calibration_refinement) {
+    CalibrationRefinementReport& refusal = result.calibration_refinement.emplace();
+    refusal.refine = options.calibration_refinement.refine;
+    refusal.before = refusal.after = rig;
+    refusal.num_frames = static_cast<int>(all_frames.size());
+    refusal.reason = "no global bundle adjustment: " + std::to_string(all_frames.size()) +
+                     " tracked frame(s)";
   }
   for (int i = 0; i < n; ++i) {
     if (!map.has_pose[i]) {

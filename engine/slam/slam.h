@@ -47,6 +47,9 @@ struct SlamOptions {
   int local_window_frames = 3;
   int local_max_iterations = 5;
   bool global_bundle_adjustment = true;
+  // What the global adjustment refines of the calibration (the local windows keep it fixed:
+  // a few frames do not constrain it). Needs global_bundle_adjustment.
+  CalibrationRefinementOptions calibration_refinement;
   // A frame is untrackable below these.
   double min_mean_intensity = 12.0;  // grey level inside the mirror (a black image)
   int min_features = 80;             // per camera (blur, a covered lens)
@@ -108,6 +111,10 @@ struct SlamResult {
   std::vector<FrameReport> frames;
   std::vector<MapPoint> map;
   std::optional<BundleAdjustmentReport> global_bundle_adjustment;
+  // With options.calibration_refinement.refine != kNone: what was refined, or why not (too
+  // small a problem, no global adjustment), and the calibration before and after. Poses and
+  // map are in the refined calibration's terms.
+  std::optional<CalibrationRefinementReport> calibration_refinement;
   StageTimes stage_totals;      // wall clock
   StageTimes cpu_stage_totals;  // CPU time of the threads that ran each stage
   double global_ba_s = 0.0;

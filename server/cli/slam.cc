@@ -2,10 +2,13 @@
 // artifacts and report as the `slam` job type.
 //
 //   omnirig slam --rig rig.json DIR [--gt traj.tum] -o OUTDIR [--options options.json]
-//       [--threads N]
+//       [--threads N] [--refine-calibration none|intrinsics|rig|all]
 //
 // rig.json is a relative_pose result (cam0_from_cam1 and both cameras); DIR holds cam0/NAME and
 // cam1/NAME. OUTDIR receives trajectory.json, trajectory.tum, map.ply and report.json.
+// --refine-calibration sets options.refine_calibration (the global bundle adjustment refines
+// the cameras' intrinsics and/or the rig's rotation); the refined calibration is in
+// report.json's "calibration_refinement".
 
 #include <algorithm>
 #include <filesystem>
@@ -61,6 +64,9 @@ int RunSlam(const Args& raw_args) {
   args.AddOption("o", "slam_out", "output folder");
   args.AddOption("options", "", "JSON file with the job's \"options\" object");
   args.AddOption("threads", "2", "worker threads");
+  args.AddOption("refine-calibration", "",
+                 "none|intrinsics|rig|all: refine the calibration in the global bundle adjustment "
+                 "(overrides the options file)");
   args.SetPositional("DIR", "folder with cam0/ and cam1/ images, paired and ordered by name");
   if (!args.Parse(raw_args)) return args.exit_code();
   OMNIRIG_CHECK(args.positional().size() == 1, "expected one DIR (see --help)");
@@ -69,6 +75,16 @@ int RunSlam(const Args& raw_args) {
   slam::SlamOptions options;
   if (args.Has("options")) {
     options = api::SlamOptionsFromJson(ReadJsonFile(args.Get("options"), "--options"));
+  }
+  if (args.Has("refine-calibration")) {
+    try {
+      options.calibration_refinement.refine =
+          api::CalibrationRefinementFromJson(json(args.Get("refine-calibration")));
+    } catch (const InvalidArgument&) {
+      throw InvalidArgument("--refine-calibration must be none, intrinsics, rig or all, not '" +
+                            args.Get("refine-calibration") + "'");
+    }
+    options.Check();  // e.g. refinement without the global bundle adjustment
   }
   options.num_threads = args.GetInt("threads");
   OMNIRIG_CHECK(options.num_threads >= 1, "--threads must be at least 1");
@@ -90,6 +106,17 @@ int RunSlam(const Args& raw_args) {
     const json& e = report["evaluation"];
     std::cout << "ATE RMSE " << e["ate_rmse_m"] << " m, drift " << e["final_drift_percent"]
               << " % of " << e["path_length_m"] << " m\n";
+  }
+  if (report.contains("calibration_refinement") && !report["calibration_refinement"].is_null()) {
+    const json& r = report["calibration_refinement"];
+    if (r["applied"].get<bool>()) {
+      std::cout << "calibration refined (" << r["refine"].get<std::string>()
+                << "): reprojection RMS " << r["reprojection_rms_px"]["initial"] << " -> "
+                << r["reprojection_rms_px"]["final"] << " px, changes " << r["change"].dump()
+                << "\n";
+    } else {
+      std::cout << "calibration not refined: " << r["reason"].get<std::string>() << "\n";
+    }
   }
   std::cout << "wrote " << (fs::path(args.Get("o")) / "trajectory.json").string() << ", "
             << "trajectory.tum, map.ply, report.json\n";
