@@ -6,6 +6,7 @@
 #include <opencv2/features2d.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "engine/stereo/sift_bias.h"
 #include "engine/util/check.h"
 
 namespace omnirig::slam {
@@ -119,13 +120,10 @@ CameraFeatures DetectFeatures(const CameraModel& camera, const cv::Mat& image, c
   std::vector<cv::KeyPoint> keypoints;
   cv::Mat descriptors;
   sift->detectAndCompute(search, search_mask, keypoints, descriptors);
-  // OpenCV's SIFT doubles its input with INTER_LINEAR (pixel j of the double image is input
-  // pixel j / 2 - 0.25) but reports positions as if it were j / 2: every keypoint lies 0.25
-  // input pixels too far right and down, at every octave (opencv/opencv#23123; the fix,
-  // enable_precise_upscale, arrived in 4.8 and is off by default). At detection_scale 0.5 that
-  // is 0.5 full-size pixels: uncorrected, the calibration refinement moved u0 and v0 by +0.5 px
-  // on renders.
-  constexpr double kSiftUpscaleBias = 0.25;
+  // OpenCV's SIFT reports keypoints a quarter pixel off (sift_bias.h). At detection_scale 0.5
+  // that is 0.5 full-size pixels: uncorrected, the calibration refinement moved u0 and v0 by
+  // +0.5 px on renders.
+  constexpr double kSiftUpscaleBias = kOpenCvSiftUpscaleBiasPx;
   for (cv::KeyPoint& keypoint : keypoints) {
     // Pixel centres: small pixel i covers full pixels [i / scale, (i + 1) / scale).
     keypoint.pt.x = static_cast<float>((keypoint.pt.x - kSiftUpscaleBias + 0.5) / scale - 0.5 +

@@ -9,22 +9,15 @@
 #include <opencv2/features2d.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "engine/calib/detect.h"
 #include "engine/geometry/unified_camera.h"
 #include "engine/stereo/essential.h"
+#include "engine/stereo/sift_bias.h"
 #include "engine/stereo/triangulation.h"
 #include "engine/util/check.h"
 
 namespace omnirig {
 namespace {
-
-cv::Mat ToGray(const cv::Mat& image) {
-  OMNIRIG_CHECK(image.depth() == CV_8U && (image.channels() == 1 || image.channels() == 3),
-                "expected an 8-bit grey or BGR image");
-  if (image.channels() == 1) return image;
-  cv::Mat gray;
-  cv::cvtColor(image, gray, cv::COLOR_BGR2GRAY);
-  return gray;
-}
 
 float SquaredDistance(const float* a, const float* b, int n) {
   float sum = 0.f;
@@ -112,7 +105,7 @@ void StereoReconstructOptions::Check() const {
 cv::Mat MirrorMask(const cv::Mat& image, const CameraModel& camera,
                    const StereoReconstructOptions& options) {
   cv::Mat blurred;
-  cv::GaussianBlur(ToGray(image), blurred, cv::Size(5, 5), 0.0);
+  cv::GaussianBlur(ToGreyscale8(image), blurred, cv::Size(5, 5), 0.0);
   cv::Mat dark = blurred <= options.dark_level;
   cv::Mat labels;
   cv::connectedComponents(dark, labels, 8, CV_32S);
@@ -153,7 +146,11 @@ LiftedFeatures DetectAndLift(const cv::Mat& image, const cv::Mat& mask, const Ca
   cv::Ptr<cv::SIFT> sift = cv::SIFT::create(options.max_features);
   std::vector<cv::KeyPoint> keypoints;
   cv::Mat descriptors;
-  sift->detectAndCompute(ToGray(image), mask, keypoints, descriptors);
+  sift->detectAndCompute(ToGreyscale8(image), mask, keypoints, descriptors);
+  for (cv::KeyPoint& keypoint : keypoints) {
+    keypoint.pt.x -= static_cast<float>(kOpenCvSiftUpscaleBiasPx);
+    keypoint.pt.y -= static_cast<float>(kOpenCvSiftUpscaleBiasPx);
+  }
   LiftedFeatures features;
   std::vector<int> kept_rows;
   for (size_t k = 0; k < keypoints.size(); ++k) {
