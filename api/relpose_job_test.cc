@@ -98,6 +98,8 @@ TEST_F(RelposeJob, WithCalibrationsRecoversTheRenderedRig) {
   EXPECT_EQ(result["num_pairs_used"].get<int>(), 8);
   EXPECT_EQ(result["calibrations"]["cam0"]["job_id"], "truth0");
   EXPECT_EQ(result["cameras"]["cam1"], CameraToJson(set_->rig.cam1));
+  EXPECT_EQ(result["intrinsics_model"]["selection"], "given");
+  EXPECT_FALSE(result["intrinsics_model"].contains("candidates"));
   EXPECT_TRUE(monotone);
   EXPECT_NEAR(last_fraction, 1.0, 1e-9);
 }
@@ -113,6 +115,25 @@ TEST_F(RelposeJob, WithoutCalibrationsCalibratesEachCameraFirst) {
   const double baseline_m = result["baseline_m"].get<double>();
   EXPECT_NEAR(baseline_m, set_->rig.cam0_from_cam1.translation.norm(), 5e-4);
   EXPECT_LT(result["rms_px"].get<double>(), 0.5);
+  // The default chooses the intrinsics model by cross-validation and reports the evidence;
+  // the result is the chosen candidate's fit.
+  const json& model = result["intrinsics_model"];
+  EXPECT_EQ(model["selection"], "cross_validation");
+  EXPECT_EQ(model["held_out_pairs"].get<int>(), 8);
+  ASSERT_EQ(model["candidates"].size(), 3u);
+  int num_chosen = 0;
+  for (const json& candidate : model["candidates"]) {
+    EXPECT_TRUE(candidate["success"].get<bool>()) << candidate.dump();
+    EXPECT_GT(candidate["cv_rms_px"].get<double>(), candidate["rms_px"].get<double>());
+    EXPECT_GE(candidate["cv_excess_mse_px2"].get<double>(), 0.0);
+    if (candidate["name"] != model["chosen"]) continue;
+    ++num_chosen;
+    EXPECT_EQ(candidate["baseline_m"].get<double>(), baseline_m);
+    EXPECT_LE(candidate["cv_excess_mse_px2"].get<double>(),
+              candidate["cv_excess_se_px2"].get<double>());
+  }
+  EXPECT_EQ(num_chosen, 1);
+  EXPECT_NE(model["rule"].get<std::string>().find("one standard error"), std::string::npos);
 }
 
 TEST_F(RelposeJob, CancellationStopsTheJob) {

@@ -70,6 +70,29 @@ std::array<bool, UnifiedIntrinsics::kNumParams> FixedIntrinsicsFromJson(const js
   return calibration.fixed;
 }
 
+// params.intrinsics_model, or its default: "auto" when the job calibrates the cameras itself
+// and the intrinsics options were not given, "" (those options as given) otherwise.
+std::string IntrinsicsModelField(const json& params, bool self_calibrating) {
+  const bool explicit_options =
+      params.contains("refine_intrinsics") || params.contains("fixed_intrinsics");
+  if (!params.contains("intrinsics_model")) {
+    return self_calibrating && !explicit_options ? "auto" : "";
+  }
+  OMNIRIG_CHECK(params["intrinsics_model"].is_string(),
+                "field 'params.intrinsics_model' must be a string");
+  const std::string model = params["intrinsics_model"].get<std::string>();
+  OMNIRIG_CHECK(model == "auto" || model == "fixed" || model == "tangential_fixed" ||
+                    model == "free",
+                "field 'params.intrinsics_model' must be auto, fixed, tangential_fixed or free, "
+                "got '" << model << "'");
+  OMNIRIG_CHECK(!params.contains("refine_intrinsics"),
+                "give 'params.intrinsics_model' or 'params.refine_intrinsics', not both");
+  OMNIRIG_CHECK(self_calibrating || model == "fixed" || model == "free",
+                "'params.intrinsics_model' " << model << " needs the job to calibrate the cameras "
+                                                         "itself (no 'params.calibrations')");
+  return model;
+}
+
 json NullableRms(double rms_px) { return rms_px >= 0.0 ? json(rms_px) : json(nullptr); }
 
 json Vector3Json(const Eigen::Vector3d& v) { return json::array({v.x(), v.y(), v.z()}); }
@@ -79,7 +102,8 @@ json Vector3Json(const Eigen::Vector3d& v) { return json::array({v.x(), v.y(), v
 RelativePoseParams RelativePoseParamsFromJson(const json& params) {
   CheckKnownFields(params, "params",
                    {"board", "calibrations", "refine_intrinsics", "fixed_intrinsics",
-                    "resolve_corner_order", "huber_loss_px", "max_num_iterations"});
+                    "intrinsics_model", "resolve_corner_order", "huber_loss_px",
+                    "max_num_iterations"});
   OMNIRIG_CHECK(params.contains("board"), "missing field 'params.board'");
   RelativePoseParams out;
   out.board = BoardFromJson(params["board"]);
@@ -89,16 +113,27 @@ RelativePoseParams RelativePoseParamsFromJson(const json& params) {
     out.cam0_calibration_job = JobIdField(calibrations, "cam0");
     out.cam1_calibration_job = JobIdField(calibrations, "cam1");
   }
-  // Default: refine the intrinsics with the rig when the job calibrates the cameras itself (a
-  // per-camera calibration leaves xi, the focal length and k1 trading off, which scales the
-  // board's depth and so the baseline: on bench_relpose's renders +0.17 +- 0.15 % over three
-  // seeds against -0.015 +- 0.03 % when refined); keep given calibrations as they are.
+  // Without a model: refine the intrinsics with the rig when the job calibrates the cameras
+  // itself (a per-camera calibration leaves xi, the focal length and k1 trading off, which
+  // scales the board's depth and so the baseline: on bench_relpose's renders +0.17 +- 0.15 %
+  // over three seeds against -0.015 +- 0.03 % when refined); keep given calibrations as they
+  // are.
   out.options.refine_intrinsics = !out.cam0_calibration_job.has_value();
   if (params.contains("refine_intrinsics")) {
     out.options.refine_intrinsics = BoolField(params, "refine_intrinsics");
   }
   if (params.contains("fixed_intrinsics")) {
     out.options.fixed_intrinsics = FixedIntrinsicsFromJson(params["fixed_intrinsics"]);
+  }
+  out.base_fixed_intrinsics = out.options.fixed_intrinsics;
+  out.intrinsics_model = IntrinsicsModelField(params, !out.cam0_calibration_job.has_value());
+  if (!out.intrinsics_model.empty() && out.intrinsics_model != "auto") {
+    for (const RigIntrinsicsModel& model :
+         StandardRigIntrinsicsModels(out.base_fixed_intrinsics)) {
+      if (model.name != out.intrinsics_model) continue;
+      out.options.refine_intrinsics = model.refine_intrinsics;
+      out.options.fixed_intrinsics = model.joint_fixed;
+    }
   }
   if (params.contains("resolve_corner_order")) {
     out.options.resolve_corner_order = BoolField(params, "resolve_corner_order");
@@ -267,6 +302,80 @@ CameraSource CalibrateFromOwnImages(const std::vector<std::string>& names,
   return source;
 }
 
+void LogBaseline(const RelativePoseReport& report, const JobContext& context) {
+  context.Log("baseline " + std::to_string(report.baseline_m * 1e3) + " mm from " +
+              std::to_string(report.num_pairs_used) + " pairs, RMS " +
+              std::to_string(report.rms_px) + " px");
+}
+
+json ModelSelectionToJson(const RigModelSelection& selection) {
+  json candidates = json::array();
+  for (const RigModelScore& score : selection.candidates) {
+    candidates.push_back({{"name", score.name},
+                          {"num_free_intrinsics", score.num_free_intrinsics},
+                          {"success", score.fit.success},
+                          {"baseline_m", score.fit.baseline_m},
+                          {"rms_px", score.fit.rms_px},
+                          {"num_pairs_used", score.fit.num_pairs_used},
+                          {"cv_rms_px", NullableRms(score.cv_rms_px)},
+                          {"cv_excess_mse_px2", score.cv_excess_mse_px2},
+                          {"cv_excess_se_px2", score.cv_excess_se_px2}});
+  }
+  return {{"chosen", selection.candidates[selection.chosen].name},
+          {"selection", "cross_validation"},
+          {"rule", selection.rule},
+          {"held_out_pairs", selection.held_out.size()},
+          {"candidates", candidates}};
+}
+
+// "intrinsics_model": "auto": the standard models, each from its own per-camera calibrations
+// (the tangential-fixed one calibrated again with k3 = k4 = 0), scored by cross-validation;
+// the chosen one's fit is the result.
+json RunAutoModel(const RelativePoseParams& parsed, const RelativePoseOptions& options,
+                  const std::array<std::vector<std::string>, 2>& names,
+                  const std::array<std::vector<BoardDetection>, 2>& detections,
+                  const std::array<std::vector<cv::Mat>, 2>& images,
+                  const std::vector<StereoBoardPair>& board_pairs,
+                  const std::array<std::optional<CameraSource>, 2>& cameras,
+                  const JobContext& context) {
+  std::vector<RigModelCandidate> candidates;
+  std::vector<std::array<const CameraSource*, 2>> sources;
+  std::array<std::optional<CameraSource>, 2> no_tangential;
+  const std::array<bool, UnifiedIntrinsics::kNumParams>& base = parsed.base_fixed_intrinsics;
+  for (const RigIntrinsicsModel& model : StandardRigIntrinsicsModels(base)) {
+    if (model.calibration_fixed == base) {
+      if (model.name == "tangential_fixed") continue;  // the same as "free" here
+      candidates.push_back({model, cameras[0]->model, cameras[1]->model});
+      sources.push_back({&*cameras[0], &*cameras[1]});
+      continue;
+    }
+    for (int c = 0; c < 2; ++c) {
+      context.Log("calibrating cam" + std::to_string(c) + " with k3 = k4 = 0");
+      no_tangential[c] = CalibrateFromOwnImages(
+          names[c], detections[c], images[c][0].cols, images[c][0].rows, parsed.board,
+          model.calibration_fixed, context, SubRange(context.progress, 0.7 + 0.025 * c,
+                                                     0.725 + 0.025 * c));
+    }
+    candidates.push_back({model, no_tangential[0]->model, no_tangential[1]->model});
+    sources.push_back({&*no_tangential[0], &*no_tangential[1]});
+  }
+  const RigModelSelection selection = SelectRigIntrinsicsModel(
+      parsed.board, board_pairs, candidates, options, SubRange(context.progress, 0.75, 1.0));
+  if (selection.chosen < 0) {
+    throw InvalidArgument("no relative pose: " + selection.candidates[0].fit.message);
+  }
+  const RigModelScore& chosen = selection.candidates[selection.chosen];
+  context.Log("intrinsics model: " + selection.rule);
+  LogBaseline(chosen.fit, context);
+  const auto& source = sources[selection.chosen];
+  json result = RelativePoseResultToJson(chosen.fit, source[0]->camera_json,
+                                         source[1]->camera_json,
+                                         candidates[selection.chosen].model.refine_intrinsics);
+  result["calibrations"] = {{"cam0", source[0]->provenance}, {"cam1", source[1]->provenance}};
+  result["intrinsics_model"] = ModelSelectionToJson(selection);
+  return result;
+}
+
 }  // namespace
 
 json RunRelativePoseJob(const json& params, const JobContext& context) {
@@ -310,16 +419,20 @@ json RunRelativePoseJob(const json& params, const JobContext& context) {
   }
   RelativePoseOptions options = parsed.options;
   options.num_threads = std::max(1, context.num_threads);
+  if (parsed.intrinsics_model == "auto") {
+    return RunAutoModel(parsed, options, names, detections, images, board_pairs, cameras, context);
+  }
   const RelativePoseReport report =
       EstimateRelativePose(cameras[0]->model, cameras[1]->model, parsed.board, board_pairs,
                            options, SubRange(context.progress, 0.7, 1.0));
   if (!report.success) throw InvalidArgument("no relative pose: " + report.message);
-  context.Log("baseline " + std::to_string(report.baseline_m * 1e3) + " mm from " +
-              std::to_string(report.num_pairs_used) + " pairs, RMS " +
-              std::to_string(report.rms_px) + " px");
+  LogBaseline(report, context);
   json result = RelativePoseResultToJson(report, cameras[0]->camera_json, cameras[1]->camera_json,
                                          options.refine_intrinsics);
   result["calibrations"] = {{"cam0", cameras[0]->provenance}, {"cam1", cameras[1]->provenance}};
+  result["intrinsics_model"] = {
+      {"chosen", parsed.intrinsics_model.empty() ? "custom" : parsed.intrinsics_model},
+      {"selection", "given"}};
   return result;
 }
 

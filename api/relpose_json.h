@@ -16,6 +16,14 @@
 //                                 "principal_point", "gamma"; default ["alpha", "k5"]; e.g.
 //                                 ["alpha", "k5", "tangential"] for a fisheye lens, whose
 //                                 tangential terms trade against the rig pose),
+//    "intrinsics_model": "auto" | "fixed" | "tangential_fixed" | "free"
+//        (default "auto" when the job calibrates the cameras itself and neither
+//        refine_intrinsics nor fixed_intrinsics is given: each candidate model (each camera's
+//        own calibration kept; k3 = k4 = 0 and the rest refined with the rig; everything but
+//        fixed_intrinsics refined with the rig) is scored by leave-one-pair-out prediction of
+//        one camera's corners from the other's, and the simplest within one standard error of
+//        the best is used. fixed_intrinsics is then the models' common fixed set. Not with
+//        refine_intrinsics; "auto" and "tangential_fixed" need the job's own calibrations),
 //    "resolve_corner_order": bool, "huber_loss_px": number, "max_num_iterations": int}
 // Result:
 //   {"cam0_from_cam1": {"rotation_wxyz", "translation_m"}, "baseline_m", "baseline_std_m",
@@ -25,7 +33,11 @@
 //    "cameras": {"cam0": camera, "cam1": camera},  (the calibration results' `camera` objects,
 //                                                   or the refined ones)
 //    "linear_cam0_from_cam1", "averaged_cam0_from_cam1", "num_pairs_used",
-//    "spread_eigen_ratio", "calibrations": {...}, "solver": {...}}
+//    "spread_eigen_ratio", "calibrations": {...}, "solver": {...},
+//    "intrinsics_model": {"chosen", "selection": "cross_validation" | "given", "rule",
+//                         "held_out_pairs", "candidates": [{"name", "num_free_intrinsics",
+//                         "baseline_m", "rms_px", "num_pairs_used", "cv_rms_px",
+//                         "cv_excess_mse_px2", "cv_excess_se_px2"}]}}  (candidates: auto only)
 
 #include <optional>
 #include <string>
@@ -36,6 +48,7 @@
 #include "api/job_types.h"
 #include "engine/calib/board.h"
 #include "engine/stereo/relative_pose.h"
+#include "engine/stereo/relpose_model_select.h"
 
 namespace omnirig::api {
 
@@ -43,6 +56,12 @@ struct RelativePoseParams {
   BoardSpec board;
   std::optional<std::string> cam0_calibration_job;  // both or neither
   std::optional<std::string> cam1_calibration_job;
+  // "auto" (choose by cross-validation, engine/stereo/relpose_model_select.h), one of the
+  // standard models "fixed", "tangential_fixed", "free" (already applied to `options`), or ""
+  // when refine_intrinsics / fixed_intrinsics were given without it.
+  std::string intrinsics_model;
+  // The fixed set the models start from (params.fixed_intrinsics, default skew and k5).
+  std::array<bool, UnifiedIntrinsics::kNumParams> base_fixed_intrinsics{};
   RelativePoseOptions options;
 };
 

@@ -73,6 +73,64 @@ TEST(RelposeJson, FixedIntrinsicsReplaceTheDefaultSet) {
             std::string::npos);
 }
 
+// "auto" is the default only when the job calibrates the cameras and no intrinsics option was
+// given; a named model sets the options it stands for, on top of fixed_intrinsics.
+TEST(RelposeJson, IntrinsicsModelDefaultsAndNamedModels) {
+  EXPECT_EQ(RelativePoseParamsFromJson({{"board", Board()}}).intrinsics_model, "auto");
+  const json calibrations = {{"cam0", "a"}, {"cam1", "b"}};
+  EXPECT_EQ(RelativePoseParamsFromJson({{"board", Board()}, {"calibrations", calibrations}})
+                .intrinsics_model,
+            "");
+  EXPECT_EQ(RelativePoseParamsFromJson({{"board", Board()}, {"refine_intrinsics", false}})
+                .intrinsics_model,
+            "");
+  EXPECT_EQ(RelativePoseParamsFromJson({{"board", Board()}, {"fixed_intrinsics", {"alpha"}}})
+                .intrinsics_model,
+            "");
+  const RelativePoseParams tangential = RelativePoseParamsFromJson(
+      {{"board", Board()}, {"intrinsics_model", "tangential_fixed"}});
+  EXPECT_TRUE(tangential.options.refine_intrinsics);
+  EXPECT_TRUE(tangential.options.fixed_intrinsics[UnifiedIntrinsics::kK3]);
+  EXPECT_TRUE(tangential.options.fixed_intrinsics[UnifiedIntrinsics::kK4]);
+  EXPECT_TRUE(tangential.options.fixed_intrinsics[UnifiedIntrinsics::kK5]);
+  EXPECT_EQ(tangential.base_fixed_intrinsics, DefaultFixedIntrinsics());
+  const RelativePoseParams fixed = RelativePoseParamsFromJson(
+      {{"board", Board()}, {"intrinsics_model", "fixed"}});
+  EXPECT_FALSE(fixed.options.refine_intrinsics);
+  const RelativePoseParams free_with_calibrations = RelativePoseParamsFromJson(
+      {{"board", Board()}, {"calibrations", calibrations}, {"intrinsics_model", "free"}});
+  EXPECT_TRUE(free_with_calibrations.options.refine_intrinsics);
+  const RelativePoseParams auto_u0 = RelativePoseParamsFromJson(
+      {{"board", Board()}, {"intrinsics_model", "auto"}, {"fixed_intrinsics", {"u0", "k5"}}});
+  EXPECT_TRUE(auto_u0.base_fixed_intrinsics[UnifiedIntrinsics::kU0]);
+  EXPECT_FALSE(auto_u0.base_fixed_intrinsics[UnifiedIntrinsics::kAlpha]);
+}
+
+TEST(RelposeJson, IntrinsicsModelConflictsAreRefused) {
+  EXPECT_NE(ErrorOf([] {
+              RelativePoseParamsFromJson({{"board", Board()}, {"intrinsics_model", "best"}});
+            }).find("intrinsics_model"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf([] {
+              RelativePoseParamsFromJson({{"board", Board()}, {"intrinsics_model", 1}});
+            }).find("intrinsics_model"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf([] {
+              RelativePoseParamsFromJson(
+                  {{"board", Board()}, {"intrinsics_model", "free"}, {"refine_intrinsics", true}});
+            }).find("not both"),
+            std::string::npos);
+  for (const char* model : {"auto", "tangential_fixed"}) {
+    EXPECT_NE(ErrorOf([model] {
+                RelativePoseParamsFromJson({{"board", Board()},
+                                            {"calibrations", {{"cam0", "a"}, {"cam1", "b"}}},
+                                            {"intrinsics_model", model}});
+              }).find("calibrate the cameras itself"),
+              std::string::npos)
+        << model;
+  }
+}
+
 TEST(RelposeJson, ParamsRefuseUnknownFieldsAndWrongTypesNamingTheField) {
   EXPECT_NE(ErrorOf([] { RelativePoseParamsFromJson({{"board", Board()}, {"bord", 1}}); })
                 .find("params.bord"),

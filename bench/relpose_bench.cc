@@ -19,10 +19,15 @@
 //      0.2 %) and RMS (< 0.5 px); the reference's own method (cv::fisheye::stereoCalibrate, the
 //      Kannala-Brandt model, its 12 iterations and converged) and cv::omnidir on our corners;
 //      what fixing / freeing k5, skew and the tangential terms, the robust loss, pair rejection
-//      and dropping outer corners do; the baseline without each pair and from each half.
+//      and dropping outer corners do; the baseline without each pair and from each half; the
+//      job's default: the intrinsics model chosen by leave-one-pair-out cross-validation
+//      (engine/stereo/relpose_model_select.h), with each candidate's held-out error.
+//   5. (--only preset; not in a full run: tens of CPU minutes) The synthetic readings B and C
+//      with a recording preset: 60 pairs of a board of 11 x 8 corners of 40 mm, 3 seeds, all
+//      methods incl. cv::omnidir::stereoCalibrate on the same renders.
 // RMS everywhere is sqrt(mean |e|^2) of the Euclidean corner error, as OpenCV reports it.
 //
-// Usage: bench_relpose [--quick] [--data DIR] [--only synthetic|floor|real]
+// Usage: bench_relpose [--quick] [--data DIR] [--only synthetic|floor|preset|real]
 //   (DIR: the folder holding the real data sets; --only runs one part, "synthetic" includes
 //   the floor)
 
@@ -31,6 +36,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <ctime>
 #include <filesystem>
 #include <fstream>
 #include <functional>
@@ -40,6 +46,7 @@
 #include <random>
 #include <sstream>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include <Eigen/Core>
@@ -53,6 +60,7 @@
 #include "engine/calib/detect.h"
 #include "engine/stereo/relative_pose.h"
 #include "engine/stereo/relpose_corner_order.h"
+#include "engine/stereo/relpose_model_select.h"
 #include "engine/stereo/triangulation.h"
 #include "engine/synth/presets.h"
 
@@ -332,8 +340,10 @@ TriangulationStats TriangulateBoards(const synth::StereoBoardSet& set, const Boa
 }
 
 synth::StereoBoardSet RenderSet(int num_pairs, double min_distance_m, double max_distance_m,
-                                uint64_t seed, double image_noise = 2.0) {
+                                uint64_t seed, double image_noise = 2.0,
+                                const synth::CheckerboardSpec& board = {}) {
   synth::StereoBoardOptions options;
+  options.board = board;
   options.num_pairs = num_pairs;
   options.poses.min_distance_m = min_distance_m;
   options.poses.max_distance_m = max_distance_m;
@@ -431,7 +441,7 @@ const std::vector<std::string>& SyntheticMethods() {
       "known cameras: omnirig eq. (9) + SVD",
       "known cameras: paper, average of per-pair poses",
       "calibrated per camera: omnirig joint, cameras fixed",
-      "calibrated: omnirig joint + intrinsics (job default)",
+      "calibrated: omnirig joint + intrinsics (\"free\")",
       "cv::omnidir::stereoCalibrate"};
   return methods;
 }
@@ -490,6 +500,56 @@ void PrintTriangulation(const std::string& name, const synth::StereoBoardSet& fa
               stats.mean_range_m, stats.mean_error_pct, stats.max_error_pct);
 }
 
+// One reading of "0.2 px noise" over the seeds: every method's errors, one table.
+void RunSyntheticConfig(const NoiseConfig& config, int num_pairs,
+                        const std::vector<uint64_t>& seeds, const synth::CheckerboardSpec& spec,
+                        std::vector<std::pair<std::string, StereoRig>>* triangulation_rigs) {
+  const BoardSpec board = ToBoardSpec(spec);
+  std::vector<ErrorStats> stats(SyntheticMethods().size());
+  double detection_rms = 0.0;
+  const auto start = std::chrono::steady_clock::now();
+  const auto cpu_start = std::clock();
+  for (size_t k = 0; k < seeds.size(); ++k) {
+    const synth::StereoBoardSet set =
+        RenderSet(num_pairs, 0.35, 1.2, seeds[k], config.image_noise, spec);
+    double max_detection_error_px = 0.0, rms_detection_error_px = 0.0;
+    const std::vector<StereoBoardPair> pairs =
+        DetectPairs(set, board, config.corner_noise_px, false, &max_detection_error_px, seeds[k],
+                    &rms_detection_error_px);
+    detection_rms += rms_detection_error_px / seeds.size();
+    RunSyntheticSeed(set, board, pairs, &stats,
+                     k == 0 ? triangulation_rigs : nullptr, "reading " + config.label);
+  }
+  char title[640];
+  std::snprintf(title, sizeof(title),
+                "Synthetic vertical rig (100 mm), reading %s, %s: %d pairs of 1024x768 per seed, "
+                "board %d x %d corners of %.0f mm, %zu seeds, detector error %.3f px RMS before "
+                "any added noise (%.0f s wall, %.0f s CPU); targets: |error| < 0.01%%, rotation "
+                "< 0.01 deg",
+                config.label.c_str(), config.name.c_str(), num_pairs, spec.cols, spec.rows,
+                spec.square_size_m * 1e3, seeds.size(), detection_rms, Seconds(start),
+                static_cast<double>(std::clock() - cpu_start) / CLOCKS_PER_SEC);
+  PrintStatsHeader(title);
+  for (size_t m = 0; m < stats.size(); ++m) PrintStats(SyntheticMethods()[m], stats[m]);
+}
+
+// The preset a user would record for a rig calibration (README): 60 pairs of a board of
+// 11 x 8 inner corners of 40 mm, in readings B and C, against cv::omnidir on the same renders.
+void RunSyntheticPreset(bool quick) {
+  synth::CheckerboardSpec spec;
+  spec.cols = 11;
+  spec.rows = 8;
+  const std::vector<uint64_t> seeds =
+      quick ? std::vector<uint64_t>{7} : std::vector<uint64_t>{7, 8, 9};
+  const std::vector<NoiseConfig> configs = {
+      {"B", "renders, image noise 2 grey levels, detector corners + 0.2 px Gaussian noise", 2.0,
+       0.2},
+      {"C", "renders, image noise 19 grey levels, detector corners as found", 19.0, 0.0}};
+  for (const NoiseConfig& config : configs) {
+    RunSyntheticConfig(config, quick ? 20 : 60, seeds, spec, nullptr);
+  }
+}
+
 // The synthetic target on renders, over several seeds (the estimator's spread at this
 // noise is larger than the target, so one seed alone could pass or fail by luck).
 void RunSynthetic(bool quick) {
@@ -511,30 +571,7 @@ void RunSynthetic(bool quick) {
   triangulation_rigs.push_back({"ground truth rig", far.rig});
   const BoardSpec board = ToBoardSpec(far.board);
   for (const NoiseConfig& config : configs) {
-    std::vector<ErrorStats> stats(SyntheticMethods().size());
-    double detection_rms = 0.0;
-    const auto start = std::chrono::steady_clock::now();
-    for (size_t k = 0; k < seeds.size(); ++k) {
-      const synth::StereoBoardSet set =
-          RenderSet(num_pairs, 0.35, 1.2, seeds[k], config.image_noise);
-      double max_detection_error_px = 0.0, rms_detection_error_px = 0.0;
-      const std::vector<StereoBoardPair> pairs =
-          DetectPairs(set, board, config.corner_noise_px, false, &max_detection_error_px, seeds[k],
-                      &rms_detection_error_px);
-      detection_rms += rms_detection_error_px / seeds.size();
-      RunSyntheticSeed(set, board, pairs, &stats, k == 0 ? &triangulation_rigs : nullptr,
-                       "reading " + config.label);
-    }
-    char title[512];
-    std::snprintf(title, sizeof(title),
-                  "Synthetic vertical rig (100 mm), reading %s, %s: %d pairs of 1024x768 per seed, "
-                  "%zu seeds; "
-                  "detector error %.3f px RMS before any added noise (%.0f s); targets: |error| < "
-                  "0.01%%, rotation < 0.01 deg",
-                  config.label.c_str(), config.name.c_str(), num_pairs, seeds.size(), detection_rms,
-                  Seconds(start));
-    PrintStatsHeader(title);
-    for (size_t m = 0; m < stats.size(); ++m) PrintStats(SyntheticMethods()[m], stats[m]);
+    RunSyntheticConfig(config, num_pairs, seeds, synth::CheckerboardSpec(), &triangulation_rigs);
   }
   double max_detection_error_px = 0.0;
   for (double corner_noise_px : {0.0, 0.2}) {
@@ -552,47 +589,70 @@ void RunSynthetic(bool quick) {
 // The estimator's statistical floor without rendering: exact projections of sampled board
 // poses plus 0.2 px Gaussian noise, cameras known, for several numbers of pairs. The spread
 // over seeds against the number of pairs shows what the 0.01 % target needs.
-void RunCornerLevelFloor(bool quick) {
+// The floor for one board and pair count: exact corners + 0.2 px noise, cameras known.
+ErrorStats CornerLevelFloor(const synth::CheckerboardSpec& spec, int num_pairs, int num_seeds) {
   const std::vector<synth::SynthCamera> cameras = {synth::DefaultCamera(),
                                                    synth::DefaultSecondCamera()};
   const Rigid3d truth = synth::DefaultCam0FromCam1();
   const std::vector<Rigid3d> cam_from_cam0 = {Rigid3d(), truth.Inverse()};
-  const synth::CheckerboardSpec spec;
   const BoardSpec board = ToBoardSpec(spec);
+  ErrorStats stats;
+  for (int seed = 0; seed < num_seeds; ++seed) {
+    std::mt19937 rng(1000 + seed);
+    std::normal_distribution<double> noise(0.0, 0.2);
+    std::vector<StereoBoardPair> pairs(num_pairs);
+    for (int i = 0; i < num_pairs; ++i) {
+      const Rigid3d cam0_from_board = synth::SampleBoardPose(
+          cameras, cam_from_cam0, spec, synth::BoardPoseOptions(), i, num_pairs, 500 + seed);
+      BoardDetection* detections[2] = {&pairs[i].cam0, &pairs[i].cam1};
+      for (int c = 0; c < 2; ++c) {
+        const auto corners =
+            synth::ProjectBoardCorners(cameras[c], cam_from_cam0[c] * cam0_from_board, spec);
+        for (size_t id = 0; id < corners.size(); ++id) {
+          if (!corners[id].allFinite()) continue;
+          detections[c]->corners_px.push_back(corners[id] +
+                                              Eigen::Vector2d(noise(rng), noise(rng)));
+          detections[c]->corner_ids.push_back(static_cast<int>(id));
+        }
+        detections[c]->found = true;
+      }
+      pairs[i].name = "pair" + std::to_string(i);
+    }
+    RelativePoseReport report;
+    const Row row = OurRow("", cameras[0].model, cameras[1].model, board, pairs,
+                           RelativePoseOptions(), &report);
+    stats.Add(row, truth, report.baseline_std_m);
+  }
+  return stats;
+}
+
+void RunCornerLevelFloor(bool quick) {
   const int num_seeds = quick ? 4 : 20;
   PrintStatsHeader(
       "Estimator floor: exact corners + 0.2 px Gaussian noise, cameras known, "
       "omnirig joint (eq. 20), " +
       std::to_string(num_seeds) + " seeds per row");
+  const synth::CheckerboardSpec spec;
   for (int num_pairs : {20, 80, 320}) {
-    ErrorStats stats;
-    for (int seed = 0; seed < num_seeds; ++seed) {
-      std::mt19937 rng(1000 + seed);
-      std::normal_distribution<double> noise(0.0, 0.2);
-      std::vector<StereoBoardPair> pairs(num_pairs);
-      for (int i = 0; i < num_pairs; ++i) {
-        const Rigid3d cam0_from_board = synth::SampleBoardPose(
-            cameras, cam_from_cam0, spec, synth::BoardPoseOptions(), i, num_pairs, 500 + seed);
-        BoardDetection* detections[2] = {&pairs[i].cam0, &pairs[i].cam1};
-        for (int c = 0; c < 2; ++c) {
-          const auto corners =
-              synth::ProjectBoardCorners(cameras[c], cam_from_cam0[c] * cam0_from_board, spec);
-          for (size_t id = 0; id < corners.size(); ++id) {
-            if (!corners[id].allFinite()) continue;
-            detections[c]->corners_px.push_back(corners[id] +
-                                                Eigen::Vector2d(noise(rng), noise(rng)));
-            detections[c]->corner_ids.push_back(static_cast<int>(id));
-          }
-          detections[c]->found = true;
-        }
-        pairs[i].name = "pair" + std::to_string(i);
+    PrintStats(std::to_string(num_pairs) + " pairs, 8 x 6 corners of 40 mm",
+               CornerLevelFloor(spec, num_pairs, num_seeds));
+  }
+  for (const auto& [cols, rows, square_m] :
+       {std::tuple{11, 8, 0.04}, std::tuple{11, 8, 0.03}, std::tuple{14, 10, 0.03}}) {
+    synth::CheckerboardSpec larger;
+    larger.cols = cols;
+    larger.rows = rows;
+    larger.square_size_m = square_m;
+    for (int num_pairs : {20, 60}) {
+      char name[96];
+      std::snprintf(name, sizeof(name), "%d pairs, %d x %d corners of %.0f mm", num_pairs, cols,
+                    rows, square_m * 1e3);
+      try {
+        PrintStats(name, CornerLevelFloor(larger, num_pairs, num_seeds));
+      } catch (const std::exception& e) {
+        std::printf("| %-50s | %s\n", name, e.what());
       }
-      RelativePoseReport report;
-      const Row row = OurRow("", cameras[0].model, cameras[1].model, board, pairs,
-                             RelativePoseOptions(), &report);
-      stats.Add(row, truth, report.baseline_std_m);
     }
-    PrintStats(std::to_string(num_pairs) + " pairs", stats);
   }
 }
 
@@ -719,7 +779,11 @@ void PrintPairSubsets(const CameraModel& cam0, const CameraModel& cam1, const Bo
   const std::vector<Eigen::Vector3d> object = board.ObjectPoints();
   std::printf(
       "per pair: baseline without it (mm) | RMS in the joint fit | RMS of each camera's "
-      "own board pose (px), refined cameras\n");
+      "own board pose (px), refined cameras | the two own board poses compared through the "
+      "rig: board centre offset (mm), rotation (deg)\n");
+  const std::vector<BoardSymmetry> symmetries = BoardGridSymmetries(board);
+  Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+  for (const auto& p : object) centre += p / static_cast<double>(object.size());
   for (size_t leave = 0; leave < pairs.size(); ++leave) {
     if (!all.pairs[leave].used) continue;
     std::vector<StereoBoardPair> subset = pairs;
@@ -729,13 +793,23 @@ void PrintPairSubsets(const CameraModel& cam0, const CameraModel& cam1, const Bo
     double mono_rms[2] = {-1.0, -1.0};
     const BoardDetection* detections[2] = {&pairs[leave].cam0, &pairs[leave].cam1};
     const CameraModel* cameras[2] = {&all.rig.cam0, &all.rig.cam1};
+    std::optional<Rigid3d> own_pose[2];
     for (int c = 0; c < 2; ++c) {
+      const std::vector<int>& permutation =
+          symmetries[c == 0 ? 0 : all.pairs[leave].cam1_order].permutation;
       std::vector<Eigen::Vector3d> points;
-      for (int id : detections[c]->corner_ids) points.push_back(object[id]);
-      EstimateBoardPose(*cameras[c], points, detections[c]->corners_px, &mono_rms[c]);
+      for (int id : detections[c]->corner_ids) points.push_back(object[permutation[id]]);
+      own_pose[c] = EstimateBoardPose(*cameras[c], points, detections[c]->corners_px, &mono_rms[c]);
     }
-    std::printf("  %s: %.3f | %.3f | %.3f / %.3f\n", pairs[leave].name.c_str(),
-                report.baseline_m * 1e3, all.pairs[leave].rms_px, mono_rms[0], mono_rms[1]);
+    double offset_mm = NAN, rotation_deg = NAN;
+    if (own_pose[0] && own_pose[1]) {
+      const Rigid3d via_cam1 = all.rig.cam0_from_cam1 * *own_pose[1];
+      offset_mm = 1e3 * (*own_pose[0] * centre - via_cam1 * centre).norm();
+      rotation_deg = RotationDistanceRad(own_pose[0]->rotation, via_cam1.rotation) * kDegPerRad;
+    }
+    std::printf("  %s: %.3f | %.3f | %.3f / %.3f | %.2f mm, %.3f deg\n",
+                pairs[leave].name.c_str(), report.baseline_m * 1e3, all.pairs[leave].rms_px,
+                mono_rms[0], mono_rms[1], offset_mm, rotation_deg);
   }
   double mean = 0.0, var = 0.0;
   for (double b : baselines) mean += b / baselines.size();
@@ -755,6 +829,62 @@ void PrintPairSubsets(const CameraModel& cam0, const CameraModel& cam1, const Bo
         half == 0 ? "odd-numbered" : "even-numbered", report.baseline_m * 1e3,
         report.baseline_std_m * 1e3, report.rms_px, report.num_pairs_used);
   }
+}
+
+// Each camera's tangential terms (k3, k4) from its own calibration, against their standard
+// deviations: whether a camera alone can tell them from zero.
+void PrintTangentialSignificance(const std::vector<StereoBoardPair>& pairs, cv::Size size,
+                                 const BoardSpec& board) {
+  for (int camera = 0; camera < 2; ++camera) {
+    std::vector<CalibrationView> views;
+    for (const StereoBoardPair& pair : pairs) {
+      views.push_back({pair.name, camera == 0 ? pair.cam0 : pair.cam1});
+    }
+    const CalibrationReport report = Calibrate(views, size.width, size.height, board,
+                                               CalibrationOptions(), ProgressSink());
+    const auto& p = report.camera.intrinsics.params;
+    const auto& s = report.intrinsics_std;
+    std::printf("cam%d alone: k3 = %.2e +- %.1e (%.1f std), k4 = %.2e +- %.1e (%.1f std)\n",
+                camera, p[UnifiedIntrinsics::kK3], s[UnifiedIntrinsics::kK3],
+                std::abs(p[UnifiedIntrinsics::kK3]) / s[UnifiedIntrinsics::kK3],
+                p[UnifiedIntrinsics::kK4], s[UnifiedIntrinsics::kK4],
+                std::abs(p[UnifiedIntrinsics::kK4]) / s[UnifiedIntrinsics::kK4]);
+  }
+}
+
+// The job's default ("intrinsics_model": "auto"): the candidate models scored by
+// leave-one-pair-out prediction (engine/stereo/relpose_model_select.h), and the one chosen.
+RigModelSelection PrintModelSelection(const std::vector<RigModelCandidate>& candidates,
+                                      const BoardSpec& board,
+                                      const std::vector<StereoBoardPair>& pairs,
+                                      double reference_baseline_m) {
+  const auto start = std::chrono::steady_clock::now();
+  const auto cpu_start = std::clock();
+  const RigModelSelection selection =
+      SelectRigIntrinsicsModel(board, pairs, candidates, RelativePoseOptions());
+  std::printf(
+      "\nModel selection by leave-one-pair-out cross-validation (the job's default, "
+      "\"intrinsics_model\": \"auto\"; %.1f s wall, %.1f s CPU): held-out error = cam1's corners "
+      "predicted from cam0's board pose through the rig and vice versa\n",
+      Seconds(start), static_cast<double>(std::clock() - cpu_start) / CLOCKS_PER_SEC);
+  std::printf("| %-18s | %5s | %12s | %8s | %8s | %10s | %21s | %s\n", "model", "free",
+              "baseline mm", "error %", "fit RMS", "CV RMS px", "CV excess MSE +- SE", "");
+  std::printf("|%s|%s|%s|%s|%s|%s|%s|---\n", std::string(20, '-').c_str(),
+              std::string(7, '-').c_str(), std::string(14, '-').c_str(),
+              std::string(10, '-').c_str(), std::string(10, '-').c_str(),
+              std::string(12, '-').c_str(), std::string(23, '-').c_str());
+  for (size_t k = 0; k < selection.candidates.size(); ++k) {
+    const RigModelScore& score = selection.candidates[k];
+    const double baseline = score.fit.baseline_m;
+    std::printf("| %-18s | %5d | %12.4f | %+8.4f | %8.4f | %10.4f | %9.5f +- %8.5f | %s\n",
+                score.name.c_str(), score.num_free_intrinsics, baseline * 1e3,
+                100.0 * (baseline - reference_baseline_m) / reference_baseline_m,
+                score.fit.rms_px, score.cv_rms_px, score.cv_excess_mse_px2,
+                score.cv_excess_se_px2,
+                static_cast<int>(k) == selection.chosen ? "<- chosen" : "");
+  }
+  std::printf("rule: %s\n", selection.rule.c_str());
+  return selection;
 }
 
 void RunRealFisheye(const std::filesystem::path& data_dir) {
@@ -802,6 +932,15 @@ void RunRealFisheye(const std::filesystem::path& data_dir) {
       rms0, rms1, rms0_k5, rms1_k5, rms0_nt, rms1_nt, cam0.intrinsics.params[0],
       cam1.intrinsics.params[0], MaxFieldAngleDeg(pairs, cam0, cam1));
 
+  PrintTangentialSignificance(pairs, size, board);
+  std::vector<RigModelCandidate> candidates;
+  for (const RigIntrinsicsModel& model : StandardRigIntrinsicsModels(DefaultFixedIntrinsics())) {
+    const bool no_tangential = model.calibration_fixed[UnifiedIntrinsics::kK3];
+    candidates.push_back({model, no_tangential ? cam0_nt : cam0, no_tangential ? cam1_nt : cam1});
+  }
+  const RigModelSelection selection =
+      PrintModelSelection(candidates, board, pairs, reference_baseline_m);
+
   RelativePoseOptions fixed_cameras;
   RelativePoseOptions joint;
   joint.refine_intrinsics = true;
@@ -813,7 +952,7 @@ void RunRealFisheye(const std::filesystem::path& data_dir) {
                   fixed_report.linear_cam0_from_cam1, NAN, NAN, ""});
   rows.push_back({"paper: average of per-pair poses", fixed_report.success,
                   fixed_report.averaged_cam0_from_cam1, NAN, NAN, ""});
-  rows.push_back(OurRow("omnirig joint + intrinsics (the job's default)", cam0, cam1, board, pairs,
+  rows.push_back(OurRow("omnirig joint + intrinsics (all but skew, k5)", cam0, cam1, board, pairs,
                         joint, &joint_report));
   RelativePoseOptions joint_k5 = joint;
   joint_k5.fixed_intrinsics[UnifiedIntrinsics::kK5] = false;
@@ -851,6 +990,16 @@ void RunRealFisheye(const std::filesystem::path& data_dir) {
     rows.push_back(OurRow("  ... corners within " + std::to_string(static_cast<int>(max_angle)) +
                               " deg of the axis only",
                           cam0, cam1, board, central, joint));
+  }
+  if (selection.chosen >= 0) {
+    const RigModelScore& chosen = selection.candidates[selection.chosen];
+    Row row{"omnirig, model chosen by CV (job default): " + chosen.name, chosen.fit.success,
+            chosen.fit.rig.cam0_from_cam1, chosen.fit.rms_px, NAN, ""};
+    char note[96];
+    std::snprintf(note, sizeof(note), "%d/%zu pairs, baseline std %.4f mm",
+                  chosen.fit.num_pairs_used, pairs.size(), chosen.fit.baseline_std_m * 1e3);
+    row.note = note;
+    rows.push_back(row);
   }
   rows.push_back(RunOmnidirStereo(board, pairs, joint_report, size, size));
   rows.push_back(RunFisheyeStereo("cv::fisheye::stereoCalibrate, as the reference", board, pairs,
@@ -898,6 +1047,7 @@ int main(int argc, char** argv) {
     if (only.empty() || only == "synthetic" || only == "floor") {
       omnirig::RunCornerLevelFloor(quick);
     }
+    if (only == "preset") omnirig::RunSyntheticPreset(quick);  // long: on request only
     if (only.empty() || only == "real") omnirig::RunRealFisheye(data_dir);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "bench_relpose: %s\n", e.what());

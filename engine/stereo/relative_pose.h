@@ -60,7 +60,9 @@ struct RelativePoseOptions {
   // ...except these (UnifiedIntrinsics order), which keep the given cameras' values. Skew and
   // k5 by default, as in CalibrationOptions. On the real fisheye pairs (bench_relpose) freeing
   // k5 or skew moves the baseline by under 0.05 mm, but fixing the tangential terms (k3, k4)
-  // moves it by +0.4 mm: they trade against the rig pose at almost the same RMS.
+  // moves it by +0.4 mm: they trade against the rig pose at almost the same RMS. Which set to
+  // free can be chosen from the data by cross-validation (relpose_model_select.h, the
+  // relative_pose job's default).
   std::array<bool, UnifiedIntrinsics::kNumParams> fixed_intrinsics = DefaultFixedIntrinsics();
   // After the joint refinement, a pair whose RMS exceeds this multiple of the median pair's is
   // left out and the rig re-solved once: its two images disagree (the board moved between two

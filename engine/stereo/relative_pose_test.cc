@@ -9,108 +9,12 @@
 #include "engine/stereo/relpose_corner_order.h"
 #include "engine/stereo/relpose_cost.h"
 #include "engine/stereo/relpose_linear.h"
+#include "engine/stereo/relpose_test_scene.h"
 
 namespace omnirig {
 namespace {
 
-constexpr double kDegPerRad = 180.0 / M_PI;
-
-// A hyperbolic-mirror-like camera of 1024 x 768 (the camera's +z points down from the mirror
-// towards the camera, so the horizon images on a ring around the principal point).
-CameraModel MakeCamera(double gamma, double u0, double v0) {
-  CameraModel camera;
-  camera.width = 1024;
-  camera.height = 768;
-  camera.intrinsics.params = {0.94, gamma, gamma * 1.002, u0, v0, 0.0,
-                              -0.06, 0.012, 0.0004, -0.0003, 0.0};
-  return camera;
-}
-
-// The paper's vertical rig: cam1 100 mm above cam0 (above = -z in these camera frames), with a
-// small misalignment.
-Rigid3d VerticalRig() {
-  const Eigen::Quaterniond rotation(Eigen::AngleAxisd(0.8 / kDegPerRad,
-                                                      Eigen::Vector3d(0.3, -0.5, 1.0).normalized()));
-  return Rigid3d(rotation, Eigen::Vector3d(0.0021, -0.0013, -0.0998));
-}
-
-// A board facing the rig at `azimuth_deg` around it, `distance_m` away, tilted a little.
-Rigid3d BoardPose(const BoardSpec& board, double azimuth_deg, double distance_m,
-                  double tilt_deg, double height_m) {
-  const double a = azimuth_deg / kDegPerRad;
-  const Eigen::Vector3d centre(distance_m * std::cos(a), distance_m * std::sin(a), height_m);
-  const Eigen::Vector3d z_axis = Eigen::Vector3d(centre.x(), centre.y(), 0.0).normalized();
-  const Eigen::Vector3d x_axis(-std::sin(a), std::cos(a), 0.0);
-  Eigen::Matrix3d facing;
-  facing << x_axis, z_axis.cross(x_axis), z_axis;
-  const Eigen::Matrix3d tilt =
-      Eigen::AngleAxisd(tilt_deg / kDegPerRad, Eigen::Vector3d(1.0, 0.6, 0.2).normalized())
-          .toRotationMatrix();
-  const Eigen::Matrix3d rotation = facing * tilt;
-  const Eigen::Vector3d board_centre(0.5 * (board.cols - 1) * board.square_size_m,
-                                     0.5 * (board.rows - 1) * board.square_size_m, 0.0);
-  return Rigid3d(Eigen::Quaterniond(rotation), centre - rotation * board_centre);
-}
-
-BoardDetection Detect(const CameraModel& camera, const BoardSpec& board,
-                      const Rigid3d& cam_from_board, double noise_px, std::mt19937* rng) {
-  std::normal_distribution<double> noise(0.0, noise_px);
-  BoardDetection detection;
-  const std::vector<Eigen::Vector3d> object_points = board.ObjectPoints();
-  for (size_t id = 0; id < object_points.size(); ++id) {
-    const auto pixel = Project(camera.intrinsics, cam_from_board * object_points[id]);
-    if (!pixel) continue;
-    const Eigen::Vector2d offset = noise_px > 0.0 ? Eigen::Vector2d(noise(*rng), noise(*rng))
-                                                  : Eigen::Vector2d::Zero();
-    detection.corners_px.push_back(*pixel + offset);
-    detection.corner_ids.push_back(static_cast<int>(id));
-  }
-  detection.found = detection.corners_px.size() == object_points.size();
-  if (!detection.found) detection.reason = "corners outside the image";
-  return detection;
-}
-
-// Renumbers a detection as if the detector had started from the other end of the grid.
-void HalfTurn(const BoardSpec& board, BoardDetection* detection) {
-  for (int& id : detection->corner_ids) id = board.NumCorners() - 1 - id;
-}
-
-struct Scene {
-  BoardSpec board;
-  StereoRig rig;
-  std::vector<StereoBoardPair> pairs;
-};
-
-Scene MakeScene(double noise_px, int num_pairs, unsigned seed, int cols = 7, int rows = 5) {
-  Scene scene;
-  scene.board.cols = cols;
-  scene.board.rows = rows;
-  scene.board.square_size_m = 0.04;
-  scene.rig.cam0 = MakeCamera(238.0, 515.0, 381.0);
-  scene.rig.cam1 = MakeCamera(241.0, 509.0, 386.0);
-  scene.rig.cam0_from_cam1 = VerticalRig();
-  std::mt19937 rng(seed);
-  for (int i = 0; i < num_pairs; ++i) {
-    const Rigid3d cam0_from_board =
-        BoardPose(scene.board, 360.0 * i / num_pairs, 0.6 + 0.1 * (i % 4), 15.0 + 7.0 * (i % 3),
-                  -0.05 + 0.02 * (i % 5));
-    const Rigid3d cam1_from_board = scene.rig.cam0_from_cam1.Inverse() * cam0_from_board;
-    StereoBoardPair pair;
-    pair.name = "pair" + std::to_string(i);
-    pair.cam0 = Detect(scene.rig.cam0, scene.board, cam0_from_board, noise_px, &rng);
-    pair.cam1 = Detect(scene.rig.cam1, scene.board, cam1_from_board, noise_px, &rng);
-    scene.pairs.push_back(pair);
-  }
-  return scene;
-}
-
-RelativePoseReport Estimate(const Scene& scene, const RelativePoseOptions& options = {}) {
-  return EstimateRelativePose(scene.rig.cam0, scene.rig.cam1, scene.board, scene.pairs, options);
-}
-
-double RotationErrorDeg(const Rigid3d& a, const Rigid3d& b) {
-  return RotationDistanceRad(a.rotation, b.rotation) * kDegPerRad;
-}
+using namespace relpose_test;  // NOLINT: the shared test scenes
 
 TEST(RelposeLinear, ProjectToRotationIsNearestRotation) {
   const Eigen::Matrix3d truth =
@@ -214,37 +118,6 @@ TEST(RelativePose, ExactCornersRecoverTheRig) {
     EXPECT_EQ(pair.cam1_order, 0);
     EXPECT_EQ(pair.num_corners, scene.board.NumCorners());
   }
-}
-
-// Across noisy trials, the scatter of the baseline error matches the reported standard
-// deviation, and the refined rig beats the per-pair average.
-TEST(RelativePose, NoiseGivesConsistentStandardDeviation) {
-  const double noise_px = 0.3;
-  const int num_trials = 12;
-  double sum_sq_error = 0.0, sum_sq_std = 0.0, sum_sq_average_error = 0.0;
-  for (int trial = 0; trial < num_trials; ++trial) {
-    const Scene scene = MakeScene(noise_px, 10, 100 + trial);
-    const RelativePoseReport report = Estimate(scene);
-    ASSERT_TRUE(report.success) << report.message;
-    // rms_px is the RMS of the Euclidean corner error: sigma * sqrt(2) for noise of sigma per
-    // axis.
-    EXPECT_NEAR(report.rms_px, noise_px * std::sqrt(2.0), 0.1 * noise_px);
-    const double truth = scene.rig.cam0_from_cam1.translation.norm();
-    sum_sq_error += std::pow(report.baseline_m - truth, 2);
-    sum_sq_std += std::pow(report.baseline_std_m, 2);
-    sum_sq_average_error += (report.averaged_cam0_from_cam1.translation -
-                             scene.rig.cam0_from_cam1.translation).squaredNorm();
-    EXPECT_GT(report.rotation_std_deg, 0.0);
-    EXPECT_LT(RotationErrorDeg(report.rig.cam0_from_cam1, scene.rig.cam0_from_cam1),
-              5.0 * report.rotation_std_deg);
-  }
-  const double empirical = std::sqrt(sum_sq_error / num_trials);
-  const double predicted = std::sqrt(sum_sq_std / num_trials);
-  EXPECT_GT(predicted, 1e-6);
-  EXPECT_LT(predicted, 1e-3);
-  EXPECT_GT(empirical / predicted, 0.5);
-  EXPECT_LT(empirical / predicted, 2.0);
-  EXPECT_LT(empirical, std::sqrt(sum_sq_average_error / num_trials));
 }
 
 TEST(RelativePose, HalfTurnedCornerOrdersAreResolved) {

@@ -6,6 +6,7 @@
 
 #include <cstdlib>
 #include <filesystem>
+#include <optional>
 
 #include <gtest/gtest.h>
 #include <opencv2/imgcodecs.hpp>
@@ -13,6 +14,7 @@
 #include "engine/calib/calibrate.h"
 #include "engine/calib/detect.h"
 #include "engine/stereo/relative_pose.h"
+#include "engine/stereo/relpose_model_select.h"
 
 namespace omnirig {
 namespace {
@@ -63,6 +65,19 @@ class RelativePoseReal : public ::testing::Test {
     ASSERT_EQ(pairs_->size(), 29u) << "an image of the 29 pairs did not load";
   }
 
+  // Each camera calibrated from its own 29 images, default fixed set (tangential = false) or
+  // with k3 = k4 = 0 too; computed once for the whole suite.
+  static const CameraModel& Camera(int camera, bool no_tangential) {
+    static std::optional<CameraModel> cache[2][2];
+    std::optional<CameraModel>& cached = cache[camera][no_tangential ? 1 : 0];
+    if (!cached) {
+      CalibrationOptions options;
+      options.SetFixed("tangential", no_tangential);
+      cached = CalibrateCamera(*pairs_, camera, board_, options);
+    }
+    return *cached;
+  }
+
   static BoardSpec board_;
   static std::vector<StereoBoardPair>* pairs_;
 };
@@ -71,11 +86,10 @@ BoardSpec RelativePoseReal::board_;
 std::vector<StereoBoardPair>* RelativePoseReal::pairs_ = nullptr;
 
 TEST_F(RelativePoseReal, FisheyePairsGiveTheReferenceBaseline) {
-  const CameraModel cam0 = CalibrateCamera(*pairs_, 0, board_);
-  const CameraModel cam1 = CalibrateCamera(*pairs_, 1, board_);
   RelativePoseOptions options;
   options.refine_intrinsics = true;
-  const RelativePoseReport report = EstimateRelativePose(cam0, cam1, board_, *pairs_, options);
+  const RelativePoseReport report =
+      EstimateRelativePose(Camera(0, false), Camera(1, false), board_, *pairs_, options);
   ASSERT_TRUE(report.success) << report.message;
   EXPECT_GE(report.num_pairs_used, 25);
   EXPECT_LT(report.rms_px, 0.5);
@@ -95,21 +109,47 @@ TEST_F(RelativePoseReal, TangentialTermsMoveTheBaselineByMoreThanItsStd) {
   RelativePoseOptions options;
   options.refine_intrinsics = true;
   const RelativePoseReport with_tangential =
-      EstimateRelativePose(CalibrateCamera(*pairs_, 0, board_), CalibrateCamera(*pairs_, 1, board_),
-                           board_, *pairs_, options);
-  CalibrationOptions no_tangential;
-  no_tangential.SetFixed("tangential", true);
+      EstimateRelativePose(Camera(0, false), Camera(1, false), board_, *pairs_, options);
   options.fixed_intrinsics[UnifiedIntrinsics::kK3] = true;
   options.fixed_intrinsics[UnifiedIntrinsics::kK4] = true;
-  const RelativePoseReport without = EstimateRelativePose(
-      CalibrateCamera(*pairs_, 0, board_, no_tangential),
-      CalibrateCamera(*pairs_, 1, board_, no_tangential), board_, *pairs_, options);
+  const RelativePoseReport without =
+      EstimateRelativePose(Camera(0, true), Camera(1, true), board_, *pairs_, options);
   ASSERT_TRUE(with_tangential.success) << with_tangential.message;
   ASSERT_TRUE(without.success) << without.message;
   EXPECT_EQ(without.rig.cam0.intrinsics.params[UnifiedIntrinsics::kK3], 0.0);
   EXPECT_LT(without.rms_px, with_tangential.rms_px + 0.02);
   EXPECT_GT(without.baseline_m - with_tangential.baseline_m, 3.0 * with_tangential.baseline_std_m);
   EXPECT_NEAR(without.baseline_m, 0.10996, 0.002 * 0.10996);
+}
+
+// The job's default on these pairs: the three standard models scored by leave-one-pair-out
+// prediction of one camera's corners from the other's (bench_relpose prints the table).
+TEST_F(RelativePoseReal, CrossValidationScoresEveryModelAndFollowsItsRule) {
+  std::vector<RigModelCandidate> candidates;
+  for (const RigIntrinsicsModel& model : StandardRigIntrinsicsModels(DefaultFixedIntrinsics())) {
+    const bool no_tangential = model.calibration_fixed[UnifiedIntrinsics::kK3];
+    candidates.push_back({model, Camera(0, no_tangential), Camera(1, no_tangential)});
+  }
+  const RigModelSelection selection =
+      SelectRigIntrinsicsModel(board_, *pairs_, candidates, RelativePoseOptions());
+  EXPECT_GE(selection.held_out.size(), 25u);
+  ASSERT_GE(selection.chosen, 0) << selection.rule;
+  for (const RigModelScore& score : selection.candidates) {
+    ASSERT_TRUE(score.fit.success) << score.name << ": " << score.fit.message;
+    EXPECT_GT(score.cv_rms_px, score.fit.rms_px) << score.name;
+  }
+  // Each camera's own calibration, kept, predicts the other camera worst of the three.
+  const RigModelScore& fixed = selection.candidates[0];
+  for (size_t k = 1; k < selection.candidates.size(); ++k) {
+    EXPECT_GT(fixed.cv_rms_px, selection.candidates[k].cv_rms_px) << selection.candidates[k].name;
+  }
+  const RigModelScore& chosen = selection.candidates[selection.chosen];
+  EXPECT_LE(chosen.cv_excess_mse_px2, chosen.cv_excess_se_px2);
+  for (int k = 0; k < selection.chosen; ++k) {  // every simpler model is more than 1 SE worse
+    EXPECT_GT(selection.candidates[k].cv_excess_mse_px2, selection.candidates[k].cv_excess_se_px2);
+  }
+  EXPECT_LT(chosen.fit.rms_px, 0.5);
+  EXPECT_NEAR(chosen.fit.baseline_m, 0.10996, 0.005 * 0.10996);
 }
 
 }  // namespace

@@ -84,7 +84,8 @@ json BoardParams(const ArgParser& parser) {
 }
 
 void PrintProgress(double fraction, const std::string& stage, const std::string& message) {
-  if (stage == "refine" || stage == "solve") return;  // per-iteration lines are noise here
+  // Per-iteration and per-fold lines are noise here.
+  if (stage == "refine" || stage == "solve" || stage == "cross_validation") return;
   std::cerr << "[" << std::setw(3) << static_cast<int>(100.0 * fraction) << "%] " << stage
             << (message.empty() ? "" : " " + message) << "\n";
 }
@@ -97,6 +98,15 @@ void PrintSummary(const json& result) {
             << std::setprecision(3) << result["rms_px"].get<double>() << " px, "
             << result["num_pairs_used"].get<int>() << " of " << result["pairs"].size()
             << " pairs used\n";
+  if (result.contains("intrinsics_model") && result["intrinsics_model"].contains("candidates")) {
+    std::cerr << "intrinsics model " << result["intrinsics_model"]["chosen"].get<std::string>()
+              << " (" << result["intrinsics_model"]["rule"].get<std::string>() << ")\n";
+    for (const json& candidate : result["intrinsics_model"]["candidates"]) {
+      std::cerr << "  " << candidate["name"].get<std::string>() << ": baseline "
+                << candidate["baseline_m"].get<double>() * 1e3 << " mm, held-out RMS "
+                << candidate["cv_rms_px"].dump() << " px\n";
+    }
+  }
   for (const json& pair : result["pairs"]) {
     if (!pair["used"].get<bool>()) {
       std::cerr << "  unused " << pair["name"].get<std::string>() << ": "
@@ -124,6 +134,11 @@ int RunRelpose(const Args& args) {
   parser.AddOption("fixed-intrinsics", "alpha,k5",
                    "comma-separated intrinsics held fixed (names, or skew, tangential, "
                    "principal_point, gamma); alpha,k5,tangential suits fisheye lenses");
+  parser.AddOption("intrinsics-model", "auto",
+                   "auto, fixed, tangential_fixed or free: which intrinsics the joint refinement "
+                   "frees (auto: chosen by leave-one-pair-out cross-validation; the default when "
+                   "the cameras are calibrated here and neither --refine-intrinsics nor "
+                   "--fixed-intrinsics is given)");
   parser.AddOption("threads", "1", "solver threads");
   parser.AddOption("o", "", "write the result JSON here (also --output); default: stdout");
   parser.AddOption("output", "", "the same as -o");
@@ -142,6 +157,7 @@ int RunRelpose(const Args& args) {
     params["calibrations"] = {{"cam0", parser.Get("calib0")}, {"cam1", parser.Get("calib1")}};
   }
   if (parser.Has("refine-intrinsics")) params["refine_intrinsics"] = true;
+  if (parser.Has("intrinsics-model")) params["intrinsics_model"] = parser.Get("intrinsics-model");
   if (parser.Has("fixed-intrinsics")) {
     params["fixed_intrinsics"] = json::array();
     std::istringstream names(parser.Get("fixed-intrinsics"));

@@ -116,6 +116,22 @@ TEST_F(RelposeCli, FixedIntrinsicsKeepTheGivenCamerasValues) {
   EXPECT_NE(intrinsics.at("u0").get<double>(), set_->rig.cam0.intrinsics.params[3]);
 }
 
+// --intrinsics-model names a model; with given calibrations "free" refines them, and "auto"
+// (which needs the job's own calibrations) is refused before any work.
+TEST_F(RelposeCli, IntrinsicsModelOptionReachesTheJob) {
+  const fs::path out = *dir_ / "rig_free.json";
+  Args args = BaseArgs();
+  args.insert(args.end(), {"--intrinsics-model", "free", "-o", out.string()});
+  ASSERT_EQ(RunRelpose(args), 0);
+  const json result = ReadJson(out);
+  EXPECT_TRUE(result.at("intrinsics_refined").get<bool>());
+  EXPECT_EQ(result.at("intrinsics_model").at("chosen"), "free");
+  EXPECT_EQ(result.at("intrinsics_model").at("selection"), "given");
+  Args automatic = BaseArgs();
+  automatic.insert(automatic.end(), {"--intrinsics-model", "auto"});
+  EXPECT_THROW(RunRelpose(automatic), InvalidArgument);
+}
+
 TEST_F(RelposeCli, BothOutputSpellingsOrAnUnknownLetterAreRefused) {
   Args both = BaseArgs();
   both.insert(both.end(),

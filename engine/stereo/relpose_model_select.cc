@@ -1,0 +1,237 @@
+#include "engine/stereo/relpose_model_select.h"
+
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+
+#include "engine/calib/board_pose.h"
+#include "engine/stereo/relpose_corner_order.h"
+#include "engine/stereo/relpose_refine.h"
+
+namespace omnirig {
+
+int RigIntrinsicsModel::NumFreeIntrinsics() const {
+  if (!refine_intrinsics) return 0;
+  int count = 0;
+  for (bool fixed : joint_fixed) count += fixed ? 0 : 2;
+  return count;
+}
+
+std::vector<RigIntrinsicsModel> StandardRigIntrinsicsModels(
+    const std::array<bool, UnifiedIntrinsics::kNumParams>& base) {
+  std::array<bool, UnifiedIntrinsics::kNumParams> no_tangential = base;
+  no_tangential[UnifiedIntrinsics::kK3] = true;
+  no_tangential[UnifiedIntrinsics::kK4] = true;
+  return {{"fixed", base, false, base},
+          {"tangential_fixed", no_tangential, true, no_tangential},
+          {"free", base, true, base}};
+}
+
+namespace {
+
+// Pair i's corners with cam1's ids relabelled by its chosen corner order.
+RigPairCorners CornersOf(const BoardSpec& board, const std::vector<BoardSymmetry>& symmetries,
+                         const StereoBoardPair& pair, int cam1_order) {
+  const std::vector<Eigen::Vector3d> object = board.ObjectPoints();
+  RigPairCorners corners;
+  for (size_t c = 0; c < pair.cam0.corner_ids.size(); ++c) {
+    corners.points_in_board0.push_back(object[pair.cam0.corner_ids[c]]);
+    corners.pixels0.push_back(pair.cam0.corners_px[c]);
+  }
+  const std::vector<int>& permutation = symmetries[cam1_order].permutation;
+  for (size_t c = 0; c < pair.cam1.corner_ids.size(); ++c) {
+    corners.points_in_board1.push_back(object[permutation[pair.cam1.corner_ids[c]]]);
+    corners.pixels1.push_back(pair.cam1.corners_px[c]);
+  }
+  return corners;
+}
+
+// Squared pixel errors of `pixels` projected from `cam_from_board`; a corner that does not
+// project counts 1e6 px^2, as in PairRmsPx.
+double SumSquaredErrors(const CameraModel& camera, const Rigid3d& cam_from_board,
+                        const std::vector<Eigen::Vector3d>& points,
+                        const std::vector<Eigen::Vector2d>& pixels) {
+  double sum = 0.0;
+  for (size_t c = 0; c < pixels.size(); ++c) {
+    const auto projected = Project(camera.intrinsics, cam_from_board * points[c]);
+    sum += projected ? (*projected - pixels[c]).squaredNorm() : 1e6;
+  }
+  return sum;
+}
+
+// The held-out pair predicted by `rig`: the board's pose from one camera's corners alone, the
+// other camera's corners through the rig, both ways round. Sum of squares and corner count.
+std::pair<double, int> PredictionError(const StereoRig& rig, const RigPairCorners& pair) {
+  const double unpredictable = 1e6 * (pair.pixels0.size() + pair.pixels1.size());
+  const int count = static_cast<int>(pair.pixels0.size() + pair.pixels1.size());
+  const auto cam0_from_board = EstimateBoardPose(rig.cam0, pair.points_in_board0, pair.pixels0);
+  const auto cam1_from_board = EstimateBoardPose(rig.cam1, pair.points_in_board1, pair.pixels1);
+  if (!cam0_from_board || !cam1_from_board) return {unpredictable, count};
+  const double sum = SumSquaredErrors(rig.cam1, rig.cam0_from_cam1.Inverse() * *cam0_from_board,
+                                      pair.points_in_board1, pair.pixels1) +
+                     SumSquaredErrors(rig.cam0, rig.cam0_from_cam1 * *cam1_from_board,
+                                      pair.points_in_board0, pair.pixels0);
+  return {sum, count};
+}
+
+// One fold: the candidate's all-pairs solution refined again without pair `held_out`, then
+// that pair predicted. Sum of squares and corner count.
+std::pair<double, int> FoldError(const BoardSpec& board,
+                                 const std::vector<BoardSymmetry>& symmetries,
+                                 const std::vector<StereoBoardPair>& pairs,
+                                 const RelativePoseReport& fit, const RigRefinementOptions& refine,
+                                 size_t held_out) {
+  std::vector<RigPairCorners> corners;
+  std::vector<Rigid3d> cam0_from_board;
+  for (size_t i = 0; i < pairs.size(); ++i) {
+    if (!fit.pairs[i].used || i == held_out) continue;
+    corners.push_back(CornersOf(board, symmetries, pairs[i], fit.pairs[i].cam1_order));
+    cam0_from_board.push_back(fit.pairs[i].cam0_from_board);
+  }
+  StereoRig rig = fit.rig;
+  const RigRefinementSummary summary = RefineRig(corners, refine, &rig, &cam0_from_board, nullptr);
+  const RigPairCorners test =
+      CornersOf(board, symmetries, pairs[held_out], fit.pairs[held_out].cam1_order);
+  if (!summary.usable) {
+    return {1e6 * (test.pixels0.size() + test.pixels1.size()),
+            static_cast<int>(test.pixels0.size() + test.pixels1.size())};
+  }
+  return PredictionError(rig, test);
+}
+
+// The one-standard-error rule over the scored candidates (cv_rms_px >= 0), given each one's
+// per-fold sums of squares. Fills the excess columns, `chosen`, `lowest_error` and `rule`.
+void ApplyOneStandardErrorRule(const std::vector<std::vector<double>>& fold_sums,
+                               double total_count, RigModelSelection* selection) {
+  auto& scores = selection->candidates;
+  for (size_t k = 0; k < scores.size(); ++k) {
+    if (scores[k].cv_rms_px < 0.0) continue;
+    if (selection->lowest_error < 0 ||
+        scores[k].cv_rms_px < scores[selection->lowest_error].cv_rms_px) {
+      selection->lowest_error = static_cast<int>(k);
+    }
+  }
+  if (selection->lowest_error < 0) return;
+  const std::vector<double>& best = fold_sums[selection->lowest_error];
+  const double num_folds = static_cast<double>(best.size());
+  for (size_t k = 0; k < scores.size(); ++k) {
+    if (scores[k].cv_rms_px < 0.0) continue;
+    double mean = 0.0, var = 0.0;
+    for (size_t f = 0; f < best.size(); ++f) mean += (fold_sums[k][f] - best[f]) / num_folds;
+    for (size_t f = 0; f < best.size(); ++f) {
+      var += std::pow(fold_sums[k][f] - best[f] - mean, 2) / std::max(1.0, num_folds - 1.0);
+    }
+    // Per corner: the excess of the pooled mean square, and its standard error.
+    scores[k].cv_excess_mse_px2 = mean * num_folds / total_count;
+    scores[k].cv_excess_se_px2 = std::sqrt(var / num_folds) * num_folds / total_count;
+  }
+  std::vector<size_t> order;
+  for (size_t k = 0; k < scores.size(); ++k) {
+    if (scores[k].cv_rms_px >= 0.0) order.push_back(k);
+  }
+  std::stable_sort(order.begin(), order.end(), [&scores](size_t a, size_t b) {
+    return scores[a].num_free_intrinsics < scores[b].num_free_intrinsics;
+  });
+  for (size_t k : order) {
+    if (scores[k].cv_excess_mse_px2 <= scores[k].cv_excess_se_px2) {
+      selection->chosen = static_cast<int>(k);
+      break;
+    }
+  }
+  std::ostringstream os;
+  os << "leave-one-pair-out prediction over " << selection->held_out.size()
+     << " pairs; lowest error: " << scores[selection->lowest_error].name << " ("
+     << scores[selection->lowest_error].cv_rms_px << " px); chosen: the simplest model within "
+     << "one standard error of it: " << scores[selection->chosen].name;
+  selection->rule = os.str();
+}
+
+// Every candidate fitted on all pairs; `candidate_options` receives the options of each.
+void FitCandidates(const BoardSpec& board, const std::vector<StereoBoardPair>& pairs,
+                   const std::vector<RigModelCandidate>& candidates,
+                   const RelativePoseOptions& options, const ProgressSink& progress,
+                   std::vector<RelativePoseOptions>* candidate_options,
+                   RigModelSelection* selection) {
+  for (size_t k = 0; k < candidates.size(); ++k) {
+    progress.ThrowIfCancelled();
+    RelativePoseOptions candidate = options;
+    candidate.refine_intrinsics = candidates[k].model.refine_intrinsics;
+    candidate.fixed_intrinsics = candidates[k].model.joint_fixed;
+    RigModelScore score;
+    score.name = candidates[k].model.name;
+    score.num_free_intrinsics = candidates[k].model.NumFreeIntrinsics();
+    score.fit =
+        EstimateRelativePose(candidates[k].cam0, candidates[k].cam1, board, pairs, candidate);
+    selection->candidates.push_back(std::move(score));
+    candidate_options->push_back(candidate);
+    progress.Report(0.2 * (k + 1.0) / candidates.size(), "model_fit", candidates[k].model.name);
+  }
+}
+
+// The folds: every pair that all fitted candidates used.
+std::vector<size_t> CommonPairs(const RigModelSelection& selection, size_t num_pairs) {
+  std::vector<size_t> held_out;
+  for (size_t i = 0; i < num_pairs; ++i) {
+    bool all = true;
+    for (const RigModelScore& score : selection.candidates) {
+      if (score.fit.success && !score.fit.pairs[i].used) all = false;
+    }
+    if (all) held_out.push_back(i);
+  }
+  return held_out;
+}
+
+}  // namespace
+
+RigModelSelection SelectRigIntrinsicsModel(const BoardSpec& board,
+                                           const std::vector<StereoBoardPair>& pairs,
+                                           const std::vector<RigModelCandidate>& candidates,
+                                           const RelativePoseOptions& options,
+                                           const ProgressSink& progress) {
+  options.Check();
+  RigModelSelection selection;
+  std::vector<RelativePoseOptions> candidate_options;
+  FitCandidates(board, pairs, candidates, options, progress, &candidate_options, &selection);
+  const std::vector<size_t> held_out = CommonPairs(selection, pairs.size());
+  for (size_t i : held_out) selection.held_out.push_back(pairs[i].name);
+  const std::vector<BoardSymmetry> symmetries = BoardGridSymmetries(board);
+  std::vector<std::vector<double>> fold_sums(candidates.size());
+  double total_count = 0.0;
+  for (size_t k = 0; k < candidates.size(); ++k) {
+    RigModelScore& score = selection.candidates[k];
+    if (!score.fit.success || held_out.size() < 3) continue;
+    RigRefinementOptions refine;
+    refine.refine_intrinsics = candidate_options[k].refine_intrinsics;
+    refine.fixed_intrinsics = candidate_options[k].fixed_intrinsics;
+    refine.huber_loss_px = options.huber_loss_px;
+    refine.max_num_iterations = options.max_num_iterations;
+    refine.num_threads = options.num_threads;
+    double sum = 0.0, count = 0.0;
+    for (size_t f = 0; f < held_out.size(); ++f) {
+      progress.ThrowIfCancelled();
+      const auto [fold_sum, fold_count] =
+          FoldError(board, symmetries, pairs, score.fit, refine, held_out[f]);
+      fold_sums[k].push_back(fold_sum);
+      score.fold_rms_px.push_back(std::sqrt(fold_sum / fold_count));
+      sum += fold_sum;
+      count += fold_count;
+      progress.Report(0.2 + 0.8 * (k + (f + 1.0) / held_out.size()) / candidates.size(),
+                      "cross_validation", score.name + " without " + pairs[held_out[f]].name);
+    }
+    score.cv_rms_px = std::sqrt(sum / count);
+    total_count = count;
+  }
+  ApplyOneStandardErrorRule(fold_sums, total_count, &selection);
+  if (selection.chosen < 0) {
+    // Too few common pairs to cross-validate: the simplest candidate that could be fitted.
+    for (size_t k = 0; k < selection.candidates.size() && selection.chosen < 0; ++k) {
+      if (selection.candidates[k].fit.success) selection.chosen = static_cast<int>(k);
+    }
+    selection.rule =
+        "fewer than 3 pairs common to every candidate: no cross-validation, the "
+        "first candidate that could be fitted";
+  }
+  return selection;
+}
+
+}  // namespace omnirig
