@@ -6,6 +6,9 @@
 #   3. SIGKILL-and-restart cycles during a batch of jobs (tests/server_crash with 20 cycles).
 # Usage: bench/load_bench.sh [BUILD_DIR]   (default: build). Needs wrk, curl, python3.
 # LOAD_BENCH_PARTS (default "poll upload crash") picks the parts to run.
+# LOAD_BENCH_CONNECTIONS (default 200) and LOAD_BENCH_DELAY_MS (default 100, the pause of each
+# connection between polls) set the polling load; LOAD_BENCH_SERVE_ARGS adds `omnirig serve`
+# flags (e.g. "--http-loop threads" for the thread-per-connection loop).
 set -euo pipefail
 PARTS=${LOAD_BENCH_PARTS:-poll upload crash}
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
@@ -73,9 +76,13 @@ if [[ -d $REAL ]] && curl -sf "$URL/api/v1/health" | grep -q '"calibration"'; th
 fi
 POLL_JOB=${JOB:-missing}
 echo "polling job $POLL_JOB with workers busy: $BUSY"
+CONNECTIONS=${LOAD_BENCH_CONNECTIONS:-200}
+DELAY=${LOAD_BENCH_DELAY_MS:-100}
+echo "poll_connections $CONNECTIONS"
+echo "poll_delay_ms $DELAY"
 CPU_START=$(server_cpu_s)
 HTTP_CPU_START=$(http_cpu_s)
-DELAY_MS=100 wrk -t2 -c200 -d20s -s "$ROOT/bench/load_poll.lua" "$URL/api/v1/jobs/$POLL_JOB" \
+DELAY_MS=$DELAY wrk -t2 -c"$CONNECTIONS" -d20s -s "$ROOT/bench/load_poll.lua" "$URL/api/v1/jobs/$POLL_JOB" \
   | tee "$WORK/wrk.txt" | grep -E '^poll_|Requests/sec|Socket errors|Non-2xx'
 # Server CPU over the run includes the busy worker; the idle-server cost per poll is measured
 # separately below, with the queue empty.

@@ -73,7 +73,14 @@ struct HttpResponse {
 using HttpHandler = std::function<void(const HttpRequest&, HttpResponse&)>;
 
 struct HttpServerOptions {
-  int num_threads = 64;                // connection threads (one per open keep-alive connection)
+  // Requests served at once. With `event_loop`, a fixed pool of this many threads serves all
+  // open connections; without, one thread per open keep-alive connection (so also the bound on
+  // open connections).
+  int num_threads = 64;
+  // true: idle keep-alive connections wait in one epoll set, not on a thread each (see http.cc).
+  bool event_loop = true;
+  int keep_alive_timeout_ms = 5000;    // idle keep-alive connections are closed after this
+  int read_timeout_ms = 5000;          // a request whose bytes stall this long is dropped
   int64_t max_body_bytes = 1LL << 30;  // larger bodies are refused (413) before reading
   std::string token;                   // bearer token required under /api/ and /metrics when set
 };

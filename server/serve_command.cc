@@ -30,7 +30,12 @@ void DeclareOptions(cli::ArgParser& parser) {
   parser.AddOption("workers", std::to_string(DefaultWorkers()),
                    "jobs run at the same time (half the cores by default)");
   parser.AddOption("threads-per-job", "", "solver threads per job (default: cores / workers)");
-  parser.AddOption("http-threads", "128", "HTTP connection threads");
+  parser.AddOption("http-threads", "128",
+                   "HTTP threads: requests served at once (with --http-loop threads, also the "
+                   "open connections served at once)");
+  parser.AddOption("http-loop", "epoll",
+                   "how open connections wait for their next request: 'epoll' (one epoll set "
+                   "served by the --http-threads pool) or 'threads' (one thread each)");
   parser.AddOption("worker-nice", "10",
                    "niceness of job threads (0-19), so status polls stay fast while jobs run");
   parser.AddOption("worker-sched", "idle",
@@ -66,6 +71,12 @@ ServiceOptions ToOptions(const cli::ArgParser& parser) {
                                 ? DefaultThreadsPerJob(options.num_workers)
                                 : parser.GetInt("threads-per-job");
   options.http_threads = parser.GetInt("http-threads");
+  const std::string http_loop = parser.Get("http-loop");
+  if (http_loop != "epoll" && http_loop != "threads") {
+    throw omnirig::InvalidArgument("--http-loop must be 'epoll' or 'threads', got '" + http_loop +
+                                   "'");
+  }
+  options.http_event_loop = http_loop == "epoll";
   options.worker_nice = parser.GetInt("worker-nice");
   const std::string worker_sched = parser.Get("worker-sched");
   if (worker_sched != "idle" && worker_sched != "normal") {

@@ -81,6 +81,7 @@ Service::Service(const ServiceOptions& options) : state_(std::make_unique<Servic
 
   HttpServerOptions http_options;
   http_options.num_threads = options.http_threads;
+  http_options.event_loop = options.http_event_loop;
   http_options.max_body_bytes = options.max_dataset_bytes;
   http_options.token = options.token;
   http_ = std::make_unique<HttpServer>(

@@ -1,0 +1,289 @@
+// The HTTP layer's connection handling with the event loop (HttpServerOptions::event_loop): more
+// open keep-alive connections than threads, slow uploads beside status polls, the keep-alive
+// and read timeouts, and a prompt Stop() with idle connections open. Real sockets on loopback.
+
+#include "server/http.h"
+
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <chrono>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+namespace omnirig::server {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double SecondsSince(Clock::time_point start) {
+  return std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+// A client socket that sends raw bytes and reads responses with a receive timeout.
+class RawConnection {
+ public:
+  explicit RawConnection(int port, double timeout_s = 3.0)
+      : fd_(::socket(AF_INET, SOCK_STREAM, 0)) {
+    sockaddr_in address{};
+    address.sin_family = AF_INET;
+    address.sin_port = htons(static_cast<uint16_t>(port));
+    address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    connected_ = ::connect(fd_, reinterpret_cast<sockaddr*>(&address), sizeof(address)) == 0;
+    const auto micros = static_cast<long>(timeout_s * 1e6);
+    const timeval timeout{micros / 1000000, micros % 1000000};
+    ::setsockopt(fd_, SOL_SOCKET, SO_RCVTIMEO, &timeout, sizeof(timeout));
+  }
+  ~RawConnection() { ::close(fd_); }
+  RawConnection(const RawConnection&) = delete;
+  RawConnection& operator=(const RawConnection&) = delete;
+
+  bool connected() const { return connected_; }
+  bool Send(const std::string& bytes) {
+    return ::send(fd_, bytes.data(), bytes.size(), MSG_NOSIGNAL) ==
+           static_cast<ssize_t>(bytes.size());
+  }
+  // Reads one response with a Content-Length body; "" on timeout or close.
+  std::string ReadResponse() {
+    while (true) {
+      const size_t header_end = buffer_.find("\r\n\r\n");
+      if (header_end != std::string::npos) {
+        const size_t length_at = buffer_.find("Content-Length: ");
+        const size_t length =
+            length_at < header_end ? std::stoul(buffer_.substr(length_at + 16)) : 0;
+        if (buffer_.size() >= header_end + 4 + length) {
+          std::string response = buffer_.substr(0, header_end + 4 + length);
+          buffer_.erase(0, response.size());
+          return response;
+        }
+      }
+      if (!Receive()) return "";
+    }
+  }
+  // True when the server closes the connection before the receive timeout: EOF, or a reset
+  // for a connection still in the listen backlog when the listening socket closed.
+  bool ClosedByServer() {
+    char byte;
+    const ssize_t got = ::recv(fd_, &byte, 1, 0);
+    return got == 0 || (got < 0 && errno == ECONNRESET);
+  }
+
+ private:
+  bool Receive() {
+    char chunk[4096];
+    const ssize_t got = ::recv(fd_, chunk, sizeof(chunk), 0);
+    if (got <= 0) return false;
+    buffer_.append(chunk, static_cast<size_t>(got));
+    return true;
+  }
+
+  int fd_;
+  bool connected_ = false;
+  std::string buffer_;
+};
+
+std::string Get(const std::string& path) {
+  return "GET " + path + " HTTP/1.1\r\nHost: test\r\n\r\n";
+}
+
+class HttpServerTest : public ::testing::Test {
+ protected:
+  // Routes: GET /status (JSON), POST /cancel (answers with the body's size), PUT /upload
+  // (streamed; answers with the byte count).
+  int Start(const HttpServerOptions& options) {
+    server_ =
+        std::make_unique<HttpServer>(options, [this](const std::string& route, int status, double) {
+          std::lock_guard<std::mutex> lock(mutex_);
+          ++counts_[route + " " + std::to_string(status)];
+        });
+    server_->Route("GET", "/status", [](const HttpRequest&, HttpResponse& response) {
+      response.Json(200, {{"state", "running"}});
+    });
+    server_->Route("POST", "/cancel", [](const HttpRequest& request, HttpResponse& response) {
+      response.Json(200, {{"body_bytes", request.body.size()}});
+    });
+    server_->Route(
+        "PUT", "/upload",
+        [](const HttpRequest& request, HttpResponse& response) {
+          size_t bytes = 0;
+          request.read_body([&bytes](const char*, size_t size) {
+            bytes += size;
+            return true;
+          });
+          response.Json(201, {{"bytes", bytes}});
+        },
+        /*streaming=*/true);
+    const int port = server_->Bind("127.0.0.1", 0);
+    server_->Start();
+    return port;
+  }
+  int Count(const std::string& key) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return counts_[key];
+  }
+
+  static HttpServerOptions EventLoopOptions(int threads) {
+    HttpServerOptions options;
+    options.event_loop = true;
+    options.num_threads = threads;
+    return options;
+  }
+
+  std::unique_ptr<HttpServer> server_;
+  std::mutex mutex_;
+  std::map<std::string, int> counts_;
+};
+
+TEST_F(HttpServerTest, ServesManyMoreKeepAliveConnectionsThanThreads) {
+  const int port = Start(EventLoopOptions(/*threads=*/4));
+  // With one thread per connection, connections 5..64 would wait for the first four to close.
+  constexpr int kConnections = 64;
+  std::vector<std::unique_ptr<RawConnection>> connections;
+  for (int i = 0; i < kConnections; ++i) {
+    connections.push_back(std::make_unique<RawConnection>(port));
+    ASSERT_TRUE(connections.back()->connected());
+  }
+  for (int round = 0; round < 3; ++round) {
+    for (auto& connection : connections) ASSERT_TRUE(connection->Send(Get("/status")));
+    for (auto& connection : connections) {
+      const std::string response = connection->ReadResponse();
+      ASSERT_EQ(response.rfind("HTTP/1.1 200", 0), 0u) << "round " << round << ": " << response;
+      EXPECT_NE(response.find("\"running\""), std::string::npos);
+    }
+  }
+  // Pipelined requests on one connection: all answered, in order.
+  ASSERT_TRUE(connections[0]->Send(Get("/status") + Get("/nothing") + Get("/status")));
+  EXPECT_EQ(connections[0]->ReadResponse().rfind("HTTP/1.1 200", 0), 0u);
+  EXPECT_EQ(connections[0]->ReadResponse().rfind("HTTP/1.1 404", 0), 0u);
+  EXPECT_EQ(connections[0]->ReadResponse().rfind("HTTP/1.1 200", 0), 0u);
+  // The request counter sees each request's route (set and read on the serving thread). The
+  // logger runs after the response is written, so the last count may lag: poll briefly.
+  const int expected = 3 * kConnections + 2;
+  const auto start = Clock::now();
+  while (Count("GET /status 200") < expected && SecondsSince(start) < 2) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  EXPECT_EQ(Count("GET /status 200"), expected);
+  EXPECT_EQ(Count("unmatched 404"), 1);
+}
+
+TEST_F(HttpServerTest, PostWithoutContentLengthHasAnEmptyBody) {
+  const int port = Start(EventLoopOptions(/*threads=*/2));
+  // What `curl -X POST URL` sends: no Content-Length, no body. Answered at once, not after the
+  // read timeout (5 s; the connection's receive timeout is 3 s), and the connection stays usable.
+  RawConnection connection(port);
+  for (int i = 0; i < 2; ++i) {
+    ASSERT_TRUE(connection.Send("POST /cancel HTTP/1.1\r\nHost: test\r\n\r\n"));
+    const std::string response = connection.ReadResponse();
+    EXPECT_EQ(response.rfind("HTTP/1.1 200", 0), 0u) << response;
+    EXPECT_NE(response.find("\"body_bytes\":0"), std::string::npos) << response;
+  }
+  // A body with a length is still read.
+  ASSERT_TRUE(
+      connection.Send("POST /cancel HTTP/1.1\r\nHost: test\r\nContent-Length: 3\r\n\r\nabc"));
+  EXPECT_NE(connection.ReadResponse().find("\"body_bytes\":3"), std::string::npos);
+}
+
+TEST_F(HttpServerTest, SlowUploadsDoNotBlockStatusPolls) {
+  const int port = Start(EventLoopOptions(/*threads=*/4));
+  // Three uploads that send their headers and half the body, then stall: three threads wait
+  // in them (up to the read timeout).
+  constexpr size_t kBodyBytes = 1 << 20;
+  const std::string half(kBodyBytes / 2, 'x');
+  std::vector<std::unique_ptr<RawConnection>> uploads;
+  for (int i = 0; i < 3; ++i) {
+    uploads.push_back(std::make_unique<RawConnection>(port));
+    ASSERT_TRUE(uploads.back()->Send("PUT /upload HTTP/1.1\r\nHost: test\r\nContent-Length: " +
+                                     std::to_string(kBodyBytes) + "\r\n\r\n" + half));
+  }
+  // Polls on 20 other connections are all answered meanwhile, promptly.
+  std::vector<std::unique_ptr<RawConnection>> polls;
+  for (int i = 0; i < 20; ++i) polls.push_back(std::make_unique<RawConnection>(port));
+  const auto start = Clock::now();
+  for (int round = 0; round < 5; ++round) {
+    for (auto& poll : polls) ASSERT_TRUE(poll->Send(Get("/status")));
+    for (auto& poll : polls) ASSERT_EQ(poll->ReadResponse().rfind("HTTP/1.1 200", 0), 0u);
+  }
+  EXPECT_LT(SecondsSince(start), 2.0);
+  // The uploads then complete.
+  for (auto& upload : uploads) {
+    ASSERT_TRUE(upload->Send(half));
+    const std::string response = upload->ReadResponse();
+    EXPECT_EQ(response.rfind("HTTP/1.1 201", 0), 0u) << response;
+    EXPECT_NE(response.find("\"bytes\":" + std::to_string(kBodyBytes)), std::string::npos)
+        << response;
+  }
+}
+
+TEST_F(HttpServerTest, ClosesIdleConnectionsAfterTheKeepAliveTimeout) {
+  HttpServerOptions options = EventLoopOptions(/*threads=*/2);
+  options.keep_alive_timeout_ms = 300;
+  options.read_timeout_ms = 300;
+  const int port = Start(options);
+  // A connection that keeps polling every 100 ms outlives the timeout: it counts idle time.
+  RawConnection busy(port);
+  const auto busy_start = Clock::now();
+  while (SecondsSince(busy_start) < 0.8) {
+    ASSERT_TRUE(busy.Send(Get("/status")));
+    ASSERT_EQ(busy.ReadResponse().rfind("HTTP/1.1 200", 0), 0u)
+        << "after " << SecondsSince(busy_start) << " s";
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  // An idle one is closed after the timeout, not before.
+  RawConnection idle(port);
+  ASSERT_TRUE(idle.Send(Get("/status")));
+  ASSERT_EQ(idle.ReadResponse().rfind("HTTP/1.1 200", 0), 0u);
+  const auto idle_start = Clock::now();
+  EXPECT_TRUE(idle.ClosedByServer());
+  EXPECT_GE(SecondsSince(idle_start), 0.25);
+  EXPECT_LT(SecondsSince(idle_start), 2.0);
+  // A request whose headers stall gets 400 after the read timeout (httplib's answer), and a
+  // request line that stalls closes the connection.
+  RawConnection stalled_headers(port);
+  ASSERT_TRUE(stalled_headers.Send("GET /status HTTP/1.1\r\nHo"));
+  const auto headers_start = Clock::now();
+  EXPECT_EQ(stalled_headers.ReadResponse().rfind("HTTP/1.1 400", 0), 0u);
+  EXPECT_GE(SecondsSince(headers_start), 0.25);
+  EXPECT_LT(SecondsSince(headers_start), 2.0);
+  RawConnection stalled_line(port);
+  ASSERT_TRUE(stalled_line.Send("GET /sta"));
+  const auto line_start = Clock::now();
+  EXPECT_TRUE(stalled_line.ClosedByServer());
+  EXPECT_GE(SecondsSince(line_start), 0.25);
+  EXPECT_LT(SecondsSince(line_start), 2.0);
+}
+
+TEST_F(HttpServerTest, StopReturnsPromptlyWithIdleConnectionsOpen) {
+  const int port = Start(EventLoopOptions(/*threads=*/8));
+  std::vector<std::unique_ptr<RawConnection>> connections;
+  for (int i = 0; i < 50; ++i) {
+    connections.push_back(std::make_unique<RawConnection>(port));
+    // Half have served a request and wait for the next; half never sent anything.
+    if (i % 2 == 0) {
+      ASSERT_TRUE(connections.back()->Send(Get("/status")));
+      ASSERT_EQ(connections.back()->ReadResponse().rfind("HTTP/1.1 200", 0), 0u);
+    }
+  }
+  const auto start = Clock::now();
+  server_->Stop();
+  EXPECT_LT(SecondsSince(start), 1.0);
+  for (auto& connection : connections) EXPECT_TRUE(connection->ClosedByServer());
+  // The server starts again on a new port after a stop.
+  const int again = server_->Bind("127.0.0.1", 0);
+  server_->Start();
+  RawConnection connection(again);
+  ASSERT_TRUE(connection.Send(Get("/status")));
+  EXPECT_EQ(connection.ReadResponse().rfind("HTTP/1.1 200", 0), 0u);
+}
+
+}  // namespace
+}  // namespace omnirig::server
