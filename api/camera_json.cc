@@ -2,6 +2,7 @@
 
 #include <string>
 
+#include "engine/calib/calibrate.h"
 #include "engine/util/check.h"
 
 namespace omnirig::api {
@@ -106,6 +107,22 @@ nlohmann::json RigToJson(const StereoRig& rig) {
   return {{"cam0_from_cam1", PoseToJson(rig.cam0_from_cam1)},
           {"baseline_m", rig.cam0_from_cam1.translation.norm()},
           {"cameras", {{"cam0", CameraToJson(rig.cam0)}, {"cam1", CameraToJson(rig.cam1)}}}};
+}
+
+std::array<bool, UnifiedIntrinsics::kNumParams> FixedIntrinsicsFromJson(const nlohmann::json& names,
+                                                                        const std::string& field) {
+  OMNIRIG_CHECK(names.is_array(), "field '" << field << "' must be an array of names");
+  CalibrationOptions calibration;
+  calibration.fixed.fill(false);
+  for (const nlohmann::json& name : names) {
+    OMNIRIG_CHECK(name.is_string(), "field '" << field << "' must hold names, got " << name.dump());
+    try {
+      calibration.SetFixed(name.get<std::string>(), true);
+    } catch (const InvalidArgument& e) {
+      throw InvalidArgument("field '" + field + "': " + e.what());
+    }
+  }
+  return calibration.fixed;
 }
 
 }  // namespace omnirig::api

@@ -6,6 +6,9 @@
 //   pose:   {"rotation_wxyz": [w, x, y, z], "translation_m": [x, y, z]}
 //   rig:    {"cam0_from_cam1": pose, "cameras": {"cam0": camera, "cam1": camera}, ...}
 
+#include <array>
+#include <string>
+
 #include <nlohmann/json.hpp>
 
 #include "engine/geometry/camera_model.h"
@@ -26,5 +29,11 @@ Rigid3d PoseFromJson(const nlohmann::json& json);
 StereoRig RigFromJson(const nlohmann::json& json);
 // Writes cam0_from_cam1, baseline_m and cameras; callers add the rest of their result.
 nlohmann::json RigToJson(const StereoRig& rig);
+
+// A list of intrinsic names (UnifiedIntrinsics::kNames, or the calibration's groups "skew",
+// "tangential", "principal_point", "gamma") as a fixed set, nothing else fixed. `field` names
+// the JSON field in error messages (e.g. "params.fixed_intrinsics").
+std::array<bool, UnifiedIntrinsics::kNumParams> FixedIntrinsicsFromJson(const nlohmann::json& names,
+                                                                        const std::string& field);
 
 }  // namespace omnirig::api

@@ -56,20 +56,6 @@ std::string JobIdField(const json& calibrations, const std::string& camera) {
   return id.get<std::string>();
 }
 
-// A list of intrinsic names (UnifiedIntrinsics::kNames, or the groups "skew", "tangential",
-// "principal_point", "gamma") as the fixed set, replacing the default (skew and k5).
-std::array<bool, UnifiedIntrinsics::kNumParams> FixedIntrinsicsFromJson(const json& names) {
-  OMNIRIG_CHECK(names.is_array(), "field 'params.fixed_intrinsics' must be an array of names");
-  CalibrationOptions calibration;
-  calibration.fixed.fill(false);
-  for (const json& name : names) {
-    OMNIRIG_CHECK(name.is_string(),
-                  "field 'params.fixed_intrinsics' must hold names, got " << name.dump());
-    calibration.SetFixed(name.get<std::string>(), true);
-  }
-  return calibration.fixed;
-}
-
 // params.intrinsics_model, or its default: "auto" when the job calibrates the cameras itself
 // and the intrinsics options were not given, "" (those options as given) otherwise.
 std::string IntrinsicsModelField(const json& params, bool self_calibrating) {
@@ -123,7 +109,8 @@ RelativePoseParams RelativePoseParamsFromJson(const json& params) {
     out.options.refine_intrinsics = BoolField(params, "refine_intrinsics");
   }
   if (params.contains("fixed_intrinsics")) {
-    out.options.fixed_intrinsics = FixedIntrinsicsFromJson(params["fixed_intrinsics"]);
+    out.options.fixed_intrinsics =
+        FixedIntrinsicsFromJson(params["fixed_intrinsics"], "params.fixed_intrinsics");
   }
   out.base_fixed_intrinsics = out.options.fixed_intrinsics;
   out.intrinsics_model = IntrinsicsModelField(params, !out.cam0_calibration_job.has_value());

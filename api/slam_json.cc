@@ -88,24 +88,6 @@ json BundleAdjustmentToJson(const slam::BundleAdjustmentReport& r) {
           {"termination", r.termination},           {"time_s", r.time_s}};
 }
 
-// Names (UnifiedIntrinsics::kNames or the calibration's groups "skew", "tangential",
-// "principal_point", "gamma") as the fixed set of the calibration refinement.
-std::array<bool, UnifiedIntrinsics::kNumParams> FixedIntrinsicsFromJson(const json& names) {
-  OMNIRIG_CHECK(names.is_array(), "field 'options.fixed_intrinsics' must be an array of names");
-  CalibrationOptions calibration;
-  calibration.fixed.fill(false);
-  for (const json& name : names) {
-    OMNIRIG_CHECK(name.is_string(),
-                  "field 'options.fixed_intrinsics' must hold names, got " << name.dump());
-    try {
-      calibration.SetFixed(name.get<std::string>(), true);
-    } catch (const InvalidArgument& e) {
-      throw InvalidArgument(std::string("field 'options.fixed_intrinsics': ") + e.what());
-    }
-  }
-  return calibration.fixed;
-}
-
 json CalibrationRefinementToJson(const slam::CalibrationRefinementReport& r,
                                  const slam::BundleAdjustmentReport* global) {
   json change = json::object();
@@ -284,7 +266,8 @@ slam::SlamOptions SlamOptionsFromJson(const json& object) {
     o.calibration_refinement.refine = CalibrationRefinementFromJson(object["refine_calibration"]);
   }
   if (has("fixed_intrinsics")) {
-    o.calibration_refinement.fixed_intrinsics = FixedIntrinsicsFromJson(object["fixed_intrinsics"]);
+    o.calibration_refinement.fixed_intrinsics =
+        FixedIntrinsicsFromJson(object["fixed_intrinsics"], "options.fixed_intrinsics");
   }
   if (has("min_features")) o.min_features = Integer(object, "min_features");
   if (has("min_stereo_points")) o.min_stereo_points = Integer(object, "min_stereo_points");
