@@ -52,6 +52,17 @@ void DeclareOptions(cli::ArgParser& parser) {
                    "seconds SIGTERM waits for running jobs before re-queuing them");
 }
 
+// The value of option `name`, which must be `a` or `b`.
+std::string OneOf(const cli::ArgParser& parser, const std::string& name, const std::string& a,
+                  const std::string& b) {
+  const std::string value = parser.Get(name);
+  if (value != a && value != b) {
+    throw omnirig::InvalidArgument("--" + name + " must be '" + a + "' or '" + b + "', got '" +
+                                   value + "'");
+  }
+  return value;
+}
+
 int64_t Megabytes(const cli::ArgParser& parser, const std::string& name) {
   return static_cast<int64_t>(parser.GetDouble(name) * 1024 * 1024);
 }
@@ -71,19 +82,9 @@ ServiceOptions ToOptions(const cli::ArgParser& parser) {
                                 ? DefaultThreadsPerJob(options.num_workers)
                                 : parser.GetInt("threads-per-job");
   options.http_threads = parser.GetInt("http-threads");
-  const std::string http_loop = parser.Get("http-loop");
-  if (http_loop != "epoll" && http_loop != "threads") {
-    throw omnirig::InvalidArgument("--http-loop must be 'epoll' or 'threads', got '" + http_loop +
-                                   "'");
-  }
-  options.http_event_loop = http_loop == "epoll";
+  options.http_event_loop = OneOf(parser, "http-loop", "epoll", "threads") == "epoll";
   options.worker_nice = parser.GetInt("worker-nice");
-  const std::string worker_sched = parser.Get("worker-sched");
-  if (worker_sched != "idle" && worker_sched != "normal") {
-    throw omnirig::InvalidArgument("--worker-sched must be 'idle' or 'normal', got '" +
-                                worker_sched + "'");
-  }
-  options.worker_idle_scheduling = worker_sched == "idle";
+  options.worker_idle_scheduling = OneOf(parser, "worker-sched", "idle", "normal") == "idle";
   options.max_attempts = parser.GetInt("max-attempts");
   options.max_file_bytes = Megabytes(parser, "max-file-mb");
   options.max_dataset_bytes = Megabytes(parser, "max-dataset-mb");
