@@ -1,12 +1,13 @@
 #!/usr/bin/env bash
 # Load benchmark of the omnirig service (issue 6 targets), on this machine:
 #   1. job status polling with wrk: 200 connections offering ~2,000 requests/s for 20 s while
-#      the worker runs real calibration jobs on real images (CPU busy); p50/p99 latency;
+#      the worker runs real calibration jobs on real images (CPU busy); p50/p99 latency, with
+#      the clients polling independently and then in lockstep (see bench/load_poll.lua);
 #   2. upload throughput: a 200 MB dataset (50 PNG files of 4 MB) PUT over loopback;
 #   3. SIGKILL-and-restart cycles during a batch of jobs (tests/server_crash with 20 cycles).
 # Usage: bench/load_bench.sh [BUILD_DIR]   (default: build). Needs wrk, curl, python3.
 # LOAD_BENCH_PARTS (default "poll upload crash") picks the parts to run.
-# LOAD_BENCH_CONNECTIONS (default 200) and LOAD_BENCH_DELAY_MS (default 100, the pause of each
+# LOAD_BENCH_CONNECTIONS (default 200) and LOAD_BENCH_DELAY_MS (default 99, the mean pause of each
 # connection between polls) set the polling load; LOAD_BENCH_SERVE_ARGS adds `omnirig serve`
 # flags (e.g. "--http-loop threads" for the thread-per-connection loop).
 set -euo pipefail
@@ -77,20 +78,32 @@ fi
 POLL_JOB=${JOB:-missing}
 echo "polling job $POLL_JOB with workers busy: $BUSY"
 CONNECTIONS=${LOAD_BENCH_CONNECTIONS:-200}
-DELAY=${LOAD_BENCH_DELAY_MS:-100}
+DELAY=${LOAD_BENCH_DELAY_MS:-99}
 echo "poll_connections $CONNECTIONS"
 echo "poll_delay_ms $DELAY"
-CPU_START=$(server_cpu_s)
-HTTP_CPU_START=$(http_cpu_s)
-DELAY_MS=$DELAY wrk -t2 -c"$CONNECTIONS" -d20s -s "$ROOT/bench/load_poll.lua" "$URL/api/v1/jobs/$POLL_JOB" \
-  | tee "$WORK/wrk.txt" | grep -E '^poll_|Requests/sec|Socket errors|Non-2xx'
-# Server CPU over the run includes the busy worker; the idle-server cost per poll is measured
-# separately below, with the queue empty.
-echo "poll_server_cpu_s $(python3 -c "print(f'{$(server_cpu_s) - $CPU_START:.2f}')")"
-REQUESTS=$(sed -n 's/^poll_requests //p' "$WORK/wrk.txt")
-python3 -c "print(f'poll_http_cpu_us_per_request {($(http_cpu_s) - $HTTP_CPU_START) * 1e6 / max(1, $REQUESTS):.0f}')"
+# Two readings of "200 clients at 2,000 requests/s" (bench/load_poll.lua): clients that poll
+# independently (Poisson arrivals, the target's reading), then the same clients in lockstep
+# (all of them at once every DELAY_MS, the worst case for the same average rate). Keys of the
+# second reading start with poll_lockstep_.
+poll_run() {  # ARRIVALS PREFIX
+  local cpu_start http_cpu_start requests
+  cpu_start=$(server_cpu_s)
+  http_cpu_start=$(http_cpu_s)
+  echo "${2}arrivals $1"
+  ARRIVALS=$1 DELAY_MS=$DELAY wrk -t2 -c"$CONNECTIONS" -d20s -s "$ROOT/bench/load_poll.lua" \
+      "$URL/api/v1/jobs/$POLL_JOB" > "$WORK/wrk.txt"
+  grep -E '^poll_' "$WORK/wrk.txt" | sed "s/^poll_/$2/"
+  grep -E 'Socket errors|Non-2xx' "$WORK/wrk.txt" || true
+  # Server CPU over the run includes the busy worker; the HTTP threads' own share per request
+  # comes from the scheduler's exact run times of the threads at niceness 0.
+  echo "${2}server_cpu_s $(python3 -c "print(f'{$(server_cpu_s) - $cpu_start:.2f}')")"
+  requests=$(sed -n 's/^poll_requests //p' "$WORK/wrk.txt")
+  python3 -c "print(f'${2}http_cpu_us_per_request {($(http_cpu_s) - $http_cpu_start) * 1e6 / max(1, $requests):.0f}')"
+  echo "${2}load_average $(cut -d' ' -f1-3 /proc/loadavg)"
+}
+poll_run independent poll_
+poll_run lockstep poll_lockstep_
 echo "poll_niced_threads $(cat /proc/"$SERVER_PID"/task/*/stat | sed 's/^.*) //' | awk '$17 > 0' | wc -l)"
-echo "poll_load_average $(cut -d' ' -f1-3 /proc/loadavg)"
 echo "busy workers after polling: $(curl -sf "$URL/api/v1/health" | json_field busy_workers)"
 # The upload is measured with the workers idle: cancel what is left of the batch.
 for job in $(curl -sf "$URL/api/v1/jobs?limit=10000" |
