@@ -7,6 +7,7 @@
 #include <poll.h>
 #include <sys/epoll.h>
 #include <sys/eventfd.h>
+#include <sys/resource.h>
 #include <sys/socket.h>
 #include <unistd.h>
 
@@ -32,6 +33,11 @@ namespace {
 // request counter (httplib calls the logger on the same thread after the handler).
 thread_local std::string current_route;
 thread_local std::chrono::steady_clock::time_point request_start;
+// Set by Dispatch when a streaming handler answered without reading its whole body: the rest
+// of the body is still on the connection and would be parsed as the next request (a 400 for
+// each line, answers out of step with the client's requests), so the connection closes after
+// this response instead (see LingerBeforeClose).
+thread_local bool close_after_response = false;
 
 // "/api/v1/jobs/{id}" -> "^/api/v1/jobs/([^/]+)$"; names collects the parameter names.
 std::string PatternToRegex(const std::string& pattern, std::vector<std::string>& names) {
@@ -227,6 +233,163 @@ class ConnectionStream : public httplib::Stream {
   size_t end_ = 0;
 };
 
+// Before closing a connection whose client may still be sending (a body the handler did not
+// read): shuts the write side (the response is out) and discards what arrives until the client
+// closes, for at most `linger_ms` (the read timeout: no longer than a stalled upload may hold
+// the serving thread anyway). Closing at once with unread bytes would send a reset, which may
+// discard the response before the client reads it (RFC 9112, 9.6).
+void LingerBeforeClose(int sock, int linger_ms) {
+  ::shutdown(sock, SHUT_WR);
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(linger_ms);
+  char scratch[64 * 1024];
+  while (true) {
+    const auto left =
+        std::chrono::ceil<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
+    if (left.count() <= 0) return;
+    pollfd fd{sock, POLLIN, 0};
+    const int ready = ::poll(&fd, 1, static_cast<int>(left.count()));
+    if (ready < 0 && errno == EINTR) continue;
+    if (ready <= 0) return;
+    const ssize_t got = ::recv(sock, scratch, sizeof(scratch), MSG_DONTWAIT);
+    if (got == 0 || (got < 0 && errno != EINTR && errno != EAGAIN && errno != EWOULDBLOCK)) {
+      return;
+    }
+  }
+}
+
+// Answers the connections beyond HttpServerOptions::max_connections: a 503 with the JSON error
+// and Retry-After, written at once (a fresh socket's send buffer takes it without waiting), then
+// the write side shut and the request drained until the client closes, so that the client reads
+// the 503 rather than a reset (closing a socket with unread request bytes sends RST, which may
+// discard the response before the client reads it: RFC 9112, 9.6). One thread waits on all of
+// them; each lingers at most kLinger, and beyond kMaxLingering at once a socket is closed right
+// after its 503 (a flood of connections then costs no more descriptors).
+class ConnectionRefuser {
+ public:
+  explicit ConnectionRefuser(int max_connections)
+      : response_(Response(max_connections)), wake_fd_(::eventfd(0, EFD_CLOEXEC | EFD_NONBLOCK)) {
+    if (wake_fd_ < 0) throw std::runtime_error("cannot create an eventfd");
+    thread_ = std::thread([this] { Run(); });
+  }
+  ~ConnectionRefuser() {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      stopping_ = true;
+    }
+    Wake();
+    thread_.join();
+    for (const Lingering& lingering : lingering_) ::close(lingering.sock);
+    ::close(wake_fd_);
+  }
+  ConnectionRefuser(const ConnectionRefuser&) = delete;
+  ConnectionRefuser& operator=(const ConnectionRefuser&) = delete;
+
+  // Takes ownership of an accepted socket.
+  void Refuse(int sock) {
+    (void)!::send(sock, response_.data(), response_.size(), MSG_NOSIGNAL | MSG_DONTWAIT);
+    ::shutdown(sock, SHUT_WR);
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (!stopping_ && lingering_.size() < kMaxLingering) {
+        lingering_.push_back({sock, std::chrono::steady_clock::now() + kLinger});
+        Wake();
+        return;
+      }
+    }
+    ::close(sock);
+  }
+
+ private:
+  static constexpr size_t kMaxLingering = 64;
+  static constexpr std::chrono::milliseconds kLinger{1000};
+  static constexpr int kRetryAfterS = 1;
+
+  struct Lingering {
+    int sock;
+    std::chrono::steady_clock::time_point deadline;
+  };
+
+  static std::string Response(int max_connections) {
+    const std::string body =
+        api::ErrorJson("unavailable",
+                       "too many open connections (" + std::to_string(max_connections) + ")",
+                       {{"max_connections", max_connections}, {"retry_after_s", kRetryAfterS}})
+            .dump();
+    return "HTTP/1.1 503 Service Unavailable\r\nContent-Type: application/json\r\n"
+           "Content-Length: " +
+           std::to_string(body.size()) + "\r\nRetry-After: " + std::to_string(kRetryAfterS) +
+           "\r\nConnection: close\r\n\r\n" + body;
+  }
+
+  void Wake() {
+    const uint64_t one = 1;
+    (void)!::write(wake_fd_, &one, sizeof(one));
+  }
+
+  // True once the client has closed (or reset) its side: everything it sent has been read.
+  static bool DrainedToEnd(int sock) {
+    char scratch[4096];
+    while (true) {
+      const ssize_t got = ::recv(sock, scratch, sizeof(scratch), MSG_DONTWAIT);
+      if (got > 0) continue;
+      if (got < 0 && errno == EINTR) continue;
+      return got == 0 || (errno != EAGAIN && errno != EWOULDBLOCK);
+    }
+  }
+
+  // For poll(): -1 (no deadline) or the time to the earliest one. Called with the lock held.
+  int MillisecondsToNextDeadline() const {
+    if (lingering_.empty()) return -1;
+    auto next = lingering_.front().deadline;
+    for (const Lingering& lingering : lingering_) next = std::min(next, lingering.deadline);
+    const auto left =
+        std::chrono::ceil<std::chrono::milliseconds>(next - std::chrono::steady_clock::now());
+    return static_cast<int>(std::clamp<int64_t>(left.count(), 0, kLinger.count()));
+  }
+
+  void Run() {
+    std::vector<pollfd> fds;
+    std::unique_lock<std::mutex> lock(mutex_);
+    while (!stopping_) {
+      // Refuse() only appends and only this thread removes: the first fds.size() - 1 entries
+      // stay the ones polled while the lock is released.
+      fds.assign(1, pollfd{wake_fd_, POLLIN, 0});
+      for (const Lingering& lingering : lingering_) {
+        fds.push_back(pollfd{lingering.sock, POLLIN, 0});
+      }
+      const int timeout_ms = MillisecondsToNextDeadline();
+      lock.unlock();
+      const int ready = ::poll(fds.data(), fds.size(), timeout_ms);
+      if (ready > 0 && (fds[0].revents & POLLIN)) {
+        uint64_t value;
+        (void)!::read(wake_fd_, &value, sizeof(value));
+      }
+      lock.lock();
+      const auto now = std::chrono::steady_clock::now();
+      std::vector<bool> done(lingering_.size(), false);
+      for (size_t i = 0; i + 1 < fds.size(); ++i) {
+        const bool closed = ready > 0 && fds[i + 1].revents != 0 && DrainedToEnd(fds[i + 1].fd);
+        if (closed || now >= lingering_[i].deadline) {
+          ::close(lingering_[i].sock);
+          done[i] = true;
+        }
+      }
+      size_t kept = 0;
+      for (size_t i = 0; i < lingering_.size(); ++i) {
+        if (!done[i]) lingering_[kept++] = lingering_[i];
+      }
+      lingering_.resize(kept);
+    }
+  }
+
+  const std::string response_;
+  const int wake_fd_;
+  std::mutex mutex_;
+  std::vector<Lingering> lingering_;
+  bool stopping_ = false;
+  std::thread thread_;
+};
+
 // Serves every open connection from one fixed pool of threads (leader/follower): the
 // connections wait in one epoll set, each armed with EPOLLONESHOT, and the pool's threads block
 // in epoll_wait on it. The thread that gets a ready connection owns it alone (one-shot: no
@@ -243,8 +406,11 @@ class ConnectionLoop {
   // Serves the requests that are ready (or buffered) on a connection; false closes it.
   using ServeFn = std::function<bool(ConnectionStream&)>;
 
-  ConnectionLoop(int num_threads, int keep_alive_timeout_ms, int read_timeout_ms, ServeFn serve)
-      : keep_alive_(keep_alive_timeout_ms),
+  // max_connections: how many Add() takes at most (0: no cap).
+  ConnectionLoop(int num_threads, int max_connections, int keep_alive_timeout_ms,
+                 int read_timeout_ms, ServeFn serve)
+      : max_connections_(static_cast<size_t>(std::max(0, max_connections))),
+        keep_alive_(keep_alive_timeout_ms),
         read_timeout_ms_(read_timeout_ms),
         serve_(std::move(serve)),
         epoll_fd_(::epoll_create1(EPOLL_CLOEXEC)),
@@ -265,16 +431,23 @@ class ConnectionLoop {
     ::close(stop_fd_);
   }
 
-  // Takes ownership of an accepted socket.
-  void Add(int sock) {
+  // Takes ownership of an accepted socket, or returns false (the socket stays the caller's)
+  // when max_connections are open. Only the accepting thread adds, so the count checked here
+  // can only shrink before the connection is listed.
+  bool Add(int sock) {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (max_connections_ > 0 && connections_.size() >= max_connections_) return false;
+    }
     const int one = 1;
     ::setsockopt(sock, IPPROTO_TCP, TCP_NODELAY, &one, sizeof(one));
     auto connection = std::make_unique<Connection>(sock, read_timeout_ms_);
     std::lock_guard<std::mutex> lock(mutex_);
-    if (stopping_) return;  // closes the socket
+    if (stopping_) return true;  // closes the socket
     const uint64_t id = next_id_++;
-    if (!Arm(EPOLL_CTL_ADD, sock, id)) return;
+    if (!Arm(EPOLL_CTL_ADD, sock, id)) return true;
     connections_.emplace(id, std::move(connection));
+    return true;
   }
 
   // Wakes every thread, waits for requests in progress to end, closes all connections.
@@ -380,6 +553,7 @@ class ConnectionLoop {
     }
   }
 
+  const size_t max_connections_;
   const std::chrono::milliseconds keep_alive_;
   const int read_timeout_ms_;
   const ServeFn serve_;
@@ -400,6 +574,39 @@ class InlineTaskQueue : public httplib::TaskQueue {
  public:
   void enqueue(std::function<void()> fn) override { fn(); }
   void shutdown() override {}
+};
+
+// Set on the accepting thread while it runs the task of a connection beyond the cap.
+thread_local bool refusing_connection = false;
+
+// --http-loop threads: httplib's pool, with the connections handed to it (queued or served)
+// counted against max_connections. httplib's task for an accepted socket is an opaque closure
+// over process_and_close_socket(sock); beyond the cap it runs right here on the accepting
+// thread with `refusing_connection` set, and process_and_close_socket refuses the socket.
+class CappedThreadPool : public httplib::TaskQueue {
+ public:
+  CappedThreadPool(int num_threads, int max_connections)
+      : pool_(static_cast<size_t>(num_threads)), max_connections_(max_connections) {}
+  void enqueue(std::function<void()> fn) override {
+    // Only the accepting thread enqueues: the count can only shrink between check and add.
+    if (max_connections_ > 0 && open_ >= max_connections_) {
+      refusing_connection = true;
+      fn();
+      refusing_connection = false;
+      return;
+    }
+    ++open_;
+    pool_.enqueue([this, fn = std::move(fn)] {
+      fn();
+      --open_;
+    });
+  }
+  void shutdown() override { pool_.shutdown(); }
+
+ private:
+  httplib::ThreadPool pool_;
+  const int max_connections_;
+  std::atomic<int> open_{0};
 };
 
 // httplib 0.11 waits for a keep-alive connection's next request by polling it for 10 ms and
@@ -434,13 +641,24 @@ class KeepAliveServer : public httplib::Server {
   // Accepted sockets go to `loop` (owned by the caller, alive until listening ends) when set,
   // else each gets a thread of httplib's task queue until it closes.
   void SetConnectionLoop(ConnectionLoop* loop) { loop_ = loop; }
+  // Where connections beyond the cap go (owned by the caller, alive until listening ends), and
+  // what counts them.
+  void SetConnectionRefuser(ConnectionRefuser* refuser, std::function<void()> on_refused) {
+    refuser_ = refuser;
+    on_refused_ = std::move(on_refused);
+  }
   // The ConnectionLoop's ServeFn: every request ready on the connection, pipelined ones too.
   bool ServeReady(ConnectionStream& stream) {
     do {
       bool connection_closed = false;
+      close_after_response = false;
       const bool ok =
           process_request(stream, /*close_connection=*/stopping_, connection_closed, nullptr);
-      if (!stream.Flush() || !ok || connection_closed || stopping_) return false;
+      const bool flushed = stream.Flush();
+      if (flushed && close_after_response) LingerBeforeClose(stream.socket(), read_timeout_ms());
+      if (!flushed || !ok || connection_closed || close_after_response || stopping_) {
+        return false;
+      }
     } while (stream.has_buffered());
     return true;
   }
@@ -456,10 +674,11 @@ class KeepAliveServer : public httplib::Server {
 
  private:
   bool process_and_close_socket(int sock) override {
-    if (loop_ != nullptr) {
-      loop_->Add(sock);
-      return true;
+    if (refusing_connection || (loop_ != nullptr && !loop_->Add(sock))) {
+      Refuse(sock);
+      return false;
     }
+    if (loop_ != nullptr) return true;
     const int one = 1;
     ::setsockopt(sock, IPPROTO_TCP, TCP_NODELAY, &one, sizeof(one));
     // An idle keep-alive connection closes after keep_alive_timeout_ms_, a request whose bytes
@@ -468,9 +687,12 @@ class KeepAliveServer : public httplib::Server {
     bool ok = false;
     while (!stopping_ && WaitForRequest(stream)) {
       bool connection_closed = false;
+      close_after_response = false;
       ok = process_request(stream, /*close_connection=*/stopping_, connection_closed, nullptr);
-      ok = stream.Flush() && ok;
-      if (!ok || connection_closed) break;
+      const bool flushed = stream.Flush();
+      if (flushed && close_after_response) LingerBeforeClose(stream.socket(), read_timeout_ms());
+      ok = flushed && ok;
+      if (!ok || connection_closed || close_after_response) break;
     }
     ::shutdown(sock, SHUT_RDWR);
     ::close(sock);
@@ -496,9 +718,20 @@ class KeepAliveServer : public httplib::Server {
     return false;
   }
 
+  void Refuse(int sock) {
+    if (refuser_ == nullptr) {  // not reached: a cap comes with a refuser
+      ::close(sock);
+      return;
+    }
+    refuser_->Refuse(sock);
+    if (on_refused_) on_refused_();
+  }
+
   int stop_fd_;
   std::atomic<bool> stopping_{false};
   ConnectionLoop* loop_ = nullptr;
+  ConnectionRefuser* refuser_ = nullptr;
+  std::function<void()> on_refused_;
   int keep_alive_timeout_ms_ = 5000;
 };
 
@@ -532,18 +765,20 @@ struct HttpServer::Impl {
   RequestCounter counter;
   KeepAliveServer server;
   std::unique_ptr<ConnectionLoop> loop;  // with options.event_loop, between Start() and Stop()
+  std::unique_ptr<ConnectionRefuser> refuser;  // with max_connections, between Start() and Stop()
   std::thread thread;
   std::atomic<bool> listen_returned{false};
 
   void Dispatch(const RouteInfo& route, const httplib::Request& req, httplib::Response& res,
                 const httplib::ContentReader* reader);
   HttpRequest MakeRequest(const RouteInfo& route, const httplib::Request& req,
-                          const httplib::ContentReader* reader);
+                          const httplib::ContentReader* reader, bool& body_read);
   void Install();
 };
 
+// `body_read` becomes true once a streaming handler has read its body to the end.
 HttpRequest HttpServer::Impl::MakeRequest(const RouteInfo& route, const httplib::Request& req,
-                                          const httplib::ContentReader* reader) {
+                                          const httplib::ContentReader* reader, bool& body_read) {
   HttpRequest request;
   request.method = req.method;
   request.path = req.path;
@@ -555,16 +790,20 @@ HttpRequest HttpServer::Impl::MakeRequest(const RouteInfo& route, const httplib:
   request.header = [&req](const std::string& name) { return req.get_header_value(name); };
   if (reader) {
     request.is_multipart = req.is_multipart_form_data();
-    request.read_body = [reader](const std::function<bool(const char*, size_t)>& on_data) {
-      return (*reader)([&](const char* data, size_t size) { return on_data(data, size); });
+    request.read_body = [reader,
+                         &body_read](const std::function<bool(const char*, size_t)>& on_data) {
+      body_read = (*reader)([&](const char* data, size_t size) { return on_data(data, size); });
+      return body_read;
     };
-    request.read_multipart = [reader](const std::function<bool(const MultipartPart&)>& on_part,
-                                      const std::function<bool(const char*, size_t)>& on_data) {
-      return (*reader)(
+    request.read_multipart = [reader, &body_read](
+                                 const std::function<bool(const MultipartPart&)>& on_part,
+                                 const std::function<bool(const char*, size_t)>& on_data) {
+      body_read = (*reader)(
           [&](const httplib::MultipartFormData& part) {
             return on_part(MultipartPart{part.name, part.filename, part.content_type});
           },
           [&](const char* data, size_t size) { return on_data(data, size); });
+      return body_read;
     };
   }
   return request;
@@ -574,8 +813,9 @@ void HttpServer::Impl::Dispatch(const RouteInfo& route, const httplib::Request& 
                                 httplib::Response& res, const httplib::ContentReader* reader) {
   current_route = route.pattern;
   HttpResponse response;
+  bool body_read = false;
   try {
-    route.handler(MakeRequest(route, req, reader), response);
+    route.handler(MakeRequest(route, req, reader, body_read), response);
   } catch (const HttpError& e) {
     response.Json(e.status, api::ErrorJson(e.code, e.what(), e.details));
   } catch (const std::invalid_argument& e) {
@@ -584,6 +824,16 @@ void HttpServer::Impl::Dispatch(const RouteInfo& route, const httplib::Request& 
     response.Json(500, api::ErrorJson("internal", e.what()));
   } catch (...) {
     response.Json(500, api::ErrorJson("internal", "unknown error"));
+  }
+  const bool has_body =
+      req.get_header_value("Content-Length") != "0" || req.has_header("Transfer-Encoding");
+  if (reader != nullptr && !body_read && has_body) {
+    // See close_after_response. A "Connection: close" request header makes httplib say so in
+    // the response (the request is httplib's mutable local, as above).
+    close_after_response = true;
+    auto& headers = const_cast<httplib::Request&>(req).headers;
+    headers.erase("Connection");
+    headers.emplace("Connection", "close");
   }
   res.status = response.status;
   for (const auto& [name, value] : response.headers) res.set_header(name.c_str(), value);
@@ -602,10 +852,13 @@ void HttpServer::Impl::Dispatch(const RouteInfo& route, const httplib::Request& 
 
 void HttpServer::Impl::Install() {
   const int threads = options.num_threads;
+  const int max_connections = options.max_connections;
   if (options.event_loop) {
     server.new_task_queue = [] { return new InlineTaskQueue(); };
   } else {
-    server.new_task_queue = [threads] { return new httplib::ThreadPool(threads); };
+    server.new_task_queue = [threads, max_connections] {
+      return new CappedThreadPool(threads, max_connections);
+    };
   }
   server.SetTimeouts(options.keep_alive_timeout_ms, options.read_timeout_ms);
   server.set_payload_max_length(static_cast<size_t>(options.max_body_bytes));
@@ -711,10 +964,18 @@ void HttpServer::Start() {
   if (impl_->options.event_loop) {
     KeepAliveServer& server = impl_->server;
     impl_->loop = std::make_unique<ConnectionLoop>(
-        impl_->options.num_threads, server.keep_alive_timeout_ms(), server.read_timeout_ms(),
+        impl_->options.num_threads, impl_->options.max_connections, server.keep_alive_timeout_ms(),
+        server.read_timeout_ms(),
         [&server](ConnectionStream& stream) { return server.ServeReady(stream); });
   }
+  if (impl_->options.max_connections > 0) {
+    impl_->refuser = std::make_unique<ConnectionRefuser>(impl_->options.max_connections);
+  }
   impl_->server.SetConnectionLoop(impl_->loop.get());
+  Impl* impl = impl_.get();
+  impl_->server.SetConnectionRefuser(impl_->refuser.get(), [impl] {
+    if (impl->counter) impl->counter(kRefusedRoute, 503, 0.0);
+  });
   impl_->thread = std::thread([this] {
     impl_->server.listen_after_bind();
     impl_->listen_returned = true;
@@ -730,9 +991,29 @@ void HttpServer::Stop() {
   impl_->server.WakeIdleConnections();
   impl_->server.stop();
   if (impl_->thread.joinable()) impl_->thread.join();
-  // Listening has ended: no socket reaches the loop any more.
+  // Listening has ended: no socket reaches the loop or the refuser any more.
   impl_->server.SetConnectionLoop(nullptr);
+  impl_->server.SetConnectionRefuser(nullptr, nullptr);
   impl_->loop.reset();
+  impl_->refuser.reset();
+}
+
+int64_t RaiseOpenFileLimit() {
+  rlimit limit{};
+  if (::getrlimit(RLIMIT_NOFILE, &limit) != 0) return 1024;
+  if (limit.rlim_cur < limit.rlim_max) {
+    rlimit raised = limit;
+    raised.rlim_cur = limit.rlim_max;
+    if (::setrlimit(RLIMIT_NOFILE, &raised) == 0) limit = raised;
+  }
+  constexpr int64_t kLarge = int64_t{1} << 30;
+  if (limit.rlim_cur == RLIM_INFINITY) return kLarge;
+  return static_cast<int64_t>(std::min<rlim_t>(limit.rlim_cur, kLarge));
+}
+
+int DefaultMaxConnections(int64_t open_file_limit, int http_threads) {
+  const int64_t reserve = 256 + 2 * static_cast<int64_t>(std::max(0, http_threads));
+  return static_cast<int>(std::clamp<int64_t>(open_file_limit - reserve, 16, 4096));
 }
 
 }  // namespace omnirig::server

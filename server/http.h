@@ -74,8 +74,8 @@ using HttpHandler = std::function<void(const HttpRequest&, HttpResponse&)>;
 
 struct HttpServerOptions {
   // Requests served at once. With `event_loop`, a fixed pool of this many threads serves all
-  // open connections; without, one thread per open keep-alive connection (so also the bound on
-  // open connections).
+  // open connections; without, one thread per open keep-alive connection (connections beyond
+  // the threads wait for one; max_connections bounds them all).
   int num_threads = 64;
   // true: idle keep-alive connections wait in one epoll set, not on a thread each (see http.cc).
   bool event_loop = true;
@@ -83,10 +83,25 @@ struct HttpServerOptions {
   int read_timeout_ms = 5000;          // a request whose bytes stall this long is dropped
   int64_t max_body_bytes = 1LL << 30;  // larger bodies are refused (413) before reading
   std::string token;                   // bearer token required under /api/ and /metrics when set
+  // Open connections at most (0: no cap), in both loops. A connection beyond it gets a 503
+  // (code "unavailable", Retry-After) at once and is closed; the open ones are unaffected. The
+  // file descriptors left over stay for SQLite, uploads and artifacts (DefaultMaxConnections).
+  int max_connections = 0;
 };
 
-// Request counters by (route pattern, status), rendered by Metrics.
+// Request counters by (route pattern, status), rendered by Metrics. A connection refused beyond
+// max_connections counts as route kRefusedRoute, status 503.
 using RequestCounter = std::function<void(const std::string& route, int status, double seconds)>;
+inline constexpr const char* kRefusedRoute = "refused";
+
+// Raises the soft limit on open files (RLIMIT_NOFILE) to the hard limit, as far as the kernel
+// allows; returns the soft limit in force afterwards.
+int64_t RaiseOpenFileLimit();
+// The default max_connections under a limit on open files: the limit less a reserve for what
+// else the process opens (SQLite's database, WAL and readers, an upload's temporary file or a
+// download per request in flight, artifacts written by jobs), at least 16 and at most 4096
+// (each open connection also holds a 64 KiB read buffer).
+int DefaultMaxConnections(int64_t open_file_limit, int http_threads);
 
 class HttpServer {
  public:

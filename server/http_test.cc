@@ -1,6 +1,7 @@
 // The HTTP layer's connection handling with the event loop (HttpServerOptions::event_loop): more
 // open keep-alive connections than threads, slow uploads beside status polls, the keep-alive
-// and read timeouts, and a prompt Stop() with idle connections open. Real sockets on loopback.
+// and read timeouts, a prompt Stop() with idle connections open, the cap on open connections
+// (both loops) and a body left unread. Real sockets on loopback.
 
 #include "server/http.h"
 
@@ -122,6 +123,11 @@ class HttpServerTest : public ::testing::Test {
           response.Json(201, {{"bytes", bytes}});
         },
         /*streaming=*/true);
+    // Refuses before reading the body (as a route does for a missing dataset).
+    server_->Route(
+        "PUT", "/refuse",
+        [](const HttpRequest&, HttpResponse&) { throw HttpError(404, "not_found", "refused"); },
+        /*streaming=*/true);
     const int port = server_->Bind("127.0.0.1", 0);
     server_->Start();
     return port;
@@ -138,10 +144,95 @@ class HttpServerTest : public ::testing::Test {
     return options;
   }
 
+  // With `cap` open keep-alive connections (each has been served, so the server holds them
+  // all), one more gets a prompt 503 with the JSON error and Retry-After and is closed; the open
+  // ones still work; once two of them close, a new connection is served again. Every 503 seen
+  // is counted as a refused connection.
+  void ExpectConnectionCap(int port, int cap) {
+    std::vector<std::unique_ptr<RawConnection>> open;
+    for (int i = 0; i < cap; ++i) {
+      open.push_back(std::make_unique<RawConnection>(port));
+      ASSERT_TRUE(open.back()->Send(Get("/status")));
+      ASSERT_EQ(open.back()->ReadResponse().rfind("HTTP/1.1 200", 0), 0u) << "connection " << i;
+    }
+    int refused = 0;
+    {
+      RawConnection extra(port);
+      ASSERT_TRUE(extra.connected());
+      const auto start = Clock::now();
+      ASSERT_TRUE(extra.Send(Get("/status")));
+      const std::string response = extra.ReadResponse();
+      EXPECT_LT(SecondsSince(start), 1.0);
+      ASSERT_EQ(response.rfind("HTTP/1.1 503", 0), 0u) << response;
+      ++refused;
+      EXPECT_NE(response.find("Retry-After: 1\r\n"), std::string::npos) << response;
+      EXPECT_NE(response.find("Connection: close\r\n"), std::string::npos) << response;
+      EXPECT_NE(response.find("{\"error\":{\"code\":\"unavailable\""), std::string::npos)
+          << response;
+      EXPECT_NE(response.find("too many open connections (" + std::to_string(cap) + ")"),
+                std::string::npos)
+          << response;
+      EXPECT_TRUE(extra.ClosedByServer());
+    }
+    for (auto& connection : open) {
+      ASSERT_TRUE(connection->Send(Get("/status")));
+      EXPECT_EQ(connection->ReadResponse().rfind("HTTP/1.1 200", 0), 0u);
+    }
+    open.resize(static_cast<size_t>(cap - 2));
+    // The server sees the two closes when their end-of-file events are served: poll.
+    bool served = false;
+    const auto start = Clock::now();
+    while (!served && SecondsSince(start) < 5) {
+      RawConnection fresh(port);
+      ASSERT_TRUE(fresh.Send(Get("/status")));
+      const std::string response = fresh.ReadResponse();
+      served = response.rfind("HTTP/1.1 200", 0) == 0;
+      if (!served) {
+        ASSERT_EQ(response.rfind("HTTP/1.1 503", 0), 0u) << response;
+        ++refused;
+      }
+    }
+    EXPECT_TRUE(served);
+    for (auto& connection : open) {
+      ASSERT_TRUE(connection->Send(Get("/status")));
+      EXPECT_EQ(connection->ReadResponse().rfind("HTTP/1.1 200", 0), 0u);
+    }
+    // The counter is called just after the 503 is written: poll briefly.
+    const auto count_start = Clock::now();
+    while (Count(std::string(kRefusedRoute) + " 503") < refused && SecondsSince(count_start) < 2) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    }
+    EXPECT_EQ(Count(std::string(kRefusedRoute) + " 503"), refused);
+  }
+
   std::unique_ptr<HttpServer> server_;
   std::mutex mutex_;
   std::map<std::string, int> counts_;
 };
+
+TEST(DefaultMaxConnectionsTest, LeavesAReserveOfDescriptors) {
+  // 256 + 2 per HTTP thread stay for SQLite, uploads, downloads and artifacts.
+  EXPECT_EQ(DefaultMaxConnections(1024, 128), 1024 - 256 - 256);
+  EXPECT_EQ(DefaultMaxConnections(4096, 16), 4096 - 256 - 32);
+  EXPECT_EQ(DefaultMaxConnections(1 << 20, 128), 4096);  // memory: 64 KiB buffer each
+  EXPECT_EQ(DefaultMaxConnections(300, 128), 16);
+  // The soft limit is raised to the hard one (when the kernel allows, at least not lowered).
+  EXPECT_GE(RaiseOpenFileLimit(), 64);
+}
+
+TEST_F(HttpServerTest, EventLoopRefusesConnectionsBeyondTheCap) {
+  HttpServerOptions options = EventLoopOptions(/*threads=*/2);
+  options.max_connections = 4;
+  ExpectConnectionCap(Start(options), options.max_connections);
+}
+
+TEST_F(HttpServerTest, ThreadsLoopRefusesConnectionsBeyondTheCap) {
+  HttpServerOptions options;
+  options.event_loop = false;
+  options.num_threads = 8;  // more than the cap: every open connection has its thread
+  options.max_connections = 4;
+  ExpectConnectionCap(Start(options), options.max_connections);
+}
 
 TEST_F(HttpServerTest, ServesManyMoreKeepAliveConnectionsThanThreads) {
   const int port = Start(EventLoopOptions(/*threads=*/4));
@@ -174,6 +265,27 @@ TEST_F(HttpServerTest, ServesManyMoreKeepAliveConnectionsThanThreads) {
   }
   EXPECT_EQ(Count("GET /status 200"), expected);
   EXPECT_EQ(Count("unmatched 404"), 1);
+}
+
+TEST_F(HttpServerTest, ClosesTheConnectionAfterABodyTheHandlerDidNotRead) {
+  const int port = Start(EventLoopOptions(/*threads=*/2));
+  // The unread body and a request pipelined after it: the body's bytes must not be parsed as
+  // requests (a 400 each), so the answer says "Connection: close" and the connection ends.
+  RawConnection connection(port);
+  const std::string body(100000, 'x');
+  ASSERT_TRUE(connection.Send("PUT /refuse HTTP/1.1\r\nHost: test\r\nContent-Length: " +
+                              std::to_string(body.size()) + "\r\n\r\n" + body + Get("/status")));
+  const std::string response = connection.ReadResponse();
+  EXPECT_EQ(response.rfind("HTTP/1.1 404", 0), 0u) << response;
+  EXPECT_NE(response.find("Connection: close\r\n"), std::string::npos) << response;
+  EXPECT_TRUE(connection.ClosedByServer());
+  EXPECT_EQ(Count("unmatched 400"), 0);
+  // A body the handler read to the end keeps the connection.
+  RawConnection kept(port);
+  ASSERT_TRUE(kept.Send("PUT /upload HTTP/1.1\r\nHost: test\r\nContent-Length: 3\r\n\r\nabc" +
+                        Get("/status")));
+  EXPECT_EQ(kept.ReadResponse().rfind("HTTP/1.1 201", 0), 0u);
+  EXPECT_EQ(kept.ReadResponse().rfind("HTTP/1.1 200", 0), 0u);
 }
 
 TEST_F(HttpServerTest, PostWithoutContentLengthHasAnEmptyBody) {

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <sstream>
 
+#include "server/http.h"
+
 namespace omnirig::server {
 namespace {
 
@@ -83,6 +85,11 @@ std::string Metrics::Render(storage::JobStore& store, int busy_workers, int num_
     out << "omnirig_http_requests_total{route=\"" << Escape(key.first) << "\",status=\""
         << key.second << "\"} " << count << "\n";
   }
+  const auto refused = requests_.find({kRefusedRoute, 503});
+  out << "# HELP omnirig_http_connections_refused_total Connections refused with 503 beyond "
+      << "--max-connections.\n# TYPE omnirig_http_connections_refused_total counter\n"
+      << "omnirig_http_connections_refused_total "
+      << (refused == requests_.end() ? 0 : refused->second) << "\n";
   out << "# HELP omnirig_http_request_duration_seconds Time to handle a request.\n"
       << "# TYPE omnirig_http_request_duration_seconds histogram\n";
   for (const auto& [route, h] : request_durations_) {

@@ -16,7 +16,8 @@ namespace omnirig::server {
 class Metrics {
  public:
   Metrics();
-  // `route` is "METHOD /pattern" (or "static", "unmatched", "auth").
+  // `route` is "METHOD /pattern" (or "static", "unmatched", "auth", or kRefusedRoute for a
+  // connection refused beyond --max-connections, also rendered as its own counter).
   void CountRequest(const std::string& route, int status, double seconds);
   void ObserveJobDuration(const std::string& type, const std::string& state, double seconds);
   // The whole exposition text; `busy_workers` is the number of jobs running in this process.

@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cstdlib>
+#include <set>
 
 #include "api/service_json.h"
 #include "server/json_views.h"
@@ -53,8 +54,25 @@ void CheckRoom(ServiceState& state, const storage::DatasetRecord& dataset, int64
   }
 }
 
+[[noreturn]] void TooManyImages(const storage::DatasetRecord& dataset, int64_t limit,
+                                nlohmann::json details = nlohmann::json::object()) {
+  details["limit_images"] = limit;
+  throw HttpError(413, "payload_too_large",
+                  "the dataset already holds " + std::to_string(dataset.image_count) +
+                      " images, the most it may hold",
+                  details);
+}
+
+// The dataset as it is now, under files_mutex: 404 when it was deleted during the upload.
+storage::DatasetRecord CurrentDataset(ServiceState& state, const std::string& id) {
+  auto dataset = state.store->GetDataset(id);
+  if (!dataset) throw HttpError(404, "dataset_not_found", "dataset " + id + " was deleted");
+  return *dataset;
+}
+
 // One image on its way to disk: streamed into an atomic temporary file while the first bytes
-// are kept for the header check; committed (rename + record) only when everything passed.
+// are kept for the header check; sealed (fsynced under its temporary name) once it passed, and
+// put into place (rename) with its record only when everything passed.
 class ImageUpload {
  public:
   ImageUpload(ServiceState& state, const storage::DatasetRecord& dataset, std::string name)
@@ -75,7 +93,9 @@ class ImageUpload {
     writer_.Append(data, size);
   }
 
-  storage::ImageRecord Commit() {
+  // Checks the header (415 or 422 for what is not an image) and seals the file: written and
+  // fsynced under its temporary name, holding no descriptor. Returns the record it will have.
+  const storage::ImageRecord& Seal() {
     const storage::ImageHeader header = ProbeUpload();
     if (header.status == storage::ImageHeader::Status::kNotAnImage) {
       throw HttpError(415, "unsupported_media_type", name_ + ": " + header.problem,
@@ -84,17 +104,33 @@ class ImageUpload {
     if (header.status == storage::ImageHeader::Status::kCorrupt) {
       throw HttpError(422, "corrupt_image", name_ + ": " + header.problem, {{"name", name_}});
     }
-    std::lock_guard<std::mutex> lock(state_.files_mutex);
-    CheckCount();
-    if (!state_.store->GetDataset(dataset_.id)) {
-      throw HttpError(404, "dataset_not_found", "dataset " + dataset_.id + " was deleted");
-    }
-    const storage::FileDigest digest = writer_.Commit();
-    storage::ImageRecord image{name_,        digest.size,   digest.sha256,
-                               header.width, header.height, header.content_type};
-    state_.store->PutImage(dataset_.id, image);
-    return image;
+    const storage::FileDigest digest = writer_.Seal();
+    std::string().swap(head_);  // a batch holds many sealed uploads
+    record_ = storage::ImageRecord{name_,        digest.size,   digest.sha256,
+                                   header.width, header.height, header.content_type};
+    return record_;
   }
+  // Renames the sealed file into place; `sync_folder` false when the caller fsyncs the folder.
+  void Publish(bool sync_folder) { writer_.Commit(sync_folder); }
+
+  // PUT: seal, then under files_mutex check the dataset and its image limit, put the file into
+  // place and write its record.
+  storage::ImageRecord Commit() {
+    Seal();
+    std::lock_guard<std::mutex> lock(state_.files_mutex);
+    const storage::DatasetRecord current = CurrentDataset(state_, dataset_.id);
+    if (current.image_count >= state_.options.max_images_per_dataset &&
+        !state_.store->GetImage(dataset_.id, name_)) {
+      TooManyImages(current, state_.options.max_images_per_dataset);
+    }
+    Publish(/*sync_folder=*/true);
+    state_.store->PutImage(dataset_.id, record_);
+    return record_;
+  }
+
+  const std::string& name() const { return name_; }
+  const storage::ImageRecord& record() const { return record_; }
+  const std::filesystem::path& final_path() const { return writer_.final_path(); }
 
  private:
   // Images, and one kind of text file: a ground-truth trajectory in TUM format (NAME.tum) that a
@@ -117,21 +153,108 @@ class ImageUpload {
     return storage::ProbeImageHeader(head_);
   }
 
-  void CheckCount() {
-    const auto current = state_.store->GetDataset(dataset_.id);
-    if (current && current->image_count >= state_.options.max_images_per_dataset &&
-        !state_.store->GetImage(dataset_.id, name_)) {
-      TooLarge("the dataset already holds " + std::to_string(current->image_count) + " images",
-               state_.options.max_images_per_dataset);
-    }
-  }
-
   ServiceState& state_;
   storage::DatasetRecord dataset_;
   std::string name_;
   storage::AtomicFileWriter writer_;
   std::string head_;
+  storage::ImageRecord record_;  // set by Seal()
 };
+
+// The files of one multipart request: each sealed when its part ends, all committed together
+// by Commit(). Whatever is not committed is removed (temporary files) when the batch ends.
+class ImageBatch {
+ public:
+  ImageBatch(ServiceState& state, const storage::DatasetRecord& dataset)
+      : state_(state), dataset_(dataset) {}
+
+  // A part with a file name starts; the previous one ended whole.
+  void Begin(const std::string& file_name) {
+    End();
+    current_ = std::make_unique<ImageUpload>(state_, dataset_, file_name);
+  }
+  void Append(const char* data, size_t size) {
+    if (current_) current_->Append(data, size);
+  }
+  // The current part ended whole: sealed into the batch (or it throws and is dropped).
+  void End() {
+    if (!current_) return;
+    std::unique_ptr<ImageUpload> upload = std::move(current_);
+    upload->Seal();
+    sealed_.push_back(std::move(upload));
+  }
+  // The current part was cut short: dropped.
+  void Abandon() { current_.reset(); }
+
+  // Puts the sealed files into place, in order, as many as the dataset's image limit allows
+  // (the names of the rest go to `over_limit`), fsyncs each folder once and writes their
+  // records in one transaction. Returns the records stored.
+  std::vector<storage::ImageRecord> Commit(std::vector<std::string>& over_limit);
+
+ private:
+  // Drops from sealed_ what exceeds the image limit; returns the names without a record yet.
+  std::set<std::string> KeepWhatFits(std::vector<std::string>& over_limit);
+
+  ServiceState& state_;
+  storage::DatasetRecord dataset_;
+  std::unique_ptr<ImageUpload> current_;
+  std::vector<std::unique_ptr<ImageUpload>> sealed_;
+};
+
+std::set<std::string> ImageBatch::KeepWhatFits(std::vector<std::string>& over_limit) {
+  const storage::DatasetRecord current = CurrentDataset(state_, dataset_.id);
+  // A name stored before, or earlier in the batch, takes no new place in the dataset.
+  std::set<std::string> new_names;
+  int64_t count = current.image_count;
+  size_t fitting = 0;
+  for (; fitting < sealed_.size(); ++fitting) {
+    const std::string& name = sealed_[fitting]->name();
+    if (new_names.count(name) || state_.store->GetImage(dataset_.id, name)) continue;
+    if (count >= state_.options.max_images_per_dataset) break;
+    ++count;
+    new_names.insert(name);
+  }
+  for (size_t i = fitting; i < sealed_.size(); ++i) over_limit.push_back(sealed_[i]->name());
+  sealed_.resize(fitting);  // removes the temporary files of the rest
+  return new_names;
+}
+
+std::vector<storage::ImageRecord> ImageBatch::Commit(std::vector<std::string>& over_limit) {
+  std::vector<storage::ImageRecord> records;
+  if (sealed_.empty()) return records;
+  // Deletion of the dataset waits for this lock: the files and records land in a live dataset.
+  std::lock_guard<std::mutex> lock(state_.files_mutex);
+  const std::set<std::string> new_names = KeepWhatFits(over_limit);
+  size_t published = 0;
+  try {
+    std::set<std::filesystem::path> folders;
+    for (; published < sealed_.size(); ++published) {
+      sealed_[published]->Publish(/*sync_folder=*/false);
+      folders.insert(sealed_[published]->final_path().parent_path());
+      records.push_back(sealed_[published]->record());
+    }
+    for (const auto& folder : folders) storage::FsyncPath(folder);
+    state_.store->PutImages(dataset_.id, records);
+  } catch (...) {
+    // No record may describe another file than its own: the new files go, and the records of
+    // the files this batch replaced go with them (the client uploads those again).
+    for (size_t i = 0; i < published; ++i) {
+      const std::string& name = sealed_[i]->name();
+      std::error_code ignored;
+      if (new_names.count(name)) {
+        std::filesystem::remove(sealed_[i]->final_path(), ignored);
+      } else {
+        try {
+          state_.store->DeleteImage(dataset_.id, name);
+        } catch (const std::exception&) {
+          // The start-up consistency check drops a record whose file has another size.
+        }
+      }
+    }
+    throw;
+  }
+  return records;
+}
 
 void PutImage(ServiceState& state, const HttpRequest& request, HttpResponse& response) {
   const storage::DatasetRecord dataset = RequireDataset(state, request.Param("id"));
@@ -160,6 +283,32 @@ void PutImage(ServiceState& state, const HttpRequest& request, HttpResponse& res
   response.Json(previous ? 200 : 201, ImageJson(image));
 }
 
+// Rethrows the failure of a multipart upload as an HttpError whose details name the files
+// that were stored all the same.
+[[noreturn]] void RethrowWithStored(const std::exception_ptr& failure,
+                                    const nlohmann::json& stored_names) {
+  try {
+    std::rethrow_exception(failure);
+  } catch (HttpError& e) {
+    e.details["stored"] = stored_names;
+    throw;
+  } catch (const std::exception& e) {
+    throw HttpError(500, "internal", e.what(), {{"stored", stored_names}});
+  }
+}
+
+// POST .../images, multipart/form-data, one image per part (the filename is the name). Each
+// part streams to a temporary file, sealed (fsynced) when the part ends whole; then all the
+// request's files are committed together: renamed into place, each folder fsynced once, and
+// their records written in one transaction (JobStore::PutImages). A file and its record are
+// never stored one without the other. A request that fails half-way keeps what it completed,
+// as PUTs one by one would (and as this route did when it committed file by file): the files
+// whose parts ended whole and passed their checks before the failure are stored, the failed
+// part and everything after it are not, and the error's details name the stored files
+// ("stored"), so that the client sends the rest, as it resumes from the dataset's listing. The
+// failures: a bad name (400), not an image (415, 422), a file too large (413), the image limit
+// (413 with "over_limit": the files beyond it), a body that ends early (400 "incomplete_body"; a
+// dropped connection hears nothing, its listing shows what was stored).
 void PostImages(ServiceState& state, const HttpRequest& request, HttpResponse& response) {
   const storage::DatasetRecord dataset = RequireDataset(state, request.Param("id"));
   if (!request.is_multipart) {
@@ -168,37 +317,48 @@ void PostImages(ServiceState& state, const HttpRequest& request, HttpResponse& r
                     "one raw image");
   }
   CheckRoom(state, dataset, DeclaredLength(request).value_or(0));
-  std::unique_ptr<ImageUpload> upload;
+  ImageBatch batch(state, dataset);
   std::exception_ptr failure;
-  nlohmann::json stored = nlohmann::json::array();
-  const auto finish = [&] {
-    if (upload) stored.push_back(ImageJson(upload->Commit()));
-    upload.reset();
+  const auto guarded = [&failure](const auto& step) {
+    try {
+      step();
+      return true;
+    } catch (...) {
+      failure = std::current_exception();
+      return false;
+    }
   };
-  request.read_multipart(
+  const bool whole = request.read_multipart(
       [&](const MultipartPart& part) {
-        try {
-          finish();
-          if (part.filename.empty()) return true;  // a plain form field: ignored
-          upload = std::make_unique<ImageUpload>(state, dataset, part.filename);
-          return true;
-        } catch (...) {
-          failure = std::current_exception();
-          return false;
-        }
+        return guarded([&] {
+          batch.End();
+          if (!part.filename.empty()) batch.Begin(part.filename);  // else a form field: ignored
+        });
       },
-      [&](const char* data, size_t size) {
-        try {
-          if (upload) upload->Append(data, size);
-          return true;
-        } catch (...) {
-          failure = std::current_exception();
-          return false;
-        }
-      });
-  if (failure) std::rethrow_exception(failure);
-  finish();
-  response.Json(201, {{"images", stored}});
+      [&](const char* data, size_t size) { return guarded([&] { batch.Append(data, size); }); });
+  if (whole && !failure) {
+    guarded([&] { batch.End(); });
+  } else {
+    batch.Abandon();
+  }
+  std::vector<std::string> over_limit;
+  const std::vector<storage::ImageRecord> stored = batch.Commit(over_limit);
+  nlohmann::json stored_names = nlohmann::json::array();
+  nlohmann::json images = nlohmann::json::array();
+  for (const auto& image : stored) {
+    stored_names.push_back(image.name);
+    images.push_back(ImageJson(image));
+  }
+  if (failure) RethrowWithStored(failure, stored_names);
+  if (!whole) {
+    throw HttpError(400, "incomplete_body", "the multipart body ended before its last boundary",
+                    {{"stored", stored_names}});
+  }
+  if (!over_limit.empty()) {
+    TooManyImages(CurrentDataset(state, dataset.id), state.options.max_images_per_dataset,
+                  {{"stored", stored_names}, {"over_limit", over_limit}});
+  }
+  response.Json(201, {{"images", images}});
 }
 
 void GetImage(ServiceState& state, const HttpRequest& request, HttpResponse& response) {

@@ -36,6 +36,10 @@ void DeclareOptions(cli::ArgParser& parser) {
   parser.AddOption("http-loop", "epoll",
                    "how open connections wait for their next request: 'epoll' (one epoll set "
                    "served by the --http-threads pool) or 'threads' (one thread each)");
+  parser.AddOption("max-connections", "",
+                   "open HTTP connections at most; beyond, a new one gets 503 and is closed "
+                   "(default: the open-file limit, raised to its hard limit at start, less a "
+                   "reserve for SQLite, uploads and artifacts; at most 4096; 0: no cap)");
   parser.AddOption("worker-nice", "10",
                    "niceness of job threads (0-19), so status polls stay fast while jobs run");
   parser.AddOption("worker-sched", "idle",
@@ -83,6 +87,11 @@ ServiceOptions ToOptions(const cli::ArgParser& parser) {
                                 : parser.GetInt("threads-per-job");
   options.http_threads = parser.GetInt("http-threads");
   options.http_event_loop = OneOf(parser, "http-loop", "epoll", "threads") == "epoll";
+  // Raised here, before anything opens files: the default cap is what the raised limit allows.
+  const int64_t open_file_limit = RaiseOpenFileLimit();
+  options.max_connections = parser.Get("max-connections").empty()
+                                ? DefaultMaxConnections(open_file_limit, options.http_threads)
+                                : parser.GetInt("max-connections");
   options.worker_nice = parser.GetInt("worker-nice");
   options.worker_idle_scheduling = OneOf(parser, "worker-sched", "idle", "normal") == "idle";
   options.max_attempts = parser.GetInt("max-attempts");
@@ -138,6 +147,8 @@ int ServeCommand(const std::vector<std::string>& args) {
   Service service(options);
   const int port = service.Start();
   std::cout << "omnirig listening on http://" << options.host << ":" << port << std::endl;
+  std::cerr << "omnirig: at most " << options.max_connections << " open connections (0: no cap)"
+            << std::endl;
   const int received = WaitForSignal();
   std::cerr << "omnirig: " << (received == SIGTERM ? "SIGTERM" : "SIGINT") << ": draining (up to "
             << drain_timeout_s << " s)" << std::endl;

@@ -14,6 +14,7 @@ void ServiceOptions::Check() const {
   OMNIRIG_CHECK(num_workers >= 1 && num_workers <= 256, "--workers must be in [1, 256]");
   OMNIRIG_CHECK(threads_per_job >= 1, "--threads-per-job must be at least 1");
   OMNIRIG_CHECK(http_threads >= 2, "--http-threads must be at least 2");
+  OMNIRIG_CHECK(max_connections >= 0, "--max-connections must not be negative");
   OMNIRIG_CHECK(worker_nice >= 0 && worker_nice <= 19, "--worker-nice must be in [0, 19]");
   OMNIRIG_CHECK(max_attempts >= 1, "--max-attempts must be at least 1");
   OMNIRIG_CHECK(max_file_bytes > 0 && max_dataset_bytes >= max_file_bytes,
@@ -82,6 +83,7 @@ Service::Service(const ServiceOptions& options) : state_(std::make_unique<Servic
   HttpServerOptions http_options;
   http_options.num_threads = options.http_threads;
   http_options.event_loop = options.http_event_loop;
+  http_options.max_connections = options.max_connections;
   http_options.max_body_bytes = options.max_dataset_bytes;
   http_options.token = options.token;
   http_ = std::make_unique<HttpServer>(

@@ -25,6 +25,7 @@ struct ServiceOptions {
   int threads_per_job = 1;
   int http_threads = 128;
   bool http_event_loop = true;  // --http-loop epoll (true) or threads (see HttpServerOptions)
+  int max_connections = 0;  // open HTTP connections at most, then 503 (0: no cap; see serve)
   bool worker_idle_scheduling = true;  // SCHED_IDLE for worker (and solver) threads
   int worker_nice = 10;  // niceness of worker (and solver) threads: HTTP threads come first
   int max_attempts = 3;  // runs started before a crash-looping job fails

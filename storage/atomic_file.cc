@@ -77,20 +77,27 @@ void AtomicFileWriter::Flush() {
   buffer_.clear();
 }
 
-FileDigest AtomicFileWriter::Commit() {
-  Flush();
-  if (::fsync(fd_) != 0) ThrowErrno("cannot fsync", temp_path_);
-  if (::close(fd_) != 0) {
+FileDigest AtomicFileWriter::Seal() {
+  if (fd_ >= 0) {
+    Flush();
+    if (::fsync(fd_) != 0) ThrowErrno("cannot fsync", temp_path_);
+    const int fd = fd_;
     fd_ = -1;
-    ThrowErrno("cannot close", temp_path_);
+    if (::close(fd) != 0) ThrowErrno("cannot close", temp_path_);
+    sha256_ = hasher_.HexDigest();
+    std::string().swap(buffer_);  // its 1 MiB, for a batch of sealed files
   }
-  fd_ = -1;
+  return FileDigest{size_, sha256_};
+}
+
+FileDigest AtomicFileWriter::Commit(bool sync_folder) {
+  const FileDigest digest = Seal();
   if (::rename(temp_path_.c_str(), final_path_.c_str()) != 0) {
     ThrowErrno("cannot rename onto", final_path_);
   }
   committed_ = true;
-  FsyncPath(final_path_.parent_path());
-  return FileDigest{size_, hasher_.HexDigest()};
+  if (sync_folder) FsyncPath(final_path_.parent_path());
+  return digest;
 }
 
 FileDigest WriteFileAtomically(const std::filesystem::path& path, std::string_view content) {

@@ -31,8 +31,13 @@ class AtomicFileWriter {
   void Append(const char* data, size_t size);
   void Append(std::string_view data) { Append(data.data(), data.size()); }
   int64_t bytes_written() const { return size_; }
-  // fsync, rename over the final path, fsync the folder; returns what was written.
-  FileDigest Commit();
+  // fsync and close the temporary file, which stays until Commit() or destruction: a batch of
+  // finished files holds no descriptors. Returns what was written; no Append() after it.
+  FileDigest Seal();
+  // Seal() if not done, rename over the final path and, with `sync_folder`, fsync the folder
+  // (a batch of renames fsyncs each folder once instead); returns what was written.
+  FileDigest Commit(bool sync_folder = true);
+  const std::filesystem::path& final_path() const { return final_path_; }
 
  private:
   void Flush();
@@ -43,6 +48,7 @@ class AtomicFileWriter {
   int64_t size_ = 0;
   int64_t flushed_ = 0;  // bytes handed to the kernel (and queued for writeback)
   Sha256 hasher_;
+  std::string sha256_;  // set by Seal()
   bool committed_ = false;
 };
 

@@ -26,6 +26,10 @@ class JobStore {
   virtual bool DeleteDataset(const std::string& id) = 0;
   // Inserts or replaces the image record (idempotent uploads).
   virtual void PutImage(const std::string& dataset_id, const ImageRecord& image) = 0;
+  // PutImage for each record in order (a later one replaces an earlier one of the same name), in
+  // one transaction: all are stored or, when it throws, none (a multipart upload's files).
+  virtual void PutImages(const std::string& dataset_id,
+                         const std::vector<ImageRecord>& images) = 0;
   virtual bool DeleteImage(const std::string& dataset_id, const std::string& name) = 0;
   virtual std::vector<ImageRecord> ListImages(const std::string& dataset_id) = 0;  // by name
   virtual std::optional<ImageRecord> GetImage(const std::string& dataset_id,

@@ -193,12 +193,22 @@ bool SqliteJobStore::DeleteDataset(const std::string& id) {
 }
 
 void SqliteJobStore::PutImage(const std::string& dataset_id, const ImageRecord& image) {
+  PutImages(dataset_id, {image});
+}
+
+// One commit (one WAL fsync) for the whole batch instead of one per record.
+void SqliteJobStore::PutImages(const std::string& dataset_id,
+                               const std::vector<ImageRecord>& images) {
   std::lock_guard<std::mutex> lock(writer_mutex_);
-  Statement upsert(*writer_,
-                   "INSERT OR REPLACE INTO images(dataset_id, name, size, sha256, width, height, "
-                   "content_type) VALUES(?,?,?,?,?,?,?)");
-  upsert.Bind(1, dataset_id).Bind(2, image.name).Bind(3, image.size).Bind(4, image.sha256);
-  upsert.Bind(5, image.width).Bind(6, image.height).Bind(7, image.content_type).Run();
+  Transaction transaction(*writer_);
+  for (const ImageRecord& image : images) {
+    Statement upsert(*writer_,
+                     "INSERT OR REPLACE INTO images(dataset_id, name, size, sha256, width, "
+                     "height, content_type) VALUES(?,?,?,?,?,?,?)");
+    upsert.Bind(1, dataset_id).Bind(2, image.name).Bind(3, image.size).Bind(4, image.sha256);
+    upsert.Bind(5, image.width).Bind(6, image.height).Bind(7, image.content_type).Run();
+  }
+  transaction.Commit();
 }
 
 bool SqliteJobStore::DeleteImage(const std::string& dataset_id, const std::string& name) {

@@ -28,6 +28,7 @@ class SqliteJobStore : public JobStore {
   std::optional<DatasetRecord> GetDataset(const std::string& id) override;
   bool DeleteDataset(const std::string& id) override;
   void PutImage(const std::string& dataset_id, const ImageRecord& image) override;
+  void PutImages(const std::string& dataset_id, const std::vector<ImageRecord>& images) override;
   bool DeleteImage(const std::string& dataset_id, const std::string& name) override;
   std::vector<ImageRecord> ListImages(const std::string& dataset_id) override;
   std::optional<ImageRecord> GetImage(const std::string& dataset_id,

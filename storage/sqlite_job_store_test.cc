@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <set>
 #include <thread>
 
@@ -59,6 +60,55 @@ TEST_F(SqliteJobStoreTest, ImagesAreIdempotentAndCounted) {
   EXPECT_TRUE(store.DeleteDataset(id));
   EXPECT_FALSE(store.GetDataset(id));
   EXPECT_TRUE(store.ListImages(id).empty());
+}
+
+TEST_F(SqliteJobStoreTest, PutImagesStoresABatchLikePutImageInOrder) {
+  SqliteJobStore store(DbPath());
+  const std::string id = store.CreateDataset("d").id;
+  store.PutImage(id, ImageRecord{"cam0/0.png", 7, "00", 4, 3, "image/png"});
+  store.PutImages(id, {ImageRecord{"cam0/1.png", 10, "aa", 4, 3, "image/png"},
+                       ImageRecord{"cam0/0.png", 5, "cc", 4, 3, "image/png"},
+                       ImageRecord{"cam0/1.png", 12, "bb", 4, 3, "image/png"}});
+  const auto images = store.ListImages(id);
+  ASSERT_EQ(images.size(), 2u);
+  EXPECT_EQ(images[0].sha256, "cc");  // replaced the earlier upload
+  EXPECT_EQ(images[1].sha256, "bb");  // the later record of a name wins
+  EXPECT_EQ(store.GetDataset(id)->image_count, 2);
+  EXPECT_EQ(store.GetDataset(id)->total_bytes, 17);
+  store.PutImages(id, {});  // an empty batch is a no-op
+  EXPECT_EQ(store.ListImages(id).size(), 2u);
+  // A batch that fails (here: no such dataset) stores nothing.
+  EXPECT_THROW(store.PutImages("missing", {ImageRecord{"x.png", 1, "dd", 1, 1, "image/png"}}),
+               std::exception);
+  EXPECT_TRUE(store.ListImages("missing").empty());
+}
+
+TEST_F(SqliteJobStoreTest, ReadersSeeAnImageBatchWholeOrNotAtAll) {
+  SqliteJobStore store(DbPath());
+  const std::string id = store.CreateDataset("d").id;
+  constexpr int kImages = 2000;
+  std::vector<ImageRecord> batch;
+  for (int i = 0; i < kImages; ++i) {
+    batch.push_back(
+        ImageRecord{"cam0/" + std::to_string(i) + ".png", 100, "ab", 4, 3, "image/png"});
+  }
+  // A reader polls the dataset's image count while the batch is written: one commit per record
+  // would show it counts in between.
+  std::atomic<bool> written{false};
+  std::set<int64_t> seen;
+  std::thread reader([&] {
+    while (true) {
+      const bool last = written;  // read once more after the batch is in
+      seen.insert(store.GetDataset(id)->image_count);
+      if (last) return;
+    }
+  });
+  store.PutImages(id, batch);
+  written = true;
+  reader.join();
+  for (const int64_t count : seen) EXPECT_TRUE(count == 0 || count == kImages) << count;
+  EXPECT_EQ(seen.count(kImages), 1u);
+  EXPECT_EQ(store.GetDataset(id)->total_bytes, 100 * kImages);
 }
 
 TEST_F(SqliteJobStoreTest, JobLifecycle) {

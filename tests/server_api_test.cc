@@ -12,6 +12,7 @@
 #include <chrono>
 #include <cstdlib>
 #include <fstream>
+#include <map>
 #include <set>
 #include <thread>
 
@@ -330,6 +331,130 @@ TEST_F(ServerApiTest, ImageCountAndMultipartSizeLimits) {
       client.Get((base + "b.png").c_str(), {{"If-None-Match", image->get_header_value("ETag")}})
           ->status,
       304);
+}
+
+// A multipart upload commits its files together (one transaction for the records); one that
+// fails half-way keeps the files that arrived whole before the failure, names them in the
+// error's details, and leaves no file without a record, no record without a file and no
+// temporary file behind.
+TEST_F(ServerApiTest, MultipartFailureKeepsTheFilesCompletedBeforeIt) {
+  auto options = Options();
+  options.max_images_per_dataset = 4;
+  auto& client = Start(options);
+  const std::string id = CreateDataset(client);
+  const std::string url = "/api/v1/datasets/" + id + "/images";
+  const auto listing = [&] {
+    std::map<std::string, std::string> sha256_by_name;
+    const json dataset = JsonOf(client.Get(("/api/v1/datasets/" + id).c_str()));
+    for (const auto& image : dataset["images"]) sha256_by_name[image["name"]] = image["sha256"];
+    return sha256_by_name;
+  };
+  // The third part is not an image: 415, the first two are stored, the fourth is not.
+  httplib::MultipartFormDataItems items = {{"files", PngBytes(8, 8, 1), "a.png", "image/png"},
+                                           {"note", "a plain form field, ignored", "", ""},
+                                           {"files", PngBytes(8, 8, 2), "cam0/b.png", "image/png"},
+                                           {"files", "just some text", "c.png", "image/png"},
+                                           {"files", PngBytes(8, 8, 4), "d.png", "image/png"}};
+  const auto failed = client.Post(url.c_str(), items);
+  ExpectError(failed, 415, "unsupported_media_type");
+  EXPECT_EQ(JsonOf(failed)["error"]["details"]["stored"], json::array({"a.png", "cam0/b.png"}));
+  EXPECT_EQ(JsonOf(failed)["error"]["details"]["name"], "c.png");
+  EXPECT_EQ(listing(), (std::map<std::string, std::string>{
+                           {"a.png", storage::Sha256Hex(PngBytes(8, 8, 1))},
+                           {"cam0/b.png", storage::Sha256Hex(PngBytes(8, 8, 2))}}));
+
+  // The image limit (4): a.png is replaced (no new place), e.png and f.png fit, g.png does not.
+  items = {{"files", PngBytes(8, 8, 5), "a.png", "image/png"},
+           {"files", PngBytes(8, 8, 6), "e.png", "image/png"},
+           {"files", PngBytes(8, 8, 7), "f.png", "image/png"},
+           {"files", PngBytes(8, 8, 8), "g.png", "image/png"}};
+  const auto over = client.Post(url.c_str(), items);
+  ExpectError(over, 413, "payload_too_large");
+  EXPECT_EQ(JsonOf(over)["error"]["details"]["stored"], json::array({"a.png", "e.png", "f.png"}));
+  EXPECT_EQ(JsonOf(over)["error"]["details"]["over_limit"], json::array({"g.png"}));
+  EXPECT_EQ(JsonOf(over)["error"]["details"]["limit_images"], 4);
+  EXPECT_EQ(listing().size(), 4u);
+  EXPECT_EQ(listing()["a.png"], storage::Sha256Hex(PngBytes(8, 8, 5)));
+
+  // A connection dropped in the middle of the third part of another dataset's upload: the two
+  // whole parts are stored, the cut one is not.
+  const std::string other = CreateDataset(client, "other");
+  const std::string boundary = "omnirigtestboundary";
+  const auto part = [&](const std::string& name, const std::string& bytes) {
+    return "--" + boundary + "\r\nContent-Disposition: form-data; name=\"files\"; filename=\"" +
+           name + "\"\r\nContent-Type: image/png\r\n\r\n" + bytes + "\r\n";
+  };
+  const std::string whole = part("p0.png", PngBytes(16, 16, 0)) +
+                            part("p1.png", PngBytes(16, 16, 1)) +
+                            part("p2.png", PngBytes(16, 16, 2)) + "--" + boundary + "--\r\n";
+  const size_t p2_bytes_at = whole.find("\r\n\r\n", whole.find("p2.png")) + 4;
+  const size_t cut = p2_bytes_at + PngBytes(16, 16, 2).size() / 2;
+  {
+    RawConnection connection(port_);
+    ASSERT_TRUE(connection.connected());
+    connection.Send("POST /api/v1/datasets/" + other +
+                    "/images HTTP/1.1\r\nHost: test\r\nContent-Type: multipart/form-data; "
+                    "boundary=" +
+                    boundary + "\r\nContent-Length: " + std::to_string(whole.size()) + "\r\n\r\n" +
+                    whole.substr(0, cut));
+  }
+  // The server sees the drop when it reads on: poll the listing.
+  json dataset;
+  const auto start = std::chrono::steady_clock::now();
+  do {
+    dataset = JsonOf(client.Get(("/api/v1/datasets/" + other).c_str()));
+  } while (dataset["image_count"] != 2 &&
+           std::chrono::steady_clock::now() - start < std::chrono::seconds(10));
+  ASSERT_EQ(dataset["image_count"], 2) << dataset.dump();
+  EXPECT_EQ(dataset["images"][0]["name"], "p0.png");
+  EXPECT_EQ(dataset["images"][1]["name"], "p1.png");
+  // Nothing half-written is left behind, and every file has its record.
+  const auto root = dir_.path() / "data" / "datasets";
+  int files = 0;
+  for (const auto& entry : std::filesystem::recursive_directory_iterator(root)) {
+    EXPECT_EQ(entry.path().filename().string().find(".part-"), std::string::npos) << entry.path();
+    files += entry.is_regular_file() ? 1 : 0;
+  }
+  EXPECT_EQ(files, 4 + 2);
+}
+
+TEST_F(ServerApiTest, ConnectionsBeyondTheCapGet503AndAreCounted) {
+  auto options = Options();
+  options.max_connections = 2;
+  auto& client = Start(options);  // httplib's client closes its connection after each request
+  const std::string health = "GET /api/v1/health HTTP/1.1\r\nHost: test\r\n\r\n";
+  int refused = 0;
+  {
+    RawConnection first(port_), second(port_);
+    first.Send(health);
+    second.Send(health);
+    EXPECT_EQ(first.ReadUntil("\r\n\r\n").rfind("HTTP/1.1 200", 0), 0u);
+    EXPECT_EQ(second.ReadUntil("\r\n\r\n").rfind("HTTP/1.1 200", 0), 0u);
+    RawConnection third(port_);
+    third.Send(health);
+    const std::string response = third.ReadUntil("}}");
+    EXPECT_EQ(response.rfind("HTTP/1.1 503", 0), 0u) << response;
+    EXPECT_NE(response.find("too many open connections (2)"), std::string::npos) << response;
+    ++refused;
+  }
+  // Until the server has seen the two closes, the client's requests are refused too.
+  int status = 0;
+  std::string body;
+  const auto counted = [&] {
+    return body.find("omnirig_http_connections_refused_total " + std::to_string(refused) +
+                     "\n") != std::string::npos;
+  };
+  const auto start = std::chrono::steady_clock::now();
+  do {
+    const auto metrics = client.Get("/metrics");
+    ASSERT_TRUE(metrics);
+    status = metrics->status;
+    body = metrics->body;
+    if (status == 503) ++refused;
+  } while ((status != 200 || !counted()) &&
+           std::chrono::steady_clock::now() - start < std::chrono::seconds(5));
+  EXPECT_EQ(status, 200);
+  EXPECT_TRUE(counted()) << "refused " << refused << "\n" << body;
 }
 
 TEST_F(ServerApiTest, RefusesUploadsWhenDiskIsShort) {
