@@ -10,6 +10,7 @@
 
 #include "engine/calib/board_pose.h"
 #include "engine/calib/calibrate.h"
+#include "engine/calib/corner_fit.h"
 #include "engine/calib/initialize.h"
 
 namespace omnirig {
@@ -75,10 +76,11 @@ bool ExtendsBeyondAnEdge(const cv::Mat& grey, const std::vector<Eigen::Vector2d>
              R, [&](int r) { return at(r, C - 1); }, [&](int r) { return at(r, C - 2); });
 }
 
-// Refines each corner with cornerSubPix in a window scaled to its local square size. Returns
-// the largest shift.
+// Refines each corner with cornerSubPix in a window scaled to its local square size, then (with
+// `fit`) by fitting the blurred X-junction with curved edges (corner_fit.h): cornerSubPix alone
+// is pulled to the convex side of edges a mirror bends. Returns the largest shift.
 double RefineCorners(const cv::Mat& grey, std::vector<Eigen::Vector2d>* corners,
-                     const std::vector<double>& square_px) {
+                     const std::vector<double>& square_px, bool fit) {
   double max_shift = 0.0;
   for (size_t i = 0; i < corners->size(); ++i) {
     const int half = std::clamp(static_cast<int>(std::lround(0.4 * square_px[i])), 2, 15);
@@ -92,18 +94,21 @@ double RefineCorners(const cv::Mat& grey, std::vector<Eigen::Vector2d>* corners,
     cv::cornerSubPix(grey, point, cv::Size(half, half), cv::Size(-1, -1),
                      cv::TermCriteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 40, 1e-3));
     (*corners)[i] = Eigen::Vector2d(point[0].x, point[0].y);
-    max_shift = std::max(max_shift, static_cast<double>(cv::norm(point[0] - before)));
+    if (fit) {
+      if (const auto fitted = FitCheckerCorner(grey, (*corners)[i], half)) (*corners)[i] = *fitted;
+    }
+    max_shift = std::max(max_shift, ((*corners)[i] - Eigen::Vector2d(before.x, before.y)).norm());
   }
 
   return max_shift;
 }
 
-void RefineGrid(const cv::Mat& grey, const BoardSpec& board, BoardDetection* detection) {
+void RefineGrid(const cv::Mat& grey, const BoardSpec& board, bool fit, BoardDetection* detection) {
   std::vector<double> square_px;
   for (int id : detection->corner_ids) {
     square_px.push_back(LocalSquarePx(detection->corners_px, board, id));
   }
-  RefineCorners(grey, &detection->corners_px, square_px);
+  RefineCorners(grey, &detection->corners_px, square_px, fit);
 }
 
 std::string ValidateGridImpl(const cv::Mat& grey, const BoardSpec& board,
@@ -496,7 +501,7 @@ BoardDetection DetectBoard(const cv::Mat& image, const BoardSpec& board,
   }
   if (detection.found && options.refine_subpixel && detection.method != "hint" &&
       detection.method != "charuco") {
-    RefineGrid(grey, board, &detection);
+    RefineGrid(grey, board, options.fit_corner_model, &detection);
   }
   return detection;
 }
@@ -521,7 +526,7 @@ BoardDetection DetectBoardFromPose(const cv::Mat& image, const BoardSpec& board,
     if (!(square_px > 4.0) || !std::isfinite(square_px)) continue;
     std::vector<Eigen::Vector2d> corner = {predicted[id]};
     if (!LooksLikeXCorner(grey, corner[0], 0.3 * square_px)) continue;
-    RefineCorners(grey, &corner, {square_px});
+    RefineCorners(grey, &corner, {square_px}, options.fit_corner_model);
     // A refinement that wanders off by more than a third of a square found something else.
     if ((corner[0] - predicted[id]).norm() > square_px / 3.0) continue;
     detection.corners_px.push_back(corner[0]);

@@ -5,9 +5,10 @@
 // contrast-normalised and upsampled versions; a candidate must have every corner (sub-boards
 // are rejected by the count and the board's extent), a consistent row-major ordering (no
 // flipped or mirrored grids) and is refined to sub-pixel with a window adapted to the local
-// square size. With a model from an earlier calibration, or with the four outer corners given
-// by the user, every corner is predicted and refined instead (the paper's tool's hint path).
-// ChArUco boards go through OpenCV aruco and may be partial.
+// square size: cornerSubPix, then a fit of the corner's X-junction with curved edges. With a model
+// from an earlier calibration, or with the four outer corners given by the user, every corner is
+// predicted and refined instead (the paper's tool's hint path). ChArUco boards go through OpenCV
+// aruco and may be partial.
 
 #include <array>
 #include <optional>
@@ -36,6 +37,11 @@ struct BoardDetection {
 struct DetectOptions {
   // Sub-pixel refinement of every corner.
   bool refine_subpixel = true;
+  // After cornerSubPix, fit a model of the blurred X-junction with curved edges to the pixels
+  // around each corner (corner_fit.h): cornerSubPix alone is pulled to the convex side of the
+  // edges a mirror bends (radially outward, +0.02 px on average on the synthetic renders). Off only
+  // to measure that bias.
+  bool fit_corner_model = true;
   // Also try 2x upsampled and contrast-normalised images when the plain image fails.
   bool try_enhanced = true;
   // Allow OpenCV's exhaustive search as the last resort (can take minutes on a large image
