@@ -95,7 +95,17 @@ TEST_F(RelposeJob, WithCalibrationsRecoversTheRenderedRig) {
   EXPECT_LT(RotationDistanceRad(rig.cam0_from_cam1.rotation, truth.rotation) * 180.0 / M_PI,
             0.05);
   EXPECT_LT(result["rms_px"].get<double>(), 0.3);
-  EXPECT_EQ(result["num_pairs_used"].get<int>(), 8);
+  // The synchronisation test may leave out a pair whose two images disagree on the board's
+  // pose: with the detector of this writing, pair_007's joint RMS is 0.40 px where the others'
+  // are 0.02 px (its exposures are simultaneous by construction: corners off in one image).
+  EXPECT_GE(result["num_pairs_used"].get<int>(), 7);
+  for (const json& pair : result["pairs"]) {
+    if (pair["used"].get<bool>()) continue;
+    EXPECT_NE(pair["reason"].get<std::string>().find("not simultaneous"), std::string::npos)
+        << pair.dump();
+    EXPECT_GT(pair["sync_statistic"].get<double>(), result["sync_test"]["limit"].get<double>());
+  }
+  EXPECT_TRUE(result["sync_test"]["run"].get<bool>());
   EXPECT_EQ(result["calibrations"]["cam0"]["job_id"], "truth0");
   EXPECT_EQ(result["cameras"]["cam1"], CameraToJson(set_->rig.cam1));
   EXPECT_EQ(result["intrinsics_model"]["selection"], "given");
@@ -119,8 +129,10 @@ TEST_F(RelposeJob, WithoutCalibrationsCalibratesEachCameraFirst) {
   // the result is the chosen candidate's fit.
   const json& model = result["intrinsics_model"];
   EXPECT_EQ(model["selection"], "cross_validation");
-  EXPECT_EQ(model["held_out_pairs"].get<int>(), 8);
-  ASSERT_EQ(model["candidates"].size(), 3u);
+  EXPECT_GE(model["held_out_pairs"].get<int>(), 7);
+  // fixed, tangential_fixed, tangential_free_cam0, tangential_free_cam1, free.
+  ASSERT_EQ(model["candidates"].size(), 5u);
+  EXPECT_EQ(model["candidates"][2]["name"], "tangential_free_cam0");
   int num_chosen = 0;
   for (const json& candidate : model["candidates"]) {
     EXPECT_TRUE(candidate["success"].get<bool>()) << candidate.dump();

@@ -79,6 +79,7 @@ std::string IntrinsicsModelField(const json& params, bool self_calibrating) {
   return model;
 }
 
+// A non-negative quantity, or null where it was not measured (-1).
 json NullableRms(double rms_px) { return rms_px >= 0.0 ? json(rms_px) : json(nullptr); }
 
 json Vector3Json(const Eigen::Vector3d& v) { return json::array({v.x(), v.y(), v.z()}); }
@@ -89,7 +90,7 @@ RelativePoseParams RelativePoseParamsFromJson(const json& params) {
   CheckKnownFields(params, "params",
                    {"board", "calibrations", "refine_intrinsics", "fixed_intrinsics",
                     "intrinsics_model", "resolve_corner_order", "huber_loss_px",
-                    "max_num_iterations"});
+                    "max_num_iterations", "sync_false_alarm_rate"});
   OMNIRIG_CHECK(params.contains("board"), "missing field 'params.board'");
   RelativePoseParams out;
   out.board = BoardFromJson(params["board"]);
@@ -130,6 +131,12 @@ RelativePoseParams RelativePoseParamsFromJson(const json& params) {
   }
   if (params.contains("max_num_iterations")) {
     out.options.max_num_iterations = IntField(params, "params", "max_num_iterations");
+  }
+  if (params.contains("sync_false_alarm_rate")) {
+    const double rate = NumberField(params, "params", "sync_false_alarm_rate");
+    OMNIRIG_CHECK(rate >= 0.0 && rate < 1.0,
+                  "field 'params.sync_false_alarm_rate' must be in [0, 1), got " << rate);
+    out.options.sync_test.false_alarm_rate = rate;
   }
   out.options.Check();
   return out;
@@ -185,9 +192,19 @@ json RelativePoseResultToJson(const RelativePoseReport& report, const json& came
                   {"num_corners", pair.num_corners},
                   {"cam1_corner_order", pair.cam1_order}};
     if (pair.used) entry["cam0_from_board"] = PoseToJson(pair.cam0_from_board);
+    entry["sync_statistic"] = NullableRms(pair.sync_statistic);
+    entry["board_offset_m"] = NullableRms(pair.board_offset_m);
+    entry["board_rotation_deg"] = NullableRms(pair.board_rotation_deg);
     pairs.push_back(entry);
   }
   result["pairs"] = pairs;
+  const SyncTestReport& sync = report.sync_test;
+  result["sync_test"] = {{"run", sync.run},
+                         {"corner_noise_px", {sync.corner_noise_px[0], sync.corner_noise_px[1]}},
+                         {"dispersion", sync.dispersion},
+                         {"median_statistic", sync.median_statistic},
+                         {"limit", sync.limit},
+                         {"num_pairs_left_out", report.sync_rounds}};
   result["solver"] = {{"initial_cost", report.solver.initial_cost},
                       {"final_cost", report.solver.final_cost},
                       {"num_iterations", report.solver.num_iterations},
@@ -315,9 +332,10 @@ json ModelSelectionToJson(const RigModelSelection& selection) {
           {"candidates", candidates}};
 }
 
-// "intrinsics_model": "auto": the standard models, each from its own per-camera calibrations
-// (the tangential-fixed one calibrated again with k3 = k4 = 0), scored by cross-validation;
-// the chosen one's fit is the result.
+// "intrinsics_model": "auto": the candidate models (AutoRigIntrinsicsModels), each camera from
+// its own calibration with the model's fixed set (a camera whose tangential terms the model
+// fixes is calibrated again with k3 = k4 = 0, once), scored by cross-validation; the chosen
+// one's fit is the result.
 json RunAutoModel(const RelativePoseParams& parsed, const RelativePoseOptions& options,
                   const std::array<std::vector<std::string>, 2>& names,
                   const std::array<std::vector<BoardDetection>, 2>& detections,
@@ -327,24 +345,27 @@ json RunAutoModel(const RelativePoseParams& parsed, const RelativePoseOptions& o
                   const JobContext& context) {
   std::vector<RigModelCandidate> candidates;
   std::vector<std::array<const CameraSource*, 2>> sources;
-  std::array<std::optional<CameraSource>, 2> no_tangential;
+  std::array<std::optional<CameraSource>, 2> recalibrated;
   const std::array<bool, UnifiedIntrinsics::kNumParams>& base = parsed.base_fixed_intrinsics;
-  for (const RigIntrinsicsModel& model : StandardRigIntrinsicsModels(base)) {
-    if (model.calibration_fixed == base) {
-      if (model.name == "tangential_fixed") continue;  // the same as "free" here
-      candidates.push_back({model, cameras[0]->model, cameras[1]->model});
-      sources.push_back({&*cameras[0], &*cameras[1]});
-      continue;
-    }
+  for (const RigIntrinsicsModel& model : AutoRigIntrinsicsModels(base)) {
+    std::array<const CameraSource*, 2> source{};
     for (int c = 0; c < 2; ++c) {
-      context.Log("calibrating cam" + std::to_string(c) + " with k3 = k4 = 0");
-      no_tangential[c] = CalibrateFromOwnImages(
-          names[c], detections[c], images[c][0].cols, images[c][0].rows, parsed.board,
-          model.calibration_fixed, context, SubRange(context.progress, 0.7 + 0.025 * c,
-                                                     0.725 + 0.025 * c));
+      if (model.CalibrationFixed(c) == base) {
+        source[c] = &*cameras[c];
+        continue;
+      }
+      // The only other set the candidates use: base with k3 = k4 = 0.
+      if (!recalibrated[c]) {
+        context.Log("calibrating cam" + std::to_string(c) + " with k3 = k4 = 0");
+        recalibrated[c] = CalibrateFromOwnImages(
+            names[c], detections[c], images[c][0].cols, images[c][0].rows, parsed.board,
+            model.CalibrationFixed(c), context,
+            SubRange(context.progress, 0.7 + 0.025 * c, 0.725 + 0.025 * c));
+      }
+      source[c] = &*recalibrated[c];
     }
-    candidates.push_back({model, no_tangential[0]->model, no_tangential[1]->model});
-    sources.push_back({&*no_tangential[0], &*no_tangential[1]});
+    candidates.push_back({model, source[0]->model, source[1]->model});
+    sources.push_back(source);
   }
   const RigModelSelection selection = SelectRigIntrinsicsModel(
       parsed.board, board_pairs, candidates, options, SubRange(context.progress, 0.75, 1.0));

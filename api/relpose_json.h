@@ -19,21 +19,30 @@
 //    "intrinsics_model": "auto" | "fixed" | "tangential_fixed" | "free"
 //        (default "auto" when the job calibrates the cameras itself and neither
 //        refine_intrinsics nor fixed_intrinsics is given: each candidate model (each camera's
-//        own calibration kept; k3 = k4 = 0 and the rest refined with the rig; everything but
+//        own calibration kept; k3 = k4 = 0 and the rest refined with the rig; the same with one
+//        camera's k3, k4 free, "tangential_free_cam0" / "_cam1"; everything but
 //        fixed_intrinsics refined with the rig) is scored by leave-one-pair-out prediction of
 //        one camera's corners from the other's, and the simplest within one standard error of
 //        the best is used. fixed_intrinsics is then the models' common fixed set. Not with
 //        refine_intrinsics; "auto" and "tangential_fixed" need the job's own calibrations),
-//    "resolve_corner_order": bool, "huber_loss_px": number, "max_num_iterations": int}
+//    "resolve_corner_order": bool, "huber_loss_px": number, "max_num_iterations": int,
+//    "sync_false_alarm_rate": number in [0, 1) (default 0.01: the probability that a set of
+//        simultaneous pairs loses one to the synchronisation test, engine/stereo/relpose_sync.h;
+//        0 turns the test off)}
 // Result:
 //   {"cam0_from_cam1": {"rotation_wxyz", "translation_m"}, "baseline_m", "baseline_std_m",
 //    "translation_std_m", "rotation_std_deg", "rms_px",
 //    "pairs": [{"name", "used", "reason", "rms_px", "num_corners", "cam1_corner_order",
-//               "cam0_from_board"}],
+//               "cam0_from_board", "sync_statistic", "board_offset_m", "board_rotation_deg"}],
+//              (sync_statistic: the synchronisation test's statistic, compared with
+//               sync_test.limit; board_offset_m / _deg: the two cameras' own board poses
+//               compared through the rig at the board's centre; null where not tested)
 //    "cameras": {"cam0": camera, "cam1": camera},  (the calibration results' `camera` objects,
 //                                                   or the refined ones)
 //    "linear_cam0_from_cam1", "averaged_cam0_from_cam1", "num_pairs_used",
 //    "spread_eigen_ratio", "calibrations": {...}, "solver": {...},
+//    "sync_test": {"run", "corner_noise_px": [cam0, cam1], "dispersion", "median_statistic",
+//                  "limit", "num_pairs_left_out"},
 //    "intrinsics_model": {"chosen", "selection": "cross_validation" | "given", "rule",
 //                         "held_out_pairs", "candidates": [{"name", "num_free_intrinsics",
 //                         "baseline_m", "rms_px", "num_pairs_used", "cv_rms_px",

@@ -35,7 +35,8 @@ TEST(RelposeJson, ParamsParseBoardCalibrationsAndOptions) {
   const json params = {{"board", Board()},
                        {"calibrations", {{"cam0", "job-a"}, {"cam1", "job-b"}}},
                        {"refine_intrinsics", true},
-                       {"huber_loss_px", 0.5}};
+                       {"huber_loss_px", 0.5},
+                       {"sync_false_alarm_rate", 0.05}};
   const RelativePoseParams parsed = RelativePoseParamsFromJson(params);
   EXPECT_EQ(parsed.board.cols, 9);
   EXPECT_EQ(parsed.board.rows, 6);
@@ -44,6 +45,7 @@ TEST(RelposeJson, ParamsParseBoardCalibrationsAndOptions) {
   EXPECT_EQ(*parsed.cam1_calibration_job, "job-b");
   EXPECT_TRUE(parsed.options.refine_intrinsics);
   EXPECT_EQ(parsed.options.huber_loss_px, 0.5);
+  EXPECT_EQ(parsed.options.sync_test.false_alarm_rate, 0.05);
   const RelativePoseParams self_calibrating = RelativePoseParamsFromJson({{"board", Board()}});
   EXPECT_FALSE(self_calibrating.cam0_calibration_job);
   EXPECT_TRUE(self_calibrating.options.refine_intrinsics);
@@ -163,6 +165,10 @@ TEST(RelposeJson, ParamsRefuseUnknownFieldsAndWrongTypesNamingTheField) {
               RelativePoseParamsFromJson({{"board", Board()}, {"huber_loss_px", -1}});
             }).find("huber_loss_px"),
             std::string::npos);
+  EXPECT_NE(ErrorOf([] {
+              RelativePoseParamsFromJson({{"board", Board()}, {"sync_false_alarm_rate", 1}});
+            }).find("params.sync_false_alarm_rate"),
+            std::string::npos);
   EXPECT_THROW(RelativePoseParamsFromJson(json::array()), InvalidArgument);
 }
 
@@ -202,9 +208,19 @@ TEST(RelposeJson, ResultHasTheIssueKeys) {
   report.baseline_std_m = 1e-5;
   report.rms_px = 0.2;
   report.pairs.resize(2);
-  report.pairs[0] = {"a", true, "", 0.19, 54, 1, Rigid3d()};
+  report.pairs[0].name = "a";
+  report.pairs[0].used = true;
+  report.pairs[0].rms_px = 0.19;
+  report.pairs[0].num_corners = 54;
+  report.pairs[0].cam1_order = 1;
+  report.pairs[0].sync_statistic = 3.5;
+  report.pairs[0].board_offset_m = 4e-4;
+  report.pairs[0].board_rotation_deg = 0.1;
   report.pairs[1].name = "b";
   report.pairs[1].reason = "board seen by cam0 only";
+  report.sync_test.run = true;
+  report.sync_test.corner_noise_px = {0.12, 0.13};
+  report.sync_test.limit = 21.6;
   const json camera0 = {{"model", "unified"}, {"marker", 0}};
   const json result = RelativePoseResultToJson(report, camera0, camera0, false);
   EXPECT_EQ(result["cam0_from_cam1"]["rotation_wxyz"].size(), 4u);
@@ -220,6 +236,11 @@ TEST(RelposeJson, ResultHasTheIssueKeys) {
   EXPECT_FALSE(result["pairs"][1]["used"].get<bool>());
   EXPECT_TRUE(result["pairs"][1]["rms_px"].is_null());
   EXPECT_EQ(result["pairs"][1]["reason"], "board seen by cam0 only");
+  EXPECT_EQ(result["pairs"][0]["sync_statistic"].get<double>(), 3.5);
+  EXPECT_EQ(result["pairs"][0]["board_offset_m"].get<double>(), 4e-4);
+  EXPECT_TRUE(result["pairs"][1]["sync_statistic"].is_null());
+  EXPECT_EQ(result["sync_test"]["corner_noise_px"][1].get<double>(), 0.13);
+  EXPECT_EQ(result["sync_test"]["limit"].get<double>(), 21.6);
   // With refined intrinsics the cameras are the refined ones.
   const json refined = RelativePoseResultToJson(report, camera0, camera0, true);
   EXPECT_EQ(refined["cameras"]["cam0"]["image_size"][0], 640);

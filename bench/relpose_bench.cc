@@ -21,7 +21,9 @@
 //      what fixing / freeing k5, skew and the tangential terms, the robust loss, pair rejection
 //      and dropping outer corners do; the baseline without each pair and from each half; the
 //      job's default: the intrinsics model chosen by leave-one-pair-out cross-validation
-//      (engine/stereo/relpose_model_select.h), with each candidate's held-out error.
+//      (engine/stereo/relpose_model_select.h), with each candidate's held-out error, with and
+//      without the test for unsynchronised pairs (engine/stereo/relpose_sync.h), whose
+//      per-pair statistics it prints.
 //   5. (--only preset; not in a full run: tens of CPU minutes) The synthetic readings B and C
 //      with a recording preset: 60 pairs of a board of 11 x 8 corners of 40 mm, 3 seeds, all
 //      methods incl. cv::omnidir::stereoCalibrate on the same renders.
@@ -268,6 +270,7 @@ Row OurRow(const std::string& method, const CameraModel& cam0, const CameraModel
            const BoardSpec& board, const std::vector<StereoBoardPair>& pairs,
            const RelativePoseOptions& options, RelativePoseReport* out = nullptr) {
   const auto start = std::chrono::steady_clock::now();
+  const auto cpu_start = std::clock();
   const RelativePoseReport report = EstimateRelativePose(cam0, cam1, board, pairs, options);
   Row row;
   row.method = method;
@@ -276,9 +279,10 @@ Row OurRow(const std::string& method, const CameraModel& cam0, const CameraModel
   row.cam0_from_cam1 = report.rig.cam0_from_cam1;
   row.rms_px = report.rms_px;
   char note[160];
-  std::snprintf(note, sizeof(note), "%d/%zu pairs, baseline std %.4f mm, rot std %.5f deg",
+  std::snprintf(note, sizeof(note), "%d/%zu pairs, baseline std %.4f mm, rot std %.5f deg, %.2f s CPU",
                 report.num_pairs_used, pairs.size(), report.baseline_std_m * 1e3,
-                report.rotation_std_deg);
+                report.rotation_std_deg,
+                static_cast<double>(std::clock() - cpu_start) / CLOCKS_PER_SEC);
   row.note = report.success ? note : report.message;
   if (out != nullptr) *out = report;
   return row;
@@ -857,16 +861,16 @@ void PrintTangentialSignificance(const std::vector<StereoBoardPair>& pairs, cv::
 RigModelSelection PrintModelSelection(const std::vector<RigModelCandidate>& candidates,
                                       const BoardSpec& board,
                                       const std::vector<StereoBoardPair>& pairs,
-                                      double reference_baseline_m) {
+                                      double reference_baseline_m,
+                                      const RelativePoseOptions& options, const char* what) {
   const auto start = std::chrono::steady_clock::now();
   const auto cpu_start = std::clock();
-  const RigModelSelection selection =
-      SelectRigIntrinsicsModel(board, pairs, candidates, RelativePoseOptions());
+  const RigModelSelection selection = SelectRigIntrinsicsModel(board, pairs, candidates, options);
   std::printf(
-      "\nModel selection by leave-one-pair-out cross-validation (the job's default, "
-      "\"intrinsics_model\": \"auto\"; %.1f s wall, %.1f s CPU): held-out error = cam1's corners "
-      "predicted from cam0's board pose through the rig and vice versa\n",
-      Seconds(start), static_cast<double>(std::clock() - cpu_start) / CLOCKS_PER_SEC);
+      "\nModel selection by leave-one-pair-out cross-validation (%s; %.1f s wall, %.1f s CPU): "
+      "held-out error = cam1's corners predicted from cam0's board pose through the rig and "
+      "vice versa\n",
+      what, Seconds(start), static_cast<double>(std::clock() - cpu_start) / CLOCKS_PER_SEC);
   std::printf("| %-18s | %5s | %12s | %8s | %8s | %10s | %21s | %s\n", "model", "free",
               "baseline mm", "error %", "fit RMS", "CV RMS px", "CV excess MSE +- SE", "");
   std::printf("|%s|%s|%s|%s|%s|%s|%s|---\n", std::string(20, '-').c_str(),
@@ -885,6 +889,28 @@ RigModelSelection PrintModelSelection(const std::vector<RigModelCandidate>& cand
   }
   std::printf("rule: %s\n", selection.rule.c_str());
   return selection;
+}
+
+// The synchronisation test of one fit (engine/stereo/relpose_sync.h): the noise it found, its
+// limit, and every pair's statistic and board disagreement, with the reason of those left out.
+void PrintSyncTest(const std::string& name, const RelativePoseReport& report) {
+  const SyncTestReport& test = report.sync_test;
+  std::printf(
+      "\nSynchronisation test, %s: corner noise %.4f / %.4f px per coordinate, median "
+      "statistic %.2f (chi^2_6: 5.35), dispersion %.2f, limit %.2f (final round); %d pairs left "
+      "out\n",
+      name.c_str(), test.corner_noise_px[0], test.corner_noise_px[1], test.median_statistic,
+      test.dispersion, test.limit, report.sync_rounds);
+  std::printf("per pair: statistic | board offset mm, rotation deg | joint RMS px (or why unused)\n");
+  for (const RelativePosePairReport& pair : report.pairs) {
+    std::printf("  %s: %.1f | %.2f mm, %.3f deg | ", pair.name.c_str(), pair.sync_statistic,
+                pair.board_offset_m * 1e3, pair.board_rotation_deg);
+    if (pair.used) {
+      std::printf("%.3f\n", pair.rms_px);
+    } else {
+      std::printf("unused: %s\n", pair.reason.c_str());
+    }
+  }
 }
 
 void RunRealFisheye(const std::filesystem::path& data_dir) {
@@ -933,13 +959,27 @@ void RunRealFisheye(const std::filesystem::path& data_dir) {
       cam1.intrinsics.params[0], MaxFieldAngleDeg(pairs, cam0, cam1));
 
   PrintTangentialSignificance(pairs, size, board);
+  // Each camera from its calibration with or without the tangential terms, as the model says.
+  const auto candidate_of = [&](const RigIntrinsicsModel& model) {
+    return RigModelCandidate{model,
+                             model.CalibrationFixed(0)[UnifiedIntrinsics::kK3] ? cam0_nt : cam0,
+                             model.CalibrationFixed(1)[UnifiedIntrinsics::kK3] ? cam1_nt : cam1};
+  };
   std::vector<RigModelCandidate> candidates;
-  for (const RigIntrinsicsModel& model : StandardRigIntrinsicsModels(DefaultFixedIntrinsics())) {
-    const bool no_tangential = model.calibration_fixed[UnifiedIntrinsics::kK3];
-    candidates.push_back({model, no_tangential ? cam0_nt : cam0, no_tangential ? cam1_nt : cam1});
+  for (const RigIntrinsicsModel& model : AutoRigIntrinsicsModels(DefaultFixedIntrinsics())) {
+    candidates.push_back(candidate_of(model));
   }
   const RigModelSelection selection =
-      PrintModelSelection(candidates, board, pairs, reference_baseline_m);
+      PrintModelSelection(candidates, board, pairs, reference_baseline_m, RelativePoseOptions(),
+                          "the job's default, \"intrinsics_model\": \"auto\"");
+  if (selection.chosen >= 0) {
+    const RigModelScore& chosen = selection.candidates[selection.chosen];
+    PrintSyncTest("the job's default (" + chosen.name + ")", chosen.fit);
+  }
+  RelativePoseOptions no_sync_test;
+  no_sync_test.sync_test.false_alarm_rate = 0.0;
+  PrintModelSelection(candidates, board, pairs, reference_baseline_m, no_sync_test,
+                      "the same with the synchronisation test off");
 
   RelativePoseOptions fixed_cameras;
   RelativePoseOptions joint;
@@ -970,15 +1010,8 @@ void RunRealFisheye(const std::filesystem::path& data_dir) {
   rows.push_back(
       OurRow("  ... plain least squares (no Huber)", cam0, cam1, board, pairs, joint_l2));
   RelativePoseOptions joint_all = joint;
-  joint_all.max_pair_rms_ratio = 1e9;
-  rows.push_back(OurRow("  ... no pair rejection", cam0, cam1, board, pairs, joint_all));
-  for (double ratio : {2.0, 1.5}) {
-    RelativePoseOptions separate = joint;
-    separate.max_pair_separate_ratio = ratio;
-    char method[96];
-    std::snprintf(method, sizeof(method), "  ... reject joint RMS > %.1f x separate fits", ratio);
-    rows.push_back(OurRow(method, cam0, cam1, board, pairs, separate));
-  }
+  joint_all.sync_test.false_alarm_rate = 0.0;
+  rows.push_back(OurRow("  ... no synchronisation test", cam0, cam1, board, pairs, joint_all));
   // The largest field angle of these corners is about 70 deg (printed above): the board never
   // reaches the >180 deg lens's rim, so edge bias is tested by dropping the outer corners.
   for (double max_angle : {60.0, 50.0}) {

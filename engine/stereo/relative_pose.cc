@@ -21,12 +21,7 @@ void RelativePoseOptions::Check() const {
                     << consensus_translation_fraction);
   OMNIRIG_CHECK(max_board_pose_rms_px > 0.0,
                 "max_board_pose_rms_px must be positive, got " << max_board_pose_rms_px);
-  OMNIRIG_CHECK(max_pair_rms_ratio > 1.0,
-                "max_pair_rms_ratio must be > 1, got " << max_pair_rms_ratio);
-  OMNIRIG_CHECK(max_pair_separate_ratio == 0.0 || max_pair_separate_ratio > 1.0,
-                "max_pair_separate_ratio must be 0 (off) or > 1, got " << max_pair_separate_ratio);
-  OMNIRIG_CHECK(min_rejected_pair_rms_px >= 0.0,
-                "min_rejected_pair_rms_px must be >= 0, got " << min_rejected_pair_rms_px);
+  sync_test.Check();
   OMNIRIG_CHECK(huber_loss_px >= 0.0, "huber_loss_px must be >= 0, got " << huber_loss_px);
   OMNIRIG_CHECK(max_num_iterations >= 1 && max_num_iterations <= 10000,
                 "max_num_iterations must be in [1, 10000], got " << max_num_iterations);
@@ -211,14 +206,24 @@ bool SolveLinear(const UsedPairs& used, const RelativePoseOptions& options,
   return false;
 }
 
-// Step 4: the joint refinement from the linear estimate, and the per-pair and overall RMS.
-bool SolveJoint(UsedPairs* used, const RelativePoseOptions& options, const ProgressSink& progress,
-                RelativePoseReport* report) {
+// Step 4: the joint refinement, and the per-pair and overall RMS. From the linear estimate,
+// or with `warm_start` from the previous round's solution (the rig and the board poses of the
+// pairs still used): one pair fewer moves the optimum little, and the refits after each
+// rejection then take a few iterations instead of a full solve.
+bool SolveJoint(UsedPairs* used, const RelativePoseOptions& options, bool warm_start,
+                const ProgressSink& progress, RelativePoseReport* report) {
   StereoRig rig = report->rig;
-  rig.cam0_from_cam1 = report->linear_cam0_from_cam1;
+  if (warm_start) {
+    for (size_t u = 0; u < used->index.size(); ++u) {
+      used->cam0_from_board[u] = report->pairs[used->index[u]].cam0_from_board;
+    }
+  } else {
+    rig.cam0_from_cam1 = report->linear_cam0_from_cam1;
+  }
   RigRefinementOptions refine_options;
   refine_options.refine_intrinsics = options.refine_intrinsics;
   refine_options.fixed_intrinsics = options.fixed_intrinsics;
+  refine_options.cam1_fixed_intrinsics = options.cam1_fixed_intrinsics;
   refine_options.huber_loss_px = options.huber_loss_px;
   refine_options.max_num_iterations = options.max_num_iterations;
   refine_options.num_threads = options.num_threads;
@@ -250,65 +255,49 @@ bool SolveJoint(UsedPairs* used, const RelativePoseOptions& options, const Progr
   return true;
 }
 
-// RMS (pixels) of one pair's corners when each camera fits its own board pose: what the pair
-// would leave if the two exposures were not tied to one board pose by the rig.
-double SeparateFitRmsPx(const StereoRig& rig, const RigPairCorners& corners) {
-  double rms0 = 0.0, rms1 = 0.0;
-  if (!EstimateBoardPose(rig.cam0, corners.points_in_board0, corners.pixels0, &rms0) ||
-      !EstimateBoardPose(rig.cam1, corners.points_in_board1, corners.pixels1, &rms1)) {
-    return -1.0;
-  }
-  const double n0 = static_cast<double>(corners.pixels0.size());
-  const double n1 = static_cast<double>(corners.pixels1.size());
-  return std::sqrt((rms0 * rms0 * n0 + rms1 * rms1 * n1) / (n0 + n1));
-}
-
-// Why a pair is inconsistent between its two images, or "" when it is not: its joint RMS
-// exceeds max_pair_rms_ratio times the median pair's, or max_pair_separate_ratio times its own
-// separate fits' (each camera fitting the board alone fits well, the two together do not: the
-// board moved between two unsynchronised exposures). Never below min_rejected_pair_rms_px.
-std::string InconsistencyReason(double rms, double median, double separate,
-                                const RelativePoseOptions& options) {
-  if (rms <= options.min_rejected_pair_rms_px) return "";
+// Why a pair flagged by the synchronisation test is left out, in the user's terms.
+std::string UnsynchronisedReason(const PairSyncStatistic& pair, const SyncTestReport& test,
+                                 size_t num_tested, double false_alarm_rate) {
   std::ostringstream os;
-  os << "inconsistent between the two cameras: RMS " << rms << " px in the joint fit, over ";
-  if (rms > options.max_pair_rms_ratio * median) {
-    os << options.max_pair_rms_ratio << " x the median pair's " << median << " px";
-  } else if (options.max_pair_separate_ratio > 0.0 && separate > 0.0 &&
-             rms > options.max_pair_separate_ratio * separate) {
-    os << options.max_pair_separate_ratio << " x the " << separate
-       << " px of each camera fitting the board alone";
-  } else {
-    return "";
+  os.precision(3);
+  os << "the cameras disagree on the board's pose by " << pair.board_offset_m * 1e3 << " mm and "
+     << pair.board_rotation_deg << " deg at its centre, beyond what corner noise of "
+     << test.corner_noise_px[0] << " / " << test.corner_noise_px[1] << " px";
+  if (test.dispersion > 1.0) {
+    os << " and the spread common to all pairs (dispersion " << test.dispersion << ")";
   }
-  os << " (the board moved between the two exposures, or wrong corners)";
+  os << " explain (statistic " << pair.statistic << " over the limit " << test.limit << " for "
+     << 100.0 * false_alarm_rate << " % false alarms over " << num_tested
+     << " pairs): exposures not simultaneous? (or corners wrong in one image)";
   return os.str();
 }
 
-// Marks the used pairs that InconsistencyReason rejects as unused. Returns the number
-// rejected; none when that would leave fewer than min_num_pairs.
-int RejectInconsistentPairs(const UsedPairs& used, const RelativePoseOptions& options,
-                            RelativePoseReport* report) {
-  std::vector<double> rms;
-  for (size_t i : used.index) rms.push_back(report->pairs[i].rms_px);
-  if (rms.size() < 3) return 0;
-  std::vector<double> sorted = rms;
-  std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
-  const double median = sorted[sorted.size() / 2];
-  std::vector<std::pair<size_t, std::string>> rejected;
-  for (size_t u = 0; u < rms.size(); ++u) {
-    const double separate = options.max_pair_separate_ratio > 0.0
-                                ? SeparateFitRmsPx(report->rig, used.corners[u])
-                                : -1.0;
-    std::string reason = InconsistencyReason(rms[u], median, separate, options);
-    if (!reason.empty()) rejected.push_back({used.index[u], std::move(reason)});
+// Step 5: the synchronisation test on the used pairs of the current rig (relpose_sync.h); the
+// statistics go into the report. With `reject`, the worst flagged pair is marked unused,
+// unless that would leave fewer than min_num_pairs or `min_kept` pairs. Returns whether one
+// was.
+bool TestSynchronisation(const UsedPairs& used, const RelativePoseOptions& options, bool reject,
+                         int min_kept, RelativePoseReport* report) {
+  report->sync_test = TestPairSynchronisation(report->rig, used.corners, used.cam0_from_board,
+                                              options.sync_test);
+  const SyncTestReport& test = report->sync_test;
+  if (!test.run) return false;
+  for (size_t u = 0; u < used.index.size(); ++u) {
+    RelativePosePairReport& pair = report->pairs[used.index[u]];
+    const PairSyncStatistic& statistic = test.pairs[u];
+    pair.sync_statistic = statistic.valid ? statistic.statistic : -1.0;
+    pair.board_offset_m = statistic.valid ? statistic.board_offset_m : -1.0;
+    pair.board_rotation_deg = statistic.valid ? statistic.board_rotation_deg : -1.0;
   }
-  if (static_cast<int>(used.index.size() - rejected.size()) < options.min_num_pairs) return 0;
-  for (auto& [i, reason] : rejected) {
-    report->pairs[i].reason = std::move(reason);
-    report->pairs[i].rms_px = -1.0;
+  const int num_left = static_cast<int>(used.index.size()) - 1;
+  if (!reject || test.worst < 0 || num_left < std::max(options.min_num_pairs, min_kept)) {
+    return false;
   }
-  return static_cast<int>(rejected.size());
+  RelativePosePairReport& pair = report->pairs[used.index[test.worst]];
+  pair.reason = UnsynchronisedReason(test.pairs[test.worst], test, used.index.size(),
+                                     options.sync_test.false_alarm_rate);
+  pair.rms_px = -1.0;
+  return true;
 }
 
 }  // namespace
@@ -348,8 +337,10 @@ RelativePoseReport EstimateRelativePose(const CameraModel& cam0, const CameraMod
   const std::vector<int> chosen =
       ChooseConsistentCandidates(candidates, scales, options.consensus_rotation_deg,
                                  options.consensus_translation_fraction);
-  // Steps 3 and 4, once more without the pairs the joint fit shows to be inconsistent.
-  for (int round = 0; round < 2; ++round) {
+  // Steps 3 and 4, again without the pair that step 5 finds least synchronised, until it finds
+  // none (at most max_rounds times, and at most half the pairs first used).
+  int min_kept = 0;
+  for (int round = 0;; ++round) {
     UsedPairs used = CollectUsedPairs(board, pairs, symmetries, poses, chosen, &report);
     if (report.num_pairs_used < options.min_num_pairs) {
       report.message = "too few usable pairs (need " + std::to_string(options.min_num_pairs) +
@@ -357,13 +348,20 @@ RelativePoseReport EstimateRelativePose(const CameraModel& cam0, const CameraMod
       return report;
     }
     if (!SolveLinear(used, options, &report)) return report;
+    // Round r reports within [1 - 0.5^(r+1), 1 - 0.5^(r+2)].
+    const double start = 1.0 - std::pow(0.5, round + 1), span = std::pow(0.5, round + 2);
     const ProgressSink refine_progress{
-        [&progress, round](double fraction, const std::string& stage, const std::string& message) {
-          progress.Report(0.5 + 0.25 * (round + fraction), stage, message);
+        [&progress, start, span](double fraction, const std::string& stage,
+                                 const std::string& message) {
+          progress.Report(start + span * fraction, stage, message);
         },
         progress.is_cancelled};
-    if (!SolveJoint(&used, options, refine_progress, &report)) return report;
-    if (round == 0 && RejectInconsistentPairs(used, options, &report) == 0) break;
+    if (!SolveJoint(&used, options, round > 0, refine_progress, &report)) return report;
+    progress.ThrowIfCancelled();
+    if (round == 0) min_kept = (report.num_pairs_used + 1) / 2;
+    const bool may_reject = round < options.sync_test.max_rounds;
+    if (!TestSynchronisation(used, options, may_reject, min_kept, &report)) break;
+    report.sync_rounds = round + 1;
   }
   report.success = true;
   progress.Report(1.0, "done");

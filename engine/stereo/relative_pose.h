@@ -15,13 +15,15 @@
 //      reprojection error in both images with a robust loss (optionally both cameras'
 //      intrinsics too); the covariance of cam0_from_cam1 gives the baseline's and the
 //      rotation's standard deviations;
-//   5. pairs whose joint fit is much worse than the others' (the board moved between two
-//      unsynchronised exposures) are left out and steps 3-4 run once more.
+//   5. the pair whose two images disagree most on the board's pose, if by more than the
+//      corner noise explains (the board moved between two unsynchronised exposures;
+//      relpose_sync.h), is left out and steps 3-4 run again, until no pair is flagged.
 //
 // Frames: cam0_from_cam1 maps points in cam1's frame into cam0's (eq. 8); the board frame is
 // BoardSpec's (metres). Pixels: the centre of the top-left pixel is (0, 0).
 
 #include <array>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -32,6 +34,7 @@
 #include "engine/geometry/camera_model.h"
 #include "engine/geometry/rigid3.h"
 #include "engine/stereo/relpose_refine.h"
+#include "engine/stereo/relpose_sync.h"
 #include "engine/util/progress.h"
 
 namespace omnirig {
@@ -60,21 +63,16 @@ struct RelativePoseOptions {
   // ...except these (UnifiedIntrinsics order), which keep the given cameras' values. Skew and
   // k5 by default, as in CalibrationOptions. On the real fisheye pairs (bench_relpose) freeing
   // k5 or skew moves the baseline by under 0.05 mm, but fixing the tangential terms (k3, k4)
-  // moves it by +0.4 mm: they trade against the rig pose at almost the same RMS. Which set to
+  // moves it by +0.3 to +0.4 mm: they trade against the rig pose at almost the same RMS. Which set to
   // free can be chosen from the data by cross-validation (relpose_model_select.h, the
   // relative_pose job's default).
   std::array<bool, UnifiedIntrinsics::kNumParams> fixed_intrinsics = DefaultFixedIntrinsics();
-  // After the joint refinement, a pair whose RMS exceeds this multiple of the median pair's is
-  // left out and the rig re-solved once: its two images disagree (the board moved between two
-  // unsynchronised exposures, or a corner is wrong).
-  double max_pair_rms_ratio = 3.0;
-  // A pair is also left out when its joint RMS exceeds this multiple of the RMS that each
-  // camera reaches fitting the board alone (same cameras): each image is fine, but the two do
-  // not show one board pose. 0 turns this test off.
-  double max_pair_separate_ratio = 0.0;
-  // ...but a pair fitting better than this is always kept (exact or near-exact corners make
-  // the median tiny).
-  double min_rejected_pair_rms_px = 0.5;
+  // cam1's fixed set when it differs from cam0's (`fixed_intrinsics` then holds cam0's).
+  std::optional<std::array<bool, UnifiedIntrinsics::kNumParams>> cam1_fixed_intrinsics;
+  // Pairs whose two images do not show one board pose (the board moved between two
+  // unsynchronised exposures) are found by a statistical test against the corner noise and
+  // left out, the rig refitted (relpose_sync.h states the rule).
+  SyncTestOptions sync_test;
   // Huber loss scale on the pixel residuals of the joint refinement.
   double huber_loss_px = 1.0;
   int max_num_iterations = 100;
@@ -98,6 +96,12 @@ struct RelativePosePairReport {
   int num_corners = 0;         // corners seen by both cameras
   int cam1_order = 0;          // 0: cam1's corner order as detected; k: the k-th symmetry
   Rigid3d cam0_from_board;     // after refinement (used pairs)
+  // The synchronisation test (relpose_sync.h) of the last round the pair took part in: its
+  // statistic (compared with RelativePoseReport::sync_test.limit) and the two cameras' own
+  // board poses compared through the rig at the board's centre. -1 when not tested.
+  double sync_statistic = -1.0;
+  double board_offset_m = -1.0;
+  double board_rotation_deg = -1.0;
 };
 
 struct RelativePoseSolverSummary {
@@ -129,6 +133,11 @@ struct RelativePoseReport {
   bool degenerate = false;
   double spread_eigen_ratio = 0.0;
   int num_pairs_used = 0;
+  // The synchronisation test on the final rig's pairs (its per-pair entries are copied into
+  // `pairs`), and how many rounds of test, rejection of one pair and refit ran (the number of
+  // pairs it left out).
+  SyncTestReport sync_test;
+  int sync_rounds = 0;
   RelativePoseSolverSummary solver;
   std::vector<RelativePosePairReport> pairs;
 };

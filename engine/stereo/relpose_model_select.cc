@@ -13,7 +13,9 @@ namespace omnirig {
 int RigIntrinsicsModel::NumFreeIntrinsics() const {
   if (!refine_intrinsics) return 0;
   int count = 0;
-  for (bool fixed : joint_fixed) count += fixed ? 0 : 2;
+  for (int camera = 0; camera < 2; ++camera) {
+    for (bool fixed : JointFixed(camera)) count += fixed ? 0 : 1;
+  }
   return count;
 }
 
@@ -22,9 +24,38 @@ std::vector<RigIntrinsicsModel> StandardRigIntrinsicsModels(
   std::array<bool, UnifiedIntrinsics::kNumParams> no_tangential = base;
   no_tangential[UnifiedIntrinsics::kK3] = true;
   no_tangential[UnifiedIntrinsics::kK4] = true;
-  return {{"fixed", base, false, base},
-          {"tangential_fixed", no_tangential, true, no_tangential},
-          {"free", base, true, base}};
+  return {{"fixed", base, false, base, std::nullopt, std::nullopt},
+          {"tangential_fixed", no_tangential, true, no_tangential, std::nullopt, std::nullopt},
+          {"free", base, true, base, std::nullopt, std::nullopt}};
+}
+
+std::vector<RigIntrinsicsModel> PerCameraTangentialModels(
+    const std::array<bool, UnifiedIntrinsics::kNumParams>& base) {
+  std::array<bool, UnifiedIntrinsics::kNumParams> no_tangential = base;
+  no_tangential[UnifiedIntrinsics::kK3] = true;
+  no_tangential[UnifiedIntrinsics::kK4] = true;
+  std::vector<RigIntrinsicsModel> models(2);
+  for (int camera = 0; camera < 2; ++camera) {
+    RigIntrinsicsModel& model = models[camera];
+    model.name = "tangential_free_cam" + std::to_string(camera);
+    model.refine_intrinsics = true;
+    model.calibration_fixed = model.joint_fixed = camera == 0 ? base : no_tangential;
+    model.cam1_calibration_fixed = model.cam1_joint_fixed = camera == 1 ? base : no_tangential;
+  }
+  return models;
+}
+
+std::vector<RigIntrinsicsModel> AutoRigIntrinsicsModels(
+    const std::array<bool, UnifiedIntrinsics::kNumParams>& base) {
+  std::vector<RigIntrinsicsModel> models = StandardRigIntrinsicsModels(base);
+  if (models[1].joint_fixed == models[2].joint_fixed) {
+    models.erase(models.begin() + 1);  // "tangential_fixed" is "free" when base fixes k3, k4
+    return models;
+  }
+  for (const RigIntrinsicsModel& model : PerCameraTangentialModels(base)) {
+    models.insert(models.end() - 1, model);
+  }
+  return models;
 }
 
 namespace {
@@ -157,6 +188,7 @@ void FitCandidates(const BoardSpec& board, const std::vector<StereoBoardPair>& p
     RelativePoseOptions candidate = options;
     candidate.refine_intrinsics = candidates[k].model.refine_intrinsics;
     candidate.fixed_intrinsics = candidates[k].model.joint_fixed;
+    candidate.cam1_fixed_intrinsics = candidates[k].model.cam1_joint_fixed;
     RigModelScore score;
     score.name = candidates[k].model.name;
     score.num_free_intrinsics = candidates[k].model.NumFreeIntrinsics();
@@ -203,6 +235,7 @@ RigModelSelection SelectRigIntrinsicsModel(const BoardSpec& board,
     RigRefinementOptions refine;
     refine.refine_intrinsics = candidate_options[k].refine_intrinsics;
     refine.fixed_intrinsics = candidate_options[k].fixed_intrinsics;
+    refine.cam1_fixed_intrinsics = candidate_options[k].cam1_fixed_intrinsics;
     refine.huber_loss_px = options.huber_loss_px;
     refine.max_num_iterations = options.max_num_iterations;
     refine.num_threads = options.num_threads;

@@ -3,9 +3,9 @@
 // cross-validation of the rig itself.
 //
 // The rig pose and the cameras' intrinsics trade off: on the real fisheye pairs of bench_relpose
-// freeing the tangential terms (k3, k4) with the rig moves the baseline by 0.4 mm at almost the
-// same RMS, and keeping every intrinsic at its per-camera calibration moves it by another
-// 1.2 mm. The fit's own RMS cannot choose (the freer model always fits better), so each
+// freeing the tangential terms (k3, k4) with the rig moves the baseline by 0.3 to 0.4 mm at
+// almost the same RMS, and keeping every intrinsic at its per-camera calibration moves it by
+// about another millimetre. The fit's own RMS cannot choose (the freer model always fits better), so each
 // candidate model is judged by how well it predicts pairs it has not seen: fit the rig on the
 // other pairs, then for the held-out pair fit the board's pose from one camera's corners alone
 // (cameras fixed), map it through cam0_from_cam1 into the other camera and measure that
@@ -13,6 +13,7 @@
 // rig is for: where a point seen by one camera appears in the other.
 
 #include <array>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -26,11 +27,21 @@ namespace omnirig {
 // One model of the cameras for the rig: the intrinsics held fixed when each camera is
 // calibrated alone, and whether / which the joint refinement frees.
 struct RigIntrinsicsModel {
+  using FixedSet = std::array<bool, UnifiedIntrinsics::kNumParams>;
   std::string name;
-  std::array<bool, UnifiedIntrinsics::kNumParams> calibration_fixed{};
+  FixedSet calibration_fixed{};
   bool refine_intrinsics = false;
-  std::array<bool, UnifiedIntrinsics::kNumParams> joint_fixed{};
+  FixedSet joint_fixed{};
+  // cam1's sets when they differ from cam0's (the two above then hold cam0's).
+  std::optional<FixedSet> cam1_calibration_fixed;
+  std::optional<FixedSet> cam1_joint_fixed;
 
+  const FixedSet& CalibrationFixed(int camera) const {
+    return camera == 1 && cam1_calibration_fixed ? *cam1_calibration_fixed : calibration_fixed;
+  }
+  const FixedSet& JointFixed(int camera) const {
+    return camera == 1 && cam1_joint_fixed ? *cam1_joint_fixed : joint_fixed;
+  }
   // Intrinsics the joint refinement estimates, both cameras together (0 when not refined).
   int NumFreeIntrinsics() const;
 };
@@ -41,6 +52,21 @@ struct RigIntrinsicsModel {
 //                      `base`'s free intrinsics refined with the rig;
 //   "free"             every intrinsic free in `base` refined with the rig.
 std::vector<RigIntrinsicsModel> StandardRigIntrinsicsModels(
+    const std::array<bool, UnifiedIntrinsics::kNumParams>& base);
+
+// Between "tangential_fixed" and "free", one camera's tangential terms only:
+//   "tangential_free_cam0" k3, k4 free in cam0 (its calibration and the joint refinement),
+//                          zero in cam1;
+//   "tangential_free_cam1" the other way round.
+std::vector<RigIntrinsicsModel> PerCameraTangentialModels(
+    const std::array<bool, UnifiedIntrinsics::kNumParams>& base);
+
+// The candidates of the relative_pose job's "intrinsics_model": "auto", simplest first: the
+// standard ones with the per-camera tangential models between "tangential_fixed" and "free"
+// (on the real fisheye pairs of bench_relpose the cross-validation prefers freeing cam0's
+// tangential terms alone: it predicts as well as "free" with two parameters fewer). Models
+// that coincide with another for this `base` (tangential terms already fixed) are left out.
+std::vector<RigIntrinsicsModel> AutoRigIntrinsicsModels(
     const std::array<bool, UnifiedIntrinsics::kNumParams>& base);
 
 // A model with its per-camera calibrations (made by the caller with calibration_fixed).

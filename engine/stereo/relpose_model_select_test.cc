@@ -40,6 +40,27 @@ TEST(RigIntrinsicsModels, StandardCandidatesAreOrderedByFreedom) {
   EXPECT_EQ(models[kFree].NumFreeIntrinsics(), 18);
   EXPECT_FALSE(models[kFree].calibration_fixed[UnifiedIntrinsics::kK3]);
   EXPECT_TRUE(models[kTangentialFixed].joint_fixed[UnifiedIntrinsics::kK4]);
+  // One camera's tangential terms: between the two in freedom.
+  const auto per_camera = PerCameraTangentialModels(DefaultFixedIntrinsics());
+  ASSERT_EQ(per_camera.size(), 2u);
+  for (int camera = 0; camera < 2; ++camera) {
+    const RigIntrinsicsModel& model = per_camera[camera];
+    EXPECT_EQ(model.name, "tangential_free_cam" + std::to_string(camera));
+    EXPECT_EQ(model.NumFreeIntrinsics(), 16);
+    EXPECT_FALSE(model.JointFixed(camera)[UnifiedIntrinsics::kK3]);
+    EXPECT_TRUE(model.JointFixed(1 - camera)[UnifiedIntrinsics::kK3]);
+    EXPECT_TRUE(model.CalibrationFixed(1 - camera)[UnifiedIntrinsics::kK4]);
+  }
+  // The job's "auto" candidates: all five, simplest first; four when k3, k4 are fixed anyway.
+  const auto all = AutoRigIntrinsicsModels(DefaultFixedIntrinsics());
+  ASSERT_EQ(all.size(), 5u);
+  for (size_t k = 1; k < all.size(); ++k) {
+    EXPECT_LE(all[k - 1].NumFreeIntrinsics(), all[k].NumFreeIntrinsics()) << all[k].name;
+  }
+  EXPECT_EQ(all.back().name, "free");
+  auto no_tangential = DefaultFixedIntrinsics();
+  no_tangential[UnifiedIntrinsics::kK3] = no_tangential[UnifiedIntrinsics::kK4] = true;
+  EXPECT_EQ(AutoRigIntrinsicsModels(no_tangential).size(), 2u);  // fixed, free
 }
 
 // With the true cameras the simplest model predicts held-out pairs as well as any: the rule

@@ -1,9 +1,10 @@
 // The relative pose on real fisheye stereo pairs (label integration): detection, per-camera
 // calibration and the rig, against the reference baseline of the data's own repository
 // (cv::fisheye::stereoCalibrate, Kannala-Brandt model: 109.96 mm). The same pairs' own
-// uncertainty is large: leaving one pair out moves our baseline over 0.6 mm, the odd- and
-// even-numbered halves differ by 1.3 mm (bench_relpose).
+// uncertainty is large: leaving one pair out moves our baseline by up to 0.6 mm (bench_relpose).
 
+#include <algorithm>
+#include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <optional>
@@ -91,7 +92,11 @@ TEST_F(RelativePoseReal, FisheyePairsGiveTheReferenceBaseline) {
   const RelativePoseReport report =
       EstimateRelativePose(Camera(0, false), Camera(1, false), board_, *pairs_, options);
   ASSERT_TRUE(report.success) << report.message;
-  EXPECT_GE(report.num_pairs_used, 25);
+  // The synchronisation test may leave out up to half the pairs, each with its reason.
+  EXPECT_GE(report.num_pairs_used, 15);
+  for (const RelativePosePairReport& pair : report.pairs) {
+    EXPECT_TRUE(pair.used || !pair.reason.empty()) << pair.name;
+  }
   EXPECT_LT(report.rms_px, 0.5);
   // Left camera = cam0: the right camera sits ~110 mm along cam0's +x.
   EXPECT_GT(report.rig.cam0_from_cam1.translation.x(), 0.1);
@@ -122,17 +127,52 @@ TEST_F(RelativePoseReal, TangentialTermsMoveTheBaselineByMoreThanItsStd) {
   EXPECT_NEAR(without.baseline_m, 0.10996, 0.002 * 0.10996);
 }
 
-// The job's default on these pairs: the three standard models scored by leave-one-pair-out
-// prediction of one camera's corners from the other's (bench_relpose prints the table).
+// Some pairs' two images do not show one board pose: before the synchronisation test existed,
+// the pairs whose joint residual was well above the mono calibrations' were traced to pairs 11,
+// 15 and 22, whose two cameras' own board poses disagree by 2 to 3 mm at the board's centre.
+// The test (relpose_sync.h, its rule fixed on synthetic rigs) must leave those out, keep most
+// pairs, and the rig without them must fit the rest at close to the mono calibrations' level.
+TEST_F(RelativePoseReal, UnsynchronisedPairsAreLeftOut) {
+  RelativePoseOptions options;
+  options.refine_intrinsics = true;
+  const RelativePoseReport report =
+      EstimateRelativePose(Camera(0, false), Camera(1, false), board_, *pairs_, options);
+  options.sync_test.false_alarm_rate = 0.0;
+  const RelativePoseReport kept =
+      EstimateRelativePose(Camera(0, false), Camera(1, false), board_, *pairs_, options);
+  ASSERT_TRUE(report.success) << report.message;
+  ASSERT_TRUE(kept.success) << kept.message;
+  EXPECT_EQ(report.num_pairs_used, 29 - report.sync_rounds);
+  for (const char* name : {"pair11", "pair15", "pair22"}) {
+    const auto pair = std::find_if(report.pairs.begin(), report.pairs.end(),
+                                   [name](const RelativePosePairReport& p) { return p.name == name; });
+    ASSERT_NE(pair, report.pairs.end());
+    EXPECT_FALSE(pair->used) << name;
+    EXPECT_NE(pair->reason.find("exposures not simultaneous?"), std::string::npos) << pair->reason;
+    EXPECT_GT(pair->board_offset_m, 1e-3) << name;
+  }
+  // Each camera's corner noise as its own calibration sees it (0.16-0.18 px RMS of the
+  // Euclidean error: 0.11-0.13 px per coordinate).
+  for (double noise : report.sync_test.corner_noise_px) {
+    EXPECT_GT(noise, 0.10);
+    EXPECT_LT(noise, 0.14);
+  }
+  EXPECT_LT(report.rms_px, kept.rms_px);
+  EXPECT_LT(report.rms_px, 2.0 * std::sqrt(2.0) * report.sync_test.corner_noise_px[1]);
+}
+
+// The job's default on these pairs: the five candidate models (AutoRigIntrinsicsModels) scored
+// by leave-one-pair-out prediction of one camera's corners from the other's (bench_relpose
+// prints the table).
 TEST_F(RelativePoseReal, CrossValidationScoresEveryModelAndFollowsItsRule) {
   std::vector<RigModelCandidate> candidates;
-  for (const RigIntrinsicsModel& model : StandardRigIntrinsicsModels(DefaultFixedIntrinsics())) {
-    const bool no_tangential = model.calibration_fixed[UnifiedIntrinsics::kK3];
-    candidates.push_back({model, Camera(0, no_tangential), Camera(1, no_tangential)});
+  for (const RigIntrinsicsModel& model : AutoRigIntrinsicsModels(DefaultFixedIntrinsics())) {
+    candidates.push_back({model, Camera(0, model.CalibrationFixed(0)[UnifiedIntrinsics::kK3]),
+                          Camera(1, model.CalibrationFixed(1)[UnifiedIntrinsics::kK3])});
   }
   const RigModelSelection selection =
       SelectRigIntrinsicsModel(board_, *pairs_, candidates, RelativePoseOptions());
-  EXPECT_GE(selection.held_out.size(), 25u);
+  EXPECT_GE(selection.held_out.size(), 15u);
   ASSERT_GE(selection.chosen, 0) << selection.rule;
   for (const RigModelScore& score : selection.candidates) {
     ASSERT_TRUE(score.fit.success) << score.name << ": " << score.fit.message;

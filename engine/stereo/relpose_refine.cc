@@ -68,11 +68,15 @@ void AddResiduals(const std::vector<RigPairCorners>& pairs, const RigRefinementO
     problem->SetManifold(board, NewPoseManifold());
   }
   problem->SetManifold(blocks->cam0_from_cam1.data(), NewPoseManifold());
-  std::vector<int> fixed;
-  for (int p = 0; p < UnifiedIntrinsics::kNumParams; ++p) {
-    if (options.fixed_intrinsics[p]) fixed.push_back(p);
-  }
-  for (double* intrinsics : {blocks->intrinsics0.data(), blocks->intrinsics1.data()}) {
+  for (int camera = 0; camera < 2; ++camera) {
+    const auto& fixed_set = camera == 1 && options.cam1_fixed_intrinsics
+                                ? *options.cam1_fixed_intrinsics
+                                : options.fixed_intrinsics;
+    double* intrinsics = camera == 0 ? blocks->intrinsics0.data() : blocks->intrinsics1.data();
+    std::vector<int> fixed;
+    for (int p = 0; p < UnifiedIntrinsics::kNumParams; ++p) {
+      if (fixed_set[p]) fixed.push_back(p);
+    }
     if (!options.refine_intrinsics || fixed.size() == UnifiedIntrinsics::kNumParams) {
       problem->SetParameterBlockConstant(intrinsics);
     } else if (!fixed.empty()) {
@@ -135,6 +139,40 @@ RigUncertainty EstimateUncertainty(ceres::Problem* problem, RigBlocks* blocks) {
   return uncertainty;
 }
 
+// A board corner of one pair with the rig and the camera held constant: the board pose is the
+// only parameter block, so the autodiff carries 7 derivatives instead of the 25 of the rig's
+// functors (the synchronisation test fits every pair's board this way in every round).
+struct BoardThroughRigCost {
+  BoardThroughRigCost(const Eigen::Vector2d& observed_px, const Eigen::Vector3d& point_in_board,
+                      const Rigid3d& cam_from_cam0, const UnifiedIntrinsics& intrinsics)
+      : observed_px(observed_px), cam_from_cam0(cam_from_cam0), intrinsics(intrinsics.params) {
+    for (int k = 0; k < 3; ++k) point[k] = point_in_board[k];
+  }
+
+  template <typename T>
+  bool operator()(const T* cam0_from_board, T* residual) const {
+    const T point_in_board[3] = {T(point[0]), T(point[1]), T(point[2])};
+    T point_in_cam0[3];
+    TransformPoint(cam0_from_board, point_in_board, point_in_cam0);
+    const Eigen::Matrix<T, 3, 1> point_in_cam =
+        cam_from_cam0.rotation.cast<T>() *
+            Eigen::Map<const Eigen::Matrix<T, 3, 1>>(point_in_cam0) +
+        cam_from_cam0.translation.cast<T>();
+    T params[UnifiedIntrinsics::kNumParams];
+    for (int p = 0; p < UnifiedIntrinsics::kNumParams; ++p) params[p] = T(intrinsics[p]);
+    T pixel[2];
+    if (!ProjectToPixel(params, point_in_cam.data(), pixel)) return false;
+    residual[0] = pixel[0] - T(observed_px.x());
+    residual[1] = pixel[1] - T(observed_px.y());
+    return true;
+  }
+
+  Eigen::Vector2d observed_px;
+  double point[3];
+  Rigid3d cam_from_cam0;
+  std::array<double, UnifiedIntrinsics::kNumParams> intrinsics;
+};
+
 }  // namespace
 
 RigRefinementSummary RefineRig(const std::vector<RigPairCorners>& pairs,
@@ -184,6 +222,44 @@ RigRefinementSummary RefineRig(const std::vector<RigPairCorners>& pairs,
   rig->cam1.intrinsics.params = blocks.intrinsics1;
   if (uncertainty != nullptr) *uncertainty = EstimateUncertainty(&problem, &blocks);
   return result;
+}
+
+double FitBoardThroughRig(const StereoRig& rig, const RigPairCorners& pair,
+                          const std::array<double, 2>& noise_px, Rigid3d* cam0_from_board) {
+  OMNIRIG_CHECK(noise_px[0] > 0.0 && noise_px[1] > 0.0, "corner noise must be positive");
+  std::array<double, 7> board = cam0_from_board->ToParams();
+  // Weights 1 / sigma^2 on each camera's squared residuals: the problem's cost is then half
+  // the whitened sum of squares.
+  ceres::Problem::Options problem_options;
+  problem_options.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+  ceres::Problem problem(problem_options);
+  ceres::ScaledLoss weight0(nullptr, 1.0 / (noise_px[0] * noise_px[0]), ceres::TAKE_OWNERSHIP);
+  ceres::ScaledLoss weight1(nullptr, 1.0 / (noise_px[1] * noise_px[1]), ceres::TAKE_OWNERSHIP);
+  const Rigid3d cam1_from_cam0 = rig.cam0_from_cam1.Inverse();
+  for (size_t c = 0; c < pair.pixels0.size(); ++c) {
+    problem.AddResidualBlock(
+        new ceres::AutoDiffCostFunction<BoardThroughRigCost, 2, 7>(new BoardThroughRigCost(
+            pair.pixels0[c], pair.points_in_board0[c], Rigid3d(), rig.cam0.intrinsics)),
+        &weight0, board.data());
+  }
+  for (size_t c = 0; c < pair.pixels1.size(); ++c) {
+    problem.AddResidualBlock(
+        new ceres::AutoDiffCostFunction<BoardThroughRigCost, 2, 7>(new BoardThroughRigCost(
+            pair.pixels1[c], pair.points_in_board1[c], cam1_from_cam0, rig.cam1.intrinsics)),
+        &weight1, board.data());
+  }
+  problem.SetManifold(board.data(), NewPoseManifold());
+  ceres::Solver::Options solver_options;
+  solver_options.linear_solver_type = ceres::DENSE_QR;
+  solver_options.max_num_iterations = 50;
+  solver_options.function_tolerance = 1e-12;
+  solver_options.parameter_tolerance = 1e-12;
+  solver_options.logging_type = ceres::SILENT;
+  ceres::Solver::Summary summary;
+  ceres::Solve(solver_options, &problem, &summary);
+  if (!summary.IsSolutionUsable() || !std::isfinite(summary.final_cost)) return -1.0;
+  *cam0_from_board = Rigid3d::FromParams(board.data());
+  return 2.0 * summary.final_cost;
 }
 
 double PairRmsPx(const StereoRig& rig, const Rigid3d& cam0_from_board,

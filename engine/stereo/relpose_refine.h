@@ -3,6 +3,7 @@
 // cam0_from_cam1 and one board pose per pair, optionally both cameras' intrinsics.
 
 #include <array>
+#include <optional>
 #include <vector>
 
 #include <Eigen/Core>
@@ -26,8 +27,10 @@ std::array<bool, UnifiedIntrinsics::kNumParams> DefaultFixedIntrinsics();
 
 struct RigRefinementOptions {
   bool refine_intrinsics = false;
-  // With refine_intrinsics: the intrinsics (UnifiedIntrinsics order) that stay constant.
+  // With refine_intrinsics: the intrinsics (UnifiedIntrinsics order) that stay constant...
   std::array<bool, UnifiedIntrinsics::kNumParams> fixed_intrinsics = DefaultFixedIntrinsics();
+  // ...in cam1 these instead, when given (a model that frees a term in one camera only).
+  std::optional<std::array<bool, UnifiedIntrinsics::kNumParams>> cam1_fixed_intrinsics;
   double huber_loss_px = 1.0;
   int max_num_iterations = 100;
   int num_threads = 1;
@@ -57,6 +60,14 @@ RigRefinementSummary RefineRig(const std::vector<RigPairCorners>& pairs,
                                const RigRefinementOptions& options, StereoRig* rig,
                                std::vector<Rigid3d>* cam0_from_board, RigUncertainty* uncertainty,
                                const ProgressSink& progress = {});
+
+// The board pose of one pair with the rig and both cameras held fixed: plain (not robust)
+// least squares over both images' corners, each camera's residuals divided by its corner noise
+// `noise_px` (per coordinate). `cam0_from_board` is the starting point and receives the
+// solution. Returns the weighted sum of squares at the solution (dimensionless), or -1 when
+// the solve fails or a corner does not project.
+double FitBoardThroughRig(const StereoRig& rig, const RigPairCorners& pair,
+                          const std::array<double, 2>& noise_px, Rigid3d* cam0_from_board);
 
 // RMS (pixels) over one pair's corners in both images; a corner that does not project counts
 // as a residual of 1e3 px (never silently dropped).

@@ -80,14 +80,18 @@ struct Scene {
   std::vector<StereoBoardPair> pairs;
 };
 
+// The board's pose in cam0 for pair i of num_pairs: around the rig, 0.6 to 0.9 m away.
+inline Rigid3d PairBoardPose(const BoardSpec& board, int i, int num_pairs) {
+  return BoardPose(board, 360.0 * i / num_pairs, 0.6 + 0.1 * (i % 4), 15.0 + 7.0 * (i % 3),
+                   -0.05 + 0.02 * (i % 5));
+}
+
 // Pairs of `scene.board` seen by `scene.rig` (both set), replacing scene->pairs.
 inline void ProjectPairs(double noise_px, int num_pairs, unsigned seed, Scene* scene) {
   std::mt19937 rng(seed);
   scene->pairs.clear();
   for (int i = 0; i < num_pairs; ++i) {
-    const Rigid3d cam0_from_board =
-        BoardPose(scene->board, 360.0 * i / num_pairs, 0.6 + 0.1 * (i % 4), 15.0 + 7.0 * (i % 3),
-                  -0.05 + 0.02 * (i % 5));
+    const Rigid3d cam0_from_board = PairBoardPose(scene->board, i, num_pairs);
     const Rigid3d cam1_from_board = scene->rig.cam0_from_cam1.Inverse() * cam0_from_board;
     StereoBoardPair pair;
     pair.name = "pair" + std::to_string(i);
@@ -107,6 +111,19 @@ inline Scene MakeScene(double noise_px, int num_pairs, unsigned seed, int cols =
   scene.rig.cam0_from_cam1 = VerticalRig();
   ProjectPairs(noise_px, num_pairs, seed, &scene);
   return scene;
+}
+
+// Unsynchronised exposures: pair `index`'s board moved by `shift_in_cam0_m` (cam0's frame)
+// after cam0's shot and before cam1's; cam1's corners are projected again from the moved
+// board with fresh noise of `noise_px`.
+inline void MoveBoardBeforeCam1(int index, const Eigen::Vector3d& shift_in_cam0_m, double noise_px,
+                                unsigned seed, Scene* scene) {
+  const int num_pairs = static_cast<int>(scene->pairs.size());
+  const Rigid3d cam0_from_board = PairBoardPose(scene->board, index, num_pairs);
+  const Rigid3d moved(cam0_from_board.rotation, cam0_from_board.translation + shift_in_cam0_m);
+  std::mt19937 rng(seed);
+  scene->pairs[index].cam1 = Detect(scene->rig.cam1, scene->board,
+                                    scene->rig.cam0_from_cam1.Inverse() * moved, noise_px, &rng);
 }
 
 inline RelativePoseReport Estimate(const Scene& scene, const RelativePoseOptions& options = {}) {

@@ -1,0 +1,172 @@
+#include "engine/stereo/relpose_sync.h"
+
+#include <algorithm>
+#include <cmath>
+#include <optional>
+
+#include "engine/calib/board_pose.h"
+#include "engine/util/check.h"
+
+namespace omnirig {
+
+double ChiSquareSurvival(double x, int dof) {
+  OMNIRIG_CHECK(dof > 0 && dof % 2 == 0, "chi-square survival needs an even dof, got " << dof);
+  if (x <= 0.0) return 1.0;
+  // Q(x; 2m) = exp(-x/2) * sum_{k<m} (x/2)^k / k!: the Poisson tail's identity.
+  const double half = 0.5 * x;
+  double term = 1.0, sum = 1.0;
+  for (int k = 1; k < dof / 2; ++k) {
+    term *= half / k;
+    sum += term;
+  }
+  return std::min(1.0, std::exp(-half) * sum);
+}
+
+double ChiSquareUpperQuantile(double p, int dof) {
+  OMNIRIG_CHECK(p > 0.0 && p < 1.0, "probability must be in (0, 1), got " << p);
+  double low = 0.0, high = dof + 10.0;
+  while (ChiSquareSurvival(high, dof) > p) high *= 2.0;
+  // Q decreases in x: bisection to machine precision.
+  for (int i = 0; i < 200 && high - low > 1e-12 * high; ++i) {
+    const double mid = 0.5 * (low + high);
+    (ChiSquareSurvival(mid, dof) > p ? low : high) = mid;
+  }
+  return 0.5 * (low + high);
+}
+
+void SyncTestOptions::Check() const {
+  OMNIRIG_CHECK(false_alarm_rate >= 0.0 && false_alarm_rate < 1.0,
+                "sync_test.false_alarm_rate must be in [0, 1), got " << false_alarm_rate);
+  OMNIRIG_CHECK(min_corner_noise_px > 0.0,
+                "sync_test.min_corner_noise_px must be positive, got " << min_corner_noise_px);
+  OMNIRIG_CHECK(max_rounds >= 1 && max_rounds <= 100,
+                "sync_test.max_rounds must be in [1, 100], got " << max_rounds);
+}
+
+namespace {
+
+constexpr int kPoseDof = 6;
+
+double Median(std::vector<double> values) {
+  const size_t mid = values.size() / 2;
+  std::nth_element(values.begin(), values.begin() + mid, values.end());
+  if (values.size() % 2 == 1) return values[mid];
+  const double upper = values[mid];
+  return 0.5 * (upper + *std::max_element(values.begin(), values.begin() + mid));
+}
+
+// One pair's two own board poses and their sums of squares (pixels^2).
+struct SeparateFit {
+  bool ok = false;
+  std::optional<Rigid3d> cam_from_board[2];
+  double sum_squares[2] = {0.0, 0.0};
+  int dof[2] = {0, 0};
+};
+
+SeparateFit FitSeparately(const StereoRig& rig, const RigPairCorners& pair) {
+  SeparateFit fit;
+  double rms[2] = {0.0, 0.0};
+  fit.cam_from_board[0] = EstimateBoardPose(rig.cam0, pair.points_in_board0, pair.pixels0, &rms[0]);
+  fit.cam_from_board[1] = EstimateBoardPose(rig.cam1, pair.points_in_board1, pair.pixels1, &rms[1]);
+  const size_t n[2] = {pair.pixels0.size(), pair.pixels1.size()};
+  fit.ok = fit.cam_from_board[0] && fit.cam_from_board[1] && n[0] > 3 && n[1] > 3;
+  for (int c = 0; c < 2; ++c) {
+    // PoseRmsPx is sqrt(mean |e|^2) over corners: both coordinates' squares.
+    fit.sum_squares[c] = rms[c] * rms[c] * static_cast<double>(n[c]);
+    fit.dof[c] = 2 * static_cast<int>(n[c]) - kPoseDof;
+  }
+  return fit;
+}
+
+// Step 1 of the rule: sigma per camera from the separate fits.
+std::array<double, 2> CornerNoise(const std::vector<SeparateFit>& fits,
+                                  const SyncTestOptions& options) {
+  std::array<double, 2> noise{};
+  for (int c = 0; c < 2; ++c) {
+    std::vector<double> variances, dofs;
+    for (const SeparateFit& fit : fits) {
+      if (!fit.ok) continue;
+      variances.push_back(fit.sum_squares[c] / fit.dof[c]);
+      dofs.push_back(fit.dof[c]);
+    }
+    double variance = 0.0;
+    if (!variances.empty()) {
+      int k = static_cast<int>(std::lround(Median(dofs)));
+      k += k % 2;  // the closed form wants an even dof (2n - 6 always is)
+      variance = Median(variances) / (ChiSquareUpperQuantile(0.5, k) / k);
+    }
+    noise[c] = std::max(options.min_corner_noise_px, std::sqrt(variance));
+  }
+  return noise;
+}
+
+Eigen::Vector3d BoardCentre(const RigPairCorners& pair) {
+  Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+  for (const auto& p : pair.points_in_board0) centre += p;
+  for (const auto& p : pair.points_in_board1) centre += p;
+  return centre / static_cast<double>(pair.points_in_board0.size() + pair.points_in_board1.size());
+}
+
+// Step 2 for one pair: T (before the dispersion) and the disagreement in metric terms.
+PairSyncStatistic PairStatistic(const StereoRig& rig, const RigPairCorners& pair,
+                                const SeparateFit& separate, const std::array<double, 2>& noise,
+                                Rigid3d cam0_from_board, double* raw_statistic) {
+  PairSyncStatistic statistic;
+  if (!separate.ok) return statistic;
+  const double joint = FitBoardThroughRig(rig, pair, noise, &cam0_from_board);
+  if (joint < 0.0) return statistic;
+  const double apart = separate.sum_squares[0] / (noise[0] * noise[0]) +
+                       separate.sum_squares[1] / (noise[1] * noise[1]);
+  // The separate fits are the unconstrained optimum: a negative difference is round-off.
+  *raw_statistic = std::max(0.0, joint - apart);
+  const Rigid3d& own0 = *separate.cam_from_board[0];
+  const Rigid3d via_cam1 = rig.cam0_from_cam1 * *separate.cam_from_board[1];
+  const Eigen::Vector3d centre = BoardCentre(pair);
+  statistic.board_offset_m = (own0 * centre - via_cam1 * centre).norm();
+  statistic.board_rotation_deg =
+      RotationDistanceRad(own0.rotation, via_cam1.rotation) * 180.0 / M_PI;
+  statistic.valid = true;
+  return statistic;
+}
+
+}  // namespace
+
+SyncTestReport TestPairSynchronisation(const StereoRig& rig,
+                                       const std::vector<RigPairCorners>& pairs,
+                                       const std::vector<Rigid3d>& cam0_from_board,
+                                       const SyncTestOptions& options) {
+  options.Check();
+  OMNIRIG_CHECK(cam0_from_board.size() == pairs.size(), "one board pose per pair expected");
+  SyncTestReport report;
+  report.pairs.resize(pairs.size());
+  if (pairs.size() < 3 || options.false_alarm_rate == 0.0) return report;
+  std::vector<SeparateFit> separate;
+  for (const RigPairCorners& pair : pairs) separate.push_back(FitSeparately(rig, pair));
+  report.corner_noise_px = CornerNoise(separate, options);
+  std::vector<double> raw(pairs.size(), 0.0), valid_raw;
+  for (size_t i = 0; i < pairs.size(); ++i) {
+    report.pairs[i] = PairStatistic(rig, pairs[i], separate[i], report.corner_noise_px,
+                                    cam0_from_board[i], &raw[i]);
+    if (report.pairs[i].valid) valid_raw.push_back(raw[i]);
+  }
+  if (valid_raw.size() < 3) return report;
+  report.run = true;
+  report.median_statistic = Median(valid_raw);
+  report.dispersion =
+      std::max(1.0, report.median_statistic / ChiSquareUpperQuantile(0.5, kPoseDof));
+  report.limit = ChiSquareUpperQuantile(options.false_alarm_rate / valid_raw.size(), kPoseDof);
+  for (size_t i = 0; i < pairs.size(); ++i) {
+    PairSyncStatistic& pair = report.pairs[i];
+    if (!pair.valid) continue;
+    pair.statistic = raw[i] / report.dispersion;
+    pair.flagged = pair.statistic > report.limit;
+    if (!pair.flagged) continue;
+    ++report.num_flagged;
+    if (report.worst < 0 || pair.statistic > report.pairs[report.worst].statistic) {
+      report.worst = static_cast<int>(i);
+    }
+  }
+  return report;
+}
+
+}  // namespace omnirig
