@@ -17,6 +17,7 @@
 #include "engine/calib/board_pose.h"
 #include "engine/calib/model_io.h"
 #include "engine/calib/pipeline.h"
+#include "engine/synth/calib_board.h"
 #include "engine/synth/presets.h"
 #include "engine/util/timer.h"
 
@@ -92,14 +93,6 @@ OmnidirResult RunOmnidir(const std::vector<CalibrationView>& views, const BoardS
   return result;
 }
 
-BoardSpec FromSynth(const synth::CheckerboardSpec& spec) {
-  BoardSpec board;
-  board.cols = spec.cols;
-  board.rows = spec.rows;
-  board.square_size_m = spec.square_size_m;
-  return board;
-}
-
 double MeanRayErrorDeg(const synth::SynthCamera& truth, const CameraModel& estimate) {
   double sum = 0.0;
   int n = 0;
@@ -156,7 +149,7 @@ void SyntheticAccuracy() {
   options.render.num_threads = 2;
   options.seed = 42;
   const synth::MonoCalibrationSet set = synth::MakeMonoCalibrationSet(options);
-  const BoardSpec board = FromSynth(set.board);
+  const BoardSpec board = ToBoardSpec(set.board);
   std::vector<BoardDetection> detections;
   std::vector<CalibrationView> views;
   double corner_error = 0.0;
@@ -349,7 +342,7 @@ void DetectAndCalibrateSpeed() {
     names.push_back(set.names[v] + ".png");
     cv::imwrite((dir / names.back()).string(), set.images[v]);
   }
-  TimeCalibrateImages("10 renders 1280x1024 (PNG)", dir, names, FromSynth(set.board));
+  TimeCalibrateImages("10 renders 1280x1024 (PNG)", dir, names, ToBoardSpec(set.board));
   fs::remove_all(dir);
   const fs::path vmr =
       fs::path(OMNIRIG_SOURCE_DIR) / ".." / "shared" / "data" / "real" / "ocamcalib-vmr";

@@ -35,18 +35,11 @@
 #include "engine/calib/calibrate.h"
 #include "engine/calib/detect.h"
 #include "engine/geometry/unified_camera.h"
+#include "engine/synth/calib_board.h"
 #include "engine/synth/presets.h"
 
 namespace omnirig {
 namespace {
-
-BoardSpec ToBoardSpec(const synth::CheckerboardSpec& spec) {
-  BoardSpec board;
-  board.cols = spec.cols;
-  board.rows = spec.rows;
-  board.square_size_m = spec.square_size_m;
-  return board;
-}
 
 // Running sums of one group of corner errors.
 struct Accumulator {

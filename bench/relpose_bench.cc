@@ -64,6 +64,7 @@
 #include "engine/stereo/relpose_corner_order.h"
 #include "engine/stereo/relpose_model_select.h"
 #include "engine/stereo/triangulation.h"
+#include "engine/synth/calib_board.h"
 #include "engine/synth/presets.h"
 
 namespace omnirig {
@@ -113,14 +114,6 @@ void PrintRows(const std::string& title, const std::vector<Row>& rows, const Rig
     std::printf("| %-44s | %12.4f | %+10.4f | %10s | %8s | %7s | %s\n", row.method.c_str(),
                 baseline * 1e3, error_pct, rotation, rms, time, row.note.c_str());
   }
-}
-
-BoardSpec ToBoardSpec(const synth::CheckerboardSpec& spec) {
-  BoardSpec board;
-  board.cols = spec.cols;
-  board.rows = spec.rows;
-  board.square_size_m = spec.square_size_m;
-  return board;
 }
 
 void AddCornerNoise(double sigma_px, std::mt19937* rng, BoardDetection* detection) {

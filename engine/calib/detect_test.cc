@@ -8,18 +8,11 @@
 #include <opencv2/aruco/charuco.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "engine/synth/calib_board.h"
 #include "engine/synth/presets.h"
 
 namespace omnirig {
 namespace {
-
-BoardSpec ToBoardSpec(const synth::CheckerboardSpec& spec) {
-  BoardSpec board;
-  board.cols = spec.cols;
-  board.rows = spec.rows;
-  board.square_size_m = spec.square_size_m;
-  return board;
-}
 
 // A few rendered views, shared by the tests (rendering dominates their time).
 const synth::MonoCalibrationSet& RenderedSet() {
