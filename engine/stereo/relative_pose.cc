@@ -31,6 +31,17 @@ void RelativePoseOptions::Check() const {
                 "min_spread_eigen_ratio must be in [0, 1), got " << min_spread_eigen_ratio);
 }
 
+RigRefinementOptions RelativePoseOptions::RefinementOptions() const {
+  RigRefinementOptions refine;
+  refine.refine_intrinsics = refine_intrinsics;
+  refine.fixed_intrinsics = fixed_intrinsics;
+  refine.cam1_fixed_intrinsics = cam1_fixed_intrinsics;
+  refine.huber_loss_px = huber_loss_px;
+  refine.max_num_iterations = max_num_iterations;
+  refine.num_threads = num_threads;
+  return refine;
+}
+
 namespace {
 
 // One pair's board poses as estimated per camera, before the corner order is settled.
@@ -220,15 +231,8 @@ bool SolveJoint(UsedPairs* used, const RelativePoseOptions& options, bool warm_s
   } else {
     rig.cam0_from_cam1 = report->linear_cam0_from_cam1;
   }
-  RigRefinementOptions refine_options;
-  refine_options.refine_intrinsics = options.refine_intrinsics;
-  refine_options.fixed_intrinsics = options.fixed_intrinsics;
-  refine_options.cam1_fixed_intrinsics = options.cam1_fixed_intrinsics;
-  refine_options.huber_loss_px = options.huber_loss_px;
-  refine_options.max_num_iterations = options.max_num_iterations;
-  refine_options.num_threads = options.num_threads;
   RigUncertainty uncertainty;
-  const RigRefinementSummary summary = RefineRig(used->corners, refine_options, &rig,
+  const RigRefinementSummary summary = RefineRig(used->corners, options.RefinementOptions(), &rig,
                                                  &used->cam0_from_board, &uncertainty, progress);
   report->solver = {summary.initial_cost, summary.final_cost, summary.num_iterations,
                     summary.termination, summary.time_s};

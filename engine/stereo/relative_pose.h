@@ -86,6 +86,8 @@ struct RelativePoseOptions {
 
   // Throws InvalidArgument naming the offending field.
   void Check() const;
+  // The joint refinement's options (eq. 20) that these imply.
+  RigRefinementOptions RefinementOptions() const;
 };
 
 struct RelativePosePairReport {

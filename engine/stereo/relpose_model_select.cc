@@ -19,11 +19,21 @@ int RigIntrinsicsModel::NumFreeIntrinsics() const {
   return count;
 }
 
+namespace {
+
+// `base` with the tangential terms k3, k4 fixed too.
+RigIntrinsicsModel::FixedSet WithoutTangential(const RigIntrinsicsModel::FixedSet& base) {
+  RigIntrinsicsModel::FixedSet fixed = base;
+  fixed[UnifiedIntrinsics::kK3] = true;
+  fixed[UnifiedIntrinsics::kK4] = true;
+  return fixed;
+}
+
+}  // namespace
+
 std::vector<RigIntrinsicsModel> StandardRigIntrinsicsModels(
     const std::array<bool, UnifiedIntrinsics::kNumParams>& base) {
-  std::array<bool, UnifiedIntrinsics::kNumParams> no_tangential = base;
-  no_tangential[UnifiedIntrinsics::kK3] = true;
-  no_tangential[UnifiedIntrinsics::kK4] = true;
+  const RigIntrinsicsModel::FixedSet no_tangential = WithoutTangential(base);
   return {{"fixed", base, false, base, std::nullopt, std::nullopt},
           {"tangential_fixed", no_tangential, true, no_tangential, std::nullopt, std::nullopt},
           {"free", base, true, base, std::nullopt, std::nullopt}};
@@ -31,9 +41,7 @@ std::vector<RigIntrinsicsModel> StandardRigIntrinsicsModels(
 
 std::vector<RigIntrinsicsModel> PerCameraTangentialModels(
     const std::array<bool, UnifiedIntrinsics::kNumParams>& base) {
-  std::array<bool, UnifiedIntrinsics::kNumParams> no_tangential = base;
-  no_tangential[UnifiedIntrinsics::kK3] = true;
-  no_tangential[UnifiedIntrinsics::kK4] = true;
+  const RigIntrinsicsModel::FixedSet no_tangential = WithoutTangential(base);
   std::vector<RigIntrinsicsModel> models(2);
   for (int camera = 0; camera < 2; ++camera) {
     RigIntrinsicsModel& model = models[camera];
@@ -232,13 +240,7 @@ RigModelSelection SelectRigIntrinsicsModel(const BoardSpec& board,
   for (size_t k = 0; k < candidates.size(); ++k) {
     RigModelScore& score = selection.candidates[k];
     if (!score.fit.success || held_out.size() < 3) continue;
-    RigRefinementOptions refine;
-    refine.refine_intrinsics = candidate_options[k].refine_intrinsics;
-    refine.fixed_intrinsics = candidate_options[k].fixed_intrinsics;
-    refine.cam1_fixed_intrinsics = candidate_options[k].cam1_fixed_intrinsics;
-    refine.huber_loss_px = options.huber_loss_px;
-    refine.max_num_iterations = options.max_num_iterations;
-    refine.num_threads = options.num_threads;
+    const RigRefinementOptions refine = candidate_options[k].RefinementOptions();
     double sum = 0.0, count = 0.0;
     for (size_t f = 0; f < held_out.size(); ++f) {
       progress.ThrowIfCancelled();
