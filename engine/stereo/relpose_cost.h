@@ -5,6 +5,8 @@
 // Parameter blocks: poses as 7 doubles in Eigen order [qx, qy, qz, qw, tx, ty, tz]
 // (Rigid3d::ToParams), intrinsics as UnifiedIntrinsics::params (11 doubles).
 
+#include <array>
+
 #include <ceres/autodiff_cost_function.h>
 #include <Eigen/Core>
 
@@ -72,6 +74,40 @@ struct RigCam1CornerCost {
 
   Eigen::Vector2d observed_px;
   Eigen::Vector3d point_in_board;
+};
+
+// A board corner of one pair with the rig and the camera held constant: the board pose is the
+// only parameter block, so the autodiff carries 7 derivatives instead of the 25 of the rig's
+// functors (the synchronisation test fits every pair's board this way in every round).
+struct BoardThroughRigCost {
+  BoardThroughRigCost(const Eigen::Vector2d& observed_px, const Eigen::Vector3d& point_in_board,
+                      const Rigid3d& cam_from_cam0, const UnifiedIntrinsics& intrinsics)
+      : observed_px(observed_px), cam_from_cam0(cam_from_cam0), intrinsics(intrinsics.params) {
+    for (int k = 0; k < 3; ++k) point[k] = point_in_board[k];
+  }
+
+  template <typename T>
+  bool operator()(const T* cam0_from_board, T* residual) const {
+    const T point_in_board[3] = {T(point[0]), T(point[1]), T(point[2])};
+    T point_in_cam0[3];
+    TransformPoint(cam0_from_board, point_in_board, point_in_cam0);
+    const Eigen::Matrix<T, 3, 1> point_in_cam =
+        cam_from_cam0.rotation.cast<T>() *
+            Eigen::Map<const Eigen::Matrix<T, 3, 1>>(point_in_cam0) +
+        cam_from_cam0.translation.cast<T>();
+    T params[UnifiedIntrinsics::kNumParams];
+    for (int p = 0; p < UnifiedIntrinsics::kNumParams; ++p) params[p] = T(intrinsics[p]);
+    T pixel[2];
+    if (!ProjectToPixel(params, point_in_cam.data(), pixel)) return false;
+    residual[0] = pixel[0] - T(observed_px.x());
+    residual[1] = pixel[1] - T(observed_px.y());
+    return true;
+  }
+
+  Eigen::Vector2d observed_px;
+  double point[3];
+  Rigid3d cam_from_cam0;
+  std::array<double, UnifiedIntrinsics::kNumParams> intrinsics;
 };
 
 }  // namespace omnirig
