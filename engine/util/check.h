@@ -23,9 +23,23 @@ class Cancelled : public std::runtime_error {
 };
 
 namespace internal {
+// The last two components of a source path ("calib/pipeline.cc"): enough to find the check, and
+// free of the build machine's directories, which would otherwise reach API users in job errors.
+inline const char* ShortSourcePath(const char* file) {
+  const char* last = nullptr;
+  const char* before_last = nullptr;
+  for (const char* c = file; *c != '\0'; ++c) {
+    if (*c == '/' || *c == '\\') {
+      before_last = last;
+      last = c;
+    }
+  }
+  return before_last != nullptr ? before_last + 1 : file;
+}
+
 [[noreturn]] inline void ThrowCheck(const char* file, int line, const std::string& what) {
   std::ostringstream os;
-  os << what << " (" << file << ":" << line << ")";
+  os << what << " (" << ShortSourcePath(file) << ":" << line << ")";
   throw InvalidArgument(os.str());
 }
 }  // namespace internal
