@@ -49,6 +49,9 @@ struct JobType {
   std::function<void(const nlohmann::json& params)> validate;
   // Ids of earlier jobs this job reads (so the server can check they exist before queueing).
   std::function<std::vector<std::string>(const nlohmann::json& params)> referenced_jobs;
+  // Whether the job reads its dataset's images (the server then refuses an empty dataset with
+  // 422 at submission instead of queueing a job that can only fail).
+  bool reads_images = true;
   // Runs the job and returns its result JSON. Throws omnirig::Cancelled on cancellation,
   // InvalidArgument for bad input discovered while running, anything else for failures.
   std::function<nlohmann::json(const nlohmann::json& params, const JobContext& context)> run;

@@ -90,9 +90,16 @@ poll_run() {  # ARRIVALS PREFIX
   cpu_start=$(server_cpu_s)
   http_cpu_start=$(http_cpu_s)
   echo "${2}arrivals $1"
+  # The /metrics gauge of open connections halfway through the run: wrk's connections plus
+  # the one reading it.
+  (sleep 10; curl -sf "$URL/metrics" | sed -n 's/^omnirig_http_open_connections //p') \
+      > "$WORK/open_connections.txt" &
+  local sampler=$!
   ARRIVALS=$1 DELAY_MS=$DELAY wrk -t2 -c"$CONNECTIONS" -d20s -s "$ROOT/bench/load_poll.lua" \
       "$URL/api/v1/jobs/$POLL_JOB" > "$WORK/wrk.txt"
+  wait "$sampler" || true
   grep -E '^poll_' "$WORK/wrk.txt" | sed "s/^poll_/$2/"
+  echo "${2}open_connections_midway $(cat "$WORK/open_connections.txt")"
   grep -E 'Socket errors|Non-2xx' "$WORK/wrk.txt" || true
   # Server CPU over the run includes the busy worker; the HTTP threads' own share per request
   # comes from the scheduler's exact run times of the threads at niceness 0.

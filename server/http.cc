@@ -14,14 +14,15 @@
 #include <algorithm>
 #include <atomic>
 #include <cerrno>
-#include <cstring>
 #include <chrono>
 #include <condition_variable>
+#include <cstring>
 #include <fstream>
 #include <mutex>
 #include <regex>
 #include <thread>
 #include <unordered_map>
+#include <utility>
 #include <vector>
 
 #include "api/service_json.h"
@@ -60,6 +61,74 @@ std::string PatternToRegex(const std::string& pattern, std::vector<std::string>&
     pos = close + 1;
   }
   return regex + "$";
+}
+
+// One '/'-separated piece of a route pattern, for matching without std::regex.
+struct Segment {
+  enum Kind { kLiteral, kParam, kRest } kind = kLiteral;
+  std::string literal;
+};
+
+// The pattern's segments; false when a parameter is not a whole segment (e.g. "{id}.json") or
+// "{name+}" is not the last one: such a pattern is left to its regex.
+bool PatternToSegments(const std::string& pattern, std::vector<Segment>& segments) {
+  if (pattern.empty() || pattern[0] != '/') return false;
+  size_t pos = 1;
+  while (true) {
+    const size_t end = std::min(pattern.find('/', pos), pattern.size());
+    const std::string piece = pattern.substr(pos, end - pos);
+    const bool braced = piece.size() >= 2 && piece.front() == '{' && piece.back() == '}';
+    const std::string inner = braced ? piece.substr(1, piece.size() - 2) : piece;
+    if (inner.find_first_of("{}") != std::string::npos) return false;
+    Segment segment;
+    if (braced) {
+      segment.kind = !inner.empty() && inner.back() == '+' ? Segment::kRest : Segment::kParam;
+    } else {
+      segment.literal = piece;
+    }
+    if (!segments.empty() && segments.back().kind == Segment::kRest) return false;
+    segments.push_back(std::move(segment));
+    if (end == pattern.size()) return true;
+    pos = end + 1;
+  }
+}
+
+// Matches `path` as the pattern's regex (PatternToRegex) does: "{name}" is one non-empty segment
+// ([^/]+), "{name+}" the non-empty rest (.+, which stops at line breaks). `values` gets the
+// parameters in order.
+bool MatchSegments(const std::vector<Segment>& segments, const std::string& path,
+                   std::vector<std::string>& values) {
+  values.clear();
+  size_t pos = 0;
+  for (const Segment& segment : segments) {
+    if (pos >= path.size() || path[pos] != '/') return false;
+    ++pos;
+    if (segment.kind == Segment::kRest) {
+      if (pos == path.size() || path.find_first_of("\r\n", pos) != std::string::npos) return false;
+      values.push_back(path.substr(pos));
+      return true;
+    }
+    const size_t end = std::min(path.find('/', pos), path.size());
+    if (segment.kind == Segment::kParam) {
+      if (end == pos) return false;
+      values.push_back(path.substr(pos, end - pos));
+    } else if (path.compare(pos, end - pos, segment.literal) != 0) {
+      return false;
+    }
+    pos = end;
+  }
+  return pos == path.size();
+}
+
+// Header names for httplib's lookups, which take std::string: built once, not per request.
+const std::string kContentLength = "Content-Length";
+const std::string kTransferEncoding = "Transfer-Encoding";
+const std::string kAuthorization = "Authorization";
+
+// The pre-routing handler gives every request without Content-Length or Transfer-Encoding a
+// "Content-Length: 0" (see Install).
+bool HasBody(const httplib::Request& req) {
+  return req.get_header_value(kContentLength) != "0" || req.has_header(kTransferEncoding);
 }
 
 bool ConstantTimeEquals(const std::string& a, const std::string& b) {
@@ -164,11 +233,18 @@ class ConnectionStream : public httplib::Stream {
     return ok;
   }
 
+  // httplib asks for both addresses on every request (REMOTE_ADDR, LOCAL_ADDR headers); they
+  // do not change while the connection lives, so each is looked up once (a system call and two
+  // inet_ntop were ~6 % of a status poll's user-space instructions).
   void get_remote_ip_and_port(std::string& ip, int& port) const override {
-    Address(::getpeername, ip, port);
+    if (!remote_) remote_ = Address(::getpeername);
+    ip = remote_->first;
+    port = remote_->second;
   }
   void get_local_ip_and_port(std::string& ip, int& port) const override {
-    Address(::getsockname, ip, port);
+    if (!local_) local_ = Address(::getsockname);
+    ip = local_->first;
+    port = local_->second;
   }
   int socket() const override { return sock_; }
 
@@ -205,12 +281,11 @@ class ConnectionStream : public httplib::Stream {
     }
   }
   template <typename Getter>
-  void Address(Getter getter, std::string& ip, int& port) const {
+  std::pair<std::string, int> Address(Getter getter) const {
     sockaddr_storage address{};
     socklen_t length = sizeof(address);
-    ip.clear();
-    port = 0;
-    if (getter(sock_, reinterpret_cast<sockaddr*>(&address), &length) != 0) return;
+    int port = 0;
+    if (getter(sock_, reinterpret_cast<sockaddr*>(&address), &length) != 0) return {"", 0};
     char text[INET6_ADDRSTRLEN] = {};
     if (address.ss_family == AF_INET) {
       const auto* v4 = reinterpret_cast<const sockaddr_in*>(&address);
@@ -221,7 +296,7 @@ class ConnectionStream : public httplib::Stream {
       ::inet_ntop(AF_INET6, &v6->sin6_addr, text, sizeof(text));
       port = ntohs(v6->sin6_port);
     }
-    ip = text;
+    return {text, port};
   }
 
   static constexpr size_t kOutBytes = 64 * 1024;
@@ -231,12 +306,14 @@ class ConnectionStream : public httplib::Stream {
   char buffer_[64 * 1024];
   size_t begin_ = 0;
   size_t end_ = 0;
+  mutable std::optional<std::pair<std::string, int>> remote_, local_;
 };
 
 // Before closing a connection whose client may still be sending (a body the handler did not
 // read): shuts the write side (the response is out) and discards what arrives until the client
-// closes, for at most `linger_ms` (the read timeout: no longer than a stalled upload may hold
-// the serving thread anyway). Closing at once with unread bytes would send a reset, which may
+// closes, for at most `linger_ms` (HttpServerOptions::unread_body_linger_ms, 1 s: a client that
+// keeps its end open after "Connection: close" held the serving thread for the whole read
+// timeout, 5 s, before). Closing at once with unread bytes would send a reset, which may
 // discard the response before the client reads it (RFC 9112, 9.6).
 void LingerBeforeClose(int sock, int linger_ms) {
   ::shutdown(sock, SHUT_WR);
@@ -407,9 +484,11 @@ class ConnectionLoop {
   using ServeFn = std::function<bool(ConnectionStream&)>;
 
   // max_connections: how many Add() takes at most (0: no cap).
+  // `open_connections` counts the connections listed here (owned by the caller, outlives this).
   ConnectionLoop(int num_threads, int max_connections, int keep_alive_timeout_ms,
-                 int read_timeout_ms, ServeFn serve)
-      : max_connections_(static_cast<size_t>(std::max(0, max_connections))),
+                 int read_timeout_ms, std::atomic<int64_t>& open_connections, ServeFn serve)
+      : open_connections_(open_connections),
+        max_connections_(static_cast<size_t>(std::max(0, max_connections))),
         keep_alive_(keep_alive_timeout_ms),
         read_timeout_ms_(read_timeout_ms),
         serve_(std::move(serve)),
@@ -441,7 +520,7 @@ class ConnectionLoop {
     }
     const int one = 1;
     ::setsockopt(sock, IPPROTO_TCP, TCP_NODELAY, &one, sizeof(one));
-    auto connection = std::make_unique<Connection>(sock, read_timeout_ms_);
+    auto connection = std::make_unique<Connection>(sock, read_timeout_ms_, open_connections_);
     std::lock_guard<std::mutex> lock(mutex_);
     if (stopping_) return true;  // closes the socket
     const uint64_t id = next_id_++;
@@ -473,12 +552,17 @@ class ConnectionLoop {
   static constexpr uint64_t kStopId = 0;
 
   struct Connection {
-    Connection(int sock, int read_timeout_ms) : stream(sock, read_timeout_ms) {}
+    Connection(int sock, int read_timeout_ms, std::atomic<int64_t>& open_count)
+        : stream(sock, read_timeout_ms), open(open_count) {
+      ++open;
+    }
     ~Connection() {
       ::shutdown(stream.socket(), SHUT_RDWR);
       ::close(stream.socket());
+      --open;
     }
     ConnectionStream stream;
+    std::atomic<int64_t>& open;
     bool busy = false;  // owned by a pool thread; only that thread may close it
     std::chrono::steady_clock::time_point idle_since = std::chrono::steady_clock::now();
   };
@@ -553,6 +637,7 @@ class ConnectionLoop {
     }
   }
 
+  std::atomic<int64_t>& open_connections_;
   const size_t max_connections_;
   const std::chrono::milliseconds keep_alive_;
   const int read_timeout_ms_;
@@ -585,8 +670,9 @@ thread_local bool refusing_connection = false;
 // thread with `refusing_connection` set, and process_and_close_socket refuses the socket.
 class CappedThreadPool : public httplib::TaskQueue {
  public:
-  CappedThreadPool(int num_threads, int max_connections)
-      : pool_(static_cast<size_t>(num_threads)), max_connections_(max_connections) {}
+  // `open` counts the connections handed to the pool (owned by the caller, outlives this).
+  CappedThreadPool(int num_threads, int max_connections, std::atomic<int64_t>& open)
+      : pool_(static_cast<size_t>(num_threads)), max_connections_(max_connections), open_(open) {}
   void enqueue(std::function<void()> fn) override {
     // Only the accepting thread enqueues: the count can only shrink between check and add.
     if (max_connections_ > 0 && open_ >= max_connections_) {
@@ -606,7 +692,7 @@ class CappedThreadPool : public httplib::TaskQueue {
  private:
   httplib::ThreadPool pool_;
   const int max_connections_;
-  std::atomic<int> open_{0};
+  std::atomic<int64_t>& open_;
 };
 
 // httplib 0.11 waits for a keep-alive connection's next request by polling it for 10 ms and
@@ -655,7 +741,7 @@ class KeepAliveServer : public httplib::Server {
       const bool ok =
           process_request(stream, /*close_connection=*/stopping_, connection_closed, nullptr);
       const bool flushed = stream.Flush();
-      if (flushed && close_after_response) LingerBeforeClose(stream.socket(), read_timeout_ms());
+      if (flushed && close_after_response) LingerBeforeClose(stream.socket(), linger_ms());
       if (!flushed || !ok || connection_closed || close_after_response || stopping_) {
         return false;
       }
@@ -666,8 +752,10 @@ class KeepAliveServer : public httplib::Server {
     return static_cast<int>(read_timeout_sec_ * 1000 + read_timeout_usec_ / 1000);
   }
   int keep_alive_timeout_ms() const { return keep_alive_timeout_ms_; }
-  void SetTimeouts(int keep_alive_timeout_ms, int read_timeout_ms) {
+  int linger_ms() const { return std::min(read_timeout_ms(), unread_body_linger_ms_); }
+  void SetTimeouts(int keep_alive_timeout_ms, int read_timeout_ms, int unread_body_linger_ms) {
     keep_alive_timeout_ms_ = keep_alive_timeout_ms;
+    unread_body_linger_ms_ = unread_body_linger_ms;
     set_keep_alive_timeout((keep_alive_timeout_ms + 999) / 1000);
     set_read_timeout(read_timeout_ms / 1000, (read_timeout_ms % 1000) * 1000);
   }
@@ -690,7 +778,7 @@ class KeepAliveServer : public httplib::Server {
       close_after_response = false;
       ok = process_request(stream, /*close_connection=*/stopping_, connection_closed, nullptr);
       const bool flushed = stream.Flush();
-      if (flushed && close_after_response) LingerBeforeClose(stream.socket(), read_timeout_ms());
+      if (flushed && close_after_response) LingerBeforeClose(stream.socket(), linger_ms());
       ok = flushed && ok;
       if (!ok || connection_closed || close_after_response) break;
     }
@@ -733,6 +821,7 @@ class KeepAliveServer : public httplib::Server {
   ConnectionRefuser* refuser_ = nullptr;
   std::function<void()> on_refused_;
   int keep_alive_timeout_ms_ = 5000;
+  int unread_body_linger_ms_ = 1000;
 };
 
 }  // namespace
@@ -750,6 +839,13 @@ void HttpResponse::Json(int status_code, const nlohmann::json& json) {
   file.reset();
 }
 
+void HttpResponse::JsonText(int status_code, std::string json_text) {
+  status = status_code;
+  content_type = "application/json";
+  body = std::move(json_text);
+  file.reset();
+}
+
 bool IsLoopbackHost(const std::string& host) {
   return host == "localhost" || host == "::1" || host.rfind("127.", 0) == 0;
 }
@@ -759,31 +855,50 @@ struct HttpServer::Impl {
     std::string pattern;
     std::vector<std::string> names;
     HttpHandler handler;
+    std::vector<Segment> segments;
+    bool whole_segments = false;  // `segments` match as the regex does (PatternToSegments)
   };
 
   HttpServerOptions options;
   RequestCounter counter;
+  // Accepted and not yet closed, in either loop (declared before `server`, which uses it).
+  std::atomic<int64_t> open_connections{0};
   KeepAliveServer server;
   std::unique_ptr<ConnectionLoop> loop;  // with options.event_loop, between Start() and Stop()
   std::unique_ptr<ConnectionRefuser> refuser;  // with max_connections, between Start() and Stop()
   std::thread thread;
   std::atomic<bool> listen_returned{false};
+  // GET and DELETE routes by method, in the order registered (httplib tries them in that order
+  // too); fixed once serving starts.
+  std::map<std::string, std::vector<std::shared_ptr<const RouteInfo>>> bodyless_routes;
+  std::string expected_authorization;  // "Bearer <token>"
 
+  // `values`: the path parameters in order; nullptr takes them from the regex's req.matches.
   void Dispatch(const RouteInfo& route, const httplib::Request& req, httplib::Response& res,
-                const httplib::ContentReader* reader);
+                const httplib::ContentReader* reader,
+                const std::vector<std::string>* values = nullptr);
+  bool DispatchBodyless(const httplib::Request& req, httplib::Response& res);
   HttpRequest MakeRequest(const RouteInfo& route, const httplib::Request& req,
-                          const httplib::ContentReader* reader, bool& body_read);
+                          const httplib::ContentReader* reader,
+                          const std::vector<std::string>* values, bool& body_read);
   void Install();
 };
 
 // `body_read` becomes true once a streaming handler has read its body to the end.
 HttpRequest HttpServer::Impl::MakeRequest(const RouteInfo& route, const httplib::Request& req,
-                                          const httplib::ContentReader* reader, bool& body_read) {
+                                          const httplib::ContentReader* reader,
+                                          const std::vector<std::string>* values, bool& body_read) {
   HttpRequest request;
   request.method = req.method;
   request.path = req.path;
-  for (size_t i = 0; i < route.names.size() && i + 1 < req.matches.size(); ++i) {
-    request.path_params[route.names[i]] = req.matches[i + 1].str();
+  if (values != nullptr) {
+    for (size_t i = 0; i < route.names.size() && i < values->size(); ++i) {
+      request.path_params[route.names[i]] = (*values)[i];
+    }
+  } else {
+    for (size_t i = 0; i < route.names.size() && i + 1 < req.matches.size(); ++i) {
+      request.path_params[route.names[i]] = req.matches[i + 1].str();
+    }
   }
   request.query.insert(req.params.begin(), req.params.end());
   request.body = req.body;
@@ -810,12 +925,13 @@ HttpRequest HttpServer::Impl::MakeRequest(const RouteInfo& route, const httplib:
 }
 
 void HttpServer::Impl::Dispatch(const RouteInfo& route, const httplib::Request& req,
-                                httplib::Response& res, const httplib::ContentReader* reader) {
+                                httplib::Response& res, const httplib::ContentReader* reader,
+                                const std::vector<std::string>* values) {
   current_route = route.pattern;
   HttpResponse response;
   bool body_read = false;
   try {
-    route.handler(MakeRequest(route, req, reader, body_read), response);
+    route.handler(MakeRequest(route, req, reader, values, body_read), response);
   } catch (const HttpError& e) {
     response.Json(e.status, api::ErrorJson(e.code, e.what(), e.details));
   } catch (const std::invalid_argument& e) {
@@ -825,9 +941,7 @@ void HttpServer::Impl::Dispatch(const RouteInfo& route, const httplib::Request& 
   } catch (...) {
     response.Json(500, api::ErrorJson("internal", "unknown error"));
   }
-  const bool has_body =
-      req.get_header_value("Content-Length") != "0" || req.has_header("Transfer-Encoding");
-  if (reader != nullptr && !body_read && has_body) {
+  if (reader != nullptr && !body_read && HasBody(req)) {
     // See close_after_response. A "Connection: close" request header makes httplib say so in
     // the response (the request is httplib's mutable local, as above).
     close_after_response = true;
@@ -850,17 +964,42 @@ void HttpServer::Impl::Dispatch(const RouteInfo& route, const httplib::Request& 
   }
 }
 
+// httplib finds a handler by trying each route's std::regex in turn: for a status poll that was
+// ~12 % of its user-space instructions (7 regexes before /api/v1/jobs/{id}). A GET or DELETE
+// without a body is matched here by segments instead, in the same order with the same result;
+// anything else (a body to read, a pattern with a partial-segment parameter, no match: 404)
+// goes on to httplib as before. Only under /api/: httplib would first look for a static file
+// of that path under a mount at "/" (a stat() per request); the web folder has no api/ folder,
+// and elsewhere static files keep their precedence.
+bool HttpServer::Impl::DispatchBodyless(const httplib::Request& req, httplib::Response& res) {
+  if (req.path.rfind("/api/", 0) != 0 || HasBody(req)) return false;
+  const auto routes = bodyless_routes.find(req.method);
+  if (routes == bodyless_routes.end()) return false;
+  thread_local std::vector<std::string> values;
+  for (const auto& route : routes->second) {
+    if (!route->whole_segments) return false;  // its regex decides from here on
+    if (MatchSegments(route->segments, req.path, values)) {
+      Dispatch(*route, req, res, nullptr, &values);
+      return true;
+    }
+  }
+  return false;
+}
+
 void HttpServer::Impl::Install() {
+  expected_authorization = "Bearer " + options.token;
   const int threads = options.num_threads;
   const int max_connections = options.max_connections;
+  std::atomic<int64_t>* open = &open_connections;
   if (options.event_loop) {
     server.new_task_queue = [] { return new InlineTaskQueue(); };
   } else {
-    server.new_task_queue = [threads, max_connections] {
-      return new CappedThreadPool(threads, max_connections);
+    server.new_task_queue = [threads, max_connections, open] {
+      return new CappedThreadPool(threads, max_connections, *open);
     };
   }
-  server.SetTimeouts(options.keep_alive_timeout_ms, options.read_timeout_ms);
+  server.SetTimeouts(options.keep_alive_timeout_ms, options.read_timeout_ms,
+                     options.unread_body_linger_ms);
   server.set_payload_max_length(static_cast<size_t>(options.max_body_bytes));
   server.set_keep_alive_max_count(100000);
   server.set_pre_routing_handler([this](const httplib::Request& req, httplib::Response& res) {
@@ -877,12 +1016,12 @@ void HttpServer::Impl::Install() {
     // A request without Content-Length or Transfer-Encoding has no body (RFC 9112, 6.3), but
     // httplib 0.11 reads the body of such a POST, PUT or DELETE until the client closes: a
     // `curl -X POST .../cancel` waited out the read timeout (5 s) and got 400. Say it is empty.
-    if (!req.has_header("Content-Length") && !req.has_header("Transfer-Encoding")) {
-      headers.emplace("Content-Length", "0");
+    if (!req.has_header(kContentLength) && !req.has_header(kTransferEncoding)) {
+      headers.emplace(kContentLength, "0");
     }
     const bool protected_path = req.path.rfind("/api/", 0) == 0 || req.path == "/metrics";
     if (!options.token.empty() && protected_path &&
-        !ConstantTimeEquals(req.get_header_value("Authorization"), "Bearer " + options.token)) {
+        !ConstantTimeEquals(req.get_header_value(kAuthorization), expected_authorization)) {
       current_route = "auth";
       res.status = 401;
       res.set_header("WWW-Authenticate", "Bearer");
@@ -890,7 +1029,8 @@ void HttpServer::Impl::Install() {
                       "application/json");
       return httplib::Server::HandlerResponse::Handled;
     }
-    return httplib::Server::HandlerResponse::Unhandled;
+    return DispatchBodyless(req, res) ? httplib::Server::HandlerResponse::Handled
+                                      : httplib::Server::HandlerResponse::Unhandled;
   });
   server.set_error_handler([](const httplib::Request& req, httplib::Response& res) {
     if (!res.body.empty()) return;
@@ -922,6 +1062,8 @@ void HttpServer::Route(const std::string& method, const std::string& pattern, Ht
   route->pattern = method + " " + pattern;
   route->handler = std::move(handler);
   const std::string regex = PatternToRegex(pattern, route->names);
+  route->whole_segments = PatternToSegments(pattern, route->segments);
+  if (method == "GET" || method == "DELETE") impl_->bodyless_routes[method].push_back(route);
   Impl* impl = impl_.get();
   const auto buffered = [impl, route](const httplib::Request& req, httplib::Response& res) {
     impl->Dispatch(*route, req, res, nullptr);
@@ -948,6 +1090,8 @@ bool HttpServer::MountStatic(const std::string& prefix, const std::filesystem::p
   return impl_->server.set_mount_point(prefix, dir.string());
 }
 
+int64_t HttpServer::OpenConnections() const { return impl_->open_connections.load(); }
+
 int HttpServer::Bind(const std::string& host, int port) {
   const int bound = port == 0 ? impl_->server.bind_to_any_port(host)
                               : (impl_->server.bind_to_port(host, port) ? port : -1);
@@ -965,7 +1109,7 @@ void HttpServer::Start() {
     KeepAliveServer& server = impl_->server;
     impl_->loop = std::make_unique<ConnectionLoop>(
         impl_->options.num_threads, impl_->options.max_connections, server.keep_alive_timeout_ms(),
-        server.read_timeout_ms(),
+        server.read_timeout_ms(), impl_->open_connections,
         [&server](ConnectionStream& stream) { return server.ServeReady(stream); });
   }
   if (impl_->options.max_connections > 0) {

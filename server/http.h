@@ -68,6 +68,8 @@ struct HttpResponse {
   int64_t file_size = 0;
 
   void Json(int status_code, const nlohmann::json& json);
+  // A body that is JSON text already (e.g. server/job_json.h).
+  void JsonText(int status_code, std::string json_text);
 };
 
 using HttpHandler = std::function<void(const HttpRequest&, HttpResponse&)>;
@@ -79,8 +81,13 @@ struct HttpServerOptions {
   int num_threads = 64;
   // true: idle keep-alive connections wait in one epoll set, not on a thread each (see http.cc).
   bool event_loop = true;
-  int keep_alive_timeout_ms = 5000;    // idle keep-alive connections are closed after this
-  int read_timeout_ms = 5000;          // a request whose bytes stall this long is dropped
+  int keep_alive_timeout_ms = 5000;  // idle keep-alive connections are closed after this
+  int read_timeout_ms = 5000;        // a request whose bytes stall this long is dropped
+  // After a response to a request whose body the handler left unread ("Connection: close"),
+  // what the client still sends is discarded for at most this long (and never beyond the read
+  // timeout) before the socket closes, so the client reads the response rather than a reset.
+  // The serving thread waits meanwhile: a client that ignores the close must not hold it long.
+  int unread_body_linger_ms = 1000;
   int64_t max_body_bytes = 1LL << 30;  // larger bodies are refused (413) before reading
   std::string token;                   // bearer token required under /api/ and /metrics when set
   // Open connections at most (0: no cap), in both loops. A connection beyond it gets a 503
@@ -120,6 +127,9 @@ class HttpServer {
   // Serves on a background thread until Stop().
   void Start();
   void Stop();
+  // Connections accepted and not yet closed (idle keep-alive ones included; not the ones
+  // refused beyond max_connections), for the /metrics gauge.
+  int64_t OpenConnections() const;
 
  private:
   struct Impl;

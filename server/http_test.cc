@@ -128,6 +128,24 @@ class HttpServerTest : public ::testing::Test {
         "PUT", "/refuse",
         [](const HttpRequest&, HttpResponse&) { throw HttpError(404, "not_found", "refused"); },
         /*streaming=*/true);
+    // Under /api/, bodyless GETs and DELETEs are matched by segments rather than by httplib's
+    // regexes (http.cc, DispatchBodyless); each answers with its name and path parameters.
+    const auto echo = [](const std::string& name) {
+      return [name](const HttpRequest& request, HttpResponse& response) {
+        nlohmann::json params = nlohmann::json::object();
+        for (const auto& [key, value] : request.path_params) params[key] = value;
+        response.Json(200, {{"route", name},
+                            {"params", params},
+                            {"q", request.Query("q").value_or("")},
+                            {"body", request.body}});
+      };
+    };
+    server_->Route("GET", "/api/v1/items", echo("list"));
+    server_->Route("GET", "/api/v1/items/{id}", echo("get"));
+    server_->Route("GET", "/api/v1/items/{id}/files/{name+}", echo("file"));
+    server_->Route("DELETE", "/api/v1/items/{id}", echo("delete"));
+    server_->Route("GET", "/api/v1/odd/{id}.json", echo("odd"));  // not whole segments: regex
+    server_->Route("GET", "/api/v1/odd/{id}", echo("after_odd"));
     const int port = server_->Bind("127.0.0.1", 0);
     server_->Start();
     return port;
@@ -286,6 +304,100 @@ TEST_F(HttpServerTest, ClosesTheConnectionAfterABodyTheHandlerDidNotRead) {
                         Get("/status")));
   EXPECT_EQ(kept.ReadResponse().rfind("HTTP/1.1 201", 0), 0u);
   EXPECT_EQ(kept.ReadResponse().rfind("HTTP/1.1 200", 0), 0u);
+}
+
+// The route, parameters, query and body a request reached, or the status line when not 200.
+nlohmann::json Reached(RawConnection& connection, const std::string& request) {
+  if (!connection.Send(request)) return "send failed";
+  const std::string response = connection.ReadResponse();
+  if (response.rfind("HTTP/1.1 200", 0) != 0) return response.substr(0, response.find('\r'));
+  return nlohmann::json::parse(response.substr(response.find("\r\n\r\n") + 4));
+}
+
+TEST_F(HttpServerTest, MatchesApiRoutesAsTheirPatternsSay) {
+  const int port = Start(EventLoopOptions(/*threads=*/2));
+  RawConnection connection(port);
+  const auto reached = [&connection](const std::string& request) {
+    return Reached(connection, request);
+  };
+  EXPECT_EQ(reached(Get("/api/v1/items"))["route"], "list");
+  EXPECT_EQ(reached(Get("/api/v1/items/abc"))["params"], nlohmann::json({{"id", "abc"}}));
+  EXPECT_EQ(reached(Get("/api/v1/items/a%20b?q=7"))["params"], nlohmann::json({{"id", "a b"}}));
+  EXPECT_EQ(reached(Get("/api/v1/items/a%20b?q=7"))["q"], "7");
+  EXPECT_EQ(reached(Get("/api/v1/items/x/files/cam0/000012.png"))["params"],
+            nlohmann::json({{"id", "x"}, {"name", "cam0/000012.png"}}));
+  EXPECT_EQ(reached("DELETE /api/v1/items/abc HTTP/1.1\r\nHost: test\r\n\r\n")["route"], "delete");
+  // A pattern with a parameter inside a segment, and the routes after it, go to the regexes.
+  EXPECT_EQ(reached(Get("/api/v1/odd/7.json"))["params"], nlohmann::json({{"id", "7"}}));
+  EXPECT_EQ(reached(Get("/api/v1/odd/7.json"))["route"], "odd");
+  EXPECT_EQ(reached(Get("/api/v1/odd/8"))["route"], "after_odd");
+  // No route: httplib's 404, counted as unmatched, on the same connection.
+  for (const std::string path :
+       {"/api/v1/items/", "/api/v1/items//files/a", "/api/v1/items/x/files/", "/api/v1/items/x/y",
+        "/api/v1/itemsx", "/api/v2/items"}) {
+    EXPECT_EQ(reached(Get(path)), "HTTP/1.1 404 Not Found") << path;
+  }
+  EXPECT_EQ(reached("DELETE /api/v1/items HTTP/1.1\r\nHost: test\r\n\r\n"),
+            "HTTP/1.1 404 Not Found");
+  // A DELETE with a body takes httplib's path, which reads the body.
+  const nlohmann::json with_body =
+      reached("DELETE /api/v1/items/b HTTP/1.1\r\nHost: test\r\nContent-Length: 3\r\n\r\nxyz");
+  EXPECT_EQ(with_body["params"], nlohmann::json({{"id", "b"}}));
+  EXPECT_EQ(with_body["body"], "xyz");
+  EXPECT_EQ(reached(Get("/api/v1/items/c"))["params"], nlohmann::json({{"id", "c"}}));
+  // The request counter sees the route patterns either way.
+  const auto start = Clock::now();
+  while (Count("GET /api/v1/items/{id} 200") < 4 && SecondsSince(start) < 2) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  EXPECT_EQ(Count("GET /api/v1/items/{id} 200"), 4);
+  EXPECT_EQ(Count("GET /api/v1/odd/{id}.json 200"), 2);
+  EXPECT_EQ(Count("DELETE /api/v1/items/{id} 200"), 2);
+  EXPECT_EQ(Count("unmatched 404"), 7);
+}
+
+TEST_F(HttpServerTest, CountsOpenConnections) {
+  for (const bool event_loop : {true, false}) {
+    HttpServerOptions options = EventLoopOptions(/*threads=*/4);
+    options.event_loop = event_loop;
+    const int port = Start(options);
+    EXPECT_EQ(server_->OpenConnections(), 0);
+    std::vector<std::unique_ptr<RawConnection>> connections;
+    for (int i = 0; i < 3; ++i) {
+      connections.push_back(std::make_unique<RawConnection>(port));
+      ASSERT_TRUE(connections.back()->Send(Get("/status")));
+      ASSERT_EQ(connections.back()->ReadResponse().rfind("HTTP/1.1 200", 0), 0u);
+    }
+    EXPECT_EQ(server_->OpenConnections(), 3) << "event_loop " << event_loop;
+    connections.resize(1);
+    // The server sees the closes when it next looks at the sockets: poll.
+    const auto start = Clock::now();
+    while (server_->OpenConnections() != 1 && SecondsSince(start) < 3) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+    EXPECT_EQ(server_->OpenConnections(), 1) << "event_loop " << event_loop;
+    server_->Stop();
+    EXPECT_EQ(server_->OpenConnections(), 0) << "event_loop " << event_loop;
+  }
+}
+
+TEST_F(HttpServerTest, AClientIgnoringConnectionCloseHoldsTheThreadBriefly) {
+  // One serving thread, the default linger (1 s) and read timeout (5 s).
+  const int port = Start(EventLoopOptions(/*threads=*/1));
+  RawConnection ignoring(port);
+  ASSERT_TRUE(ignoring.Send("PUT /refuse HTTP/1.1\r\nHost: test\r\nContent-Length: 100000\r\n\r\n" +
+                            std::string(1000, 'x')));
+  const std::string response = ignoring.ReadResponse();
+  EXPECT_EQ(response.rfind("HTTP/1.1 404", 0), 0u) << response;
+  EXPECT_NE(response.find("Connection: close\r\n"), std::string::npos) << response;
+  // The client keeps its end open and sends nothing more. The only thread lingers on it for
+  // the linger, not the read timeout: another client's poll is answered within its 3 s receive
+  // timeout (it waited 5 s before).
+  RawConnection poll(port);
+  const auto start = Clock::now();
+  ASSERT_TRUE(poll.Send(Get("/status")));
+  EXPECT_EQ(poll.ReadResponse().rfind("HTTP/1.1 200", 0), 0u);
+  EXPECT_LT(SecondsSince(start), 2.5);
 }
 
 TEST_F(HttpServerTest, PostWithoutContentLengthHasAnEmptyBody) {

@@ -65,6 +65,10 @@ void Metrics::ObserveJobDuration(const std::string& type, const std::string& sta
   ++histogram.count;
 }
 
+void Metrics::SetOpenConnectionsGauge(std::function<int64_t()> open_connections) {
+  open_connections_ = std::move(open_connections);
+}
+
 std::string Metrics::Render(storage::JobStore& store, int busy_workers, int num_workers) const {
   std::ostringstream out;
   const auto counts = store.CountJobsByState();
@@ -78,6 +82,9 @@ std::string Metrics::Render(storage::JobStore& store, int busy_workers, int num_
   out << "# HELP omnirig_workers_busy Workers running a job in this process.\n"
       << "# TYPE omnirig_workers_busy gauge\nomnirig_workers_busy " << busy_workers << "\n"
       << "# TYPE omnirig_workers gauge\nomnirig_workers " << num_workers << "\n";
+  out << "# HELP omnirig_http_open_connections Open HTTP connections, idle keep-alive ones "
+      << "included.\n# TYPE omnirig_http_open_connections gauge\nomnirig_http_open_connections "
+      << (open_connections_ ? open_connections_() : 0) << "\n";
   std::lock_guard<std::mutex> lock(mutex_);
   out << "# HELP omnirig_http_requests_total HTTP requests by route and status.\n"
       << "# TYPE omnirig_http_requests_total counter\n";

@@ -3,6 +3,8 @@
 // job run durations by type and final state; job counts by state and the queue depth come from
 // the store when the page is rendered.
 
+#include <cstdint>
+#include <functional>
 #include <map>
 #include <mutex>
 #include <string>
@@ -20,6 +22,9 @@ class Metrics {
   // connection refused beyond --max-connections, also rendered as its own counter).
   void CountRequest(const std::string& route, int status, double seconds);
   void ObserveJobDuration(const std::string& type, const std::string& state, double seconds);
+  // Where the omnirig_http_open_connections gauge reads its value when the page is rendered
+  // (HttpServer::OpenConnections); 0 until set. Set before serving starts.
+  void SetOpenConnectionsGauge(std::function<int64_t()> open_connections);
   // The whole exposition text; `busy_workers` is the number of jobs running in this process.
   std::string Render(storage::JobStore& store, int busy_workers, int num_workers) const;
 
@@ -29,6 +34,7 @@ class Metrics {
     double sum = 0;
     int64_t count = 0;
   };
+  std::function<int64_t()> open_connections_;
   mutable std::mutex mutex_;
   std::vector<double> request_bounds_s_, job_bounds_s_;
   std::map<std::pair<std::string, int>, int64_t> requests_;

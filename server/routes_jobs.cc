@@ -8,6 +8,7 @@
 #include "api/service_json.h"
 #include "api/stereo_json.h"
 #include "engine/util/check.h"
+#include "server/job_json.h"
 #include "server/json_views.h"
 #include "server/service.h"
 #include "storage/image_header.h"
@@ -18,7 +19,7 @@ namespace {
 storage::JobRecord RequireJob(ServiceState& state, const std::string& id) {
   auto job = state.store->GetJob(id);
   if (!job) throw HttpError(404, "job_not_found", "no job " + id);
-  return *job;
+  return std::move(*job);
 }
 
 void CheckReferencedJobs(ServiceState& state, const api::JobType& type,
@@ -51,7 +52,8 @@ void CreateJob(ServiceState& state, const HttpRequest& request, HttpResponse& re
         "unknown job type '" + parsed.type + "' (known: " + (list.empty() ? "none" : list) + ")",
         {{"known_types", known}});
   }
-  if (!state.store->GetDataset(parsed.dataset)) {
+  const auto dataset = state.store->GetDataset(parsed.dataset);
+  if (!dataset) {
     throw HttpError(404, "dataset_not_found", "no dataset " + parsed.dataset,
                     {{"dataset", parsed.dataset}});
   }
@@ -61,6 +63,13 @@ void CreateJob(ServiceState& state, const HttpRequest& request, HttpResponse& re
     throw HttpError(400, "invalid_params", e.what());
   }
   CheckReferencedJobs(state, *type, parsed.params);
+  // A job on an empty dataset would be queued only to fail once it ran.
+  if (type->reads_images && dataset->image_count == 0) {
+    throw HttpError(
+        422, "dataset_empty",
+        "dataset " + parsed.dataset + " has no images: upload them before creating a job",
+        {{"dataset", parsed.dataset}});
+  }
   const int64_t queued = state.store->CountJobsByState().at(storage::JobState::kQueued);
   if (queued >= state.options.max_queued_jobs) {
     response.headers.emplace("Retry-After", "10");
@@ -72,7 +81,7 @@ void CreateJob(ServiceState& state, const HttpRequest& request, HttpResponse& re
       state.store->CreateJob(parsed.type, parsed.dataset, parsed.params.dump());
   state.workers->Notify();
   response.headers.emplace("Location", "/api/v1/jobs/" + job.id);
-  response.Json(202, JobJson(job));
+  response.JsonText(202, JobJsonText(job));
 }
 
 void ListJobs(ServiceState& state, const HttpRequest& request, HttpResponse& response) {
@@ -95,9 +104,7 @@ void ListJobs(ServiceState& state, const HttpRequest& request, HttpResponse& res
     }
     filter.limit = static_cast<int>(value);
   }
-  nlohmann::json list = nlohmann::json::array();
-  for (const auto& job : state.store->ListJobs(filter)) list.push_back(JobJson(job));
-  response.Json(200, list);
+  response.JsonText(200, JobListJsonText(state.store->ListJobs(filter)));
 }
 
 void CancelJob(ServiceState& state, const HttpRequest& request, HttpResponse& response) {
@@ -110,7 +117,8 @@ void CancelJob(ServiceState& state, const HttpRequest& request, HttpResponse& re
   }
   const auto after = state.store->RequestCancel(id);
   if (after == storage::JobState::kRunning) state.workers->Cancel(id);
-  response.Json(after == storage::JobState::kRunning ? 202 : 200, JobJson(RequireJob(state, id)));
+  response.JsonText(after == storage::JobState::kRunning ? 202 : 200,
+                    JobJsonText(RequireJob(state, id)));
 }
 
 void DeleteJob(ServiceState& state, const HttpRequest& request, HttpResponse& response) {
@@ -128,9 +136,9 @@ void RetryJob(ServiceState& state, const HttpRequest& request, HttpResponse& res
   const std::string& id = request.Param("id");
   const storage::JobRecord job = RequireJob(state, id);
   if (!state.store->GetDataset(job.dataset_id)) {
-    throw HttpError(409, "dataset_not_found",
-                    "job " + id + " cannot run again: its dataset " + job.dataset_id +
-                        " was deleted");
+    throw HttpError(
+        409, "dataset_not_found",
+        "job " + id + " cannot run again: its dataset " + job.dataset_id + " was deleted");
   }
   if (!state.store->RetryJob(id)) {
     throw HttpError(409, "job_not_retryable",
@@ -139,7 +147,7 @@ void RetryJob(ServiceState& state, const HttpRequest& request, HttpResponse& res
                     {{"state", storage::JobStateName(job.state)}});
   }
   state.workers->Notify();
-  response.Json(202, JobJson(RequireJob(state, id)));
+  response.JsonText(202, JobJsonText(RequireJob(state, id)));
 }
 
 void GetResult(ServiceState& state, const HttpRequest& request, HttpResponse& response) {
@@ -242,7 +250,7 @@ void AddJobRoutes(HttpServer& http, ServiceState& state) {
   http.Route("GET", "/api/v1/jobs", bind(ListJobs));
   http.Route("GET", "/api/v1/jobs/{id}",
              [&state](const HttpRequest& request, HttpResponse& response) {
-               response.Json(200, JobJson(RequireJob(state, request.Param("id"))));
+               response.JsonText(200, JobJsonText(RequireJob(state, request.Param("id"))));
              });
   http.Route("POST", "/api/v1/jobs/{id}/cancel", bind(CancelJob));
   http.Route("DELETE", "/api/v1/jobs/{id}", bind(DeleteJob));

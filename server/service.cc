@@ -90,6 +90,7 @@ Service::Service(const ServiceOptions& options) : state_(std::make_unique<Servic
       http_options, [&state](const std::string& route, int status, double seconds) {
         state.metrics.CountRequest(route, status, seconds);
       });
+  state.metrics.SetOpenConnectionsGauge([http = http_.get()] { return http->OpenConnections(); });
   AddSystemRoutes(*http_, state);
   AddDatasetRoutes(*http_, state);
   AddJobRoutes(*http_, state);

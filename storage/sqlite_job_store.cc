@@ -77,7 +77,10 @@ JobRecord ReadJob(const Statement& row) {
 }
 
 std::optional<JobRecord> SelectJob(Connection& db, const std::string& id) {
-  Statement select(db, std::string("SELECT ") + kJobColumns + " FROM jobs WHERE id = ?");
+  // Built once: the statement cache is keyed by the SQL text (a status poll per lookup).
+  static const std::string kSelect =
+      std::string("SELECT ") + kJobColumns + " FROM jobs WHERE id = ?";
+  Statement select(db, kSelect);
   select.Bind(1, id);
   if (!select.Step()) return std::nullopt;
   return ReadJob(select);
@@ -170,8 +173,7 @@ DatasetRecord SqliteJobStore::CreateDataset(const std::string& name) {
 
 std::vector<DatasetRecord> SqliteJobStore::ListDatasets() {
   ReaderLease db = Reader();
-  Statement select(*db,
-                   std::string(kDatasetSelect) + "GROUP BY d.id ORDER BY d.created_at DESC");
+  Statement select(*db, std::string(kDatasetSelect) + "GROUP BY d.id ORDER BY d.created_at DESC");
   std::vector<DatasetRecord> datasets;
   while (select.Step()) datasets.push_back(ReadDataset(select));
   return datasets;

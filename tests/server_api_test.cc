@@ -536,6 +536,12 @@ TEST_F(ServerApiTest, RefusesBadJobs) {
               404, "job_not_found");
   ExpectError(client.Get("/api/v1/jobs/missing"), 404, "job_not_found");
   ExpectError(client.Get("/api/v1/jobs?state=bogus"), 400, "invalid_argument");
+  // A job that reads images is refused on an empty dataset rather than queued to fail.
+  const auto empty = post(R"({"type": "calibration", "dataset": ")" + dataset +
+                          R"(", "params": {"board": {"type": "checkerboard", "cols": 9, )"
+                          R"("rows": 6, "square_size_mm": 30}}})");
+  ExpectError(empty, 422, "dataset_empty");
+  EXPECT_NE(empty->body.find(dataset), std::string::npos);
 }
 
 TEST_F(ServerApiTest, ResultIs409UntilSucceededAndProgressIsStored) {
@@ -764,6 +770,7 @@ TEST_F(ServerApiTest, EpipolarCurveOfARelativePoseResult) {
   api::JobType fake;
   fake.name = "relative_pose";
   fake.validate = [](const json&) {};
+  fake.reads_images = false;
   fake.run = [](const json&, const api::JobContext&) {
     StereoRig rig;
     for (CameraModel* camera : {&rig.cam0, &rig.cam1}) {
