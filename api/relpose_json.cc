@@ -68,9 +68,11 @@ std::string IntrinsicsModelField(const json& params, bool self_calibrating) {
                 "field 'params.intrinsics_model' must be a string");
   const std::string model = params["intrinsics_model"].get<std::string>();
   OMNIRIG_CHECK(model == "auto" || model == "fixed" || model == "tangential_fixed" ||
+                    model == "tangential_free_cam0" || model == "tangential_free_cam1" ||
                     model == "free",
-                "field 'params.intrinsics_model' must be auto, fixed, tangential_fixed or free, "
-                "got '" << model << "'");
+                "field 'params.intrinsics_model' must be auto, fixed, tangential_fixed, "
+                "tangential_free_cam0, tangential_free_cam1 or free, got '"
+                    << model << "'");
   OMNIRIG_CHECK(!params.contains("refine_intrinsics"),
                 "give 'params.intrinsics_model' or 'params.refine_intrinsics', not both");
   OMNIRIG_CHECK(self_calibrating || model == "fixed" || model == "free",
@@ -116,11 +118,14 @@ RelativePoseParams RelativePoseParamsFromJson(const json& params) {
   out.base_fixed_intrinsics = out.options.fixed_intrinsics;
   out.intrinsics_model = IntrinsicsModelField(params, !out.cam0_calibration_job.has_value());
   if (!out.intrinsics_model.empty() && out.intrinsics_model != "auto") {
-    for (const RigIntrinsicsModel& model :
-         StandardRigIntrinsicsModels(out.base_fixed_intrinsics)) {
+    const auto& base = out.base_fixed_intrinsics;
+    std::vector<RigIntrinsicsModel> models = StandardRigIntrinsicsModels(base);
+    for (const RigIntrinsicsModel& model : PerCameraTangentialModels(base)) models.push_back(model);
+    for (const RigIntrinsicsModel& model : models) {
       if (model.name != out.intrinsics_model) continue;
       out.options.refine_intrinsics = model.refine_intrinsics;
       out.options.fixed_intrinsics = model.joint_fixed;
+      out.options.cam1_fixed_intrinsics = model.cam1_joint_fixed;
     }
   }
   if (params.contains("resolve_corner_order")) {
@@ -415,9 +420,12 @@ json RunRelativePoseJob(const json& params, const JobContext& context) {
                               SubRange(context.progress, 0.1 + 0.3 * c, 0.35 + 0.3 * c));
     if (!cameras[c]) {
       context.Log("calibrating cam" + std::to_string(c) + " from its own images");
+      // A named model's calibration fixes what its joint refinement does, per camera.
+      const auto& fixed = c == 1 && parsed.options.cam1_fixed_intrinsics
+                              ? *parsed.options.cam1_fixed_intrinsics
+                              : parsed.options.fixed_intrinsics;
       cameras[c] = CalibrateFromOwnImages(names[c], detections[c], images[c][0].cols,
-                                          images[c][0].rows, parsed.board,
-                                          parsed.options.fixed_intrinsics, context,
+                                          images[c][0].rows, parsed.board, fixed, context,
                                           SubRange(context.progress, 0.35 + 0.3 * c, 0.4 + 0.3 * c));
     }
   }

@@ -16,7 +16,8 @@
 //                                 "principal_point", "gamma"; default ["alpha", "k5"]; e.g.
 //                                 ["alpha", "k5", "tangential"] for a fisheye lens, whose
 //                                 tangential terms trade against the rig pose),
-//    "intrinsics_model": "auto" | "fixed" | "tangential_fixed" | "free"
+//    "intrinsics_model": "auto" | "fixed" | "tangential_fixed" | "tangential_free_cam0" |
+//                        "tangential_free_cam1" | "free"
 //        (default "auto" when the job calibrates the cameras itself and neither
 //        refine_intrinsics nor fixed_intrinsics is given: each candidate model (each camera's
 //        own calibration kept; k3 = k4 = 0 and the rest refined with the rig; the same with one
@@ -24,7 +25,7 @@
 //        fixed_intrinsics refined with the rig) is scored by leave-one-pair-out prediction of
 //        one camera's corners from the other's, and the simplest within one standard error of
 //        the best is used. fixed_intrinsics is then the models' common fixed set. Not with
-//        refine_intrinsics; "auto" and "tangential_fixed" need the job's own calibrations),
+//        refine_intrinsics; all but "fixed" and "free" need the job's own calibrations),
 //    "resolve_corner_order": bool, "huber_loss_px": number, "max_num_iterations": int,
 //    "sync_false_alarm_rate": number in [0, 1) (default 0.01: the probability that a set of
 //        simultaneous pairs loses one to the synchronisation test, engine/stereo/relpose_sync.h;
@@ -66,7 +67,8 @@ struct RelativePoseParams {
   std::optional<std::string> cam0_calibration_job;  // both or neither
   std::optional<std::string> cam1_calibration_job;
   // "auto" (choose by cross-validation, engine/stereo/relpose_model_select.h), one of the
-  // standard models "fixed", "tangential_fixed", "free" (already applied to `options`), or ""
+  // candidate models "fixed", "tangential_fixed", "tangential_free_cam0",
+  // "tangential_free_cam1", "free" (already applied to `options`), or ""
   // when refine_intrinsics / fixed_intrinsics were given without it.
   std::string intrinsics_model;
   // The fixed set the models start from (params.fixed_intrinsics, default skew and k5).

@@ -109,11 +109,48 @@ TEST(RelposeJson, IntrinsicsModelDefaultsAndNamedModels) {
   EXPECT_FALSE(auto_u0.base_fixed_intrinsics[UnifiedIntrinsics::kAlpha]);
 }
 
+// One camera's tangential terms free (the auto candidates tangential_free_cam0 / _cam1) can be
+// named too: the other camera's k3, k4 fixed (at 0 in its own calibration), the rest as free.
+TEST(RelposeJson, PerCameraTangentialModelsCanBeNamed) {
+  for (int camera = 0; camera < 2; ++camera) {
+    const std::string name = "tangential_free_cam" + std::to_string(camera);
+    const RelativePoseParams params =
+        RelativePoseParamsFromJson({{"board", Board()}, {"intrinsics_model", name}});
+    EXPECT_EQ(params.intrinsics_model, name);
+    EXPECT_TRUE(params.options.refine_intrinsics) << name;
+    ASSERT_TRUE(params.options.cam1_fixed_intrinsics.has_value()) << name;
+    const auto& cam0_fixed = params.options.fixed_intrinsics;
+    const auto& cam1_fixed = *params.options.cam1_fixed_intrinsics;
+    const auto& free_camera = camera == 0 ? cam0_fixed : cam1_fixed;
+    const auto& other_camera = camera == 0 ? cam1_fixed : cam0_fixed;
+    EXPECT_EQ(free_camera, DefaultFixedIntrinsics()) << name;
+    EXPECT_TRUE(other_camera[UnifiedIntrinsics::kK3]) << name;
+    EXPECT_TRUE(other_camera[UnifiedIntrinsics::kK4]) << name;
+    EXPECT_TRUE(other_camera[UnifiedIntrinsics::kK5]) << name;
+    EXPECT_FALSE(other_camera[UnifiedIntrinsics::kK1]) << name;
+    // Like tangential_fixed, it needs the job's own calibrations (k3 = k4 = 0 in one camera).
+    EXPECT_NE(ErrorOf([&name] {
+                RelativePoseParamsFromJson({{"board", Board()},
+                                            {"calibrations", {{"cam0", "a"}, {"cam1", "b"}}},
+                                            {"intrinsics_model", name}});
+              }).find("calibrate the cameras itself"),
+              std::string::npos)
+        << name;
+  }
+  // The standard models leave cam1's set to cam0's.
+  EXPECT_FALSE(RelativePoseParamsFromJson({{"board", Board()}, {"intrinsics_model", "free"}})
+                   .options.cam1_fixed_intrinsics.has_value());
+}
+
 TEST(RelposeJson, IntrinsicsModelConflictsAreRefused) {
-  EXPECT_NE(ErrorOf([] {
-              RelativePoseParamsFromJson({{"board", Board()}, {"intrinsics_model", "best"}});
-            }).find("intrinsics_model"),
-            std::string::npos);
+  // The message names the field and every allowed value.
+  const std::string unknown = ErrorOf([] {
+    RelativePoseParamsFromJson({{"board", Board()}, {"intrinsics_model", "best"}});
+  });
+  for (const char* expected : {"params.intrinsics_model", "auto", "fixed", "tangential_fixed",
+                               "tangential_free_cam0", "tangential_free_cam1", "free", "'best'"}) {
+    EXPECT_NE(unknown.find(expected), std::string::npos) << expected << " in: " << unknown;
+  }
   EXPECT_NE(ErrorOf([] {
               RelativePoseParamsFromJson({{"board", Board()}, {"intrinsics_model", 1}});
             }).find("intrinsics_model"),

@@ -12,9 +12,14 @@
 // For each render setting (noise-free with and without blur, image noise 2 and 19 grey levels)
 // and two boards: the full detector, and DetectBoardFromPose started at the exact corners (the
 // sub-pixel refinement alone), with the junction fit after cornerSubPix (corner_fit.h) on and off.
+// After each DetectBoard table, the grid check (grid_check.h): corners it refined again or
+// dropped, corners > 0.5 px from the truth and the largest error with and without it (the tables
+// skip errors over 2 px), DetectBoard's CPU time per view both ways and the check's own cost.
+// First, the renders of api/relpose_job_test (800x600, seed 5), whose cam1/pair_007 has the
+// corner that OpenCV's classic detector puts 3.9 px off (the grid check's reproduction case).
 // Then real sets (../shared/data/real: ocamcalib VMR and KaidanOmni, both cameras of the fisheye
-// stereo pairs): views found and the per-camera calibration's RMS, fit off and on, with the mean
-// and largest move of a corner between the two.
+// stereo pairs): views found and the per-camera calibration's RMS, fit off and on and without
+// the grid check, with the mean and largest move of a corner between fit off and on.
 //
 // Usage: bench_detect_bias [--quick] [--only synthetic|real]
 //   --quick: noise-free renders with 0.5 px blur only, 12 views per board, no real sets.
@@ -27,6 +32,7 @@
 #include <cstring>
 #include <ctime>
 #include <filesystem>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -34,6 +40,7 @@
 
 #include "engine/calib/calibrate.h"
 #include "engine/calib/detect.h"
+#include "engine/calib/grid_check.h"
 #include "engine/geometry/unified_camera.h"
 #include "engine/synth/calib_board.h"
 #include "engine/synth/presets.h"
@@ -122,6 +129,42 @@ struct BiasTables {
   int views = 0, found = 0;
 };
 
+// What the grid check did over a set's detections, and the corners far from the truth (which
+// the bias tables leave out: they label each corner by the nearest exact one and skip errors
+// over 2 px).
+struct GrossErrors {
+  int views = 0, found = 0, rerefined = 0, dropped = 0;
+  int over_half_px = 0;
+  double largest_px = 0.0;
+  double cpu_s = 0.0;
+
+  void Add(const BoardDetection& detection, const std::vector<Eigen::Vector2d>& truth) {
+    ++views;
+    if (!detection.found) return;
+    ++found;
+    rerefined += detection.num_rerefined_corners;
+    dropped += static_cast<int>(detection.dropped_corner_ids.size());
+    for (const Eigen::Vector2d& corner : detection.corners_px) {
+      double nearest = std::numeric_limits<double>::infinity();
+      for (const Eigen::Vector2d& exact : truth)
+        nearest = std::min(nearest, (exact - corner).norm());
+      over_half_px += nearest > 0.5;
+      largest_px = std::max(largest_px, nearest);
+    }
+  }
+  void Print(const char* label) const {
+    std::printf(
+        "%-22s %d of %d views found, %d corners re-refined, %d dropped; corners > 0.5 px from the "
+        "truth: %d, largest error %.3f px; DetectBoard %.1f ms CPU per view\n",
+        label, found, views, rerefined, dropped, over_half_px, largest_px,
+        1e3 * cpu_s / std::max(1, views));
+  }
+};
+
+double CpuSeconds(std::clock_t start) {
+  return static_cast<double>(std::clock() - start) / CLOCKS_PER_SEC;
+}
+
 // Adds one detection's errors against the exact corners of its view.
 void AddDetection(const synth::SynthCamera& camera, const Rigid3d& cam_from_board,
                   const synth::CheckerboardSpec& spec, const std::vector<Eigen::Vector2d>& truth,
@@ -188,6 +231,42 @@ struct SetConfig {
   double min_distance_m, max_distance_m;
 };
 
+// The grid check on a rendered set: DetectBoard's detections with it (`checked`, from the bias
+// tables' pass) against a pass without it (gross errors against the truth, CPU time per view),
+// and the check's own cost on the refined grids.
+void PrintGridCheck(const synth::MonoCalibrationSet& set, const BoardSpec& board,
+                    DetectOptions options, const std::vector<BoardDetection>& checked,
+                    double checked_cpu_s) {
+  GrossErrors with, without;
+  with.cpu_s = checked_cpu_s;
+  std::vector<std::vector<Eigen::Vector2d>> grids;
+  options.check_grid = false;
+  for (size_t v = 0; v < set.images.size(); ++v) {
+    with.Add(checked[v], set.corners_px[v]);
+    if (checked[v].found && checked[v].dropped_corner_ids.empty()) {
+      grids.push_back(checked[v].corners_px);
+    }
+    const auto cpu_start = std::clock();
+    const BoardDetection detection = DetectBoard(set.images[v], board, options);
+    without.cpu_s += CpuSeconds(cpu_start);
+    without.Add(detection, set.corners_px[v]);
+  }
+  with.Print("  with the grid check:");
+  without.Print("  without:");
+  constexpr int kRepeats = 200;
+  const auto cpu_start = std::clock();
+  size_t flagged = 0;
+  for (int i = 0; i < kRepeats; ++i) {
+    for (const auto& grid : grids) {
+      flagged += FindInconsistentCorners(grid, board.cols, board.rows, options.grid_check).size();
+    }
+  }
+  std::printf("  grid check alone on the %zu refined grids: %.1f us CPU per view (%zu flagged)\n",
+              grids.size(),
+              1e6 * CpuSeconds(cpu_start) / std::max<size_t>(1, kRepeats * grids.size()),
+              flagged / kRepeats);
+}
+
 // The full detector on every view, and the refinement alone started at the exact corners.
 void RunConfig(const SetConfig& set_config, const RenderConfig& render, int num_views,
                uint64_t seed) {
@@ -209,10 +288,15 @@ void RunConfig(const SetConfig& set_config, const RenderConfig& render, int num_
     DetectOptions detect_options;
     detect_options.fit_corner_model = fit;
     BiasTables detected, from_truth;
+    std::vector<BoardDetection> detections;
+    double detect_cpu_s = 0.0;
     for (size_t v = 0; v < set.images.size(); ++v) {
       ++detected.views;
       ++from_truth.views;
-      const BoardDetection detection = DetectBoard(set.images[v], board, detect_options);
+      const auto cpu_start = std::clock();
+      detections.push_back(DetectBoard(set.images[v], board, detect_options));
+      detect_cpu_s += CpuSeconds(cpu_start);
+      const BoardDetection& detection = detections.back();
       if (detection.found) {
         ++detected.found;
         AddDetection(set.camera, set.cam_from_board[v], set.board, set.corners_px[v], detection,
@@ -230,10 +314,42 @@ void RunConfig(const SetConfig& set_config, const RenderConfig& render, int num_
                                (fit ? ", corner model fit ON" : ", corner model fit OFF");
     PrintTables("DetectBoard, " + suffix, detected);
     PrintTables("refinement from the exact corners, " + suffix, from_truth);
+    PrintGridCheck(set, board, detect_options, detections, detect_cpu_s);
   }
   std::printf("(%.1f s wall, %.1f s CPU)\n",
               std::chrono::duration<double>(std::chrono::steady_clock::now() - wall_start).count(),
               static_cast<double>(std::clock() - cpu_start) / CLOCKS_PER_SEC);
+}
+
+// api/relpose_job_test's renders, detected with and without the grid check.
+void RunRelposeJobRenders() {
+  synth::StereoBoardOptions options;
+  options.num_pairs = 8;
+  options.width = 800;
+  options.height = 600;
+  options.render.supersampling = 2;
+  options.render.noise_sigma = 2.0;
+  options.render.blur_sigma_px = 0.5;
+  options.render.grayscale = true;
+  options.render.num_threads = 2;
+  options.seed = 5;
+  const synth::StereoBoardSet set = synth::MakeStereoBoardSet(options);
+  const BoardSpec board = ToBoardSpec(set.board);
+  std::printf("\napi/relpose_job_test's renders (2 x 8 views, 800x600, seed 5)\n");
+  for (const bool check : {true, false}) {
+    DetectOptions detect_options;
+    detect_options.check_grid = check;
+    GrossErrors errors;
+    for (int camera = 0; camera < 2; ++camera) {
+      for (size_t i = 0; i < set.names.size(); ++i) {
+        const auto cpu_start = std::clock();
+        const BoardDetection detection = DetectBoard(set.images[camera][i], board, detect_options);
+        errors.cpu_s += CpuSeconds(cpu_start);
+        errors.Add(detection, set.corners_px[camera][i]);
+      }
+    }
+    errors.Print(check ? "  with the grid check:" : "  without:");
+  }
 }
 
 // One real set: every image detected with the junction fit off and on, each camera calibrated
@@ -255,21 +371,29 @@ void RunRealSet(const std::string& name, const std::filesystem::path& dir,
   for (const std::string& file : files) {
     images.push_back(cv::imread((dir / file).string(), cv::IMREAD_GRAYSCALE));
   }
-  std::array<std::vector<CalibrationView>, 2> views;
-  std::array<double, 2> detect_cpu_s = {0.0, 0.0};
+  // Variants: junction fit off, on (both with the grid check), on without the grid check.
+  struct Variant {
+    const char* name;
+    bool fit, check;
+  };
+  const std::array<Variant, 3> variants = {Variant{"off", false, true}, Variant{"on", true, true},
+                                           Variant{"on, no grid check", true, false}};
+  std::array<std::vector<CalibrationView>, 3> views;
+  std::array<double, 3> detect_cpu_s = {0.0, 0.0, 0.0};
   double move_sum = 0.0, move_max = 0.0;
   int moves = 0;
   for (size_t i = 0; i < images.size(); ++i) {
-    for (const bool fit : {false, true}) {
+    for (size_t k = 0; k < variants.size(); ++k) {
       DetectOptions options;
-      options.fit_corner_model = fit;
+      options.fit_corner_model = variants[k].fit;
+      options.check_grid = variants[k].check;
       const auto cpu_start = std::clock();
-      views[fit].push_back({files[i], DetectBoard(images[i], board, options)});
-      detect_cpu_s[fit] += static_cast<double>(std::clock() - cpu_start) / CLOCKS_PER_SEC;
+      views[k].push_back({files[i], DetectBoard(images[i], board, options)});
+      detect_cpu_s[k] += CpuSeconds(cpu_start);
     }
     const BoardDetection& off = views[0].back().detection;
     const BoardDetection& on = views[1].back().detection;
-    if (!off.found || !on.found || off.corners_px.size() != on.corners_px.size()) continue;
+    if (!off.found || !on.found || off.corner_ids != on.corner_ids) continue;
     for (size_t k = 0; k < on.corners_px.size(); ++k) {
       const double move = (on.corners_px[k] - off.corners_px[k]).norm();
       move_sum += move;
@@ -277,25 +401,29 @@ void RunRealSet(const std::string& name, const std::filesystem::path& dir,
       ++moves;
     }
   }
-  for (const bool fit : {false, true}) {
-    int found = 0;
-    for (const auto& view : views[fit]) found += view.detection.found;
+  for (size_t k = 0; k < variants.size(); ++k) {
+    int found = 0, rerefined = 0, dropped = 0;
+    for (const auto& view : views[k]) {
+      found += view.detection.found;
+      rerefined += view.detection.num_rerefined_corners;
+      dropped += static_cast<int>(view.detection.dropped_corner_ids.size());
+    }
+    std::printf("| %-34s | %-17s | %5d/%-3zu |", name.c_str(), variants[k].name, found,
+                files.size());
     try {
-      const CalibrationReport report = Calibrate(views[fit], images[0].cols, images[0].rows, board,
+      const CalibrationReport report = Calibrate(views[k], images[0].cols, images[0].rows, board,
                                                  CalibrationOptions(), ProgressSink());
-      std::printf("| %-34s | %-3s | %5d/%-3zu | %5d | %9.4f | %9.4f |", name.c_str(),
-                  fit ? "on" : "off", found, files.size(), report.num_views_used, report.rms_px,
+      std::printf(" %5d | %9.4f | %9.4f |", report.num_views_used, report.rms_px,
                   report.rms_all_px);
     } catch (const std::exception& e) {
-      std::printf("| %-34s | %-3s | %5d/%-3zu | calibration failed: %s |", name.c_str(),
-                  fit ? "on" : "off", found, files.size(), e.what());
+      std::printf(" calibration failed: %s |", e.what());
     }
-    if (fit) {
-      std::printf(" %.4f / %.4f px | %5.2f s\n", move_sum / std::max(1, moves), move_max,
-                  detect_cpu_s[fit]);
+    if (k == 1) {
+      std::printf(" %.4f / %.4f px |", move_sum / std::max(1, moves), move_max);
     } else {
-      std::printf(" %-20s | %5.2f s\n", "", detect_cpu_s[fit]);
+      std::printf(" %-20s |", "");
     }
+    std::printf(" %3d / %3d | %5.2f s\n", rerefined, dropped, detect_cpu_s[k]);
   }
 }
 
@@ -304,10 +432,11 @@ void RunReal() {
       std::filesystem::path(OMNIRIG_SOURCE_DIR) / ".." / "shared" / "data" / "real";
   std::printf(
       "\nReal sets: views found, per-camera calibration RMS of the inliers and of every corner "
-      "(px), junction fit off/on; corner move = mean / largest distance between the two "
-      "detections; detect = CPU s of DetectBoard over the set\n");
-  std::printf("| %-34s | %-3s | %9s | %5s | %9s | %9s | %-20s | %s\n", "set", "fit", "found",
-              "used", "rms", "rms all", "corner move", "detect");
+      "(px), junction fit off/on (with the grid check) and on without the grid check; corner "
+      "move = mean / largest distance between the fit-off and fit-on detections; grid = corners "
+      "the grid check refined again / dropped; detect = CPU s of DetectBoard over the set\n");
+  std::printf("| %-34s | %-17s | %9s | %5s | %9s | %9s | %-20s | %-9s | %s\n", "set", "fit",
+              "found", "used", "rms", "rms all", "corner move", "grid", "detect");
   BoardSpec board;
   board.square_size_m = 0.03;
   board.cols = 6;
@@ -351,6 +480,7 @@ int main(int argc, char** argv) {
       omnirig::RunReal();
       return 0;
     }
+    omnirig::RunRelposeJobRenders();
     for (const auto& set : sets) {
       for (const auto& render : renders) {
         // Quick: the relative-pose bench's render setting alone, fewer views.

@@ -95,8 +95,11 @@ poll_run() {  # ARRIVALS PREFIX
   (sleep 10; curl -sf "$URL/metrics" | sed -n 's/^omnirig_http_open_connections //p') \
       > "$WORK/open_connections.txt" &
   local sampler=$!
-  ARRIVALS=$1 DELAY_MS=$DELAY wrk -t2 -c"$CONNECTIONS" -d20s -s "$ROOT/bench/load_poll.lua" \
-      "$URL/api/v1/jobs/$POLL_JOB" > "$WORK/wrk.txt"
+  # The client's own CPU (user + system) too: wrk shares the 2 cores with the server.
+  local TIMEFORMAT='%U %S'
+  { time ARRIVALS=$1 DELAY_MS=$DELAY wrk -t2 -c"$CONNECTIONS" -d20s \
+      -s "$ROOT/bench/load_poll.lua" "$URL/api/v1/jobs/$POLL_JOB" > "$WORK/wrk.txt" ; } \
+      2> "$WORK/wrk_cpu.txt"
   wait "$sampler" || true
   grep -E '^poll_' "$WORK/wrk.txt" | sed "s/^poll_/$2/"
   echo "${2}open_connections_midway $(cat "$WORK/open_connections.txt")"
@@ -106,6 +109,9 @@ poll_run() {  # ARRIVALS PREFIX
   echo "${2}server_cpu_s $(python3 -c "print(f'{$(server_cpu_s) - $cpu_start:.2f}')")"
   requests=$(sed -n 's/^poll_requests //p' "$WORK/wrk.txt")
   python3 -c "print(f'${2}http_cpu_us_per_request {($(http_cpu_s) - $http_cpu_start) * 1e6 / max(1, $requests):.0f}')"
+  local client_user client_system
+  read -r client_user client_system < <(tail -n1 "$WORK/wrk_cpu.txt")
+  python3 -c "print(f'${2}client_cpu_us_per_request {($client_user + $client_system) * 1e6 / max(1, $requests):.0f}')"
   echo "${2}load_average $(cut -d' ' -f1-3 /proc/loadavg)"
 }
 poll_run independent poll_

@@ -11,6 +11,7 @@
 #include "engine/calib/board_pose.h"
 #include "engine/calib/calibrate.h"
 #include "engine/calib/corner_fit.h"
+#include "engine/calib/grid_check.h"
 #include "engine/calib/initialize.h"
 
 namespace omnirig {
@@ -76,6 +77,11 @@ bool ExtendsBeyondAnEdge(const cv::Mat& grey, const std::vector<Eigen::Vector2d>
              R, [&](int r) { return at(r, C - 1); }, [&](int r) { return at(r, C - 2); });
 }
 
+// Refinement window half-size (pixels) for a corner whose local square is square_px.
+int WindowHalfPx(double square_px) {
+  return std::clamp(static_cast<int>(std::lround(0.4 * square_px)), 2, 15);
+}
+
 // Refines each corner with cornerSubPix in a window scaled to its local square size, then (with
 // `fit`) by fitting the blurred X-junction with curved edges (corner_fit.h): cornerSubPix alone
 // is pulled to the convex side of edges a mirror bends. Returns the largest shift.
@@ -83,7 +89,7 @@ double RefineCorners(const cv::Mat& grey, std::vector<Eigen::Vector2d>* corners,
                      const std::vector<double>& square_px, bool fit) {
   double max_shift = 0.0;
   for (size_t i = 0; i < corners->size(); ++i) {
-    const int half = std::clamp(static_cast<int>(std::lround(0.4 * square_px[i])), 2, 15);
+    const int half = WindowHalfPx(square_px[i]);
     std::vector<cv::Point2f> point = {
         cv::Point2f(static_cast<float>((*corners)[i].x()), static_cast<float>((*corners)[i].y()))};
     const cv::Point2f before = point[0];
@@ -103,12 +109,91 @@ double RefineCorners(const cv::Mat& grey, std::vector<Eigen::Vector2d>* corners,
   return max_shift;
 }
 
-void RefineGrid(const cv::Mat& grey, const BoardSpec& board, bool fit, BoardDetection* detection) {
+// Refines the whole grid; returns the local square size each corner's window was sized from.
+std::vector<double> RefineGrid(const cv::Mat& grey, const BoardSpec& board, bool fit,
+                               BoardDetection* detection) {
   std::vector<double> square_px;
   for (int id : detection->corner_ids) {
     square_px.push_back(LocalSquarePx(detection->corners_px, board, id));
   }
   RefineCorners(grey, &detection->corners_px, square_px, fit);
+  return square_px;
+}
+
+// Refines the corners `flagged` by the grid check again from their clean neighbours'
+// prediction, in a window sized from the square those neighbours span (the first window may have
+// been sized from the wrong corner itself), then their clean 4-neighbours whose window changed.
+// A corner whose refinement measures nothing (too near the border, or cornerSubPix returning its
+// start because it diverged) keeps its old position, so that the second check drops it.
+void RefineFlaggedCorners(const cv::Mat& grey, const BoardSpec& board, const DetectOptions& options,
+                          const std::vector<int>& flagged,
+                          const std::vector<double>& first_square_px, BoardDetection* detection) {
+  std::vector<Eigen::Vector2d>& grid = detection->corners_px;
+  std::vector<bool> usable(grid.size(), true);
+  for (int id : flagged) usable[id] = false;
+  const std::vector<GridCornerPrediction> predictions = PredictFromGridNeighbours(
+      grid, board.cols, board.rows, usable, options.grid_check.num_neighbours);
+  for (int id : flagged) {
+    const GridCornerPrediction& prediction = predictions[id];
+    if (!prediction.valid || !std::isfinite(prediction.square_px)) continue;
+    std::vector<Eigen::Vector2d> corner = {prediction.predicted_px};
+    if (RefineCorners(grey, &corner, {prediction.square_px}, options.fit_corner_model) > 0.0) {
+      grid[id] = corner[0];
+      ++detection->num_rerefined_corners;
+    }
+  }
+  const int offsets[4][2] = {{0, 1}, {0, -1}, {1, 0}, {-1, 0}};
+  for (int id : flagged) {
+    for (const auto& offset : offsets) {
+      const int r = id / board.cols + offset[0], c = id % board.cols + offset[1];
+      if (r < 0 || c < 0 || r >= board.rows || c >= board.cols || !usable[r * board.cols + c]) {
+        continue;
+      }
+      const int neighbour = r * board.cols + c;
+      const double square_px = LocalSquarePx(grid, board, neighbour);
+      if (WindowHalfPx(square_px) == WindowHalfPx(first_square_px[neighbour])) continue;
+      std::vector<Eigen::Vector2d> corner = {grid[neighbour]};
+      RefineCorners(grey, &corner, {square_px}, options.fit_corner_model);
+      grid[neighbour] = corner[0];
+    }
+  }
+}
+
+// Leaves the corners `ids` out of a full-grid detection.
+void DropCorners(std::vector<int> ids, BoardDetection* detection) {
+  std::sort(ids.begin(), ids.end());
+  BoardDetection kept = *detection;
+  kept.corners_px.clear();
+  kept.corner_ids.clear();
+  for (size_t i = 0; i < detection->corners_px.size(); ++i) {
+    if (std::binary_search(ids.begin(), ids.end(), detection->corner_ids[i])) continue;
+    kept.corners_px.push_back(detection->corners_px[i]);
+    kept.corner_ids.push_back(detection->corner_ids[i]);
+  }
+  kept.dropped_corner_ids = std::move(ids);
+  *detection = std::move(kept);
+}
+
+// The grid check (grid_check.h) after the refinement of a full grid (corner id i at index i):
+// inconsistent corners are refined again; those still inconsistent are dropped, or the view is
+// rejected when that would drop more than max_dropped_fraction of the corners.
+void CheckGrid(const cv::Mat& grey, const BoardSpec& board, const DetectOptions& options,
+               const std::vector<double>& first_square_px, BoardDetection* detection) {
+  const std::vector<int> flagged =
+      FindInconsistentCorners(detection->corners_px, board.cols, board.rows, options.grid_check);
+  if (flagged.empty()) return;
+  RefineFlaggedCorners(grey, board, options, flagged, first_square_px, detection);
+  const std::vector<int> still =
+      FindInconsistentCorners(detection->corners_px, board.cols, board.rows, options.grid_check);
+  if (still.empty()) return;
+  if (static_cast<double>(still.size()) > options.max_dropped_fraction * board.NumCorners()) {
+    detection->found = false;
+    detection->reason = std::to_string(still.size()) + " of " + std::to_string(board.NumCorners()) +
+                        " corners disagree with their neighbours in the grid even after a new "
+                        "refinement (an inconsistent grid)";
+    return;
+  }
+  DropCorners(still, detection);
 }
 
 std::string ValidateGridImpl(const cv::Mat& grey, const BoardSpec& board,
@@ -483,6 +568,9 @@ void DetectOptions::Check() const {
     }
   }
   if (model) model->intrinsics.Check();
+  grid_check.Check();
+  OMNIRIG_CHECK(max_dropped_fraction >= 0.0 && max_dropped_fraction <= 1.0,
+                "detect: max_dropped_fraction must be in [0, 1]");
 }
 
 BoardDetection DetectBoard(const cv::Mat& image, const BoardSpec& board,
@@ -501,7 +589,9 @@ BoardDetection DetectBoard(const cv::Mat& image, const BoardSpec& board,
   }
   if (detection.found && options.refine_subpixel && detection.method != "hint" &&
       detection.method != "charuco") {
-    RefineGrid(grey, board, options.fit_corner_model, &detection);
+    const std::vector<double> square_px =
+        RefineGrid(grey, board, options.fit_corner_model, &detection);
+    if (options.check_grid) CheckGrid(grey, board, options, square_px, &detection);
   }
   return detection;
 }

@@ -5,10 +5,11 @@
 // contrast-normalised and upsampled versions; a candidate must have every corner (sub-boards
 // are rejected by the count and the board's extent), a consistent row-major ordering (no
 // flipped or mirrored grids) and is refined to sub-pixel with a window adapted to the local
-// square size: cornerSubPix, then a fit of the corner's X-junction with curved edges. With a model
-// from an earlier calibration, or with the four outer corners given by the user, every corner is
-// predicted and refined instead (the paper's tool's hint path). ChArUco boards go through OpenCV
-// aruco and may be partial.
+// square size: cornerSubPix, then a fit of the corner's X-junction with curved edges; then every
+// corner is checked against its grid neighbours (grid_check.h) and a wrong one refined again from
+// their prediction or left out. With a model from an earlier calibration, or with the four outer
+// corners given by the user, every corner is predicted and refined instead (the paper's tool's
+// hint path). ChArUco boards go through OpenCV aruco and may be partial.
 
 #include <array>
 #include <optional>
@@ -19,6 +20,7 @@
 #include <opencv2/core.hpp>
 
 #include "engine/calib/board.h"
+#include "engine/calib/grid_check.h"
 #include "engine/geometry/camera_model.h"
 #include "engine/geometry/rigid3.h"
 
@@ -32,6 +34,10 @@ struct BoardDetection {
   std::vector<Eigen::Vector2d> corners_px;
   std::vector<int> corner_ids;
   std::string method;  // which detector found it ("sb", "classic", "hint", "model", "charuco")
+  // The grid check (DetectOptions::check_grid): corners it refined again from their
+  // neighbours' prediction, and the ids it left out because they still disagreed.
+  int num_rerefined_corners = 0;
+  std::vector<int> dropped_corner_ids;
 };
 
 struct DetectOptions {
@@ -42,6 +48,15 @@ struct DetectOptions {
   // edges a mirror bends (radially outward, +0.02 px on average on the synthetic renders). Off only
   // to measure that bias.
   bool fit_corner_model = true;
+  // After the refinement of an automatically found checkerboard, check every corner against
+  // where its row and column neighbours predict it (grid_check.h). An inconsistent corner (e.g.
+  // OpenCV's classic detector averaging the vertices of two different quads) is refined again
+  // from the prediction; one that still disagrees is dropped (corner_ids then has a gap, which
+  // calibration and relative pose handle), and a view that would lose more than
+  // max_dropped_fraction of its corners is rejected with the reason.
+  bool check_grid = true;
+  GridCheckOptions grid_check;
+  double max_dropped_fraction = 0.1;
   // Also try 2x upsampled and contrast-normalised images when the plain image fails.
   bool try_enhanced = true;
   // Allow OpenCV's exhaustive search as the last resort (can take minutes on a large image

@@ -1,13 +1,11 @@
 #include "engine/calib/pipeline.h"
 
-#include <atomic>
-#include <mutex>
 #include <sstream>
-#include <thread>
 
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "engine/util/parallel.h"
 #include "engine/util/timer.h"
 
 namespace omnirig {
@@ -66,11 +64,8 @@ std::vector<CalibrationView> DetectAll(const std::filesystem::path& dir,
                                        int* height, const ProgressSink& progress) {
   std::vector<CalibrationView> views(names.size());
   std::vector<cv::Size> sizes(names.size());
-  std::mutex mutex;
-  std::atomic<size_t> next{0};
-  size_t done = 0;
-  std::exception_ptr error;
-  auto detect_one = [&](size_t i) {
+  auto detect_one = [&](int i, const ProgressSink& cancellation) {
+    cancellation.ThrowIfCancelled();
     views[i].name = names[i];
     const cv::Mat image = ReadImage(dir / names[i], &views[i].detection.reason);
     if (image.empty()) return;
@@ -80,34 +75,15 @@ std::vector<CalibrationView> DetectAll(const std::filesystem::path& dir,
     if (hint != options.hints.end()) detect.outer_corners_hint_px = hint->second;
     views[i].detection = DetectBoard(image, board, detect);
   };
-  auto worker = [&]() {
-    for (size_t i = next++; i < names.size(); i = next++) {
-      {
-        // The sink's callbacks need not be thread-safe: every call is under the lock.
-        const std::lock_guard<std::mutex> lock(mutex);
-        if (progress.IsCancelled()) return;
-      }
-      try {
-        detect_one(i);
-        const std::lock_guard<std::mutex> lock(mutex);
-        ++done;
-        progress.Report(
-            0.5 * done / names.size(), "detect",
-            names[i] + (views[i].detection.found ? ": found" : ": " + views[i].detection.reason));
-      } catch (...) {
-        const std::lock_guard<std::mutex> lock(mutex);
-        if (!error) error = std::current_exception();
-        return;
-      }
-    }
-  };
-  const int num_threads =
-      std::max(1, std::min<int>(options.calibrate.num_threads, static_cast<int>(names.size())));
-  std::vector<std::thread> threads;
-  for (int t = 1; t < num_threads; ++t) threads.emplace_back(worker);
-  worker();
-  for (std::thread& thread : threads) thread.join();
-  if (error) std::rethrow_exception(error);
+  size_t done = 0;
+  RunTasks(static_cast<int>(names.size()), options.calibrate.num_threads, progress, detect_one,
+           [&](int i) {
+             ++done;
+             progress.Report(0.5 * done / names.size(), "detect",
+                             names[i] + (views[i].detection.found
+                                             ? ": found"
+                                             : ": " + views[i].detection.reason));
+           });
   progress.ThrowIfCancelled();
   CheckImageSizes(sizes, &views, width, height);
   return views;

@@ -231,9 +231,10 @@ bool SolveJoint(UsedPairs* used, const RelativePoseOptions& options, bool warm_s
   } else {
     rig.cam0_from_cam1 = report->linear_cam0_from_cam1;
   }
-  RigUncertainty uncertainty;
+  // The uncertainty only of the last round's fit (EstimateRelativePose): each fit before it
+  // is refitted without one pair.
   const RigRefinementSummary summary = RefineRig(used->corners, options.RefinementOptions(), &rig,
-                                                 &used->cam0_from_board, &uncertainty, progress);
+                                                 &used->cam0_from_board, nullptr, progress);
   report->solver = {summary.initial_cost, summary.final_cost, summary.num_iterations,
                     summary.termination, summary.time_s};
   if (!summary.usable) {
@@ -242,9 +243,6 @@ bool SolveJoint(UsedPairs* used, const RelativePoseOptions& options, bool warm_s
   }
   report->rig = rig;
   report->baseline_m = rig.cam0_from_cam1.translation.norm();
-  report->baseline_std_m = uncertainty.baseline_std_m;
-  report->translation_std_m = uncertainty.translation_std_m;
-  report->rotation_std_deg = uncertainty.rotation_std_deg;
   double sum_squares = 0.0;
   size_t count = 0;
   for (size_t u = 0; u < used->index.size(); ++u) {
@@ -344,8 +342,9 @@ RelativePoseReport EstimateRelativePose(const CameraModel& cam0, const CameraMod
   // Steps 3 and 4, again without the pair that step 5 finds least synchronised, until it finds
   // none (at most max_rounds times, and at most half the pairs first used).
   int min_kept = 0;
+  UsedPairs used;
   for (int round = 0;; ++round) {
-    UsedPairs used = CollectUsedPairs(board, pairs, symmetries, poses, chosen, &report);
+    used = CollectUsedPairs(board, pairs, symmetries, poses, chosen, &report);
     if (report.num_pairs_used < options.min_num_pairs) {
       report.message = "too few usable pairs (need " + std::to_string(options.min_num_pairs) +
                        "): " + UsedPairsMessage(report);
@@ -367,6 +366,12 @@ RelativePoseReport EstimateRelativePose(const CameraModel& cam0, const CameraMod
     if (!TestSynchronisation(used, options, may_reject, min_kept, &report)) break;
     report.sync_rounds = round + 1;
   }
+  // The covariance of cam0_from_cam1 in the final fit.
+  const RigUncertainty uncertainty = EstimateRigUncertainty(
+      used.corners, options.RefinementOptions(), report.rig, used.cam0_from_board);
+  report.baseline_std_m = uncertainty.baseline_std_m;
+  report.translation_std_m = uncertainty.translation_std_m;
+  report.rotation_std_deg = uncertainty.rotation_std_deg;
   report.success = true;
   progress.Report(1.0, "done");
   return report;

@@ -7,6 +7,7 @@
 #include "engine/calib/board_pose.h"
 #include "engine/stereo/relpose_corner_order.h"
 #include "engine/stereo/relpose_refine.h"
+#include "engine/util/parallel.h"
 
 namespace omnirig {
 
@@ -185,27 +186,37 @@ void ApplyOneStandardErrorRule(const std::vector<std::vector<double>>& fold_sums
   selection->rule = os.str();
 }
 
-// Every candidate fitted on all pairs; `candidate_options` receives the options of each.
+// Every candidate fitted on all pairs; `candidate_options` receives the options of each. The
+// job's threads run candidates side by side, one solver thread each (a rig problem of a few
+// dozen pairs keeps one thread busy better than several).
 void FitCandidates(const BoardSpec& board, const std::vector<StereoBoardPair>& pairs,
                    const std::vector<RigModelCandidate>& candidates,
                    const RelativePoseOptions& options, const ProgressSink& progress,
                    std::vector<RelativePoseOptions>* candidate_options,
                    RigModelSelection* selection) {
-  for (size_t k = 0; k < candidates.size(); ++k) {
-    progress.ThrowIfCancelled();
+  const int num_candidates = static_cast<int>(candidates.size());
+  selection->candidates.resize(candidates.size());
+  for (const RigModelCandidate& model_candidate : candidates) {
     RelativePoseOptions candidate = options;
-    candidate.refine_intrinsics = candidates[k].model.refine_intrinsics;
-    candidate.fixed_intrinsics = candidates[k].model.joint_fixed;
-    candidate.cam1_fixed_intrinsics = candidates[k].model.cam1_joint_fixed;
-    RigModelScore score;
-    score.name = candidates[k].model.name;
-    score.num_free_intrinsics = candidates[k].model.NumFreeIntrinsics();
-    score.fit =
-        EstimateRelativePose(candidates[k].cam0, candidates[k].cam1, board, pairs, candidate);
-    selection->candidates.push_back(std::move(score));
+    candidate.refine_intrinsics = model_candidate.model.refine_intrinsics;
+    candidate.fixed_intrinsics = model_candidate.model.joint_fixed;
+    candidate.cam1_fixed_intrinsics = model_candidate.model.cam1_joint_fixed;
+    candidate.num_threads = 1;
     candidate_options->push_back(candidate);
-    progress.Report(0.2 * (k + 1.0) / candidates.size(), "model_fit", candidates[k].model.name);
   }
+  int num_done = 0;
+  RunTasks(
+      num_candidates, options.num_threads, progress,
+      [&](int k, const ProgressSink& cancellation) {
+        RigModelScore& score = selection->candidates[k];
+        score.name = candidates[k].model.name;
+        score.num_free_intrinsics = candidates[k].model.NumFreeIntrinsics();
+        score.fit = EstimateRelativePose(candidates[k].cam0, candidates[k].cam1, board, pairs,
+                                         (*candidate_options)[k], cancellation);
+      },
+      [&](int k) {
+        progress.Report(0.2 * ++num_done / num_candidates, "model_fit", candidates[k].model.name);
+      });
 }
 
 // The folds: every pair that all fitted candidates used.
@@ -235,23 +246,39 @@ RigModelSelection SelectRigIntrinsicsModel(const BoardSpec& board,
   const std::vector<size_t> held_out = CommonPairs(selection, pairs.size());
   for (size_t i : held_out) selection.held_out.push_back(pairs[i].name);
   const std::vector<BoardSymmetry> symmetries = BoardGridSymmetries(board);
+  // Every (candidate, fold) pair is one task; the sums are taken in fold order afterwards.
+  std::vector<std::pair<size_t, size_t>> tasks;  // (candidate, fold)
+  for (size_t k = 0; k < candidates.size(); ++k) {
+    if (!selection.candidates[k].fit.success || held_out.size() < 3) continue;
+    for (size_t f = 0; f < held_out.size(); ++f) tasks.emplace_back(k, f);
+  }
+  std::vector<std::vector<std::pair<double, int>>> folds(
+      candidates.size(), std::vector<std::pair<double, int>>(held_out.size()));
+  int num_done = 0;
+  RunTasks(
+      static_cast<int>(tasks.size()), options.num_threads, progress,
+      [&](int t, const ProgressSink& cancellation) {
+        cancellation.ThrowIfCancelled();
+        const auto [k, f] = tasks[t];
+        folds[k][f] = FoldError(board, symmetries, pairs, selection.candidates[k].fit,
+                                candidate_options[k].RefinementOptions(), held_out[f]);
+      },
+      [&](int t) {
+        const auto [k, f] = tasks[t];
+        progress.Report(0.2 + 0.8 * ++num_done / tasks.size(), "cross_validation",
+                        selection.candidates[k].name + " without " + pairs[held_out[f]].name);
+      });
   std::vector<std::vector<double>> fold_sums(candidates.size());
   double total_count = 0.0;
   for (size_t k = 0; k < candidates.size(); ++k) {
     RigModelScore& score = selection.candidates[k];
     if (!score.fit.success || held_out.size() < 3) continue;
-    const RigRefinementOptions refine = candidate_options[k].RefinementOptions();
     double sum = 0.0, count = 0.0;
-    for (size_t f = 0; f < held_out.size(); ++f) {
-      progress.ThrowIfCancelled();
-      const auto [fold_sum, fold_count] =
-          FoldError(board, symmetries, pairs, score.fit, refine, held_out[f]);
+    for (const auto& [fold_sum, fold_count] : folds[k]) {
       fold_sums[k].push_back(fold_sum);
       score.fold_rms_px.push_back(std::sqrt(fold_sum / fold_count));
       sum += fold_sum;
       count += fold_count;
-      progress.Report(0.2 + 0.8 * (k + (f + 1.0) / held_out.size()) / candidates.size(),
-                      "cross_validation", score.name + " without " + pairs[held_out[f]].name);
     }
     score.cv_rms_px = std::sqrt(sum / count);
     total_count = count;

@@ -105,7 +105,9 @@ struct RigModelSelection {
 // one image of each held-out pair (a slight advantage to it).
 // Choice (the one-standard-error rule of cross-validation): the simplest candidate (fewest
 // free intrinsics) whose mean squared held-out error exceeds the lowest by no more than one
-// standard error of the paired difference. Throws Cancelled through `progress`.
+// standard error of the paired difference. options.num_threads fits candidates and folds side
+// by side, one solver thread each: the result does not depend on it. Throws Cancelled through
+// `progress`, whose callbacks are only ever called from one thread at a time.
 RigModelSelection SelectRigIntrinsicsModel(const BoardSpec& board,
                                            const std::vector<StereoBoardPair>& pairs,
                                            const std::vector<RigModelCandidate>& candidates,

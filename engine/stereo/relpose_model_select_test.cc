@@ -1,5 +1,8 @@
 #include "engine/stereo/relpose_model_select.h"
 
+#include <algorithm>
+#include <string>
+
 #include <gtest/gtest.h>
 
 #include "engine/stereo/relpose_test_scene.h"
@@ -120,6 +123,63 @@ TEST(RigModelSelection, RealTangentialTermsAreKept) {
   EXPECT_EQ(selection.chosen, kFree) << selection.rule;
   EXPECT_GT(selection.candidates[kTangentialFixed].cv_rms_px,
             selection.candidates[kFree].cv_rms_px);
+}
+
+// The job's threads fit candidates and folds side by side: every number is the same as on one
+// thread, and the progress sink sees one call at a time, its fractions never going back.
+TEST(RigModelSelection, ThreadsDoNotChangeTheResult) {
+  const Scene scene = MakeScene(0.2, 10, 43);
+  CameraModel cam0 = scene.rig.cam0;
+  cam0.intrinsics.u0() += 2.0;
+  const std::vector<RigModelCandidate> candidates = Candidates(cam0, scene.rig.cam1);
+  const RigModelSelection serial = SelectRigIntrinsicsModel(scene.board, scene.pairs, candidates, {});
+  RelativePoseOptions options;
+  options.num_threads = 3;
+  int calls_inside = 0, max_inside = 0;
+  double last_fraction = 0.0;
+  bool monotonic = true;
+  ProgressSink progress;
+  progress.report = [&](double fraction, const std::string&, const std::string&) {
+    max_inside = std::max(max_inside, ++calls_inside);
+    monotonic = monotonic && fraction >= last_fraction;
+    last_fraction = fraction;
+    --calls_inside;
+  };
+  const RigModelSelection parallel =
+      SelectRigIntrinsicsModel(scene.board, scene.pairs, candidates, options, progress);
+  EXPECT_EQ(max_inside, 1);
+  EXPECT_TRUE(monotonic);
+  EXPECT_DOUBLE_EQ(last_fraction, 1.0);
+  EXPECT_EQ(parallel.chosen, serial.chosen);
+  EXPECT_EQ(parallel.rule, serial.rule);
+  ASSERT_EQ(parallel.candidates.size(), serial.candidates.size());
+  for (size_t k = 0; k < serial.candidates.size(); ++k) {
+    const RigModelScore& a = parallel.candidates[k];
+    const RigModelScore& b = serial.candidates[k];
+    EXPECT_EQ(a.name, b.name);
+    EXPECT_EQ(a.fit.baseline_m, b.fit.baseline_m) << b.name;
+    EXPECT_EQ(a.fit.rms_px, b.fit.rms_px) << b.name;
+    EXPECT_EQ(a.fold_rms_px, b.fold_rms_px) << b.name;
+    EXPECT_EQ(a.cv_excess_mse_px2, b.cv_excess_mse_px2) << b.name;
+  }
+}
+
+// Cancelled while candidates run on several threads: the call throws, it does not hang.
+TEST(RigModelSelection, CancellationStopsEveryThread) {
+  const Scene scene = MakeScene(0.0, 6, 31);
+  RelativePoseOptions options;
+  options.num_threads = 4;
+  int num_reports = 0;
+  ProgressSink progress;
+  progress.report = [&num_reports](double, const std::string&, const std::string&) {
+    ++num_reports;
+  };
+  progress.is_cancelled = [&num_reports] { return num_reports >= 2; };
+  EXPECT_THROW(SelectRigIntrinsicsModel(scene.board, scene.pairs,
+                                        Candidates(scene.rig.cam0, scene.rig.cam1), options,
+                                        progress),
+               Cancelled);
+  EXPECT_GE(num_reports, 2);
 }
 
 TEST(RigModelSelection, CancellationThrows) {

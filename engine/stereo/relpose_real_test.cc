@@ -79,6 +79,18 @@ class RelativePoseReal : public ::testing::Test {
     return *cached;
   }
 
+  // The job's rig with the intrinsics refined, default fixed set and synchronisation test:
+  // three tests check different properties of this one estimate, computed once.
+  static const RelativePoseReport& JointEstimate() {
+    static std::optional<RelativePoseReport> cached;
+    if (!cached) {
+      RelativePoseOptions options;
+      options.refine_intrinsics = true;
+      cached = EstimateRelativePose(Camera(0, false), Camera(1, false), board_, *pairs_, options);
+    }
+    return *cached;
+  }
+
   static BoardSpec board_;
   static std::vector<StereoBoardPair>* pairs_;
 };
@@ -87,10 +99,7 @@ BoardSpec RelativePoseReal::board_;
 std::vector<StereoBoardPair>* RelativePoseReal::pairs_ = nullptr;
 
 TEST_F(RelativePoseReal, FisheyePairsGiveTheReferenceBaseline) {
-  RelativePoseOptions options;
-  options.refine_intrinsics = true;
-  const RelativePoseReport report =
-      EstimateRelativePose(Camera(0, false), Camera(1, false), board_, *pairs_, options);
+  const RelativePoseReport& report = JointEstimate();
   ASSERT_TRUE(report.success) << report.message;
   // The synchronisation test may leave out up to half the pairs, each with its reason.
   EXPECT_GE(report.num_pairs_used, 15);
@@ -111,10 +120,9 @@ TEST_F(RelativePoseReal, FisheyePairsGiveTheReferenceBaseline) {
 // 0.4 % shorter, many times the covariance's standard deviation away (bench_relpose prints
 // both next to cv::fisheye and cv::omnidir on the same corners).
 TEST_F(RelativePoseReal, TangentialTermsMoveTheBaselineByMoreThanItsStd) {
+  const RelativePoseReport& with_tangential = JointEstimate();
   RelativePoseOptions options;
   options.refine_intrinsics = true;
-  const RelativePoseReport with_tangential =
-      EstimateRelativePose(Camera(0, false), Camera(1, false), board_, *pairs_, options);
   options.fixed_intrinsics[UnifiedIntrinsics::kK3] = true;
   options.fixed_intrinsics[UnifiedIntrinsics::kK4] = true;
   const RelativePoseReport without =
@@ -133,10 +141,9 @@ TEST_F(RelativePoseReal, TangentialTermsMoveTheBaselineByMoreThanItsStd) {
 // The test (relpose_sync.h, its rule fixed on synthetic rigs) must leave those out, keep most
 // pairs, and the rig without them must fit the rest at close to the mono calibrations' level.
 TEST_F(RelativePoseReal, UnsynchronisedPairsAreLeftOut) {
+  const RelativePoseReport& report = JointEstimate();
   RelativePoseOptions options;
   options.refine_intrinsics = true;
-  const RelativePoseReport report =
-      EstimateRelativePose(Camera(0, false), Camera(1, false), board_, *pairs_, options);
   options.sync_test.false_alarm_rate = 0.0;
   const RelativePoseReport kept =
       EstimateRelativePose(Camera(0, false), Camera(1, false), board_, *pairs_, options);
@@ -170,8 +177,12 @@ TEST_F(RelativePoseReal, CrossValidationScoresEveryModelAndFollowsItsRule) {
     candidates.push_back({model, Camera(0, model.CalibrationFixed(0)[UnifiedIntrinsics::kK3]),
                           Camera(1, model.CalibrationFixed(1)[UnifiedIntrinsics::kK3])});
   }
+  // Two threads, as a job with two: the same result as one (relpose_model_select_test.cc),
+  // half the wall time on a quiet machine.
+  RelativePoseOptions options;
+  options.num_threads = 2;
   const RigModelSelection selection =
-      SelectRigIntrinsicsModel(board_, *pairs_, candidates, RelativePoseOptions());
+      SelectRigIntrinsicsModel(board_, *pairs_, candidates, options);
   EXPECT_GE(selection.held_out.size(), 15u);
   ASSERT_GE(selection.chosen, 0) << selection.rule;
   for (const RigModelScore& score : selection.candidates) {

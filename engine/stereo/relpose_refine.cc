@@ -48,6 +48,15 @@ struct RigBlocks {
   std::array<double, UnifiedIntrinsics::kNumParams> intrinsics0, intrinsics1;
 };
 
+RigBlocks BlocksOf(const StereoRig& rig, const std::vector<Rigid3d>& cam0_from_board) {
+  RigBlocks blocks;
+  blocks.cam0_from_cam1 = rig.cam0_from_cam1.ToParams();
+  for (const Rigid3d& pose : cam0_from_board) blocks.cam0_from_board.push_back(pose.ToParams());
+  blocks.intrinsics0 = rig.cam0.intrinsics.params;
+  blocks.intrinsics1 = rig.cam1.intrinsics.params;
+  return blocks;
+}
+
 void AddResiduals(const std::vector<RigPairCorners>& pairs, const RigRefinementOptions& options,
                   RigBlocks* blocks, ceres::Problem* problem) {
   ceres::LossFunction* loss = options.huber_loss_px > 0.0
@@ -56,13 +65,14 @@ void AddResiduals(const std::vector<RigPairCorners>& pairs, const RigRefinementO
   for (size_t i = 0; i < pairs.size(); ++i) {
     double* board = blocks->cam0_from_board[i].data();
     for (size_t c = 0; c < pairs[i].pixels0.size(); ++c) {
+      // RigCam0CornerCost, with hand-written Jacobians: the calibration's own corner cost.
       problem->AddResidualBlock(
-          RigCam0CornerCost::Create(pairs[i].pixels0[c], pairs[i].points_in_board0[c]), loss,
-          board, blocks->intrinsics0.data());
+          new BoardCornerAnalyticCost(pairs[i].points_in_board0[c], pairs[i].pixels0[c]), loss,
+          blocks->intrinsics0.data(), board);
     }
     for (size_t c = 0; c < pairs[i].pixels1.size(); ++c) {
       problem->AddResidualBlock(
-          RigCam1CornerCost::Create(pairs[i].pixels1[c], pairs[i].points_in_board1[c]), loss,
+          new RigCam1CornerAnalyticCost(pairs[i].pixels1[c], pairs[i].points_in_board1[c]), loss,
           board, blocks->cam0_from_cam1.data(), blocks->intrinsics1.data());
     }
     problem->SetManifold(board, NewPoseManifold());
@@ -141,16 +151,22 @@ RigUncertainty EstimateUncertainty(ceres::Problem* problem, RigBlocks* blocks) {
 
 }  // namespace
 
+RigUncertainty EstimateRigUncertainty(const std::vector<RigPairCorners>& pairs,
+                                      const RigRefinementOptions& options, const StereoRig& rig,
+                                      const std::vector<Rigid3d>& cam0_from_board) {
+  OMNIRIG_CHECK(cam0_from_board.size() == pairs.size(), "one board pose per pair expected");
+  RigBlocks blocks = BlocksOf(rig, cam0_from_board);
+  ceres::Problem problem;
+  AddResiduals(pairs, options, &blocks, &problem);
+  return EstimateUncertainty(&problem, &blocks);
+}
+
 RigRefinementSummary RefineRig(const std::vector<RigPairCorners>& pairs,
                                const RigRefinementOptions& options, StereoRig* rig,
                                std::vector<Rigid3d>* cam0_from_board, RigUncertainty* uncertainty,
                                const ProgressSink& progress) {
   OMNIRIG_CHECK(cam0_from_board->size() == pairs.size(), "one board pose per pair expected");
-  RigBlocks blocks;
-  blocks.cam0_from_cam1 = rig->cam0_from_cam1.ToParams();
-  for (const Rigid3d& pose : *cam0_from_board) blocks.cam0_from_board.push_back(pose.ToParams());
-  blocks.intrinsics0 = rig->cam0.intrinsics.params;
-  blocks.intrinsics1 = rig->cam1.intrinsics.params;
+  RigBlocks blocks = BlocksOf(*rig, *cam0_from_board);
 
   ceres::Problem problem;
   AddResiduals(pairs, options, &blocks, &problem);

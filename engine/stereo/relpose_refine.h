@@ -61,6 +61,13 @@ RigRefinementSummary RefineRig(const std::vector<RigPairCorners>& pairs,
                                std::vector<Rigid3d>* cam0_from_board, RigUncertainty* uncertainty,
                                const ProgressSink& progress = {});
 
+// The uncertainty RefineRig reports, of a solution it returned (the same problem, evaluated at
+// `rig` and `cam0_from_board`): for a caller that refits several times and needs only the last
+// fit's.
+RigUncertainty EstimateRigUncertainty(const std::vector<RigPairCorners>& pairs,
+                                      const RigRefinementOptions& options, const StereoRig& rig,
+                                      const std::vector<Rigid3d>& cam0_from_board);
+
 // The board pose of one pair with the rig and both cameras held fixed: plain (not robust)
 // least squares over both images' corners, each camera's residuals divided by its corner noise
 // `noise_px` (per coordinate). `cam0_from_board` is the starting point and receives the

@@ -135,7 +135,8 @@ int RunRelpose(const Args& args) {
                    "comma-separated intrinsics held fixed (names, or skew, tangential, "
                    "principal_point, gamma); alpha,k5,tangential suits fisheye lenses");
   parser.AddOption("intrinsics-model", "auto",
-                   "auto, fixed, tangential_fixed or free: which intrinsics the joint refinement "
+                   "auto, fixed, tangential_fixed, tangential_free_cam0, tangential_free_cam1 "
+                   "or free: which intrinsics the joint refinement "
                    "frees (auto: chosen by leave-one-pair-out cross-validation; the default when "
                    "the cameras are calibrated here and neither --refine-intrinsics nor "
                    "--fixed-intrinsics is given)");

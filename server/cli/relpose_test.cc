@@ -130,6 +130,20 @@ TEST_F(RelposeCli, IntrinsicsModelOptionReachesTheJob) {
   Args automatic = BaseArgs();
   automatic.insert(automatic.end(), {"--intrinsics-model", "auto"});
   EXPECT_THROW(RunRelpose(automatic), InvalidArgument);
+  // The per-camera models are names the option takes (they too need the job's calibrations);
+  // a name it does not know is refused with the list of those it does.
+  for (const std::string model : {"tangential_free_cam1", "best"}) {
+    Args named = BaseArgs();
+    named.insert(named.end(), {"--intrinsics-model", model});
+    try {
+      RunRelpose(named);
+      ADD_FAILURE() << model << " with given calibrations was accepted";
+    } catch (const InvalidArgument& e) {
+      const std::string expected =
+          model == "best" ? "tangential_free_cam0, tangential_free_cam1" : "calibrate the cameras";
+      EXPECT_NE(std::string(e.what()).find(expected), std::string::npos) << e.what();
+    }
+  }
 }
 
 TEST_F(RelposeCli, BothOutputSpellingsOrAnUnknownLetterAreRefused) {
