@@ -21,15 +21,7 @@ using nlohmann::json;
 class RelposeJob : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    synth::StereoBoardOptions options;
-    options.num_pairs = 8;
-    options.width = 800;
-    options.height = 600;
-    options.render.supersampling = 2;
-    options.render.noise_sigma = 2.0;
-    options.render.blur_sigma_px = 0.5;
-    options.render.grayscale = true;
-    options.seed = 5;
+    synth::StereoBoardOptions options = synth::QuickStereoBoardOptions(8, 5);
     set_ = new synth::StereoBoardSet(synth::MakeStereoBoardSet(options));
     dir_ = new std::filesystem::path(std::filesystem::temp_directory_path() /
                                      ("omnirig_relpose_job_" +

@@ -323,16 +323,8 @@ void RunConfig(const SetConfig& set_config, const RenderConfig& render, int num_
 
 // api/relpose_job_test's renders, detected with and without the grid check.
 void RunRelposeJobRenders() {
-  synth::StereoBoardOptions options;
-  options.num_pairs = 8;
-  options.width = 800;
-  options.height = 600;
-  options.render.supersampling = 2;
-  options.render.noise_sigma = 2.0;
-  options.render.blur_sigma_px = 0.5;
-  options.render.grayscale = true;
+  synth::StereoBoardOptions options = synth::QuickStereoBoardOptions(8, 5);
   options.render.num_threads = 2;
-  options.seed = 5;
   const synth::StereoBoardSet set = synth::MakeStereoBoardSet(options);
   const BoardSpec board = ToBoardSpec(set.board);
   std::printf("\napi/relpose_job_test's renders (2 x 8 views, 800x600, seed 5)\n");

@@ -183,16 +183,8 @@ TEST(Detect, NoRadialBiasOnCurvedEdges) {
 // The grid check refines it again from its neighbours' prediction. The other 15 views are clean:
 // the check must leave them alone.
 TEST(Detect, GridCheckRepairsAMislinkedCornerAndLeavesCleanGridsAlone) {
-  synth::StereoBoardOptions options;
-  options.num_pairs = 8;
-  options.width = 800;
-  options.height = 600;
-  options.render.supersampling = 2;
-  options.render.noise_sigma = 2.0;
-  options.render.blur_sigma_px = 0.5;
-  options.render.grayscale = true;
+  synth::StereoBoardOptions options = synth::QuickStereoBoardOptions(8, 5);
   options.render.num_threads = 2;
-  options.seed = 5;
   const synth::StereoBoardSet set = synth::MakeStereoBoardSet(options);
   const BoardSpec board = ToBoardSpec(set.board);
   // Largest corner error against the truth, in the better of the two numberings.

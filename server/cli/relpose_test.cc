@@ -23,15 +23,7 @@ using nlohmann::json;
 class RelposeCli : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    synth::StereoBoardOptions options;
-    options.num_pairs = 6;
-    options.width = 800;
-    options.height = 600;
-    options.render.supersampling = 2;
-    options.render.noise_sigma = 2.0;
-    options.render.blur_sigma_px = 0.5;
-    options.render.grayscale = true;
-    options.seed = 3;
+    synth::StereoBoardOptions options = synth::QuickStereoBoardOptions(6, 3);
     set_ = new synth::StereoBoardSet(synth::MakeStereoBoardSet(options));
     dir_ = new fs::path(fs::temp_directory_path() /
                         ("omnirig_relpose_cli_" + std::to_string(std::random_device()())));
