@@ -136,7 +136,7 @@ void AppendJsonTime(const std::optional<double>& seconds_since_epoch, std::strin
   out += "Z\"";
 }
 
-// Keys in nlohmann's order (sorted), as JobJson(job).dump() writes them.
+// Keys in nlohmann's order (sorted), as the tree form (JobJson in job_json_test.cc) dumps them.
 void AppendJobJson(const storage::JobRecord& job, std::string& out) {
   AppendLiteral("{\"attempts\":", out);
   out += std::to_string(job.attempts);

@@ -1,9 +1,9 @@
 #pragma once
-// The job's JSON text (the form json_views.h documents) written straight into a string: the
-// same bytes as JobJson(job).dump(), without building a JSON tree and without parsing the
-// stored params back. A status poll is the service's most frequent request; building the tree,
-// re-parsing params and dumping cost about half of its user-space CPU (job_json_test.cc checks
-// the bytes against JobJson).
+// The job's JSON text (the form json_views.h documents) written straight into a string:
+// the same bytes as nlohmann's dump() of the tree form (job_json_test.cc keeps that tree as
+// its oracle and compares byte for byte), without building a JSON tree and without parsing
+// the stored params back. A status poll is the service's most frequent request; building the
+// tree, re-parsing params and dumping cost about half of its user-space CPU.
 
 #include <optional>
 #include <string>
