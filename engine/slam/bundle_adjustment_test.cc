@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 
 #include "engine/slam/evaluation.h"
+#include "engine/slam/sequence_accuracy.h"
 
 namespace omnirig::slam {
 namespace {
@@ -317,34 +318,16 @@ TEST(RigCalibrationCost, JacobiansMatchAutoDiff) {
   EXPECT_GT(evaluated, 40);
 }
 
-// The scene's observations come from MakeRig(); the adjustment is handed a calibration off by
-// +0.5 % in focal length, 1-1.5 px in principal point, and cam1 turned by 0.2 degrees.
-StereoRig PerturbedRig(const StereoRig& truth) {
-  StereoRig rig = truth;
-  for (CameraModel* camera : {&rig.cam0, &rig.cam1}) {
-    camera->intrinsics.gamma_u() *= 1.005;
-    camera->intrinsics.gamma_v() *= 1.005;
-  }
-  rig.cam0.intrinsics.u0() += 1.5;
-  rig.cam0.intrinsics.v0() -= 1.0;
-  rig.cam1.intrinsics.u0() -= 1.0;
-  rig.cam1.intrinsics.v0() += 1.5;
-  rig.cam0_from_cam1.rotation =
-      Eigen::Quaterniond(Eigen::AngleAxisd(0.2 * M_PI / 180, Eigen::Vector3d(1, -2, 0.5).normalized())) *
-      truth.cam0_from_cam1.rotation;
-  return rig;
-}
-
 TEST(BundleAdjustWithCalibration, RefinesAPerturbedCalibrationTowardsTheTruth) {
   const StereoRig truth = MakeRig();
   const std::vector<int> frames = {0, 1, 2, 3, 4, 5};
   // Reference: the same perturbed start with the calibration held fixed.
   SyntheticScene fixed_scene = MakeScene(truth, 0.3, 0.0);
-  const BundleAdjustmentReport fixed_report =
-      BundleAdjust(PerturbedRig(truth), frames, BundleAdjustmentOptions(), &fixed_scene.map);
+  const BundleAdjustmentReport fixed_report = BundleAdjust(
+      PerturbedCalibration(truth), frames, BundleAdjustmentOptions(), &fixed_scene.map);
 
   SyntheticScene scene = MakeScene(truth, 0.3, 0.0);
-  StereoRig rig = PerturbedRig(truth);
+  StereoRig rig = PerturbedCalibration(truth);
   CalibrationRefinementOptions refinement;
   refinement.refine = CalibrationRefinement::kAll;
   CalibrationRefinementReport calibration;
@@ -388,7 +371,7 @@ TEST(BundleAdjustWithCalibration, RefinesAPerturbedCalibrationTowardsTheTruth) {
 TEST(BundleAdjustWithCalibration, RefusesTooSmallAProblemAndKeepsTheCalibration) {
   const StereoRig truth = MakeRig();
   SyntheticScene scene = MakeScene(truth, 0.3, 0.0);
-  StereoRig rig = PerturbedRig(truth);
+  StereoRig rig = PerturbedCalibration(truth);
   const StereoRig given = rig;
   CalibrationRefinementOptions refinement;
   refinement.refine = CalibrationRefinement::kIntrinsics;
