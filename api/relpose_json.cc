@@ -92,7 +92,7 @@ RelativePoseParams RelativePoseParamsFromJson(const json& params) {
   CheckKnownFields(params, "params",
                    {"board", "calibrations", "refine_intrinsics", "fixed_intrinsics",
                     "intrinsics_model", "resolve_corner_order", "huber_loss_px",
-                    "max_num_iterations", "sync_false_alarm_rate"});
+                    "max_num_iterations", "sync_false_alarm_rate", "model_board_motion"});
   OMNIRIG_CHECK(params.contains("board"), "missing field 'params.board'");
   RelativePoseParams out;
   out.board = BoardFromJson(params["board"]);
@@ -142,6 +142,9 @@ RelativePoseParams RelativePoseParamsFromJson(const json& params) {
     OMNIRIG_CHECK(rate >= 0.0 && rate < 1.0,
                   "field 'params.sync_false_alarm_rate' must be in [0, 1), got " << rate);
     out.options.sync_test.false_alarm_rate = rate;
+  }
+  if (params.contains("model_board_motion")) {
+    out.options.model_board_motion = BoolField(params, "model_board_motion");
   }
   out.options.Check();
   return out;
@@ -210,6 +213,16 @@ json RelativePoseResultToJson(const RelativePoseReport& report, const json& came
                          {"median_statistic", sync.median_statistic},
                          {"limit", sync.limit},
                          {"num_pairs_left_out", report.sync_rounds}};
+  // The board's motion between the two exposures (engine/stereo/relpose_motion.h): the
+  // estimated std per axis (0 when not used), and the significance test behind "used".
+  const BoardMotionEstimate& motion = report.board_motion;
+  result["board_motion"] = {{"used", motion.used},
+                            {"rotation_std_deg", motion.rotation_std_rad * 180.0 / M_PI},
+                            {"translation_std_m", motion.translation_std_m},
+                            {"statistic", motion.statistic},
+                            {"dof", motion.dof},
+                            {"limit", motion.limit},
+                            {"num_pairs", motion.num_pairs}};
   result["solver"] = {{"initial_cost", report.solver.initial_cost},
                       {"final_cost", report.solver.final_cost},
                       {"num_iterations", report.solver.num_iterations},

@@ -1,5 +1,6 @@
 #include "api/relpose_json.h"
 
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <random>
@@ -36,7 +37,8 @@ TEST(RelposeJson, ParamsParseBoardCalibrationsAndOptions) {
                        {"calibrations", {{"cam0", "job-a"}, {"cam1", "job-b"}}},
                        {"refine_intrinsics", true},
                        {"huber_loss_px", 0.5},
-                       {"sync_false_alarm_rate", 0.05}};
+                       {"sync_false_alarm_rate", 0.05},
+                       {"model_board_motion", false}};
   const RelativePoseParams parsed = RelativePoseParamsFromJson(params);
   EXPECT_EQ(parsed.board.cols, 9);
   EXPECT_EQ(parsed.board.rows, 6);
@@ -46,7 +48,9 @@ TEST(RelposeJson, ParamsParseBoardCalibrationsAndOptions) {
   EXPECT_TRUE(parsed.options.refine_intrinsics);
   EXPECT_EQ(parsed.options.huber_loss_px, 0.5);
   EXPECT_EQ(parsed.options.sync_test.false_alarm_rate, 0.05);
+  EXPECT_FALSE(parsed.options.model_board_motion);
   const RelativePoseParams self_calibrating = RelativePoseParamsFromJson({{"board", Board()}});
+  EXPECT_TRUE(self_calibrating.options.model_board_motion);  // the default
   EXPECT_FALSE(self_calibrating.cam0_calibration_job);
   EXPECT_TRUE(self_calibrating.options.refine_intrinsics);
   EXPECT_FALSE(RelativePoseParamsFromJson(
@@ -258,6 +262,10 @@ TEST(RelposeJson, ResultHasTheIssueKeys) {
   report.sync_test.run = true;
   report.sync_test.corner_noise_px = {0.12, 0.13};
   report.sync_test.limit = 21.6;
+  report.board_motion.used = true;
+  report.board_motion.rotation_std_rad = M_PI / 180.0 * 0.25;
+  report.board_motion.translation_std_m = 4e-4;
+  report.board_motion.dof = 120;
   const json camera0 = {{"model", "unified"}, {"marker", 0}};
   const json result = RelativePoseResultToJson(report, camera0, camera0, false);
   EXPECT_EQ(result["cam0_from_cam1"]["rotation_wxyz"].size(), 4u);
@@ -278,6 +286,10 @@ TEST(RelposeJson, ResultHasTheIssueKeys) {
   EXPECT_TRUE(result["pairs"][1]["sync_statistic"].is_null());
   EXPECT_EQ(result["sync_test"]["corner_noise_px"][1].get<double>(), 0.13);
   EXPECT_EQ(result["sync_test"]["limit"].get<double>(), 21.6);
+  EXPECT_TRUE(result["board_motion"]["used"].get<bool>());
+  EXPECT_NEAR(result["board_motion"]["rotation_std_deg"].get<double>(), 0.25, 1e-12);
+  EXPECT_EQ(result["board_motion"]["translation_std_m"].get<double>(), 4e-4);
+  EXPECT_EQ(result["board_motion"]["dof"].get<int>(), 120);
   // With refined intrinsics the cameras are the refined ones.
   const json refined = RelativePoseResultToJson(report, camera0, camera0, true);
   EXPECT_EQ(refined["cameras"]["cam0"]["image_size"][0], 640);

@@ -1,6 +1,7 @@
 #include "engine/stereo/relative_pose.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <optional>
 #include <set>
@@ -22,6 +23,7 @@ void RelativePoseOptions::Check() const {
   OMNIRIG_CHECK(max_board_pose_rms_px > 0.0,
                 "max_board_pose_rms_px must be positive, got " << max_board_pose_rms_px);
   sync_test.Check();
+  board_motion.Check();
   OMNIRIG_CHECK(huber_loss_px >= 0.0, "huber_loss_px must be >= 0, got " << huber_loss_px);
   OMNIRIG_CHECK(max_num_iterations >= 1 && max_num_iterations <= 10000,
                 "max_num_iterations must be in [1, 10000], got " << max_num_iterations);
@@ -164,6 +166,7 @@ struct UsedPairs {
   std::vector<Rigid3d> cam0_from_board;
   std::vector<Rigid3d> per_pair_rigs;  // cam0_from_cam1 of each pair alone
   std::vector<Eigen::Vector3d> points_in_cam0, points_in_cam1;  // common corners, eq. (9)
+  std::vector<Rigid3d> cam1_from_board;  // cam1's own board poses (step 6 only)
 };
 
 // Step 2's bookkeeping: every pair with poses and a consistent order, except `excluded`.
@@ -217,11 +220,23 @@ bool SolveLinear(const UsedPairs& used, const RelativePoseOptions& options,
   return false;
 }
 
+// The board pose of used pair `u` that both images' corners share through the rig, for the
+// RMS: the joint fit's, or with the board motion model (where cam1 has its own pose) one
+// fitted to both images through the rig from cam0's. So the RMS means the same with and
+// without the model: how well the rig maps one board pose into both images.
+Rigid3d OneBoardPose(const StereoRig& rig, const UsedPairs* used, size_t u) {
+  Rigid3d pose = used->cam0_from_board[u];
+  if (used->cam1_from_board.empty()) return pose;
+  Rigid3d fitted = pose;
+  return FitBoardThroughRig(rig, used->corners[u], {1.0, 1.0}, &fitted) >= 0.0 ? fitted : pose;
+}
+
 // Step 4: the joint refinement, and the per-pair and overall RMS. From the linear estimate,
 // or with `warm_start` from the previous round's solution (the rig and the board poses of the
 // pairs still used): one pair fewer moves the optimum little, and the refits after each
 // rejection then take a few iterations instead of a full solve.
-bool SolveJoint(UsedPairs* used, const RelativePoseOptions& options, bool warm_start,
+// With `refine.board_motion` (step 6), cam1's own board poses go into used->cam1_from_board.
+bool SolveJoint(UsedPairs* used, const RigRefinementOptions& refine, bool warm_start,
                 const ProgressSink& progress, RelativePoseReport* report) {
   StereoRig rig = report->rig;
   if (warm_start) {
@@ -233,8 +248,9 @@ bool SolveJoint(UsedPairs* used, const RelativePoseOptions& options, bool warm_s
   }
   // The uncertainty only of the last round's fit (EstimateRelativePose): each fit before it
   // is refitted without one pair.
-  const RigRefinementSummary summary = RefineRig(used->corners, options.RefinementOptions(), &rig,
-                                                 &used->cam0_from_board, nullptr, progress);
+  const RigRefinementSummary summary =
+      RefineRigWithBoardMotion(used->corners, refine, &rig, &used->cam0_from_board,
+                               &used->cam1_from_board, nullptr, progress);
   report->solver = {summary.initial_cost, summary.final_cost, summary.num_iterations,
                     summary.termination, summary.time_s};
   if (!summary.usable) {
@@ -248,7 +264,7 @@ bool SolveJoint(UsedPairs* used, const RelativePoseOptions& options, bool warm_s
   for (size_t u = 0; u < used->index.size(); ++u) {
     RelativePosePairReport& pair_report = report->pairs[used->index[u]];
     pair_report.cam0_from_board = used->cam0_from_board[u];
-    pair_report.rms_px = PairRmsPx(rig, used->cam0_from_board[u], used->corners[u]);
+    pair_report.rms_px = PairRmsPx(rig, OneBoardPose(rig, used, u), used->corners[u]);
     const size_t n = used->corners[u].pixels0.size() + used->corners[u].pixels1.size();
     sum_squares += pair_report.rms_px * pair_report.rms_px * n;
     count += n;
@@ -300,6 +316,37 @@ bool TestSynchronisation(const UsedPairs& used, const RelativePoseOptions& optio
                                      options.sync_test.false_alarm_rate);
   pair.rms_px = -1.0;
   return true;
+}
+
+// Step 6 (relpose_motion.h): the board motion's variance from the kept pairs of the eq.-20
+// rig and, when the rule uses it, the rig refitted with the prior from that solution.
+// Returns the refinement options of the final fit (for its uncertainty); false in `ok` when
+// the refit failed (the report's message says why).
+RigRefinementOptions ModelBoardMotion(UsedPairs* used, const RelativePoseOptions& options,
+                                      const ProgressSink& progress, RelativePoseReport* report,
+                                      bool* ok) {
+  *ok = true;
+  RigRefinementOptions refine = options.RefinementOptions();
+  if (!options.model_board_motion) return refine;
+  const std::array<double, 2> noise =
+      report->sync_test.run
+          ? report->sync_test.corner_noise_px
+          : EstimatePairCornerNoise(report->rig, used->corners, options.sync_test);
+  report->board_motion =
+      EstimateBoardMotion(report->rig, used->corners, noise, options.board_motion);
+  if (!report->board_motion.used) return refine;
+  refine.board_motion = ToBoardMotionPrior(report->board_motion, noise);
+  // The refit reports where one more round of the rejection loop would.
+  const int round = report->sync_rounds + 1;
+  const double start = 1.0 - std::pow(0.5, round + 1), span = std::pow(0.5, round + 2);
+  const ProgressSink refit_progress{
+      [&progress, start, span](double fraction, const std::string& stage,
+                               const std::string& message) {
+        progress.Report(start + span * fraction, stage, message);
+      },
+      progress.is_cancelled};
+  *ok = SolveJoint(used, refine, true, refit_progress, report);
+  return refine;
 }
 
 }  // namespace
@@ -359,16 +406,22 @@ RelativePoseReport EstimateRelativePose(const CameraModel& cam0, const CameraMod
           progress.Report(start + span * fraction, stage, message);
         },
         progress.is_cancelled};
-    if (!SolveJoint(&used, options, round > 0, refine_progress, &report)) return report;
+    if (!SolveJoint(&used, options.RefinementOptions(), round > 0, refine_progress, &report)) {
+      return report;
+    }
     progress.ThrowIfCancelled();
     if (round == 0) min_kept = (report.num_pairs_used + 1) / 2;
     const bool may_reject = round < options.sync_test.max_rounds;
     if (!TestSynchronisation(used, options, may_reject, min_kept, &report)) break;
     report.sync_rounds = round + 1;
   }
-  // The covariance of cam0_from_cam1 in the final fit.
+  bool motion_ok = true;
+  const RigRefinementOptions final_refine =
+      ModelBoardMotion(&used, options, progress, &report, &motion_ok);
+  if (!motion_ok) return report;
+  // The covariance of cam0_from_cam1 in the final fit (with the motion's, when modelled).
   const RigUncertainty uncertainty = EstimateRigUncertainty(
-      used.corners, options.RefinementOptions(), report.rig, used.cam0_from_board);
+      used.corners, final_refine, report.rig, used.cam0_from_board, used.cam1_from_board);
   report.baseline_std_m = uncertainty.baseline_std_m;
   report.translation_std_m = uncertainty.translation_std_m;
   report.rotation_std_deg = uncertainty.rotation_std_deg;

@@ -131,6 +131,14 @@ PairSyncStatistic PairStatistic(const StereoRig& rig, const RigPairCorners& pair
 
 }  // namespace
 
+std::array<double, 2> EstimatePairCornerNoise(const StereoRig& rig,
+                                              const std::vector<RigPairCorners>& pairs,
+                                              const SyncTestOptions& options) {
+  std::vector<SeparateFit> separate;
+  for (const RigPairCorners& pair : pairs) separate.push_back(FitSeparately(rig, pair));
+  return CornerNoise(separate, options);
+}
+
 SyncTestReport TestPairSynchronisation(const StereoRig& rig,
                                        const std::vector<RigPairCorners>& pairs,
                                        const std::vector<Rigid3d>& cam0_from_board,

@@ -90,6 +90,12 @@ struct SyncTestReport {
   std::vector<PairSyncStatistic> pairs;  // one per tested pair
 };
 
+// Step 1 of the rule alone: the corner noise per camera (px per coordinate) from each
+// camera's own board fits of `pairs` (also when the test itself is turned off).
+std::array<double, 2> EstimatePairCornerNoise(const StereoRig& rig,
+                                              const std::vector<RigPairCorners>& pairs,
+                                              const SyncTestOptions& options);
+
 // Tests every pair of a fitted rig. `cam0_from_board`: the joint fit's board poses (starting
 // points of the fits through the rig). Needs at least 3 pairs (else report.run is false).
 SyncTestReport TestPairSynchronisation(const StereoRig& rig,
