@@ -1,5 +1,6 @@
 #include "api/job_types.h"
 
+#include <memory>
 #include <mutex>
 
 #include "api/calibration_json.h"
@@ -15,23 +16,32 @@ std::mutex& RegistryMutex() {
   return mutex;
 }
 
-std::map<std::string, JobType>& Registry() {
-  static std::map<std::string, JobType> registry;
+std::map<std::string, std::unique_ptr<const JobType>>& Registry() {
+  static std::map<std::string, std::unique_ptr<const JobType>> registry;
   return registry;
+}
+
+// Replaced entries are kept, never destroyed: FindJobType's pointers are used after the lock is
+// released (by workers running a job), and the service registers the built-in types again each
+// time one is constructed. A handful of entries per registration, for the process's lifetime.
+std::vector<std::unique_ptr<const JobType>>& Retired() {
+  static std::vector<std::unique_ptr<const JobType>> retired;
+  return retired;
 }
 
 }  // namespace
 
 void RegisterJobType(JobType type) {
   std::lock_guard<std::mutex> lock(RegistryMutex());
-  const std::string name = type.name;
-  Registry()[name] = std::move(type);
+  std::unique_ptr<const JobType>& slot = Registry()[type.name];
+  if (slot) Retired().push_back(std::move(slot));
+  slot = std::make_unique<const JobType>(std::move(type));
 }
 
 const JobType* FindJobType(const std::string& name) {
   std::lock_guard<std::mutex> lock(RegistryMutex());
   const auto it = Registry().find(name);
-  return it == Registry().end() ? nullptr : &it->second;
+  return it == Registry().end() ? nullptr : it->second.get();
 }
 
 std::vector<std::string> JobTypeNames() {

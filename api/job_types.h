@@ -57,7 +57,9 @@ struct JobType {
   std::function<nlohmann::json(const nlohmann::json& params, const JobContext& context)> run;
 };
 
-// Registers a job type; later registrations of the same name replace earlier ones.
+// Registers a job type; later registrations of the same name replace earlier ones for
+// FindJobType, while pointers it returned before stay valid (and unchanged) for the process's
+// lifetime.
 void RegisterJobType(JobType type);
 // nullptr when no such type.
 const JobType* FindJobType(const std::string& name);
