@@ -318,6 +318,17 @@ bool TestSynchronisation(const UsedPairs& used, const RelativePoseOptions& optio
   return true;
 }
 
+// Round r of the joint refinement (the rejection loop's, then step 6's refit) reports within
+// [1 - 0.5^(r+1), 1 - 0.5^(r+2)] of `progress`, which must outlive the sink.
+ProgressSink RoundProgress(const ProgressSink& progress, int round) {
+  const double start = 1.0 - std::pow(0.5, round + 1), span = std::pow(0.5, round + 2);
+  return ProgressSink{[&progress, start, span](double fraction, const std::string& stage,
+                                               const std::string& message) {
+                        progress.Report(start + span * fraction, stage, message);
+                      },
+                      progress.is_cancelled};
+}
+
 // Step 6 (relpose_motion.h): the board motion's variance from the kept pairs of the eq.-20
 // rig and, when the rule uses it, the rig refitted with the prior from that solution.
 // Returns the refinement options of the final fit (for its uncertainty); false in `ok` when
@@ -337,15 +348,7 @@ RigRefinementOptions ModelBoardMotion(UsedPairs* used, const RelativePoseOptions
   if (!report->board_motion.used) return refine;
   refine.board_motion = ToBoardMotionPrior(report->board_motion, noise);
   // The refit reports where one more round of the rejection loop would.
-  const int round = report->sync_rounds + 1;
-  const double start = 1.0 - std::pow(0.5, round + 1), span = std::pow(0.5, round + 2);
-  const ProgressSink refit_progress{
-      [&progress, start, span](double fraction, const std::string& stage,
-                               const std::string& message) {
-        progress.Report(start + span * fraction, stage, message);
-      },
-      progress.is_cancelled};
-  *ok = SolveJoint(used, refine, true, refit_progress, report);
+  *ok = SolveJoint(used, refine, true, RoundProgress(progress, report->sync_rounds + 1), report);
   return refine;
 }
 
@@ -398,15 +401,8 @@ RelativePoseReport EstimateRelativePose(const CameraModel& cam0, const CameraMod
       return report;
     }
     if (!SolveLinear(used, options, &report)) return report;
-    // Round r reports within [1 - 0.5^(r+1), 1 - 0.5^(r+2)].
-    const double start = 1.0 - std::pow(0.5, round + 1), span = std::pow(0.5, round + 2);
-    const ProgressSink refine_progress{
-        [&progress, start, span](double fraction, const std::string& stage,
-                                 const std::string& message) {
-          progress.Report(start + span * fraction, stage, message);
-        },
-        progress.is_cancelled};
-    if (!SolveJoint(&used, options.RefinementOptions(), round > 0, refine_progress, &report)) {
+    if (!SolveJoint(&used, options.RefinementOptions(), round > 0, RoundProgress(progress, round),
+                    &report)) {
       return report;
     }
     progress.ThrowIfCancelled();
