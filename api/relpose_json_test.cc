@@ -38,7 +38,7 @@ TEST(RelposeJson, ParamsParseBoardCalibrationsAndOptions) {
                        {"refine_intrinsics", true},
                        {"huber_loss_px", 0.5},
                        {"sync_false_alarm_rate", 0.05},
-                       {"model_board_motion", false}};
+                       {"model_board_motion", true}};
   const RelativePoseParams parsed = RelativePoseParamsFromJson(params);
   EXPECT_EQ(parsed.board.cols, 9);
   EXPECT_EQ(parsed.board.rows, 6);
@@ -48,9 +48,9 @@ TEST(RelposeJson, ParamsParseBoardCalibrationsAndOptions) {
   EXPECT_TRUE(parsed.options.refine_intrinsics);
   EXPECT_EQ(parsed.options.huber_loss_px, 0.5);
   EXPECT_EQ(parsed.options.sync_test.false_alarm_rate, 0.05);
-  EXPECT_FALSE(parsed.options.model_board_motion);
+  EXPECT_TRUE(parsed.options.model_board_motion);
   const RelativePoseParams self_calibrating = RelativePoseParamsFromJson({{"board", Board()}});
-  EXPECT_TRUE(self_calibrating.options.model_board_motion);  // the default
+  EXPECT_FALSE(self_calibrating.options.model_board_motion);  // the default
   EXPECT_FALSE(self_calibrating.cam0_calibration_job);
   EXPECT_TRUE(self_calibrating.options.refine_intrinsics);
   EXPECT_FALSE(RelativePoseParamsFromJson(

@@ -6,6 +6,7 @@
 
 #include "engine/calib/board_pose.h"
 #include "engine/stereo/relpose_corner_order.h"
+#include "engine/stereo/relpose_motion.h"
 #include "engine/stereo/relpose_refine.h"
 #include "engine/util/parallel.h"
 
@@ -254,6 +255,18 @@ RigModelSelection SelectRigIntrinsicsModel(const BoardSpec& board,
   }
   std::vector<std::vector<std::pair<double, int>>> folds(
       candidates.size(), std::vector<std::pair<double, int>>(held_out.size()));
+  // Each fold refits the candidate as its all-pairs fit was made: with the board motion prior
+  // that fit estimated (relpose_motion.h), when it used one, so that the folds score the
+  // estimator the job reports. The prior is not re-estimated per fold (like the corner orders
+  // and the pairs the synchronisation test left out).
+  std::vector<RigRefinementOptions> fold_refine;
+  for (size_t k = 0; k < candidates.size(); ++k) {
+    fold_refine.push_back(candidate_options[k].RefinementOptions());
+    const BoardMotionEstimate& motion = selection.candidates[k].fit.board_motion;
+    if (motion.used) {
+      fold_refine.back().board_motion = ToBoardMotionPrior(motion, motion.corner_noise_px);
+    }
+  }
   int num_done = 0;
   RunTasks(
       static_cast<int>(tasks.size()), options.num_threads, progress,
@@ -261,7 +274,7 @@ RigModelSelection SelectRigIntrinsicsModel(const BoardSpec& board,
         cancellation.ThrowIfCancelled();
         const auto [k, f] = tasks[t];
         folds[k][f] = FoldError(board, symmetries, pairs, selection.candidates[k].fit,
-                                candidate_options[k].RefinementOptions(), held_out[f]);
+                                fold_refine[k], held_out[f]);
       },
       [&](int t) {
         const auto [k, f] = tasks[t];

@@ -133,6 +133,7 @@ BoardMotionEstimate EstimateBoardMotion(const StereoRig& rig,
   OMNIRIG_CHECK(corner_noise_px[0] > 0.0 && corner_noise_px[1] > 0.0,
                 "corner noise must be positive");
   BoardMotionEstimate estimate;
+  estimate.corner_noise_px = corner_noise_px;
   double sum_sq[2] = {0.0, 0.0}, sum_trace[2] = {0.0, 0.0};
   for (const RigPairCorners& pair : pairs) {
     const PairDisagreement d = Disagreement(rig, pair, corner_noise_px);

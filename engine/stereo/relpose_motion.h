@@ -90,6 +90,10 @@ struct BoardMotionEstimate {
   double statistic = 0.0;
   int dof = 0;
   double limit = 0.0;
+  // The corner noise per camera (px per coordinate) the estimate was made with: with the
+  // standard deviations, what ToBoardMotionPrior needs to rebuild the prior (e.g. for the
+  // cross-validation folds of relpose_model_select.h).
+  std::array<double, 2> corner_noise_px = {0.0, 0.0};
 };
 
 // Steps 2-5 of the rule, on the pairs of a rig fitted by eq. 20. `corner_noise_px`: per

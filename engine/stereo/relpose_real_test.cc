@@ -91,13 +91,13 @@ class RelativePoseReal : public ::testing::Test {
     return *cached;
   }
 
-  // The same with eq. 20 alone (the board motion model off, as before session 6).
-  static const RelativePoseReport& Eq20JointEstimate() {
+  // The same with the board motion model on (relpose_motion.h; off by default).
+  static const RelativePoseReport& MotionJointEstimate() {
     static std::optional<RelativePoseReport> cached;
     if (!cached) {
       RelativePoseOptions options;
       options.refine_intrinsics = true;
-      options.model_board_motion = false;
+      options.model_board_motion = true;
       cached = EstimateRelativePose(Camera(0, false), Camera(1, false), board_, *pairs_, options);
     }
     return *cached;
@@ -127,15 +127,14 @@ TEST_F(RelativePoseReal, FisheyePairsGiveTheReferenceBaseline) {
 }
 
 // The model, not the method, sets where the baseline lands on these pairs: under eq. 20 alone
-// (the board motion model off, as before it existed), without the tangential terms (k3, k4)
-// the unified model has the Kannala-Brandt reference's degrees of freedom and lands on its
-// baseline, at almost the same RMS; with them it lands 0.4 % shorter, many times eq. 20's
-// covariance standard deviation away (bench_relpose prints both next to cv::fisheye and
-// cv::omnidir on the same corners). With the board motion model (the default since session 6)
-// both baselines move up by about a millimetre, their difference stays about 0.5 mm, and the
-// honest std (0.2 mm) makes that about 2 std: BoardMotionIsModelledAndWidensTheStd below.
+// (the default), without the tangential terms (k3, k4) the unified model has the
+// Kannala-Brandt reference's degrees of freedom and lands on its baseline, at almost the same
+// RMS; with them it lands 0.4 % shorter, many times eq. 20's covariance standard deviation
+// away (bench_relpose prints both next to cv::fisheye and cv::omnidir on the same corners).
+// With the board motion model both baselines move up by about a millimetre, their difference
+// stays about 0.5 mm, and its honest std (0.2 mm) makes that about 2 std.
 TEST_F(RelativePoseReal, TangentialTermsMoveTheBaselineByMoreThanItsStd) {
-  const RelativePoseReport& with_tangential = Eq20JointEstimate();
+  const RelativePoseReport& with_tangential = JointEstimate();
   RelativePoseOptions options;
   options.refine_intrinsics = true;
   options.model_board_motion = false;
@@ -191,8 +190,8 @@ TEST_F(RelativePoseReal, UnsynchronisedPairsAreLeftOut) {
 // pairs the test kept, and report a baseline std several times eq. 20's (whose 0.06 mm is
 // about 8 times below the leave-one-pair-out spread bench_relpose measures).
 TEST_F(RelativePoseReal, BoardMotionIsModelledAndWidensTheStd) {
-  const RelativePoseReport& report = JointEstimate();
-  const RelativePoseReport& eq20 = Eq20JointEstimate();
+  const RelativePoseReport& report = MotionJointEstimate();
+  const RelativePoseReport& eq20 = JointEstimate();
   ASSERT_TRUE(report.success) << report.message;
   ASSERT_TRUE(eq20.success) << eq20.message;
   const BoardMotionEstimate& motion = report.board_motion;
