@@ -83,6 +83,7 @@ TEST_F(RelposeJob, WithCalibrationsRecoversTheRenderedRig) {
   const double baseline_error_m = rig.cam0_from_cam1.translation.norm() - truth.translation.norm();
   EXPECT_LT(std::abs(baseline_error_m), 1e-4);  // 0.1% of the 100 mm baseline
   EXPECT_LT(std::abs(baseline_error_m), 5.0 * result["baseline_std_m"].get<double>() + 1e-5);
+  EXPECT_LT(std::abs(baseline_error_m), 5.0 * result["baseline_std_robust_m"].get<double>() + 1e-5);
   EXPECT_LT((rig.cam0_from_cam1.translation - truth.translation).norm(), 5e-4);
   EXPECT_LT(RotationDistanceRad(rig.cam0_from_cam1.rotation, truth.rotation) * 180.0 / M_PI,
             0.05);

@@ -183,6 +183,9 @@ json RelativePoseResultToJson(const RelativePoseReport& report, const json& came
   if (!intrinsics_refined) result["cameras"] = {{"cam0", camera0}, {"cam1", camera1}};
   result["baseline_m"] = report.baseline_m;
   result["baseline_std_m"] = report.baseline_std_m;
+  // The cluster-robust std over pairs (null when fewer than 3 pairs): see relative_pose.h.
+  result["baseline_std_robust_m"] = NullableRms(report.baseline_std_robust_m);
+  result["rotation_std_robust_deg"] = NullableRms(report.rotation_std_robust_deg);
   result["translation_std_m"] = Vector3Json(report.translation_std_m);
   result["rotation_std_deg"] = report.rotation_std_deg;
   result["rms_px"] = report.rms_px;

@@ -247,6 +247,7 @@ TEST(RelposeJson, ResultHasTheIssueKeys) {
   report.rig.cam0.height = report.rig.cam1.height = 480;
   report.baseline_m = 0.1;
   report.baseline_std_m = 1e-5;
+  report.baseline_std_robust_m = 3e-5;
   report.rms_px = 0.2;
   report.pairs.resize(2);
   report.pairs[0].name = "a";
@@ -272,6 +273,8 @@ TEST(RelposeJson, ResultHasTheIssueKeys) {
   EXPECT_EQ(result["cam0_from_cam1"]["translation_m"][2].get<double>(), 0.1);
   EXPECT_EQ(result["baseline_m"].get<double>(), 0.1);
   EXPECT_EQ(result["baseline_std_m"].get<double>(), 1e-5);
+  EXPECT_EQ(result["baseline_std_robust_m"].get<double>(), 3e-5);
+  EXPECT_TRUE(result["rotation_std_robust_deg"].is_null());  // not computed (-1)
   EXPECT_EQ(result["rms_px"].get<double>(), 0.2);
   EXPECT_EQ(result["cameras"]["cam0"], camera0);  // the calibration's own object
   ASSERT_EQ(result["pairs"].size(), 2u);

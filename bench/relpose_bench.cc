@@ -281,10 +281,12 @@ Row OurRow(const std::string& method, const CameraModel& cam0, const CameraModel
   row.ok = report.success;
   row.cam0_from_cam1 = report.rig.cam0_from_cam1;
   row.rms_px = report.rms_px;
-  char note[160];
-  std::snprintf(note, sizeof(note), "%d/%zu pairs, baseline std %.4f mm, rot std %.5f deg, %.2f s CPU",
+  char note[200];
+  std::snprintf(note, sizeof(note),
+                "%d/%zu pairs, baseline std %.4f mm (cluster-robust %.4f), rot std %.5f deg, "
+                "%.2f s CPU",
                 report.num_pairs_used, pairs.size(), report.baseline_std_m * 1e3,
-                report.rotation_std_deg,
+                report.baseline_std_robust_m * 1e3, report.rotation_std_deg,
                 static_cast<double>(std::clock() - cpu_start) / CLOCKS_PER_SEC);
   row.note = report.success ? note : report.message;
   if (out != nullptr) *out = report;

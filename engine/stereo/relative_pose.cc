@@ -421,6 +421,10 @@ RelativePoseReport EstimateRelativePose(const CameraModel& cam0, const CameraMod
   report.baseline_std_m = uncertainty.baseline_std_m;
   report.translation_std_m = uncertainty.translation_std_m;
   report.rotation_std_deg = uncertainty.rotation_std_deg;
+  if (uncertainty.robust_valid) {
+    report.baseline_std_robust_m = uncertainty.robust_baseline_std_m;
+    report.rotation_std_robust_deg = uncertainty.robust_rotation_std_deg;
+  }
   report.success = true;
   progress.Report(1.0, "done");
   return report;

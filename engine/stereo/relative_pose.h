@@ -85,11 +85,12 @@ struct RelativePoseOptions {
   // it keeps the rig error, lowers the translation error and makes the baseline std honest
   // (|error| < 2 std in 26-27 of 30 seeds against 10-12); with a still board it is not used.
   // Off by default: on the real fisheye pairs of bench_relpose, where the kept pairs disagree
-  // ~25 times beyond their corner noise, rigs fitted with it predict held-out pairs worse than
-  // eq. 20's (leave-one-pair-out, relpose_model_select.h: 0.50 against 0.45 px for "free",
-  // 0.54 against 0.45 px for "tangential_free_cam0"), so that disagreement is not the random,
-  // pose-independent motion the model assumes. Its std (0.21 mm there) matches the
-  // leave-one-pair-out spread; eq. 20's (0.06 mm) is ~8 times below it.
+  // ~25 times beyond their corner noise, rigs fitted with it predict held-out pairs worse
+  // than eq. 20's (leave-one-pair-out, relpose_model_select.h: 0.50 against 0.45 px for
+  // "free", 0.54 against 0.45 px for "tangential_free_cam0"), so that disagreement is not the
+  // random, pose-independent motion the model assumes. Its std (0.21 mm there) matches the
+  // leave-one-pair-out spread; eq. 20's covariance (0.06 mm) is ~8 times below it, its
+  // cluster-robust std (baseline_std_robust_m) is not.
   bool model_board_motion = false;
   BoardMotionOptions board_motion;
   // Huber loss scale on the pixel residuals of the joint refinement.
@@ -148,6 +149,12 @@ struct RelativePoseReport {
   double baseline_std_m = 0.0;
   Eigen::Vector3d translation_std_m = Eigen::Vector3d::Zero();
   double rotation_std_deg = 0.0;      // RMS angle of the rotation's uncertainty
+  // The same from the cluster-robust covariance over pairs (RigUncertainty in relpose_refine.h):
+  // honest when the pairs disagree beyond their corner noise, as on the real fisheye pairs of
+  // bench_relpose, where baseline_std_m is ~8 times below the leave-one-pair-out spread. -1
+  // when it could not be computed (fewer than 3 pairs).
+  double baseline_std_robust_m = -1.0;
+  double rotation_std_robust_deg = -1.0;
   double rms_px = 0.0;                // all used corners of both cameras
 
   // The steps before the joint refinement, kept for comparison: eq. (9) with the SVD

@@ -104,6 +104,7 @@ struct RigErrors {
   double translation_error_m = 0.0;  // |t - t_true|
   double rotation_error_deg = 0.0;
   double baseline_std_m = 0.0;  // as reported
+  double baseline_std_robust_m = 0.0;  // the cluster-robust one
   bool motion_used = false;
   double motion_rotation_std_deg = 0.0;
   double motion_translation_std_m = 0.0;
@@ -119,6 +120,7 @@ inline RigErrors ErrorsOf(const Scene& scene, const RelativePoseReport& report) 
   errors.translation_error_m = (report.rig.cam0_from_cam1.translation - truth.translation).norm();
   errors.rotation_error_deg = RotationErrorDeg(report.rig.cam0_from_cam1, truth);
   errors.baseline_std_m = report.baseline_std_m;
+  errors.baseline_std_robust_m = report.baseline_std_robust_m;
   errors.motion_used = report.board_motion.used;
   errors.motion_rotation_std_deg = report.board_motion.rotation_std_rad * kDegPerRad;
   errors.motion_translation_std_m = report.board_motion.translation_std_m;
@@ -135,6 +137,8 @@ struct MotionComparison {
   double rms_rotation_error_deg[2] = {0.0, 0.0};
   double mean_baseline_std_m[2] = {0.0, 0.0};
   int covered[2] = {0, 0};                    // seeds with |baseline error| < 2 reported std
+  int covered_robust[2] = {0, 0};             // the same with the cluster-robust std
+  double mean_baseline_std_robust_m[2] = {0.0, 0.0};
   int motion_used = 0;                        // seeds where the new estimate used the model
   double mean_motion_rotation_std_deg = 0.0;  // over the seeds that used it
   double mean_motion_translation_std_m = 0.0;
@@ -173,6 +177,9 @@ inline MotionComparison CompareMotionModel(const MotionSceneOptions& scene_optio
           errors[m].rotation_error_deg * errors[m].rotation_error_deg;
       result.mean_baseline_std_m[m] += errors[m].baseline_std_m;
       result.covered[m] += std::abs(errors[m].baseline_error_m) < 2.0 * errors[m].baseline_std_m;
+      result.covered_robust[m] +=
+          std::abs(errors[m].baseline_error_m) < 2.0 * errors[m].baseline_std_robust_m;
+      result.mean_baseline_std_robust_m[m] += errors[m].baseline_std_robust_m;
     }
     if (errors[1].motion_used) {
       ++result.motion_used;
@@ -191,6 +198,7 @@ inline MotionComparison CompareMotionModel(const MotionSceneOptions& scene_optio
     result.rms_translation_error_m[m] = std::sqrt(result.rms_translation_error_m[m] / n);
     result.rms_rotation_error_deg[m] = std::sqrt(result.rms_rotation_error_deg[m] / n);
     result.mean_baseline_std_m[m] /= n;
+    result.mean_baseline_std_robust_m[m] /= n;
   }
   if (result.motion_used > 0) {
     result.mean_motion_rotation_std_deg /= result.motion_used;

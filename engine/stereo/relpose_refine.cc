@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <memory>
+#include <optional>
 
 #include <ceres/ceres.h>
 
@@ -61,8 +62,14 @@ RigBlocks BlocksOf(const StereoRig& rig, const std::vector<Rigid3d>& cam0_from_b
   return blocks;
 }
 
+// `pair_residuals`, when given, receives each pair's residual blocks (for the robust covariance).
 void AddResiduals(const std::vector<RigPairCorners>& pairs, const RigRefinementOptions& options,
-                  RigBlocks* blocks, ceres::Problem* problem) {
+                  RigBlocks* blocks, ceres::Problem* problem,
+                  std::vector<std::vector<ceres::ResidualBlockId>>* pair_residuals = nullptr) {
+  if (pair_residuals != nullptr) pair_residuals->assign(pairs.size(), {});
+  const auto keep = [pair_residuals](size_t i, ceres::ResidualBlockId id) {
+    if (pair_residuals != nullptr) (*pair_residuals)[i].push_back(id);
+  };
   ceres::LossFunction* loss = options.huber_loss_px > 0.0
                                   ? new ceres::HuberLoss(options.huber_loss_px)
                                   : nullptr;
@@ -70,27 +77,28 @@ void AddResiduals(const std::vector<RigPairCorners>& pairs, const RigRefinementO
     double* board = blocks->cam0_from_board[i].data();
     for (size_t c = 0; c < pairs[i].pixels0.size(); ++c) {
       // RigCam0CornerCost, with hand-written Jacobians: the calibration's own corner cost.
-      problem->AddResidualBlock(
-          new BoardCornerAnalyticCost(pairs[i].points_in_board0[c], pairs[i].pixels0[c]), loss,
-          blocks->intrinsics0.data(), board);
+      keep(i, problem->AddResidualBlock(
+                  new BoardCornerAnalyticCost(pairs[i].points_in_board0[c], pairs[i].pixels0[c]),
+                  loss, blocks->intrinsics0.data(), board));
     }
     if (options.board_motion) {
       // cam1's own board pose, tied to the rig's prediction by the motion prior.
       double* board1 = blocks->cam1_from_board[i].data();
       for (size_t c = 0; c < pairs[i].pixels1.size(); ++c) {
-        problem->AddResidualBlock(
-            new BoardCornerAnalyticCost(pairs[i].points_in_board1[c], pairs[i].pixels1[c]), loss,
-            blocks->intrinsics1.data(), board1);
+        keep(i, problem->AddResidualBlock(
+                    new BoardCornerAnalyticCost(pairs[i].points_in_board1[c], pairs[i].pixels1[c]),
+                    loss, blocks->intrinsics1.data(), board1));
       }
-      problem->AddResidualBlock(
-          BoardMotionLinkCost::Create(RigPairBoardCentre(pairs[i]), *options.board_motion), nullptr,
-          board, blocks->cam0_from_cam1.data(), board1);
+      keep(i, problem->AddResidualBlock(
+                  BoardMotionLinkCost::Create(RigPairBoardCentre(pairs[i]), *options.board_motion),
+                  nullptr, board, blocks->cam0_from_cam1.data(), board1));
       problem->SetManifold(board1, NewPoseManifold());
     } else {
       for (size_t c = 0; c < pairs[i].pixels1.size(); ++c) {
-        problem->AddResidualBlock(
-            new RigCam1CornerAnalyticCost(pairs[i].pixels1[c], pairs[i].points_in_board1[c]), loss,
-            board, blocks->cam0_from_cam1.data(), blocks->intrinsics1.data());
+        keep(i,
+             problem->AddResidualBlock(
+                 new RigCam1CornerAnalyticCost(pairs[i].pixels1[c], pairs[i].points_in_board1[c]),
+                 loss, board, blocks->cam0_from_cam1.data(), blocks->intrinsics1.data()));
       }
     }
     problem->SetManifold(board, NewPoseManifold());
@@ -135,7 +143,83 @@ int NumFreeParameters(const ceres::Problem& problem) {
   return count;
 }
 
-RigUncertainty EstimateUncertainty(ceres::Problem* problem, RigBlocks* blocks) {
+using Matrix6d = Eigen::Matrix<double, 6, 6>;
+
+struct RigStd {
+  Eigen::Vector3d translation_m = Eigen::Vector3d::Zero();
+  double baseline_m = 0.0;
+  double rotation_deg = 0.0;
+};
+
+// The standard deviations of a covariance of cam0_from_cam1's tangent (rotation, translation).
+RigStd StdOfTangentCovariance(const Matrix6d& covariance, const double* rig) {
+  // EigenQuaternionManifold's tangent d rotates by exp(d) as a quaternion: an angle of 2|d|.
+  const Eigen::Matrix3d rotation_cov = 4.0 * covariance.topLeftCorner<3, 3>();
+  const Eigen::Matrix3d translation_cov = covariance.bottomRightCorner<3, 3>();
+  const Eigen::Vector3d t(rig[4], rig[5], rig[6]);
+  const Eigen::Vector3d direction = t.norm() > 0 ? Eigen::Vector3d(t.normalized())
+                                                 : Eigen::Vector3d::UnitX();
+  RigStd std;
+  std.translation_m = translation_cov.diagonal().cwiseMax(0.0).cwiseSqrt();
+  std.baseline_m = std::sqrt(std::max(0.0, direction.dot(translation_cov * direction)));
+  std.rotation_deg = std::sqrt(std::max(0.0, rotation_cov.trace())) * 180.0 / M_PI;
+  return std;
+}
+
+// The cluster-robust covariance of the rig's tangent (RigUncertainty states the formula), from
+// the Jacobian and residuals (with the robust loss's correction) at the solution. The rig's
+// block comes first among the free parameters, so only its 6 rows of H^-1 G are needed.
+std::optional<Matrix6d> ClusteredRigCovariance(
+    ceres::Problem* problem, double* rig,
+    const std::vector<std::vector<ceres::ResidualBlockId>>& pair_residuals) {
+  const int num_pairs = static_cast<int>(pair_residuals.size());
+  if (num_pairs < 3 || problem->IsParameterBlockConstant(rig)) return std::nullopt;
+  ceres::Problem::EvaluateOptions evaluate;
+  std::vector<double*> all_blocks;
+  problem->GetParameterBlocks(&all_blocks);
+  evaluate.parameter_blocks.push_back(rig);
+  for (double* block : all_blocks) {
+    if (block != rig && !problem->IsParameterBlockConstant(block)) {
+      evaluate.parameter_blocks.push_back(block);
+    }
+  }
+  std::vector<int> row_pair;  // the pair of each residual row
+  for (int i = 0; i < num_pairs; ++i) {
+    for (const ceres::ResidualBlockId id : pair_residuals[i]) {
+      evaluate.residual_blocks.push_back(id);
+      const int rows = problem->GetCostFunctionForResidualBlock(id)->num_residuals();
+      row_pair.insert(row_pair.end(), rows, i);
+    }
+  }
+  std::vector<double> residuals;
+  ceres::CRSMatrix jacobian;
+  if (!problem->Evaluate(evaluate, nullptr, &residuals, nullptr, &jacobian)) return std::nullopt;
+  const int n = jacobian.num_cols;
+  Eigen::MatrixXd hessian = Eigen::MatrixXd::Zero(n, n);
+  Eigen::MatrixXd gradients = Eigen::MatrixXd::Zero(n, num_pairs);
+  for (int r = 0; r < jacobian.num_rows; ++r) {
+    for (int a = jacobian.rows[r]; a < jacobian.rows[r + 1]; ++a) {
+      const int col = jacobian.cols[a];
+      const double value = jacobian.values[a];
+      gradients(col, row_pair[r]) += value * residuals[r];
+      for (int b = jacobian.rows[r]; b < jacobian.rows[r + 1]; ++b) {
+        hessian(col, jacobian.cols[b]) += value * jacobian.values[b];
+      }
+    }
+  }
+  const Eigen::LDLT<Eigen::MatrixXd> ldlt(hessian);
+  if (ldlt.info() != Eigen::Success || !(ldlt.vectorD().minCoeff() > 0.0)) return std::nullopt;
+  const Eigen::MatrixXd influence = ldlt.solve(gradients).topRows<6>();  // 6 x pairs
+  const Matrix6d covariance =
+      influence * influence.transpose() * (num_pairs / (num_pairs - 1.0));
+  if (!covariance.allFinite()) return std::nullopt;
+  return covariance;
+}
+
+// `pair_residuals` (each pair's residual blocks), when not empty, adds the robust estimate.
+RigUncertainty EstimateUncertainty(
+    ceres::Problem* problem, RigBlocks* blocks,
+    const std::vector<std::vector<ceres::ResidualBlockId>>& pair_residuals = {}) {
   RigUncertainty uncertainty;
   ceres::Covariance::Options covariance_options;
   // SPARSE_QR (SuiteSparse) rather than DENSE_SVD: the static libceres' Eigen SVD
@@ -143,7 +227,7 @@ RigUncertainty EstimateUncertainty(ceres::Problem* problem, RigBlocks* blocks) {
   // rank-deficient Jacobian makes Compute() fail, and the uncertainty is then reported invalid.
   covariance_options.algorithm_type = ceres::SPARSE_QR;
   ceres::Covariance covariance(covariance_options);
-  const double* rig = blocks->cam0_from_cam1.data();
+  double* rig = blocks->cam0_from_cam1.data();
   const std::vector<std::pair<const double*, const double*>> blocks_wanted = {{rig, rig}};
   if (!covariance.Compute(blocks_wanted, problem)) return uncertainty;
   Eigen::Matrix<double, 6, 6, Eigen::RowMajor> tangent;
@@ -153,17 +237,19 @@ RigUncertainty EstimateUncertainty(ceres::Problem* problem, RigBlocks* blocks) {
   const int dof = num_residuals - NumFreeParameters(*problem);
   if (dof <= 0) return uncertainty;
   const double sigma2 = sum_squares / dof;
-  const Eigen::Matrix<double, 6, 6> scaled = tangent * sigma2;
-  // EigenQuaternionManifold's tangent d rotates by exp(d) as a quaternion: an angle of 2|d|.
-  const Eigen::Matrix3d rotation_cov = 4.0 * scaled.topLeftCorner<3, 3>();
-  const Eigen::Matrix3d translation_cov = scaled.bottomRightCorner<3, 3>();
-  const Eigen::Vector3d t(rig[4], rig[5], rig[6]);
-  const Eigen::Vector3d direction = t.norm() > 0 ? Eigen::Vector3d(t.normalized())
-                                                 : Eigen::Vector3d::UnitX();
-  uncertainty.translation_std_m = translation_cov.diagonal().cwiseMax(0.0).cwiseSqrt();
-  uncertainty.baseline_std_m = std::sqrt(std::max(0.0, direction.dot(translation_cov * direction)));
-  uncertainty.rotation_std_deg = std::sqrt(std::max(0.0, rotation_cov.trace())) * 180.0 / M_PI;
+  const RigStd std = StdOfTangentCovariance(tangent * sigma2, rig);
+  uncertainty.translation_std_m = std.translation_m;
+  uncertainty.baseline_std_m = std.baseline_m;
+  uncertainty.rotation_std_deg = std.rotation_deg;
   uncertainty.valid = true;
+  if (!pair_residuals.empty()) {
+    if (const auto robust = ClusteredRigCovariance(problem, rig, pair_residuals)) {
+      const RigStd robust_std = StdOfTangentCovariance(*robust, rig);
+      uncertainty.robust_baseline_std_m = robust_std.baseline_m;
+      uncertainty.robust_rotation_std_deg = robust_std.rotation_deg;
+      uncertainty.robust_valid = true;
+    }
+  }
   return uncertainty;
 }
 
@@ -198,8 +284,9 @@ RigUncertainty EstimateRigUncertainty(const std::vector<RigPairCorners>& pairs,
   RigBlocks blocks =
       BlocksOf(rig, cam0_from_board, Cam1Poses(options, rig, cam0_from_board, cam1_from_board));
   ceres::Problem problem;
-  AddResiduals(pairs, options, &blocks, &problem);
-  return EstimateUncertainty(&problem, &blocks);
+  std::vector<std::vector<ceres::ResidualBlockId>> pair_residuals;
+  AddResiduals(pairs, options, &blocks, &problem, &pair_residuals);
+  return EstimateUncertainty(&problem, &blocks, pair_residuals);
 }
 
 RigRefinementSummary RefineRig(const std::vector<RigPairCorners>& pairs,
@@ -222,7 +309,8 @@ RigRefinementSummary RefineRigWithBoardMotion(const std::vector<RigPairCorners>&
                               Cam1Poses(options, *rig, *cam0_from_board, *cam1_from_board));
 
   ceres::Problem problem;
-  AddResiduals(pairs, options, &blocks, &problem);
+  std::vector<std::vector<ceres::ResidualBlockId>> pair_residuals;
+  AddResiduals(pairs, options, &blocks, &problem, &pair_residuals);
 
   ceres::Solver::Options solver_options;
   // Board poses form the Schur complement's eliminated group; the rig pose and intrinsics are
@@ -259,7 +347,9 @@ RigRefinementSummary RefineRigWithBoardMotion(const std::vector<RigPairCorners>&
   }
   rig->cam0.intrinsics.params = blocks.intrinsics0;
   rig->cam1.intrinsics.params = blocks.intrinsics1;
-  if (uncertainty != nullptr) *uncertainty = EstimateUncertainty(&problem, &blocks);
+  if (uncertainty != nullptr) {
+    *uncertainty = EstimateUncertainty(&problem, &blocks, pair_residuals);
+  }
   return result;
 }
 

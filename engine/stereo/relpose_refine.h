@@ -67,6 +67,15 @@ struct RigUncertainty {
   Eigen::Vector3d translation_std_m = Eigen::Vector3d::Zero();
   double baseline_std_m = 0.0;    // along cam0_from_cam1.translation's direction
   double rotation_std_deg = 0.0;  // RMS angle: sqrt(trace) of the rotation-vector covariance
+  // The same two from the cluster-robust (sandwich) covariance over pairs,
+  // H^-1 (sum_i g_i g_i^T) H^-1 N / (N - 1), g_i pair i's gradient of the cost: honest when the
+  // pairs disagree by more than independent corner noise explains (e.g. a board that moved
+  // between two unsynchronised exposures, or a model error each pose sees differently), where
+  // the Gauss-Newton covariance above is far too small; noisier with few pairs. Valid with 3
+  // pairs or more.
+  bool robust_valid = false;
+  double robust_baseline_std_m = 0.0;
+  double robust_rotation_std_deg = 0.0;
 };
 
 // Refines `rig` (cam0_from_cam1, and intrinsics when asked) and `cam0_from_board` (one per
