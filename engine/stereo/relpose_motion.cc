@@ -30,14 +30,6 @@ ceres::CostFunction* BoardMotionLinkCost::Create(const Eigen::Vector3d& centre_i
                               prior.corner_noise_px / prior.translation_std_m));
 }
 
-Eigen::Vector3d RigPairBoardCentre(const RigPairCorners& pair) {
-  Eigen::Vector3d centre = Eigen::Vector3d::Zero();
-  for (const auto& p : pair.points_in_board0) centre += p;
-  for (const auto& p : pair.points_in_board1) centre += p;
-  const size_t n = pair.points_in_board0.size() + pair.points_in_board1.size();
-  return n > 0 ? Eigen::Vector3d(centre / static_cast<double>(n)) : centre;
-}
-
 BoardMotionPrior ToBoardMotionPrior(const BoardMotionEstimate& estimate,
                                     const std::array<double, 2>& corner_noise_px) {
   BoardMotionPrior prior;

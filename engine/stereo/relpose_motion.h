@@ -108,9 +108,6 @@ BoardMotionEstimate EstimateBoardMotion(const StereoRig& rig,
 BoardMotionPrior ToBoardMotionPrior(const BoardMotionEstimate& estimate,
                                     const std::array<double, 2>& corner_noise_px);
 
-// The board's centre in the board frame (mean of both cameras' object points).
-Eigen::Vector3d RigPairBoardCentre(const RigPairCorners& pair);
-
 // The link between cam0's board pose, the rig, and cam1's own board pose of one pair:
 // delta = (rotation vector of via1 * own0^-1, via1 * c - own0 * c) in cam0's frame, where
 // via1 = cam0_from_cam1 * cam1_from_board, own0 = cam0_from_board, c the board's centre;

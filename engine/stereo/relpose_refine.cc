@@ -276,6 +276,14 @@ std::vector<Rigid3d> Cam1Poses(const RigRefinementOptions& options, const Stereo
 
 }  // namespace
 
+Eigen::Vector3d RigPairBoardCentre(const RigPairCorners& pair) {
+  Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+  for (const auto& p : pair.points_in_board0) centre += p;
+  for (const auto& p : pair.points_in_board1) centre += p;
+  const size_t n = pair.points_in_board0.size() + pair.points_in_board1.size();
+  return n > 0 ? Eigen::Vector3d(centre / static_cast<double>(n)) : centre;
+}
+
 RigUncertainty EstimateRigUncertainty(const std::vector<RigPairCorners>& pairs,
                                       const RigRefinementOptions& options, const StereoRig& rig,
                                       const std::vector<Rigid3d>& cam0_from_board,

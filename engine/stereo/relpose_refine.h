@@ -22,6 +22,10 @@ struct RigPairCorners {
   std::vector<Eigen::Vector2d> pixels1;
 };
 
+// The board's centre in the board frame: the mean of both cameras' object points (zero when
+// there are none). Where the synchronisation test and the board motion model compare poses.
+Eigen::Vector3d RigPairBoardCentre(const RigPairCorners& pair);
+
 // Skew (alpha) and k5 fixed, every other intrinsic free.
 std::array<bool, UnifiedIntrinsics::kNumParams> DefaultFixedIntrinsics();
 

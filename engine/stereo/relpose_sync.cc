@@ -100,13 +100,6 @@ std::array<double, 2> CornerNoise(const std::vector<SeparateFit>& fits,
   return noise;
 }
 
-Eigen::Vector3d BoardCentre(const RigPairCorners& pair) {
-  Eigen::Vector3d centre = Eigen::Vector3d::Zero();
-  for (const auto& p : pair.points_in_board0) centre += p;
-  for (const auto& p : pair.points_in_board1) centre += p;
-  return centre / static_cast<double>(pair.points_in_board0.size() + pair.points_in_board1.size());
-}
-
 // Step 2 for one pair: T (before the dispersion) and the disagreement in metric terms.
 PairSyncStatistic PairStatistic(const StereoRig& rig, const RigPairCorners& pair,
                                 const SeparateFit& separate, const std::array<double, 2>& noise,
@@ -121,7 +114,7 @@ PairSyncStatistic PairStatistic(const StereoRig& rig, const RigPairCorners& pair
   *raw_statistic = std::max(0.0, joint - apart);
   const Rigid3d& own0 = *separate.cam_from_board[0];
   const Rigid3d via_cam1 = rig.cam0_from_cam1 * *separate.cam_from_board[1];
-  const Eigen::Vector3d centre = BoardCentre(pair);
+  const Eigen::Vector3d centre = RigPairBoardCentre(pair);
   statistic.board_offset_m = (own0 * centre - via_cam1 * centre).norm();
   statistic.board_rotation_deg =
       RotationDistanceRad(own0.rotation, via_cam1.rotation) * 180.0 / M_PI;
