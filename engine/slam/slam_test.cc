@@ -19,13 +19,7 @@ namespace {
 class SlamOnShortSequence : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    synth::StereoSequenceOptions options;
-    options.num_frames = 10;
-    options.path_length_m = 1.5;  // 15 cm steps
-    options.width = 640;
-    options.height = 480;
-    options.render.noise_sigma = 1.0;
-    sequence_ = new synth::StereoSequence(synth::MakeStereoSequence(options));
+    sequence_ = new synth::StereoSequence(synth::MakeStereoSequence(ShortSequenceOptions(10)));
   }
   static void TearDownTestSuite() { delete sequence_; }
 
