@@ -35,15 +35,30 @@ inline Eigen::Matrix<double, 3, 4> RotatedPointJacobian(const Eigen::Quaterniond
 
 // What differs between the solves of the engine; everything else is set in MakeSolverOptions.
 struct SolverSetup {
-  // The size the linear solver is chosen by: 0 for a problem with nothing to eliminate (one
-  // pose, a two-view geometry): DENSE_QR. Otherwise the Schur complement eliminates the points
-  // or board poses, DENSE_SCHUR up to max_dense_schur_size and SPARSE_SCHUR beyond; the size is
-  // what each caller measured the choice on (parameter blocks of a calibration, free poses of a
-  // bundle adjustment).
-  int problem_size = 0;
+  // problem_size is what the linear solver is chosen by: 0 for a problem with nothing to
+  // eliminate (one pose, a two-view geometry): DENSE_QR. Otherwise the Schur complement
+  // eliminates the points or board poses, DENSE_SCHUR up to max_dense_schur_size and
+  // SPARSE_SCHUR beyond; the size is what each caller measured the choice on (parameter blocks
+  // of a calibration, free poses of a bundle adjustment).
+  SolverSetup(int problem_size, int max_num_iterations, int num_threads = 1)
+      : problem_size(problem_size),
+        max_num_iterations(max_num_iterations),
+        num_threads(num_threads) {}
+  SolverSetup& DenseSchurUpTo(int size) {
+    max_dense_schur_size = size;
+    return *this;
+  }
+  SolverSetup& Tolerances(double function, double gradient, double parameter) {
+    function_tolerance = function;
+    gradient_tolerance = gradient;
+    parameter_tolerance = parameter;
+    return *this;
+  }
+
+  int problem_size;
+  int max_num_iterations;
+  int num_threads;  // the job's budget
   int max_dense_schur_size = 200;
-  int max_num_iterations = 50;
-  int num_threads = 1;  // the job's budget
   // Ceres' defaults unless a caller needs tighter.
   double function_tolerance = 1e-6;
   double gradient_tolerance = 1e-10;
