@@ -5,8 +5,8 @@
 #include <ceres/ceres.h>
 #include <Eigen/SVD>
 
-#include "engine/calib/ceres_util.h"
-#include "engine/calib/reprojection_cost.h"
+#include "engine/geometry/ceres_problem.h"
+#include "engine/geometry/reprojection_cost.h"
 
 namespace omnirig {
 namespace {
@@ -104,15 +104,13 @@ std::optional<Rigid3d> EstimateBoardPose(const CameraModel& camera,
   std::array<double, UnifiedIntrinsics::kNumParams> intrinsics = camera.intrinsics.params;
   ceres::Problem problem;
   for (size_t i = 0; i < object_points.size(); ++i) {
-    problem.AddResidualBlock(new BoardCornerAnalyticCost(object_points[i], corners_px[i]), nullptr,
-                             intrinsics.data(), pose.data());
+    problem.AddResidualBlock(ReprojectionCost::BoardCorner(object_points[i], corners_px[i]),
+                             nullptr, pose.data(), intrinsics.data());
   }
   problem.SetParameterBlockConstant(intrinsics.data());
   problem.SetManifold(pose.data(), NewPoseManifold());
-  ceres::Solver::Options options = MakeCalibrationSolverOptions(1, 50, 1);
-  options.linear_solver_type = ceres::DENSE_QR;
-  options.function_tolerance = 1e-10;
-  options.parameter_tolerance = 1e-10;
+  const ceres::Solver::Options options =
+      MakeSolverOptions(SolverSetup(0, 50).Tolerances(1e-10, 1e-10, 1e-10));
   ceres::Solver::Summary summary;
   ceres::Solve(options, &problem, &summary);
   const Rigid3d cam_from_board = Rigid3d::FromParams(pose.data());

@@ -7,9 +7,9 @@
 
 #include <ceres/ceres.h>
 
-#include "engine/calib/ceres_util.h"
 #include "engine/calib/initialize.h"
-#include "engine/calib/reprojection_cost.h"
+#include "engine/geometry/ceres_problem.h"
+#include "engine/geometry/reprojection_cost.h"
 #include "engine/util/timer.h"
 
 namespace omnirig {
@@ -234,8 +234,8 @@ ceres::Solver::Summary Solve(const CalibrationOptions& options, bool robust, int
                                       ? new ceres::HuberLoss(options.huber_loss_px)
                                       : nullptr;
       problem->AddResidualBlock(
-          new BoardCornerAnalyticCost(view.object_points[i], view.corners_px[i]), loss,
-          intrinsics->params.data(), view.cam_from_board.data());
+          ReprojectionCost::BoardCorner(view.object_points[i], view.corners_px[i]), loss,
+          view.cam_from_board.data(), intrinsics->params.data());
     }
     problem->SetManifold(view.cam_from_board.data(), NewPoseManifold());
   }
@@ -254,8 +254,10 @@ ceres::Solver::Summary Solve(const CalibrationOptions& options, bool robust, int
   // than 1 on every real set); threads pay off only on much larger problems.
   const int num_threads =
       std::min(options.num_threads, 1 + problem->NumResidualBlocks() / kResidualBlocksPerThread);
-  ceres::Solver::Options solver_options = MakeCalibrationSolverOptions(
-      static_cast<int>(views->size()) + 1, options.max_num_iterations, num_threads);
+  // Tolerances tight enough to reach the minimum on every set, without tuning per set.
+  ceres::Solver::Options solver_options = MakeSolverOptions(
+      SolverSetup(static_cast<int>(views->size()) + 1, options.max_num_iterations, num_threads)
+          .Tolerances(1e-10, 1e-10, 1e-10));
   // xi, gamma and k1 trade off along a narrow curved valley (xi is weakly observable): strictly
   // monotone LM crawls along it in tiny steps (42 iterations on ocamcalib-vmr), non-monotone
   // steps take 13 to the same minimum. Ceres returns the parameters of the lowest cost seen.

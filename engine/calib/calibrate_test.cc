@@ -7,7 +7,6 @@
 
 #include "engine/calib/board_pose.h"
 #include "engine/calib/initialize.h"
-#include "engine/calib/reprojection_cost.h"
 #include "engine/calib/synthetic_corners.h"
 
 namespace omnirig {
@@ -194,51 +193,6 @@ TEST(Calibrate, CancelsThroughTheSink) {
   sink.is_cancelled = [&] { return reports >= 2; };
   EXPECT_THROW(Calibrate(set.views, truth.width, truth.height, Board(), CalibrationOptions(), sink),
                Cancelled);
-}
-
-// The hand-written Jacobians of the solve's residual against autodiff of the templated one, with
-// every intrinsic (skew, tangential, k5 included) away from zero and random poses.
-TEST(BoardCornerAnalyticCost, MatchesAutodiff) {
-  std::mt19937 rng(11);
-  std::uniform_real_distribution<double> unit(-1.0, 1.0);
-  std::unique_ptr<ceres::CostFunction> reference_cost;
-  int compared = 0;
-  for (int trial = 0; trial < 200; ++trial) {
-    const std::array<double, UnifiedIntrinsics::kNumParams> intrinsics = {
-        0.8 + 0.4 * unit(rng), 300 + 20 * unit(rng), 290 + 20 * unit(rng),    510 + 5 * unit(rng),
-        385 + 5 * unit(rng),   0.01 * unit(rng),     -0.2 + 0.05 * unit(rng), 0.04 * unit(rng),
-        0.003 * unit(rng),     0.003 * unit(rng),    0.01 * unit(rng)};
-    const Eigen::Quaterniond rotation =
-        Eigen::Quaterniond(unit(rng), unit(rng), unit(rng), unit(rng)).normalized();
-    std::array<double, 7> pose = {rotation.x(),    rotation.y(),    rotation.z(),   rotation.w(),
-                                  0.3 * unit(rng), 0.3 * unit(rng), 0.5 * unit(rng)};
-    const Eigen::Vector3d point(0.2 * unit(rng), 0.2 * unit(rng), 0.0);
-    const Eigen::Vector2d measured(500 + 100 * unit(rng), 400 + 100 * unit(rng));
-    BoardCornerAnalyticCost analytic(point, measured);
-    reference_cost.reset(BoardCornerCost::Create(point, measured));
-    const double* parameters[2] = {intrinsics.data(), pose.data()};
-    double residual_a[2], residual_b[2];
-    Eigen::Matrix<double, 2, 11, Eigen::RowMajor> ja_i, jb_i;
-    Eigen::Matrix<double, 2, 7, Eigen::RowMajor> ja_p, jb_p;
-    double* jacobians_a[2] = {ja_i.data(), ja_p.data()};
-    double* jacobians_b[2] = {jb_i.data(), jb_p.data()};
-    const bool valid_a = analytic.Evaluate(parameters, residual_a, jacobians_a);
-    const bool valid_b = reference_cost->Evaluate(parameters, residual_b, jacobians_b);
-    ASSERT_EQ(valid_a, valid_b) << "trial " << trial;
-    if (!valid_a) continue;
-    ++compared;
-    // Relative: near the rim of the valid domain pixels and derivatives grow without bound.
-    EXPECT_NEAR(residual_a[0], residual_b[0], 1e-9 * (1.0 + std::abs(residual_b[0])));
-    EXPECT_NEAR(residual_a[1], residual_b[1], 1e-9 * (1.0 + std::abs(residual_b[1])));
-    EXPECT_LT((ja_i - jb_i).norm(), 1e-9 * (1.0 + jb_i.norm())) << "trial " << trial;
-    EXPECT_LT((ja_p - jb_p).norm(), 1e-9 * (1.0 + jb_p.norm())) << "trial " << trial;
-    // Residual only, and one Jacobian block only.
-    double* only_pose[2] = {nullptr, ja_p.data()};
-    EXPECT_TRUE(analytic.Evaluate(parameters, residual_a, nullptr));
-    EXPECT_TRUE(analytic.Evaluate(parameters, residual_a, only_pose));
-    EXPECT_LT((ja_p - jb_p).norm(), 1e-9 * (1.0 + jb_p.norm()));
-  }
-  EXPECT_GT(compared, 100);
 }
 
 TEST(Initialize, GammaFromLineIsExactForXiOne) {

@@ -8,7 +8,7 @@
 //
 // Parameter blocks: Ceres problems hold a pose as one block of 7 doubles in Eigen's storage
 // order [qx, qy, qz, qw, tx, ty, tz] with ceres::EigenQuaternionManifold on the first four
-// (see NewPoseManifold() in engine/calib/ceres_util.h). The paper and JSON use (w, x, y, z);
+// (see NewPoseManifold() in engine/geometry/ceres_problem.h). The paper and JSON use (w, x, y, z);
 // the conversion happens only in ToWxyz()/FromWxyz() below.
 
 #include <array>
@@ -55,6 +55,13 @@ struct Rigid3d {
 
 // Angle of the rotation a^-1 * b, in radians.
 double RotationDistanceRad(const Eigen::Quaterniond& a, const Eigen::Quaterniond& b);
+
+// The cross-product matrix: Skew(a) * b == a.cross(b).
+inline Eigen::Matrix3d Skew(const Eigen::Vector3d& v) {
+  Eigen::Matrix3d m;
+  m << 0.0, -v.z(), v.y(), v.z(), 0.0, -v.x(), -v.y(), v.x(), 0.0;
+  return m;
+}
 
 // Transforms a point by a pose held in a 7-element parameter block (Eigen order). Templated
 // so that Ceres Jets pass through.

@@ -24,12 +24,21 @@
 //   Valid domain: the Newton iteration converges (|D(m) - m_d| < 1e-12) and
 //   1 + (1 - xi^2) |m|^2 >= 0 (for xi > 1 the image of the horizon bounds |m|), and the lifted
 //   bearing lies in the projection's valid domain so that project(lift(p)) == p.
+//
+// Derivatives (basalt's camera headers are the model): Project() optionally returns
+// d pixel / d point_in_cam (2x3) and d pixel / d params (2x11), Lift() d bearing / d pixel
+// (3x2), in closed form, valid wherever the function itself is. The projection is invariant to
+// the point's scale, so d pixel / d point_in_cam * point_in_cam = 0; the lifted bearing is a unit
+// vector, so bearing^T * d bearing / d pixel = 0. Everything is templated on the scalar (double
+// and float are tested against central differences; ProjectToPixel also takes Ceres Jets).
 
 #include <array>
 #include <cmath>
 #include <optional>
+#include <algorithm>
 
 #include <Eigen/Core>
+#include <Eigen/LU>
 
 #include "engine/util/check.h"
 
@@ -63,6 +72,15 @@ struct UnifiedIntrinsics {
   void Check() const;
 };
 
+template <typename T>
+using Vector2 = Eigen::Matrix<T, 2, 1>;
+template <typename T>
+using Vector3 = Eigen::Matrix<T, 3, 1>;
+// An Eigen matrix whose scalar is not deduced from the argument (so that nullptr is accepted for
+// an optional Jacobian).
+template <typename T, int Rows, int Cols>
+using JacobianOf = Eigen::Matrix<typename Eigen::NumTraits<T>::Real, Rows, Cols>;
+
 // Eq. (3): the distortion D applied to a point m on the normalised plane.
 template <typename T>
 inline void Distort(const T* params, const T& x, const T& y, T* xd, T* yd) {
@@ -73,6 +91,24 @@ inline void Distort(const T* params, const T& x, const T& y, T* xd, T* yd) {
       params[I::kK5] * rho2 * rho2 * rho2;
   *xd = x * radial + T(2) * params[I::kK3] * x * y + params[I::kK4] * (rho2 + T(2) * x * x);
   *yd = y * radial + T(2) * params[I::kK4] * x * y + params[I::kK3] * (rho2 + T(2) * y * y);
+}
+
+// d D(m) / d m of eq. (3) at m = (x, y): the one place it is written (the projection's
+// Jacobians and the Newton iteration of Undistort both use it).
+template <typename T>
+inline Eigen::Matrix<T, 2, 2> DistortionJacobian(const T* params, const T& x, const T& y) {
+  using I = UnifiedIntrinsics;
+  const T rho2 = x * x + y * y;
+  const T radial = T(1) + params[I::kK1] * rho2 + params[I::kK2] * rho2 * rho2 +
+                   params[I::kK5] * rho2 * rho2 * rho2;
+  const T dr = params[I::kK1] + T(2) * params[I::kK2] * rho2 + T(3) * params[I::kK5] * rho2 * rho2;
+  const T k3 = params[I::kK3], k4 = params[I::kK4];
+  Eigen::Matrix<T, 2, 2> jacobian;
+  jacobian(0, 0) = radial + T(2) * x * x * dr + T(2) * k3 * y + T(6) * k4 * x;
+  jacobian(0, 1) = T(2) * x * y * dr + T(2) * k3 * x + T(2) * k4 * y;
+  jacobian(1, 0) = T(2) * x * y * dr + T(2) * k4 * y + T(2) * k3 * x;
+  jacobian(1, 1) = radial + T(2) * y * y * dr + T(2) * k4 * x + T(6) * k3 * y;
+  return jacobian;
 }
 
 // Eqs. (2)-(4): projects a point in the mirror (camera) frame to a pixel. Returns false, leaving
@@ -100,23 +136,136 @@ inline bool ProjectToPixel(const T* params, const T* point_in_cam, T* pixel) {
   return true;
 }
 
+// Eqs. (2)-(4) with their Jacobians: `pixel` of `point_in_cam`, and when not null
+// d pixel / d point_in_cam and d pixel / d params. False (outputs untouched) outside the valid
+// domain.
+template <typename T>
+inline bool Project(const T* params, const Vector3<T>& point_in_cam, Vector2<T>* pixel,
+                    JacobianOf<T, 2, 3>* d_pixel_d_point = nullptr,
+                    JacobianOf<T, 2, UnifiedIntrinsics::kNumParams>* d_pixel_d_params = nullptr) {
+  using I = UnifiedIntrinsics;
+  if (!ProjectToPixel(params, point_in_cam.data(), pixel->data())) return false;
+  if (d_pixel_d_point == nullptr && d_pixel_d_params == nullptr) return true;
+  // The chain point -> unit sphere s -> normalised plane m -> distorted m_d -> pixel.
+  const T norm = point_in_cam.norm();
+  const Vector3<T> s = point_in_cam / norm;
+  const T denom = s.z() + params[I::kXi];
+  const T x = s.x() / denom, y = s.y() / denom;
+  Eigen::Matrix<T, 2, 2> dp_dmd;
+  dp_dmd << params[I::kGammaU], params[I::kGammaU] * params[I::kAlpha], T(0), params[I::kGammaV];
+  const Eigen::Matrix<T, 2, 2> dp_dm = dp_dmd * DistortionJacobian(params, x, y);
+  if (d_pixel_d_point != nullptr) {
+    // d s / d X = (I - s s^T) / |X|;  d m / d s from m = (s_x, s_y) / (s_z + xi).
+    const Eigen::Matrix<T, 3, 3> ds_dX =
+        (Eigen::Matrix<T, 3, 3>::Identity() - s * s.transpose()) / norm;
+    Eigen::Matrix<T, 2, 3> dm_ds;
+    dm_ds << T(1) / denom, T(0), -x / denom, T(0), T(1) / denom, -y / denom;
+    *d_pixel_d_point = dp_dm * dm_ds * ds_dX;
+  }
+  if (d_pixel_d_params != nullptr) {
+    Eigen::Matrix<T, 2, I::kNumParams>& J = *d_pixel_d_params;
+    const T rho2 = x * x + y * y, rho4 = rho2 * rho2;
+    T xd, yd;
+    Distort(params, x, y, &xd, &yd);
+    J.setZero();
+    J.col(I::kXi) = dp_dm * Vector2<T>(-x / denom, -y / denom);
+    J(0, I::kGammaU) = xd + params[I::kAlpha] * yd;
+    J(1, I::kGammaV) = yd;
+    J(0, I::kU0) = T(1);
+    J(1, I::kV0) = T(1);
+    J(0, I::kAlpha) = params[I::kGammaU] * yd;
+    J.col(I::kK1) = dp_dmd * Vector2<T>(x * rho2, y * rho2);
+    J.col(I::kK2) = dp_dmd * Vector2<T>(x * rho4, y * rho4);
+    J.col(I::kK3) = dp_dmd * Vector2<T>(T(2) * x * y, rho2 + T(2) * y * y);
+    J.col(I::kK4) = dp_dmd * Vector2<T>(rho2 + T(2) * x * x, T(2) * x * y);
+    J.col(I::kK5) = dp_dmd * Vector2<T>(x * rho4 * rho2, y * rho4 * rho2);
+  }
+  return true;
+}
+
+// Convergence threshold of the Newton iteration on the normalised plane: 1e-14 in double, a few
+// ulps in float.
+template <typename T>
+inline T UndistortTolerance() {
+  return std::max(T(1e-14), T(8) * Eigen::NumTraits<T>::epsilon());
+}
+
+// Inverse of the distortion D (eq. 3) by Newton's method: false when it does not converge to
+// 1e-12 (a few ulps in float) on the normalised plane.
+template <typename T>
+inline bool Undistort(const T* params, const Vector2<T>& distorted, Vector2<T>* undistorted) {
+  const T accept = std::max(T(1e-12), T(64) * Eigen::NumTraits<T>::epsilon());
+  Vector2<T> m = distorted;
+  for (int iter = 0; iter < 50; ++iter) {
+    Vector2<T> residual;
+    Distort(params, m.x(), m.y(), &residual.x(), &residual.y());
+    residual -= distorted;
+    if (!residual.allFinite()) return false;
+    if (residual.norm() < UndistortTolerance<T>()) {
+      *undistorted = m;
+      return true;
+    }
+    const Eigen::Matrix<T, 2, 2> jacobian = DistortionJacobian(params, m.x(), m.y());
+    if (!(std::abs(jacobian.determinant()) > T(1e-12))) return false;
+    m -= jacobian.inverse() * residual;
+  }
+  Vector2<T> back;
+  Distort(params, m.x(), m.y(), &back.x(), &back.y());
+  if (!((back - distorted).norm() < accept)) return false;
+  *undistorted = m;
+  return true;
+}
+
+// Eq. (6) after inverting K and D: the unit bearing (on the sphere, in the mirror frame) of a
+// pixel, and when not null d bearing / d pixel. False outside the valid domain documented above.
+template <typename T>
+inline bool Lift(const T* params, const Vector2<T>& pixel, Vector3<T>* bearing,
+                 JacobianOf<T, 3, 2>* d_bearing_d_pixel = nullptr) {
+  using I = UnifiedIntrinsics;
+  const T xi = params[I::kXi];
+  // Invert K (eq. 4).
+  const T yd = (pixel.y() - params[I::kV0]) / params[I::kGammaV];
+  const T xd = (pixel.x() - params[I::kU0]) / params[I::kGammaU] - params[I::kAlpha] * yd;
+  Vector2<T> m;
+  if (!Undistort(params, Vector2<T>(xd, yd), &m)) return false;
+  // Eq. (6).
+  const T r2 = m.squaredNorm();
+  const T disc = T(1) + (T(1) - xi * xi) * r2;
+  if (disc < T(0)) return false;
+  const T factor = (xi + std::sqrt(disc)) / (r2 + T(1));
+  Vector3<T> lifted(factor * m.x(), factor * m.y(), factor - xi);
+  lifted.normalize();
+  // The lifted bearing must be in the projection's domain (for xi > 1 the other root of the
+  // quadratic lies beyond the horizon).
+  if (!(lifted.z() + xi > T(1e-12)) || (xi > T(1) && !(xi * lifted.z() + T(1) > T(1e-12)))) {
+    return false;
+  }
+  if (d_bearing_d_pixel != nullptr) {
+    // Lifting inverts the projection on the unit sphere: d pixel / d bearing * J = I and
+    // bearing^T J = 0 determine J.
+    Vector2<T> unused;
+    Eigen::Matrix<T, 3, 3> constraints;
+    Eigen::Matrix<T, 2, 3> d_pixel_d_point;
+    if (!Project(params, lifted, &unused, &d_pixel_d_point)) return false;
+    constraints << d_pixel_d_point, lifted.transpose();
+    *d_bearing_d_pixel = constraints.inverse().template leftCols<2>();
+  }
+  *bearing = lifted;
+  return true;
+}
+
 // Convenience wrappers in double.
 std::optional<Eigen::Vector2d> Project(const UnifiedIntrinsics& intrinsics,
                                        const Eigen::Vector3d& point_in_cam);
 
-// Projection with its Jacobian d(pixel)/d(point_in_cam), computed analytically (tested
-// against Jets and central differences).
+// Projection with its Jacobian d(pixel)/d(point_in_cam).
 std::optional<Eigen::Vector2d> ProjectWithJacobian(const UnifiedIntrinsics& intrinsics,
                                                    const Eigen::Vector3d& point_in_cam,
                                                    Eigen::Matrix<double, 2, 3>* d_pixel_d_point);
 
-// Inverse of the distortion D (eq. 3) by Newton's method. Returns nullopt when it does not
-// converge to 1e-12 on the normalised plane.
 std::optional<Eigen::Vector2d> Undistort(const UnifiedIntrinsics& intrinsics,
                                          const Eigen::Vector2d& distorted);
 
-// Eq. (6) after inverting K and D: the unit bearing (on the sphere, in the mirror frame) of a
-// pixel. nullopt outside the valid domain documented above.
 std::optional<Eigen::Vector3d> Lift(const UnifiedIntrinsics& intrinsics,
                                     const Eigen::Vector2d& pixel);
 

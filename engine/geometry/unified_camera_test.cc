@@ -115,6 +115,135 @@ TEST(UnifiedCamera, JacobianMatchesJetsAndCentralDifferences) {
   }
 }
 
+// The templated projection's Jacobians (point and parameters) against central differences of
+// the projection itself, in double and in float.
+template <typename T>
+void CheckProjectionJacobians(T step, T tolerance) {
+  using I = UnifiedIntrinsics;
+  const UnifiedIntrinsics camera = HyperbolicCamera();
+  std::array<T, I::kNumParams> params;
+  for (int k = 0; k < I::kNumParams; ++k) params[k] = static_cast<T>(camera.params[k]);
+  std::mt19937 rng(4);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  int tested = 0;
+  for (int i = 0; i < 300; ++i) {
+    const Eigen::Vector3d point_d(u(rng) * 3, u(rng) * 3, u(rng) * 1.5);
+    if (!InImage(Project(camera, point_d))) continue;
+    const Vector3<T> point = point_d.cast<T>();
+    Vector2<T> pixel;
+    Eigen::Matrix<T, 2, 3> d_point;
+    Eigen::Matrix<T, 2, I::kNumParams> d_params;
+    ASSERT_TRUE(Project(params.data(), point, &pixel, &d_point, &d_params));
+    EXPECT_LT((pixel.template cast<double>() - *Project(camera, point_d)).norm(),
+              1e4 * Eigen::NumTraits<T>::epsilon());
+    // Scale invariance: the derivative along the ray is zero.
+    EXPECT_LT((d_point * point).norm(), tolerance * 100);
+    for (int c = 0; c < 3; ++c) {
+      Vector3<T> plus = point, minus = point;
+      plus[c] += step;
+      minus[c] -= step;
+      Vector2<T> pp, pm;
+      ASSERT_TRUE(Project(params.data(), plus, &pp) && Project(params.data(), minus, &pm));
+      const Vector2<T> numeric = (pp - pm) / (T(2) * step);
+      for (int r = 0; r < 2; ++r) {
+        EXPECT_NEAR(numeric[r], d_point(r, c), tolerance * (1 + std::abs(d_point(r, c))));
+      }
+    }
+    for (int k = 0; k < I::kNumParams; ++k) {
+      std::array<T, I::kNumParams> plus = params, minus = params;
+      plus[k] += step;
+      minus[k] -= step;
+      Vector2<T> pp, pm;
+      ASSERT_TRUE(Project(plus.data(), point, &pp) && Project(minus.data(), point, &pm));
+      const Vector2<T> numeric = (pp - pm) / (T(2) * step);
+      for (int r = 0; r < 2; ++r) {
+        EXPECT_NEAR(numeric[r], d_params(r, k), tolerance * (1 + std::abs(d_params(r, k))))
+            << I::kNames[k];
+      }
+    }
+    ++tested;
+  }
+  EXPECT_GT(tested, 50);
+}
+
+TEST(UnifiedCamera, ProjectionJacobiansMatchCentralDifferencesInDouble) {
+  CheckProjectionJacobians<double>(1e-6, 1e-4);
+}
+
+TEST(UnifiedCamera, ProjectionJacobiansMatchCentralDifferencesInFloat) {
+  CheckProjectionJacobians<float>(1e-2f, 2e-2f);
+}
+
+TEST(UnifiedCamera, IntrinsicsJacobianMatchesJets) {
+  using I = UnifiedIntrinsics;
+  using Jet = ceres::Jet<double, I::kNumParams>;
+  const UnifiedIntrinsics camera = HyperbolicCamera();
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (int i = 0; i < 200; ++i) {
+    const Eigen::Vector3d point(u(rng) * 3, u(rng) * 3, u(rng) * 1.5);
+    Eigen::Vector2d pixel;
+    Eigen::Matrix<double, 2, I::kNumParams> analytic;
+    if (!InImage(Project(camera, point))) continue;
+    ASSERT_TRUE(Project(camera.params.data(), point, &pixel, nullptr, &analytic));
+    Jet params[I::kNumParams];
+    for (int k = 0; k < I::kNumParams; ++k) params[k] = Jet(camera.params[k], k);
+    const Jet point_jet[3] = {Jet(point.x()), Jet(point.y()), Jet(point.z())};
+    Jet pixel_jet[2];
+    ASSERT_TRUE(ProjectToPixel(params, point_jet, pixel_jet));
+    for (int r = 0; r < 2; ++r) {
+      for (int k = 0; k < I::kNumParams; ++k) {
+        EXPECT_NEAR(pixel_jet[r].v[k], analytic(r, k), 1e-9 * (1 + std::abs(analytic(r, k))))
+            << I::kNames[k];
+      }
+    }
+  }
+}
+
+// The lifting's Jacobian against central differences of Lift, in double and in float; and the
+// lift of the projection in float.
+template <typename T>
+void CheckLiftJacobian(T step, T tolerance) {
+  using I = UnifiedIntrinsics;
+  const UnifiedIntrinsics camera = HyperbolicCamera();
+  std::array<T, I::kNumParams> params;
+  for (int k = 0; k < I::kNumParams; ++k) params[k] = static_cast<T>(camera.params[k]);
+  int tested = 0;
+  for (double v = 84; v < 684; v += 50) {
+    for (double u = 212; u < 812; u += 50) {
+      const Vector2<T> pixel(static_cast<T>(u), static_cast<T>(v));
+      Vector3<T> bearing;
+      Eigen::Matrix<T, 3, 2> jacobian;
+      if (!Lift(params.data(), pixel, &bearing, &jacobian)) continue;
+      Vector2<T> back;
+      ASSERT_TRUE(Project(params.data(), bearing, &back));
+      EXPECT_LT((back - pixel).norm(), tolerance * 0.1);
+      EXPECT_LT((bearing.transpose() * jacobian).norm(), tolerance * 1e-2);
+      for (int c = 0; c < 2; ++c) {
+        Vector2<T> plus = pixel, minus = pixel;
+        plus[c] += step;
+        minus[c] -= step;
+        Vector3<T> bp, bm;
+        ASSERT_TRUE(Lift(params.data(), plus, &bp) && Lift(params.data(), minus, &bm));
+        const Vector3<T> numeric = (bp - bm) / (T(2) * step);
+        for (int r = 0; r < 3; ++r) {
+          EXPECT_NEAR(numeric[r], jacobian(r, c), tolerance * 1e-2) << u << " " << v;
+        }
+      }
+      ++tested;
+    }
+  }
+  EXPECT_GT(tested, 100);
+}
+
+TEST(UnifiedCamera, LiftJacobianMatchesCentralDifferencesInDouble) {
+  CheckLiftJacobian<double>(1e-4, 1e-6);
+}
+
+TEST(UnifiedCamera, LiftJacobianMatchesCentralDifferencesInFloat) {
+  CheckLiftJacobian<float>(0.25f, 2e-2f);
+}
+
 TEST(UnifiedCamera, AgreesWithOpenCvOmnidirWhenK5IsZero) {
   UnifiedIntrinsics camera = HyperbolicCamera();
   camera.k(5) = 0.0;

@@ -7,20 +7,13 @@
 #include <set>
 #include <sstream>
 
-#include <ceres/jet.h>
-
-#include "engine/calib/ceres_util.h"
+#include "engine/geometry/ceres_problem.h"
+#include "engine/geometry/reprojection_cost.h"
 #include "engine/util/check.h"
 #include "engine/util/timer.h"
 
 namespace omnirig::slam {
 namespace {
-
-Eigen::Matrix3d Skew(const Eigen::Vector3d& v) {
-  Eigen::Matrix3d m;
-  m << 0, -v.z(), v.y(), v.z(), 0, -v.x(), -v.y(), v.x(), 0;
-  return m;
-}
 
 // Whether a landmark enters the adjustment: seen by a free frame, and from at least two rig
 // positions. A landmark seen from one position only (by both cameras) carries no information
@@ -52,22 +45,6 @@ std::optional<double> SquaredError(const StereoRig& rig, const Rigid3d& rig_from
   const std::optional<Eigen::Vector2d> pixel = Project(camera.intrinsics, point_in_cam);
   if (!pixel) return std::nullopt;
   return (*pixel - observation.pixel).squaredNorm();
-}
-
-ceres::Solver::Options SolverOptions(const BundleAdjustmentOptions& options, int num_free_poses,
-                                     int max_iterations) {
-  ceres::Solver::Options solver;
-  solver.linear_solver_type = num_free_poses <= options.max_dense_schur_poses
-                                  ? ceres::DENSE_SCHUR
-                                  : ceres::SPARSE_SCHUR;
-  solver.max_num_iterations = max_iterations;
-  solver.num_threads = options.num_threads;
-  solver.function_tolerance = 1e-6;
-  solver.gradient_tolerance = 1e-10;
-  solver.parameter_tolerance = 1e-8;
-  solver.logging_type = ceres::SILENT;
-  solver.minimizer_progress_to_stdout = false;
-  return solver;
 }
 
 // Aborts the solver as soon as the sink is cancelled (Ceres calls this after every iteration,
@@ -127,13 +104,6 @@ struct CalibrationBlocks {
     using I = UnifiedIntrinsics;
     std::vector<int> fixed;
     for (int i = 0; i < I::kNumParams; ++i) {
-      if (refinement.fixed_intrinsics[i]) continue;
-      const bool linear = i == I::kGammaU || i == I::kGammaV || i == I::kU0 || i == I::kV0 ||
-                          i == I::kAlpha;
-      nonlinear_intrinsics_free = nonlinear_intrinsics_free || !linear;
-    }
-    nonlinear_intrinsics_free = nonlinear_intrinsics_free && refinement.RefinesIntrinsics();
-    for (int i = 0; i < I::kNumParams; ++i) {
       if (refinement.fixed_intrinsics[i]) fixed.push_back(i);
     }
     for (auto& block : intrinsics) {
@@ -164,7 +134,6 @@ struct CalibrationBlocks {
   std::array<double, UnifiedIntrinsics::kNumParams> intrinsics[2];
   Eigen::Vector4d rotation;     // Eigen order [x, y, z, w]
   Eigen::Vector3d translation;
-  bool nonlinear_intrinsics_free = false;  // xi or k1..k5 refined
 };
 
 // One observation's residual: the fixed-calibration cost, or the one over the calibration
@@ -175,17 +144,16 @@ void AddObservation(const StereoRig& rig, const Rigid3d (&cam_from_rig)[2],
   if (calibration == nullptr) {
     const CameraModel& camera = o.camera == 0 ? rig.cam0 : rig.cam1;
     problem->AddResidualBlock(
-        new RigReprojectionCost(camera.intrinsics, cam_from_rig[o.camera], o.pixel), loss, pose,
-        point);
+        ReprojectionCost::Landmark(o.pixel, cam_from_rig[o.camera], camera.intrinsics), loss,
+        pose, point);
   } else if (o.camera == 0) {
-    problem->AddResidualBlock(
-        new RigCalibrationCost(0, o.pixel, calibration->nonlinear_intrinsics_free), loss,
-        {pose, point, calibration->intrinsics[0].data()});
+    problem->AddResidualBlock(ReprojectionCost::LandmarkWithCalibration(0, o.pixel), loss,
+                              {pose, point, calibration->intrinsics[0].data()});
   } else {
-    problem->AddResidualBlock(
-        new RigCalibrationCost(1, o.pixel, calibration->nonlinear_intrinsics_free), loss,
-        {pose, point, calibration->intrinsics[1].data(), calibration->rotation.data(),
-         calibration->translation.data()});
+    problem->AddResidualBlock(ReprojectionCost::LandmarkWithCalibration(1, o.pixel), loss,
+                              {pose, point, calibration->rotation.data(),
+                               calibration->translation.data(),
+                               calibration->intrinsics[1].data()});
   }
 }
 
@@ -244,7 +212,9 @@ ceres::Solver::Summary SolveOnce(const CalibrationRefinementOptions* refinement,
     delete loss;  // the problem owns only loss functions it was given
     return summary;
   }
-  ceres::Solver::Options solver = SolverOptions(options, report->num_free_poses, max_iterations);
+  ceres::Solver::Options solver = MakeSolverOptions(
+      SolverSetup(report->num_free_poses, max_iterations, options.num_threads)
+          .DenseSchurUpTo(options.max_dense_schur_poses));
   solver.linear_solver_ordering = ordering;
   ProgressCallback callback(progress, iteration_offset,
                             options.max_iterations + SecondSolveIterations(options));
@@ -402,183 +372,6 @@ BundleAdjustmentReport Adjust(const CalibrationRefinementOptions* refinement,
 
 }  // namespace
 
-RigReprojectionCost::RigReprojectionCost(const UnifiedIntrinsics& intrinsics,
-                                         const Rigid3d& cam_from_rig,
-                                         const Eigen::Vector2d& observed_pixel)
-    : intrinsics_(intrinsics),
-      cam_from_rig_rotation_(cam_from_rig.RotationMatrix()),
-      cam_from_rig_translation_(cam_from_rig.translation),
-      observed_pixel_(observed_pixel) {}
-
-namespace {
-
-// point_in_rig = rig_from_world * x for the pose block [qx, qy, qz, qw, tx, ty, tz], with its
-// Jacobians (3x7 and 3x3; either may be null). Eigen's q * x for a possibly non-unit q:
-// x + 2w (v × x) + 2 v × (v × x); the Jacobians differentiate exactly this expression.
-Eigen::Vector3d RigPoint(const double* pose, const double* point,
-                         Eigen::Matrix<double, 3, 7>* d_rig_d_pose,
-                         Eigen::Matrix3d* d_rig_d_point) {
-  const Eigen::Map<const Eigen::Vector3d> v(pose);  // quaternion's vector part
-  const double w = pose[3];
-  const Eigen::Map<const Eigen::Vector3d> t(pose + 4);
-  const Eigen::Map<const Eigen::Vector3d> x(point);
-  const Eigen::Vector3d uv = 2.0 * v.cross(x);
-  if (d_rig_d_pose) {
-    d_rig_d_pose->leftCols<3>() =
-        -2.0 * w * Skew(x) +
-        2.0 * (v * x.transpose() + v.dot(x) * Eigen::Matrix3d::Identity() - 2.0 * x * v.transpose());
-    d_rig_d_pose->col(3) = uv;
-    d_rig_d_pose->rightCols<3>().setIdentity();
-  }
-  if (d_rig_d_point) {
-    *d_rig_d_point = Eigen::Matrix3d::Identity() + 2.0 * w * Skew(v) + 2.0 * Skew(v) * Skew(v);
-  }
-  return x + w * uv + v.cross(uv) + t;
-}
-
-// cam1's point_in_cam = q^-1 (point_in_rig - t) for cam0_from_cam1 = (q, t), with its
-// Jacobian over [q (4), t (3), point_in_rig (3)] from 10-dim jets (cheap next to projecting).
-Eigen::Vector3d Cam1Point(const double* rotation, const double* translation,
-                          const Eigen::Vector3d& point_in_rig,
-                          Eigen::Matrix<double, 3, 10>* jacobian) {
-  using Jet10 = ceres::Jet<double, 10>;
-  Eigen::Quaternion<Jet10> q;
-  Eigen::Matrix<Jet10, 3, 1> t, p;
-  for (int i = 0; i < 4; ++i) q.coeffs()[i] = Jet10(rotation[i], i);
-  for (int i = 0; i < 3; ++i) {
-    t[i] = Jet10(translation[i], 4 + i);
-    p[i] = Jet10(point_in_rig[i], 7 + i);
-  }
-  const Eigen::Matrix<Jet10, 3, 1> c = q.conjugate() * (p - t);
-  Eigen::Vector3d point_in_cam;
-  for (int i = 0; i < 3; ++i) {
-    point_in_cam[i] = c[i].a;
-    jacobian->row(i) = c[i].v.transpose();
-  }
-  return point_in_cam;
-}
-
-// d pixel / d intrinsics (2x11, row-major into `jacobian`). The linear parameters in closed
-// form: pixel = (gamma_u (m_x + alpha m_y) + u0, gamma_v m_y + v0) of the distorted point m;
-// xi and k1..k5 by 11-dim jets when `nonlinear_free`, else left zero.
-bool IntrinsicsJacobian(const UnifiedIntrinsics& intrinsics, const Eigen::Vector3d& point_in_cam,
-                        const Eigen::Vector2d& pixel, bool nonlinear_free, double* jacobian) {
-  using I = UnifiedIntrinsics;
-  Eigen::Map<Eigen::Matrix<double, 2, I::kNumParams, Eigen::RowMajor>> j(jacobian);
-  if (nonlinear_free) {
-    using Jet11 = ceres::Jet<double, I::kNumParams>;
-    Jet11 params[I::kNumParams], point[3], projected[2];
-    for (int i = 0; i < I::kNumParams; ++i) params[i] = Jet11(intrinsics.params[i], i);
-    for (int i = 0; i < 3; ++i) point[i] = Jet11(point_in_cam[i]);
-    if (!ProjectToPixel(params, point, projected)) return false;
-    for (int r = 0; r < 2; ++r) j.row(r) = projected[r].v.transpose();
-    return true;
-  }
-  j.setZero();
-  const double my = (pixel.y() - intrinsics.v0()) / intrinsics.gamma_v();
-  const double mx = (pixel.x() - intrinsics.u0()) / intrinsics.gamma_u() - intrinsics.alpha() * my;
-  j(0, I::kGammaU) = mx + intrinsics.alpha() * my;
-  j(0, I::kU0) = 1.0;
-  j(0, I::kAlpha) = intrinsics.gamma_u() * my;
-  j(1, I::kGammaV) = my;
-  j(1, I::kV0) = 1.0;
-  return true;
-}
-
-}  // namespace
-
-bool RigReprojectionCost::Evaluate(double const* const* parameters, double* residuals,
-                                   double** jacobians) const {
-  Eigen::Matrix<double, 3, 7> d_rig_d_pose;
-  Eigen::Matrix3d d_rig_d_x;
-  const Eigen::Vector3d point_in_rig =
-      RigPoint(parameters[0], parameters[1], jacobians && jacobians[0] ? &d_rig_d_pose : nullptr,
-               jacobians && jacobians[1] ? &d_rig_d_x : nullptr);
-  const Eigen::Vector3d point_in_cam = cam_from_rig_rotation_ * point_in_rig +
-                                       cam_from_rig_translation_;
-  Eigen::Matrix<double, 2, 3> d_pixel_d_cam;
-  const std::optional<Eigen::Vector2d> pixel =
-      ProjectWithJacobian(intrinsics_, point_in_cam, jacobians ? &d_pixel_d_cam : nullptr);
-  if (!pixel) return false;
-  residuals[0] = pixel->x() - observed_pixel_.x();
-  residuals[1] = pixel->y() - observed_pixel_.y();
-  if (!jacobians) return true;
-  const Eigen::Matrix<double, 2, 3> d_pixel_d_rig = d_pixel_d_cam * cam_from_rig_rotation_;
-  if (jacobians[0]) {
-    Eigen::Map<Eigen::Matrix<double, 2, 7, Eigen::RowMajor>> j0(jacobians[0]);
-    j0 = d_pixel_d_rig * d_rig_d_pose;
-  }
-  if (jacobians[1]) {
-    Eigen::Map<Eigen::Matrix<double, 2, 3, Eigen::RowMajor>> j1(jacobians[1]);
-    j1 = d_pixel_d_rig * d_rig_d_x;
-  }
-  return true;
-}
-
-RigCalibrationCost::RigCalibrationCost(int camera, const Eigen::Vector2d& observed_pixel,
-                                       bool nonlinear_intrinsics_free)
-    : camera_(camera),
-      observed_pixel_(observed_pixel),
-      nonlinear_intrinsics_free_(nonlinear_intrinsics_free) {
-  set_num_residuals(2);
-  *mutable_parameter_block_sizes() = camera == 0 ? std::vector<int32_t>{7, 3, 11}
-                                                 : std::vector<int32_t>{7, 3, 11, 4, 3};
-}
-
-bool RigCalibrationCost::Evaluate(double const* const* parameters, double* residuals,
-                                  double** jacobians) const {
-  using I = UnifiedIntrinsics;
-  const bool want = jacobians != nullptr;
-  Eigen::Matrix<double, 3, 7> d_rig_d_pose;
-  Eigen::Matrix3d d_rig_d_x;
-  const Eigen::Vector3d point_in_rig =
-      RigPoint(parameters[0], parameters[1], want && jacobians[0] ? &d_rig_d_pose : nullptr,
-               want && jacobians[1] ? &d_rig_d_x : nullptr);
-  // d_cam_d_transform: [q (4), t (3), point_in_rig (3)]
-  Eigen::Matrix<double, 3, 10> d_cam_d_transform;
-  const Eigen::Vector3d point_in_cam =
-      camera_ == 0 ? point_in_rig
-                   : Cam1Point(parameters[3], parameters[4], point_in_rig, &d_cam_d_transform);
-  if (camera_ == 0) {
-    d_cam_d_transform.setZero();
-    d_cam_d_transform.rightCols<3>().setIdentity();
-  }
-  I intrinsics;
-  std::copy(parameters[2], parameters[2] + I::kNumParams, intrinsics.params.begin());
-  Eigen::Matrix<double, 2, 3> d_pixel_d_cam;
-  const std::optional<Eigen::Vector2d> pixel =
-      ProjectWithJacobian(intrinsics, point_in_cam, want ? &d_pixel_d_cam : nullptr);
-  if (!pixel) return false;
-  residuals[0] = pixel->x() - observed_pixel_.x();
-  residuals[1] = pixel->y() - observed_pixel_.y();
-  if (!want) return true;
-  const Eigen::Matrix<double, 2, 3> d_pixel_d_rig =
-      d_pixel_d_cam * d_cam_d_transform.rightCols<3>();
-  if (jacobians[0]) {
-    Eigen::Map<Eigen::Matrix<double, 2, 7, Eigen::RowMajor>> j0(jacobians[0]);
-    j0 = d_pixel_d_rig * d_rig_d_pose;
-  }
-  if (jacobians[1]) {
-    Eigen::Map<Eigen::Matrix<double, 2, 3, Eigen::RowMajor>> j1(jacobians[1]);
-    j1 = d_pixel_d_rig * d_rig_d_x;
-  }
-  if (jacobians[2]) {
-    if (!IntrinsicsJacobian(intrinsics, point_in_cam, *pixel, nonlinear_intrinsics_free_,
-                            jacobians[2])) {
-      return false;
-    }
-  }
-  if (camera_ == 1 && jacobians[3]) {
-    Eigen::Map<Eigen::Matrix<double, 2, 4, Eigen::RowMajor>> j3(jacobians[3]);
-    j3 = d_pixel_d_cam * d_cam_d_transform.leftCols<4>();
-  }
-  if (camera_ == 1 && jacobians[4]) {
-    Eigen::Map<Eigen::Matrix<double, 2, 3, Eigen::RowMajor>> j4(jacobians[4]);
-    j4 = d_pixel_d_cam * d_cam_d_transform.middleCols<3>(4);
-  }
-  return true;
-}
-
 Rigid3d CamFromRig(const StereoRig& rig, int camera) {
   OMNIRIG_CHECK(camera == 0 || camera == 1, "a stereo rig has cameras 0 and 1, not " << camera);
   return camera == 0 ? Rigid3d() : rig.cam0_from_cam1.Inverse();
@@ -656,7 +449,7 @@ Rigid3d RefineRigPose(const StereoRig& rig, const Rigid3d& rig_from_world_init,
       const Observation& o = observations[i];
       const CameraModel& camera = o.camera == 0 ? rig.cam0 : rig.cam1;
       problem.AddResidualBlock(
-          new RigReprojectionCost(camera.intrinsics, cam_from_rig[o.camera], o.pixel), loss,
+          ReprojectionCost::Landmark(o.pixel, cam_from_rig[o.camera], camera.intrinsics), loss,
           pose.data(), points[i].data());
       problem.SetParameterBlockConstant(points[i].data());
       ++used;
@@ -665,10 +458,7 @@ Rigid3d RefineRigPose(const StereoRig& rig, const Rigid3d& rig_from_world_init,
       delete loss;
       break;
     }
-    ceres::Solver::Options solver;
-    solver.linear_solver_type = ceres::DENSE_QR;
-    solver.max_num_iterations = options.max_iterations;
-    solver.logging_type = ceres::SILENT;
+    const ceres::Solver::Options solver = MakeSolverOptions(SolverSetup(0, options.max_iterations));
     ceres::Solver::Summary summary;
     ceres::Solve(solver, &problem, &summary);
     const Rigid3d refined = Rigid3d::FromParams(pose.data());

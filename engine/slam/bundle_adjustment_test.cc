@@ -1,12 +1,13 @@
 #include "engine/slam/bundle_adjustment.h"
 
 #include <algorithm>
+#include <memory>
 #include <random>
 #include <string>
 
-#include <ceres/autodiff_cost_function.h>
 #include <gtest/gtest.h>
 
+#include "engine/geometry/reprojection_cost.h"
 #include "engine/slam/evaluation.h"
 #include "engine/slam/sequence_accuracy.h"
 
@@ -26,39 +27,6 @@ StereoRig MakeRig() {
   rig.cam0_from_cam1 = Rigid3d(Eigen::Quaterniond(Eigen::AngleAxisd(0.01, Eigen::Vector3d::UnitX())),
                                Eigen::Vector3d(0.002, -0.001, 0.1));
   return rig;
-}
-
-TEST(RigReprojectionCost, AnalyticJacobiansMatchAutoDiff) {
-  const StereoRig rig = MakeRig();
-  std::mt19937 rng(3);
-  std::uniform_real_distribution<double> u(-1, 1);
-  for (int trial = 0; trial < 50; ++trial) {
-    const int camera = trial % 2;
-    // A non-unit quaternion too: the analytic Jacobian differentiates Eigen's expression.
-    std::array<double, 7> pose = {u(rng), u(rng), u(rng), 1.5 + u(rng), u(rng), u(rng), u(rng)};
-    if (trial % 3 == 0) {
-      const double n = std::sqrt(pose[0] * pose[0] + pose[1] * pose[1] + pose[2] * pose[2] +
-                                 pose[3] * pose[3]);
-      for (int i = 0; i < 4; ++i) pose[i] /= n;
-    }
-    std::array<double, 3> point = {2 * u(rng), 2 * u(rng), 1 + u(rng)};
-    const Eigen::Vector2d observed(500 + 100 * u(rng), 300 + 100 * u(rng));
-    const CameraModel& model = camera == 0 ? rig.cam0 : rig.cam1;
-    RigReprojectionCost analytic(model.intrinsics, CamFromRig(rig, camera), observed);
-    ceres::AutoDiffCostFunction<RigReprojectionAutoDiff, 2, 7, 3> autodiff(
-        new RigReprojectionAutoDiff(model.intrinsics, CamFromRig(rig, camera), observed));
-    const double* params[2] = {pose.data(), point.data()};
-    double r_a[2], r_b[2], j0_a[14], j0_b[14], j1_a[6], j1_b[6];
-    double* j_a[2] = {j0_a, j1_a};
-    double* j_b[2] = {j0_b, j1_b};
-    const bool ok_a = analytic.Evaluate(params, r_a, j_a);
-    const bool ok_b = autodiff.Evaluate(params, r_b, j_b);
-    ASSERT_EQ(ok_a, ok_b);
-    if (!ok_a) continue;
-    for (int i = 0; i < 2; ++i) EXPECT_NEAR(r_a[i], r_b[i], 1e-9);
-    for (int i = 0; i < 14; ++i) EXPECT_NEAR(j0_a[i], j0_b[i], 1e-7 * (1 + std::abs(j0_b[i])));
-    for (int i = 0; i < 6; ++i) EXPECT_NEAR(j1_a[i], j1_b[i], 1e-7 * (1 + std::abs(j1_b[i])));
-  }
 }
 
 struct SyntheticScene {
@@ -227,7 +195,9 @@ TEST(BundleAdjustmentOptions, RejectsNonsense) {
   EXPECT_THROW(options.Check(), InvalidArgument);
 }
 
-TEST(RigCalibrationReprojection, MatchesTheFixedCalibrationCost) {
+// The residual over the calibration blocks equals the fixed-calibration one at the same values
+// (the Jacobians of both: engine/geometry/reprojection_cost_test.cc).
+TEST(ReprojectionCost, LandmarkWithCalibrationMatchesTheFixedCalibration) {
   const StereoRig rig = MakeRig();
   std::array<double, 7> pose =
       Rigid3d(Eigen::Quaterniond(Eigen::AngleAxisd(0.3, Eigen::Vector3d(1, 2, 3).normalized())),
@@ -240,82 +210,20 @@ TEST(RigCalibrationReprojection, MatchesTheFixedCalibrationCost) {
   for (int camera = 0; camera < 2; ++camera) {
     const CameraModel& model = camera == 0 ? rig.cam0 : rig.cam1;
     std::array<double, UnifiedIntrinsics::kNumParams> intrinsics = model.intrinsics.params;
-    const RigReprojectionCost fixed(model.intrinsics, CamFromRig(rig, camera), observed);
+    const std::unique_ptr<ceres::CostFunction> fixed(
+        ReprojectionCost::Landmark(observed, CamFromRig(rig, camera), model.intrinsics));
     const double* fixed_params[2] = {pose.data(), point.data()};
     double expected[2], actual[2];
-    ASSERT_TRUE(fixed.Evaluate(fixed_params, expected, nullptr));
-    const RigCalibrationReprojection free(observed);
-    ASSERT_TRUE(free.Residual(pose.data(), point.data(), intrinsics.data(),
-                              camera == 0 ? nullptr : rotation.data(),
-                              camera == 0 ? nullptr : translation.data(), actual));
+    ASSERT_TRUE(fixed->Evaluate(fixed_params, expected, nullptr));
+    const std::unique_ptr<ceres::CostFunction> free(
+        ReprojectionCost::LandmarkWithCalibration(camera, observed));
+    const double* cam0_params[3] = {pose.data(), point.data(), intrinsics.data()};
+    const double* cam1_params[5] = {pose.data(), point.data(), rotation.data(),
+                                    translation.data(), intrinsics.data()};
+    ASSERT_TRUE(free->Evaluate(camera == 0 ? cam0_params : cam1_params, actual, nullptr));
     EXPECT_NEAR(actual[0], expected[0], 1e-9);
     EXPECT_NEAR(actual[1], expected[1], 1e-9);
   }
-}
-
-TEST(RigCalibrationCost, JacobiansMatchAutoDiff) {
-  using I = UnifiedIntrinsics;
-  StereoRig rig = MakeRig();
-  rig.cam1.intrinsics.alpha() = 0.002;  // a skew too, so that its column is exercised
-  rig.cam1.intrinsics.k(3) = 1e-3;
-  std::mt19937 rng(5);
-  std::uniform_real_distribution<double> u(-1, 1);
-  int evaluated = 0;
-  for (int trial = 0; trial < 60; ++trial) {
-    const int camera = trial % 2;
-    const bool nonlinear_free = trial % 4 < 2;
-    std::array<double, 7> pose = {u(rng), u(rng), u(rng), 1.5 + u(rng), u(rng), u(rng), u(rng)};
-    std::array<double, 3> point = {2 * u(rng), 2 * u(rng), 1 + u(rng)};
-    std::array<double, I::kNumParams> intrinsics =
-        (camera == 0 ? rig.cam0 : rig.cam1).intrinsics.params;
-    Eigen::Vector4d rotation = rig.cam0_from_cam1.rotation.coeffs();
-    Eigen::Vector3d translation = rig.cam0_from_cam1.translation;
-    const Eigen::Vector2d observed(500 + 100 * u(rng), 300 + 100 * u(rng));
-    const RigCalibrationCost analytic(camera, observed, nonlinear_free);
-    const int num_blocks = camera == 0 ? 3 : 5;
-    const int sizes[5] = {7, 3, I::kNumParams, 4, 3};
-    const double* params[5] = {pose.data(), point.data(), intrinsics.data(), rotation.data(),
-                               translation.data()};
-    std::vector<std::vector<double>> j_a(num_blocks), j_b(num_blocks);
-    double* ja[5];
-    double* jb[5];
-    for (int b = 0; b < num_blocks; ++b) {
-      j_a[b].assign(2 * sizes[b], 0.0);
-      j_b[b].assign(2 * sizes[b], 0.0);
-      ja[b] = j_a[b].data();
-      jb[b] = j_b[b].data();
-    }
-    double r_a[2], r_b[2];
-    bool ok_b;
-    if (camera == 0) {
-      ceres::AutoDiffCostFunction<Cam0CalibrationReprojection, 2, 7, 3, I::kNumParams> autodiff(
-          new Cam0CalibrationReprojection(observed));
-      ok_b = autodiff.Evaluate(params, r_b, jb);
-    } else {
-      ceres::AutoDiffCostFunction<Cam1CalibrationReprojection, 2, 7, 3, I::kNumParams, 4, 3>
-          autodiff(new Cam1CalibrationReprojection(observed));
-      ok_b = autodiff.Evaluate(params, r_b, jb);
-    }
-    const bool ok_a = analytic.Evaluate(params, r_a, ja);
-    ASSERT_EQ(ok_a, ok_b);
-    if (!ok_a) continue;
-    ++evaluated;
-    for (int i = 0; i < 2; ++i) EXPECT_NEAR(r_a[i], r_b[i], 1e-9);
-    for (int b = 0; b < num_blocks; ++b) {
-      for (int k = 0; k < 2 * sizes[b]; ++k) {
-        const int column = k % sizes[b];
-        const bool linear = column == I::kGammaU || column == I::kGammaV || column == I::kU0 ||
-                            column == I::kV0 || column == I::kAlpha;
-        if (b == 2 && !nonlinear_free && !linear) {
-          EXPECT_EQ(j_a[b][k], 0.0);  // left for the subset manifold to ignore
-          continue;
-        }
-        EXPECT_NEAR(j_a[b][k], j_b[b][k], 1e-7 * (1 + std::abs(j_b[b][k])))
-            << "block " << b << " entry " << k << " trial " << trial;
-      }
-    }
-  }
-  EXPECT_GT(evaluated, 40);
 }
 
 TEST(BundleAdjustWithCalibration, RefinesAPerturbedCalibrationTowardsTheTruth) {

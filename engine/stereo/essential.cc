@@ -7,18 +7,13 @@
 #include <Eigen/Eigenvalues>
 #include <Eigen/SVD>
 
+#include "engine/geometry/ceres_problem.h"
 #include "engine/stereo/ransac.h"
 #include "engine/stereo/triangulation.h"
 #include "engine/util/check.h"
 
 namespace omnirig {
 namespace {
-
-Eigen::Matrix3d Skew(const Eigen::Vector3d& v) {
-  Eigen::Matrix3d s;
-  s << 0, -v.z(), v.y(), v.z(), 0, -v.x(), -v.y(), v.x(), 0;
-  return s;
-}
 
 // Hartley's conditioning transposed to bearings: a linear map T with (1/n) sum (T b)(T b)^T
 // proportional to the identity, so that the nine columns of A in eq. (14) have comparable
@@ -273,11 +268,7 @@ bool RefineRelativePose(const std::vector<Eigen::Vector3d>& bearings1,
   problem.SetManifold(params.data(), new ceres::EigenQuaternionManifold());
   // Scale is not observable: the translation lives on the unit sphere (the gauge).
   problem.SetManifold(params.data() + 4, new ceres::SphereManifold<3>());
-  ceres::Solver::Options options;
-  options.linear_solver_type = ceres::DENSE_QR;
-  options.max_num_iterations = 20;
-  options.num_threads = 1;
-  options.logging_type = ceres::SILENT;
+  const ceres::Solver::Options options = MakeSolverOptions(SolverSetup(0, 20));
   ceres::Solver::Summary summary;
   ceres::Solve(options, &problem, &summary);
   if (!summary.IsSolutionUsable() || !std::isfinite(summary.final_cost)) return false;

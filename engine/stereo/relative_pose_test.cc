@@ -7,7 +7,7 @@
 #include <gtest/gtest.h>
 
 #include "engine/stereo/relpose_corner_order.h"
-#include "engine/stereo/relpose_cost.h"
+#include "engine/geometry/reprojection_cost.h"
 #include "engine/stereo/relpose_linear.h"
 #include "engine/stereo/relpose_test_scene.h"
 
@@ -86,7 +86,8 @@ TEST(RelposeCost, Cam1ResidualIsTheProjectionThroughTheRig) {
   const Rigid3d cam0_from_board = BoardPose(scene.board, 30.0, 0.7, 10.0, 0.0);
   const Eigen::Vector3d point = scene.board.ObjectPoints()[5];
   const Eigen::Vector2d observed(500.0, 300.0);
-  std::unique_ptr<ceres::CostFunction> cost(RigCam1CornerCost::Create(observed, point));
+  std::unique_ptr<ceres::CostFunction> cost(
+      ReprojectionCost::BoardCornerThroughRig(point, observed));
   const auto board_params = cam0_from_board.ToParams();
   const auto rig_params = scene.rig.cam0_from_cam1.ToParams();
   const double* parameters[] = {board_params.data(), rig_params.data(),

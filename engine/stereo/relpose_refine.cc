@@ -6,8 +6,8 @@
 
 #include <ceres/ceres.h>
 
-#include "engine/calib/ceres_util.h"
-#include "engine/stereo/relpose_cost.h"
+#include "engine/geometry/ceres_problem.h"
+#include "engine/geometry/reprojection_cost.h"
 #include "engine/stereo/relpose_motion.h"
 
 namespace omnirig {
@@ -76,18 +76,17 @@ void AddResiduals(const std::vector<RigPairCorners>& pairs, const RigRefinementO
   for (size_t i = 0; i < pairs.size(); ++i) {
     double* board = blocks->cam0_from_board[i].data();
     for (size_t c = 0; c < pairs[i].pixels0.size(); ++c) {
-      // RigCam0CornerCost, with hand-written Jacobians: the calibration's own corner cost.
       keep(i, problem->AddResidualBlock(
-                  new BoardCornerAnalyticCost(pairs[i].points_in_board0[c], pairs[i].pixels0[c]),
-                  loss, blocks->intrinsics0.data(), board));
+                  ReprojectionCost::BoardCorner(pairs[i].points_in_board0[c], pairs[i].pixels0[c]),
+                  loss, board, blocks->intrinsics0.data()));
     }
     if (options.board_motion) {
       // cam1's own board pose, tied to the rig's prediction by the motion prior.
       double* board1 = blocks->cam1_from_board[i].data();
       for (size_t c = 0; c < pairs[i].pixels1.size(); ++c) {
         keep(i, problem->AddResidualBlock(
-                    new BoardCornerAnalyticCost(pairs[i].points_in_board1[c], pairs[i].pixels1[c]),
-                    loss, blocks->intrinsics1.data(), board1));
+                    ReprojectionCost::BoardCorner(pairs[i].points_in_board1[c], pairs[i].pixels1[c]),
+                    loss, board1, blocks->intrinsics1.data()));
       }
       keep(i, problem->AddResidualBlock(
                   BoardMotionLinkCost::Create(RigPairBoardCentre(pairs[i]), *options.board_motion),
@@ -97,7 +96,8 @@ void AddResiduals(const std::vector<RigPairCorners>& pairs, const RigRefinementO
       for (size_t c = 0; c < pairs[i].pixels1.size(); ++c) {
         keep(i,
              problem->AddResidualBlock(
-                 new RigCam1CornerAnalyticCost(pairs[i].pixels1[c], pairs[i].points_in_board1[c]),
+                 ReprojectionCost::BoardCornerThroughRig(pairs[i].points_in_board1[c],
+                                                         pairs[i].pixels1[c]),
                  loss, board, blocks->cam0_from_cam1.data(), blocks->intrinsics1.data()));
       }
     }
@@ -320,16 +320,11 @@ RigRefinementSummary RefineRigWithBoardMotion(const std::vector<RigPairCorners>&
   std::vector<std::vector<ceres::ResidualBlockId>> pair_residuals;
   AddResiduals(pairs, options, &blocks, &problem, &pair_residuals);
 
-  ceres::Solver::Options solver_options;
-  // Board poses form the Schur complement's eliminated group; the rig pose and intrinsics are
-  // few, so the reduced system is small and dense.
-  solver_options.linear_solver_type = ceres::DENSE_SCHUR;
-  solver_options.max_num_iterations = options.max_num_iterations;
-  solver_options.num_threads = std::max(1, options.num_threads);
-  solver_options.function_tolerance = 1e-12;
-  solver_options.gradient_tolerance = 1e-14;
-  solver_options.parameter_tolerance = 1e-12;
-  solver_options.logging_type = ceres::SILENT;
+  // Board poses form the Schur complement's eliminated group; the rig pose and the two
+  // intrinsics are few (3 blocks), so the reduced system is small and dense.
+  ceres::Solver::Options solver_options = MakeSolverOptions(
+      SolverSetup(3, options.max_num_iterations, std::max(1, options.num_threads))
+          .Tolerances(1e-12, 1e-14, 1e-12));
   ProgressCallback callback(progress, options.max_num_iterations);
   solver_options.callbacks.push_back(&callback);
   ceres::Solver::Summary summary;
@@ -375,23 +370,19 @@ double FitBoardThroughRig(const StereoRig& rig, const RigPairCorners& pair,
   const Rigid3d cam1_from_cam0 = rig.cam0_from_cam1.Inverse();
   for (size_t c = 0; c < pair.pixels0.size(); ++c) {
     problem.AddResidualBlock(
-        new ceres::AutoDiffCostFunction<BoardThroughRigCost, 2, 7>(new BoardThroughRigCost(
-            pair.pixels0[c], pair.points_in_board0[c], Rigid3d(), rig.cam0.intrinsics)),
+        ReprojectionCost::BoardCornerFixedCamera(pair.points_in_board0[c], pair.pixels0[c],
+                                                 Rigid3d(), rig.cam0.intrinsics),
         &weight0, board.data());
   }
   for (size_t c = 0; c < pair.pixels1.size(); ++c) {
     problem.AddResidualBlock(
-        new ceres::AutoDiffCostFunction<BoardThroughRigCost, 2, 7>(new BoardThroughRigCost(
-            pair.pixels1[c], pair.points_in_board1[c], cam1_from_cam0, rig.cam1.intrinsics)),
+        ReprojectionCost::BoardCornerFixedCamera(pair.points_in_board1[c], pair.pixels1[c],
+                                                 cam1_from_cam0, rig.cam1.intrinsics),
         &weight1, board.data());
   }
   problem.SetManifold(board.data(), NewPoseManifold());
-  ceres::Solver::Options solver_options;
-  solver_options.linear_solver_type = ceres::DENSE_QR;
-  solver_options.max_num_iterations = 50;
-  solver_options.function_tolerance = 1e-12;
-  solver_options.parameter_tolerance = 1e-12;
-  solver_options.logging_type = ceres::SILENT;
+  const ceres::Solver::Options solver_options =
+      MakeSolverOptions(SolverSetup(0, 50).Tolerances(1e-12, 1e-10, 1e-12));
   ceres::Solver::Summary summary;
   ceres::Solve(solver_options, &problem, &summary);
   if (!summary.IsSolutionUsable() || !std::isfinite(summary.final_cost)) return -1.0;
