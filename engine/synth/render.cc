@@ -607,6 +607,39 @@ Eigen::Vector3f ShadePixel(const FrameContext& frame, int i, int j, uint8_t cls,
   return ShadeSampled(frame, i, j, border, corners);
 }
 
+FrameContext MakeFrameContext(const Scene& scene, const SynthCamera& camera,
+                              const Rigid3d& cam_from_world, int supersampling) {
+  FrameContext frame;
+  frame.camera = &camera;
+  frame.plane = NormalisedPlane(camera.model.intrinsics.xi());
+  frame.rim2 = camera.rim_radius_px * camera.rim_radius_px;
+  frame.hole2 = camera.hole_radius_px * camera.hole_radius_px;
+  for (int i = 0; i < static_cast<int>(scene.primitives().size()); ++i) {
+    frame.prims.push_back(MakeFramePrimitive(scene, i, cam_from_world));
+  }
+  frame.background = (scene.background_rgb() * 255.0).cast<float>();
+  frame.samples = RookPattern(supersampling);
+  return frame;
+}
+
+// The sensor: blur, grey conversion and noise on the radiance (BGR, 0-255), then 8 bits.
+cv::Mat SensorImage(cv::Mat radiance, const RenderOptions& options) {
+  if (options.blur_sigma_px > 0.0) {
+    cv::GaussianBlur(radiance, radiance, cv::Size(0, 0), options.blur_sigma_px, 0.0,
+                     cv::BORDER_REPLICATE);
+  }
+  if (options.grayscale) cv::cvtColor(radiance, radiance, cv::COLOR_BGR2GRAY);
+  if (options.noise_sigma > 0.0) {
+    cv::Mat noise(radiance.size(), radiance.type());
+    cv::RNG rng(options.seed ^ 0x5DEECE66Dull);
+    rng.fill(noise, cv::RNG::NORMAL, 0.0, options.noise_sigma);
+    radiance += noise;
+  }
+  cv::Mat image;
+  radiance.convertTo(image, options.grayscale ? CV_8UC1 : CV_8UC3);
+  return image;
+}
+
 }  // namespace
 
 cv::Mat Renderer::Render(const Scene& scene, const Rigid3d& cam_from_world,
@@ -617,23 +650,13 @@ cv::Mat Renderer::Render(const Scene& scene, const Rigid3d& cam_from_world,
   const int width = camera.model.width, height = camera.model.height;
   const int threads = ResolveThreads(options.num_threads, height);
 
-  FrameContext frame;
-  frame.camera = &camera;
-  frame.plane = NormalisedPlane(camera.model.intrinsics.xi());
-  frame.rim2 = camera.rim_radius_px * camera.rim_radius_px;
-  frame.hole2 = camera.hole_radius_px * camera.hole_radius_px;
-  for (int i = 0; i < static_cast<int>(scene.primitives().size()); ++i) {
-    frame.prims.push_back(MakeFramePrimitive(scene, i, cam_from_world));
-  }
-  frame.background = (scene.background_rgb() * 255.0).cast<float>();
-  frame.samples = RookPattern(options.supersampling);
+  FrameContext frame = MakeFrameContext(scene, camera, cam_from_world, options.supersampling);
 
   // Pass 1: the primitive hit at every needed pixel corner.
   frame.lattice_hit.assign(g.m.size(), -1);
   ParallelRows(g.lattice_rows, threads, [&](int j) {
     for (int i = 0; i < g.lattice_cols; ++i) {
       const size_t index = static_cast<size_t>(j) * g.lattice_cols + i;
-      if (!g.m_valid[index]) continue;
       const std::optional<Eigen::Vector3d>& bearing = g.bearing[index];
       if (bearing) frame.lattice_hit[index] = IntersectAll(frame.prims, *bearing).primitive;
     }
@@ -665,20 +688,7 @@ cv::Mat Renderer::Render(const Scene& scene, const Rigid3d& cam_from_world,
     }
   });
 
-  if (options.blur_sigma_px > 0.0) {
-    cv::GaussianBlur(radiance, radiance, cv::Size(0, 0), options.blur_sigma_px, 0.0,
-                     cv::BORDER_REPLICATE);
-  }
-  if (options.grayscale) cv::cvtColor(radiance, radiance, cv::COLOR_BGR2GRAY);
-  if (options.noise_sigma > 0.0) {
-    cv::Mat noise(radiance.size(), radiance.type());
-    cv::RNG rng(options.seed ^ 0x5DEECE66Dull);
-    rng.fill(noise, cv::RNG::NORMAL, 0.0, options.noise_sigma);
-    radiance += noise;
-  }
-  cv::Mat image;
-  radiance.convertTo(image, options.grayscale ? CV_8UC1 : CV_8UC3);
-  return image;
+  return SensorImage(std::move(radiance), options);
 }
 
 cv::Mat Render(const Scene& scene, const SynthCamera& camera, const Rigid3d& cam_from_world,
