@@ -139,8 +139,7 @@ class Tracker {
   void LocalBundleAdjustment(FrameReport* report);
   // Tracks `frame` against anchor_ without the motion prior (the motion since then is
   // unknown); on success replaces `report` and `matches`.
-  bool Relocalise(KeyFrame* frame, std::vector<std::pair<int, int>>* matches,
-                  FrameReport* report);
+  bool Relocalise(KeyFrame* frame, std::vector<std::pair<int, int>>* matches, FrameReport* report);
   // Starts a new segment at `frame`: its pose is restart_pose, its landmarks new ones.
   void Restart(const std::optional<Rigid3d>& restart_pose, KeyFrame* frame,
                std::vector<std::pair<int, int>>* matches, FrameReport* report);
@@ -489,8 +488,8 @@ bool Tracker::Relocalise(KeyFrame* frame, std::vector<std::pair<int, int>>* matc
   if (!TrackAgainst(*anchor_, /*use_motion_prior=*/false, frame, &anchor_matches, &attempt)) {
     return false;
   }
-  attempt.reason = "relocalised against frame " + std::to_string(anchor_->index) +
-                   " after: " + report->reason;
+  attempt.reason =
+      "relocalised against frame " + std::to_string(anchor_->index) + " after: " + report->reason;
   *report = std::move(attempt);
   *matches = std::move(anchor_matches);
   report->linked = true;

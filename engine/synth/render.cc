@@ -33,8 +33,8 @@ int ResolveThreads(int num_threads, int rows) {
 
 // Runs body(row) for every row in [0, rows) on `threads` threads.
 void ParallelRows(int rows, int threads, const std::function<void(int)>& body) {
-  RunTasks(rows, threads, ProgressSink{}, [&body](int row, const ProgressSink&) { body(row); },
-           nullptr);
+  RunTasks(
+      rows, threads, ProgressSink{}, [&body](int row, const ProgressSink&) { body(row); }, nullptr);
 }
 
 // The normalised plane as the image of a camera with K = I and no distortion: lifting one of
@@ -494,7 +494,7 @@ float Vignetting(double strength, int i, int j, const SynthCamera& camera) {
 
 struct FrameContext {
   const SynthCamera* camera = nullptr;
-  UnifiedIntrinsics plane;  // NormalisedPlane(xi)
+  UnifiedIntrinsics plane;         // NormalisedPlane(xi)
   double rim2 = 0.0, hole2 = 0.0;  // squared mirror radii, pixels^2
   std::vector<FramePrimitive> prims;
   Eigen::Vector3f background;
@@ -556,8 +556,7 @@ std::optional<Eigen::Vector3f> ShadeSurfaceByInterpolation(const FrameContext& f
   std::array<Hit, 4> hits;
   for (int q = 0; q < 4; ++q) {
     const std::optional<Eigen::Vector3d>& bearing = *corners.bearing[q];
-    if (!bearing || !IntersectOne(prim, *bearing, id, &hits[q]) ||
-        hits[q].face != hits[0].face) {
+    if (!bearing || !IntersectOne(prim, *bearing, id, &hits[q]) || hits[q].face != hits[0].face) {
       return std::nullopt;
     }
   }
@@ -592,9 +591,9 @@ Eigen::Vector3f ShadePixel(const FrameContext& frame, int i, int j, uint8_t cls,
     const FramePrimitive& prim = frame.prims[corners.primitive];
     if (prim.kind == PrimitiveInfo::Kind::kCheckerboard) {
       if (!border) {
-        const auto level = BoardPixel(prim, corners.primitive,
-                                      {corners.bearing[0], corners.bearing[1], corners.bearing[3],
-                                       corners.bearing[2]});
+        const auto level = BoardPixel(
+            prim, corners.primitive,
+            {corners.bearing[0], corners.bearing[1], corners.bearing[3], corners.bearing[2]});
         if (level) return Eigen::Vector3f::Constant(*level);
       }
     } else if (frame.samples.size() > 4) {
