@@ -16,13 +16,7 @@ namespace {
 class CalibrationRefinementOnSequence : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    synth::StereoSequenceOptions options;
-    options.num_frames = 20;
-    options.path_length_m = 3.0;  // 15 cm steps
-    options.width = 640;
-    options.height = 480;
-    options.render.noise_sigma = 1.0;
-    sequence_ = new synth::StereoSequence(synth::MakeStereoSequence(options));
+    sequence_ = new synth::StereoSequence(synth::MakeStereoSequence(ShortSequenceOptions(20)));
   }
   static void TearDownTestSuite() { delete sequence_; }
 

@@ -71,4 +71,14 @@ StereoRig PerturbedCalibration(const StereoRig& rig, double rig_rotation_deg) {
   return perturbed;
 }
 
+synth::StereoSequenceOptions ShortSequenceOptions(int num_frames) {
+  synth::StereoSequenceOptions options;
+  options.num_frames = num_frames;
+  options.path_length_m = 0.15 * num_frames;
+  options.width = 640;
+  options.height = 480;
+  options.render.noise_sigma = 1.0;
+  return options;
+}
+
 }  // namespace omnirig::slam

@@ -32,4 +32,7 @@ SequenceAccuracy EvaluateOnSequence(const synth::StereoSequence& sequence,
 // by 0.2 degrees. The baseline is kept: it is the metric scale, which no residual observes.
 StereoRig PerturbedCalibration(const StereoRig& rig, double rig_rotation_deg = 0.2);
 
+// A short sequence the SLAM tests render: 640x480, 15 cm steps, image noise 1 grey level.
+synth::StereoSequenceOptions ShortSequenceOptions(int num_frames);
+
 }  // namespace omnirig::slam
