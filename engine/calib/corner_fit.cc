@@ -3,10 +3,10 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
-#include <utility>
 #include <vector>
 
 #include <ceres/jet.h>
+#include <ceres/tiny_solver.h>
 #include <Eigen/Dense>
 
 #include "engine/util/check.h"
@@ -142,29 +142,30 @@ std::optional<std::array<double, 2>> EdgeAngles(const cv::Mat& image, const Eige
                                0.5 * (crossings[1] + crossings[3] - M_PI)};
 }
 
-// The cost (sum of squared residuals model - value) at q and its normal equations J^T J and
-// J^T r, computed together: each accepted Levenberg-Marquardt step needs both at the new point.
-struct Linearisation {
-  double cost = 0.0;
-  Eigen::Matrix<double, kNum, kNum> jtj;
-  Params jtr;
-};
+// The residuals model - value over the disc's pixels and their analytic Jacobian, as
+// ceres::TinySolver takes them.
+struct JunctionResiduals {
+  using Scalar = double;
+  enum { NUM_RESIDUALS = Eigen::Dynamic, NUM_PARAMETERS = kNum };
 
-Linearisation Linearise(const std::vector<Pixel>& pixels, const Params& q) {
-  const JunctionModel<double> model(q.data());
-  Linearisation result;
-  result.jtj.setZero();
-  result.jtr.setZero();
-  Params gradient;
-  for (const Pixel& pixel : pixels) {
-    const double r = ValueAndGradient(model, pixel.x, pixel.y, &gradient) - pixel.value;
-    result.cost += r * r;
-    result.jtj.selfadjointView<Eigen::Upper>().rankUpdate(gradient);
-    result.jtr += r * gradient;
+  const std::vector<Pixel>* pixels;
+
+  int NumResiduals() const { return static_cast<int>(pixels->size()); }
+
+  // `jacobian` is column-major (residual, parameter), or null.
+  bool operator()(const double* q, double* residuals, double* jacobian) const {
+    const JunctionModel<double> model(q);
+    const int n = NumResiduals();
+    Params gradient;
+    for (int i = 0; i < n; ++i) {
+      const Pixel& pixel = (*pixels)[i];
+      residuals[i] = ValueAndGradient(model, pixel.x, pixel.y, &gradient) - pixel.value;
+      if (jacobian == nullptr) continue;
+      for (int j = 0; j < kNum; ++j) jacobian[i + j * n] = gradient[j];
+    }
+    return true;
   }
-  result.jtj = result.jtj.selfadjointView<Eigen::Upper>();
-  return result;
-}
+};
 
 // Mean and amplitude by linear least squares with the geometry of q fixed.
 void FitLevels(const std::vector<Pixel>& pixels, Params* q) {
@@ -186,29 +187,10 @@ void FitLevels(const std::vector<Pixel>& pixels, Params* q) {
 
 // Levenberg-Marquardt on the model; false when it does not settle.
 bool Solve(const std::vector<Pixel>& pixels, int max_iterations, Params* q) {
-  Linearisation current = Linearise(pixels, *q);
-  double lambda = 1e-3;
-  for (int iteration = 0; iteration < max_iterations; ++iteration) {
-    bool improved = false;
-    while (!improved && lambda < 1e10) {
-      Eigen::Matrix<double, kNum, kNum> damped = current.jtj;
-      damped.diagonal() += lambda * current.jtj.diagonal().cwiseMax(1e-9);
-      const Params step = damped.ldlt().solve(-current.jtr);
-      const Params candidate = *q + step;
-      Linearisation next = Linearise(pixels, candidate);
-      if (std::isfinite(next.cost) && next.cost < current.cost) {
-        improved = true;
-        *q = candidate;
-        current = std::move(next);
-        lambda = std::max(1e-9, lambda * 0.1);
-        if (std::hypot(step[kPx], step[kPy]) < 1e-4) return true;
-      } else {
-        lambda *= 10.0;
-      }
-    }
-    if (!improved) return true;  // no further descent: at a minimum to working precision
-  }
-  return false;
+  ceres::TinySolver<JunctionResiduals> solver;
+  solver.options.max_num_iterations = max_iterations;
+  const auto& summary = solver.Solve(JunctionResiduals{&pixels}, q);
+  return summary.status != ceres::TinySolver<JunctionResiduals>::HIT_MAX_ITERATIONS;
 }
 
 }  // namespace

@@ -17,11 +17,11 @@
 // d_k = b_k - kappa_k a_k^2 / 2 and the intensity is
 //   I(x) = m + g . (x - p) + h E(d_1) E(d_2),   E(d) = erf(d / s) averaged over the pixel,
 // a checkerboard X-junction blurred to the width s, with a linear shading term g. The 11
-// parameters are fitted by Levenberg-Marquardt (analytic Jacobian, tested against Jets) to the
-// pixels in a disc. What remains is a zero-mean dependence on the corner's sub-pixel phase where
-// the real blur is not a Gaussian: 0.021 px RMS on the noise-free renders with 0.5 px blur,
-// against 0.048 px for cornerSubPix. Without any blur (box-filtered pixels only) a small radial
-// bias of +0.003-0.005 px remains, a fifth of cornerSubPix's.
+// parameters are fitted by Levenberg-Marquardt (ceres::TinySolver; analytic Jacobian, tested
+// against Jets) to the pixels in a disc. What remains is a zero-mean dependence on the corner's
+// sub-pixel phase where the real blur is not a Gaussian: 0.021 px RMS on the noise-free renders
+// with 0.5 px blur, against 0.048 px for cornerSubPix. Without any blur (box-filtered pixels
+// only) a small radial bias of +0.003-0.005 px remains, a fifth of cornerSubPix's.
 
 #include <array>
 #include <optional>
@@ -34,7 +34,9 @@ namespace omnirig {
 struct CornerFitOptions {
   // Radius of the disc of pixels fitted, at most (the caller's window may be smaller).
   double max_radius_px = 8.0;
-  int max_iterations = 30;
+  // Levenberg-Marquardt iterations (ceres::TinySolver's, rejected steps included); the hardest
+  // corners of the synthetic renders take about 50.
+  int max_iterations = 100;
   // A fit that moves the corner further than this from the start is rejected.
   double max_shift_px = 1.0;
 

@@ -1,9 +1,9 @@
 #include "engine/slam/motion.h"
 
 #include <cmath>
-#include <random>
 
 #include "engine/slam/evaluation.h"
+#include "engine/stereo/ransac.h"
 #include "engine/util/check.h"
 
 namespace omnirig::slam {
@@ -27,6 +27,34 @@ std::vector<char> Inliers(const Rigid3d& curr_from_prev, const std::vector<Point
   }
   return mask;
 }
+
+// The 3-point rigid alignment (Kabsch) as a RANSAC estimator (engine/stereo/ransac.h); a pair's
+// error is its distance under the motion in units of its tolerance.
+struct RigidMotionEstimator {
+  using Model = Rigid3d;
+  static constexpr int kMinSampleSize = 3;
+
+  const std::vector<PointPair>& pairs;
+  const ScaleOptions& options;
+
+  void Estimate(const std::vector<int>& sample, std::vector<Model>* models) const {
+    Refit(sample, &models->emplace_back());
+  }
+  bool Refit(const std::vector<int>& indices, Model* curr_from_prev) const {
+    std::vector<Eigen::Vector3d> src, dst;
+    for (const int i : indices) {
+      src.push_back(pairs[i].point_in_prev);
+      dst.push_back(pairs[i].point_in_curr);
+    }
+    *curr_from_prev = AlignRigid(src, dst);
+    return true;
+  }
+  double Error(const Model& curr_from_prev, int i) const {
+    return (curr_from_prev * pairs[i].point_in_prev - pairs[i].point_in_curr).norm() /
+           Tolerance(pairs[i], options);
+  }
+  int NumData() const { return static_cast<int>(pairs.size()); }
+};
 
 }  // namespace
 
@@ -93,34 +121,26 @@ AbsoluteOrientationReport EstimateRigidMotion3D(const std::vector<PointPair>& pa
     report.reason = "too few stereo points seen in both frames (" + std::to_string(n) + ")";
     return report;
   }
-  std::mt19937_64 rng(options.seed);
-  std::uniform_int_distribution<int> pick(0, n - 1);
-  int best_count = -1;
-  for (int iteration = 0; iteration < options.max_iterations; ++iteration) {
-    const int a = pick(rng), b = pick(rng), c = pick(rng);
-    if (a == b || b == c || a == c) continue;
-    const Rigid3d hypothesis =
-        AlignRigid({pairs[a].point_in_prev, pairs[b].point_in_prev, pairs[c].point_in_prev},
-                   {pairs[a].point_in_curr, pairs[b].point_in_curr, pairs[c].point_in_curr});
-    int count = 0;
-    std::vector<char> mask = Inliers(hypothesis, pairs, options, &count);
-    if (count > best_count) {
-      best_count = count;
-      report.curr_from_prev = hypothesis;
-      report.inlier_mask = std::move(mask);
-    }
-  }
-  for (int round = 0; round < 2 && best_count >= 3; ++round) {
-    std::vector<Eigen::Vector3d> src, dst;
+  // All max_iterations hypotheses are tried; then two least-squares fits on the inliers (the
+  // inlier set can grow after the first).
+  RansacOptions ransac;
+  ransac.max_error = 1.0;
+  ransac.min_iterations = ransac.max_iterations = options.max_iterations;
+  ransac.seed = options.seed;
+  ransac.local_optimization = false;
+  const RigidMotionEstimator estimator{pairs, options};
+  const RansacReport<Rigid3d> found = Ransac(estimator, ransac);
+  report.curr_from_prev = found.model;
+  report.inlier_mask = found.inlier_mask;
+  report.num_inliers = found.num_inliers;
+  for (int round = 0; round < 2 && report.num_inliers >= 3; ++round) {
+    std::vector<int> inliers;
     for (int i = 0; i < n; ++i) {
-      if (!report.inlier_mask[i]) continue;
-      src.push_back(pairs[i].point_in_prev);
-      dst.push_back(pairs[i].point_in_curr);
+      if (report.inlier_mask[i]) inliers.push_back(i);
     }
-    report.curr_from_prev = AlignRigid(src, dst);
-    report.inlier_mask = Inliers(report.curr_from_prev, pairs, options, &best_count);
+    estimator.Refit(inliers, &report.curr_from_prev);
+    report.inlier_mask = Inliers(report.curr_from_prev, pairs, options, &report.num_inliers);
   }
-  report.num_inliers = std::max(0, best_count);
   report.success = report.num_inliers >= std::max(3, options.min_inliers);
   if (!report.success) {
     report.reason = "3D-3D: only " + std::to_string(report.num_inliers) + " consistent stereo points";

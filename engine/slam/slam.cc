@@ -137,6 +137,12 @@ class Tracker {
   void AddNewLandmarks(const KeyFrame* reference, KeyFrame* frame,
                        const std::vector<std::pair<int, int>>& matches, FrameReport* report);
   void LocalBundleAdjustment(FrameReport* report);
+  // Tracks `frame` against anchor_ without the motion prior (the motion since then is
+  // unknown); on success replaces `report` and `matches`.
+  bool Relocalise(KeyFrame* frame, std::vector<std::pair<int, int>>* matches, FrameReport* report);
+  // Starts a new segment at `frame`: its pose is restart_pose, its landmarks new ones.
+  void Restart(const std::optional<Rigid3d>& restart_pose, KeyFrame* frame,
+               std::vector<std::pair<int, int>>* matches, FrameReport* report);
 
   const StereoRig& rig_;
   const SlamOptions& options_;
@@ -453,33 +459,12 @@ FrameReport Tracker::BackEnd(FrontEndResult front) {
       restart_pose = map_.rig_from_world[index];
     }
   }
-  if (!reference && anchor_ && !last_linked_) {
-    // Relocalisation: the last linked keyframe, without the motion prior (the motion since
-    // then is unknown).
-    FrameReport attempt = report;
-    attempt.reason.clear();
-    attempt.motion_source.clear();
-    std::vector<std::pair<int, int>> anchor_matches;
-    if (TrackAgainst(*anchor_, /*use_motion_prior=*/false, &frame, &anchor_matches, &attempt)) {
-      attempt.reason = "relocalised against frame " + std::to_string(anchor_->index) +
-                       " after: " + report.reason;
-      report = std::move(attempt);
-      matches = std::move(anchor_matches);
-      reference = &*anchor_;
-      report.linked = true;
-    }
+  if (!reference && anchor_ && !last_linked_ && Relocalise(&frame, &matches, &report)) {
+    reference = &*anchor_;
   }
   const StageClock map_timer;
   if (!reference) {
-    // A new start from this frame's stereo points: the trajectory continues from the restart
-    // pose, the new landmarks are not tied to the old ones.
-    for (int c = 0; c < 2; ++c) frame.landmark_of[c].assign(frame.features[c].size(), -1);
-    map_.rig_from_world[index] = restart_pose.value_or(Rigid3d());
-    matches.clear();
-    last_step_ = Rigid3d();
-    report.state = last_ ? "reinitialised" : "initialised";
-    report.linked = !last_;
-    if (last_ && last_linked_) anchor_ = std::move(last_);
+    Restart(restart_pose, &frame, &matches, &report);
   } else {
     last_step_ = map_.rig_from_world[index] * map_.rig_from_world[reference->index].Inverse();
     report.state = reference == &*last_ ? "tracked" : "relocalised";
@@ -494,6 +479,36 @@ FrameReport Tracker::BackEnd(FrontEndResult front) {
   return report;
 }
 
+bool Tracker::Relocalise(KeyFrame* frame, std::vector<std::pair<int, int>>* matches,
+                         FrameReport* report) {
+  FrameReport attempt = *report;
+  attempt.reason.clear();
+  attempt.motion_source.clear();
+  std::vector<std::pair<int, int>> anchor_matches;
+  if (!TrackAgainst(*anchor_, /*use_motion_prior=*/false, frame, &anchor_matches, &attempt)) {
+    return false;
+  }
+  attempt.reason =
+      "relocalised against frame " + std::to_string(anchor_->index) + " after: " + report->reason;
+  *report = std::move(attempt);
+  *matches = std::move(anchor_matches);
+  report->linked = true;
+  return true;
+}
+
+void Tracker::Restart(const std::optional<Rigid3d>& restart_pose, KeyFrame* frame,
+                      std::vector<std::pair<int, int>>* matches, FrameReport* report) {
+  // The trajectory continues from the restart pose; the new landmarks are not tied to the old
+  // ones.
+  for (int c = 0; c < 2; ++c) frame->landmark_of[c].assign(frame->features[c].size(), -1);
+  map_.rig_from_world[frame->index] = restart_pose.value_or(Rigid3d());
+  matches->clear();
+  last_step_ = Rigid3d();
+  report->state = last_ ? "reinitialised" : "initialised";
+  report->linked = !last_;
+  if (last_ && last_linked_) anchor_ = std::move(last_);
+}
+
 std::vector<MapPoint> ExportMap(const SlamMap& map, int min_frames) {
   std::vector<MapPoint> points;
   for (const Landmark& landmark : map.landmarks) {
@@ -505,6 +520,50 @@ std::vector<MapPoint> ExportMap(const SlamMap& map, int min_frames) {
                       static_cast<int>(landmark.observations.size())});
   }
   return points;
+}
+
+// The global bundle adjustment over every tracked frame (with the calibration refinement when
+// options ask for it), into result's global_bundle_adjustment, calibration_refinement and times.
+void GlobalBundleAdjustment(const StereoRig& rig, const SlamOptions& options,
+                            const ProgressSink& progress, SlamMap* map, SlamResult* result) {
+  std::vector<int> all_frames;
+  for (int i = 0; i < static_cast<int>(map->has_pose.size()); ++i) {
+    if (map->has_pose[i]) all_frames.push_back(i);
+  }
+  if (options.global_bundle_adjustment && all_frames.size() >= 2) {
+    progress.ThrowIfCancelled();
+    progress.Report(0.95, "global_ba", "global bundle adjustment");
+    BundleAdjustmentOptions global = options.bundle_adjustment;
+    global.max_iterations = std::max(global.max_iterations, 50);
+    global.num_threads = options.num_threads;
+    const ProgressSink ba_progress{
+        [&](double fraction, const std::string& stage, const std::string& message) {
+          progress.Report(0.95 + 0.04 * fraction, stage, "global bundle adjustment: " + message);
+        },
+        progress.is_cancelled};
+    const StageClock ba_timer(CLOCK_PROCESS_CPUTIME_ID);
+    if (options.calibration_refinement.refine == CalibrationRefinement::kNone) {
+      result->global_bundle_adjustment = BundleAdjust(rig, all_frames, global, map, ba_progress);
+    } else {
+      StereoRig refined = rig;
+      result->calibration_refinement.emplace();
+      result->global_bundle_adjustment =
+          BundleAdjustWithCalibration(options.calibration_refinement, all_frames, global,
+                                      &refined, map, &*result->calibration_refinement,
+                                      ba_progress);
+    }
+    result->global_ba_s = ba_timer.WallSeconds();
+    result->global_ba_cpu_s = ba_timer.CpuSeconds();
+  }
+  if (options.calibration_refinement.refine != CalibrationRefinement::kNone &&
+      !result->calibration_refinement) {
+    CalibrationRefinementReport& refusal = result->calibration_refinement.emplace();
+    refusal.refine = options.calibration_refinement.refine;
+    refusal.before = refusal.after = rig;
+    refusal.num_frames = static_cast<int>(all_frames.size());
+    refusal.reason = "no global bundle adjustment: " + std::to_string(all_frames.size()) +
+                     " tracked frame(s)";
+  }
 }
 
 }  // namespace
@@ -540,44 +599,7 @@ SlamResult RunSlam(const StereoRig& rig, const std::vector<std::string>& frame_n
     result.frames.push_back(std::move(report));
   }
   SlamMap& map = tracker.map();
-  std::vector<int> all_frames;
-  for (int i = 0; i < n; ++i) {
-    if (map.has_pose[i]) all_frames.push_back(i);
-  }
-  if (options.global_bundle_adjustment && all_frames.size() >= 2) {
-    progress.ThrowIfCancelled();
-    progress.Report(0.95, "global_ba", "global bundle adjustment");
-    BundleAdjustmentOptions global = options.bundle_adjustment;
-    global.max_iterations = std::max(global.max_iterations, 50);
-    global.num_threads = options.num_threads;
-    const ProgressSink ba_progress{
-        [&](double fraction, const std::string& stage, const std::string& message) {
-          progress.Report(0.95 + 0.04 * fraction, stage, "global bundle adjustment: " + message);
-        },
-        progress.is_cancelled};
-    const StageClock ba_timer(CLOCK_PROCESS_CPUTIME_ID);
-    if (options.calibration_refinement.refine == CalibrationRefinement::kNone) {
-      result.global_bundle_adjustment = BundleAdjust(rig, all_frames, global, &map, ba_progress);
-    } else {
-      StereoRig refined = rig;
-      result.calibration_refinement.emplace();
-      result.global_bundle_adjustment =
-          BundleAdjustWithCalibration(options.calibration_refinement, all_frames, global,
-                                      &refined, &map, &*result.calibration_refinement,
-                                      ba_progress);
-    }
-    result.global_ba_s = ba_timer.WallSeconds();
-    result.global_ba_cpu_s = ba_timer.CpuSeconds();
-  }
-  if (options.calibration_refinement.refine != CalibrationRefinement::kNone &&
-      !result.calibration_refinement) {
-    CalibrationRefinementReport& refusal = result.calibration_refinement.emplace();
-    refusal.refine = options.calibration_refinement.refine;
-    refusal.before = refusal.after = rig;
-    refusal.num_frames = static_cast<int>(all_frames.size());
-    refusal.reason = "no global bundle adjustment: " + std::to_string(all_frames.size()) +
-                     " tracked frame(s)";
-  }
+  GlobalBundleAdjustment(rig, options, progress, &map, &result);
   for (int i = 0; i < n; ++i) {
     if (!map.has_pose[i]) {
       ++result.num_lost;

@@ -1,7 +1,6 @@
 #include "engine/synth/render.h"
 
 #include <algorithm>
-#include <atomic>
 #include <cmath>
 #include <functional>
 #include <limits>
@@ -14,6 +13,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "engine/util/check.h"
+#include "engine/util/parallel.h"
 
 namespace omnirig::synth {
 namespace {
@@ -31,28 +31,18 @@ int ResolveThreads(int num_threads, int rows) {
   return std::clamp(threads, 1, std::max(1, rows));
 }
 
-// Runs body(row) for every row in [0, rows) on `threads` threads, rows handed out one by one.
+// Runs body(row) for every row in [0, rows) on `threads` threads.
 void ParallelRows(int rows, int threads, const std::function<void(int)>& body) {
-  if (threads <= 1) {
-    for (int row = 0; row < rows; ++row) body(row);
-    return;
-  }
-  std::atomic<int> next_row{0};
-  auto worker = [&]() {
-    for (int row = next_row++; row < rows; row = next_row++) body(row);
-  };
-  std::vector<std::thread> pool;
-  for (int t = 1; t < threads; ++t) pool.emplace_back(worker);
-  worker();
-  for (std::thread& thread : pool) thread.join();
+  RunTasks(
+      rows, threads, ProgressSink{}, [&body](int row, const ProgressSink&) { body(row); }, nullptr);
 }
 
-// Eq. (6): the bearing on the unit sphere of a point m on the normalised plane.
-inline Eigen::Vector3d LiftNormalised(double xi, double mx, double my) {
-  const double r2 = mx * mx + my * my;
-  const double disc = std::max(0.0, 1.0 + (1.0 - xi * xi) * r2);
-  const double factor = (xi + std::sqrt(disc)) / (r2 + 1.0);
-  return Eigen::Vector3d(factor * mx, factor * my, factor - xi);
+// The normalised plane as the image of a camera with K = I and no distortion: lifting one of
+// its points through the camera model is eq. (6) alone, with the model's valid domain.
+UnifiedIntrinsics NormalisedPlane(double xi) {
+  UnifiedIntrinsics plane;
+  plane.xi() = xi;
+  return plane;
 }
 
 struct Hit {
@@ -390,8 +380,11 @@ void RenderOptions::Check() const {
 struct Renderer::Grid {
   SynthCamera camera;
   int lattice_cols = 0, lattice_rows = 0;
+  // At each needed pixel corner: its point on the normalised plane (eq. 3, 4 inverted) and its
+  // bearing (eq. 6), nullopt where lifting fails.
   std::vector<Eigen::Vector2d> m;
   std::vector<uint8_t> m_valid;
+  std::vector<std::optional<Eigen::Vector3d>> bearing;
   std::vector<uint8_t> lattice_needed;
   std::vector<uint8_t> pixel_class;
 };
@@ -428,6 +421,7 @@ Renderer::Renderer(const SynthCamera& camera, int num_threads) {
   }
   grid->m.assign(grid->lattice_needed.size(), Eigen::Vector2d::Zero());
   grid->m_valid.assign(grid->lattice_needed.size(), 0);
+  grid->bearing.assign(grid->lattice_needed.size(), std::nullopt);
   Grid* g = grid.get();
   ParallelRows(grid->lattice_rows, ResolveThreads(num_threads, grid->lattice_rows), [g, &k](int j) {
     for (int i = 0; i < g->lattice_cols; ++i) {
@@ -440,6 +434,7 @@ Renderer::Renderer(const SynthCamera& camera, int num_threads) {
       if (!m) continue;
       g->m[index] = *m;
       g->m_valid[index] = 1;
+      g->bearing[index] = Lift(NormalisedPlane(k.xi()), *m);
     }
   });
   grid_ = std::move(grid);
@@ -475,12 +470,13 @@ std::vector<SubSample> RookPattern(int s) {
 
 // The analytic grey level of a pixel whose four corners (normalised-plane points m, in order
 // around the pixel) all see the printed side of `board`.
-std::optional<float> BoardPixel(const FramePrimitive& board, int index, double xi,
-                                const std::array<const Eigen::Vector2d*, 4>& corners_m) {
+std::optional<float> BoardPixel(
+    const FramePrimitive& board, int index,
+    const std::array<const std::optional<Eigen::Vector3d>*, 4>& corner_bearings) {
   Polygon quad;
-  for (const Eigen::Vector2d* m : corners_m) {
+  for (const std::optional<Eigen::Vector3d>* bearing : corner_bearings) {
     Hit hit;
-    if (!IntersectOne(board, LiftNormalised(xi, m->x(), m->y()), index, &hit) || hit.face != 0) {
+    if (!*bearing || !IntersectOne(board, **bearing, index, &hit) || hit.face != 0) {
       return std::nullopt;
     }
     quad.v[quad.n++] = Eigen::Vector2d(hit.u, hit.v);
@@ -498,7 +494,7 @@ float Vignetting(double strength, int i, int j, const SynthCamera& camera) {
 
 struct FrameContext {
   const SynthCamera* camera = nullptr;
-  double xi = 0.0;
+  UnifiedIntrinsics plane;         // NormalisedPlane(xi)
   double rim2 = 0.0, hole2 = 0.0;  // squared mirror radii, pixels^2
   std::vector<FramePrimitive> prims;
   Eigen::Vector3f background;
@@ -506,10 +502,11 @@ struct FrameContext {
   std::vector<int> lattice_hit;  // primitive hit at each pixel corner, -1 for none
 };
 
-// A pixel's four corners (order 00, 10, 01, 11) on the normalised plane, and the primitive that
-// all four hit (-1 for none) when `uniform`.
+// A pixel's four corners (order 00, 10, 01, 11) on the normalised plane and their bearings, and
+// the primitive that all four hit (-1 for none) when `uniform`.
 struct PixelCorners {
   std::array<const Eigen::Vector2d*, 4> m;
+  std::array<const std::optional<Eigen::Vector3d>*, 4> bearing;
   bool uniform = false;
   int primitive = -1;
 };
@@ -536,10 +533,11 @@ Eigen::Vector3f ShadeSampled(const FrameContext& frame, int i, int j, bool borde
     }
     const double mx = f.w00 * m00.x() + f.w10 * m10.x() + f.w01 * m01.x() + f.w11 * m11.x();
     const double my = f.w00 * m00.y() + f.w10 * m10.y() + f.w01 * m01.y() + f.w11 * m11.y();
-    const Eigen::Vector3d bearing = LiftNormalised(frame.xi, mx, my);
-    Hit hit;
-    if (!corners.uniform || (id >= 0 && !IntersectOne(frame.prims[id], bearing, id, &hit))) {
-      hit = IntersectAll(frame.prims, bearing);
+    const auto bearing = Lift(frame.plane, Eigen::Vector2d(mx, my));
+    Hit hit;  // a sample outside lifting's domain sees nothing
+    if (bearing &&
+        (!corners.uniform || (id >= 0 && !IntersectOne(frame.prims[id], *bearing, id, &hit)))) {
+      hit = IntersectAll(frame.prims, *bearing);
     }
     sum += Shade(frame.prims, hit, frame.background);
   }
@@ -557,9 +555,8 @@ std::optional<Eigen::Vector3f> ShadeSurfaceByInterpolation(const FrameContext& f
   const FramePrimitive& prim = frame.prims[id];
   std::array<Hit, 4> hits;
   for (int q = 0; q < 4; ++q) {
-    const Eigen::Vector2d& m = *corners.m[q];
-    if (!IntersectOne(prim, LiftNormalised(frame.xi, m.x(), m.y()), id, &hits[q]) ||
-        hits[q].face != hits[0].face) {
+    const std::optional<Eigen::Vector3d>& bearing = *corners.bearing[q];
+    if (!bearing || !IntersectOne(prim, *bearing, id, &hits[q]) || hits[q].face != hits[0].face) {
       return std::nullopt;
     }
   }
@@ -594,8 +591,9 @@ Eigen::Vector3f ShadePixel(const FrameContext& frame, int i, int j, uint8_t cls,
     const FramePrimitive& prim = frame.prims[corners.primitive];
     if (prim.kind == PrimitiveInfo::Kind::kCheckerboard) {
       if (!border) {
-        const auto level = BoardPixel(prim, corners.primitive, frame.xi,
-                                      {corners.m[0], corners.m[1], corners.m[3], corners.m[2]});
+        const auto level = BoardPixel(
+            prim, corners.primitive,
+            {corners.bearing[0], corners.bearing[1], corners.bearing[3], corners.bearing[2]});
         if (level) return Eigen::Vector3f::Constant(*level);
       }
     } else if (frame.samples.size() > 4) {
@@ -608,6 +606,39 @@ Eigen::Vector3f ShadePixel(const FrameContext& frame, int i, int j, uint8_t cls,
   return ShadeSampled(frame, i, j, border, corners);
 }
 
+FrameContext MakeFrameContext(const Scene& scene, const SynthCamera& camera,
+                              const Rigid3d& cam_from_world, int supersampling) {
+  FrameContext frame;
+  frame.camera = &camera;
+  frame.plane = NormalisedPlane(camera.model.intrinsics.xi());
+  frame.rim2 = camera.rim_radius_px * camera.rim_radius_px;
+  frame.hole2 = camera.hole_radius_px * camera.hole_radius_px;
+  for (int i = 0; i < static_cast<int>(scene.primitives().size()); ++i) {
+    frame.prims.push_back(MakeFramePrimitive(scene, i, cam_from_world));
+  }
+  frame.background = (scene.background_rgb() * 255.0).cast<float>();
+  frame.samples = RookPattern(supersampling);
+  return frame;
+}
+
+// The sensor: blur, grey conversion and noise on the radiance (BGR, 0-255), then 8 bits.
+cv::Mat SensorImage(cv::Mat radiance, const RenderOptions& options) {
+  if (options.blur_sigma_px > 0.0) {
+    cv::GaussianBlur(radiance, radiance, cv::Size(0, 0), options.blur_sigma_px, 0.0,
+                     cv::BORDER_REPLICATE);
+  }
+  if (options.grayscale) cv::cvtColor(radiance, radiance, cv::COLOR_BGR2GRAY);
+  if (options.noise_sigma > 0.0) {
+    cv::Mat noise(radiance.size(), radiance.type());
+    cv::RNG rng(options.seed ^ 0x5DEECE66Dull);
+    rng.fill(noise, cv::RNG::NORMAL, 0.0, options.noise_sigma);
+    radiance += noise;
+  }
+  cv::Mat image;
+  radiance.convertTo(image, options.grayscale ? CV_8UC1 : CV_8UC3);
+  return image;
+}
+
 }  // namespace
 
 cv::Mat Renderer::Render(const Scene& scene, const Rigid3d& cam_from_world,
@@ -618,25 +649,15 @@ cv::Mat Renderer::Render(const Scene& scene, const Rigid3d& cam_from_world,
   const int width = camera.model.width, height = camera.model.height;
   const int threads = ResolveThreads(options.num_threads, height);
 
-  FrameContext frame;
-  frame.camera = &camera;
-  frame.xi = camera.model.intrinsics.xi();
-  frame.rim2 = camera.rim_radius_px * camera.rim_radius_px;
-  frame.hole2 = camera.hole_radius_px * camera.hole_radius_px;
-  for (int i = 0; i < static_cast<int>(scene.primitives().size()); ++i) {
-    frame.prims.push_back(MakeFramePrimitive(scene, i, cam_from_world));
-  }
-  frame.background = (scene.background_rgb() * 255.0).cast<float>();
-  frame.samples = RookPattern(options.supersampling);
+  FrameContext frame = MakeFrameContext(scene, camera, cam_from_world, options.supersampling);
 
   // Pass 1: the primitive hit at every needed pixel corner.
   frame.lattice_hit.assign(g.m.size(), -1);
   ParallelRows(g.lattice_rows, threads, [&](int j) {
     for (int i = 0; i < g.lattice_cols; ++i) {
       const size_t index = static_cast<size_t>(j) * g.lattice_cols + i;
-      if (!g.m_valid[index]) continue;
-      const Eigen::Vector3d bearing = LiftNormalised(frame.xi, g.m[index].x(), g.m[index].y());
-      frame.lattice_hit[index] = IntersectAll(frame.prims, bearing).primitive;
+      const std::optional<Eigen::Vector3d>& bearing = g.bearing[index];
+      if (bearing) frame.lattice_hit[index] = IntersectAll(frame.prims, *bearing).primitive;
     }
   });
 
@@ -655,6 +676,7 @@ cv::Mat Renderer::Render(const Scene& scene, const Rigid3d& cam_from_world,
       }
       PixelCorners corners;
       corners.m = {&g.m[c00], &g.m[c10], &g.m[c01], &g.m[c11]};
+      corners.bearing = {&g.bearing[c00], &g.bearing[c10], &g.bearing[c01], &g.bearing[c11]};
       corners.primitive = frame.lattice_hit[c00];
       corners.uniform = corners.primitive == frame.lattice_hit[c10] &&
                         corners.primitive == frame.lattice_hit[c01] &&
@@ -665,20 +687,7 @@ cv::Mat Renderer::Render(const Scene& scene, const Rigid3d& cam_from_world,
     }
   });
 
-  if (options.blur_sigma_px > 0.0) {
-    cv::GaussianBlur(radiance, radiance, cv::Size(0, 0), options.blur_sigma_px, 0.0,
-                     cv::BORDER_REPLICATE);
-  }
-  if (options.grayscale) cv::cvtColor(radiance, radiance, cv::COLOR_BGR2GRAY);
-  if (options.noise_sigma > 0.0) {
-    cv::Mat noise(radiance.size(), radiance.type());
-    cv::RNG rng(options.seed ^ 0x5DEECE66Dull);
-    rng.fill(noise, cv::RNG::NORMAL, 0.0, options.noise_sigma);
-    radiance += noise;
-  }
-  cv::Mat image;
-  radiance.convertTo(image, options.grayscale ? CV_8UC1 : CV_8UC3);
-  return image;
+  return SensorImage(std::move(radiance), options);
 }
 
 cv::Mat Render(const Scene& scene, const SynthCamera& camera, const Rigid3d& cam_from_world,
