@@ -18,7 +18,7 @@ ROOT=$(cd "$(dirname "$0")/.." && pwd)
 BUILD=$(cd "${1:-$ROOT/build}" && pwd)
 OMNIRIG=$BUILD/server/omnirig
 CRASH_TEST=$BUILD/tests/tests_server_crash_test
-REAL=$ROOT/../shared/data/real/ocamcalib-vmr
+REAL=${LOAD_BENCH_REAL:-$ROOT/../shared/data/real/ocamcalib-vmr}  # real images (calibration jobs)
 WORK=$(mktemp -d /tmp/omnirig-load-XXXXXX)
 SERVER_PID=
 cleanup() {
