@@ -29,9 +29,9 @@ void JobEvents::Changed(const std::string& id) {
   }
   std::lock_guard<std::mutex> lock(mutex_);
   const uint64_t event_id = next_id_++;
-  events_.push_back({event_id, id,
-                     "id: " + std::to_string(event_id) + "\nevent: " + type + "\ndata: " + data +
-                         "\n\n"});
+  events_.push_back(
+      {event_id, id,
+       "id: " + std::to_string(event_id) + "\nevent: " + type + "\ndata: " + data + "\n\n"});
   while (events_.size() > kBacklog) events_.pop_front();
   wake_.notify_all();
 }
@@ -60,9 +60,9 @@ bool JobEvents::Stream::Next(std::string& text, int timeout_ms) {
     return events_.closed_ || (!events_.events_.empty() && events_.events_.back().id >= next_id_);
   });
   if (events_.closed_) return false;
-  const auto first = std::lower_bound(
-      events_.events_.begin(), events_.events_.end(), next_id_,
-      [](const Event& event, uint64_t id) { return event.id < id; });
+  const auto first =
+      std::lower_bound(events_.events_.begin(), events_.events_.end(), next_id_,
+                       [](const Event& event, uint64_t id) { return event.id < id; });
   for (auto it = first; it != events_.events_.end(); ++it) {
     if (!only_job_ || it->job_id == *only_job_) text += it->text;
   }

@@ -1,7 +1,7 @@
 #include "server/http.h"
 
-#include <httplib.h>
 #include <dirent.h>
+#include <httplib.h>
 #include <netinet/in.h>
 #include <sys/resource.h>
 #include <sys/socket.h>
@@ -133,15 +133,17 @@ void SetBody(const httplib::Request& req, httplib::Response& res, std::string bo
   if (close) res.set_header("Connection", "close");
   auto shared = std::make_shared<const std::string>(std::move(body));
   if (req.ranges.empty() && !shared->empty()) {
-    res.set_content_provider(shared->size(), content_type,
-                             [shared, close](size_t offset, size_t length, httplib::DataSink& sink) {
-                               sink.write(shared->data() + offset, length);
-                               return !close;
-                             });
+    res.set_content_provider(
+        shared->size(), content_type,
+        [shared, close](size_t offset, size_t length, httplib::DataSink& sink) {
+          sink.write(shared->data() + offset, length);
+          return !close;
+        });
   } else {
     res.set_chunked_content_provider(content_type,
                                      [shared, close](size_t, httplib::DataSink& sink) {
-                                       if (!shared->empty()) sink.write(shared->data(), shared->size());
+                                       if (!shared->empty())
+                                         sink.write(shared->data(), shared->size());
                                        sink.done();
                                        return !close;
                                      });
@@ -325,7 +327,7 @@ struct HttpServer::Impl {
   int port = 0;
   std::thread thread;
   std::atomic<bool> listen_returned{false};
-  std::vector<RouteInfo> routes;  // fixed once serving starts
+  std::vector<RouteInfo> routes;       // fixed once serving starts
   std::string expected_authorization;  // "Bearer <token>"
 
   const RouteInfo* Find(const std::string& method, const std::string& path,
@@ -432,8 +434,8 @@ void HttpServer::Impl::Dispatch(const RouteInfo& route, std::map<std::string, st
     response.Json(e.status, api::ErrorJson(e.code, e.what(), e.details));
   } catch (const InvalidArgument& e) {
     if (!e.where().empty()) {
-      std::cerr << "omnirig: " << route.label << ": 400: " << e.what() << " (check at "
-                << e.where() << ")" << std::endl;
+      std::cerr << "omnirig: " << route.label << ": 400: " << e.what() << " (check at " << e.where()
+                << ")" << std::endl;
     }
     response = HttpResponse{};
     response.Json(400, api::ErrorJson("invalid_argument", e.what()));
@@ -453,16 +455,15 @@ void HttpServer::Impl::Dispatch(const RouteInfo& route, std::map<std::string, st
   if (response.file && response.status == 200) {
     SetFile(req, response, res);
   } else if (response.stream) {
-    res.set_chunked_content_provider(
-        response.content_type,
-        [stream = std::move(response.stream)](size_t, httplib::DataSink& sink) {
-          std::string chunk;
-          if (!stream(chunk)) {
-            sink.done();
-            return true;
-          }
-          return chunk.empty() || sink.write(chunk.data(), chunk.size());
-        });
+    res.set_chunked_content_provider(response.content_type, [stream = std::move(response.stream)](
+                                                                size_t, httplib::DataSink& sink) {
+      std::string chunk;
+      if (!stream(chunk)) {
+        sink.done();
+        return true;
+      }
+      return chunk.empty() || sink.write(chunk.data(), chunk.size());
+    });
   } else {
     SetBody(req, res, std::move(response.body), response.content_type, !body_read);
   }

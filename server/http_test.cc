@@ -281,7 +281,8 @@ TEST_F(HttpServerTest, DiscardsABodyTheHandlerDidNotRead) {
   EXPECT_EQ(connection.ReadResponse().rfind("HTTP/1.1 200", 0), 0u);
   EXPECT_EQ(Count("unmatched 400"), 0);
   // A body the handler read to the end keeps the connection.
-  ASSERT_TRUE(connection.Send("PUT /upload HTTP/1.1\r\nHost: test\r\nContent-Length: 3\r\n\r\nabc"));
+  ASSERT_TRUE(
+      connection.Send("PUT /upload HTTP/1.1\r\nHost: test\r\nContent-Length: 3\r\n\r\nabc"));
   EXPECT_EQ(connection.ReadResponse().rfind("HTTP/1.1 201", 0), 0u);
   ASSERT_TRUE(connection.Send(Get("/status")));
   EXPECT_EQ(connection.ReadResponse().rfind("HTTP/1.1 200", 0), 0u);
@@ -294,8 +295,9 @@ TEST_F(HttpServerTest, ClosesTheConnectionAfterAnUnreadBodyThatStalls) {
   // Half the body, then nothing: the answer says "Connection: close" and the connection ends,
   // so the rest, should it come, is never parsed as requests.
   RawConnection connection(port);
-  ASSERT_TRUE(connection.Send(
-      "PUT /refuse HTTP/1.1\r\nHost: test\r\nContent-Length: 100000\r\n\r\n" + std::string(50000, 'x')));
+  ASSERT_TRUE(
+      connection.Send("PUT /refuse HTTP/1.1\r\nHost: test\r\nContent-Length: 100000\r\n\r\n" +
+                      std::string(50000, 'x')));
   const std::string response = connection.ReadResponse();
   EXPECT_EQ(response.rfind("HTTP/1.1 404", 0), 0u) << response;
   EXPECT_NE(response.find("Connection: close\r\n"), std::string::npos) << response;

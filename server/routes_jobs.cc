@@ -3,8 +3,8 @@
 
 #include <cmath>
 #include <cstdio>
-#include <memory>
 #include <filesystem>
+#include <memory>
 
 #include "api/job_types.h"
 #include "api/service_json.h"

@@ -9,9 +9,9 @@
 #include <sys/time.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdlib>
-#include <algorithm>
 #include <fstream>
 #include <map>
 #include <set>
@@ -605,8 +605,7 @@ TEST_F(ServerApiTest, CancelWrittenToTheStoreByAnotherProcessStopsTheJob) {
   const std::string running =
       SubmitSleep(client, dataset, {{"steps", 1000}, {"step_ms", 50}})["id"];
   ASSERT_EQ(WaitForJob(port_, running, 10, "running")["state"], "running");
-  storage::SqliteJobStore other_process(
-      service_->state().data_dir->DatabasePath().string(), 1);
+  storage::SqliteJobStore other_process(service_->state().data_dir->DatabasePath().string(), 1);
   ASSERT_EQ(other_process.RequestCancel(running), storage::JobState::kRunning);
   const json canceled = WaitForJob(port_, running, 30);
   EXPECT_EQ(canceled["state"], "canceled");
@@ -851,9 +850,9 @@ TEST_F(ServerApiTest, ErrorsCarryNoSourceLocations) {
   fake.reads_images = false;
   fake.run = [](const json&, const api::JobContext&) { return json{{"not", "a rig"}}; };
   api::RegisterJobType(fake);
-  const std::string id = JsonOf(client.Post(
-      "/api/v1/jobs", json{{"type", "relative_pose"}, {"dataset", dataset}}.dump(),
-      "application/json"))["id"];
+  const std::string id = JsonOf(
+      client.Post("/api/v1/jobs", json{{"type", "relative_pose"}, {"dataset", dataset}}.dump(),
+                  "application/json"))["id"];
   ASSERT_EQ(WaitForJob(port_, id, 30)["state"], "succeeded");
   const auto broken = client.Get(("/api/v1/jobs/" + id + "/epipolar?from=cam0&u=1&v=2").c_str());
   ExpectError(broken, 500, "internal");

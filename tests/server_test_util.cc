@@ -145,29 +145,29 @@ bool FollowEvents(int port, const std::string& job, double timeout_s,
   bool opened = false;
   bool done = false;
   std::string buffer;
-  const auto result = client.Get(
-      ("/api/v1/events" + (job.empty() ? "" : "?job=" + job)).c_str(),
-      [&](const char* data, size_t size) {
-        if (!opened) {  // the server's first chunk says the stream is open
-          opened = true;
-          if (on_open()) return !(done = true);
-        }
-        buffer.append(data, size);
-        for (size_t end = buffer.find("\n\n"); end != std::string::npos;
-             end = buffer.find("\n\n")) {
-          const std::string block = buffer.substr(0, end);
-          buffer.erase(0, end + 2);
-          const size_t type_at = block.find("event: ");
-          const size_t data_at = block.find("data: ");
-          if (type_at == std::string::npos || data_at == std::string::npos) continue;
-          const std::string type =
-              block.substr(type_at + 7, block.find('\n', type_at) - type_at - 7);
-          if (on_event(type, nlohmann::json::parse(block.substr(data_at + 6)))) {
-            return !(done = true);
-          }
-        }
-        return true;
-      });
+  const auto result =
+      client.Get(("/api/v1/events" + (job.empty() ? "" : "?job=" + job)).c_str(),
+                 [&](const char* data, size_t size) {
+                   if (!opened) {  // the server's first chunk says the stream is open
+                     opened = true;
+                     if (on_open()) return !(done = true);
+                   }
+                   buffer.append(data, size);
+                   for (size_t end = buffer.find("\n\n"); end != std::string::npos;
+                        end = buffer.find("\n\n")) {
+                     const std::string block = buffer.substr(0, end);
+                     buffer.erase(0, end + 2);
+                     const size_t type_at = block.find("event: ");
+                     const size_t data_at = block.find("data: ");
+                     if (type_at == std::string::npos || data_at == std::string::npos) continue;
+                     const std::string type =
+                         block.substr(type_at + 7, block.find('\n', type_at) - type_at - 7);
+                     if (on_event(type, nlohmann::json::parse(block.substr(data_at + 6)))) {
+                       return !(done = true);
+                     }
+                   }
+                   return true;
+                 });
   (void)result;
   return done;
 }

@@ -44,10 +44,9 @@ nlohmann::json JsonOf(const httplib::Result& result);
 // once the stream is open calls `on_open` (a true result ends there), then `on_event` with each
 // event's type and data until it returns true. False when the stream ends or is silent for
 // `timeout_s` first.
-bool FollowEvents(int port, const std::string& job, double timeout_s,
-                  const std::function<bool()>& on_open,
-                  const std::function<bool(const std::string& type, const nlohmann::json& data)>&
-                      on_event);
+bool FollowEvents(
+    int port, const std::string& job, double timeout_s, const std::function<bool()>& on_open,
+    const std::function<bool(const std::string& type, const nlohmann::json& data)>& on_event);
 // Waits, on the job's events, until its state is terminal (or `until_state`), or until no event
 // came for `timeout_s`; returns the job as GET /jobs/{id} then shows it.
 nlohmann::json WaitForJob(int port, const std::string& id, double timeout_s,
