@@ -1,22 +1,24 @@
 #!/usr/bin/env bash
-# Load benchmark of the omnirig service (issue 6 targets), on this machine:
-#   1. job status polling with wrk: 200 connections offering ~2,000 requests/s for 20 s while
-#      the worker runs real calibration jobs on real images (CPU busy); p50/p99 latency, with
-#      the clients polling independently and then in lockstep (see bench/load_poll.lua);
+# Load benchmark of the omnirig service (issue 15 targets), on this machine:
+#   1. 200 clients following jobs while the workers run real calibration jobs on real images
+#      (CPU busy): wrk's 200 connections poll GET /jobs/{id} at ~1,000 requests/s for 20 s
+#      (target: p99 under 10 ms on 2 cores), independently and then in lockstep (see
+#      bench/load_poll.lua); meanwhile bench/sse_latency.py follows GET /api/v1/events and times
+#      the events of jobs it creates and cancels (target: an event within 100 ms);
 #   2. upload throughput: a 200 MB dataset (50 PNG files of 4 MB) PUT over loopback;
 #   3. SIGKILL-and-restart cycles during a batch of jobs (tests/server_crash with 20 cycles).
 # Usage: bench/load_bench.sh [BUILD_DIR]   (default: build). Needs wrk, curl, python3.
 # LOAD_BENCH_PARTS (default "poll upload crash") picks the parts to run.
-# LOAD_BENCH_CONNECTIONS (default 200) and LOAD_BENCH_DELAY_MS (default 99, the mean pause of each
-# connection between polls) set the polling load; LOAD_BENCH_SERVE_ARGS adds `omnirig serve`
-# flags (e.g. "--http-loop threads" for the thread-per-connection loop).
+# LOAD_BENCH_CONNECTIONS (default 200) and LOAD_BENCH_DELAY_MS (default 199, the mean pause of
+# each connection between polls) set the polling load; LOAD_BENCH_SERVE_ARGS adds `omnirig serve`
+# flags (e.g. "--worker-sched idle").
 set -euo pipefail
 PARTS=${LOAD_BENCH_PARTS:-poll upload crash}
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
 BUILD=$(cd "${1:-$ROOT/build}" && pwd)
 OMNIRIG=$BUILD/server/omnirig
 CRASH_TEST=$BUILD/tests/tests_server_crash_test
-REAL=$ROOT/../shared/data/real/ocamcalib-vmr
+REAL=${LOAD_BENCH_REAL:-$ROOT/../shared/data/real/ocamcalib-vmr}  # real images (calibration jobs)
 WORK=$(mktemp -d /tmp/omnirig-load-XXXXXX)
 SERVER_PID=
 cleanup() {
@@ -41,21 +43,11 @@ start_server() {  # args...
 }
 # CPU seconds (user + system) the server process has used so far.
 server_cpu_s() { awk -v hz="$(getconf CLK_TCK)" '{printf "%.2f", ($14 + $15) / hz}' "/proc/$SERVER_PID/stat"; }
-# CPU seconds of the server's threads at niceness 0 (HTTP, not the niced workers and solvers),
-# from the scheduler's exact run times (schedstat), not tick samples.
-http_cpu_s() {
-  local total=0 task
-  for task in /proc/"$SERVER_PID"/task/*; do
-    [[ $(sed 's/^.*) //' "$task/stat" 2>/dev/null | cut -d' ' -f17) == 0 ]] || continue
-    total=$(( total + $(cut -d' ' -f1 "$task/schedstat" 2>/dev/null || echo 0) ))
-  done
-  python3 -c "print(f'{$total / 1e9:.3f}')"
-}
 json_field() { python3 -c "import json,sys; print(json.load(sys.stdin)[sys.argv[1]])" "$1"; }
 
 echo "== omnirig load benchmark ($(nproc) cores, $(date -u +%FT%TZ))"
 echo "load_average_start $(cut -d' ' -f1-3 /proc/loadavg)"
-start_server --http-threads 256 ${LOAD_BENCH_SERVE_ARGS:-}  # e.g. "--worker-nice 19"
+start_server ${LOAD_BENCH_SERVE_ARGS:-}  # e.g. "--worker-sched idle"
 echo "server on $URL"
 
 # 1. Polling while the worker computes.
@@ -78,17 +70,16 @@ fi
 POLL_JOB=${JOB:-missing}
 echo "polling job $POLL_JOB with workers busy: $BUSY"
 CONNECTIONS=${LOAD_BENCH_CONNECTIONS:-200}
-DELAY=${LOAD_BENCH_DELAY_MS:-99}
+DELAY=${LOAD_BENCH_DELAY_MS:-199}
 echo "poll_connections $CONNECTIONS"
 echo "poll_delay_ms $DELAY"
-# Two readings of "200 clients at 2,000 requests/s" (bench/load_poll.lua): clients that poll
+# Two readings of "200 clients at 1,000 requests/s" (bench/load_poll.lua): clients that poll
 # independently (Poisson arrivals, the target's reading), then the same clients in lockstep
 # (all of them at once every DELAY_MS, the worst case for the same average rate). Keys of the
 # second reading start with poll_lockstep_.
 poll_run() {  # ARRIVALS PREFIX
-  local cpu_start http_cpu_start requests
+  local cpu_start requests
   cpu_start=$(server_cpu_s)
-  http_cpu_start=$(http_cpu_s)
   echo "${2}arrivals $1"
   # The /metrics gauge of open connections halfway through the run: wrk's connections plus
   # the one reading it.
@@ -104,19 +95,22 @@ poll_run() {  # ARRIVALS PREFIX
   grep -E '^poll_' "$WORK/wrk.txt" | sed "s/^poll_/$2/"
   echo "${2}open_connections_midway $(cat "$WORK/open_connections.txt")"
   grep -E 'Socket errors|Non-2xx' "$WORK/wrk.txt" || true
-  # Server CPU over the run includes the busy worker; the HTTP threads' own share per request
-  # comes from the scheduler's exact run times of the threads at niceness 0.
+  # Server CPU over the run includes the busy workers.
   echo "${2}server_cpu_s $(python3 -c "print(f'{$(server_cpu_s) - $cpu_start:.2f}')")"
   requests=$(sed -n 's/^poll_requests //p' "$WORK/wrk.txt")
-  python3 -c "print(f'${2}http_cpu_us_per_request {($(http_cpu_s) - $http_cpu_start) * 1e6 / max(1, $requests):.0f}')"
   local client_user client_system
   read -r client_user client_system < <(tail -n1 "$WORK/wrk_cpu.txt")
   python3 -c "print(f'${2}client_cpu_us_per_request {($client_user + $client_system) * 1e6 / max(1, $requests):.0f}')"
   echo "${2}load_average $(cut -d' ' -f1-3 /proc/loadavg)"
 }
+# SSE event latency, measured during the independent polling run.
+( sleep 2; python3 "$ROOT/bench/sse_latency.py" "$URL" "$DATASET" calibration \
+    "${PARAMS:-{\}}" 50 > "$WORK/sse.txt" 2>&1 ) &
+SSE_PID=$!
 poll_run independent poll_
+wait "$SSE_PID" || true
+cat "$WORK/sse.txt"
 poll_run lockstep poll_lockstep_
-echo "poll_niced_threads $(cat /proc/"$SERVER_PID"/task/*/stat | sed 's/^.*) //' | awk '$17 > 0' | wc -l)"
 echo "busy workers after polling: $(curl -sf "$URL/api/v1/health" | json_field busy_workers)"
 # The upload is measured with the workers idle: cancel what is left of the batch.
 for job in $(curl -sf "$URL/api/v1/jobs?limit=10000" |

@@ -1,117 +1,82 @@
 #include "server/http.h"
 
+#include <dirent.h>
 #include <httplib.h>
-#include <arpa/inet.h>
 #include <netinet/in.h>
-#include <netinet/tcp.h>
-#include <poll.h>
-#include <sys/epoll.h>
-#include <sys/eventfd.h>
 #include <sys/resource.h>
 #include <sys/socket.h>
-#include <unistd.h>
+#include <zlib.h>
 
 #include <algorithm>
-#include <atomic>
-#include <cerrno>
 #include <chrono>
-#include <condition_variable>
 #include <cstring>
 #include <fstream>
-#include <mutex>
-#include <regex>
+#include <iostream>
 #include <thread>
-#include <unordered_map>
 #include <utility>
 #include <vector>
 
 #include "api/service_json.h"
+#include "engine/util/check.h"
 
 namespace omnirig::server {
 namespace {
 
 // The route pattern and start time of the request this connection thread is serving, for the
-// request counter (httplib calls the logger on the same thread after the handler).
+// request counter (httplib calls the logger on the same thread after the response).
 thread_local std::string current_route;
 thread_local std::chrono::steady_clock::time_point request_start;
-// Set by Dispatch when a streaming handler answered without reading its whole body: the rest
-// of the body is still on the connection and would be parsed as the next request (a 400 for
-// each line, answers out of step with the client's requests), so the connection closes after
-// this response instead (see LingerBeforeClose).
-thread_local bool close_after_response = false;
+// Set on the threads that serve connections beyond max_connections (ConnectionQueue).
+thread_local bool refusing_connection = false;
 
-// "/api/v1/jobs/{id}" -> "^/api/v1/jobs/([^/]+)$"; names collects the parameter names.
-std::string PatternToRegex(const std::string& pattern, std::vector<std::string>& names) {
-  std::string regex = "^";
-  size_t pos = 0;
-  while (pos < pattern.size()) {
-    const size_t open = pattern.find('{', pos);
-    const std::string literal = pattern.substr(pos, open - pos);
-    for (char c : literal) {
-      if (std::string(".+*?()[]^$|\\").find(c) != std::string::npos) regex += '\\';
-      regex += c;
-    }
-    if (open == std::string::npos) break;
-    const size_t close = pattern.find('}', open);
-    std::string name = pattern.substr(open + 1, close - open - 1);
-    const bool rest = !name.empty() && name.back() == '+';
-    if (rest) name.pop_back();
-    names.push_back(name);
-    regex += rest ? "(.+)" : "([^/]+)";
-    pos = close + 1;
-  }
-  return regex + "$";
-}
-
-// One '/'-separated piece of a route pattern, for matching without std::regex.
+// One '/'-separated piece of a route pattern.
 struct Segment {
   enum Kind { kLiteral, kParam, kRest } kind = kLiteral;
-  std::string literal;
+  std::string literal;  // kLiteral: the text; else the parameter's name
 };
 
-// The pattern's segments; false when a parameter is not a whole segment (e.g. "{id}.json") or
-// "{name+}" is not the last one: such a pattern is left to its regex.
-bool PatternToSegments(const std::string& pattern, std::vector<Segment>& segments) {
-  if (pattern.empty() || pattern[0] != '/') return false;
+// "/api/v1/jobs/{id}" -> segments; throws for a parameter that is not a whole segment or a
+// "{name+}" that is not the last one.
+std::vector<Segment> ParsePattern(const std::string& pattern) {
+  if (pattern.empty() || pattern[0] != '/') throw std::logic_error("bad route " + pattern);
+  std::vector<Segment> segments;
   size_t pos = 1;
   while (true) {
     const size_t end = std::min(pattern.find('/', pos), pattern.size());
     const std::string piece = pattern.substr(pos, end - pos);
     const bool braced = piece.size() >= 2 && piece.front() == '{' && piece.back() == '}';
-    const std::string inner = braced ? piece.substr(1, piece.size() - 2) : piece;
-    if (inner.find_first_of("{}") != std::string::npos) return false;
-    Segment segment;
-    if (braced) {
-      segment.kind = !inner.empty() && inner.back() == '+' ? Segment::kRest : Segment::kParam;
-    } else {
-      segment.literal = piece;
+    Segment segment{Segment::kLiteral, braced ? piece.substr(1, piece.size() - 2) : piece};
+    if (segment.literal.find_first_of("{}") != std::string::npos ||
+        (!segments.empty() && segments.back().kind == Segment::kRest)) {
+      throw std::logic_error("bad route " + pattern);
     }
-    if (!segments.empty() && segments.back().kind == Segment::kRest) return false;
+    if (braced) {
+      segment.kind = segment.literal.back() == '+' ? Segment::kRest : Segment::kParam;
+      if (segment.kind == Segment::kRest) segment.literal.pop_back();
+    }
     segments.push_back(std::move(segment));
-    if (end == pattern.size()) return true;
+    if (end == pattern.size()) return segments;
     pos = end + 1;
   }
 }
 
-// Matches `path` as the pattern's regex (PatternToRegex) does: "{name}" is one non-empty segment
-// ([^/]+), "{name+}" the non-empty rest (.+, which stops at line breaks). `values` gets the
-// parameters in order.
+// True when `path` matches; `params` gets the parameters.
 bool MatchSegments(const std::vector<Segment>& segments, const std::string& path,
-                   std::vector<std::string>& values) {
-  values.clear();
+                   std::map<std::string, std::string>& params) {
+  params.clear();
   size_t pos = 0;
   for (const Segment& segment : segments) {
     if (pos >= path.size() || path[pos] != '/') return false;
     ++pos;
     if (segment.kind == Segment::kRest) {
-      if (pos == path.size() || path.find_first_of("\r\n", pos) != std::string::npos) return false;
-      values.push_back(path.substr(pos));
+      if (pos == path.size()) return false;
+      params[segment.literal] = path.substr(pos);
       return true;
     }
     const size_t end = std::min(path.find('/', pos), path.size());
     if (segment.kind == Segment::kParam) {
       if (end == pos) return false;
-      values.push_back(path.substr(pos, end - pos));
+      params[segment.literal] = path.substr(pos, end - pos);
     } else if (path.compare(pos, end - pos, segment.literal) != 0) {
       return false;
     }
@@ -120,22 +85,17 @@ bool MatchSegments(const std::vector<Segment>& segments, const std::string& path
   return pos == path.size();
 }
 
-// Header names for httplib's lookups, which take std::string: built once, not per request.
-const std::string kContentLength = "Content-Length";
-const std::string kTransferEncoding = "Transfer-Encoding";
-const std::string kAuthorization = "Authorization";
-
-// The pre-routing handler gives every request without Content-Length or Transfer-Encoding a
-// "Content-Length: 0" (see Install).
-bool HasBody(const httplib::Request& req) {
-  return req.get_header_value(kContentLength) != "0" || req.has_header(kTransferEncoding);
-}
-
 bool ConstantTimeEquals(const std::string& a, const std::string& b) {
   if (a.size() != b.size()) return false;
   unsigned char difference = 0;
   for (size_t i = 0; i < a.size(); ++i) difference |= static_cast<unsigned char>(a[i] ^ b[i]);
   return difference == 0;
+}
+
+// A request without Content-Length or Transfer-Encoding has no body (RFC 9112, 6.3).
+bool HasBody(const httplib::Request& req) {
+  return (req.has_header("Content-Length") && req.get_header_value("Content-Length") != "0") ||
+         req.has_header("Transfer-Encoding");
 }
 
 const char* DefaultErrorCode(int status) {
@@ -146,10 +106,10 @@ const char* DefaultErrorCode(int status) {
       return "unauthorized";
     case 404:
       return "not_found";
-    case 405:
-      return "method_not_allowed";
     case 413:
       return "payload_too_large";
+    case 414:
+      return "uri_too_long";
     case 416:
       return "range_not_satisfiable";
     case 503:
@@ -159,23 +119,54 @@ const char* DefaultErrorCode(int status) {
   }
 }
 
-void WriteFile(const httplib::Request& req, HttpResponse& response, httplib::Response& res) {
+// Sets a body that httplib must neither slice by the request's Range header (it slices every
+// body, JSON errors included, when one is present) nor follow with another request on this
+// connection (`close`). Both go through a content provider: httplib applies ranges to a
+// provider with a length, so with a Range header the body goes chunked; a provider that
+// returns false after writing everything makes httplib close the connection.
+void SetBody(const httplib::Request& req, httplib::Response& res, std::string body,
+             const std::string& content_type, bool close) {
+  if (!close && req.ranges.empty()) {
+    res.set_content(body, content_type);
+    return;
+  }
+  if (close) res.set_header("Connection", "close");
+  auto shared = std::make_shared<const std::string>(std::move(body));
+  if (req.ranges.empty() && !shared->empty()) {
+    res.set_content_provider(
+        shared->size(), content_type,
+        [shared, close](size_t offset, size_t length, httplib::DataSink& sink) {
+          sink.write(shared->data() + offset, length);
+          return !close;
+        });
+  } else {
+    res.set_chunked_content_provider(content_type,
+                                     [shared, close](size_t, httplib::DataSink& sink) {
+                                       if (!shared->empty())
+                                         sink.write(shared->data(), shared->size());
+                                       sink.done();
+                                       return !close;
+                                     });
+  }
+}
+
+void SetFile(const httplib::Request& req, const HttpResponse& response, httplib::Response& res) {
   const int64_t size = response.file_size;
   for (const auto& [first, last] : req.ranges) {
     const bool satisfiable =
         first >= 0 ? first < size && (last < 0 || last >= first) : last > 0 && size > 0;
     if (!satisfiable) {
-      response.Json(
-          416, api::ErrorJson("range_not_satisfiable", "the requested range lies outside the file",
-                              {{"size", size}}));
       res.status = 416;
-      const_cast<httplib::Request&>(req).ranges.clear();  // see Dispatch
       res.set_header("Content-Range", "bytes */" + std::to_string(size));
-      res.set_content(response.body, "application/json");
+      SetBody(req, res,
+              api::ErrorJson("range_not_satisfiable", "the requested range lies outside the file",
+                             {{"size", size}})
+                  .dump(),
+              "application/json", false);
       return;
     }
   }
-  if (!req.ranges.empty() && response.status == 200) res.status = 206;
+  if (!req.ranges.empty()) res.status = 206;
   auto stream = std::make_shared<std::ifstream>(*response.file, std::ios::binary);
   res.set_content_provider(static_cast<size_t>(size), response.content_type,
                            [stream](size_t offset, size_t length, httplib::DataSink& sink) {
@@ -189,496 +180,64 @@ void WriteFile(const httplib::Request& req, HttpResponse& response, httplib::Res
                            });
 }
 
-// A connection's socket as an httplib::Stream, with a read buffer that lives as long as the
-// connection (httplib's own SocketStream is rebuilt per request, reads its request line
-// through 4 KB reads and drops pipelined bytes). Reads and writes wait at most the timeouts.
-class ConnectionStream : public httplib::Stream {
- public:
-  ConnectionStream(int sock, int timeout_ms) : sock_(sock), timeout_ms_(timeout_ms) {}
-
-  bool is_readable() const override { return begin_ < end_ || Wait(POLLIN, timeout_ms_); }
-  bool is_writable() const override { return Wait(POLLOUT, timeout_ms_); }
-  bool has_buffered() const { return begin_ < end_; }
-
-  ssize_t read(char* ptr, size_t size) override {
-    // A response part must leave before we wait for the client (e.g. "100 Continue").
-    if (!Flush()) return -1;
-    if (begin_ == end_) {
-      // Large reads (image bodies) go straight to the caller; small ones refill the buffer.
-      if (size >= sizeof(buffer_)) return Receive(ptr, size);
-      const ssize_t got = Receive(buffer_, sizeof(buffer_));
-      if (got <= 0) return got;
-      begin_ = 0;
-      end_ = static_cast<size_t>(got);
-    }
-    const size_t n = std::min(size, end_ - begin_);
-    std::memcpy(ptr, buffer_ + begin_, n);
-    begin_ += n;
-    return static_cast<ssize_t>(n);
+// gzip of `data` (zlib's default level), or nullopt on failure.
+std::optional<std::string> Gzip(const std::string& data) {
+  z_stream z{};
+  if (deflateInit2(&z, Z_DEFAULT_COMPRESSION, Z_DEFLATED, 31, 8, Z_DEFAULT_STRATEGY) != Z_OK) {
+    return std::nullopt;
   }
-
-  // httplib writes a response's headers and body separately; they are gathered here and sent
-  // together by Flush() (one segment for a status poll, not two with TCP_NODELAY).
-  ssize_t write(const char* ptr, size_t size) override {
-    if (out_.size() + size > kOutBytes && !Flush()) return -1;
-    if (size >= kOutBytes) return SendAll(ptr, size) ? static_cast<ssize_t>(size) : -1;
-    out_.append(ptr, size);
-    return static_cast<ssize_t>(size);
-  }
-
-  bool Flush() {
-    if (out_.empty()) return true;
-    const bool ok = SendAll(out_.data(), out_.size());
-    out_.clear();
-    return ok;
-  }
-
-  // httplib asks for both addresses on every request (REMOTE_ADDR, LOCAL_ADDR headers); they
-  // do not change while the connection lives, so each is looked up once (a system call and two
-  // inet_ntop were ~6 % of a status poll's user-space instructions).
-  void get_remote_ip_and_port(std::string& ip, int& port) const override {
-    if (!remote_) remote_ = Address(::getpeername);
-    ip = remote_->first;
-    port = remote_->second;
-  }
-  void get_local_ip_and_port(std::string& ip, int& port) const override {
-    if (!local_) local_ = Address(::getsockname);
-    ip = local_->first;
-    port = local_->second;
-  }
-  int socket() const override { return sock_; }
-
- private:
-  bool Wait(short events, int timeout_ms) const {
-    pollfd fd{sock_, events, 0};
-    while (true) {
-      const int ready = ::poll(&fd, 1, timeout_ms);
-      if (ready < 0 && errno == EINTR) continue;
-      return ready > 0;
-    }
-  }
-  bool SendAll(const char* ptr, size_t size) {
-    while (size > 0) {
-      const ssize_t sent = ::send(sock_, ptr, size, MSG_NOSIGNAL | MSG_DONTWAIT);
-      if (sent >= 0) {
-        ptr += sent;
-        size -= static_cast<size_t>(sent);
-      } else if (errno != EINTR &&
-                 ((errno != EAGAIN && errno != EWOULDBLOCK) || !Wait(POLLOUT, timeout_ms_))) {
-        return false;
-      }
-    }
-    return true;
-  }
-  // Tries first and waits only when nothing is there: a request usually arrives whole, and
-  // the event loop hands over a connection only once its bytes are readable.
-  ssize_t Receive(char* ptr, size_t size) {
-    while (true) {
-      const ssize_t got = ::recv(sock_, ptr, size, MSG_DONTWAIT);
-      if (got >= 0) return got;
-      if (errno == EINTR) continue;
-      if ((errno != EAGAIN && errno != EWOULDBLOCK) || !Wait(POLLIN, timeout_ms_)) return -1;
-    }
-  }
-  template <typename Getter>
-  std::pair<std::string, int> Address(Getter getter) const {
-    sockaddr_storage address{};
-    socklen_t length = sizeof(address);
-    int port = 0;
-    if (getter(sock_, reinterpret_cast<sockaddr*>(&address), &length) != 0) return {"", 0};
-    char text[INET6_ADDRSTRLEN] = {};
-    if (address.ss_family == AF_INET) {
-      const auto* v4 = reinterpret_cast<const sockaddr_in*>(&address);
-      ::inet_ntop(AF_INET, &v4->sin_addr, text, sizeof(text));
-      port = ntohs(v4->sin_port);
-    } else if (address.ss_family == AF_INET6) {
-      const auto* v6 = reinterpret_cast<const sockaddr_in6*>(&address);
-      ::inet_ntop(AF_INET6, &v6->sin6_addr, text, sizeof(text));
-      port = ntohs(v6->sin6_port);
-    }
-    return {text, port};
-  }
-
-  static constexpr size_t kOutBytes = 64 * 1024;
-  int sock_;
-  int timeout_ms_;
-  std::string out_;
-  char buffer_[64 * 1024];
-  size_t begin_ = 0;
-  size_t end_ = 0;
-  mutable std::optional<std::pair<std::string, int>> remote_, local_;
-};
-
-// Before closing a connection whose client may still be sending (a body the handler did not
-// read): shuts the write side (the response is out) and discards what arrives until the client
-// closes, for at most `linger_ms` (HttpServerOptions::unread_body_linger_ms, 1 s: a client that
-// keeps its end open after "Connection: close" held the serving thread for the whole read
-// timeout, 5 s, before). Closing at once with unread bytes would send a reset, which may
-// discard the response before the client reads it (RFC 9112, 9.6).
-void LingerBeforeClose(int sock, int linger_ms) {
-  ::shutdown(sock, SHUT_WR);
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(linger_ms);
-  char scratch[64 * 1024];
-  while (true) {
-    const auto left =
-        std::chrono::ceil<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
-    if (left.count() <= 0) return;
-    pollfd fd{sock, POLLIN, 0};
-    const int ready = ::poll(&fd, 1, static_cast<int>(left.count()));
-    if (ready < 0 && errno == EINTR) continue;
-    if (ready <= 0) return;
-    const ssize_t got = ::recv(sock, scratch, sizeof(scratch), MSG_DONTWAIT);
-    if (got == 0 || (got < 0 && errno != EINTR && errno != EAGAIN && errno != EWOULDBLOCK)) {
-      return;
-    }
-  }
+  std::string out(deflateBound(&z, data.size()), '\0');
+  z.next_in = reinterpret_cast<Bytef*>(const_cast<char*>(data.data()));
+  z.avail_in = static_cast<uInt>(data.size());
+  z.next_out = reinterpret_cast<Bytef*>(out.data());
+  z.avail_out = static_cast<uInt>(out.size());
+  const bool done = deflate(&z, Z_FINISH) == Z_STREAM_END;
+  out.resize(z.total_out);
+  deflateEnd(&z);
+  if (!done) return std::nullopt;
+  return out;
 }
 
-// Answers the connections beyond HttpServerOptions::max_connections: a 503 with the JSON error
-// and Retry-After, written at once (a fresh socket's send buffer takes it without waiting), then
-// the write side shut and the request drained until the client closes, so that the client reads
-// the 503 rather than a reset (closing a socket with unread request bytes sends RST, which may
-// discard the response before the client reads it: RFC 9112, 9.6). One thread waits on all of
-// them; each lingers at most kLinger, and beyond kMaxLingering at once a socket is closed right
-// after its 503 (a flood of connections then costs no more descriptors).
-class ConnectionRefuser {
+// Debian's cpp-httplib compresses a static file with brotli at maximum quality whenever the
+// client accepts it: about 6 s for three.js against 0.17 s with gzip. For such a client the file
+// goes gzip-compressed here (or as it is) through a content provider, which httplib does not
+// compress; other clients get httplib's own gzip as before.
+void AvoidBrotli(const httplib::Request& req, httplib::Response& res) {
+  const std::string accepted = req.get_header_value("Accept-Encoding");
+  if (accepted.find("br") == std::string::npos || res.body.empty()) return;
+  std::string type = res.get_header_value("Content-Type");
+  std::string body = std::move(res.body);
+  res.body.clear();
+  if (accepted.find("gzip") != std::string::npos && req.ranges.empty()) {
+    if (auto compressed = Gzip(body)) {
+      body = std::move(*compressed);
+      res.set_header("Content-Encoding", "gzip");
+    }
+  }
+  res.set_header("Vary", "Accept-Encoding");
+  auto shared = std::make_shared<const std::string>(std::move(body));
+  res.set_content_provider(shared->size(), type,
+                           [shared](size_t offset, size_t length, httplib::DataSink& sink) {
+                             return sink.write(shared->data() + offset, length);
+                           });
+}
+
+// httplib's pool of connection threads, with the connections handed to it (queued or served)
+// counted against max_connections. Beyond the cap a connection is served by a small pool of its
+// own with `refusing_connection` set: its first request gets the 503 and the connection closes.
+class ConnectionQueue : public httplib::TaskQueue {
  public:
-  explicit ConnectionRefuser(int max_connections)
-      : response_(Response(max_connections)), wake_fd_(::eventfd(0, EFD_CLOEXEC | EFD_NONBLOCK)) {
-    if (wake_fd_ < 0) throw std::runtime_error("cannot create an eventfd");
-    thread_ = std::thread([this] { Run(); });
-  }
-  ~ConnectionRefuser() {
-    {
-      std::lock_guard<std::mutex> lock(mutex_);
-      stopping_ = true;
-    }
-    Wake();
-    thread_.join();
-    for (const Lingering& lingering : lingering_) ::close(lingering.sock);
-    ::close(wake_fd_);
-  }
-  ConnectionRefuser(const ConnectionRefuser&) = delete;
-  ConnectionRefuser& operator=(const ConnectionRefuser&) = delete;
-
-  // Takes ownership of an accepted socket.
-  void Refuse(int sock) {
-    (void)!::send(sock, response_.data(), response_.size(), MSG_NOSIGNAL | MSG_DONTWAIT);
-    ::shutdown(sock, SHUT_WR);
-    {
-      std::lock_guard<std::mutex> lock(mutex_);
-      if (!stopping_ && lingering_.size() < kMaxLingering) {
-        lingering_.push_back({sock, std::chrono::steady_clock::now() + kLinger});
-        Wake();
-        return;
-      }
-    }
-    ::close(sock);
-  }
-
- private:
-  static constexpr size_t kMaxLingering = 64;
-  static constexpr std::chrono::milliseconds kLinger{1000};
-  static constexpr int kRetryAfterS = 1;
-
-  struct Lingering {
-    int sock;
-    std::chrono::steady_clock::time_point deadline;
-  };
-
-  static std::string Response(int max_connections) {
-    const std::string body =
-        api::ErrorJson("unavailable",
-                       "too many open connections (" + std::to_string(max_connections) + ")",
-                       {{"max_connections", max_connections}, {"retry_after_s", kRetryAfterS}})
-            .dump();
-    return "HTTP/1.1 503 Service Unavailable\r\nContent-Type: application/json\r\n"
-           "Content-Length: " +
-           std::to_string(body.size()) + "\r\nRetry-After: " + std::to_string(kRetryAfterS) +
-           "\r\nConnection: close\r\n\r\n" + body;
-  }
-
-  void Wake() {
-    const uint64_t one = 1;
-    (void)!::write(wake_fd_, &one, sizeof(one));
-  }
-
-  // True once the client has closed (or reset) its side: everything it sent has been read.
-  static bool DrainedToEnd(int sock) {
-    char scratch[4096];
-    while (true) {
-      const ssize_t got = ::recv(sock, scratch, sizeof(scratch), MSG_DONTWAIT);
-      if (got > 0) continue;
-      if (got < 0 && errno == EINTR) continue;
-      return got == 0 || (errno != EAGAIN && errno != EWOULDBLOCK);
-    }
-  }
-
-  // For poll(): -1 (no deadline) or the time to the earliest one. Called with the lock held.
-  int MillisecondsToNextDeadline() const {
-    if (lingering_.empty()) return -1;
-    auto next = lingering_.front().deadline;
-    for (const Lingering& lingering : lingering_) next = std::min(next, lingering.deadline);
-    const auto left =
-        std::chrono::ceil<std::chrono::milliseconds>(next - std::chrono::steady_clock::now());
-    return static_cast<int>(std::clamp<int64_t>(left.count(), 0, kLinger.count()));
-  }
-
-  void Run() {
-    std::vector<pollfd> fds;
-    std::unique_lock<std::mutex> lock(mutex_);
-    while (!stopping_) {
-      // Refuse() only appends and only this thread removes: the first fds.size() - 1 entries
-      // stay the ones polled while the lock is released.
-      fds.assign(1, pollfd{wake_fd_, POLLIN, 0});
-      for (const Lingering& lingering : lingering_) {
-        fds.push_back(pollfd{lingering.sock, POLLIN, 0});
-      }
-      const int timeout_ms = MillisecondsToNextDeadline();
-      lock.unlock();
-      const int ready = ::poll(fds.data(), fds.size(), timeout_ms);
-      if (ready > 0 && (fds[0].revents & POLLIN)) {
-        uint64_t value;
-        (void)!::read(wake_fd_, &value, sizeof(value));
-      }
-      lock.lock();
-      const auto now = std::chrono::steady_clock::now();
-      std::vector<bool> done(lingering_.size(), false);
-      for (size_t i = 0; i + 1 < fds.size(); ++i) {
-        const bool closed = ready > 0 && fds[i + 1].revents != 0 && DrainedToEnd(fds[i + 1].fd);
-        if (closed || now >= lingering_[i].deadline) {
-          ::close(lingering_[i].sock);
-          done[i] = true;
-        }
-      }
-      size_t kept = 0;
-      for (size_t i = 0; i < lingering_.size(); ++i) {
-        if (!done[i]) lingering_[kept++] = lingering_[i];
-      }
-      lingering_.resize(kept);
-    }
-  }
-
-  const std::string response_;
-  const int wake_fd_;
-  std::mutex mutex_;
-  std::vector<Lingering> lingering_;
-  bool stopping_ = false;
-  std::thread thread_;
-};
-
-// Serves every open connection from one fixed pool of threads (leader/follower): the
-// connections wait in one epoll set, each armed with EPOLLONESHOT, and the pool's threads block
-// in epoll_wait on it. The thread that gets a ready connection owns it alone (one-shot: no
-// other thread sees it until it is re-armed), serves its requests inline with the connection's
-// own buffered stream, and re-arms or closes it. With one thread per keep-alive connection,
-// 200 clients meant 200 threads waking every 10 ms, and latency grew with the connection
-// count (p99 1.5 ms at 50 connections, 3.8-8.4 ms at 200, 12.6 ms at 400 for the same rate);
-// here an idle connection costs no thread and no wake-up. The kernel wakes one waiting thread
-// per ready connection (the most recent waiter first), so the pool's threads beyond the
-// requests in flight just sleep; a pool as large as --http-threads means slow requests
-// (200 MB uploads, downloads) cannot occupy every thread while status polls wait.
-class ConnectionLoop {
- public:
-  // Serves the requests that are ready (or buffered) on a connection; false closes it.
-  using ServeFn = std::function<bool(ConnectionStream&)>;
-
-  // max_connections: how many Add() takes at most (0: no cap).
-  // `open_connections` counts the connections listed here (owned by the caller, outlives this).
-  ConnectionLoop(int num_threads, int max_connections, int keep_alive_timeout_ms,
-                 int read_timeout_ms, std::atomic<int64_t>& open_connections, ServeFn serve)
-      : open_connections_(open_connections),
-        max_connections_(static_cast<size_t>(std::max(0, max_connections))),
-        keep_alive_(keep_alive_timeout_ms),
-        read_timeout_ms_(read_timeout_ms),
-        serve_(std::move(serve)),
-        epoll_fd_(::epoll_create1(EPOLL_CLOEXEC)),
-        stop_fd_(::eventfd(0, EFD_CLOEXEC | EFD_NONBLOCK)) {
-    if (epoll_fd_ < 0 || stop_fd_ < 0) throw std::runtime_error("cannot create an epoll set");
-    // Level-triggered, never read: once signalled, every epoll_wait returns it (the kernel
-    // passes a level-triggered event on from waiter to waiter), so all threads see the stop.
-    epoll_event event{};
-    event.events = EPOLLIN;
-    event.data.u64 = kStopId;
-    ::epoll_ctl(epoll_fd_, EPOLL_CTL_ADD, stop_fd_, &event);
-    for (int i = 0; i < num_threads; ++i) threads_.emplace_back([this] { RunThread(); });
-    expiry_thread_ = std::thread([this] { ExpireIdleConnections(); });
-  }
-  ~ConnectionLoop() {
-    Stop();
-    ::close(epoll_fd_);
-    ::close(stop_fd_);
-  }
-
-  // Takes ownership of an accepted socket, or returns false (the socket stays the caller's)
-  // when max_connections are open. Only the accepting thread adds, so the count checked here
-  // can only shrink before the connection is listed.
-  bool Add(int sock) {
-    {
-      std::lock_guard<std::mutex> lock(mutex_);
-      if (max_connections_ > 0 && connections_.size() >= max_connections_) return false;
-    }
-    const int one = 1;
-    ::setsockopt(sock, IPPROTO_TCP, TCP_NODELAY, &one, sizeof(one));
-    auto connection = std::make_unique<Connection>(sock, read_timeout_ms_, open_connections_);
-    std::lock_guard<std::mutex> lock(mutex_);
-    if (stopping_) return true;  // closes the socket
-    const uint64_t id = next_id_++;
-    if (!Arm(EPOLL_CTL_ADD, sock, id)) return true;
-    connections_.emplace(id, std::move(connection));
-    return true;
-  }
-
-  // Wakes every thread, waits for requests in progress to end, closes all connections.
-  void Stop() {
-    {
-      std::lock_guard<std::mutex> lock(mutex_);
-      stopping_ = true;
-    }
-    const uint64_t one = 1;
-    (void)!::write(stop_fd_, &one, sizeof(one));
-    expiry_wake_.notify_all();
-    for (auto& thread : threads_) {
-      if (thread.joinable()) thread.join();
-    }
-    if (expiry_thread_.joinable()) expiry_thread_.join();
-    std::lock_guard<std::mutex> lock(mutex_);
-    connections_.clear();
-  }
-
- private:
-  // Events carry a connection id rather than its fd or address: an event taken from epoll_wait
-  // just before its connection expired then finds nothing, instead of a reused fd or freed memory.
-  static constexpr uint64_t kStopId = 0;
-
-  struct Connection {
-    Connection(int sock, int read_timeout_ms, std::atomic<int64_t>& open_count)
-        : stream(sock, read_timeout_ms), open(open_count) {
-      ++open;
-    }
-    ~Connection() {
-      ::shutdown(stream.socket(), SHUT_RDWR);
-      ::close(stream.socket());
-      --open;
-    }
-    ConnectionStream stream;
-    std::atomic<int64_t>& open;
-    bool busy = false;  // owned by a pool thread; only that thread may close it
-    std::chrono::steady_clock::time_point idle_since = std::chrono::steady_clock::now();
-  };
-
-  bool Arm(int operation, int sock, uint64_t id) {
-    epoll_event event{};
-    event.events = EPOLLIN | EPOLLONESHOT;
-    event.data.u64 = id;
-    return ::epoll_ctl(epoll_fd_, operation, sock, &event) == 0;
-  }
-
-  void RunThread() {
-    while (!stopping_) {
-      epoll_event event{};
-      const int ready = ::epoll_wait(epoll_fd_, &event, 1, -1);
-      if (ready < 0 && errno != EINTR) return;
-      if (ready <= 0) continue;
-      if (event.data.u64 == kStopId) return;
-      ConnectionStream* stream = Take(event.data.u64);
-      if (stream != nullptr) Release(event.data.u64, serve_(*stream));
-    }
-  }
-
-  ConnectionStream* Take(uint64_t id) {
-    std::lock_guard<std::mutex> lock(mutex_);
-    const auto it = connections_.find(id);
-    if (it == connections_.end()) return nullptr;
-    it->second->busy = true;
-    return &it->second->stream;
-  }
-
-  // Re-arms a connection after its requests, or closes it (outside the lock).
-  void Release(uint64_t id, bool keep) {
-    std::unique_ptr<Connection> closing;
-    {
-      std::lock_guard<std::mutex> lock(mutex_);
-      const auto it = connections_.find(id);
-      if (it == connections_.end()) return;  // not reached: a busy connection stays listed
-      Connection& connection = *it->second;
-      connection.busy = false;
-      connection.idle_since = std::chrono::steady_clock::now();
-      if (keep && !stopping_ && Arm(EPOLL_CTL_MOD, connection.stream.socket(), id)) return;
-      closing = std::move(it->second);
-      connections_.erase(it);
-    }
-  }
-
-  // Closes connections idle for longer than the keep-alive timeout, checking a few times per
-  // timeout. One whose next request has arrived (its event may be on its way to a thread) stays.
-  void ExpireIdleConnections() {
-    const auto interval = std::clamp(keep_alive_ / 10, std::chrono::milliseconds(10),
-                                     std::chrono::milliseconds(1000));
-    std::unique_lock<std::mutex> lock(mutex_);
-    while (!stopping_) {
-      expiry_wake_.wait_for(lock, interval);
-      const auto now = std::chrono::steady_clock::now();
-      std::vector<std::unique_ptr<Connection>> expired;
-      for (auto it = connections_.begin(); it != connections_.end();) {
-        Connection& connection = *it->second;
-        pollfd fd{connection.stream.socket(), POLLIN, 0};
-        if (!connection.busy && now - connection.idle_since >= keep_alive_ &&
-            ::poll(&fd, 1, 0) == 0) {
-          expired.push_back(std::move(it->second));
-          it = connections_.erase(it);
-        } else {
-          ++it;
-        }
-      }
-      lock.unlock();
-      expired.clear();
-      lock.lock();
-    }
-  }
-
-  std::atomic<int64_t>& open_connections_;
-  const size_t max_connections_;
-  const std::chrono::milliseconds keep_alive_;
-  const int read_timeout_ms_;
-  const ServeFn serve_;
-  const int epoll_fd_;
-  const int stop_fd_;
-  std::vector<std::thread> threads_;
-  std::thread expiry_thread_;
-  std::condition_variable expiry_wake_;
-  std::mutex mutex_;
-  std::unordered_map<uint64_t, std::unique_ptr<Connection>> connections_;
-  uint64_t next_id_ = kStopId + 1;
-  std::atomic<bool> stopping_{false};
-};
-
-// Runs httplib's per-connection task on the accepting thread: handing a socket to the
-// ConnectionLoop is a few system calls, cheaper than a hop through another thread.
-class InlineTaskQueue : public httplib::TaskQueue {
- public:
-  void enqueue(std::function<void()> fn) override { fn(); }
-  void shutdown() override {}
-};
-
-// Set on the accepting thread while it runs the task of a connection beyond the cap.
-thread_local bool refusing_connection = false;
-
-// --http-loop threads: httplib's pool, with the connections handed to it (queued or served)
-// counted against max_connections. httplib's task for an accepted socket is an opaque closure
-// over process_and_close_socket(sock); beyond the cap it runs right here on the accepting
-// thread with `refusing_connection` set, and process_and_close_socket refuses the socket.
-class CappedThreadPool : public httplib::TaskQueue {
- public:
-  // `open` counts the connections handed to the pool (owned by the caller, outlives this).
-  CappedThreadPool(int num_threads, int max_connections, std::atomic<int64_t>& open)
+  ConnectionQueue(int num_threads, int max_connections, std::atomic<int64_t>& open)
       : pool_(static_cast<size_t>(num_threads)), max_connections_(max_connections), open_(open) {}
+
+  // Called on the accepting thread only: the count can only shrink between check and add.
   void enqueue(std::function<void()> fn) override {
-    // Only the accepting thread enqueues: the count can only shrink between check and add.
     if (max_connections_ > 0 && open_ >= max_connections_) {
-      refusing_connection = true;
-      fn();
-      refusing_connection = false;
+      refusals_.enqueue([fn = std::move(fn)] {
+        refusing_connection = true;
+        fn();
+        refusing_connection = false;
+      });
       return;
     }
     ++open_;
@@ -687,142 +246,50 @@ class CappedThreadPool : public httplib::TaskQueue {
       --open_;
     });
   }
-  void shutdown() override { pool_.shutdown(); }
+  void shutdown() override {
+    pool_.shutdown();
+    refusals_.shutdown();
+  }
 
  private:
   httplib::ThreadPool pool_;
+  httplib::ThreadPool refusals_{2};
   const int max_connections_;
   std::atomic<int64_t>& open_;
 };
 
-// httplib 0.11 waits for a keep-alive connection's next request by polling it for 10 ms and
-// then sleeping 1 ms, over and over: twice the wakeups, and up to 1 ms added to a request that
-// lands in the sleep. It also rebuilds its socket stream per request and writes headers and
-// body as two segments. This server keeps one buffered stream per connection, sends each
-// response in one piece and waits on the socket and on an eventfd that Stop() signals.
-class KeepAliveServer : public httplib::Server {
- public:
-  KeepAliveServer() : stop_fd_(::eventfd(0, EFD_CLOEXEC | EFD_NONBLOCK)) {}
-  ~KeepAliveServer() override {
-    if (stop_fd_ >= 0) ::close(stop_fd_);
+uint16_t LocalPort(int fd) {
+  sockaddr_storage address{};
+  socklen_t length = sizeof(address);
+  if (::getsockname(fd, reinterpret_cast<sockaddr*>(&address), &length) != 0) return 0;
+  if (address.ss_family == AF_INET) {
+    return ntohs(reinterpret_cast<const sockaddr_in&>(address).sin_port);
   }
-  // Wakes every connection waiting for its next request, so stop() does not wait for them.
-  void WakeIdleConnections() {
-    stopping_ = true;
-    const uint64_t one = 1;
-    if (stop_fd_ >= 0) (void)!::write(stop_fd_, &one, sizeof(one));
+  if (address.ss_family == AF_INET6) {
+    return ntohs(reinterpret_cast<const sockaddr_in6&>(address).sin6_port);
   }
-  // httplib listens with a backlog of 5: 200 clients connecting at once overflow it, and the
-  // dropped SYNs are retried only after 1 s (wrk saw 1.7 s maxima and timeouts). Listening
-  // again on the bound socket raises the backlog.
-  void RaiseListenBacklog() {
-    const int sock = svr_sock_;
-    if (sock >= 0) ::listen(sock, SOMAXCONN);
-  }
-  void ResetStop() {
-    stopping_ = false;
-    uint64_t value;
-    if (stop_fd_ >= 0) (void)!::read(stop_fd_, &value, sizeof(value));
-  }
-  // Accepted sockets go to `loop` (owned by the caller, alive until listening ends) when set,
-  // else each gets a thread of httplib's task queue until it closes.
-  void SetConnectionLoop(ConnectionLoop* loop) { loop_ = loop; }
-  // Where connections beyond the cap go (owned by the caller, alive until listening ends), and
-  // what counts them.
-  void SetConnectionRefuser(ConnectionRefuser* refuser, std::function<void()> on_refused) {
-    refuser_ = refuser;
-    on_refused_ = std::move(on_refused);
-  }
-  // The ConnectionLoop's ServeFn: every request ready on the connection, pipelined ones too.
-  bool ServeReady(ConnectionStream& stream) {
-    do {
-      bool connection_closed = false;
-      close_after_response = false;
-      const bool ok =
-          process_request(stream, /*close_connection=*/stopping_, connection_closed, nullptr);
-      const bool flushed = stream.Flush();
-      if (flushed && close_after_response) LingerBeforeClose(stream.socket(), linger_ms());
-      if (!flushed || !ok || connection_closed || close_after_response || stopping_) {
-        return false;
-      }
-    } while (stream.has_buffered());
-    return true;
-  }
-  int read_timeout_ms() const {
-    return static_cast<int>(read_timeout_sec_ * 1000 + read_timeout_usec_ / 1000);
-  }
-  int keep_alive_timeout_ms() const { return keep_alive_timeout_ms_; }
-  int linger_ms() const { return std::min(read_timeout_ms(), unread_body_linger_ms_); }
-  void SetTimeouts(int keep_alive_timeout_ms, int read_timeout_ms, int unread_body_linger_ms) {
-    keep_alive_timeout_ms_ = keep_alive_timeout_ms;
-    unread_body_linger_ms_ = unread_body_linger_ms;
-    set_keep_alive_timeout((keep_alive_timeout_ms + 999) / 1000);
-    set_read_timeout(read_timeout_ms / 1000, (read_timeout_ms % 1000) * 1000);
-  }
+  return 0;
+}
 
- private:
-  bool process_and_close_socket(int sock) override {
-    if (refusing_connection || (loop_ != nullptr && !loop_->Add(sock))) {
-      Refuse(sock);
-      return false;
+// httplib 0.11 leaves a thread that waits for an idle keep-alive connection's next request
+// there until the keep-alive timeout, stopped or not. Shutting down the reading side of the
+// server's connections (the sockets of this process with local port `port` and a peer) wakes
+// those threads at once; a request in progress still writes its response.
+void ShutDownConnectionReads(int port) {
+  DIR* fds = ::opendir("/proc/self/fd");
+  if (fds == nullptr) return;
+  const int own = ::dirfd(fds);
+  while (const dirent* entry = ::readdir(fds)) {
+    const int fd = std::atoi(entry->d_name);
+    if (entry->d_name[0] == '.' || fd == own || LocalPort(fd) != port) continue;
+    sockaddr_storage peer{};
+    socklen_t length = sizeof(peer);
+    if (::getpeername(fd, reinterpret_cast<sockaddr*>(&peer), &length) == 0) {
+      ::shutdown(fd, SHUT_RD);
     }
-    if (loop_ != nullptr) return true;
-    const int one = 1;
-    ::setsockopt(sock, IPPROTO_TCP, TCP_NODELAY, &one, sizeof(one));
-    // An idle keep-alive connection closes after keep_alive_timeout_ms_, a request whose bytes
-    // stall fails after the read timeout.
-    ConnectionStream stream(sock, read_timeout_ms());
-    bool ok = false;
-    while (!stopping_ && WaitForRequest(stream)) {
-      bool connection_closed = false;
-      close_after_response = false;
-      ok = process_request(stream, /*close_connection=*/stopping_, connection_closed, nullptr);
-      const bool flushed = stream.Flush();
-      if (flushed && close_after_response) LingerBeforeClose(stream.socket(), linger_ms());
-      ok = flushed && ok;
-      if (!ok || connection_closed || close_after_response) break;
-    }
-    ::shutdown(sock, SHUT_RDWR);
-    ::close(sock);
-    return ok;
   }
-
-  // Waits in 10 ms slices rather than one long poll(): measured with wrk at 2,000 polls/s on
-  // the 2-core machine while other processes kept both cores busy (load ~10), p99 was 3.6-5.4 ms
-  // with 10 ms slices against 9.6-44 ms with one blocking poll (the scheduler seems to place a
-  // thread that slept for 100 ms behind the running tasks). The slices cost ~20,000 cheap
-  // wakeups a second with 200 open connections; httplib's sleep(1 ms) between polls is gone.
-  bool WaitForRequest(const ConnectionStream& stream) const {
-    if (stream.has_buffered()) return true;
-    constexpr int kSliceMs = 10;
-    const auto deadline =
-        std::chrono::steady_clock::now() + std::chrono::milliseconds(keep_alive_timeout_ms_);
-    pollfd fds[2] = {{stream.socket(), POLLIN, 0}, {stop_fd_, POLLIN, 0}};
-    while (!stopping_ && std::chrono::steady_clock::now() < deadline) {
-      const int ready = ::poll(fds, stop_fd_ >= 0 ? 2 : 1, kSliceMs);
-      if (ready < 0 && errno != EINTR) return false;
-      if (ready > 0) return (fds[0].revents & (POLLIN | POLLHUP | POLLERR)) && !stopping_;
-    }
-    return false;
-  }
-
-  void Refuse(int sock) {
-    if (refuser_ == nullptr) {  // not reached: a cap comes with a refuser
-      ::close(sock);
-      return;
-    }
-    refuser_->Refuse(sock);
-    if (on_refused_) on_refused_();
-  }
-
-  int stop_fd_;
-  std::atomic<bool> stopping_{false};
-  ConnectionLoop* loop_ = nullptr;
-  ConnectionRefuser* refuser_ = nullptr;
-  std::function<void()> on_refused_;
-  int keep_alive_timeout_ms_ = 5000;
-  int unread_body_linger_ms_ = 1000;
-};
+  ::closedir(fds);
+}
 
 }  // namespace
 
@@ -839,80 +306,114 @@ void HttpResponse::Json(int status_code, const nlohmann::json& json) {
   file.reset();
 }
 
-void HttpResponse::JsonText(int status_code, std::string json_text) {
-  status = status_code;
-  content_type = "application/json";
-  body = std::move(json_text);
-  file.reset();
-}
-
 bool IsLoopbackHost(const std::string& host) {
   return host == "localhost" || host == "::1" || host.rfind("127.", 0) == 0;
 }
 
 struct HttpServer::Impl {
   struct RouteInfo {
-    std::string pattern;
-    std::vector<std::string> names;
-    HttpHandler handler;
+    std::string method;
+    std::string label;  // "GET /api/v1/jobs/{id}", for the request counter
     std::vector<Segment> segments;
-    bool whole_segments = false;  // `segments` match as the regex does (PatternToSegments)
+    HttpHandler handler;
+    bool streaming = false;
   };
 
   HttpServerOptions options;
   RequestCounter counter;
-  // Accepted and not yet closed, in either loop (declared before `server`, which uses it).
-  std::atomic<int64_t> open_connections{0};
-  KeepAliveServer server;
-  std::unique_ptr<ConnectionLoop> loop;  // with options.event_loop, between Start() and Stop()
-  std::unique_ptr<ConnectionRefuser> refuser;  // with max_connections, between Start() and Stop()
+  std::atomic<int64_t> open_connections{0};  // declared before `server`, whose queue uses it
+  httplib::Server server;
+  int listen_socket = -1;
+  int port = 0;
   std::thread thread;
   std::atomic<bool> listen_returned{false};
-  // GET and DELETE routes by method, in the order registered (httplib tries them in that order
-  // too); fixed once serving starts.
-  std::map<std::string, std::vector<std::shared_ptr<const RouteInfo>>> bodyless_routes;
+  std::vector<RouteInfo> routes;       // fixed once serving starts
   std::string expected_authorization;  // "Bearer <token>"
 
-  // `values`: the path parameters in order; nullptr takes them from the regex's req.matches.
-  void Dispatch(const RouteInfo& route, const httplib::Request& req, httplib::Response& res,
-                const httplib::ContentReader* reader,
-                const std::vector<std::string>* values = nullptr);
-  bool DispatchBodyless(const httplib::Request& req, httplib::Response& res);
-  HttpRequest MakeRequest(const RouteInfo& route, const httplib::Request& req,
-                          const httplib::ContentReader* reader,
-                          const std::vector<std::string>* values, bool& body_read);
+  const RouteInfo* Find(const std::string& method, const std::string& path,
+                        std::map<std::string, std::string>& params) const {
+    const std::string& wanted = method == "HEAD" ? "GET" : method;
+    for (const RouteInfo& route : routes) {
+      if (route.method == wanted && MatchSegments(route.segments, path, params)) return &route;
+    }
+    return nullptr;
+  }
+  void Dispatch(const RouteInfo& route, std::map<std::string, std::string> params,
+                const httplib::Request& req, httplib::Response& res,
+                const httplib::ContentReader* reader);
+  // The httplib handler for every request that reaches the handlers (those with a body, and
+  // GETs that are not routes): routes it, or answers 404.
+  void DispatchOrNotFound(const httplib::Request& req, httplib::Response& res,
+                          const httplib::ContentReader* reader);
+  httplib::Server::HandlerResponse PreRoute(const httplib::Request& req, httplib::Response& res);
+  bool ReadWholeBody(const httplib::Request& req, const httplib::Response& res,
+                     const httplib::ContentReader& reader, std::string& body) const;
+  bool DiscardBody(const httplib::Request& req, const httplib::ContentReader& reader) const;
   void Install();
 };
 
-// `body_read` becomes true once a streaming handler has read its body to the end.
-HttpRequest HttpServer::Impl::MakeRequest(const RouteInfo& route, const httplib::Request& req,
-                                          const httplib::ContentReader* reader,
-                                          const std::vector<std::string>* values, bool& body_read) {
+// Reads a buffered route's body into `body`; throws HttpError when it is too large or broken.
+bool HttpServer::Impl::ReadWholeBody(const httplib::Request& req, const httplib::Response& res,
+                                     const httplib::ContentReader& reader,
+                                     std::string& body) const {
+  const auto limit = static_cast<size_t>(options.max_body_bytes);
+  bool too_large = false;
+  const auto append = [&](const char* data, size_t size) {
+    too_large = body.size() + size > limit;
+    if (!too_large) body.append(data, size);
+    return !too_large;
+  };
+  // A multipart body to a buffered route: read (its parts are not the route's JSON) and dropped.
+  const bool whole = req.is_multipart_form_data()
+                         ? reader([](const httplib::MultipartFormData&) { return true; },
+                                  [](const char*, size_t) { return true; })
+                         : reader(append);
+  if (whole) return true;
+  if (too_large || res.status == 413) {
+    throw HttpError(413, "payload_too_large",
+                    "the body exceeds " + std::to_string(options.max_body_bytes) + " bytes",
+                    {{"limit_bytes", options.max_body_bytes}});
+  }
+  throw HttpError(400, "incomplete_body", "the request body could not be read");
+}
+
+// Reads and drops a body the handler did not read, for at most unread_body_linger_ms; true
+// when it was read to its end (the connection can serve the next request).
+bool HttpServer::Impl::DiscardBody(const httplib::Request& req,
+                                   const httplib::ContentReader& reader) const {
+  const auto deadline =
+      std::chrono::steady_clock::now() + std::chrono::milliseconds(options.unread_body_linger_ms);
+  const auto in_time = [deadline](const char*, size_t) {
+    return std::chrono::steady_clock::now() < deadline;
+  };
+  if (req.is_multipart_form_data()) {
+    return reader([&](const httplib::MultipartFormData&) { return in_time(nullptr, 0); }, in_time);
+  }
+  return reader(in_time);
+}
+
+void HttpServer::Impl::Dispatch(const RouteInfo& route, std::map<std::string, std::string> params,
+                                const httplib::Request& req, httplib::Response& res,
+                                const httplib::ContentReader* reader) {
+  current_route = route.label;
   HttpRequest request;
   request.method = req.method;
   request.path = req.path;
-  if (values != nullptr) {
-    for (size_t i = 0; i < route.names.size() && i < values->size(); ++i) {
-      request.path_params[route.names[i]] = (*values)[i];
-    }
-  } else {
-    for (size_t i = 0; i < route.names.size() && i + 1 < req.matches.size(); ++i) {
-      request.path_params[route.names[i]] = req.matches[i + 1].str();
-    }
-  }
+  request.path_params = std::move(params);
   request.query.insert(req.params.begin(), req.params.end());
-  request.body = req.body;
   request.header = [&req](const std::string& name) { return req.get_header_value(name); };
-  if (reader) {
+  bool reader_called = false;  // by the handler
+  bool body_read = reader == nullptr;
+  if (reader != nullptr && route.streaming) {
     request.is_multipart = req.is_multipart_form_data();
-    request.read_body = [reader,
-                         &body_read](const std::function<bool(const char*, size_t)>& on_data) {
+    request.read_body = [&](const std::function<bool(const char*, size_t)>& on_data) {
+      reader_called = true;
       body_read = (*reader)([&](const char* data, size_t size) { return on_data(data, size); });
       return body_read;
     };
-    request.read_multipart = [reader, &body_read](
-                                 const std::function<bool(const MultipartPart&)>& on_part,
+    request.read_multipart = [&](const std::function<bool(const MultipartPart&)>& on_part,
                                  const std::function<bool(const char*, size_t)>& on_data) {
+      reader_called = true;
       body_read = (*reader)(
           [&](const httplib::MultipartFormData& part) {
             return on_part(MultipartPart{part.name, part.filename, part.content_type});
@@ -921,69 +422,111 @@ HttpRequest HttpServer::Impl::MakeRequest(const RouteInfo& route, const httplib:
       return body_read;
     };
   }
-  return request;
-}
-
-void HttpServer::Impl::Dispatch(const RouteInfo& route, const httplib::Request& req,
-                                httplib::Response& res, const httplib::ContentReader* reader,
-                                const std::vector<std::string>* values) {
-  current_route = route.pattern;
   HttpResponse response;
-  bool body_read = false;
   try {
-    route.handler(MakeRequest(route, req, reader, values, body_read), response);
+    if (reader != nullptr && !route.streaming) {
+      reader_called = true;
+      body_read = ReadWholeBody(req, res, *reader, request.body);
+    }
+    route.handler(request, response);
   } catch (const HttpError& e) {
+    response = HttpResponse{};
     response.Json(e.status, api::ErrorJson(e.code, e.what(), e.details));
-  } catch (const std::invalid_argument& e) {
+  } catch (const InvalidArgument& e) {
+    if (!e.where().empty()) {
+      std::cerr << "omnirig: " << route.label << ": 400: " << e.what() << " (check at " << e.where()
+                << ")" << std::endl;
+    }
+    response = HttpResponse{};
     response.Json(400, api::ErrorJson("invalid_argument", e.what()));
   } catch (const std::exception& e) {
+    std::cerr << "omnirig: " << route.label << ": 500: " << e.what() << std::endl;
+    response = HttpResponse{};
     response.Json(500, api::ErrorJson("internal", e.what()));
   } catch (...) {
+    std::cerr << "omnirig: " << route.label << ": 500: unknown exception" << std::endl;
+    response = HttpResponse{};
     response.Json(500, api::ErrorJson("internal", "unknown error"));
   }
-  if (reader != nullptr && !body_read && HasBody(req)) {
-    // See close_after_response. A "Connection: close" request header makes httplib say so in
-    // the response (the request is httplib's mutable local, as above).
-    close_after_response = true;
-    auto& headers = const_cast<httplib::Request&>(req).headers;
-    headers.erase("Connection");
-    headers.emplace("Connection", "close");
-  }
+  // The rest of an unread body would be parsed as the next request.
+  if (!body_read && !reader_called) body_read = DiscardBody(req, *reader);
   res.status = response.status;
-  for (const auto& [name, value] : response.headers) res.set_header(name.c_str(), value);
-  if (!response.file || response.status != 200) {
-    // cpp-httplib 0.11 slices *every* response body by the request's Range header, including
-    // JSON errors; only a file download may honour it. The Request object is httplib's own
-    // non-const local, handed to handlers as const, so clearing its ranges here is defined.
-    const_cast<httplib::Request&>(req).ranges.clear();
-  }
-  if (response.file) {
-    WriteFile(req, response, res);
+  for (const auto& [name, value] : response.headers) res.set_header(name, value);
+  if (response.file && response.status == 200) {
+    SetFile(req, response, res);
+  } else if (response.stream) {
+    res.set_chunked_content_provider(response.content_type, [stream = std::move(response.stream)](
+                                                                size_t, httplib::DataSink& sink) {
+      std::string chunk;
+      if (!stream(chunk)) {
+        sink.done();
+        return true;
+      }
+      return chunk.empty() || sink.write(chunk.data(), chunk.size());
+    });
   } else {
-    res.set_content(response.body, response.content_type.c_str());
+    SetBody(req, res, std::move(response.body), response.content_type, !body_read);
   }
 }
 
-// httplib finds a handler by trying each route's std::regex in turn: for a status poll that was
-// ~12 % of its user-space instructions (7 regexes before /api/v1/jobs/{id}). A GET or DELETE
-// without a body is matched here by segments instead, in the same order with the same result;
-// anything else (a body to read, a pattern with a partial-segment parameter, no match: 404)
-// goes on to httplib as before. Only under /api/: httplib would first look for a static file
-// of that path under a mount at "/" (a stat() per request); the web folder has no api/ folder,
-// and elsewhere static files keep their precedence.
-bool HttpServer::Impl::DispatchBodyless(const httplib::Request& req, httplib::Response& res) {
-  if (req.path.rfind("/api/", 0) != 0 || HasBody(req)) return false;
-  const auto routes = bodyless_routes.find(req.method);
-  if (routes == bodyless_routes.end()) return false;
-  thread_local std::vector<std::string> values;
-  for (const auto& route : routes->second) {
-    if (!route->whole_segments) return false;  // its regex decides from here on
-    if (MatchSegments(route->segments, req.path, values)) {
-      Dispatch(*route, req, res, nullptr, &values);
-      return true;
-    }
+void HttpServer::Impl::DispatchOrNotFound(const httplib::Request& req, httplib::Response& res,
+                                          const httplib::ContentReader* reader) {
+  std::map<std::string, std::string> params;
+  if (const RouteInfo* route = Find(req.method, req.path, params)) {
+    Dispatch(*route, std::move(params), req, res, reader);
+    return;
   }
-  return false;
+  bool body_read = reader == nullptr || DiscardBody(req, *reader);
+  res.status = 404;
+  SetBody(req, res,
+          api::ErrorJson("not_found", "no route for " + req.method + " " + req.path).dump(),
+          "application/json", !body_read);
+}
+
+// Every request starts here: the refusal beyond max_connections, the bearer token, and the
+// routes of requests without a body. httplib 0.11 reads the body of a POST, PUT or DELETE that
+// has neither Content-Length nor Transfer-Encoding until the client closes (a `curl -X POST
+// .../cancel` waited out the read timeout and got 400): served here, it has none. Requests
+// with a body go on to httplib, which hands them with a reader to DispatchOrNotFound; other
+// GETs to httplib's static files.
+httplib::Server::HandlerResponse HttpServer::Impl::PreRoute(const httplib::Request& req,
+                                                            httplib::Response& res) {
+  using Result = httplib::Server::HandlerResponse;
+  request_start = std::chrono::steady_clock::now();
+  current_route = "unmatched";
+  if (refusing_connection) {
+    constexpr int kRetryAfterS = 1;
+    current_route = kRefusedRoute;
+    res.status = 503;
+    res.set_header("Retry-After", std::to_string(kRetryAfterS));
+    const int cap = options.max_connections;
+    SetBody(req, res,
+            api::ErrorJson("unavailable", "too many open connections (" + std::to_string(cap) + ")",
+                           {{"max_connections", cap}, {"retry_after_s", kRetryAfterS}})
+                .dump(),
+            "application/json", true);
+    return Result::Handled;
+  }
+  const bool protected_path = req.path.rfind("/api/", 0) == 0 || req.path == "/metrics";
+  if (!options.token.empty() && protected_path &&
+      !ConstantTimeEquals(req.get_header_value("Authorization"), expected_authorization)) {
+    current_route = "auth";
+    res.status = 401;
+    res.set_header("WWW-Authenticate", "Bearer");
+    SetBody(req, res, api::ErrorJson("unauthorized", "a valid bearer token is required").dump(),
+            "application/json", HasBody(req));
+    return Result::Handled;
+  }
+  if (HasBody(req)) return Result::Unhandled;
+  std::map<std::string, std::string> params;
+  const RouteInfo* route = Find(req.method, req.path, params);
+  if (route == nullptr) {
+    if (req.method == "GET" || req.method == "HEAD") return Result::Unhandled;  // static files
+    DispatchOrNotFound(req, res, nullptr);
+    return Result::Handled;
+  }
+  Dispatch(*route, std::move(params), req, res, nullptr);
+  return Result::Handled;
 }
 
 void HttpServer::Impl::Install() {
@@ -991,49 +534,38 @@ void HttpServer::Impl::Install() {
   const int threads = options.num_threads;
   const int max_connections = options.max_connections;
   std::atomic<int64_t>* open = &open_connections;
-  if (options.event_loop) {
-    server.new_task_queue = [] { return new InlineTaskQueue(); };
-  } else {
-    server.new_task_queue = [threads, max_connections, open] {
-      return new CappedThreadPool(threads, max_connections, *open);
-    };
-  }
-  server.SetTimeouts(options.keep_alive_timeout_ms, options.read_timeout_ms,
-                     options.unread_body_linger_ms);
-  server.set_payload_max_length(static_cast<size_t>(options.max_body_bytes));
+  server.new_task_queue = [threads, max_connections, open] {
+    return new ConnectionQueue(threads, max_connections, *open);
+  };
+  server.set_keep_alive_timeout(std::max(1, (options.keep_alive_timeout_ms + 999) / 1000));
   server.set_keep_alive_max_count(100000);
-  server.set_pre_routing_handler([this](const httplib::Request& req, httplib::Response& res) {
-    request_start = std::chrono::steady_clock::now();
-    current_route = "unmatched";
-    // Debian's cpp-httplib prefers brotli at maximum quality whenever the client accepts it:
-    // about 6 s for three.js against 0.17 s with gzip. Offer it gzip only. The request object
-    // is a mutable local of httplib's request loop, so editing its headers here is defined.
-    auto& headers = const_cast<httplib::Request&>(req).headers;
-    const auto accept = headers.find("Accept-Encoding");
-    if (accept != headers.end() && accept->second.find("br") != std::string::npos) {
-      accept->second = accept->second.find("gzip") != std::string::npos ? "gzip" : "identity";
-    }
-    // A request without Content-Length or Transfer-Encoding has no body (RFC 9112, 6.3), but
-    // httplib 0.11 reads the body of such a POST, PUT or DELETE until the client closes: a
-    // `curl -X POST .../cancel` waited out the read timeout (5 s) and got 400. Say it is empty.
-    if (!req.has_header(kContentLength) && !req.has_header(kTransferEncoding)) {
-      headers.emplace(kContentLength, "0");
-    }
-    const bool protected_path = req.path.rfind("/api/", 0) == 0 || req.path == "/metrics";
-    if (!options.token.empty() && protected_path &&
-        !ConstantTimeEquals(req.get_header_value(kAuthorization), expected_authorization)) {
-      current_route = "auth";
-      res.status = 401;
-      res.set_header("WWW-Authenticate", "Bearer");
-      res.set_content(api::ErrorJson("unauthorized", "a valid bearer token is required").dump(),
-                      "application/json");
-      return httplib::Server::HandlerResponse::Handled;
-    }
-    return DispatchBodyless(req, res) ? httplib::Server::HandlerResponse::Handled
-                                      : httplib::Server::HandlerResponse::Unhandled;
+  server.set_read_timeout(options.read_timeout_ms / 1000, (options.read_timeout_ms % 1000) * 1000);
+  server.set_payload_max_length(static_cast<size_t>(options.max_body_bytes));
+  server.set_tcp_nodelay(true);
+  // The listening socket, to raise its backlog after binding (see Bind).
+  server.set_socket_options([this](int sock) {
+    httplib::default_socket_options(sock);
+    listen_socket = sock;
+  });
+  server.set_pre_routing_handler(
+      [this](const httplib::Request& req, httplib::Response& res) { return PreRoute(req, res); });
+  const auto buffered = [this](const httplib::Request& req, httplib::Response& res) {
+    DispatchOrNotFound(req, res, nullptr);
+  };
+  const auto streamed = [this](const httplib::Request& req, httplib::Response& res,
+                               const httplib::ContentReader& reader) {
+    DispatchOrNotFound(req, res, &reader);
+  };
+  server.Get(".*", buffered);
+  server.Post(".*", streamed);
+  server.Put(".*", streamed);
+  server.Delete(".*", streamed);
+  server.set_file_request_handler([](const httplib::Request& req, httplib::Response& res) {
+    current_route = "static";
+    AvoidBrotli(req, res);
   });
   server.set_error_handler([](const httplib::Request& req, httplib::Response& res) {
-    if (!res.body.empty()) return;
+    if (!res.body.empty() || res.content_length_ > 0 || res.content_provider_) return;
     const std::string message =
         res.status == 404 ? "no route for " + req.method + " " + req.path
                           : "request refused with HTTP status " + std::to_string(res.status);
@@ -1058,32 +590,11 @@ HttpServer::~HttpServer() { Stop(); }
 
 void HttpServer::Route(const std::string& method, const std::string& pattern, HttpHandler handler,
                        bool streaming) {
-  auto route = std::make_shared<Impl::RouteInfo>();
-  route->pattern = method + " " + pattern;
-  route->handler = std::move(handler);
-  const std::string regex = PatternToRegex(pattern, route->names);
-  route->whole_segments = PatternToSegments(pattern, route->segments);
-  if (method == "GET" || method == "DELETE") impl_->bodyless_routes[method].push_back(route);
-  Impl* impl = impl_.get();
-  const auto buffered = [impl, route](const httplib::Request& req, httplib::Response& res) {
-    impl->Dispatch(*route, req, res, nullptr);
-  };
-  const auto streamed = [impl, route](const httplib::Request& req, httplib::Response& res,
-                                      const httplib::ContentReader& reader) {
-    impl->Dispatch(*route, req, res, &reader);
-  };
-  httplib::Server& server = impl_->server;
-  if (method == "GET") {
-    server.Get(regex, buffered);
-  } else if (method == "DELETE") {
-    server.Delete(regex, buffered);
-  } else if (method == "POST") {
-    streaming ? server.Post(regex, streamed) : server.Post(regex, buffered);
-  } else if (method == "PUT") {
-    streaming ? server.Put(regex, streamed) : server.Put(regex, buffered);
-  } else {
-    throw std::invalid_argument("unsupported method " + method);
+  if (method != "GET" && method != "POST" && method != "PUT" && method != "DELETE") {
+    throw std::logic_error("unsupported method " + method);
   }
+  impl_->routes.push_back(
+      {method, method + " " + pattern, ParsePattern(pattern), std::move(handler), streaming});
 }
 
 bool HttpServer::MountStatic(const std::string& prefix, const std::filesystem::path& dir) {
@@ -1098,28 +609,15 @@ int HttpServer::Bind(const std::string& host, int port) {
   if (bound <= 0) {
     throw std::runtime_error("cannot bind " + host + ":" + std::to_string(port));
   }
-  impl_->server.RaiseListenBacklog();
+  // httplib listens with a backlog of 5: 200 clients connecting at once overflow it, and the
+  // dropped SYNs are retried only after 1 s. Listening again on the bound socket raises it.
+  if (impl_->listen_socket >= 0) ::listen(impl_->listen_socket, SOMAXCONN);
+  impl_->port = bound;
   return bound;
 }
 
 void HttpServer::Start() {
   impl_->listen_returned = false;
-  impl_->server.ResetStop();
-  if (impl_->options.event_loop) {
-    KeepAliveServer& server = impl_->server;
-    impl_->loop = std::make_unique<ConnectionLoop>(
-        impl_->options.num_threads, impl_->options.max_connections, server.keep_alive_timeout_ms(),
-        server.read_timeout_ms(), impl_->open_connections,
-        [&server](ConnectionStream& stream) { return server.ServeReady(stream); });
-  }
-  if (impl_->options.max_connections > 0) {
-    impl_->refuser = std::make_unique<ConnectionRefuser>(impl_->options.max_connections);
-  }
-  impl_->server.SetConnectionLoop(impl_->loop.get());
-  Impl* impl = impl_.get();
-  impl_->server.SetConnectionRefuser(impl_->refuser.get(), [impl] {
-    if (impl->counter) impl->counter(kRefusedRoute, 503, 0.0);
-  });
   impl_->thread = std::thread([this] {
     impl_->server.listen_after_bind();
     impl_->listen_returned = true;
@@ -1132,14 +630,10 @@ void HttpServer::Start() {
 }
 
 void HttpServer::Stop() {
-  impl_->server.WakeIdleConnections();
-  impl_->server.stop();
-  if (impl_->thread.joinable()) impl_->thread.join();
-  // Listening has ended: no socket reaches the loop or the refuser any more.
-  impl_->server.SetConnectionLoop(nullptr);
-  impl_->server.SetConnectionRefuser(nullptr, nullptr);
-  impl_->loop.reset();
-  impl_->refuser.reset();
+  if (!impl_->thread.joinable()) return;
+  impl_->server.stop();  // closes the listening socket: no connection is accepted after this
+  ShutDownConnectionReads(impl_->port);
+  impl_->thread.join();  // the connection threads end with listen_after_bind()
 }
 
 int64_t RaiseOpenFileLimit() {

@@ -1,8 +1,10 @@
 #pragma once
-// A thin wrapper over cpp-httplib, so that routes never see httplib types and every handler
-// runs inside one exception wrapper: whatever a handler throws, the client gets a real status
-// code and {"error": {"code", "message", "details"}}. It also checks the bearer token and
-// counts requests by route and status for /metrics.
+// A thin wrapper over cpp-httplib (its public API only), so that routes never see httplib
+// types and every handler runs inside one exception wrapper: whatever a handler throws, the
+// client gets a real status code and {"error": {"code", "message", "details"}} (HttpError: its
+// status; omnirig::InvalidArgument, a caller's mistake: 400; anything else, a broken
+// invariant: 500 and a line in the log). It also routes (one router: segments, see Route),
+// checks the bearer token and counts requests by route and status for /metrics.
 
 #include <atomic>
 #include <filesystem>
@@ -12,7 +14,6 @@
 #include <optional>
 #include <stdexcept>
 #include <string>
-#include <thread>
 
 #include <nlohmann/json.hpp>
 
@@ -66,33 +67,34 @@ struct HttpResponse {
   // When set, the file is streamed instead of `body` (Range requests served by the library).
   std::optional<std::filesystem::path> file;
   int64_t file_size = 0;
+  // When set, the body is streamed instead of `body` (chunked; e.g. Server-Sent Events): called
+  // again and again on the serving thread, it may block, appends what to send next to `chunk`
+  // (nothing is fine) and returns false to end the response.
+  std::function<bool(std::string& chunk)> stream;
 
   void Json(int status_code, const nlohmann::json& json);
-  // A body that is JSON text already (e.g. server/job_json.h).
-  void JsonText(int status_code, std::string json_text);
 };
 
 using HttpHandler = std::function<void(const HttpRequest&, HttpResponse&)>;
 
 struct HttpServerOptions {
-  // Requests served at once. With `event_loop`, a fixed pool of this many threads serves all
-  // open connections; without, one thread per open keep-alive connection (connections beyond
-  // the threads wait for one; max_connections bounds them all).
+  // cpp-httplib's thread pool: one thread per open connection while it is open (an idle
+  // keep-alive connection holds its thread until the keep-alive timeout), so size it for the
+  // keep-alive clients; connections beyond the threads wait for one.
   int num_threads = 64;
-  // true: idle keep-alive connections wait in one epoll set, not on a thread each (see http.cc).
-  bool event_loop = true;
-  int keep_alive_timeout_ms = 5000;  // idle keep-alive connections are closed after this
+  int keep_alive_timeout_ms = 5000;  // idle keep-alive connections are closed after this (whole s)
   int read_timeout_ms = 5000;        // a request whose bytes stall this long is dropped
-  // After a response to a request whose body the handler left unread ("Connection: close"),
-  // what the client still sends is discarded for at most this long (and never beyond the read
-  // timeout) before the socket closes, so the client reads the response rather than a reset.
-  // The serving thread waits meanwhile: a client that ignores the close must not hold it long.
+  // A body the handler left unread is read and discarded for at most this long (or until it
+  // stalls for the read timeout) before the response, so that the connection stays usable; a
+  // body that takes longer closes it ("Connection: close"), and the rest is never parsed as
+  // requests.
   int unread_body_linger_ms = 1000;
   int64_t max_body_bytes = 1LL << 30;  // larger bodies are refused (413) before reading
   std::string token;                   // bearer token required under /api/ and /metrics when set
-  // Open connections at most (0: no cap), in both loops. A connection beyond it gets a 503
-  // (code "unavailable", Retry-After) at once and is closed; the open ones are unaffected. The
-  // file descriptors left over stay for SQLite, uploads and artifacts (DefaultMaxConnections).
+  // Open connections at most (0: no cap). A connection beyond it gets a 503 (code
+  // "unavailable", Retry-After) in answer to its first request and is closed; the open ones are
+  // unaffected. The file descriptors left over stay for SQLite, uploads and artifacts
+  // (DefaultMaxConnections).
   int max_connections = 0;
 };
 
@@ -115,7 +117,9 @@ class HttpServer {
   explicit HttpServer(const HttpServerOptions& options, RequestCounter counter);
   ~HttpServer();
 
-  // Pattern: literal segments and "{name}" (one segment) or "{name+}" (the rest, with '/').
+  // Pattern: '/'-separated literal segments and "{name}" (one non-empty segment) or "{name+}"
+  // (the non-empty rest, with '/'; last only). Routes are tried in the order registered and
+  // take precedence over static files. HEAD is served by the GET route.
   // `streaming`: the body is not buffered; the handler reads it via read_body/read_multipart.
   void Route(const std::string& method, const std::string& pattern, HttpHandler handler,
              bool streaming = false);
@@ -127,8 +131,8 @@ class HttpServer {
   // Serves on a background thread until Stop().
   void Start();
   void Stop();
-  // Connections accepted and not yet closed (idle keep-alive ones included; not the ones
-  // refused beyond max_connections), for the /metrics gauge.
+  // Connections accepted and not yet closed (idle keep-alive ones and those waiting for a
+  // thread included; not the ones refused beyond max_connections), for the /metrics gauge.
   int64_t OpenConnections() const;
 
  private:

@@ -1,7 +1,8 @@
-// The HTTP layer's connection handling with the event loop (HttpServerOptions::event_loop): more
-// open keep-alive connections than threads, slow uploads beside status polls, the keep-alive
-// and read timeouts, a prompt Stop() with idle connections open, the cap on open connections
-// (both loops) and a body left unread. Real sockets on loopback.
+// The HTTP layer on real loopback sockets: one router (segments), keep-alive connections served
+// by a thread each, slow uploads beside status polls, the keep-alive and read timeouts, Stop()
+// with idle connections open, the cap on open connections, a body left unread, a Range header
+// on a JSON answer, and streamed (event) responses. No timing is asserted: tests wait for what
+// they expect (a response, a close, a count), with the sockets' receive timeout as the bound.
 
 #include "server/http.h"
 
@@ -24,10 +25,10 @@
 namespace omnirig::server {
 namespace {
 
-using Clock = std::chrono::steady_clock;
-
-double SecondsSince(Clock::time_point start) {
-  return std::chrono::duration<double>(Clock::now() - start).count();
+// Waits until `condition` holds (the ctest timeout bounds a hang).
+template <typename Condition>
+void WaitUntil(Condition condition) {
+  while (!condition()) std::this_thread::sleep_for(std::chrono::milliseconds(1));
 }
 
 // A client socket that sends raw bytes and reads responses with a receive timeout.
@@ -98,6 +99,9 @@ std::string Get(const std::string& path) {
 
 class HttpServerTest : public ::testing::Test {
  protected:
+  // The server first: its threads count requests into counts_ until it has stopped.
+  ~HttpServerTest() override { server_.reset(); }
+
   // Routes: GET /status (JSON), POST /cancel (answers with the body's size), PUT /upload
   // (streamed; answers with the byte count).
   int Start(const HttpServerOptions& options) {
@@ -128,8 +132,7 @@ class HttpServerTest : public ::testing::Test {
         "PUT", "/refuse",
         [](const HttpRequest&, HttpResponse&) { throw HttpError(404, "not_found", "refused"); },
         /*streaming=*/true);
-    // Under /api/, bodyless GETs and DELETEs are matched by segments rather than by httplib's
-    // regexes (http.cc, DispatchBodyless); each answers with its name and path parameters.
+    // Each answers with its name, path parameters, query and body.
     const auto echo = [](const std::string& name) {
       return [name](const HttpRequest& request, HttpResponse& response) {
         nlohmann::json params = nlohmann::json::object();
@@ -144,8 +147,16 @@ class HttpServerTest : public ::testing::Test {
     server_->Route("GET", "/api/v1/items/{id}", echo("get"));
     server_->Route("GET", "/api/v1/items/{id}/files/{name+}", echo("file"));
     server_->Route("DELETE", "/api/v1/items/{id}", echo("delete"));
-    server_->Route("GET", "/api/v1/odd/{id}.json", echo("odd"));  // not whole segments: regex
-    server_->Route("GET", "/api/v1/odd/{id}", echo("after_odd"));
+    // A stream of three chunks, as GET /api/v1/events sends its events.
+    server_->Route("GET", "/stream", [](const HttpRequest&, HttpResponse& response) {
+      response.content_type = "text/event-stream";
+      auto sent = std::make_shared<int>(0);
+      response.stream = [sent](std::string& chunk) {
+        if (*sent == 3) return false;
+        chunk = "data: " + std::to_string((*sent)++) + "\n\n";
+        return true;
+      };
+    });
     const int port = server_->Bind("127.0.0.1", 0);
     server_->Start();
     return port;
@@ -155,9 +166,8 @@ class HttpServerTest : public ::testing::Test {
     return counts_[key];
   }
 
-  static HttpServerOptions EventLoopOptions(int threads) {
+  static HttpServerOptions Options(int threads) {
     HttpServerOptions options;
-    options.event_loop = true;
     options.num_threads = threads;
     return options;
   }
@@ -177,10 +187,8 @@ class HttpServerTest : public ::testing::Test {
     {
       RawConnection extra(port);
       ASSERT_TRUE(extra.connected());
-      const auto start = Clock::now();
       ASSERT_TRUE(extra.Send(Get("/status")));
       const std::string response = extra.ReadResponse();
-      EXPECT_LT(SecondsSince(start), 1.0);
       ASSERT_EQ(response.rfind("HTTP/1.1 503", 0), 0u) << response;
       ++refused;
       EXPECT_NE(response.find("Retry-After: 1\r\n"), std::string::npos) << response;
@@ -197,29 +205,17 @@ class HttpServerTest : public ::testing::Test {
       EXPECT_EQ(connection->ReadResponse().rfind("HTTP/1.1 200", 0), 0u);
     }
     open.resize(static_cast<size_t>(cap - 2));
-    // The server sees the two closes when their end-of-file events are served: poll.
-    bool served = false;
-    const auto start = Clock::now();
-    while (!served && SecondsSince(start) < 5) {
-      RawConnection fresh(port);
-      ASSERT_TRUE(fresh.Send(Get("/status")));
-      const std::string response = fresh.ReadResponse();
-      served = response.rfind("HTTP/1.1 200", 0) == 0;
-      if (!served) {
-        ASSERT_EQ(response.rfind("HTTP/1.1 503", 0), 0u) << response;
-        ++refused;
-      }
-    }
-    EXPECT_TRUE(served);
+    // Once the server has seen the two closes, a new connection is served.
+    WaitUntil([&] { return server_->OpenConnections() == cap - 2; });
+    RawConnection fresh(port);
+    ASSERT_TRUE(fresh.Send(Get("/status")));
+    EXPECT_EQ(fresh.ReadResponse().rfind("HTTP/1.1 200", 0), 0u);
     for (auto& connection : open) {
       ASSERT_TRUE(connection->Send(Get("/status")));
       EXPECT_EQ(connection->ReadResponse().rfind("HTTP/1.1 200", 0), 0u);
     }
-    // The counter is called just after the 503 is written: poll briefly.
-    const auto count_start = Clock::now();
-    while (Count(std::string(kRefusedRoute) + " 503") < refused && SecondsSince(count_start) < 2) {
-      std::this_thread::sleep_for(std::chrono::milliseconds(1));
-    }
+    // The counter is called just after the 503 is written.
+    WaitUntil([&] { return Count(std::string(kRefusedRoute) + " 503") >= refused; });
     EXPECT_EQ(Count(std::string(kRefusedRoute) + " 503"), refused);
   }
 
@@ -238,24 +234,15 @@ TEST(DefaultMaxConnectionsTest, LeavesAReserveOfDescriptors) {
   EXPECT_GE(RaiseOpenFileLimit(), 64);
 }
 
-TEST_F(HttpServerTest, EventLoopRefusesConnectionsBeyondTheCap) {
-  HttpServerOptions options = EventLoopOptions(/*threads=*/2);
+TEST_F(HttpServerTest, RefusesConnectionsBeyondTheCap) {
+  HttpServerOptions options = Options(/*threads=*/8);  // more than the cap: each has its thread
   options.max_connections = 4;
   ExpectConnectionCap(Start(options), options.max_connections);
 }
 
-TEST_F(HttpServerTest, ThreadsLoopRefusesConnectionsBeyondTheCap) {
-  HttpServerOptions options;
-  options.event_loop = false;
-  options.num_threads = 8;  // more than the cap: every open connection has its thread
-  options.max_connections = 4;
-  ExpectConnectionCap(Start(options), options.max_connections);
-}
-
-TEST_F(HttpServerTest, ServesManyMoreKeepAliveConnectionsThanThreads) {
-  const int port = Start(EventLoopOptions(/*threads=*/4));
-  // With one thread per connection, connections 5..64 would wait for the first four to close.
+TEST_F(HttpServerTest, ServesEachKeepAliveConnectionOnItsThread) {
   constexpr int kConnections = 64;
+  const int port = Start(Options(/*threads=*/kConnections));
   std::vector<std::unique_ptr<RawConnection>> connections;
   for (int i = 0; i < kConnections; ++i) {
     connections.push_back(std::make_unique<RawConnection>(port));
@@ -269,41 +256,53 @@ TEST_F(HttpServerTest, ServesManyMoreKeepAliveConnectionsThanThreads) {
       EXPECT_NE(response.find("\"running\""), std::string::npos);
     }
   }
-  // Pipelined requests on one connection: all answered, in order.
-  ASSERT_TRUE(connections[0]->Send(Get("/status") + Get("/nothing") + Get("/status")));
-  EXPECT_EQ(connections[0]->ReadResponse().rfind("HTTP/1.1 200", 0), 0u);
+  ASSERT_TRUE(connections[0]->Send(Get("/nothing")));
   EXPECT_EQ(connections[0]->ReadResponse().rfind("HTTP/1.1 404", 0), 0u);
-  EXPECT_EQ(connections[0]->ReadResponse().rfind("HTTP/1.1 200", 0), 0u);
   // The request counter sees each request's route (set and read on the serving thread). The
-  // logger runs after the response is written, so the last count may lag: poll briefly.
-  const int expected = 3 * kConnections + 2;
-  const auto start = Clock::now();
-  while (Count("GET /status 200") < expected && SecondsSince(start) < 2) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(1));
-  }
-  EXPECT_EQ(Count("GET /status 200"), expected);
+  // logger runs after the response is written, so the last count may lag.
+  WaitUntil([&] { return Count("GET /status 200") >= 3 * kConnections; });
+  EXPECT_EQ(Count("GET /status 200"), 3 * kConnections);
+  WaitUntil([&] { return Count("unmatched 404") >= 1; });
   EXPECT_EQ(Count("unmatched 404"), 1);
 }
 
-TEST_F(HttpServerTest, ClosesTheConnectionAfterABodyTheHandlerDidNotRead) {
-  const int port = Start(EventLoopOptions(/*threads=*/2));
-  // The unread body and a request pipelined after it: the body's bytes must not be parsed as
-  // requests (a 400 each), so the answer says "Connection: close" and the connection ends.
+TEST_F(HttpServerTest, DiscardsABodyTheHandlerDidNotRead) {
+  const int port = Start(Options(/*threads=*/4));
+  // The unread body is read and dropped before the answer: its bytes are not parsed as requests
+  // (a 400 each), and the connection serves the next request.
   RawConnection connection(port);
   const std::string body(100000, 'x');
   ASSERT_TRUE(connection.Send("PUT /refuse HTTP/1.1\r\nHost: test\r\nContent-Length: " +
-                              std::to_string(body.size()) + "\r\n\r\n" + body + Get("/status")));
+                              std::to_string(body.size()) + "\r\n\r\n" + body));
+  const std::string response = connection.ReadResponse();
+  EXPECT_EQ(response.rfind("HTTP/1.1 404", 0), 0u) << response;
+  EXPECT_EQ(response.find("Connection: close"), std::string::npos) << response;
+  ASSERT_TRUE(connection.Send(Get("/status")));
+  EXPECT_EQ(connection.ReadResponse().rfind("HTTP/1.1 200", 0), 0u);
+  EXPECT_EQ(Count("unmatched 400"), 0);
+  // A body the handler read to the end keeps the connection.
+  ASSERT_TRUE(
+      connection.Send("PUT /upload HTTP/1.1\r\nHost: test\r\nContent-Length: 3\r\n\r\nabc"));
+  EXPECT_EQ(connection.ReadResponse().rfind("HTTP/1.1 201", 0), 0u);
+  ASSERT_TRUE(connection.Send(Get("/status")));
+  EXPECT_EQ(connection.ReadResponse().rfind("HTTP/1.1 200", 0), 0u);
+}
+
+TEST_F(HttpServerTest, ClosesTheConnectionAfterAnUnreadBodyThatStalls) {
+  HttpServerOptions options = Options(/*threads=*/4);
+  options.read_timeout_ms = 300;  // a body that stalls is given up after the read timeout
+  const int port = Start(options);
+  // Half the body, then nothing: the answer says "Connection: close" and the connection ends,
+  // so the rest, should it come, is never parsed as requests.
+  RawConnection connection(port);
+  ASSERT_TRUE(
+      connection.Send("PUT /refuse HTTP/1.1\r\nHost: test\r\nContent-Length: 100000\r\n\r\n" +
+                      std::string(50000, 'x')));
   const std::string response = connection.ReadResponse();
   EXPECT_EQ(response.rfind("HTTP/1.1 404", 0), 0u) << response;
   EXPECT_NE(response.find("Connection: close\r\n"), std::string::npos) << response;
+  EXPECT_NE(response.find("\"code\":\"not_found\""), std::string::npos) << response;
   EXPECT_TRUE(connection.ClosedByServer());
-  EXPECT_EQ(Count("unmatched 400"), 0);
-  // A body the handler read to the end keeps the connection.
-  RawConnection kept(port);
-  ASSERT_TRUE(kept.Send("PUT /upload HTTP/1.1\r\nHost: test\r\nContent-Length: 3\r\n\r\nabc" +
-                        Get("/status")));
-  EXPECT_EQ(kept.ReadResponse().rfind("HTTP/1.1 201", 0), 0u);
-  EXPECT_EQ(kept.ReadResponse().rfind("HTTP/1.1 200", 0), 0u);
 }
 
 // The route, parameters, query and body a request reached, or the status line when not 200.
@@ -314,8 +313,8 @@ nlohmann::json Reached(RawConnection& connection, const std::string& request) {
   return nlohmann::json::parse(response.substr(response.find("\r\n\r\n") + 4));
 }
 
-TEST_F(HttpServerTest, MatchesApiRoutesAsTheirPatternsSay) {
-  const int port = Start(EventLoopOptions(/*threads=*/2));
+TEST_F(HttpServerTest, MatchesRoutesAsTheirPatternsSay) {
+  const int port = Start(Options(/*threads=*/2));
   RawConnection connection(port);
   const auto reached = [&connection](const std::string& request) {
     return Reached(connection, request);
@@ -327,11 +326,7 @@ TEST_F(HttpServerTest, MatchesApiRoutesAsTheirPatternsSay) {
   EXPECT_EQ(reached(Get("/api/v1/items/x/files/cam0/000012.png"))["params"],
             nlohmann::json({{"id", "x"}, {"name", "cam0/000012.png"}}));
   EXPECT_EQ(reached("DELETE /api/v1/items/abc HTTP/1.1\r\nHost: test\r\n\r\n")["route"], "delete");
-  // A pattern with a parameter inside a segment, and the routes after it, go to the regexes.
-  EXPECT_EQ(reached(Get("/api/v1/odd/7.json"))["params"], nlohmann::json({{"id", "7"}}));
-  EXPECT_EQ(reached(Get("/api/v1/odd/7.json"))["route"], "odd");
-  EXPECT_EQ(reached(Get("/api/v1/odd/8"))["route"], "after_odd");
-  // No route: httplib's 404, counted as unmatched, on the same connection.
+  // No route: a JSON 404, counted as unmatched, on the same connection.
   for (const std::string path :
        {"/api/v1/items/", "/api/v1/items//files/a", "/api/v1/items/x/files/", "/api/v1/items/x/y",
         "/api/v1/itemsx", "/api/v2/items"}) {
@@ -339,71 +334,80 @@ TEST_F(HttpServerTest, MatchesApiRoutesAsTheirPatternsSay) {
   }
   EXPECT_EQ(reached("DELETE /api/v1/items HTTP/1.1\r\nHost: test\r\n\r\n"),
             "HTTP/1.1 404 Not Found");
-  // A DELETE with a body takes httplib's path, which reads the body.
+  // A DELETE with a body: the body is read for the route.
   const nlohmann::json with_body =
       reached("DELETE /api/v1/items/b HTTP/1.1\r\nHost: test\r\nContent-Length: 3\r\n\r\nxyz");
   EXPECT_EQ(with_body["params"], nlohmann::json({{"id", "b"}}));
   EXPECT_EQ(with_body["body"], "xyz");
   EXPECT_EQ(reached(Get("/api/v1/items/c"))["params"], nlohmann::json({{"id", "c"}}));
-  // The request counter sees the route patterns either way.
-  const auto start = Clock::now();
-  while (Count("GET /api/v1/items/{id} 200") < 4 && SecondsSince(start) < 2) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(1));
-  }
+  // The request counter sees the route patterns.
+  WaitUntil([&] { return Count("GET /api/v1/items/{id} 200") >= 4; });
   EXPECT_EQ(Count("GET /api/v1/items/{id} 200"), 4);
-  EXPECT_EQ(Count("GET /api/v1/odd/{id}.json 200"), 2);
   EXPECT_EQ(Count("DELETE /api/v1/items/{id} 200"), 2);
+  WaitUntil([&] { return Count("unmatched 404") >= 7; });
   EXPECT_EQ(Count("unmatched 404"), 7);
+  // A pattern whose parameter is not a whole segment is refused at registration.
+  EXPECT_THROW(server_->Route("GET", "/api/v1/odd/{id}.json", [](auto&, auto&) {}),
+               std::logic_error);
+}
+
+TEST_F(HttpServerTest, ARangeHeaderDoesNotSliceAJsonAnswer) {
+  const int port = Start(Options(/*threads=*/2));
+  RawConnection connection(port);
+  ASSERT_TRUE(connection.Send("GET /status HTTP/1.1\r\nHost: test\r\nRange: bytes=0-3\r\n\r\n"));
+  // Chunked (httplib applies ranges to bodies with a length): read to the last chunk.
+  std::string response;
+  while (response.find("0\r\n\r\n") == std::string::npos) {
+    const std::string part = connection.ReadResponse();
+    ASSERT_FALSE(part.empty()) << response;
+    response += part;
+  }
+  EXPECT_EQ(response.rfind("HTTP/1.1 200", 0), 0u) << response;
+  EXPECT_NE(response.find("{\"state\":\"running\"}"), std::string::npos) << response;
+}
+
+TEST_F(HttpServerTest, StreamsAResponseChunkByChunk) {
+  const int port = Start(Options(/*threads=*/2));
+  RawConnection connection(port);
+  ASSERT_TRUE(connection.Send(Get("/stream")));
+  std::string response;
+  while (response.find("0\r\n\r\n") == std::string::npos) {
+    const std::string part = connection.ReadResponse();
+    ASSERT_FALSE(part.empty()) << response;
+    response += part;
+  }
+  EXPECT_NE(response.find("Content-Type: text/event-stream"), std::string::npos) << response;
+  EXPECT_NE(response.find("Transfer-Encoding: chunked"), std::string::npos) << response;
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_NE(response.find("data: " + std::to_string(i) + "\n\n"), std::string::npos) << response;
+  }
+  // The connection serves the next request.
+  ASSERT_TRUE(connection.Send(Get("/status")));
+  EXPECT_EQ(connection.ReadResponse().rfind("HTTP/1.1 200", 0), 0u);
 }
 
 TEST_F(HttpServerTest, CountsOpenConnections) {
-  for (const bool event_loop : {true, false}) {
-    HttpServerOptions options = EventLoopOptions(/*threads=*/4);
-    options.event_loop = event_loop;
-    const int port = Start(options);
-    EXPECT_EQ(server_->OpenConnections(), 0);
-    std::vector<std::unique_ptr<RawConnection>> connections;
-    for (int i = 0; i < 3; ++i) {
-      connections.push_back(std::make_unique<RawConnection>(port));
-      ASSERT_TRUE(connections.back()->Send(Get("/status")));
-      ASSERT_EQ(connections.back()->ReadResponse().rfind("HTTP/1.1 200", 0), 0u);
-    }
-    EXPECT_EQ(server_->OpenConnections(), 3) << "event_loop " << event_loop;
-    connections.resize(1);
-    // The server sees the closes when it next looks at the sockets: poll.
-    const auto start = Clock::now();
-    while (server_->OpenConnections() != 1 && SecondsSince(start) < 3) {
-      std::this_thread::sleep_for(std::chrono::milliseconds(5));
-    }
-    EXPECT_EQ(server_->OpenConnections(), 1) << "event_loop " << event_loop;
-    server_->Stop();
-    EXPECT_EQ(server_->OpenConnections(), 0) << "event_loop " << event_loop;
+  const int port = Start(Options(/*threads=*/4));
+  EXPECT_EQ(server_->OpenConnections(), 0);
+  std::vector<std::unique_ptr<RawConnection>> connections;
+  for (int i = 0; i < 3; ++i) {
+    connections.push_back(std::make_unique<RawConnection>(port));
+    ASSERT_TRUE(connections.back()->Send(Get("/status")));
+    ASSERT_EQ(connections.back()->ReadResponse().rfind("HTTP/1.1 200", 0), 0u);
   }
-}
-
-TEST_F(HttpServerTest, AClientIgnoringConnectionCloseHoldsTheThreadBriefly) {
-  // One serving thread, the default linger (1 s) and read timeout (5 s).
-  const int port = Start(EventLoopOptions(/*threads=*/1));
-  RawConnection ignoring(port);
-  ASSERT_TRUE(ignoring.Send("PUT /refuse HTTP/1.1\r\nHost: test\r\nContent-Length: 100000\r\n\r\n" +
-                            std::string(1000, 'x')));
-  const std::string response = ignoring.ReadResponse();
-  EXPECT_EQ(response.rfind("HTTP/1.1 404", 0), 0u) << response;
-  EXPECT_NE(response.find("Connection: close\r\n"), std::string::npos) << response;
-  // The client keeps its end open and sends nothing more. The only thread lingers on it for
-  // the linger, not the read timeout: another client's poll is answered within its 3 s receive
-  // timeout (it waited 5 s before).
-  RawConnection poll(port);
-  const auto start = Clock::now();
-  ASSERT_TRUE(poll.Send(Get("/status")));
-  EXPECT_EQ(poll.ReadResponse().rfind("HTTP/1.1 200", 0), 0u);
-  EXPECT_LT(SecondsSince(start), 2.5);
+  EXPECT_EQ(server_->OpenConnections(), 3);
+  connections.resize(1);
+  // The server sees the closes when it next looks at the sockets.
+  WaitUntil([&] { return server_->OpenConnections() == 1; });
+  server_->Stop();
+  EXPECT_EQ(server_->OpenConnections(), 0);
 }
 
 TEST_F(HttpServerTest, PostWithoutContentLengthHasAnEmptyBody) {
-  const int port = Start(EventLoopOptions(/*threads=*/2));
-  // What `curl -X POST URL` sends: no Content-Length, no body. Answered at once, not after the
-  // read timeout (5 s; the connection's receive timeout is 3 s), and the connection stays usable.
+  const int port = Start(Options(/*threads=*/2));
+  // What `curl -X POST URL` sends: no Content-Length, no body. Answered without waiting for a
+  // body (the read timeout is 5 s, the connection's receive timeout 3 s), and the connection
+  // stays usable.
   RawConnection connection(port);
   for (int i = 0; i < 2; ++i) {
     ASSERT_TRUE(connection.Send("POST /cancel HTTP/1.1\r\nHost: test\r\n\r\n"));
@@ -418,7 +422,7 @@ TEST_F(HttpServerTest, PostWithoutContentLengthHasAnEmptyBody) {
 }
 
 TEST_F(HttpServerTest, SlowUploadsDoNotBlockStatusPolls) {
-  const int port = Start(EventLoopOptions(/*threads=*/4));
+  const int port = Start(Options(/*threads=*/32));
   // Three uploads that send their headers and half the body, then stall: three threads wait
   // in them (up to the read timeout).
   constexpr size_t kBodyBytes = 1 << 20;
@@ -429,15 +433,13 @@ TEST_F(HttpServerTest, SlowUploadsDoNotBlockStatusPolls) {
     ASSERT_TRUE(uploads.back()->Send("PUT /upload HTTP/1.1\r\nHost: test\r\nContent-Length: " +
                                      std::to_string(kBodyBytes) + "\r\n\r\n" + half));
   }
-  // Polls on 20 other connections are all answered meanwhile, promptly.
+  // Polls on 20 other connections are all answered meanwhile.
   std::vector<std::unique_ptr<RawConnection>> polls;
   for (int i = 0; i < 20; ++i) polls.push_back(std::make_unique<RawConnection>(port));
-  const auto start = Clock::now();
   for (int round = 0; round < 5; ++round) {
     for (auto& poll : polls) ASSERT_TRUE(poll->Send(Get("/status")));
     for (auto& poll : polls) ASSERT_EQ(poll->ReadResponse().rfind("HTTP/1.1 200", 0), 0u);
   }
-  EXPECT_LT(SecondsSince(start), 2.0);
   // The uploads then complete.
   for (auto& upload : uploads) {
     ASSERT_TRUE(upload->Send(half));
@@ -448,46 +450,30 @@ TEST_F(HttpServerTest, SlowUploadsDoNotBlockStatusPolls) {
   }
 }
 
-TEST_F(HttpServerTest, ClosesIdleConnectionsAfterTheKeepAliveTimeout) {
-  HttpServerOptions options = EventLoopOptions(/*threads=*/2);
-  options.keep_alive_timeout_ms = 300;
+TEST_F(HttpServerTest, ClosesIdleAndStalledConnections) {
+  HttpServerOptions options = Options(/*threads=*/4);
+  options.keep_alive_timeout_ms = 1000;
   options.read_timeout_ms = 300;
   const int port = Start(options);
-  // A connection that keeps polling every 100 ms outlives the timeout: it counts idle time.
-  RawConnection busy(port);
-  const auto busy_start = Clock::now();
-  while (SecondsSince(busy_start) < 0.8) {
-    ASSERT_TRUE(busy.Send(Get("/status")));
-    ASSERT_EQ(busy.ReadResponse().rfind("HTTP/1.1 200", 0), 0u)
-        << "after " << SecondsSince(busy_start) << " s";
-    std::this_thread::sleep_for(std::chrono::milliseconds(100));
-  }
-  // An idle one is closed after the timeout, not before.
+  // An idle keep-alive connection is closed by the server (within the client's 3 s).
   RawConnection idle(port);
   ASSERT_TRUE(idle.Send(Get("/status")));
   ASSERT_EQ(idle.ReadResponse().rfind("HTTP/1.1 200", 0), 0u);
-  const auto idle_start = Clock::now();
   EXPECT_TRUE(idle.ClosedByServer());
-  EXPECT_GE(SecondsSince(idle_start), 0.25);
-  EXPECT_LT(SecondsSince(idle_start), 2.0);
-  // A request whose headers stall gets 400 after the read timeout (httplib's answer), and a
-  // request line that stalls closes the connection.
+  // A request whose headers stall gets 400 after the read timeout (httplib's answer, as JSON),
+  // and a request line that stalls closes the connection.
   RawConnection stalled_headers(port);
   ASSERT_TRUE(stalled_headers.Send("GET /status HTTP/1.1\r\nHo"));
-  const auto headers_start = Clock::now();
-  EXPECT_EQ(stalled_headers.ReadResponse().rfind("HTTP/1.1 400", 0), 0u);
-  EXPECT_GE(SecondsSince(headers_start), 0.25);
-  EXPECT_LT(SecondsSince(headers_start), 2.0);
+  const std::string response = stalled_headers.ReadResponse();
+  EXPECT_EQ(response.rfind("HTTP/1.1 400", 0), 0u) << response;
+  EXPECT_NE(response.find("\"code\":\"bad_request\""), std::string::npos) << response;
   RawConnection stalled_line(port);
   ASSERT_TRUE(stalled_line.Send("GET /sta"));
-  const auto line_start = Clock::now();
   EXPECT_TRUE(stalled_line.ClosedByServer());
-  EXPECT_GE(SecondsSince(line_start), 0.25);
-  EXPECT_LT(SecondsSince(line_start), 2.0);
 }
 
-TEST_F(HttpServerTest, StopReturnsPromptlyWithIdleConnectionsOpen) {
-  const int port = Start(EventLoopOptions(/*threads=*/8));
+TEST_F(HttpServerTest, StopClosesIdleConnectionsAndStartsAgain) {
+  const int port = Start(Options(/*threads=*/64));
   std::vector<std::unique_ptr<RawConnection>> connections;
   for (int i = 0; i < 50; ++i) {
     connections.push_back(std::make_unique<RawConnection>(port));
@@ -497,9 +483,8 @@ TEST_F(HttpServerTest, StopReturnsPromptlyWithIdleConnectionsOpen) {
       ASSERT_EQ(connections.back()->ReadResponse().rfind("HTTP/1.1 200", 0), 0u);
     }
   }
-  const auto start = Clock::now();
   server_->Stop();
-  EXPECT_LT(SecondsSince(start), 1.0);
+  EXPECT_EQ(server_->OpenConnections(), 0);
   for (auto& connection : connections) EXPECT_TRUE(connection->ClosedByServer());
   // The server starts again on a new port after a stop.
   const int again = server_->Bind("127.0.0.1", 0);

@@ -50,8 +50,13 @@ class JobLog {
 // ETA from the attempt's elapsed time. Store errors are logged, never thrown into the engine.
 class ProgressWriter {
  public:
-  ProgressWriter(storage::JobStore& store, std::string job_id, double interval_s, JobLog& log)
-      : store_(store), job_id_(std::move(job_id)), interval_s_(interval_s), log_(log) {}
+  ProgressWriter(storage::JobStore& store, std::string job_id, double interval_s, JobLog& log,
+                 std::function<void(const std::string&)> on_write)
+      : store_(store),
+        job_id_(std::move(job_id)),
+        interval_s_(interval_s),
+        log_(log),
+        on_write_(std::move(on_write)) {}
 
   void Report(double fraction, const std::string& stage, const std::string& message) {
     std::lock_guard<std::mutex> lock(mutex_);
@@ -65,6 +70,7 @@ class ProgressWriter {
     }
     try {
       store_.UpdateProgress(job_id_, progress);
+      if (on_write_) on_write_(job_id_);
     } catch (const std::exception& e) {
       log_.Write(std::string("progress not stored: ") + e.what());
     }
@@ -79,6 +85,7 @@ class ProgressWriter {
   std::string job_id_;
   double interval_s_;
   JobLog& log_;
+  std::function<void(const std::string&)> on_write_;
   std::mutex mutex_;
   std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now();
   std::chrono::steady_clock::time_point last_write_{};
@@ -226,7 +233,7 @@ storage::JobOutcome RunJobAttempt(const storage::JobRecord& job, storage::JobSto
   JobLog log(output_dir / "log.txt");
   log.Write("job " + job.id + " (" + job.type + ") attempt " + std::to_string(job.attempts) +
             " with " + std::to_string(options.num_threads) + " thread(s)");
-  ProgressWriter progress(store, job.id, options.progress_interval_s, log);
+  ProgressWriter progress(store, job.id, options.progress_interval_s, log, options.on_progress);
   storage::JobOutcome outcome;
   try {
     const api::JobContext context =
@@ -236,6 +243,7 @@ storage::JobOutcome RunJobAttempt(const storage::JobRecord& job, storage::JobSto
     outcome.state = JobState::kCanceled;
   } catch (const InvalidArgument& e) {
     outcome = Failed("invalid_input", e.what());
+    if (!e.where().empty()) log.Write("check failed at " + e.where());  // the log, not the API
   } catch (const std::exception& e) {
     outcome = Failed("job_failed", e.what());
   } catch (...) {

@@ -4,6 +4,7 @@
 // artifacts. Separate from the pool so the pool only schedules.
 
 #include <atomic>
+#include <functional>
 #include <string>
 
 #include "storage/data_dir.h"
@@ -22,6 +23,8 @@ struct JobRunOptions {
   // How often a running job re-reads its cancel flag from the store, to see a cancel written
   // by another process; 0 turns the check off.
   double store_cancel_check_s = 0.2;
+  // Called after each progress write with the job's id (e.g. JobEvents::Changed); may be empty.
+  std::function<void(const std::string&)> on_progress;
 };
 
 // Runs `job` (already claimed: state running, attempts counted). Never throws.

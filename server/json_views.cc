@@ -25,6 +25,29 @@ nlohmann::json ImageJson(const storage::ImageRecord& image) {
           {"height", image.height}, {"sha256", image.sha256}, {"content_type", image.content_type}};
 }
 
+nlohmann::json JobJson(const storage::JobRecord& job) {
+  nlohmann::json params = nlohmann::json::parse(job.params, nullptr, false);
+  nlohmann::json json = {
+      {"id", job.id},
+      {"type", job.type},
+      {"dataset", job.dataset_id},
+      {"params", params.is_discarded() ? nlohmann::json(nullptr) : std::move(params)},
+      {"state", storage::JobStateName(job.state)},
+      {"progress",
+       {{"fraction", job.progress.fraction},
+        {"stage", job.progress.stage},
+        {"message", job.progress.message},
+        {"eta_s", job.progress.eta_s ? nlohmann::json(*job.progress.eta_s) : nullptr}}},
+      {"created_at", api::TimeJson(job.created_at)},
+      {"started_at", api::TimeJson(job.started_at)},
+      {"finished_at", api::TimeJson(job.finished_at)},
+      {"attempts", job.attempts},
+      {"cancel_requested", job.cancel_requested},
+      {"error", nullptr}};
+  if (job.error) json["error"] = {{"code", job.error->code}, {"message", job.error->message}};
+  return json;
+}
+
 nlohmann::json ArtifactJson(const storage::ArtifactRecord& artifact) {
   return {{"name", artifact.name},
           {"size", artifact.size},

@@ -6,8 +6,7 @@
 //              "message", "eta_s"}, "created_at", "started_at", "finished_at", "attempts",
 //              "cancel_requested", "error": null | {"code", "message"}}
 //   artifact: {"name", "size", "content_type", "sha256"}
-// Times are ISO 8601 UTC strings (null when not reached yet). The job's form is written as text
-// by job_json.h (the status poll's hot path); its test holds the tree form as the oracle.
+// Times are ISO 8601 UTC strings (null when not reached yet).
 
 #include <vector>
 
@@ -21,6 +20,8 @@ nlohmann::json DatasetJson(const storage::DatasetRecord& dataset);
 nlohmann::json DatasetJson(const storage::DatasetRecord& dataset,
                            const std::vector<storage::ImageRecord>& images);
 nlohmann::json ImageJson(const storage::ImageRecord& image);
+// Stored params that are not JSON (not written by this service) show as null.
+nlohmann::json JobJson(const storage::JobRecord& job);
 nlohmann::json ArtifactJson(const storage::ArtifactRecord& artifact);
 
 }  // namespace omnirig::server

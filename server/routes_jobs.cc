@@ -1,14 +1,15 @@
-// Jobs: create (validated by the job type), list, get, cancel, delete, retry, result and
-// artifacts (with Content-Length, ETag and Range).
+// Jobs: create (validated by the job type), list, get (with ETag), cancel, delete, retry, result
+// and artifacts (with Content-Length, ETag and Range), and their changes as Server-Sent Events.
 
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
+#include <memory>
 
 #include "api/job_types.h"
 #include "api/service_json.h"
 #include "api/stereo_json.h"
 #include "engine/util/check.h"
-#include "server/job_json.h"
 #include "server/json_views.h"
 #include "server/service.h"
 #include "storage/image_header.h"
@@ -80,8 +81,9 @@ void CreateJob(ServiceState& state, const HttpRequest& request, HttpResponse& re
   const storage::JobRecord job =
       state.store->CreateJob(parsed.type, parsed.dataset, parsed.params.dump());
   state.workers->Notify();
+  state.events->Changed(job.id);
   response.headers.emplace("Location", "/api/v1/jobs/" + job.id);
-  response.JsonText(202, JobJsonText(job));
+  response.Json(202, JobJson(job));
 }
 
 void ListJobs(ServiceState& state, const HttpRequest& request, HttpResponse& response) {
@@ -104,7 +106,9 @@ void ListJobs(ServiceState& state, const HttpRequest& request, HttpResponse& res
     }
     filter.limit = static_cast<int>(value);
   }
-  response.JsonText(200, JobListJsonText(state.store->ListJobs(filter)));
+  nlohmann::json list = nlohmann::json::array();
+  for (const storage::JobRecord& job : state.store->ListJobs(filter)) list.push_back(JobJson(job));
+  response.Json(200, list);
 }
 
 void CancelJob(ServiceState& state, const HttpRequest& request, HttpResponse& response) {
@@ -117,8 +121,8 @@ void CancelJob(ServiceState& state, const HttpRequest& request, HttpResponse& re
   }
   const auto after = state.store->RequestCancel(id);
   if (after == storage::JobState::kRunning) state.workers->Cancel(id);
-  response.JsonText(after == storage::JobState::kRunning ? 202 : 200,
-                    JobJsonText(RequireJob(state, id)));
+  state.events->Changed(id);
+  response.Json(after == storage::JobState::kRunning ? 202 : 200, JobJson(RequireJob(state, id)));
 }
 
 void DeleteJob(ServiceState& state, const HttpRequest& request, HttpResponse& response) {
@@ -129,6 +133,7 @@ void DeleteJob(ServiceState& state, const HttpRequest& request, HttpResponse& re
   }
   std::error_code ignored;
   std::filesystem::remove_all(state.data_dir->JobDir(id), ignored);
+  state.events->Changed(id);
   response.status = 204;
 }
 
@@ -147,7 +152,8 @@ void RetryJob(ServiceState& state, const HttpRequest& request, HttpResponse& res
                     {{"state", storage::JobStateName(job.state)}});
   }
   state.workers->Notify();
-  response.JsonText(202, JobJsonText(RequireJob(state, id)));
+  state.events->Changed(id);
+  response.Json(202, JobJson(RequireJob(state, id)));
 }
 
 void GetResult(ServiceState& state, const HttpRequest& request, HttpResponse& response) {
@@ -234,8 +240,61 @@ void GetEpipolar(ServiceState& state, const HttpRequest& request, HttpResponse& 
   }
   const double u = RequiredNumber(request, "u");
   const double v = RequiredNumber(request, "v");
-  response.Json(
-      200, api::EpipolarCurveJson(nlohmann::json::parse(*result), from == "cam0" ? 0 : 1, u, v));
+  try {
+    response.Json(
+        200, api::EpipolarCurveJson(nlohmann::json::parse(*result), from == "cam0" ? 0 : 1, u, v));
+  } catch (const InvalidArgument& e) {
+    // The request was checked above: what is left is the stored result, a broken invariant.
+    throw std::runtime_error("the result of job " + id + " holds no usable rig: " + e.what());
+  }
+}
+
+// 64-bit FNV-1a of the text, as a strong ETag.
+std::string ETagOf(const std::string& text) {
+  uint64_t hash = 14695981039346656037ULL;
+  for (const char c : text) hash = (hash ^ static_cast<unsigned char>(c)) * 1099511628211ULL;
+  char tag[24];
+  std::snprintf(tag, sizeof(tag), "\"%016llx\"", static_cast<unsigned long long>(hash));
+  return tag;
+}
+
+// A job poll: with If-None-Match holding the ETag of the job as it is now, 304 and no body.
+void GetJob(ServiceState& state, const HttpRequest& request, HttpResponse& response) {
+  response.Json(200, JobJson(RequireJob(state, request.Param("id"))));
+  const std::string etag = ETagOf(response.body);
+  response.headers.emplace("ETag", etag);
+  response.headers.emplace("Cache-Control", "no-cache");
+  if (request.header("If-None-Match").find(etag) != std::string::npos) {
+    response.status = 304;
+    response.body.clear();
+  }
+}
+
+// Server-Sent Events: every job's changes, or one job's with ?job=ID (server/events.h). A
+// comment line every 15 s keeps proxies from closing a quiet stream and finds closed clients.
+void StreamEvents(ServiceState& state, const HttpRequest& request, HttpResponse& response) {
+  auto stream = std::make_shared<JobEvents::Stream>(*state.events, request.Query("job"));
+  auto quiet_ms = std::make_shared<int>(0);
+  response.content_type = "text/event-stream";
+  response.headers.emplace("Cache-Control", "no-cache");
+  response.headers.emplace("X-Accel-Buffering", "no");
+  // The first chunk goes out at once: the client sees the stream open.
+  auto opened = std::make_shared<bool>(false);
+  response.stream = [stream, quiet_ms, opened](std::string& chunk) {
+    if (!*opened) {
+      *opened = true;
+      chunk = "retry: 1000\n\n";
+      return true;
+    }
+    constexpr int kWaitMs = 1000, kHeartbeatMs = 15000;
+    if (!stream->Next(chunk, kWaitMs)) return false;
+    *quiet_ms = chunk.empty() ? *quiet_ms + kWaitMs : 0;
+    if (*quiet_ms >= kHeartbeatMs) {
+      chunk = ": keep-alive\n\n";
+      *quiet_ms = 0;
+    }
+    return true;
+  };
 }
 
 }  // namespace
@@ -248,10 +307,8 @@ void AddJobRoutes(HttpServer& http, ServiceState& state) {
   };
   http.Route("POST", "/api/v1/jobs", bind(CreateJob));
   http.Route("GET", "/api/v1/jobs", bind(ListJobs));
-  http.Route("GET", "/api/v1/jobs/{id}",
-             [&state](const HttpRequest& request, HttpResponse& response) {
-               response.JsonText(200, JobJsonText(RequireJob(state, request.Param("id"))));
-             });
+  http.Route("GET", "/api/v1/jobs/{id}", bind(GetJob));
+  http.Route("GET", "/api/v1/events", bind(StreamEvents));
   http.Route("POST", "/api/v1/jobs/{id}/cancel", bind(CancelJob));
   http.Route("DELETE", "/api/v1/jobs/{id}", bind(DeleteJob));
   http.Route("POST", "/api/v1/jobs/{id}/retry", bind(RetryJob));

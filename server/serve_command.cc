@@ -31,21 +31,20 @@ void DeclareOptions(cli::ArgParser& parser) {
   parser.AddOption("workers", std::to_string(DefaultWorkers()),
                    "jobs run at the same time (half the cores by default)");
   parser.AddOption("threads-per-job", "", "solver threads per job (default: cores / workers)");
-  parser.AddOption("http-threads", "128",
-                   "HTTP threads: requests served at once (with --http-loop threads, also the "
-                   "open connections served at once)");
-  parser.AddOption("http-loop", "epoll",
-                   "how open connections wait for their next request: 'epoll' (one epoll set "
-                   "served by the --http-threads pool) or 'threads' (one thread each)");
+  parser.AddOption("http-threads", "256",
+                   "HTTP threads: one per open connection (keep-alive clients and event streams "
+                   "each hold one); connections beyond wait for a thread");
+  parser.AddOption("http-loop", "threads",
+                   "deprecated and ignored: connections are always served by --http-threads "
+                   "(one thread each)");
   parser.AddOption("max-connections", "",
                    "open HTTP connections at most; beyond, a new one gets 503 and is closed "
                    "(default: the open-file limit, raised to its hard limit at start, less a "
                    "reserve for SQLite, uploads and artifacts; at most 4096; 0: no cap)");
-  parser.AddOption("worker-nice", "10",
-                   "niceness of job threads (0-19), so status polls stay fast while jobs run");
-  parser.AddOption("worker-sched", "idle",
-                   "scheduling of job threads: 'idle' (SCHED_IDLE, run only when the HTTP "
-                   "threads do not need the CPU) or 'normal' (only --worker-nice)");
+  parser.AddOption("worker-nice", "0", "niceness of job threads (0-19)");
+  parser.AddOption("worker-sched", "normal",
+                   "scheduling of job threads: 'normal' or 'idle' (SCHED_IDLE: jobs run only "
+                   "when nothing else on the machine wants the CPU)");
   parser.AddOption("max-attempts", "3",
                    "runs a job may start before crashes make it fail ('interrupted')");
   parser.AddOption("max-file-mb", "256", "largest image upload, MB");
@@ -87,7 +86,7 @@ ServiceOptions ToOptions(const cli::ArgParser& parser) {
                                 ? DefaultThreadsPerJob(options.num_workers)
                                 : parser.GetInt("threads-per-job");
   options.http_threads = parser.GetInt("http-threads");
-  options.http_event_loop = OneOf(parser, "http-loop", "epoll", "threads") == "epoll";
+  OneOf(parser, "http-loop", "epoll", "threads");  // deprecated: accepted, no effect
   // Raised here, before anything opens files: the default cap is what the raised limit allows.
   const int64_t open_file_limit = RaiseOpenFileLimit();
   options.max_connections = parser.Get("max-connections").empty()

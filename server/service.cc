@@ -70,6 +70,7 @@ Service::Service(const ServiceOptions& options) : state_(std::make_unique<Servic
                              " fails its integrity check: " + state.consistency.integrity);
   }
   state.recovery = state.store->RecoverInterruptedJobs(options.max_attempts);
+  state.events = std::make_unique<JobEvents>(*state.store);
   PrintStartupReport(state);
   WorkerPoolOptions pool_options;
   pool_options.num_workers = options.num_workers;
@@ -77,12 +78,14 @@ Service::Service(const ServiceOptions& options) : state_(std::make_unique<Servic
   pool_options.progress_interval_s = options.progress_interval_s;
   pool_options.nice = options.worker_nice;
   pool_options.idle_scheduling = options.worker_idle_scheduling;
+  pool_options.on_job_changed = [events = state.events.get()](const std::string& id) {
+    events->Changed(id);
+  };
   state.workers =
       std::make_unique<WorkerPool>(*state.store, *state.data_dir, state.metrics, pool_options);
 
   HttpServerOptions http_options;
   http_options.num_threads = options.http_threads;
-  http_options.event_loop = options.http_event_loop;
   http_options.max_connections = options.max_connections;
   http_options.max_body_bytes = options.max_dataset_bytes;
   http_options.token = options.token;
@@ -97,6 +100,7 @@ Service::Service(const ServiceOptions& options) : state_(std::make_unique<Servic
 }
 
 Service::~Service() {
+  if (state_ && state_->events) state_->events->Close();
   if (http_) http_->Stop();
   if (state_ && state_->workers) state_->workers->Drain(0);
 }
@@ -109,6 +113,7 @@ int Service::Start() {
 }
 
 int Service::Drain(double timeout_s) {
+  state_->events->Close();  // ends the event streams, which would hold the HTTP threads
   http_->Stop();
   return state_->workers->Drain(timeout_s);
 }

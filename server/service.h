@@ -7,6 +7,7 @@
 #include <mutex>
 #include <string>
 
+#include "server/events.h"
 #include "server/http.h"
 #include "server/metrics.h"
 #include "server/worker_pool.h"
@@ -23,11 +24,10 @@ struct ServiceOptions {
   std::string token;              // bearer token; required for non-loopback hosts
   int num_workers = 1;
   int threads_per_job = 1;
-  int http_threads = 128;
-  bool http_event_loop = true;  // --http-loop epoll (true) or threads (see HttpServerOptions)
+  int http_threads = 256;   // one per open connection (see HttpServerOptions)
   int max_connections = 0;  // open HTTP connections at most, then 503 (0: no cap; see serve)
-  bool worker_idle_scheduling = true;  // SCHED_IDLE for worker (and solver) threads
-  int worker_nice = 10;  // niceness of worker (and solver) threads: HTTP threads come first
+  bool worker_idle_scheduling = false;  // SCHED_IDLE for worker (and solver) threads
+  int worker_nice = 0;                  // niceness of worker (and solver) threads
   int max_attempts = 3;  // runs started before a crash-looping job fails
   int64_t max_file_bytes = 256LL << 20;
   int64_t max_dataset_bytes = 8LL << 30;
@@ -48,6 +48,7 @@ struct ServiceState {
   ServiceOptions options;
   std::unique_ptr<storage::DataDir> data_dir;
   std::unique_ptr<storage::SqliteJobStore> store;
+  std::unique_ptr<JobEvents> events;  // GET /api/v1/events
   Metrics metrics;
   std::unique_ptr<WorkerPool> workers;
   storage::ConsistencyReport consistency;

@@ -76,8 +76,8 @@ void WorkerPool::WaitForWork(uint64_t seen_generation) {
 }
 
 void WorkerPool::WorkerLoop() {
-  // Workers (and the solver threads they start, which inherit it) yield the CPU to the HTTP
-  // threads, so status polls stay fast while every core computes. Linux nice is per thread.
+  // Optional: workers (and the solver threads they start, which inherit it) may yield the CPU.
+  // Linux nice is per thread.
   if (options_.nice > 0) ::setpriority(PRIO_PROCESS, static_cast<id_t>(::gettid()), options_.nice);
   if (options_.idle_scheduling) {
     sched_param param{};
@@ -118,8 +118,12 @@ void WorkerPool::RunJob(const storage::JobRecord& job) {
     if (stopping_) running->interrupt = true;
   }
   ++busy_;
+  if (options_.on_job_changed) options_.on_job_changed(job.id);
   const auto start = std::chrono::steady_clock::now();
-  const JobRunOptions run_options{options_.threads_per_job, options_.progress_interval_s};
+  JobRunOptions run_options;
+  run_options.num_threads = options_.threads_per_job;
+  run_options.progress_interval_s = options_.progress_interval_s;
+  run_options.on_progress = options_.on_job_changed;
   const storage::JobOutcome outcome = RunJobAttempt(
       job, store_, data_dir_, run_options, JobRunFlags{&running->cancel, &running->interrupt});
   bool handed_back =
@@ -146,6 +150,7 @@ void WorkerPool::RunJob(const storage::JobRecord& job) {
     std::cerr << "omnirig: cannot record the end of job " << job.id << ": " << e.what()
               << std::endl;
   }
+  if (options_.on_job_changed) options_.on_job_changed(job.id);
   --busy_;
   std::lock_guard<std::mutex> lock(mutex_);
   running_.erase(job.id);

@@ -10,6 +10,7 @@
 
 #include <atomic>
 #include <condition_variable>
+#include <functional>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -28,10 +29,13 @@ struct WorkerPoolOptions {
   int threads_per_job = 1;
   double progress_interval_s = 0.2;  // at most one progress write per job per interval
   double idle_poll_s = 0.5;          // re-check the store this often when idle
-  int nice = 10;                     // scheduling niceness of worker threads (0: unchanged)
-  // SCHED_IDLE for worker threads: they run only when no HTTP thread wants the CPU, and a
-  // waking HTTP thread preempts them at once (nice alone leaves a wake-up delay of a few ms).
-  bool idle_scheduling = true;
+  int nice = 0;                      // scheduling niceness of worker threads (0: unchanged)
+  // SCHED_IDLE for worker threads: they run only when nothing else on the machine wants the
+  // CPU. Off by default: any busy process would starve the jobs.
+  bool idle_scheduling = false;
+  // Called with a job's id when this pool changed it (claimed, progress, finished, handed
+  // back), e.g. JobEvents::Changed; may be empty.
+  std::function<void(const std::string&)> on_job_changed;
   void Check() const;
 };
 

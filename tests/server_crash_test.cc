@@ -31,12 +31,12 @@ class CrashTest : public ::testing::Test {
  protected:
   int StartServer(int max_attempts) {
     server_ = std::make_unique<ServerProcess>();
-    const int port = server_->Start(
+    port_ = server_->Start(
         {"--port", "0", "--data", (dir_.path() / "data").string(), "--workers", "2",
          "--threads-per-job", "1", "--web", "", "--max-attempts", std::to_string(max_attempts)},
         dir_.path() / "server.log");
-    client_ = MakeClient(port);
-    return port;
+    client_ = MakeClient(port_);
+    return port_;
   }
 
   std::string Submit(const std::string& dataset) {
@@ -49,13 +49,17 @@ class CrashTest : public ::testing::Test {
     return JsonOf(result)["id"];
   }
 
-  // Waits until at least one job is running (so the kill hits running and queued jobs).
-  bool WaitForRunningJob() {
-    for (int i = 0; i < 1000; ++i) {
-      if (!JsonOf(client_->Get("/api/v1/jobs?state=running")).empty()) return true;
-      std::this_thread::sleep_for(std::chrono::milliseconds(5));
-    }
-    return false;
+  // Waits until a job is running and has then made `steps` more progress steps (0-9 of its
+  // 10), so the kill hits running and queued jobs at varied points.
+  bool WaitForProgressSteps(int steps) {
+    int seen = 0;  // events of running jobs
+    return FollowEvents(
+        port_, "", 60,
+        [&] { return steps == 0 && !JsonOf(client_->Get("/api/v1/jobs?state=running")).empty(); },
+        [&](const std::string& type, const json& job) {
+          if (type != "job" || job["state"] != "running") return false;
+          return ++seen > steps;
+        });
   }
 
   void CheckJobIntact(const std::string& id) {
@@ -79,6 +83,7 @@ class CrashTest : public ::testing::Test {
 
   TempDir dir_;
   std::unique_ptr<ServerProcess> server_;
+  int port_ = 0;
   std::unique_ptr<httplib::Client> client_;
 };
 
@@ -101,15 +106,14 @@ TEST_F(CrashTest, EveryJobSurvivesRepeatedSigkill) {
       jobs.push_back(Submit(dataset));
       jobs.push_back(Submit(dataset));
     }
-    ASSERT_TRUE(WaitForRunningJob()) << "cycle " << cycle;
-    std::this_thread::sleep_for(std::chrono::milliseconds(random() % 200));
+    ASSERT_TRUE(WaitForProgressSteps(static_cast<int>(random() % 6))) << "cycle " << cycle;
     server_->Kill(SIGKILL);
     EXPECT_EQ(server_->Wait(), 128 + SIGKILL);
   }
   StartServer(max_attempts);
   int interrupted = 0;
   for (const std::string& id : jobs) {
-    const json job = WaitForJob(*client_, id, 120);
+    const json job = WaitForJob(port_, id, 120);
     ASSERT_EQ(job["state"], "succeeded") << job.dump();
     interrupted += job["attempts"].get<int>() > 1;
     CheckJobIntact(id);
@@ -138,7 +142,7 @@ TEST_F(CrashTest, JobFailsClearlyAfterMaxAttempts) {
       "application/json"))["id"];
   for (int attempt = 0; attempt < 2; ++attempt) {
     if (attempt > 0) StartServer(2);
-    ASSERT_EQ(WaitForJob(*client_, id, 10, "running")["state"], "running");
+    ASSERT_EQ(WaitForJob(port_, id, 10, "running")["state"], "running");
     server_->Kill(SIGKILL);
     server_->Wait();
   }

@@ -136,20 +136,64 @@ nlohmann::json JsonOf(const httplib::Result& result) {
   return nlohmann::json::parse(result->body);
 }
 
-nlohmann::json WaitForJob(httplib::Client& client, const std::string& id, double timeout_s,
+bool FollowEvents(int port, const std::string& job, double timeout_s,
+                  const std::function<bool()>& on_open,
+                  const std::function<bool(const std::string&, const nlohmann::json&)>& on_event) {
+  httplib::Client client("127.0.0.1", port);
+  const auto micros = static_cast<int64_t>(timeout_s * 1e6);
+  client.set_read_timeout(micros / 1000000, micros % 1000000);
+  bool opened = false;
+  bool done = false;
+  std::string buffer;
+  const auto result =
+      client.Get(("/api/v1/events" + (job.empty() ? "" : "?job=" + job)).c_str(),
+                 [&](const char* data, size_t size) {
+                   if (!opened) {  // the server's first chunk says the stream is open
+                     opened = true;
+                     if (on_open()) return !(done = true);
+                   }
+                   buffer.append(data, size);
+                   for (size_t end = buffer.find("\n\n"); end != std::string::npos;
+                        end = buffer.find("\n\n")) {
+                     const std::string block = buffer.substr(0, end);
+                     buffer.erase(0, end + 2);
+                     const size_t type_at = block.find("event: ");
+                     const size_t data_at = block.find("data: ");
+                     if (type_at == std::string::npos || data_at == std::string::npos) continue;
+                     const std::string type =
+                         block.substr(type_at + 7, block.find('\n', type_at) - type_at - 7);
+                     if (on_event(type, nlohmann::json::parse(block.substr(data_at + 6)))) {
+                       return !(done = true);
+                     }
+                   }
+                   return true;
+                 });
+  (void)result;
+  return done;
+}
+
+nlohmann::json WaitForJob(int port, const std::string& id, double timeout_s,
                           const std::string& until_state) {
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
-  nlohmann::json job;
-  while (std::chrono::steady_clock::now() < deadline) {
-    job = JsonOf(client.Get(("/api/v1/jobs/" + id).c_str()));
+  const auto reached = [&](const nlohmann::json& job) {
     const std::string state = job.value("state", "");
-    if (until_state.empty() ? (state == "succeeded" || state == "failed" || state == "canceled")
-                            : state == until_state) {
-      return job;
-    }
-    std::this_thread::sleep_for(std::chrono::milliseconds(10));
-  }
-  return job;
+    return until_state.empty() ? (state == "succeeded" || state == "failed" || state == "canceled")
+                               : state == until_state;
+  };
+  auto client = MakeClient(port);
+  const auto current = [&] { return JsonOf(client->Get(("/api/v1/jobs/" + id).c_str())); };
+  nlohmann::json job;
+  // Opened first, then the job read: a change between the two is not missed.
+  FollowEvents(
+      port, id, timeout_s,
+      [&] {
+        job = current();
+        return reached(job);
+      },
+      [&](const std::string& type, const nlohmann::json& data) {
+        if (type == "job") job = data;
+        return type != "job" || reached(job);
+      });
+  return job.value("state", "") == "" ? current() : job;
 }
 
 ServerProcess::~ServerProcess() {

@@ -12,6 +12,7 @@
 #include <sys/types.h>
 
 #include <filesystem>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -39,8 +40,16 @@ std::string PngBytes(int width, int height, int seed = 0);
 
 std::unique_ptr<httplib::Client> MakeClient(int port, const std::string& token = "");
 nlohmann::json JsonOf(const httplib::Result& result);
-// Polls GET /jobs/{id} until the state is terminal or `timeout_s` passes; returns the job.
-nlohmann::json WaitForJob(httplib::Client& client, const std::string& id, double timeout_s,
+// Follows GET /api/v1/events (of job `job` alone when not empty) on the server at `port`:
+// once the stream is open calls `on_open` (a true result ends there), then `on_event` with each
+// event's type and data until it returns true. False when the stream ends or is silent for
+// `timeout_s` first.
+bool FollowEvents(
+    int port, const std::string& job, double timeout_s, const std::function<bool()>& on_open,
+    const std::function<bool(const std::string& type, const nlohmann::json& data)>& on_event);
+// Waits, on the job's events, until its state is terminal (or `until_state`), or until no event
+// came for `timeout_s`; returns the job as GET /jobs/{id} then shows it.
+nlohmann::json WaitForJob(int port, const std::string& id, double timeout_s,
                           const std::string& until_state = "");
 
 // `omnirig serve` in a child process: this test binary re-executed with "--serve ARGS..."

@@ -6,14 +6,21 @@
 #include <sstream>
 #include <stdexcept>
 #include <string>
+#include <utility>
 
 namespace omnirig {
 
 // Thrown when a caller breaks a documented precondition or gives invalid options. The API layer
-// turns it into HTTP 400 with the message.
+// turns it into HTTP 400 with the message; where() ("calib/pipeline.cc:120" for a failed
+// OMNIRIG_CHECK, else empty) is for logs only, never for API users.
 class InvalidArgument : public std::invalid_argument {
  public:
-  using std::invalid_argument::invalid_argument;
+  explicit InvalidArgument(const std::string& message, std::string where = "")
+      : std::invalid_argument(message), where_(std::move(where)) {}
+  const std::string& where() const { return where_; }
+
+ private:
+  std::string where_;
 };
 
 // Thrown when an engine run is cancelled through its ProgressSink.
@@ -38,9 +45,7 @@ inline const char* ShortSourcePath(const char* file) {
 }
 
 [[noreturn]] inline void ThrowCheck(const char* file, int line, const std::string& what) {
-  std::ostringstream os;
-  os << what << " (" << ShortSourcePath(file) << ":" << line << ")";
-  throw InvalidArgument(os.str());
+  throw InvalidArgument(what, std::string(ShortSourcePath(file)) + ":" + std::to_string(line));
 }
 }  // namespace internal
 
