@@ -184,6 +184,7 @@ void RegisterStereoReconstructJobType() {
   JobType type;
   type.name = "stereo_reconstruct";
   type.validate = [](const json& params) { StereoReconstructParamsFromJson(params); };
+  type.referenced_job_type = "relative_pose";
   type.referenced_jobs = [](const json& params) {
     return std::vector<std::string>{StereoReconstructParamsFromJson(params).rig_job};
   };

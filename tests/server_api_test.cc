@@ -481,6 +481,8 @@ TEST_F(ServerApiTest, JobRunsAndServesResultAndArtifacts) {
   ASSERT_EQ(done["state"], "succeeded") << done.dump();
   EXPECT_EQ(done["attempts"], 1);
   EXPECT_DOUBLE_EQ(done["progress"]["fraction"].get<double>(), 1.0);
+  // A succeeded job ends on "done", not on the last stage it reported ("sleep").
+  EXPECT_EQ(done["progress"]["stage"], "done");
   EXPECT_TRUE(done["started_at"].is_string());
   EXPECT_TRUE(done["finished_at"].is_string());
   EXPECT_TRUE(done["error"].is_null());
@@ -549,13 +551,13 @@ TEST_F(ServerApiTest, ResultIs409UntilSucceededAndProgressIsStored) {
   const std::string dataset = CreateDataset(client);
   const std::string id = SubmitSleep(client, dataset, {{"steps", 50}, {"step_ms", 20}})["id"];
   ExpectError(client.Get(("/api/v1/jobs/" + id + "/result").c_str()), 409, "job_not_succeeded");
-  // A dependent job is refused while its reference has not succeeded.
-  ExpectError(
-      client.Post(
-          "/api/v1/jobs",
-          json{{"type", "test_sleep"}, {"dataset", dataset}, {"params", {{"after", id}}}}.dump(),
-          "application/json"),
-      409, "dependency_not_ready");
+  // A dependent job is refused while its reference has not succeeded: 422, with the reason.
+  const auto not_ready = client.Post(
+      "/api/v1/jobs",
+      json{{"type", "test_sleep"}, {"dataset", dataset}, {"params", {{"after", id}}}}.dump(),
+      "application/json");
+  ExpectError(not_ready, 422, "dependency_not_ready");
+  EXPECT_NE(not_ready->body.find("needs a succeeded"), std::string::npos) << not_ready->body;
   json job;
   for (int i = 0; i < 500; ++i) {
     job = JsonOf(client.Get(("/api/v1/jobs/" + id).c_str()));
@@ -568,6 +570,17 @@ TEST_F(ServerApiTest, ResultIs409UntilSucceededAndProgressIsStored) {
   EXPECT_TRUE(job["progress"]["eta_s"].is_number());
   const json done = WaitForJob(client, id, 20);
   ASSERT_EQ(done["state"], "succeeded");
+  // A reference of the wrong type (here a test_sleep job given as a slam job's rig) is refused
+  // at submission, naming the type it needs, even though it succeeded.
+  if (api::FindJobType("slam")) {
+    const auto wrong = client.Post(
+        "/api/v1/jobs",
+        json{{"type", "slam"}, {"dataset", dataset}, {"params", {{"rig", id}}}}.dump(),
+        "application/json");
+    ExpectError(wrong, 422, "wrong_job_type");
+    EXPECT_NE(wrong->body.find("is a test_sleep job"), std::string::npos) << wrong->body;
+    EXPECT_NE(wrong->body.find("succeeded relative_pose job"), std::string::npos) << wrong->body;
+  }
   const json after = SubmitSleep(client, dataset, {{"after", id}});
   const json dependent = WaitForJob(client, after["id"], 20);
   ASSERT_EQ(dependent["state"], "succeeded");
