@@ -101,9 +101,10 @@ export function showError(container, error, context) {
   return box;
 }
 
-export function progressBar(fraction, label) {
+// A progress bar; `failed` turns it red, stopped where the work stopped.
+export function progressBar(fraction, label, failed = false) {
   const pct = Math.max(0, Math.min(1, Number(fraction) || 0)) * 100;
-  return el('div.progress', { role: 'progressbar', 'aria-valuenow': pct.toFixed(0),
+  return el(failed ? 'div.progress.failed' : 'div.progress', { role: 'progressbar', 'aria-valuenow': pct.toFixed(0),
     'aria-valuemin': '0', 'aria-valuemax': '100' },
   el('div.bar', { style: `width:${pct.toFixed(1)}%` }), el('span', label ?? `${pct.toFixed(0)}%`));
 }
@@ -140,6 +141,20 @@ export function explainJobError(error) {
   };
   const lead = hints[code] || 'The job failed';
   return `${lead}: ${error.message || 'no message'}`;
+}
+
+// A failed job's message as readable lines: the engine joins several reasons (one per image or
+// pair) with "; " or newlines, and lists after a colon ("... images without a partner: a, b").
+export function errorLines(message) {
+  return String(message || '').split(/\n|;\s+/).map((line) => line.trim()).filter(Boolean);
+}
+
+// One short line of a failed job, for lists: the first reason, cut at 140 characters.
+export function shortJobError(error) {
+  const lines = errorLines(error && error.message);
+  const first = lines[0] || explainJobError(error);
+  const cut = first.length > 140 ? `${first.slice(0, 137)}…` : first;
+  return lines.length > 1 ? `${cut} (+${lines.length - 1} more)` : cut;
 }
 
 // Keeps a polling loop alive only while its element is in the document.
