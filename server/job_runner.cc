@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <memory>
 #include <mutex>
+#include <regex>
 
 #include <nlohmann/json.hpp>
 
@@ -180,6 +181,13 @@ api::JobContext BuildContext(const storage::JobRecord& job, storage::JobStore& s
   return context;
 }
 
+// A job's error as its user reads it: the engine's checks end their messages with the source
+// location ("(stereo/relative_pose.cc:42)"), which stays in the job's log only.
+std::string WithoutSourceLocations(const std::string& message) {
+  static const std::regex kLocation(R"( \([A-Za-z0-9_./-]+\.(cc|h):[0-9]+\))");
+  return std::regex_replace(message, kLocation, "");
+}
+
 storage::JobOutcome Failed(const std::string& code, const std::string& message) {
   storage::JobOutcome outcome;
   outcome.state = JobState::kFailed;
@@ -256,9 +264,11 @@ storage::JobOutcome RunJobAttempt(const storage::JobRecord& job, storage::JobSto
   } catch (const Cancelled&) {
     outcome.state = JobState::kCanceled;
   } catch (const InvalidArgument& e) {
-    outcome = Failed("invalid_input", e.what());
+    log.Write(std::string("error: ") + e.what());
+    outcome = Failed("invalid_input", WithoutSourceLocations(e.what()));
   } catch (const std::exception& e) {
-    outcome = Failed("job_failed", e.what());
+    log.Write(std::string("error: ") + e.what());
+    outcome = Failed("job_failed", WithoutSourceLocations(e.what()));
   } catch (...) {
     outcome = Failed("job_failed", "unknown error");
   }

@@ -898,9 +898,11 @@ async function firstHourBadInputs(page, server, { mono, rigJob }) {
   fs.mkdirSync(path.join(folder, 'cam0'), { recursive: true });
   fs.writeFileSync(path.join(folder, 'cam0', 'notes.png'), 'my notes, not a picture');
   fs.writeFileSync(path.join(folder, 'readme.txt'), 'about these images');
-  for (const [i, name] of ['view_000.png', 'view_001.png'].entries()) {
+  // Three images without a partner in the other camera: the relative_pose job below fails.
+  fs.mkdirSync(path.join(folder, 'cam1'), { recursive: true });
+  for (const [i, name] of ['view_000.png', 'view_001.png', 'view_002.png'].entries()) {
     const bytes = Buffer.from(await (await fetch(`${server.url}/api/v1/datasets/${mono.id}/images/${name}`)).arrayBuffer());
-    fs.writeFileSync(path.join(folder, 'cam0', `pair_${i}.png`), bytes);
+    fs.writeFileSync(path.join(folder, i < 2 ? 'cam0' : 'cam1', `pair_${i}.png`), bytes);
   }
   await page.setInputFiles('input[name=folder]', folder);
   await page.waitForSelector('#upload-finished');
@@ -914,8 +916,8 @@ async function firstHourBadInputs(page, server, { mono, rigJob }) {
   check(skipped.includes('readme.txt'), `the skipped file is named (${skipped})`);
   const finished = (await page.textContent('#upload-finished')).trim();
   check(!/drop them again/.test(finished), `the summary does not ask to drop refused files again (${finished})`);
-  await page.waitForFunction(() => document.querySelector('#image-count')?.textContent === '2');
-  await page.waitForFunction(() => [...document.querySelectorAll('.thumbs img')].filter((i) => i.complete && i.naturalWidth > 0).length === 2);
+  await page.waitForFunction(() => document.querySelector('#image-count')?.textContent === '3');
+  await page.waitForFunction(() => [...document.querySelectorAll('.thumbs img')].filter((i) => i.complete && i.naturalWidth > 0).length === 3);
   const tile = await page.$eval('.thumbs img', (i) => { const r = i.getBoundingClientRect(); return [r.width, r.height]; });
   check(tile[0] >= 200 && Math.abs(tile[0] - tile[1]) < 2, `thumbnails are large square tiles (${tile.map(Math.round).join('×')})`);
   await screenshot(page, 'first-hour-10-upload-errors');
@@ -927,7 +929,10 @@ async function firstHourBadInputs(page, server, { mono, rigJob }) {
   await page.goto(`${server.url}/#/jobs/${encodeURIComponent(failedJob)}`);
   await page.waitForSelector('#job-status[data-state=failed]', { timeout: FIRST_HOUR_JOB_MS });
   const why = (await page.textContent('#job-error')).trim();
-  check(/without a partner|cam1/.test(why), `the failed job says why (${why})`);
+  const lines = await page.$$eval('#job-error li', (items) => items.map((i) => i.textContent));
+  check(lines.length === 3 && lines.some((l) => l.includes('cam1/pair_2.png has no cam0/pair_2.png')),
+    `the failed job's reasons are listed one a line (${JSON.stringify(lines)}; ${why})`);
+  check(!/\.(cc|h):\d+/.test(why), `no source location in the message a person reads (${why})`);
   check(await page.$('#job-status .progress.failed'), 'the failed job\'s bar is red');
   await page.click('#job-status button[data-action=retry]');
   const edited = await page.waitForSelector('.retry-editor textarea[name=retry_params]');
@@ -937,7 +942,7 @@ async function firstHourBadInputs(page, server, { mono, rigJob }) {
   const listRow = `#job-list tr[data-job-id="${failedJob}"]`;
   await page.waitForSelector(`${listRow} a:has-text("why")`);
   const listLine = (await page.textContent(`${listRow} .error-text`)).trim();
-  check(listLine.length <= 160, `the list keeps one short line (${listLine})`);
+  check(listLine.length <= 160 && listLine.includes('(+2 more)'), `the list keeps one short line (${listLine})`);
   await screenshot(page, 'first-hour-12-jobs-list');
   return `bad inputs: "${rowText}", "${skipped}", failed job "${why.slice(0, 120)}"`;
 }

@@ -84,9 +84,15 @@ export function formatTime(iso) {
   return Number.isNaN(date.getTime()) ? String(iso) : date.toLocaleString();
 }
 
+// A message as a person reads it: without the source locations the engine's checks append
+// ("(calib/pipeline.cc:42)"), which help whoever reads the job's log, not the page.
+export function readable(message) {
+  return String(message ?? '').replace(/ \([\w./-]+\.(cc|h):\d+\)/g, '');
+}
+
 // A box showing an API error's message (and its code and details, for whoever reports a bug).
 export function errorBox(error, context) {
-  const message = (error && error.message) || String(error);
+  const message = readable((error && error.message) || String(error));
   const code = error && error.code ? ` (${error.code})` : '';
   const details = error && error.details && Object.keys(error.details).length ? JSON.stringify(error.details) : '';
   return el('div.error', { role: 'alert' },
@@ -140,13 +146,13 @@ export function explainJobError(error) {
     unknown_type: 'This server does not run this kind of job',
   };
   const lead = hints[code] || 'The job failed';
-  return `${lead}: ${error.message || 'no message'}`;
+  return `${lead}: ${readable(error.message) || 'no message'}`;
 }
 
 // A failed job's message as readable lines: the engine joins several reasons (one per image or
 // pair) with "; " or newlines, and lists after a colon ("... images without a partner: a, b").
 export function errorLines(message) {
-  return String(message || '').split(/\n|;\s+/).map((line) => line.trim()).filter(Boolean);
+  return readable(message).split(/\n|;(?:\s+|$)/).map((line) => line.trim()).filter(Boolean);
 }
 
 // One short line of a failed job, for lists: the first reason, cut at 140 characters.
