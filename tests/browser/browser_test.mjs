@@ -944,6 +944,10 @@ async function firstHourBadInputs(page, server, { mono, rigJob }) {
   const listLine = (await page.textContent(`${listRow} .error-text`)).trim();
   check(listLine.length <= 160 && listLine.includes('(+2 more)'), `the list keeps one short line (${listLine})`);
   await screenshot(page, 'first-hour-12-jobs-list');
+  // Retry from the list opens the job with its parameters to edit.
+  await page.click(`${listRow} button[data-action=retry]`);
+  await page.waitForSelector('.retry-editor textarea[name=retry_params]');
+  check(page.url().includes(`#/jobs/${failedJob}`), `Retry in the list opens the job's page (${page.url()})`);
   return `bad inputs: "${rowText}", "${skipped}", failed job "${why.slice(0, 120)}"`;
 }
 

@@ -25,7 +25,7 @@ const EVENT_POLL_MS = 5000;  // polling while server events arrive: a safety net
 const LIST_LIMIT = 200;  // the newest jobs shown in the list
 
 export async function render(view, id, query) {
-  return id ? renderJob(view, id) : renderJobs(view, query);
+  return id ? renderJob(view, id, query && query.get('retry') === '1') : renderJobs(view, query);
 }
 
 // ---- live updates -----------------------------------------------------------------------------
@@ -34,23 +34,38 @@ export async function render(view, id, query) {
 // when it offers them: `onJob(data)` runs on each event. The pages poll anyway (more slowly
 // while events arrive), so a server without events, or a dropped stream, changes nothing but
 // the delay. EventSource cannot send the bearer token: with a token, polling only.
-export function subscribeJobEvents(onJob) {
+export function subscribeJobEvents(onJob, jobId = '') {
   if (typeof EventSource === 'undefined' || getToken()) return { live: () => false, close: () => {} };
   let lastEvent = 0;
-  const source = new EventSource(`${API}/events`);
-  source.addEventListener('job', (e) => {
+  let pending = null;  // events arrive with every progress step: the page redraws at most every 300 ms
+  const source = new EventSource(`${API}/events${jobId ? `?job=${encodeURIComponent(jobId)}` : ''}`);
+  const onEvent = (e) => {
     lastEvent = Date.now();
+    let data;
     try {
-      onJob(JSON.parse(e.data));
+      data = JSON.parse(e.data);
     } catch (_) {
-      // A malformed event: the next poll shows the truth.
+      return;  // a malformed event: the next poll shows the truth
     }
-  });
+    if (pending) return;
+    pending = setTimeout(() => {
+      pending = null;
+      onJob(data);
+    }, 300);
+  };
+  source.addEventListener('job', onEvent);
+  source.addEventListener('job_deleted', onEvent);
   source.onerror = () => {
     // No events route (404) or a dropped stream: stop; polling carries on.
     if (source.readyState === EventSource.CLOSED || !lastEvent) source.close();
   };
-  return { live: () => Date.now() - lastEvent < 30000, close: () => source.close() };
+  return {
+    live: () => Date.now() - lastEvent < 30000,
+    close: () => {
+      clearTimeout(pending);
+      source.close();
+    },
+  };
 }
 
 // ---- the form ---------------------------------------------------------------------------------
@@ -245,7 +260,7 @@ function jobRow(job, refresh, errorTarget) {
     el('td', stageText(job)),
     el('td.num', etaText(job)),
     el('td', formatTime(job.created_at)),
-    el('td', jobActions(job, refresh, errorTarget)));
+    el('td', jobActions(job, refresh, errorTarget, (j) => { location.hash = `#/jobs/${encodeURIComponent(j.id)}?retry=1`; })));
 }
 
 async function renderJobs(view, query) {
@@ -384,7 +399,7 @@ async function renderReport(container, job) {
   return module.renderJobReport(container, job);
 }
 
-async function renderJob(view, id) {
+async function renderJob(view, id, openRetry = false) {
   const status = el('div');
   const report = el('div#report');
   const artifacts = el('div.card#artifacts');
@@ -402,6 +417,7 @@ async function renderJob(view, id) {
     }
     const snapshot = JSON.stringify(job);
     if (snapshot !== shownJob) clear(status, statusCard(job, refresh, status));
+    if (openRetry && !shownJob && (job.state === 'failed' || job.state === 'canceled')) retryEditor(status, job, refresh);
     shownJob = snapshot;
     if (job.state === shownState) return;
     shownState = job.state;
@@ -418,9 +434,9 @@ async function renderJob(view, id) {
     }
     if (TERMINAL.has(job.state)) await renderArtifacts(artifacts, job.id);
   };
-  const events = subscribeJobEvents((data) => {
-    if (data && data.id === id && !TERMINAL.has(shownState)) refresh();
-  });
+  const events = subscribeJobEvents(() => {
+    if (!TERMINAL.has(shownState)) refresh();
+  }, id);
   let lastPoll = 0;
   const stop = poll(status, POLL_MS, async () => {
     if (TERMINAL.has(shownState) || (events.live() && Date.now() - lastPoll < EVENT_POLL_MS)) return;
