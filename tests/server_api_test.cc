@@ -546,6 +546,39 @@ TEST_F(ServerApiTest, RefusesBadJobs) {
   EXPECT_NE(empty->body.find(dataset), std::string::npos);
 }
 
+// The first-run sample data: a "sample" job renders a preset into its (empty) dataset, whose
+// images then carry the records an upload would give them.
+TEST_F(ServerApiTest, SampleJobRendersAPresetIntoItsDataset) {
+  auto& client = Start();
+  const std::string dataset = CreateDataset(client, "sample: one camera");
+  const auto post = [&](const json& params) {
+    return client.Post("/api/v1/jobs",
+                       json{{"type", "sample"}, {"dataset", dataset}, {"params", params}}.dump(),
+                       "application/json");
+  };
+  ExpectError(post({{"preset", "teapot"}}), 400, "invalid_params");
+  ExpectError(post({{"preset", "mono-calib"}, {"views", 3}}), 400, "invalid_params");
+  const auto created = post({{"preset", "mono-calib"}});
+  ASSERT_EQ(created->status, 202) << created->body;
+  const json job = WaitForJob(client, JsonOf(created)["id"], 120);
+  ASSERT_EQ(job["state"], "succeeded") << job.dump();
+  EXPECT_EQ(job["progress"]["stage"], "done");
+  EXPECT_NE(job["progress"]["message"].get<std::string>().find("8 files"), std::string::npos);
+  const json listing = JsonOf(client.Get(("/api/v1/datasets/" + dataset).c_str()));
+  ASSERT_EQ(listing["images"].size(), 8u) << listing.dump();
+  EXPECT_EQ(listing["images"][0]["name"], "view_000.png");
+  EXPECT_EQ(listing["images"][0]["width"], 640);
+  EXPECT_EQ(listing["images"][0]["content_type"], "image/png");
+  const auto image = client.Get(("/api/v1/datasets/" + dataset + "/images/view_000.png").c_str());
+  ASSERT_EQ(image->status, 200);
+  EXPECT_EQ(image->body.size(), listing["images"][0]["size"].get<size_t>());
+  const json artifacts = JsonOf(client.Get(
+      ("/api/v1/jobs/" + JsonOf(created)["id"].get<std::string>() + "/artifacts").c_str()));
+  std::set<std::string> names;
+  for (const auto& artifact : artifacts) names.insert(artifact["name"]);
+  EXPECT_TRUE(names.count("sample/ground_truth.json")) << artifacts.dump();
+}
+
 TEST_F(ServerApiTest, ResultIs409UntilSucceededAndProgressIsStored) {
   auto& client = Start();
   const std::string dataset = CreateDataset(client);
