@@ -280,11 +280,10 @@ function pump(state, status) {
         state.listed.set(item.name, item.file.size);
       })
       .catch((err) => {
-        // A refused file: the bar stays where the server stopped it, red, never at 100 %.
+        // A refused file's bar is red and empty (not stored), never at 100 %.
         showUploadRow(item, 0, 'refused', true);
         item.row.classList.add('failed');
         item.row.append(el('div.error', { role: 'alert' }, uploadErrorText(err, item.name)));
-        item.failure = err;
       })
       .finally(() => {
         state.running -= 1;
