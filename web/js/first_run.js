@@ -55,7 +55,9 @@ export async function renderFirstRun(container, onDatasetsChanged) {
       return;
     }
     const status = el('div.sample-status#sample-status');
-    const loaded = samples.every((s) => s.dataset);
+    // A sample whose job failed or was canceled can be loaded again (into the same dataset).
+    const usable = (s) => s.dataset && s.job && !['failed', 'canceled'].includes(s.job.state);
+    const loaded = samples.every(usable);
     const button = el('button.primary#load-sample', { type: 'button', disabled: loaded, onclick: load }, loaded ? 'Sample data loaded' : 'Load the sample data');
     clear(container, el('div.card.first-run#first-run',
       el('div.row', el('h2.grow', 'Your first hour'),
@@ -80,8 +82,8 @@ export async function renderFirstRun(container, onDatasetsChanged) {
       button.disabled = true;
       try {
         for (const sample of samples) {
-          if (sample.dataset) continue;
-          const dataset = await post('/datasets', { name: sample.name });
+          if (usable(sample)) continue;
+          const dataset = sample.dataset || await post('/datasets', { name: sample.name });
           await post('/jobs', { type: 'sample', dataset: dataset.id, params: { preset: sample.preset } });
         }
       } catch (err) {
