@@ -15,7 +15,9 @@
 
 namespace omnirig::server {
 
-// Registers (or re-registers) the job type for `state`'s store and data folder.
+// Registers (or re-registers) the job type for `state`'s store and data folder. Job types are
+// process-wide: the latest Service constructed owns "sample" jobs (one Service per process, as
+// `omnirig serve` runs it; tests that hold two at once must not run sample jobs on the first).
 void RegisterSampleJobType(ServiceState& state);
 
 }  // namespace omnirig::server

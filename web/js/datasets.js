@@ -288,7 +288,7 @@ function pump(state, status) {
       .finally(() => {
         state.running -= 1;
         if (!state.queue.length && !state.running) {
-          const failed = item.row.parentElement ? item.row.parentElement.querySelectorAll('.failed').length : 0;
+          const failed = item.row.parentElement ? item.row.parentElement.querySelectorAll('.upload-row.failed').length : 0;
           status.append(el('p.notice#upload-finished', failed
             ? `Upload finished: ${failed} file(s) not stored (the reason is under each).`
             : 'Upload finished.'));
