@@ -348,7 +348,7 @@ function retryEditor(container, job, refresh) {
   const old = container.querySelector('.retry-editor');
   if (old) old.remove();
   const original = JSON.stringify(job.params ?? {}, null, 2);
-  const text = el('textarea', { name: 'retry_params' });
+  const text = el('textarea', { name: 'retry_params', rows: Math.min(24, original.split('\n').length + 1) });
   text.value = original;
   const messages = el('div');
   const card = el('div.card.retry-editor',
@@ -360,6 +360,8 @@ function retryEditor(container, job, refresh) {
     messages);
   container.append(card);
   text.focus();
+  text.setSelectionRange(0, 0);
+  text.scrollTop = 0;
 
   async function run() {
     clear(messages);
