@@ -1,8 +1,13 @@
 #!/usr/bin/env bash
 # omnirig's two commands:
-#   ./omnirig.sh run    install what is missing, build (Release), serve on http://127.0.0.1:8080
-#   ./omnirig.sh test   install what is missing, build, run every test (unit, sanitizer,
-#                       integration, browser)
+#   ./omnirig.sh run [SERVE OPTIONS]   install what is missing, build what serving needs (the
+#                                      `omnirig` executable; the web page needs no build), serve
+#                                      on http://127.0.0.1:8080 with the data in ./data. Options
+#                                      go to `omnirig serve` (e.g. --port 9000 --data DIR; see
+#                                      build/server/omnirig serve --help).
+#   ./omnirig.sh test                  install what is missing, build everything (tests and
+#                                      benchmarks too), run every test (unit, sanitizer,
+#                                      integration, browser)
 # Re-running either on a set-up machine only rebuilds what changed.
 set -euo pipefail
 cd "$(dirname "$0")"
@@ -46,22 +51,38 @@ install_npm_packages() {
   fi
 }
 
-configure_and_build() {  # build_dir [cmake args...]
+configure() {  # build_dir [cmake args...]
   local dir=$1
   shift
   if [[ ! -f $dir/build.ninja ]]; then
     cmake -S . -B "$dir" -G Ninja -DCMAKE_BUILD_TYPE=Release -DOMNIRIG_WERROR=ON "$@"
   fi
-  cmake --build "$dir" -j "$JOBS"
+}
+
+configure_and_build() {  # build_dir [cmake args...]
+  configure "$@"
+  cmake --build "$1" -j "$JOBS"
 }
 
 cmd_run() {
   install_apt_packages
   install_npm_packages
-  configure_and_build build
-  mkdir -p data
-  log "serving on http://127.0.0.1:8080 (data in $ROOT/data)"
-  exec build/server/omnirig serve --host 127.0.0.1 --port 8080 --data ./data
+  configure build
+  # Serving needs the `omnirig` executable only: tests and benchmarks are built by `test`.
+  cmake --build build -j "$JOBS" --target omnirig
+  local port=8080 data=./data args=("$@")
+  for ((i = 0; i < ${#args[@]}; i++)); do
+    case ${args[i]} in
+      --port) port=${args[i + 1]:-$port} ;;
+      --port=*) port=${args[i]#--port=} ;;
+      --data) data=${args[i + 1]:-$data} ;;
+      --data=*) data=${args[i]#--data=} ;;
+    esac
+  done
+  mkdir -p "$data"
+  log "serving on http://127.0.0.1:$port (data in $data)"
+  # Later options win: the user's come after the defaults.
+  exec build/server/omnirig serve --host 127.0.0.1 --port 8080 --data ./data "$@"
 }
 
 cmd_test() {
@@ -78,10 +99,13 @@ cmd_test() {
 }
 
 case "${1:-}" in
-  run) cmd_run ;;
+  run)
+    shift
+    cmd_run "$@"
+    ;;
   test) cmd_test ;;
   *)
-    echo "usage: $0 run|test" >&2
+    echo "usage: $0 run [omnirig serve options, e.g. --port 9000 --data DIR] | test" >&2
     exit 2
     ;;
 esac

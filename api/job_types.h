@@ -17,6 +17,7 @@ namespace omnirig::api {
 // Everything a job run sees of the service.
 struct JobContext {
   std::string job_id;
+  std::string dataset_id;
   std::filesystem::path dataset_dir;     // image files, by name (may hold cam0/, cam1/)
   std::vector<std::string> image_names;  // sorted names within dataset_dir
   std::filesystem::path output_dir;      // write artifacts here (files become artifacts)
@@ -49,6 +50,9 @@ struct JobType {
   std::function<void(const nlohmann::json& params)> validate;
   // Ids of earlier jobs this job reads (so the server can check they exist before queueing).
   std::function<std::vector<std::string>(const nlohmann::json& params)> referenced_jobs;
+  // The type every referenced job must have (empty: any), e.g. "relative_pose" for a job that
+  // reads a rig: the server refuses a reference of another type with 422 at submission.
+  std::string referenced_job_type;
   // Whether the job reads its dataset's images (the server then refuses an empty dataset with
   // 422 at submission instead of queueing a job that can only fail).
   bool reads_images = true;

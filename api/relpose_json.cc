@@ -472,6 +472,7 @@ void RegisterRelativePoseJobType() {
   JobType type;
   type.name = "relative_pose";
   type.validate = [](const json& params) { RelativePoseParamsFromJson(params); };
+  type.referenced_job_type = "calibration";
   type.referenced_jobs = [](const json& params) {
     const RelativePoseParams parsed = RelativePoseParamsFromJson(params);
     std::vector<std::string> ids;

@@ -452,6 +452,7 @@ void RegisterSlamJobType() {
   JobType type;
   type.name = "slam";
   type.validate = [](const json& params) { SlamParamsFromJson(params); };
+  type.referenced_job_type = "relative_pose";
   type.referenced_jobs = [](const json& params) {
     return std::vector<std::string>{SlamParamsFromJson(params).rig_job};
   };

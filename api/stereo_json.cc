@@ -173,10 +173,19 @@ json RunStereoReconstructJob(const json& params, const JobContext& context) {
     result["pairs"].push_back(pair);
     all_points.insert(all_points.end(), report.points.begin(), report.points.end());
   }
-  WriteColoredPly(context.output_dir / "cloud.ply", all_points);
   result["num_points"] = all_points.size();
-  result["artifact"] = "cloud.ply";
-  context.progress.Report(1.0, "done");
+  // Each pair's points are in that pair's own cam0 frame: merged, the pairs of a moving rig
+  // would pile up into an unreadable blob. One pair makes cloud.ply; several stay apart (the
+  // result's artifact is the first pair's cloud), since nothing here places them in one frame.
+  if (pairs.size() == 1) {
+    WriteColoredPly(context.output_dir / "cloud.ply", all_points);
+    result["artifact"] = "cloud.ply";
+  } else if (!pairs.empty()) {
+    result["artifact"] = result["pairs"][0]["artifact"];
+    result["clouds_merged"] = false;
+  }
+  context.progress.Report(1.0, "done", std::to_string(all_points.size()) + " points from " +
+                                           std::to_string(pairs.size()) + " pair(s)");
   return result;
 }
 
@@ -184,6 +193,7 @@ void RegisterStereoReconstructJobType() {
   JobType type;
   type.name = "stereo_reconstruct";
   type.validate = [](const json& params) { StereoReconstructParamsFromJson(params); };
+  type.referenced_job_type = "relative_pose";
   type.referenced_jobs = [](const json& params) {
     return std::vector<std::string>{StereoReconstructParamsFromJson(params).rig_job};
   };

@@ -15,9 +15,11 @@
 //               "num_points", "rejected": {"parallax", "reprojection", "uncertain"},
 //               "median_range_m", "median_range_std_m", "artifact"}],
 //    "options": {...}}
-// Artifacts: cloud.ply holds every pair's points (binary little-endian PLY, float x y z in
-// metres in each pair's cam0 frame, uchar red green blue); with more than one pair each pair
-// also gets cloud_NAME.ply (NAME with '/' and '.' replaced by '_').
+// Artifacts: one pair: cloud.ply (binary little-endian PLY, float x y z in metres in the pair's
+// cam0 frame, uchar red green blue). More than one pair: cloud_NAME.ply per pair (NAME with
+// '/' and '.' replaced by '_'), each in its own cam0 frame, and no merged cloud.ply (the pairs
+// of a moving rig do not share a frame); "artifact" names the first pair's cloud and
+// "clouds_merged" is false.
 
 #include <string>
 

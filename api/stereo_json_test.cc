@@ -128,6 +128,21 @@ TEST_F(StereoJobTest, RunsAndWritesThePly) {
   EXPECT_EQ(last_fraction_, 1.0);
 }
 
+// Pairs of a moving rig do not share a frame: each keeps its own cloud, none is merged.
+TEST_F(StereoJobTest, SeveralPairsKeepTheirCloudsApart) {
+  for (const char* name : {"cam0/a.png", "cam1/a.png", "cam0/b.png", "cam1/b.png"}) {
+    AddImage(name, 320, 240);
+  }
+  const json result = RunStereoReconstructJob({{"rig", "rig"}}, context_);
+  ASSERT_EQ(result["pairs"].size(), 2u);
+  EXPECT_FALSE(std::filesystem::exists(context_.output_dir / "cloud.ply"));
+  EXPECT_EQ(result["clouds_merged"], false);
+  EXPECT_EQ(result["artifact"], result["pairs"][0]["artifact"]);
+  for (const json& pair : result["pairs"]) {
+    EXPECT_TRUE(std::filesystem::exists(context_.output_dir / pair["artifact"].get<std::string>()));
+  }
+}
+
 // The InvalidArgument message of running the job, or "" when it does not throw one.
 std::string RunError(const json& params, const JobContext& context) {
   try {

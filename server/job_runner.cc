@@ -58,8 +58,15 @@ class ProgressWriter {
         log_(log),
         on_write_(std::move(on_write)) {}
 
-  void Report(double fraction, const std::string& stage, const std::string& message) {
+  void Report(double fraction, const std::string& reported_stage, const std::string& message) {
     std::lock_guard<std::mutex> lock(mutex_);
+    // "done" before the end is a part's end (e.g. the calibration inside a relative_pose job),
+    // not the job's: the page must not say "done" while the job runs.
+    const bool finished = fraction >= 1;
+    const std::string stage = reported_stage != "done" || finished ? reported_stage
+                              : last_stage_.empty()                  ? "running"
+                                                                     : last_stage_;
+    if (reported_stage == "done" && finished) summary_ = message;
     const auto now = std::chrono::steady_clock::now();
     const double since_write = std::chrono::duration<double>(now - last_write_).count();
     if (since_write < interval_s_ && stage == last_stage_ && fraction < 1) return;
@@ -80,6 +87,17 @@ class ProgressWriter {
     last_stage_ = stage;
   }
 
+  // The succeeded job's last progress: "done" with the engine's summary (its message at "done"),
+  // never a stage left over from before the end.
+  void Succeeded() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    try {
+      store_.UpdateProgress(job_id_, storage::JobProgress{1.0, "done", summary_, std::nullopt});
+    } catch (const std::exception& e) {
+      log_.Write(std::string("progress not stored: ") + e.what());
+    }
+  }
+
  private:
   storage::JobStore& store_;
   std::string job_id_;
@@ -90,6 +108,7 @@ class ProgressWriter {
   std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now();
   std::chrono::steady_clock::time_point last_write_{};
   std::string last_stage_;
+  std::string summary_;
 };
 
 // A cancel recorded in the store by another process (a server on another machine sharing the
@@ -139,6 +158,7 @@ api::JobContext BuildContext(const storage::JobRecord& job, storage::JobStore& s
                              ProgressWriter& progress, JobLog& log) {
   api::JobContext context;
   context.job_id = job.id;
+  context.dataset_id = job.dataset_id;
   context.dataset_dir = data_dir.ImagesDir(job.dataset_id);
   for (const storage::ImageRecord& image : store.ListImages(job.dataset_id)) {
     context.image_names.push_back(image.name);
@@ -239,12 +259,14 @@ storage::JobOutcome RunJobAttempt(const storage::JobRecord& job, storage::JobSto
     const api::JobContext context =
         BuildContext(job, store, data_dir, options, flags, output_dir, progress, log);
     outcome = RunJobType(job, context, output_dir, data_dir.root());
+    if (outcome.state == JobState::kSucceeded) progress.Succeeded();
   } catch (const Cancelled&) {
     outcome.state = JobState::kCanceled;
   } catch (const InvalidArgument& e) {
     outcome = Failed("invalid_input", e.what());
     if (!e.where().empty()) log.Write("check failed at " + e.where());  // the log, not the API
   } catch (const std::exception& e) {
+    log.Write(std::string("error: ") + e.what());
     outcome = Failed("job_failed", e.what());
   } catch (...) {
     outcome = Failed("job_failed", "unknown error");

@@ -23,6 +23,8 @@ storage::JobRecord RequireJob(ServiceState& state, const std::string& id) {
   return std::move(*job);
 }
 
+// A job that reads an earlier job's result is refused at submission (422, with the reason)
+// unless that job exists, is of the type it reads and has succeeded: queued, it could only fail.
 void CheckReferencedJobs(ServiceState& state, const api::JobType& type,
                          const nlohmann::json& params) {
   if (!type.referenced_jobs) return;
@@ -32,10 +34,18 @@ void CheckReferencedJobs(ServiceState& state, const api::JobType& type,
       throw HttpError(404, "job_not_found", "referenced job " + id + " does not exist",
                       {{"job", id}});
     }
+    const std::string& wanted = type.referenced_job_type;
+    if (!wanted.empty() && job->type != wanted) {
+      throw HttpError(422, "wrong_job_type",
+                      "job " + id + " is a " + job->type + " job, but a " + type.name +
+                          " job needs a succeeded " + wanted + " job there",
+                      {{"job", id}, {"type", job->type}, {"expected_type", wanted}});
+    }
     if (job->state != storage::JobState::kSucceeded) {
-      throw HttpError(409, "dependency_not_ready",
-                      "referenced job " + id + " has not succeeded (state " +
-                          storage::JobStateName(job->state) + ")",
+      throw HttpError(422, "dependency_not_ready",
+                      "job " + id + " is " + storage::JobStateName(job->state) + ", but a " +
+                          type.name + " job needs a succeeded " +
+                          (wanted.empty() ? job->type : wanted) + " job there",
                       {{"job", id}, {"state", storage::JobStateName(job->state)}});
     }
   }

@@ -5,6 +5,7 @@
 
 #include "api/job_types.h"
 #include "engine/util/check.h"
+#include "server/sample_job.h"
 
 namespace omnirig::server {
 
@@ -60,6 +61,7 @@ Service::Service(const ServiceOptions& options) : state_(std::make_unique<Servic
   options.Check();
   api::RegisterBuiltinJobTypes();
   ServiceState& state = *state_;
+  RegisterSampleJobType(state);
   state.options = options;
   state.started_at = storage::NowSeconds();
   state.data_dir = std::make_unique<storage::DataDir>(options.data_dir);

@@ -472,6 +472,8 @@ TEST_F(ServerApiTest, JobRunsAndServesResultAndArtifacts) {
   ASSERT_EQ(done["state"], "succeeded") << done.dump();
   EXPECT_EQ(done["attempts"], 1);
   EXPECT_DOUBLE_EQ(done["progress"]["fraction"].get<double>(), 1.0);
+  // A succeeded job ends on "done", not on the last stage it reported ("sleep").
+  EXPECT_EQ(done["progress"]["stage"], "done");
   EXPECT_TRUE(done["started_at"].is_string());
   EXPECT_TRUE(done["finished_at"].is_string());
   EXPECT_TRUE(done["error"].is_null());
@@ -535,18 +537,51 @@ TEST_F(ServerApiTest, RefusesBadJobs) {
   EXPECT_NE(empty->body.find(dataset), std::string::npos);
 }
 
+// The first-run sample data: a "sample" job renders a preset into its (empty) dataset, whose
+// images then carry the records an upload would give them.
+TEST_F(ServerApiTest, SampleJobRendersAPresetIntoItsDataset) {
+  auto& client = Start();
+  const std::string dataset = CreateDataset(client, "sample: one camera");
+  const auto post = [&](const json& params) {
+    return client.Post("/api/v1/jobs",
+                       json{{"type", "sample"}, {"dataset", dataset}, {"params", params}}.dump(),
+                       "application/json");
+  };
+  ExpectError(post({{"preset", "teapot"}}), 400, "invalid_params");
+  ExpectError(post({{"preset", "mono-calib"}, {"views", 3}}), 400, "invalid_params");
+  const auto created = post({{"preset", "mono-calib"}});
+  ASSERT_EQ(created->status, 202) << created->body;
+  const json job = WaitForJob(port_, JsonOf(created)["id"], 120);
+  ASSERT_EQ(job["state"], "succeeded") << job.dump();
+  EXPECT_EQ(job["progress"]["stage"], "done");
+  EXPECT_NE(job["progress"]["message"].get<std::string>().find("8 files"), std::string::npos);
+  const json listing = JsonOf(client.Get(("/api/v1/datasets/" + dataset).c_str()));
+  ASSERT_EQ(listing["images"].size(), 8u) << listing.dump();
+  EXPECT_EQ(listing["images"][0]["name"], "view_000.png");
+  EXPECT_EQ(listing["images"][0]["width"], 640);
+  EXPECT_EQ(listing["images"][0]["content_type"], "image/png");
+  const auto image = client.Get(("/api/v1/datasets/" + dataset + "/images/view_000.png").c_str());
+  ASSERT_EQ(image->status, 200);
+  EXPECT_EQ(image->body.size(), listing["images"][0]["size"].get<size_t>());
+  const json artifacts = JsonOf(client.Get(
+      ("/api/v1/jobs/" + JsonOf(created)["id"].get<std::string>() + "/artifacts").c_str()));
+  std::set<std::string> names;
+  for (const auto& artifact : artifacts) names.insert(artifact["name"]);
+  EXPECT_TRUE(names.count("sample/ground_truth.json")) << artifacts.dump();
+}
+
 TEST_F(ServerApiTest, ResultIs409UntilSucceededAndProgressIsStored) {
   auto& client = Start();
   const std::string dataset = CreateDataset(client);
   const std::string id = SubmitSleep(client, dataset, {{"steps", 50}, {"step_ms", 20}})["id"];
   ExpectError(client.Get(("/api/v1/jobs/" + id + "/result").c_str()), 409, "job_not_succeeded");
-  // A dependent job is refused while its reference has not succeeded.
-  ExpectError(
-      client.Post(
-          "/api/v1/jobs",
-          json{{"type", "test_sleep"}, {"dataset", dataset}, {"params", {{"after", id}}}}.dump(),
-          "application/json"),
-      409, "dependency_not_ready");
+  // A dependent job is refused while its reference has not succeeded: 422, with the reason.
+  const auto not_ready = client.Post(
+      "/api/v1/jobs",
+      json{{"type", "test_sleep"}, {"dataset", dataset}, {"params", {{"after", id}}}}.dump(),
+      "application/json");
+  ExpectError(not_ready, 422, "dependency_not_ready");
+  EXPECT_NE(not_ready->body.find("needs a succeeded"), std::string::npos) << not_ready->body;
   // Progress as events tell it, and as a poll then shows it.
   const auto progressed = [](const json& job) {
     return job["progress"]["fraction"].get<double>() > 0.1;
@@ -561,6 +596,17 @@ TEST_F(ServerApiTest, ResultIs409UntilSucceededAndProgressIsStored) {
   EXPECT_TRUE(job["progress"]["eta_s"].is_number());
   const json done = WaitForJob(port_, id, 20);
   ASSERT_EQ(done["state"], "succeeded");
+  // A reference of the wrong type (here a test_sleep job given as a slam job's rig) is refused
+  // at submission, naming the type it needs, even though it succeeded.
+  if (api::FindJobType("slam")) {
+    const auto wrong = client.Post(
+        "/api/v1/jobs",
+        json{{"type", "slam"}, {"dataset", dataset}, {"params", {{"rig", id}}}}.dump(),
+        "application/json");
+    ExpectError(wrong, 422, "wrong_job_type");
+    EXPECT_NE(wrong->body.find("is a test_sleep job"), std::string::npos) << wrong->body;
+    EXPECT_NE(wrong->body.find("succeeded relative_pose job"), std::string::npos) << wrong->body;
+  }
   const json after = SubmitSleep(client, dataset, {{"after", id}});
   const json dependent = WaitForJob(port_, after["id"], 20);
   ASSERT_EQ(dependent["state"], "succeeded");

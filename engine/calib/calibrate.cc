@@ -377,6 +377,17 @@ void Evaluate(const std::vector<ViewState>& views, CalibrationReport* report) {
   report->num_views_used = static_cast<int>(views.size());
 }
 
+// Ceres' BriefReport() describes one solve; the calibration runs several (robust rounds, then a
+// plain one), so its line is written from the totals in the shape Ceres uses.
+std::string SolverBrief(const CalibrationSolverSummary& solver) {
+  std::ostringstream os;
+  os << "Ceres Solver Report: Iterations: " << solver.iterations << " over " << solver.num_rounds
+     << (solver.num_rounds == 1 ? " solve" : " solves") << ", Initial cost: " << std::scientific
+     << solver.initial_cost << ", Final cost: " << solver.final_cost
+     << ", Termination: " << solver.termination;
+  return os.str();
+}
+
 }  // namespace
 
 void CalibrationOptions::SetFixed(const std::string& name, bool fix) {
@@ -472,7 +483,7 @@ CalibrationReport Calibrate(const std::vector<CalibrationView>& views, int width
   report.solver.termination = ceres::TerminationTypeToString(summary.termination_type);
   report.solver.num_residuals = summary.num_residuals;
   report.solver.num_parameters = summary.num_effective_parameters;
-  report.solver.brief = summary.BriefReport();
+  report.solver.brief = SolverBrief(report.solver);
   timer.Restart();
   report.intrinsics_std = IntrinsicsStd(problem.get(), &intrinsics, summary.final_cost,
                                         summary.num_residuals, summary.num_effective_parameters);

@@ -86,7 +86,9 @@ struct CalibrationSolverSummary {
   int num_parameters = 0;
   int num_rejected_corners = 0;
   int num_rejected_views = 0;
-  std::string brief;  // Ceres' BriefReport() of the last round
+  // One line in the shape of Ceres' BriefReport(), over every round (the counts above), so that
+  // its "Iterations" agrees with `iterations`.
+  std::string brief;
 };
 
 // Wall-clock seconds. detect_s and redetect_s are filled by CalibrateImages (reading the images

@@ -124,6 +124,13 @@ TEST(Calibrate, RejectsOutlierCorners) {
   EXPECT_GT(report.rms_all_px, 1.0);
   // Statistical: about 2 sigma of the principal point (std ~0.3 px) on this weak geometry.
   EXPECT_LT(MeanRayErrorDeg(truth, report.camera, set), 0.2);
+  // Several solves (robust rounds, then a plain one): the brief counts them all, as the
+  // report's iterations do.
+  ASSERT_GT(report.solver.num_rounds, 1);
+  EXPECT_NE(report.solver.brief.find("Iterations: " + std::to_string(report.solver.iterations) +
+                                     " over " + std::to_string(report.solver.num_rounds)),
+            std::string::npos)
+      << report.solver.brief;
 }
 
 TEST(Calibrate, FixedParametersStayPut) {

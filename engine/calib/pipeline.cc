@@ -167,6 +167,9 @@ std::string OverlayFileName(const std::string& image_name) {
   for (char& c : name) {
     if (c == '/' || c == '\\') c = '_';
   }
+  // The overlay is a PNG whatever the image was: its extension is replaced, not doubled.
+  const size_t dot = name.rfind('.');
+  if (dot != std::string::npos && dot > 0) name.resize(dot);
   return "overlay_" + name + ".png";
 }
 

@@ -45,7 +45,7 @@ struct ImageCalibrationOptions {
 inline constexpr const char* kSvpOverlayFileName = "svp_overlay.png";
 
 // Reads `dir / name` for every name, detects the board, calibrates, and (when `overlay_dir` is
-// not empty) writes overlay_<name>.png there, '/' in names replaced by '_', and the SVP check's
+// not empty) writes OverlayFileName(name) there, and the SVP check's
 // overlay when requested. An SVP check that cannot run (the rim does not project, the image is
 // unreadable) leaves its reason in report.svp and does not fail the calibration. Unreadable images
 // and images of another size than the first readable one are reported as unused with the
@@ -63,7 +63,8 @@ CalibrationReport CalibrateImages(const std::filesystem::path& dir,
 cv::Mat DrawCalibrationOverlay(const cv::Mat& image, const CalibrationImageReport& report,
                                double error_scale);
 
-// "overlay_<name>.png" with '/' and '\\' replaced by '_'.
+// "overlay_<name>.png" with '/' and '\\' replaced by '_' and the image's extension dropped
+// (cam0/view_000.png -> overlay_cam0_view_000.png).
 std::string OverlayFileName(const std::string& image_name);
 
 }  // namespace omnirig

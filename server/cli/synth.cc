@@ -4,6 +4,8 @@
 //       [--width 1024 --height 768 --views 20 --frames 40 --scene room|street --noise 0
 //        --blur 0 --vignetting 0 --seed 0 --supersampling 4 --threads 0 --grayscale ...]
 
+#include <unistd.h>
+
 #include <filesystem>
 #include <iostream>
 #include <string>
@@ -95,17 +97,21 @@ uint64_t SeedFromArgs(const ArgParser& args) {
   throw InvalidArgument("--seed expects a non-negative integer, got '" + text + "'");
 }
 
-ProgressSink PrintingProgress() {
+// Progress on stderr: rewritten in place (\r) on a terminal; one plain line per step when
+// stderr is a file or a pipe, so that a log reads line by line.
+ProgressSink PrintingProgress(bool terminal) {
   ProgressSink progress;
-  progress.report = [](double fraction, const std::string&, const std::string& message) {
-    std::cerr << "\rrendered " << message << " (" << static_cast<int>(100 * fraction + 0.5) << "%)"
+  progress.report = [terminal](double fraction, const std::string&, const std::string& message) {
+    std::cerr << (terminal ? "\r" : "") << "rendered " << message << " ("
+              << static_cast<int>(100 * fraction + 0.5) << "%)" << (terminal ? "" : "\n")
               << std::flush;
   };
   return progress;
 }
 
-void RunPreset(const ArgParser& args, const std::string& preset, const std::string& out) {
-  const ProgressSink progress = PrintingProgress();
+void RunPreset(const ArgParser& args, const std::string& preset, const std::string& out,
+               bool terminal) {
+  const ProgressSink progress = PrintingProgress(terminal);
   const uint64_t seed = SeedFromArgs(args);
   if (preset == "mono-calib") {
     synth::MonoCalibrationOptions options;
@@ -176,8 +182,10 @@ int RunSynth(const Args& arguments) {
   OMNIRIG_CHECK(!error && std::filesystem::is_directory(out),
                 "cannot create the output folder '" << out << "'");
   const Timer timer;
-  RunPreset(args, preset, out);
-  std::cerr << "\nwrote " << preset << " to " << out << " in " << timer.ElapsedSeconds() << " s\n";
+  const bool terminal = isatty(STDERR_FILENO) != 0;
+  RunPreset(args, preset, out, terminal);
+  std::cerr << (terminal ? "\n" : "") << "wrote " << preset << " to " << out << " in "
+            << timer.ElapsedSeconds() << " s\n";
   return 0;
 }
 

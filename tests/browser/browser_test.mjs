@@ -15,6 +15,10 @@
 //               points were drawn
 //   viewer_slam a slam job on a synthetic sequence: cloud, trajectory, top view against the
 //               ground truth, per-frame statistics (needs omnirig synth)
+//   first_hour  a new user's first hour on a fresh data folder: the first-run panel, the sample
+//               data, a calibration, a rig, a SLAM run and its viewer, and the bad inputs a new
+//               user meets (a wrong rig, a non-image, a skipped file, each type's example
+//               parameters, a failed job with Retry), checking the words the page shows
 //   auth        a server with --token: the page asks for the token, then uploads and shows images
 // Exit codes: 0 passed, 1 failed, 77 skipped (ctest SKIP_RETURN_CODE) with the reason printed,
 // e.g. when the server does not know a job type yet. Screenshots go to --out.
@@ -33,6 +37,7 @@ const REAL_DATA = path.resolve(SOURCE_DIR, '../shared/data/real');
 const CHROMIUM = process.env.OMNIRIG_CHROMIUM || '/usr/bin/chromium';
 const SKIP = 77;
 const JOB_TIMEOUT_MS = 120000;
+const FIRST_HOUR_JOB_MS = 300000;  // the first hour's jobs run at sample size on a busy machine
 
 class Skip extends Error {}
 
@@ -298,11 +303,11 @@ async function fillBoard(page, board) {
 
 // Opens the job's page and follows it to a terminal state; checks that the progress bar moved
 // monotonically and reached 100 %. Returns the final state.
-async function followJob(page, server, jobId, screenshotName) {
+async function followJob(page, server, jobId, screenshotName, timeoutMs = JOB_TIMEOUT_MS) {
   await page.goto(`${server.url}/#/jobs/${encodeURIComponent(jobId)}`);
   await page.waitForSelector('#job-status');
   const seen = [];
-  const deadline = Date.now() + JOB_TIMEOUT_MS;
+  const deadline = Date.now() + timeoutMs;
   let state = '';
   let shotRunning = false;
   for (;;) {
@@ -316,7 +321,7 @@ async function followJob(page, server, jobId, screenshotName) {
       shotRunning = true;
     }
     if (['succeeded', 'failed', 'canceled', 'cancelled'].includes(state)) break;
-    check(Date.now() < deadline, `job ${jobId} finished within ${JOB_TIMEOUT_MS / 1000} s (last: ${JSON.stringify(status)})`);
+    check(Date.now() < deadline, `job ${jobId} finished within ${timeoutMs / 1000} s (last: ${JSON.stringify(status)})`);
     await page.waitForTimeout(150);
   }
   log(`job ${jobId} progress seen:`, seen.map((s) => `${s.state} ${s.percent}%${s.stage ? ` (${s.stage.trim().slice(0, 40)})` : ''}`).join(' -> '));
@@ -326,6 +331,8 @@ async function followJob(page, server, jobId, screenshotName) {
     throw new Error(`job ${jobId} failed: ${why}`);
   }
   check(state === 'succeeded', `job ${jobId} succeeded (state ${state})`);
+  const doneEarly = seen.find((s) => s.state === 'running' && /^\s*done\b/.test(s.stage));
+  check(!doneEarly, `the stage never says "done" while the job runs (${JSON.stringify(doneEarly)})`);
   const percents = seen.map((s) => s.percent);
   check(percents.every((p, i) => i === 0 || p >= percents[i - 1]), `progress never went back (${percents.join(', ')})`);
   check(percents[percents.length - 1] === 100, 'the progress bar reached 100 %');
@@ -463,7 +470,10 @@ async function retryAndDelete(page, server, { id, canceled }) {
   let retried = 'retry not exercised (the job finished before it could be canceled)';
   if (canceled) {
     await page.goto(`${server.url}/#/jobs/${encodeURIComponent(id)}`);
+    // Retry offers to edit the parameters first; unchanged, the same job runs again.
     await page.click('#job-status button[data-action=retry]');
+    await page.waitForSelector('.retry-editor textarea[name=retry_params]');
+    await page.click('.retry-editor button[data-action=retry-run]');
     await page.waitForSelector('#job-status:not([data-state=canceled])');
     await followJob(page, server, id, null);
     retried = `job ${id} canceled, retried to success`;
@@ -754,7 +764,195 @@ async function stepAuth(page, server) {
   return `token asked for, then ${count} images uploaded and shown as thumbnails through the token`;
 }
 
-const STEPS = { datasets: stepDatasets, calibration: stepCalibration, stereo: stepStereo, viewer_ply: stepViewerPly, viewer_slam: stepViewerSlam, auth: stepAuth };
+// ---- the first hour --------------------------------------------------------------------------
+
+// The first hour of a new user on a fresh data folder, from the landing page: the first-run
+// panel, the sample data (rendered by the server), a calibration, a rig, a SLAM run and its
+// viewer, and each bad input a new user meets, checking the words the page shows.
+async function stepFirstHour(page, server) {
+  const api = async (p) => (await fetch(`${server.url}/api/v1${p}`)).json();
+  const notes = [];
+  await page.goto(`${server.url}/`);
+  await page.waitForSelector('#first-run');
+  const steps = await page.$$eval('#first-run li[data-step]', (items) => items.map((i) => i.textContent));
+  check(steps.length === 3 && /Calibrate each camera/.test(steps[0]) && /Measure the rig/.test(steps[1]) && /Run a sequence/.test(steps[2]),
+    `the panel lists the three steps (${steps.map((t) => t.slice(0, 30)).join(' | ')})`);
+  await screenshot(page, 'first-hour-01-panel');
+
+  // One click loads the sample data: three datasets rendered by "sample" jobs.
+  let started = Date.now();
+  await page.click('#load-sample');
+  await page.waitForFunction(() => document.querySelectorAll('#sample-status [data-state=succeeded]').length === 3,
+    null, { timeout: FIRST_HOUR_JOB_MS });
+  notes.push(`sample data rendered in ${((Date.now() - started) / 1000).toFixed(1)} s`);
+  await page.waitForSelector('#first-run li[data-step=calibrate] a.step-link[href*="type=calibration"]');
+  const datasets = await api('/datasets');
+  const byName = (prefix) => datasets.find((d) => d.name.startsWith(prefix));
+  const mono = byName('sample: one camera');
+  const sequence = byName('sample: sequence');
+  check(mono && byName('sample: stereo rig') && sequence, 'the three sample datasets exist');
+  // The list counts images only; the sequence's trajectory is named apart.
+  const seqRow = `tr[data-dataset-id="${sequence.id}"]`;
+  await page.waitForSelector(seqRow);
+  const seqCount = await page.$eval(`${seqRow} td[data-images]`, (td) => td.textContent);
+  check(/^20 \+ trajectory\.tum$/.test(seqCount.trim()), `the sequence shows 20 images + trajectory.tum (${seqCount})`);
+  await screenshot(page, 'first-hour-02-samples');
+
+  // Step 1: calibrate, from the step's link (the form comes with the dataset and type chosen).
+  await page.click('#first-run li[data-step=calibrate] a.step-link');
+  await page.waitForSelector('#job-form');
+  check(await page.$eval('#job-form select[name=type]', (s) => s.value) === 'calibration', 'the link chose the calibration type');
+  check(await page.$eval('#job-form select[name=dataset]', (s) => s.value) === mono.id, 'the link chose the sample dataset');
+  const calJob = await submitFromForm(page);
+  await followJob(page, server, calJob, 'first-hour-03-calibration', FIRST_HOUR_JOB_MS);
+  await page.waitForSelector('#calibration-report');
+  const calResult = await api(`/jobs/${calJob}/result`);
+  check(calResult.solver.brief.includes(`Iterations: ${calResult.solver.iterations} `),
+    `the solver's brief agrees with its iterations (${calResult.solver.brief} vs ${calResult.solver.iterations})`);
+  const artifacts = (await api(`/jobs/${calJob}/artifacts`)).map((a) => a.name);
+  check(artifacts.some((n) => /^overlay_view_000\.png$/.test(n)) && !artifacts.some((n) => /\.png\.png$/.test(n)),
+    `overlays are named overlay_view_000.png (${artifacts.filter((n) => n.startsWith('overlay')).slice(0, 3)})`);
+  await screenshot(page, 'first-hour-04-calibration-report');
+  notes.push(`calibration RMS ${calResult.rms_px.toFixed(3)} px`);
+
+  // Bad input: a calibration given as a slam job's rig is refused at submission, with the reason.
+  await page.goto(`${server.url}/#/jobs?dataset=${encodeURIComponent(sequence.id)}&type=slam`);
+  await page.waitForSelector('#job-form');
+  await page.fill('#job-form textarea[name=extra]', JSON.stringify({ rig: calJob }));
+  await page.click('#job-form button[type=submit]');
+  const wrongRig = (await (await page.waitForSelector('#job-form .error')).textContent()).trim();
+  check(wrongRig.includes('is a calibration job') && wrongRig.includes('succeeded relative_pose job'),
+    `a calibration as rig is refused with the reason (${wrongRig})`);
+  await screenshot(page, 'first-hour-05-wrong-rig-refused');
+  notes.push(`wrong rig: "${wrongRig}"`);
+
+  // Step 2: the rig, calibrating both cameras inside the job.
+  await page.goto(`${server.url}/#/datasets`);
+  await page.click('#first-run li[data-step=rig] a.step-link');
+  await page.waitForSelector('#job-form select[name=type] option[value=relative_pose]:checked', { state: 'attached' });
+  const rigJob = await submitFromForm(page);
+  await followJob(page, server, rigJob, 'first-hour-06-rig', FIRST_HOUR_JOB_MS);
+  await page.waitForSelector('#stereo-report');
+  const dropped = (await page.textContent('#dropped-pairs h2')).trim();
+  check(/^Pairs left out: \d+ of \d+$/.test(dropped), `the report says which pairs were left out (${dropped})`);
+  await screenshot(page, 'first-hour-07-rig-report');
+  notes.push(`rig: baseline ${(await page.textContent('#baseline')).trim()}; ${dropped}`);
+
+  // Step 3: the sequence with the rig and its ground truth; its page shows the map.
+  await page.goto(`${server.url}/#/datasets`);
+  await page.click('#first-run li[data-step=sequence] a.step-link');
+  await page.waitForSelector('#job-form select[name=rig]');
+  await page.selectOption('#job-form select[name=rig]', rigJob);
+  await page.fill('#job-form input[name=ground_truth]', 'trajectory.tum');
+  const slamJob = await submitFromForm(page);
+  await followJob(page, server, slamJob, 'first-hour-08-slam', FIRST_HOUR_JOB_MS);
+  await page.waitForFunction(() => Number(document.querySelector('#viewer')?.dataset.frames || 0) > 0, null, { timeout: 60000 });
+  const drawn = await drawnPixels(page);
+  check(drawn.n > 50, `the slam job's map is drawn (${drawn.n} pixels)`);
+  const summary = (await page.textContent('#job-status .grow > div:nth-child(3)')).trim();
+  check(/^done\b/.test(summary), `a succeeded job ends on "done" and its summary (${summary})`);
+  await screenshot(page, 'first-hour-09-slam-viewer');
+  notes.push(`slam: ${summary}`);
+
+  notes.push(await firstHourBadInputs(page, server, { mono, rigJob }));
+  return notes.join('; ');
+}
+
+// Submits the job form as it is; returns the new job's id.
+async function submitFromForm(page) {
+  await page.click('#job-form button[type=submit]');
+  const outcome = await page.waitForSelector('#job-form .notice a, #job-form .error');
+  const text = (await outcome.textContent()).trim();
+  check(await outcome.evaluate((n) => n.closest('.error') === null), `the form's job was accepted (${text})`);
+  return text;
+}
+
+// The bad inputs of a first hour: an empty dataset, a file that is not an image, a file the page
+// skips, each job type's example parameters, and a job that fails.
+async function firstHourBadInputs(page, server, { mono, rigJob }) {
+  await page.goto(`${server.url}/#/datasets`);
+  await page.fill('input[name=name]', 'my first dataset');
+  await page.click('button:has-text("Create dataset")');
+  await page.waitForURL(/#\/datasets\/.+/);
+  const id = decodeURIComponent(page.url().split('#/datasets/')[1]);
+  await page.waitForSelector('#image-count');
+  check((await page.textContent('#image-count')) === '0', 'an empty dataset shows 0 images');
+
+  // Every job type's example "other parameters" passes the server's checks: each submission is
+  // refused only because the dataset is empty.
+  for (const type of ['calibration', 'relative_pose', 'stereo_reconstruct', 'slam']) {
+    await page.goto(`${server.url}/#/jobs?dataset=${encodeURIComponent(id)}&type=${type}`);
+    await page.waitForSelector('#job-form textarea[name=extra]');
+    const example = (await page.getAttribute('#job-form textarea[name=extra]', 'placeholder')).replace(/^e\.g\. /, '');
+    if (await page.$('#job-form select[name=rig]')) await page.selectOption('#job-form select[name=rig]', rigJob);
+    await page.fill('#job-form textarea[name=extra]', example);
+    await page.click('#job-form button[type=submit]');
+    const refusal = (await (await page.waitForSelector('#job-form .error')).textContent()).trim();
+    check(/has no images/.test(refusal), `the ${type} example ${example} is valid (refused only for the empty dataset: ${refusal})`);
+  }
+
+  // A file that is not an image (named like one) and one the page skips, in one folder.
+  await page.goto(`${server.url}/#/datasets/${encodeURIComponent(id)}`);
+  await page.waitForSelector('input[name=folder]');
+  const folder = path.join(TEMP, 'first-hour-folder');
+  fs.mkdirSync(path.join(folder, 'cam0'), { recursive: true });
+  fs.writeFileSync(path.join(folder, 'cam0', 'notes.png'), 'my notes, not a picture');
+  fs.writeFileSync(path.join(folder, 'readme.txt'), 'about these images');
+  // Three images without a partner in the other camera: the relative_pose job below fails.
+  fs.mkdirSync(path.join(folder, 'cam1'), { recursive: true });
+  for (const [i, name] of ['view_000.png', 'view_001.png', 'view_002.png'].entries()) {
+    const bytes = Buffer.from(await (await fetch(`${server.url}/api/v1/datasets/${mono.id}/images/${name}`)).arrayBuffer());
+    fs.writeFileSync(path.join(folder, i < 2 ? 'cam0' : 'cam1', `pair_${i}.png`), bytes);
+  }
+  await page.setInputFiles('input[name=folder]', folder);
+  await page.waitForSelector('#upload-finished');
+  const row = await page.waitForSelector('.upload-row.failed');
+  const rowText = (await row.textContent()).trim();
+  const percent = await row.$eval('[role=progressbar]', (b) => b.getAttribute('aria-valuenow'));
+  check(rowText.includes('not an image: skip it'), `a non-image is refused in words (${rowText})`);
+  check(rowText.split('notes.png').length === 2, `the refused file is named once (${rowText})`);
+  check(percent !== '100', `the bar of a refused file is not at 100 % (${percent} %)`);
+  const skipped = (await page.textContent('#upload-skipped')).trim();
+  check(skipped.includes('readme.txt'), `the skipped file is named (${skipped})`);
+  const finished = (await page.textContent('#upload-finished')).trim();
+  check(!/drop them again/.test(finished) && /\b1 file\(s\) not stored/.test(finished),
+    `the summary counts the one refused file and does not ask to drop it again (${finished})`);
+  await page.waitForFunction(() => document.querySelector('#image-count')?.textContent === '3');
+  await page.waitForFunction(() => [...document.querySelectorAll('.thumbs img')].filter((i) => i.complete && i.naturalWidth > 0).length === 3);
+  const tile = await page.$eval('.thumbs img', (i) => { const r = i.getBoundingClientRect(); return [r.width, r.height]; });
+  check(tile[0] >= 200 && Math.abs(tile[0] - tile[1]) < 2, `thumbnails are large square tiles (${tile.map(Math.round).join('×')})`);
+  await screenshot(page, 'first-hour-10-upload-errors');
+
+  // A job that fails (cam0 images without cam1 partners): readable lines, a red bar, Retry.
+  await page.goto(`${server.url}/#/jobs?dataset=${encodeURIComponent(id)}&type=relative_pose`);
+  await page.waitForSelector('#job-form');
+  const failedJob = await submitFromForm(page);
+  await page.goto(`${server.url}/#/jobs/${encodeURIComponent(failedJob)}`);
+  await page.waitForSelector('#job-status[data-state=failed]', { timeout: FIRST_HOUR_JOB_MS });
+  const why = (await page.textContent('#job-error')).trim();
+  const lines = await page.$$eval('#job-error li', (items) => items.map((i) => i.textContent));
+  check(lines.length === 3 && lines.some((l) => l.includes('cam1/pair_2.png has no cam0/pair_2.png')),
+    `the failed job's reasons are listed one a line (${JSON.stringify(lines)}; ${why})`);
+  check(!/\.(cc|h):\d+/.test(why), `no source location in the message a person reads (${why})`);
+  check(await page.$('#job-status .progress.failed'), 'the failed job\'s bar is red');
+  await page.click('#job-status button[data-action=retry]');
+  const edited = await page.waitForSelector('.retry-editor textarea[name=retry_params]');
+  check(JSON.parse(await edited.inputValue()).board, 'Retry offers the parameters to edit');
+  await screenshot(page, 'first-hour-11-failed-job');
+  await page.goto(`${server.url}/#/jobs`);
+  const listRow = `#job-list tr[data-job-id="${failedJob}"]`;
+  await page.waitForSelector(`${listRow} a:has-text("why")`);
+  const listLine = (await page.textContent(`${listRow} .error-text`)).trim();
+  check(listLine.length <= 160 && listLine.includes('(+2 more)'), `the list keeps one short line (${listLine})`);
+  await screenshot(page, 'first-hour-12-jobs-list');
+  // Retry from the list opens the job with its parameters to edit.
+  await page.click(`${listRow} button[data-action=retry]`);
+  await page.waitForSelector('.retry-editor textarea[name=retry_params]');
+  check(page.url().includes(`#/jobs/${failedJob}`), `Retry in the list opens the job's page (${page.url()})`);
+  return `bad inputs: "${rowText}", "${skipped}", failed job "${why.slice(0, 120)}"`;
+}
+
+const STEPS = { first_hour: stepFirstHour, datasets: stepDatasets, calibration: stepCalibration, stereo: stepStereo, viewer_ply: stepViewerPly, viewer_slam: stepViewerSlam, auth: stepAuth };
 
 async function main() {
   const step = STEPS[ARGS.step];

@@ -17,11 +17,15 @@ export async function render(view, id) {
 
 // ---- the list --------------------------------------------------------------------------------
 
+const TRAJECTORY = /\.tum$/i;
+
+// Images and trajectories apart: a dataset's "image_count" counts every file it holds.
 function datasetStats(dataset) {
-  const images = Array.isArray(dataset.images) ? dataset.images : null;
-  const count = images ? images.length : dataset.image_count ?? dataset.num_images ?? '?';
-  const bytes = images ? images.reduce((s, i) => s + (i.size || 0), 0) : dataset.total_bytes ?? dataset.size;
-  return { count, bytes };
+  const files = Array.isArray(dataset.images) ? dataset.images : null;
+  const trajectories = files ? files.filter((i) => TRAJECTORY.test(i.name)) : [];
+  const count = files ? files.length - trajectories.length : dataset.image_count ?? dataset.num_images ?? 0;
+  const bytes = files ? files.reduce((s, i) => s + (i.size || 0), 0) : dataset.total_bytes ?? dataset.size;
+  return { count, bytes, trajectories: trajectories.map((t) => t.name) };
 }
 
 async function renderList(view) {
@@ -38,8 +42,12 @@ async function renderList(view) {
     },
   }, nameInput, el('button.primary', { type: 'submit' }, 'Create dataset'));
   const table = el('div.table-scroll');
-  clear(view, el('h1', 'Datasets'), el('div.card', el('h2', 'New dataset'), form), el('div.card', table));
+  const firstRun = el('div');
+  clear(view, el('h1', 'Datasets'), firstRun, el('div.card', el('h2', 'New dataset'), form), el('div.card', table));
+  const { renderFirstRun } = await import('./first_run.js');
+  const stopFirstRun = await renderFirstRun(firstRun, () => refreshList(table));
   await refreshList(table);
+  return stopFirstRun;
 }
 
 async function refreshList(container) {
@@ -54,11 +62,16 @@ async function refreshList(container) {
     clear(container, el('p.muted', 'No datasets yet: create one above, then drop images on it.'));
     return;
   }
-  const rows = datasets.map((d) => {
-    const { count, bytes } = datasetStats(d);
+  // The listing counts every file; each dataset's own listing tells images from trajectories.
+  const details = await Promise.all(datasets.slice(0, 100).map((d) =>
+    get(`/datasets/${encodeURIComponent(d.id)}`).catch(() => d)));
+  const rows = details.concat(datasets.slice(100)).map((d) => {
+    const { count, bytes, trajectories } = datasetStats(d);
     return el('tr', { dataset: { datasetId: d.id } },
       el('td', el('a', { href: `#/datasets/${encodeURIComponent(d.id)}` }, d.name || d.id)),
-      el('td.mono', d.id), el('td.num', count), el('td.num', formatBytes(bytes)),
+      el('td.mono', d.id), el('td.num', { dataset: { images: count } }, String(count),
+        trajectories.length ? el('span.muted', ` + ${trajectories.join(', ')}`) : null),
+      el('td.num', formatBytes(bytes)),
       el('td', formatTime(d.created_at)),
       el('td', el('button.danger', {
         onclick: async () => {
@@ -120,7 +133,8 @@ async function renderDataset(view, id) {
 }
 
 function renderSummary(container, dataset) {
-  const images = dataset.images || [];
+  const images = (dataset.images || []).filter((i) => !TRAJECTORY.test(i.name));
+  const { trajectories } = datasetStats(dataset);
   const byFolder = new Map();
   for (const image of images) {
     const folder = image.name.includes('/') ? image.name.split('/')[0] : '(top level)';
@@ -132,6 +146,7 @@ function renderSummary(container, dataset) {
     el('dl.kv.card#dataset-summary',
       el('dt', 'Id'), el('dd.mono', dataset.id),
       el('dt', 'Images'), el('dd#image-count', String(images.length)),
+      el('dt', 'Trajectories'), el('dd#trajectories', trajectories.join(', ') || '–'),
       el('dt', 'Folders'), el('dd', [...byFolder].map(([f, n]) => `${f}: ${n}`).join(', ') || '–'),
       el('dt', 'Total size'), el('dd', formatBytes(bytes)),
       el('dt', 'Image sizes'), el('dd', [...sizes].join(', ') || '–'),
@@ -204,12 +219,12 @@ async function walkEntry(entry, prefix, out) {
 }
 
 function enqueueFiles(state, entries, list, status) {
-  let skippedOther = 0;
+  const skipped = [];
   let resumed = 0;
   for (const { file, path } of entries) {
     const name = imageNameFor(path);
     if (name.split('/').some((p) => p.startsWith('.')) || !DATASET_FILES.test(name)) {
-      skippedOther += 1;
+      skipped.push(path);
       continue;
     }
     if (state.listed.get(name) === file.size) {
@@ -224,15 +239,32 @@ function enqueueFiles(state, entries, list, status) {
   }
   const notes = [];
   if (resumed) notes.push(`${resumed} already on the server (same name and size), skipped`);
-  if (skippedOther) notes.push(`${skippedOther} neither an image nor a .tum trajectory (or hidden), skipped`);
   clear(status, notes.length ? el('p.notice', notes.join('; ') + '.') : null);
+  if (skipped.length) {
+    const shown = skipped.slice(0, 10).join(', ') + (skipped.length > 10 ? ` and ${skipped.length - 10} more` : '');
+    status.append(el('p.notice#upload-skipped', `Skipped (not an image or a .tum trajectory, or hidden): ${shown}.`));
+  }
   pump(state, status);
 }
 
-function showUploadRow(item, fraction, label) {
+function showUploadRow(item, fraction, label, failed = false) {
   clear(item.row, el('div.row',
     el('span.mono.grow', item.name), el('span.muted', formatBytes(item.file.size)),
-    el('div', { style: 'flex: 0 0 200px' }, progressBar(fraction, label))));
+    el('div', { style: 'flex: 0 0 200px' }, progressBar(fraction, label, failed))));
+}
+
+// Why the server refused a file, in words, with what to do; the row already names the file, so
+// the server's "NAME: " prefix is dropped.
+export function uploadErrorText(err, name) {
+  let message = (err && err.message) || String(err);
+  if (message.startsWith(`${name}: `)) message = message.slice(name.length + 2);
+  const code = err && err.code;
+  if (code === 'unsupported_media_type') return `not an image: skip it (${message})`;
+  if (code === 'corrupt_image') return `a damaged image: export it again, or skip it (${message})`;
+  if (code === 'payload_too_large') return `too large: ${message}; skip it or make room`;
+  if (code === 'insufficient_storage') return `the server's disk is full: ${message}`;
+  if (code === 'network' || code === 'aborted') return `${message}: drop the same files again to resume`;
+  return message;
 }
 
 // Runs up to PARALLEL_UPLOADS PUTs at once; refreshes the listing when the queue drains.
@@ -248,15 +280,17 @@ function pump(state, status) {
         state.listed.set(item.name, item.file.size);
       })
       .catch((err) => {
+        // A refused file's bar is red and empty (not stored), never at 100 %.
+        showUploadRow(item, 0, 'refused', true);
         item.row.classList.add('failed');
-        item.row.append(errorBox(err, item.name));
+        item.row.append(el('div.error', { role: 'alert' }, uploadErrorText(err, item.name)));
       })
       .finally(() => {
         state.running -= 1;
         if (!state.queue.length && !state.running) {
-          const failed = item.row.parentElement ? item.row.parentElement.querySelectorAll('.failed').length : 0;
+          const failed = item.row.parentElement ? item.row.parentElement.querySelectorAll('.upload-row.failed').length : 0;
           status.append(el('p.notice#upload-finished', failed
-            ? `Upload finished with ${failed} failed file(s): drop them again to retry.`
+            ? `Upload finished: ${failed} file(s) not stored (the reason is under each).`
             : 'Upload finished.'));
           state.refresh();
         }

@@ -1,22 +1,71 @@
 // Jobs page: a form per job type, the live list of jobs (progress bar, stage, ETA, cancel, retry,
 // delete, errors in plain words), and one job's page with its report and artifacts.
 
-import { asList, del, get, post } from './api.js';
-import { clear, el, errorBox, explainJobError, formatDuration, formatTime, poll, progressBar, showError } from './ui.js';
+import { API, asList, del, get, getToken, post } from './api.js';
+import { clear, el, errorBox, errorLines, explainJobError, formatDuration, formatTime, poll, progressBar, shortJobError, showError } from './ui.js';
 import { renderArtifacts } from './artifacts.js';
 
 export const JOB_TYPES = {
   calibration: 'Calibration of one camera (unified model)',
   relative_pose: 'Stereo rig: relative pose of cam1 in cam0',
-  stereo_reconstruct: 'Instant 3D from one stereo pair',
+  stereo_reconstruct: 'Instant 3D from stereo pairs',
   slam: 'Stereo SLAM on a sequence',
+};
+// An example of the "other parameters" each job type accepts (each is valid for its type: the
+// browser tests submit them).
+export const EXTRA_PLACEHOLDERS = {
+  calibration: '{"options": {"fix": ["k5", "alpha"]}}',
+  relative_pose: '{"model_board_motion": true}',
+  stereo_reconstruct: '{"max_features": 4000}',
+  slam: '{"options": {"max_features": 1500}}',
 };
 const TERMINAL = new Set(['succeeded', 'failed', 'canceled', 'cancelled']);
 const POLL_MS = 1000;
+const EVENT_POLL_MS = 5000;  // polling while server events arrive: a safety net only
 const LIST_LIMIT = 200;  // the newest jobs shown in the list
 
 export async function render(view, id, query) {
-  return id ? renderJob(view, id) : renderJobs(view, query);
+  return id ? renderJob(view, id, query && query.get('retry') === '1') : renderJobs(view, query);
+}
+
+// ---- live updates -----------------------------------------------------------------------------
+
+// Job state and progress pushed by the server (GET /api/v1/events, Server-Sent Events "job")
+// when it offers them: `onJob(data)` runs on each event. The pages poll anyway (more slowly
+// while events arrive), so a server without events, or a dropped stream, changes nothing but
+// the delay. EventSource cannot send the bearer token: with a token, polling only.
+export function subscribeJobEvents(onJob, jobId = '') {
+  if (typeof EventSource === 'undefined' || getToken()) return { live: () => false, close: () => {} };
+  let lastEvent = 0;
+  let pending = null;  // events arrive with every progress step: the page redraws at most every 300 ms
+  const source = new EventSource(`${API}/events${jobId ? `?job=${encodeURIComponent(jobId)}` : ''}`);
+  const onEvent = (e) => {
+    lastEvent = Date.now();
+    let data;
+    try {
+      data = JSON.parse(e.data);
+    } catch (_) {
+      return;  // a malformed event: the next poll shows the truth
+    }
+    if (pending) return;
+    pending = setTimeout(() => {
+      pending = null;
+      onJob(data);
+    }, 300);
+  };
+  source.addEventListener('job', onEvent);
+  source.addEventListener('job_deleted', onEvent);
+  source.onerror = () => {
+    // No events route (404) or a dropped stream: stop; polling carries on.
+    if (source.readyState === EventSource.CLOSED || !lastEvent) source.close();
+  };
+  return {
+    live: () => Date.now() - lastEvent < 30000,
+    close: () => {
+      clearTimeout(pending);
+      source.close();
+    },
+  };
 }
 
 // ---- the form ---------------------------------------------------------------------------------
@@ -84,10 +133,10 @@ export function paramsFromForm(type, form) {
   return params;
 }
 
-async function renderForm(container, datasets, jobs, preselectedDataset, onSubmitted) {
+async function renderForm(container, datasets, jobs, preselectedDataset, onSubmitted, preselectedType) {
   const succeeded = jobs.filter((j) => j.state === 'succeeded');
   const typeSelect = el('select', { name: 'type' },
-    Object.entries(JOB_TYPES).map(([value, label]) => el('option', { value }, `${value} — ${label}`)));
+    Object.entries(JOB_TYPES).map(([value, label]) => el('option', { value, selected: value === preselectedType }, `${value} — ${label}`)));
   const datasetSelect = el('select', { name: 'dataset', required: true },
     datasets.map((d) => el('option', { value: d.id, selected: d.id === preselectedDataset }, `${d.name || d.id} (${d.id})`)));
   const specific = el('div.full.type-fields', { style: 'display:contents' });
@@ -97,11 +146,12 @@ async function renderForm(container, datasets, jobs, preselectedDataset, onSubmi
     el('label', 'Dataset'), datasets.length ? datasetSelect : el('span.muted', 'no dataset yet: create one first'),
     specific,
     el('label.full', 'Other parameters (JSON object, merged into params): ',
-      el('textarea', { name: 'extra', placeholder: '{"options": {"fix": ["k5", "alpha"]}}' })),
+      el('textarea', { name: 'extra', placeholder: EXTRA_PLACEHOLDERS[typeSelect.value] || '{}' })),
     el('div.full', el('button.primary', { type: 'submit' }, 'Submit job')),
     messages);
   const showType = () => {
     clear(specific, typeFields(typeSelect.value, succeeded));
+    form.elements.extra.placeholder = `e.g. ${EXTRA_PLACEHOLDERS[typeSelect.value] || '{}'}`;
     const boardType = form.elements.board_type;
     const charuco = specific.querySelector('.charuco');
     if (boardType && charuco) {
@@ -140,18 +190,35 @@ export function stateBadge(state) {
   return el(`span.state.state-${state}`, { dataset: { state } }, state);
 }
 
+// The bar: full when succeeded; red and stopped at the stage where a failed job stopped.
 function progressCell(job) {
   const p = job.progress || {};
   if (job.state === 'succeeded') return progressBar(1, 'done');
+  if (job.state === 'failed') return progressBar(p.fraction || 0, `failed${p.stage ? ` at ${p.stage}` : ''}`, true);
   if (TERMINAL.has(job.state)) return progressBar(p.fraction || 0, job.state);
   return progressBar(p.fraction || 0);
 }
 
-// The stage and message of the progress; in lists, a failed job's explanation instead.
+// The stage and message of the progress; in lists, a failed job's first reason and a link to
+// the rest. "done" is shown only once the job has succeeded (with its summary).
 function stageText(job, explainFailure = true) {
   const p = job.progress || {};
-  if (job.state === 'failed' && explainFailure) return el('span.error-text', explainJobError(job.error));
-  return [p.stage ? el('strong', p.stage) : null, p.message ? ` ${p.message}` : ''];
+  if (job.state === 'failed' && explainFailure) {
+    return [el('span.error-text', shortJobError(job.error)), ' ',
+      el('a', { href: `#/jobs/${encodeURIComponent(job.id)}` }, 'why')];
+  }
+  const stage = p.stage === 'done' && job.state !== 'succeeded' ? '' : p.stage;
+  return [stage ? el('strong', stage) : null, p.message ? ` ${p.message}` : ''];
+}
+
+// The failed job's whole error, one reason a line.
+function errorCard(job) {
+  const lines = errorLines(job.error && job.error.message);
+  const p = job.progress || {};
+  return el('div.error#job-error', { role: 'alert' },
+    el('strong', `Why it failed${p.stage ? ` (at ${p.stage}, ${Math.round(100 * (p.fraction || 0))} %)` : ''}: `),
+    explainJobError({ code: job.error && job.error.code, message: lines.length > 1 ? `${lines.length} problems` : lines[0] }),
+    lines.length > 1 ? el('ul.error-lines', lines.map((line) => el('li', line))) : null);
 }
 
 function etaText(job) {
@@ -160,7 +227,7 @@ function etaText(job) {
 }
 
 // Cancel / retry / delete buttons for one job; onChange runs after a successful action.
-export function jobActions(job, onChange, errorTarget) {
+export function jobActions(job, onChange, errorTarget, editor) {
   const act = (label, cls, fn) => el(`button.${cls}`, {
     dataset: { action: label.toLowerCase() },
     onclick: async () => {
@@ -176,7 +243,8 @@ export function jobActions(job, onChange, errorTarget) {
   return el('span.actions',
     TERMINAL.has(job.state) ? null : act('Cancel', 'warn', () => post(`/jobs/${id}/cancel`)),
     job.state === 'failed' || job.state === 'canceled' || job.state === 'cancelled'
-      ? act('Retry', 'plain', () => post(`/jobs/${id}/retry`)) : null,
+      ? (editor ? el('button.plain', { dataset: { action: 'retry' }, onclick: () => editor(job) }, 'Retry…')
+        : act('Retry', 'plain', () => post(`/jobs/${id}/retry`))) : null,
     job.state === 'running' ? null : act('Delete', 'danger', async () => {
       if (confirm(`Delete job ${job.id} and its results?`)) await del(`/jobs/${id}`);
     }));
@@ -192,7 +260,7 @@ function jobRow(job, refresh, errorTarget) {
     el('td', stageText(job)),
     el('td.num', etaText(job)),
     el('td', formatTime(job.created_at)),
-    el('td', jobActions(job, refresh, errorTarget)));
+    el('td', jobActions(job, refresh, errorTarget, (j) => { location.hash = `#/jobs/${encodeURIComponent(j.id)}?retry=1`; })));
 }
 
 async function renderJobs(view, query) {
@@ -234,11 +302,22 @@ async function renderJobs(view, query) {
   try {
     const [datasets, jobs] = await Promise.all([get('/datasets'), get(`/jobs?limit=${LIST_LIMIT}`)]);
     for (const d of asList(datasets, 'datasets')) datasetNames.set(d.id, d.name);
-    await renderForm(formCard, asList(datasets, 'datasets'), asList(jobs, 'jobs'), query && query.get('dataset'), refresh);
+    await renderForm(formCard, asList(datasets, 'datasets'), asList(jobs, 'jobs'), query && query.get('dataset'), refresh,
+      query && query.get('type'));
   } catch (err) {
     clear(formCard, errorBox(err, 'Could not load datasets and jobs'));
   }
-  return poll(table, POLL_MS, refresh);
+  const events = subscribeJobEvents(() => refresh());
+  let lastPoll = 0;
+  const stop = poll(table, POLL_MS, async () => {
+    if (events.live() && Date.now() - lastPoll < EVENT_POLL_MS) return;
+    lastPoll = Date.now();
+    await refresh();
+  });
+  return () => {
+    stop();
+    events.close();
+  };
 }
 
 // ---- one job ----------------------------------------------------------------------------------
@@ -258,9 +337,54 @@ function statusCard(job, refresh, container) {
         el('dt', 'Started'), el('dd', formatTime(job.started_at) || '–'),
         el('dt', 'Finished'), el('dd', formatTime(job.finished_at) || '–'),
         el('dt', 'Attempts'), el('dd', String(job.attempts ?? '–')))),
-    job.state === 'failed' ? el('div.error#job-error', el('strong', 'Why it failed: '), explainJobError(job.error)) : null,
-    el('p', jobActions(job, refresh, container)),
+    job.state === 'failed' ? errorCard(job) : null,
+    el('p', jobActions(job, refresh, container, (j) => retryEditor(container, j, refresh))),
     el('details', el('summary', 'Parameters'), el('pre.mono', JSON.stringify(job.params ?? {}, null, 2))));
+}
+
+// "Retry" offers to edit the parameters first: unchanged, the job runs again (POST retry);
+// edited, a new job of the same type on the same dataset is submitted with them.
+function retryEditor(container, job, refresh) {
+  const old = container.querySelector('.retry-editor');
+  if (old) old.remove();
+  const original = JSON.stringify(job.params ?? {}, null, 2);
+  const text = el('textarea', { name: 'retry_params', rows: Math.min(24, original.split('\n').length + 1) });
+  text.value = original;
+  const messages = el('div');
+  const card = el('div.card.retry-editor',
+    el('h2', 'Retry'), el('p', 'Edit the parameters if they caused the failure, then run the job again.'),
+    text,
+    el('p.row',
+      el('button.primary', { type: 'button', dataset: { action: 'retry-run' }, onclick: run }, 'Run again'),
+      el('button', { type: 'button', onclick: () => card.remove() }, 'Close')),
+    messages);
+  container.append(card);
+  text.focus();
+  text.setSelectionRange(0, 0);
+  text.scrollTop = 0;
+
+  async function run() {
+    clear(messages);
+    let params;
+    try {
+      params = JSON.parse(text.value);
+    } catch (err) {
+      messages.append(errorBox(err, 'The parameters are not valid JSON'));
+      return;
+    }
+    try {
+      if (JSON.stringify(params, null, 2) === original) {
+        await post(`/jobs/${encodeURIComponent(job.id)}/retry`);
+        card.remove();
+        refresh();
+      } else {
+        const created = await post('/jobs', { type: job.type, dataset: job.dataset ?? job.dataset_id, params });
+        location.hash = `#/jobs/${encodeURIComponent(created.id)}`;
+      }
+    } catch (err) {
+      messages.append(errorBox(err, 'The server refused the job'));
+    }
+  }
 }
 
 // The report shown under a succeeded job, by type.
@@ -277,7 +401,7 @@ async function renderReport(container, job) {
   return module.renderJobReport(container, job);
 }
 
-async function renderJob(view, id) {
+async function renderJob(view, id, openRetry = false) {
   const status = el('div');
   const report = el('div#report');
   const artifacts = el('div.card#artifacts');
@@ -295,6 +419,7 @@ async function renderJob(view, id) {
     }
     const snapshot = JSON.stringify(job);
     if (snapshot !== shownJob) clear(status, statusCard(job, refresh, status));
+    if (openRetry && !shownJob && (job.state === 'failed' || job.state === 'canceled')) retryEditor(status, job, refresh);
     shownJob = snapshot;
     if (job.state === shownState) return;
     shownState = job.state;
@@ -311,11 +436,18 @@ async function renderJob(view, id) {
     }
     if (TERMINAL.has(job.state)) await renderArtifacts(artifacts, job.id);
   };
+  const events = subscribeJobEvents(() => {
+    if (!TERMINAL.has(shownState)) refresh();
+  }, id);
+  let lastPoll = 0;
   const stop = poll(status, POLL_MS, async () => {
-    if (!TERMINAL.has(shownState)) await refresh();
+    if (TERMINAL.has(shownState) || (events.live() && Date.now() - lastPoll < EVENT_POLL_MS)) return;
+    lastPoll = Date.now();
+    await refresh();
   });
   return () => {
     stop();
+    events.close();
     if (reportCleanup) reportCleanup();
   };
 }

@@ -38,10 +38,25 @@ export function renderStereo(container, job, result) {
           boardMotionRow(result.board_motion)),
         el('div.grow', uncertaintyList(result)))),
     el('div.card', el('h2', 'Per-pair RMS error'), chart),
+    droppedPairsCard(pairs, result.sync_test),
     el('div.card#epipolar-explorer', el('h2', 'Epipolar explorer'), epipolarExplorer(job, result)),
     camerasCard(result.cameras));
   drawBarChart(chart, pairs.map((p) => ({ label: p.name, value: p.used ? p.rms_px : 0, muted: !p.used, note: p.used ? '' : '×' })),
     { reference: result.rms_px, unit: 'px' });
+}
+
+// The pairs the estimate left out, each with its reason in words (the chart only marks them).
+function droppedPairsCard(pairs, sync) {
+  const dropped = pairs.filter((p) => !p.used);
+  const limit = sync && sync.run && Number.isFinite(sync.limit) ? sync.limit : null;
+  return el('div.card.dropped-pairs#dropped-pairs', el('h2', `Pairs left out: ${dropped.length} of ${pairs.length}`),
+    dropped.length ? el('table',
+      el('thead', el('tr', ['Pair', 'Why it was left out', 'Synchronisation statistic'].map((h) => el('th', h)))),
+      el('tbody', dropped.map((p) => el('tr', { dataset: { pair: p.name } },
+        el('td.mono', p.name), el('td', p.reason || 'no reason given'),
+        el('td.num', p.sync_statistic !== null && p.sync_statistic !== undefined
+          ? `${formatNumber(p.sync_statistic, 1)}${limit !== null ? ` (limit ${formatNumber(limit, 1)})` : ''}` : '–')))))
+      : el('p.muted', 'Every pair was used.'));
 }
 
 // The board's motion between the two exposures of a pair (unsynchronised cameras, a handheld

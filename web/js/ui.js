@@ -84,9 +84,15 @@ export function formatTime(iso) {
   return Number.isNaN(date.getTime()) ? String(iso) : date.toLocaleString();
 }
 
+// A message as a person reads it: without the source locations the engine's checks append
+// ("(calib/pipeline.cc:42)"), which help whoever reads the job's log, not the page.
+export function readable(message) {
+  return String(message ?? '').replace(/ \([\w./-]+\.(cc|h):\d+\)/g, '');
+}
+
 // A box showing an API error's message (and its code and details, for whoever reports a bug).
 export function errorBox(error, context) {
-  const message = (error && error.message) || String(error);
+  const message = readable((error && error.message) || String(error));
   const code = error && error.code ? ` (${error.code})` : '';
   const details = error && error.details && Object.keys(error.details).length ? JSON.stringify(error.details) : '';
   return el('div.error', { role: 'alert' },
@@ -101,9 +107,10 @@ export function showError(container, error, context) {
   return box;
 }
 
-export function progressBar(fraction, label) {
+// A progress bar; `failed` turns it red, stopped where the work stopped.
+export function progressBar(fraction, label, failed = false) {
   const pct = Math.max(0, Math.min(1, Number(fraction) || 0)) * 100;
-  return el('div.progress', { role: 'progressbar', 'aria-valuenow': pct.toFixed(0),
+  return el(failed ? 'div.progress.failed' : 'div.progress', { role: 'progressbar', 'aria-valuenow': pct.toFixed(0),
     'aria-valuemin': '0', 'aria-valuemax': '100' },
   el('div.bar', { style: `width:${pct.toFixed(1)}%` }), el('span', label ?? `${pct.toFixed(0)}%`));
 }
@@ -139,7 +146,21 @@ export function explainJobError(error) {
     unknown_type: 'This server does not run this kind of job',
   };
   const lead = hints[code] || 'The job failed';
-  return `${lead}: ${error.message || 'no message'}`;
+  return `${lead}: ${readable(error.message) || 'no message'}`;
+}
+
+// A failed job's message as readable lines: the engine joins several reasons (one per image or
+// pair) with "; " or newlines, and lists after a colon ("... images without a partner: a, b").
+export function errorLines(message) {
+  return readable(message).split(/\n|;(?:\s+|$)/).map((line) => line.trim()).filter(Boolean);
+}
+
+// One short line of a failed job, for lists: the first reason, cut at 140 characters.
+export function shortJobError(error) {
+  const lines = errorLines(error && error.message);
+  const first = lines[0] || explainJobError(error);
+  const cut = first.length > 140 ? `${first.slice(0, 137)}…` : first;
+  return lines.length > 1 ? `${cut} (+${lines.length - 1} more)` : cut;
 }
 
 // Keeps a polling loop alive only while its element is in the document.
