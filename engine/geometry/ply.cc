@@ -29,10 +29,10 @@ void PlyCloud::Check() const {
   OMNIRIG_CHECK(colours.size() == positions.size(),
                 "PLY cloud: " << colours.size() << " colours for " << positions.size()
                               << " positions");
-  OMNIRIG_CHECK(confidence.empty() || confidence.size() == positions.size(),
+  OMNIRIG_CHECK(confidence.size() == (has_confidence ? positions.size() : 0),
                 "PLY cloud: " << confidence.size() << " confidences for " << positions.size()
                               << " positions");
-  OMNIRIG_CHECK(num_observations.empty() || num_observations.size() == positions.size(),
+  OMNIRIG_CHECK(num_observations.size() == (has_num_observations ? positions.size() : 0),
                 "PLY cloud: " << num_observations.size() << " observation counts for "
                               << positions.size() << " positions");
   OMNIRIG_CHECK(comment.find('\n') == std::string::npos, "PLY comment holds a newline");
@@ -45,17 +45,17 @@ void WritePly(const std::filesystem::path& path, const PlyCloud& cloud) {
   data += "element vertex " + std::to_string(cloud.size()) + "\n";
   data += "property float x\nproperty float y\nproperty float z\n";
   data += "property uchar red\nproperty uchar green\nproperty uchar blue\n";
-  if (!cloud.confidence.empty()) data += "property float confidence\n";
-  if (!cloud.num_observations.empty()) data += "property int num_observations\n";
+  if (cloud.has_confidence) data += "property float confidence\n";
+  if (cloud.has_num_observations) data += "property int num_observations\n";
   data += "end_header\n";
-  const size_t vertex_bytes = 15 + 4 * !cloud.confidence.empty() +
-                              4 * !cloud.num_observations.empty();
+  const size_t vertex_bytes = 15 + 4 * cloud.has_confidence +
+                              4 * cloud.has_num_observations;
   data.reserve(data.size() + vertex_bytes * cloud.size());
   for (size_t i = 0; i < cloud.size(); ++i) {
     for (int k = 0; k < 3; ++k) AppendLittleEndian(cloud.positions[i][k], &data);
     for (int k = 0; k < 3; ++k) AppendLittleEndian(cloud.colours[i][k], &data);
-    if (!cloud.confidence.empty()) AppendLittleEndian(cloud.confidence[i], &data);
-    if (!cloud.num_observations.empty()) AppendLittleEndian(cloud.num_observations[i], &data);
+    if (cloud.has_confidence) AppendLittleEndian(cloud.confidence[i], &data);
+    if (cloud.has_num_observations) AppendLittleEndian(cloud.num_observations[i], &data);
   }
   std::ofstream out(path, std::ios::out | std::ios::binary | std::ios::trunc);
   if (!out) throw std::runtime_error("cannot write " + path.string());

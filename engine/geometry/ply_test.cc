@@ -44,6 +44,7 @@ PlyCloud TwoPoints() {
 
 TEST(Ply, ColouredPointsWithConfidence) {
   PlyCloud cloud = TwoPoints();
+  cloud.has_confidence = true;
   cloud.confidence = {0.25f, 1.0f};
   const std::string data = WriteAndRead(cloud);
   const std::string end = "end_header\n";
@@ -74,9 +75,21 @@ TEST(Ply, WithoutOptionalPropertiesIs15BytesPerVertex) {
   EXPECT_EQ(data.size() - body - 11, 2u * 15u);
 }
 
+TEST(Ply, EmptyCloudDeclaresItsProperties) {
+  PlyCloud cloud;
+  cloud.has_confidence = true;
+  const std::string data = WriteAndRead(cloud);
+  EXPECT_NE(data.find("element vertex 0\n"), std::string::npos);
+  EXPECT_NE(data.find("property float confidence\nend_header\n"), std::string::npos);
+}
+
 TEST(Ply, RejectsMismatchedLengths) {
   PlyCloud cloud = TwoPoints();
+  cloud.has_confidence = true;
   cloud.confidence = {0.5f};
+  EXPECT_THROW(cloud.Check(), InvalidArgument);
+  cloud.has_confidence = false;  // values of an undeclared property
+  cloud.confidence = {0.5f, 0.5f};
   EXPECT_THROW(cloud.Check(), InvalidArgument);
   cloud = TwoPoints();
   cloud.colours.pop_back();

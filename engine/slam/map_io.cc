@@ -62,6 +62,7 @@ std::vector<StampedPose> ReadTum(const std::filesystem::path& path) {
 void WritePly(const std::filesystem::path& path, const std::vector<MapPoint>& points) {
   PlyCloud cloud;
   cloud.comment = "omnirig SLAM map, metres";
+  cloud.has_num_observations = true;
   for (const MapPoint& point : points) {
     cloud.positions.push_back(point.point_in_world.cast<float>());
     cloud.colours.push_back(point.rgb);
