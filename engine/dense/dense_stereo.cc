@@ -126,20 +126,22 @@ cv::Mat WindowCorrelation(const cv::Mat& a, const cv::Mat& b, int window, double
   cv::boxFilter(a.mul(b), mean_ab, CV_32F, size);
   const float noise2 = static_cast<float>(noise_grey * noise_grey);
   cv::Mat out(a.size(), CV_32F);
-  for (int r = 0; r < a.rows; ++r) {
-    const float* ma = mean_a.ptr<float>(r);
-    const float* mb = mean_b.ptr<float>(r);
-    const float* maa = mean_aa.ptr<float>(r);
-    const float* mbb = mean_bb.ptr<float>(r);
-    const float* mab = mean_ab.ptr<float>(r);
-    float* o = out.ptr<float>(r);
-    for (int c = 0; c < a.cols; ++c) {
-      const float var_a = std::max(0.f, maa[c] - ma[c] * ma[c]) + noise2;
-      const float var_b = std::max(0.f, mbb[c] - mb[c] * mb[c]) + noise2;
-      const float cov = mab[c] - ma[c] * mb[c];
-      o[c] = var_a > 0.f && var_b > 0.f ? cov / std::sqrt(var_a * var_b) : 0.f;
+  cv::parallel_for_(cv::Range(0, a.rows), [&](const cv::Range& rows) {
+    for (int r = rows.start; r < rows.end; ++r) {
+      const float* ma = mean_a.ptr<float>(r);
+      const float* mb = mean_b.ptr<float>(r);
+      const float* maa = mean_aa.ptr<float>(r);
+      const float* mbb = mean_bb.ptr<float>(r);
+      const float* mab = mean_ab.ptr<float>(r);
+      float* o = out.ptr<float>(r);
+      for (int c = 0; c < a.cols; ++c) {
+        const float var_a = std::max(0.f, maa[c] - ma[c] * ma[c]) + noise2;
+        const float var_b = std::max(0.f, mbb[c] - mb[c] * mb[c]) + noise2;
+        const float cov = mab[c] - ma[c] * mb[c];
+        o[c] = var_a > 0.f && var_b > 0.f ? cov / std::sqrt(var_a * var_b) : 0.f;
+      }
     }
-  }
+  });
   return out;
 }
 
@@ -148,6 +150,88 @@ DenseStereo::DenseStereo(const StereoRig& rig, const DenseStereoOptions& options
   const double max_parallax_rad = options_.max_parallax_deg * M_PI / 180.0;
   const int cells = static_cast<int>(std::ceil(max_parallax_rad / rectifier_.theta_step_rad()));
   num_disparities_ = std::max(16, (cells + 15) / 16 * 16);
+}
+
+void DenseStereo::Triangulate(const cv::Mat& disparity, const cv::Mat& correlation, int first,
+                              const cv::Mat& mask0, const cv::Mat& mask1, const cv::Mat& colour0,
+                              cv::Mat* range, cv::Mat* range_std, cv::Mat* confidence,
+                              DensePairResult* result) const {
+  const int rows = disparity.rows, width = disparity.cols;
+  const double step = rectifier_.theta_step_rad(), baseline = rectifier_.baseline_m();
+  // Per column: the angle from the baseline; per row: the azimuth's cosine and sine.
+  std::vector<double> theta(width), sin_theta(width), cos_theta(width);
+  for (int c = 0; c < width; ++c) {
+    theta[c] = rectifier_.Theta(first + c);
+    sin_theta[c] = std::sin(theta[c]);
+    cos_theta[c] = std::cos(theta[c]);
+  }
+  const Eigen::Matrix3d& cam0_from_grid = rectifier_.cam0_from_grid();
+  std::vector<std::vector<DensePoint>> row_points(rows);
+  std::vector<int> row_mirror(rows, 0), row_matched(rows, 0);
+  std::vector<double> row_confidence(rows, 0.0);
+  cv::parallel_for_(cv::Range(0, rows), [&](const cv::Range& range_of_rows) {
+    for (int r = range_of_rows.start; r < range_of_rows.end; ++r) {
+      const double phi = rectifier_.Phi(r);
+      const double cos_phi = std::cos(phi), sin_phi = std::sin(phi);
+      const float* d = disparity.ptr<float>(r);
+      const uint8_t* m0 = mask0.ptr<uint8_t>(r) + first;
+      const uint8_t* m1 = mask1.ptr<uint8_t>(r) + first;
+      const float* corr = correlation.ptr<float>(r);
+      float* range_row = range->ptr<float>(r) + first;
+      float* std_row = range_std->ptr<float>(r) + first;
+      float* conf_row = confidence->ptr<float>(r) + first;
+      for (int c = 0; c < width; ++c) {
+        if (!m0[c]) continue;
+        ++row_mirror[r];
+        if (!(d[c] > 0.f)) continue;
+        const int c1 = static_cast<int>(std::lround(c - d[c]));
+        if (c1 < 0 || !m1[c1]) continue;
+        ++row_matched[r];
+        const float conf = std::clamp(corr[c], 0.f, 1.f);
+        row_confidence[r] += conf;
+        conf_row[c] = conf;
+        const double theta1 = theta[c] + d[c] * step;
+        const double range_m = RangeFromAngles(theta[c], theta1, baseline);
+        const double std_m =
+            RangeDerivative(theta[c], theta1, baseline) * options_.disparity_std_cells * step;
+        if (conf < options_.min_confidence || !(range_m > 0.0) ||
+            std_m > options_.max_relative_range_std * range_m) {
+          continue;
+        }
+        range_row[c] = static_cast<float>(range_m);
+        std_row[c] = static_cast<float>(std_m);
+        DensePoint point;
+        const Eigen::Vector3d in_grid(sin_theta[c] * cos_phi, sin_theta[c] * sin_phi,
+                                      cos_theta[c]);
+        point.point_in_cam0 = (range_m * (cam0_from_grid * in_grid)).cast<float>();
+        if (colour0.channels() == 3) {
+          const cv::Vec3b bgr = colour0.at<cv::Vec3b>(r, first + c);
+          point.rgb = {bgr[2], bgr[1], bgr[0]};
+        } else {
+          const uint8_t g = colour0.at<uint8_t>(r, first + c);
+          point.rgb = {g, g, g};
+        }
+        point.confidence = conf;
+        point.range_std_m = static_cast<float>(std_m);
+        row_points[r].push_back(point);
+      }
+    }
+  });
+  size_t total = 0;
+  double confidence_sum = 0.0;
+  for (int r = 0; r < rows; ++r) {
+    total += row_points[r].size();
+    result->num_mirror_cells += row_mirror[r];
+    result->num_matched_cells += row_matched[r];
+    confidence_sum += row_confidence[r];
+  }
+  result->points.reserve(total);
+  for (const std::vector<DensePoint>& points : row_points) {
+    result->points.insert(result->points.end(), points.begin(), points.end());
+  }
+  if (result->num_matched_cells > 0) {
+    result->mean_confidence = confidence_sum / result->num_matched_cells;
+  }
 }
 
 DensePairResult DenseStereo::Reconstruct(const cv::Mat& image0, const cv::Mat& image1,
@@ -203,52 +287,8 @@ DensePairResult DenseStereo::Reconstruct(const cv::Mat& image0, const cv::Mat& i
                                                   options_.image_noise_grey);
     progress.Report(0.9, "triangulate");
 
-    const double step = rectifier_.theta_step_rad(), baseline = rectifier_.baseline_m();
-    double confidence_sum = 0.0;
-    for (int r = 0; r < rows; ++r) {
-      const float* d = disparity.ptr<float>(r);
-      const uint8_t* m0 = mask0.ptr<uint8_t>(r) + first;
-      const uint8_t* m1 = mask1.ptr<uint8_t>(r) + first;
-      const float* corr = correlation.ptr<float>(r);
-      for (int c = 0; c < roi.width; ++c) {
-        if (!m0[c]) continue;
-        ++result.num_mirror_cells;
-        if (!(d[c] > 0.f)) continue;
-        const int c1 = static_cast<int>(std::lround(c - d[c]));
-        if (c1 < 0 || !m1[c1]) continue;
-        ++result.num_matched_cells;
-        const float conf = std::clamp(corr[c], 0.f, 1.f);
-        confidence_sum += conf;
-        const int col = first + c;
-        confidence.at<float>(r, col) = conf;
-        const double theta0 = rectifier_.Theta(col);
-        const double theta1 = theta0 + d[c] * step;
-        const double range_m = RangeFromAngles(theta0, theta1, baseline);
-        const double std_m =
-            RangeDerivative(theta0, theta1, baseline) * options_.disparity_std_cells * step;
-        if (conf < options_.min_confidence || !(range_m > 0.0) ||
-            std_m > options_.max_relative_range_std * range_m) {
-          continue;
-        }
-        range.at<float>(r, col) = static_cast<float>(range_m);
-        range_std.at<float>(r, col) = static_cast<float>(std_m);
-        DensePoint point;
-        point.point_in_cam0 = (range_m * rectifier_.BearingInCam0(r, col)).cast<float>();
-        if (colour0.channels() == 3) {
-          const cv::Vec3b bgr = colour0.at<cv::Vec3b>(r, col);
-          point.rgb = {bgr[2], bgr[1], bgr[0]};
-        } else {
-          const uint8_t g = colour0.at<uint8_t>(r, col);
-          point.rgb = {g, g, g};
-        }
-        point.confidence = conf;
-        point.range_std_m = static_cast<float>(std_m);
-        result.points.push_back(point);
-      }
-    }
-    if (result.num_matched_cells > 0) {
-      result.mean_confidence = confidence_sum / result.num_matched_cells;
-    }
+    Triangulate(disparity, correlation, first, mask0, mask1, colour0, &range, &range_std,
+                &confidence, &result);
   }
   result.num_points = static_cast<int>(result.points.size());
   cv::transpose(range, result.range_m);

@@ -91,6 +91,13 @@ class DenseStereo {
   int num_disparities() const { return num_disparities_; }
 
  private:
+  // Range, its std and the confidence of every matched cell of columns [first, first +
+  // disparity.cols) (disparity and correlation cover those columns), and the points.
+  void Triangulate(const cv::Mat& disparity, const cv::Mat& correlation, int first,
+                   const cv::Mat& mask0, const cv::Mat& mask1, const cv::Mat& colour0,
+                   cv::Mat* range, cv::Mat* range_std, cv::Mat* confidence,
+                   DensePairResult* result) const;
+
   StereoRig rig_;
   DenseStereoOptions options_;
   SphericalRectifier rectifier_;
