@@ -23,6 +23,8 @@ int64_t Key(const Eigen::Vector3i& index) {
 void DenseMapOptions::Check() const {
   OMNIRIG_CHECK(voxel_m >= 0.005 && voxel_m <= 1.0,
                 "voxel_m must lie in [0.005, 1] m, got " << voxel_m);
+  OMNIRIG_CHECK(keyframe_spacing_m >= 0.0,
+                "keyframe_spacing_m must be non-negative, got " << keyframe_spacing_m);
   OMNIRIG_CHECK(min_points >= 1, "min_points must be at least 1, got " << min_points);
   OMNIRIG_CHECK(min_frames >= 1, "min_frames must be at least 1, got " << min_frames);
   OMNIRIG_CHECK(occupancy_cell_m >= voxel_m && occupancy_cell_m <= 2.0,

@@ -30,6 +30,8 @@ namespace omnirig::dense {
 
 struct DenseMapOptions {
   double voxel_m = 0.02;
+  // Keyframes: a tracked frame is fused when it lies at least this far from the last fused one.
+  double keyframe_spacing_m = 0.5;
   // A voxel is kept when at least this many points of at least min_frames keyframes fell in it
   // (a surface seen once, or by one frame only, is not confirmed).
   int min_points = 2;
