@@ -145,8 +145,16 @@ cv::Mat WindowCorrelation(const cv::Mat& a, const cv::Mat& b, int window, double
   return out;
 }
 
+namespace {
+// The rig, once the options are checked (so that the rectifier is built from valid options).
+const StereoRig& CheckedRig(const StereoRig& rig, const DenseStereoOptions& options) {
+  options.Check();
+  return rig;
+}
+}  // namespace
+
 DenseStereo::DenseStereo(const StereoRig& rig, const DenseStereoOptions& options)
-    : rig_(rig), options_(options), rectifier_((options.Check(), rig), options.grid) {
+    : rig_(rig), options_(options), rectifier_(CheckedRig(rig, options), options.grid) {
   const double max_parallax_rad = options_.max_parallax_deg * M_PI / 180.0;
   const int cells = static_cast<int>(std::ceil(max_parallax_rad / rectifier_.theta_step_rad()));
   num_disparities_ = std::max(16, (cells + 15) / 16 * 16);

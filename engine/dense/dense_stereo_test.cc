@@ -37,8 +37,7 @@ struct Accuracy {
   double azimuth_coverage = 0.0;          // fraction of 1-degree azimuth bins with points
 };
 
-Accuracy Measure(const DenseStereo& dense, const DensePairResult& result,
-                 const synth::StereoSequence& sequence) {
+Accuracy Measure(const DensePairResult& result, const synth::StereoSequence& sequence) {
   Accuracy out;
   std::vector<double> relative;
   const Rigid3d& world_from_cam0 = sequence.world_from_rig[0];
@@ -62,7 +61,6 @@ Accuracy Measure(const DenseStereo& dense, const DensePairResult& result,
     }
   }
   out.azimuth_coverage = std::count_if(bins.begin(), bins.end(), [](int n) { return n > 0; }) / 360.0;
-  (void)dense;
   return out;
 }
 
@@ -70,7 +68,7 @@ TEST(DenseStereo, RoomPairIsDenseAndAccurateAllAround) {
   const synth::StereoSequence& sequence = RoomPair();
   const DenseStereo dense(sequence.rig, DenseStereoOptions());
   const DensePairResult result = dense.Reconstruct(sequence.images[0][0], sequence.images[1][0]);
-  const Accuracy accuracy = Measure(dense, result, sequence);
+  const Accuracy accuracy = Measure(result, sequence);
   std::printf(
       "grid %dx%d (step %.5f rad), %d disparities; mirror cells %d, matched %d, points %d, mean "
       "confidence %.3f; distance to the surfaces / range: median %.4f%%, within 1%%: %.1f%%; "
@@ -97,7 +95,7 @@ TEST(DenseStereo, ShiftedImageLosesConfidence) {
   const cv::Mat shift = (cv::Mat_<double>(2, 3) << 1, 0, 4, 0, 1, 0);
   cv::warpAffine(sequence.images[1][0], shifted, shift, sequence.images[1][0].size());
   const DensePairResult bad = dense.Reconstruct(sequence.images[0][0], shifted);
-  const Accuracy accuracy = Measure(dense, bad, sequence);
+  const Accuracy accuracy = Measure(bad, sequence);
   std::printf("shifted by 4 px: points %d (in sync: %d), mean confidence %.3f (%.3f); median "
               "distance / range %.4f%%\n",
               bad.num_points, good.num_points, bad.mean_confidence, good.mean_confidence,
