@@ -25,6 +25,8 @@ void DenseMapOptions::Check() const {
                 "voxel_m must lie in [0.005, 1] m, got " << voxel_m);
   OMNIRIG_CHECK(keyframe_spacing_m >= 0.0,
                 "keyframe_spacing_m must be non-negative, got " << keyframe_spacing_m);
+  OMNIRIG_CHECK(max_relative_range_std > 0.0,
+                "max_relative_range_std must be positive, got " << max_relative_range_std);
   OMNIRIG_CHECK(min_points >= 1, "min_points must be at least 1, got " << min_points);
   OMNIRIG_CHECK(min_frames >= 1, "min_frames must be at least 1, got " << min_frames);
   OMNIRIG_CHECK(occupancy_cell_m >= voxel_m && occupancy_cell_m <= 2.0,
@@ -42,6 +44,7 @@ void DenseMap::Add(const Rigid3d& world_from_cam0, const std::vector<DensePoint>
   const int frame = num_frames_++;
   const double inverse_voxel = 1.0 / options_.voxel_m;
   for (const DensePoint& point : points) {
+    if (point.range_std_m > options_.max_relative_range_std * point.point_in_cam0.norm()) continue;
     const Eigen::Vector3d in_world = world_from_cam0 * point.point_in_cam0.cast<double>();
     const Eigen::Vector3i index = (in_world * inverse_voxel).array().floor().cast<int>();
     Voxel& voxel = voxels_[Key(index)];

@@ -36,6 +36,9 @@ struct DenseMapOptions {
   // (a surface seen once, or by one frame only, is not confirmed).
   int min_points = 2;
   int min_frames = 2;
+  // Points whose range std exceeds this fraction of their range are not fused (far points seen
+  // with little parallax would otherwise fill voxels of their own with their larger errors).
+  double max_relative_range_std = 0.02;
   // Occupancy grid: cell size, and the band of heights above the floor that holds obstacles
   // (the floor is the most populated height below the sensor).
   double occupancy_cell_m = 0.05;
