@@ -125,6 +125,35 @@ TEST_F(SlamJob, TracksTheSequenceWithSmallDriftAndWritesArtifacts) {
   EXPECT_TRUE(std::is_sorted(fractions.begin(), fractions.end()));
 }
 
+TEST_F(SlamJob, DenseMapFusesKeyframesAndWritesAnOccupancyGrid) {
+  RegisterSlamJobType();
+  const JobType* type = FindJobType("slam");
+  ASSERT_NE(type, nullptr);
+  const json params = {{"rig", "rig-job"}, {"dense_map", {{"voxel_m", 0.02}}}};
+  type->validate(params);
+  EXPECT_THROW(type->validate({{"rig", "rig-job"}, {"dense_map", {{"voxel", 0.02}}}}),
+               InvalidArgument);
+  EXPECT_THROW(type->validate({{"rig", "rig-job"}, {"dense_map", {{"voxel_m", 0.0}}}}),
+               InvalidArgument);
+  const json result = type->run(params, context_);
+  ASSERT_TRUE(result.contains("dense_map")) << result.dump(2);
+  const json& map = result["dense_map"];
+  // ~20 cm steps over 1.65 m with keyframes 0.5 m apart.
+  EXPECT_GE(map["keyframes"].size(), 3u);
+  EXPECT_GT(map["num_points"].get<int>(), 20000);  // 40,569 measured (640x480)
+  // The sensor is 1 m above the floor; the world is the first frame's cam0 frame (z down).
+  EXPECT_NEAR(map["floor_height_m"].get<double>(), -1.0, 0.05);
+  EXPECT_EQ(result["artifacts"]["dense_map_ply"], "dense_map.ply");
+  for (const char* file : {"dense_map.ply", "occupancy.pgm", "occupancy.yaml"}) {
+    EXPECT_TRUE(fs::exists(context_.output_dir / file)) << file;
+  }
+  const cv::Mat occupancy =
+      cv::imread((context_.output_dir / "occupancy.pgm").string(), cv::IMREAD_UNCHANGED);
+  ASSERT_FALSE(occupancy.empty());
+  EXPECT_GT(cv::countNonZero(occupancy == 0), 30);     // occupied cells (82 measured)
+  EXPECT_GT(cv::countNonZero(occupancy == 254), 1000);  // free cells
+}
+
 TEST_F(SlamJob, RefinesAWrongFocalLengthAndReportsTheCalibrationBeforeAndAfter) {
   // The rig job's cameras claim focal lengths 0.5 % too long (1 px at this size).
   StereoRig given = sequence_->rig;

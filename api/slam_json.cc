@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cctype>
+#include <chrono>
 #include <fstream>
 #include <map>
 #include <set>
@@ -11,6 +12,7 @@
 
 #include "api/camera_json.h"
 #include "engine/calib/calibrate.h"
+#include "engine/geometry/ply.h"
 #include "engine/slam/evaluation.h"
 #include "engine/slam/map_io.h"
 #include "engine/util/check.h"
@@ -288,10 +290,74 @@ slam::SlamOptions SlamOptionsFromJson(const json& object) {
   return o;
 }
 
+namespace {
+
+dense::DenseMapOptions DenseMapOptionsFromJson(const json& object) {
+  OMNIRIG_CHECK(object.is_object(), "field 'params.dense_map' must be an object, e.g. "
+                                    "{\"voxel_m\": 0.02}");
+  dense::DenseMapOptions options;
+  const std::map<std::string, double*> fields = {
+      {"voxel_m", &options.voxel_m},
+      {"keyframe_spacing_m", &options.keyframe_spacing_m},
+      {"occupancy_cell_m", &options.occupancy_cell_m},
+      {"obstacle_min_height_m", &options.obstacle_min_height_m},
+      {"obstacle_max_height_m", &options.obstacle_max_height_m}};
+  for (const auto& [key, value] : object.items()) {
+    const auto it = fields.find(key);
+    OMNIRIG_CHECK(it != fields.end(), "unknown field 'params.dense_map." << key << "'");
+    OMNIRIG_CHECK(value.is_number(), "field 'params.dense_map." << key << "' must be a number");
+    *it->second = value.get<double>();
+  }
+  if (!object.contains("occupancy_cell_m")) {
+    options.occupancy_cell_m = std::max(options.occupancy_cell_m, options.voxel_m);
+  }
+  options.Check();
+  return options;
+}
+
+// Fuses the dense clouds of keyframes (tracked frames at least keyframe_spacing_m apart) along
+// the estimated trajectory and writes dense_map.ply and the occupancy grid.
+json FuseDenseMap(const StereoRig& rig, const slam::SlamResult& result,
+                  const std::function<slam::StereoImages(int)>& load,
+                  const dense::DenseMapOptions& options, const fs::path& output_dir,
+                  const ProgressSink& progress) {
+  const auto start = std::chrono::steady_clock::now();
+  const dense::DenseStereo stereo(rig, dense::DenseStereoOptions());
+  dense::DenseMap map(options);
+  std::optional<Eigen::Vector3d> last;
+  json keyframes = json::array();
+  for (size_t i = 0; i < result.frames.size(); ++i) {
+    const std::optional<Rigid3d>& pose = result.frames[i].world_from_rig;
+    if (!pose || (last && (pose->translation - *last).norm() < options.keyframe_spacing_m)) {
+      continue;
+    }
+    progress.ThrowIfCancelled();
+    // SLAM has reported 1.0; the fusion's stage is named, its fraction stays there.
+    progress.Report(1.0, "dense_map", result.frames[i].name);
+    const slam::StereoImages images = load(static_cast<int>(i));
+    map.Add(*pose, stereo.Reconstruct(images.cam0, images.cam1).points);
+    last = pose->translation;
+    keyframes.push_back(result.frames[i].name);
+  }
+  const PlyCloud cloud = map.Cloud();
+  WritePly(output_dir / "dense_map.ply", cloud);
+  const dense::OccupancyGrid grid = map.Occupancy();
+  dense::WriteOccupancyGrid(output_dir / "occupancy.pgm", output_dir / "occupancy.yaml", grid);
+  return {{"keyframes", keyframes},
+          {"num_points", cloud.size()},
+          {"voxel_m", options.voxel_m},
+          {"floor_height_m", grid.floor_height_m},
+          {"occupancy_size", {grid.cells.cols, grid.cells.rows}},
+          {"seconds",
+           std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count()}};
+}
+
+}  // namespace
+
 SlamParams SlamParamsFromJson(const json& params) {
   OMNIRIG_CHECK(params.is_object(), "params must be a JSON object");
   for (const auto& [key, value] : params.items()) {
-    OMNIRIG_CHECK(key == "rig" || key == "ground_truth" || key == "options",
+    OMNIRIG_CHECK(key == "rig" || key == "ground_truth" || key == "options" || key == "dense_map",
                   "unknown field 'params." << key << "'");
   }
   SlamParams parsed;
@@ -309,6 +375,7 @@ SlamParams SlamParamsFromJson(const json& params) {
     parsed.ground_truth = name;
   }
   if (params.contains("options")) parsed.options = SlamOptionsFromJson(params["options"]);
+  if (params.contains("dense_map")) parsed.dense_map = DenseMapOptionsFromJson(params["dense_map"]);
   return parsed;
 }
 
@@ -362,7 +429,8 @@ json RunSlamOnDataset(const StereoRig& rig, const fs::path& dataset_dir,
                       const slam::SlamOptions& options,
                       const std::optional<fs::path>& ground_truth, const fs::path& output_dir,
                       const ProgressSink& progress,
-                      const std::function<void(const std::string&)>& log) {
+                      const std::function<void(const std::string&)>& log,
+                      const std::optional<dense::DenseMapOptions>& dense_map) {
   options.Check();
   const SlamSequence sequence = PrepareSlamSequence(rig, dataset_dir, image_names);
   std::vector<slam::StampedPose> gt;
@@ -425,6 +493,12 @@ json RunSlamOnDataset(const StereoRig& rig, const fs::path& dataset_dir,
                                ? EvaluationToJson(slam::EvaluateTrajectory(estimate, truth))
                                : json(nullptr);
   }
+  if (dense_map) {
+    report["dense_map"] = FuseDenseMap(rig, result, load, *dense_map, output_dir, progress);
+    report["artifacts"]["dense_map_ply"] = "dense_map.ply";
+    report["artifacts"]["occupancy_pgm"] = "occupancy.pgm";
+    report["artifacts"]["occupancy_yaml"] = "occupancy.yaml";
+  }
   std::ofstream(output_dir / "report.json") << report.dump(2) << "\n";
   return report;
 }
@@ -445,7 +519,7 @@ json RunSlamJob(const json& params, const JobContext& context) {
   std::optional<fs::path> ground_truth;
   if (parsed.ground_truth) ground_truth = context.dataset_dir / *parsed.ground_truth;
   return RunSlamOnDataset(rig, context.dataset_dir, context.image_names, options, ground_truth,
-                          context.output_dir, context.progress, context.log);
+                          context.output_dir, context.progress, context.log, parsed.dense_map);
 }
 
 void RegisterSlamJobType() {

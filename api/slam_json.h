@@ -7,7 +7,8 @@
 // Params (unknown fields are refused):
 //   {"rig": JOB_ID,                 a succeeded relative_pose job (its cam0_from_cam1, cameras)
 //    "ground_truth": "NAME.tum",    optional, a file of the dataset
-//    "options": {...}}              optional, see SlamOptionsFromJson
+//    "options": {...},              optional, see SlamOptionsFromJson
+//    "dense_map": {"voxel_m": 0.02}} optional, see SlamParams::dense_map
 // Artifacts written to the output folder:
 //   trajectory.json  {"world_frame", "frames": [{"name", "state", "reason", "timestamp_s",
 //                     "world_from_rig": {"rotation_wxyz", "translation_m"} | null}], "rig"}
@@ -15,6 +16,9 @@
 //   map.ply          binary little-endian: float x y z (m), uchar red green blue,
 //                    int num_observations
 //   report.json      the result below
+//   dense_map.ply, occupancy.pgm, occupancy.yaml   with "dense_map" (float x y z, uchar red
+//                    green blue, float confidence; ROS map_server map, occupied 0 free 254
+//                    unknown 205)
 // Result:
 //   {"artifacts": {"trajectory_json", "trajectory_tum", "map_ply", "report_json"},
 //    "num_frames", "num_tracked", "num_lost", "num_map_points", "frames_per_second",
@@ -47,6 +51,7 @@
 #include <nlohmann/json.hpp>
 
 #include "api/job_types.h"
+#include "engine/dense/dense_map.h"
 #include "engine/geometry/camera_model.h"
 #include "engine/slam/slam.h"
 
@@ -76,6 +81,11 @@ struct SlamParams {
   std::string rig_job;
   std::optional<std::string> ground_truth;  // a file name in the dataset
   slam::SlamOptions options;
+  // "dense_map": {"voxel_m", "keyframe_spacing_m", "occupancy_cell_m", "obstacle_min_height_m",
+  // "obstacle_max_height_m"} (each optional; engine/dense/dense_map.h): fuse the dense clouds of
+  // keyframes along the trajectory into dense_map.ply and write occupancy.pgm + occupancy.yaml
+  // (ROS map_server); the result's "dense_map" reports it.
+  std::optional<dense::DenseMapOptions> dense_map;
 };
 SlamParams SlamParamsFromJson(const nlohmann::json& params);
 
@@ -101,7 +111,9 @@ nlohmann::json RunSlamOnDataset(const StereoRig& rig, const std::filesystem::pat
                                 const std::optional<std::filesystem::path>& ground_truth,
                                 const std::filesystem::path& output_dir,
                                 const ProgressSink& progress,
-                                const std::function<void(const std::string&)>& log);
+                                const std::function<void(const std::string&)>& log,
+                                const std::optional<dense::DenseMapOptions>& dense_map =
+                                    std::nullopt);
 
 nlohmann::json RunSlamJob(const nlohmann::json& params, const JobContext& context);
 

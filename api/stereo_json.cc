@@ -3,11 +3,14 @@
 #include <algorithm>
 #include <cmath>
 #include <set>
+#include <sstream>
 
 #include <opencv2/imgcodecs.hpp>
 
 #include "api/camera_json.h"
 #include "api/relpose_json.h"
+#include "engine/dense/range_io.h"
+#include "engine/geometry/ply.h"
 #include "engine/stereo/epipolar.h"
 #include "engine/util/check.h"
 
@@ -16,17 +19,36 @@ namespace {
 
 using nlohmann::json;
 
-const std::set<std::string> kKnownFields = {"rig",
-                                            "max_features",
-                                            "ratio_test",
-                                            "max_epipolar_error_rad",
-                                            "mutual_check",
-                                            "min_parallax_rad",
-                                            "max_reprojection_error_rad",
-                                            "keypoint_std_px",
+// Fields of each method; dark_level and max_relative_range_std belong to both.
+const std::set<std::string> kSparseFields = {"max_features",
+                                             "ratio_test",
+                                             "max_epipolar_error_rad",
+                                             "mutual_check",
+                                             "min_parallax_rad",
+                                             "max_reprojection_error_rad",
+                                             "keypoint_std_px",
+                                             "max_relative_range_std",
+                                             "dark_level",
+                                             "mask_margin_px"};
+const std::set<std::string> kDenseFields = {"grid_step_rad",
+                                            "max_parallax_deg",
+                                            "block_size",
+                                            "uniqueness_ratio",
+                                            "speckle_window_cells",
+                                            "speckle_range_cells",
+                                            "left_right_max_diff_cells",
+                                            "confidence_window_cells",
+                                            "image_noise_grey",
+                                            "min_confidence",
+                                            "disparity_std_cells",
                                             "max_relative_range_std",
                                             "dark_level",
-                                            "mask_margin_px"};
+                                            "mask_margin_cells"};
+
+// A pair whose confident cells are fewer than this fraction of its mirror cells is reported as
+// a bad pair (dark, blurred, out of sync): the room renders give about 0.8, a pair with one
+// image shifted by 4 px about 0.3.
+constexpr double kFewConfidentFraction = 0.5;
 
 double Number(const json& params, const std::string& key) {
   OMNIRIG_CHECK(params[key].is_number(), "field 'params." << key << "' must be a number");
@@ -97,18 +119,10 @@ json PairJson(const std::string& name, const StereoPairReport& report) {
 
 }  // namespace
 
-StereoReconstructParams StereoReconstructParamsFromJson(const json& params) {
-  OMNIRIG_CHECK(params.is_object(), "'params' must be a JSON object");
-  for (const auto& [key, value] : params.items()) {
-    OMNIRIG_CHECK(kKnownFields.count(key) > 0, "unknown field 'params." << key << "'");
-  }
-  StereoReconstructParams out;
-  OMNIRIG_CHECK(params.contains("rig"),
-                "missing field 'params.rig' (the id of a succeeded relative_pose job)");
-  OMNIRIG_CHECK(params["rig"].is_string() && !params["rig"].get<std::string>().empty(),
-                "field 'params.rig' must be a job id (a non-empty string)");
-  out.rig_job = params["rig"].get<std::string>();
-  StereoReconstructOptions& o = out.options;
+namespace {
+
+void ReadSparseOptions(const json& params, StereoReconstructOptions* options) {
+  StereoReconstructOptions& o = *options;
   ReadInteger(params, "max_features", &o.max_features);
   ReadNumber(params, "ratio_test", &o.ratio_test);
   ReadNumber(params, "max_epipolar_error_rad", &o.max_epipolar_error_rad);
@@ -124,6 +138,58 @@ StereoReconstructParams StereoReconstructParamsFromJson(const json& params) {
   ReadNumber(params, "dark_level", &o.dark_level);
   ReadInteger(params, "mask_margin_px", &o.mask_margin_px);
   o.Check();
+}
+
+void ReadDenseOptions(const json& params, dense::DenseStereoOptions* options) {
+  dense::DenseStereoOptions& o = *options;
+  ReadNumber(params, "grid_step_rad", &o.grid.step_rad);
+  ReadNumber(params, "max_parallax_deg", &o.max_parallax_deg);
+  ReadInteger(params, "block_size", &o.block_size);
+  ReadInteger(params, "uniqueness_ratio", &o.uniqueness_ratio);
+  ReadInteger(params, "speckle_window_cells", &o.speckle_window_cells);
+  ReadInteger(params, "speckle_range_cells", &o.speckle_range_cells);
+  ReadInteger(params, "left_right_max_diff_cells", &o.left_right_max_diff_cells);
+  ReadInteger(params, "confidence_window_cells", &o.confidence_window_cells);
+  ReadNumber(params, "image_noise_grey", &o.image_noise_grey);
+  ReadNumber(params, "min_confidence", &o.min_confidence);
+  ReadNumber(params, "disparity_std_cells", &o.disparity_std_cells);
+  ReadNumber(params, "max_relative_range_std", &o.max_relative_range_std);
+  ReadNumber(params, "dark_level", &o.dark_level);
+  ReadInteger(params, "mask_margin_cells", &o.mask_margin_cells);
+  o.Check();
+}
+
+}  // namespace
+
+StereoReconstructParams StereoReconstructParamsFromJson(const json& params) {
+  OMNIRIG_CHECK(params.is_object(), "'params' must be a JSON object");
+  StereoReconstructParams out;
+  if (params.contains("method")) {
+    OMNIRIG_CHECK(params["method"].is_string() &&
+                      (params["method"] == "dense" || params["method"] == "sparse"),
+                  "field 'params.method' must be \"dense\" or \"sparse\"");
+    out.method = params["method"].get<std::string>();
+  }
+  const std::set<std::string>& fields = out.method == "dense" ? kDenseFields : kSparseFields;
+  const std::set<std::string>& other = out.method == "dense" ? kSparseFields : kDenseFields;
+  for (const auto& [key, value] : params.items()) {
+    if (key == "rig" || key == "method" || fields.count(key)) continue;
+    OMNIRIG_CHECK(other.count(key) == 0, "field 'params." << key << "' applies to method '"
+                                                          << (out.method == "dense" ? "sparse" : "dense")
+                                                          << "' only (this job's method is '"
+                                                          << out.method << "')");
+    OMNIRIG_CHECK(false, "unknown field 'params." << key << "'");
+  }
+  OMNIRIG_CHECK(params.contains("rig"),
+                "missing field 'params.rig' (the id of a succeeded relative_pose job)");
+  OMNIRIG_CHECK(params["rig"].is_string() && !params["rig"].get<std::string>().empty(),
+                "field 'params.rig' must be a job id (a non-empty string)");
+  out.rig_job = params["rig"].get<std::string>();
+  if (out.method == "dense") {
+    ReadDenseOptions(params, &out.dense);
+  } else {
+    ReadSparseOptions(params, &out.options);
+  }
   return out;
 }
 
@@ -140,14 +206,38 @@ json StereoReconstructOptionsToJson(const StereoReconstructOptions& o) {
           {"mask_margin_px", o.mask_margin_px}};
 }
 
-json RunStereoReconstructJob(const json& params, const JobContext& context) {
-  const StereoReconstructParams parsed = StereoReconstructParamsFromJson(params);
-  const StereoRig rig = LoadRig(context, parsed.rig_job);
-  const std::vector<ImagePairNames> pairs = MatchImagePairs(context.image_names);
+json DenseStereoOptionsToJson(const dense::DenseStereoOptions& o) {
+  return {{"grid_step_rad", o.grid.step_rad},
+          {"max_parallax_deg", o.max_parallax_deg},
+          {"block_size", o.block_size},
+          {"uniqueness_ratio", o.uniqueness_ratio},
+          {"speckle_window_cells", o.speckle_window_cells},
+          {"speckle_range_cells", o.speckle_range_cells},
+          {"left_right_max_diff_cells", o.left_right_max_diff_cells},
+          {"confidence_window_cells", o.confidence_window_cells},
+          {"image_noise_grey", o.image_noise_grey},
+          {"min_confidence", o.min_confidence},
+          {"disparity_std_cells", o.disparity_std_cells},
+          {"max_relative_range_std", o.max_relative_range_std},
+          {"dark_level", o.dark_level},
+          {"mask_margin_cells", o.mask_margin_cells}};
+}
 
-  json result = {{"rig", parsed.rig_job},
-                 {"options", StereoReconstructOptionsToJson(parsed.options)},
-                 {"pairs", json::array()}};
+namespace {
+
+// NAME of a pair's range panoramas (NAME_range.tiff): the pair's name without its extension,
+// '/' and '\\' replaced by '_'.
+std::string RangeBaseName(const std::string& pair_name) {
+  std::string out = std::filesystem::path(pair_name).replace_extension().string();
+  for (char& c : out) {
+    if (c == '/' || c == '\\') c = '_';
+  }
+  return out;
+}
+
+size_t RunSparse(const StereoReconstructParams& parsed, const StereoRig& rig,
+               const std::vector<ImagePairNames>& pairs, const JobContext& context,
+               json* result) {
   std::vector<StereoPoint> all_points;
   for (size_t k = 0; k < pairs.size(); ++k) {
     context.progress.ThrowIfCancelled();
@@ -170,21 +260,133 @@ json RunStereoReconstructJob(const json& params, const JobContext& context) {
     }
     context.Log("pair " + pairs[k].name + ": " + std::to_string(report.num_matches) +
                 " matches, " + std::to_string(report.points.size()) + " points");
-    result["pairs"].push_back(pair);
+    (*result)["pairs"].push_back(pair);
     all_points.insert(all_points.end(), report.points.begin(), report.points.end());
   }
-  result["num_points"] = all_points.size();
+  if (pairs.size() == 1) WriteColoredPly(context.output_dir / "cloud.ply", all_points);
+  return all_points.size();
+}
+
+PlyCloud DenseCloud(const std::vector<dense::DensePoint>& points) {
+  PlyCloud cloud;
+  cloud.comment = "omnirig stereo_reconstruct (dense): points in cam0's frame, metres";
+  cloud.has_confidence = true;
+  cloud.positions.reserve(points.size());
+  cloud.colours.reserve(points.size());
+  cloud.confidence.reserve(points.size());
+  for (const dense::DensePoint& p : points) {
+    cloud.positions.push_back(p.point_in_cam0);
+    cloud.colours.push_back(p.rgb);
+    cloud.confidence.push_back(p.confidence);
+  }
+  return cloud;
+}
+
+json DensePairJson(const std::string& name, const dense::DensePairResult& r) {
+  std::vector<double> ranges, stds;
+  ranges.reserve(r.points.size());
+  stds.reserve(r.points.size());
+  for (const dense::DensePoint& p : r.points) {
+    ranges.push_back(p.point_in_cam0.norm());
+    stds.push_back(p.range_std_m);
+  }
+  const double confident_fraction =
+      r.num_mirror_cells > 0 ? static_cast<double>(r.num_points) / r.num_mirror_cells : 0.0;
+  json pair = {{"name", name},
+               {"num_mirror_cells", r.num_mirror_cells},
+               {"num_matched_cells", r.num_matched_cells},
+               {"num_points", r.num_points},
+               {"confident_fraction", confident_fraction},
+               {"mean_confidence", r.mean_confidence},
+               {"median_range_m", Median(ranges)},
+               {"median_range_std_m", Median(stds)}};
+  if (confident_fraction < kFewConfidentFraction) {
+    std::ostringstream warning;
+    warning << "few confident pixels: " << r.num_points << " of " << r.num_mirror_cells
+            << " mirror cells (" << std::lround(100.0 * confident_fraction)
+            << "%); the images may be dark, blurred or out of sync, or the rig may not fit them";
+    pair["warning"] = warning.str();
+  }
+  return pair;
+}
+
+size_t RunDense(const StereoReconstructParams& parsed, const StereoRig& rig,
+                const std::vector<ImagePairNames>& pairs, const JobContext& context,
+                json* result) {
+  context.progress.Report(0.0, "rectify", "building the rectification tables");
+  const dense::DenseStereo dense(rig, parsed.dense);
+  size_t num_points = 0;
+  int num_bad_pairs = 0;
+  for (size_t k = 0; k < pairs.size(); ++k) {
+    context.progress.ThrowIfCancelled();
+    const cv::Mat image0 = ReadImage(context, pairs[k].cam0);
+    const cv::Mat image1 = ReadImage(context, pairs[k].cam1);
+    dense::DensePairResult pair_result;
+    try {
+      pair_result = dense.Reconstruct(
+          image0, image1,
+          SubRange(context.progress, static_cast<double>(k) / pairs.size(),
+                   static_cast<double>(k + 1) / pairs.size()));
+    } catch (const InvalidArgument& e) {
+      throw InvalidArgument("pair '" + pairs[k].name + "': " + e.what());
+    }
+    json pair = DensePairJson(pairs[k].name, pair_result);
+    num_bad_pairs += pair.contains("warning");
+    const std::string base = RangeBaseName(pairs[k].name);
+    dense::WriteRangeTiff(context.output_dir / (base + "_range.tiff"), pair_result.range_m);
+    dense::WriteRangePng(context.output_dir / (base + "_range.png"), pair_result.range_m);
+    pair["range_tiff"] = base + "_range.tiff";
+    pair["range_png"] = base + "_range.png";
+    const PlyCloud cloud = DenseCloud(pair_result.points);
+    if (pairs.size() > 1) {
+      const std::string artifact = SafeArtifactName(pairs[k].name);
+      WritePly(context.output_dir / artifact, cloud);
+      pair["artifact"] = artifact;
+    }
+    context.Log("pair " + pairs[k].name + ": " + std::to_string(pair_result.num_points) +
+                " points of " + std::to_string(pair_result.num_mirror_cells) + " mirror cells" +
+                (pair.contains("warning") ? " (" + pair["warning"].get<std::string>() + ")" : ""));
+    (*result)["pairs"].push_back(pair);
+    num_points += cloud.size();
+    if (pairs.size() == 1) WritePly(context.output_dir / "cloud.ply", cloud);
+  }
+  (*result)["grid"] = {{"rows", dense.rectifier().rows()},
+                       {"cols", dense.rectifier().cols()},
+                       {"step_rad", dense.rectifier().theta_step_rad()},
+                       {"num_disparities", dense.num_disparities()}};
+  if (num_bad_pairs > 0) {
+    (*result)["warning"] = std::to_string(num_bad_pairs) + " of " + std::to_string(pairs.size()) +
+                           " pairs gave few confident pixels (see each pair's warning)";
+  }
+  return num_points;
+}
+
+}  // namespace
+
+json RunStereoReconstructJob(const json& params, const JobContext& context) {
+  const StereoReconstructParams parsed = StereoReconstructParamsFromJson(params);
+  const StereoRig rig = LoadRig(context, parsed.rig_job);
+  const std::vector<ImagePairNames> pairs = MatchImagePairs(context.image_names);
+
+  json result = {{"rig", parsed.rig_job},
+                 {"method", parsed.method},
+                 {"options", parsed.method == "dense" ? DenseStereoOptionsToJson(parsed.dense)
+                                                      : StereoReconstructOptionsToJson(parsed.options)},
+                 {"pairs", json::array()}};
+  const size_t num_points = parsed.method == "dense"
+                                ? RunDense(parsed, rig, pairs, context, &result)
+                                : RunSparse(parsed, rig, pairs, context, &result);
+  result["num_points"] = num_points;
   // Each pair's points are in that pair's own cam0 frame: merged, the pairs of a moving rig
   // would pile up into an unreadable blob. One pair makes cloud.ply; several stay apart (the
   // result's artifact is the first pair's cloud), since nothing here places them in one frame.
   if (pairs.size() == 1) {
-    WriteColoredPly(context.output_dir / "cloud.ply", all_points);
     result["artifact"] = "cloud.ply";
   } else if (!pairs.empty()) {
     result["artifact"] = result["pairs"][0]["artifact"];
     result["clouds_merged"] = false;
   }
-  context.progress.Report(1.0, "done", std::to_string(all_points.size()) + " points from " +
+  context.progress.Report(1.0, "done", std::to_string(num_points) + " points from " +
                                            std::to_string(pairs.size()) + " pair(s)");
   return result;
 }

@@ -3,41 +3,60 @@
 // engine/stereo/stereo_reconstruct.h) and the epipolar curves the web page draws.
 //
 // Dataset: images named cam0/NAME and cam1/NAME, paired by NAME (one or more pairs).
-// Params (unknown fields are refused):
+// Params (unknown fields, and fields of the other method, are refused):
 //   {"rig": JOB_ID,                      a succeeded relative_pose job
+//    "method": "dense" | "sparse",       default "dense"
+//    dense (engine/dense/dense_stereo.h, DenseStereoOptions; "grid_step_rad" is grid.step_rad):
+//    "grid_step_rad", "max_parallax_deg", "block_size": int, "uniqueness_ratio": int,
+//    "speckle_window_cells": int, "speckle_range_cells": int, "left_right_max_diff_cells": int,
+//    "confidence_window_cells": int, "image_noise_grey", "min_confidence",
+//    "disparity_std_cells", "max_relative_range_std", "dark_level", "mask_margin_cells": int
+//    sparse (engine/stereo/stereo_reconstruct.h, StereoReconstructOptions):
 //    "max_features": int, "ratio_test", "max_epipolar_error_rad", "mutual_check": bool,
 //    "min_parallax_rad", "max_reprojection_error_rad", "keypoint_std_px",
-//    "max_relative_range_std", "dark_level", "mask_margin_px": int}   (all optional; the names
-//                                        and meanings of StereoReconstructOptions)
+//    "max_relative_range_std", "dark_level", "mask_margin_px": int}   (all optional)
 // Result:
-//   {"rig": JOB_ID, "num_points": N, "artifact": "cloud.ply",
-//    "pairs": [{"name", "num_keypoints": [cam0, cam1], "num_candidates", "num_matches",
-//               "num_points", "rejected": {"parallax", "reprojection", "uncertain"},
-//               "median_range_m", "median_range_std_m", "artifact"}],
-//    "options": {...}}
+//   {"rig": JOB_ID, "method", "num_points": N, "artifact": "cloud.ply", "options": {...},
+//    "pairs": [...], "warning" (dense: when some pairs gave few confident pixels),
+//    "grid": {"rows", "cols", "step_rad", "num_disparities"} (dense)}
+//   sparse pair: {"name", "num_keypoints": [cam0, cam1], "num_candidates", "num_matches",
+//                 "num_points", "rejected": {"parallax", "reprojection", "uncertain"},
+//                 "median_range_m", "median_range_std_m", "artifact"}
+//   dense pair:  {"name", "num_mirror_cells", "num_matched_cells", "num_points",
+//                 "confident_fraction", "mean_confidence", "median_range_m",
+//                 "median_range_std_m", "range_tiff", "range_png", "artifact",
+//                 "warning" (fewer than half the mirror cells confident: dark, blurred or
+//                 out-of-sync images)}
 // Artifacts: one pair: cloud.ply (binary little-endian PLY, float x y z in metres in the pair's
-// cam0 frame, uchar red green blue). More than one pair: cloud_NAME.ply per pair (NAME with
-// '/' and '.' replaced by '_'), each in its own cam0 frame, and no merged cloud.ply (the pairs
-// of a moving rig do not share a frame); "artifact" names the first pair's cloud and
-// "clouds_merged" is false.
+// cam0 frame, uchar red green blue, and for dense float confidence). More than one pair:
+// cloud_NAME.ply per pair (NAME with '/' and '.' replaced by '_'), each in its own cam0 frame,
+// and no merged cloud.ply (the pairs of a moving rig do not share a frame); "artifact" names the
+// first pair's cloud and "clouds_merged" is false. Dense also writes per pair NAME_range.tiff (32-bit float
+// metres from cam0's centre, 0 where unknown; columns = azimuth over 360 degrees, rows = angle
+// from the baseline, row 0 the largest) and NAME_range.png (a coloured preview), NAME being the
+// pair's name without extension.
 
 #include <string>
 
 #include <nlohmann/json.hpp>
 
 #include "api/job_types.h"
+#include "engine/dense/dense_stereo.h"
 #include "engine/stereo/stereo_reconstruct.h"
 
 namespace omnirig::api {
 
 struct StereoReconstructParams {
   std::string rig_job;
-  StereoReconstructOptions options;
+  std::string method = "dense";       // "dense" (engine/dense) or "sparse" (SIFT features)
+  StereoReconstructOptions options;   // method "sparse"
+  dense::DenseStereoOptions dense;    // method "dense"
 };
 
 // Throws InvalidArgument naming the field for unknown fields, wrong types, invalid values.
 StereoReconstructParams StereoReconstructParamsFromJson(const nlohmann::json& params);
 nlohmann::json StereoReconstructOptionsToJson(const StereoReconstructOptions& options);
+nlohmann::json DenseStereoOptionsToJson(const dense::DenseStereoOptions& options);
 
 // Runs the job. Throws InvalidArgument for bad input (rig job without a rig, images without a
 // partner, image sizes that differ from the rig's), Cancelled on cancellation.

@@ -30,25 +30,56 @@ StereoRig Rig() {
 
 TEST(StereoJson, ParsesParamsAndRefusesBadOnes) {
   const StereoReconstructParams parsed = StereoReconstructParamsFromJson(
-      {{"rig", "job-1"}, {"ratio_test", 0.7}, {"max_features", 1000}, {"mutual_check", false}});
+      {{"rig", "job-1"}, {"method", "sparse"}, {"ratio_test", 0.7}, {"max_features", 1000},
+       {"mutual_check", false}});
   EXPECT_EQ(parsed.rig_job, "job-1");
+  EXPECT_EQ(parsed.method, "sparse");
   EXPECT_EQ(parsed.options.ratio_test, 0.7);
   EXPECT_EQ(parsed.options.max_features, 1000);
   EXPECT_FALSE(parsed.options.mutual_check);
   EXPECT_THROW(StereoReconstructParamsFromJson(json::object()), InvalidArgument);
   EXPECT_THROW(StereoReconstructParamsFromJson({{"rig", 5}}), InvalidArgument);
   EXPECT_THROW(StereoReconstructParamsFromJson({{"rig", "a"}, {"ratio", 0.7}}), InvalidArgument);
-  EXPECT_THROW(StereoReconstructParamsFromJson({{"rig", "a"}, {"ratio_test", "x"}}),
+  const auto sparse = [](const std::string& key, const json& value) {
+    return json{{"rig", "a"}, {"method", "sparse"}, {key, value}};
+  };
+  EXPECT_THROW(StereoReconstructParamsFromJson(sparse("ratio_test", "x")),
                InvalidArgument);
-  EXPECT_THROW(StereoReconstructParamsFromJson({{"rig", "a"}, {"ratio_test", 2.0}}),
+  EXPECT_THROW(StereoReconstructParamsFromJson(sparse("ratio_test", 2.0)),
                InvalidArgument);
-  EXPECT_THROW(StereoReconstructParamsFromJson({{"rig", "a"}, {"max_features", 1.5}}),
+  EXPECT_THROW(StereoReconstructParamsFromJson(sparse("max_features", 1.5)),
                InvalidArgument);
   try {
     StereoReconstructParamsFromJson({{"rig", "a"}, {"bogus", 1}});
   } catch (const InvalidArgument& e) {
     EXPECT_NE(std::string(e.what()).find("params.bogus"), std::string::npos);
   }
+}
+
+TEST(StereoJson, DenseIsTheDefaultMethod) {
+  const StereoReconstructParams parsed = StereoReconstructParamsFromJson(
+      {{"rig", "job-1"}, {"min_confidence", 0.6}, {"grid_step_rad", 0.004}, {"block_size", 7},
+       {"dark_level", 30.0}});
+  EXPECT_EQ(parsed.method, "dense");
+  EXPECT_EQ(parsed.dense.min_confidence, 0.6);
+  EXPECT_EQ(parsed.dense.grid.step_rad, 0.004);
+  EXPECT_EQ(parsed.dense.block_size, 7);
+  EXPECT_EQ(parsed.dense.dark_level, 30.0);
+  EXPECT_EQ(DenseStereoOptionsToJson(parsed.dense)["grid_step_rad"], 0.004);
+  // A field of the other method is named as such.
+  try {
+    StereoReconstructParamsFromJson({{"rig", "a"}, {"ratio_test", 0.7}});
+    ADD_FAILURE() << "expected InvalidArgument";
+  } catch (const InvalidArgument& e) {
+    EXPECT_NE(std::string(e.what()).find("applies to method 'sparse' only"), std::string::npos)
+        << e.what();
+  }
+  EXPECT_THROW(StereoReconstructParamsFromJson({{"rig", "a"}, {"method", "sparse"}, {"block_size", 5}}),
+               InvalidArgument);
+  EXPECT_THROW(StereoReconstructParamsFromJson({{"rig", "a"}, {"method", "fast"}}), InvalidArgument);
+  EXPECT_THROW(StereoReconstructParamsFromJson({{"rig", "a"}, {"block_size", 4}}), InvalidArgument);
+  EXPECT_THROW(StereoReconstructParamsFromJson({{"rig", "a"}, {"min_confidence", "high"}}),
+               InvalidArgument);
 }
 
 TEST(StereoJson, RegistersTheJobType) {
@@ -119,7 +150,8 @@ class StereoJobTest : public ::testing::Test {
 TEST_F(StereoJobTest, RunsAndWritesThePly) {
   AddImage("cam0/a.png", 320, 240);
   AddImage("cam1/a.png", 320, 240);
-  const json result = RunStereoReconstructJob({{"rig", "rig"}}, context_);
+  const json result = RunStereoReconstructJob({{"rig", "rig"}, {"method", "sparse"}}, context_);
+  EXPECT_EQ(result["method"], "sparse");
   EXPECT_EQ(result["artifact"], "cloud.ply");
   EXPECT_EQ(result["num_points"], 0);  // dark images: nothing to match, but a valid result
   ASSERT_EQ(result["pairs"].size(), 1u);
@@ -129,11 +161,11 @@ TEST_F(StereoJobTest, RunsAndWritesThePly) {
 }
 
 // Pairs of a moving rig do not share a frame: each keeps its own cloud, none is merged.
-TEST_F(StereoJobTest, SeveralPairsKeepTheirCloudsApart) {
+TEST_F(StereoJobTest, SparseSeveralPairsKeepTheirCloudsApart) {
   for (const char* name : {"cam0/a.png", "cam1/a.png", "cam0/b.png", "cam1/b.png"}) {
     AddImage(name, 320, 240);
   }
-  const json result = RunStereoReconstructJob({{"rig", "rig"}}, context_);
+  const json result = RunStereoReconstructJob({{"rig", "rig"}, {"method", "sparse"}}, context_);
   ASSERT_EQ(result["pairs"].size(), 2u);
   EXPECT_FALSE(std::filesystem::exists(context_.output_dir / "cloud.ply"));
   EXPECT_EQ(result["clouds_merged"], false);
@@ -141,6 +173,39 @@ TEST_F(StereoJobTest, SeveralPairsKeepTheirCloudsApart) {
   for (const json& pair : result["pairs"]) {
     EXPECT_TRUE(std::filesystem::exists(context_.output_dir / pair["artifact"].get<std::string>()));
   }
+}
+
+TEST_F(StereoJobTest, DenseWritesCloudsAndRangePanoramasAndFlagsBadPairs) {
+  for (const std::string name : {"a.png", "b.png"}) {
+    AddImage("cam0/" + name, 320, 240);
+    AddImage("cam1/" + name, 320, 240);
+  }
+  const json result = RunStereoReconstructJob({{"rig", "rig"}}, context_);
+  EXPECT_EQ(result["method"], "dense");
+  EXPECT_EQ(result["artifact"], "cloud_a_png.ply");  // two pairs: no merged cloud
+  EXPECT_EQ(result["clouds_merged"], false);
+  EXPECT_EQ(result["num_points"], 0);  // dark images: nothing inside a mirror
+  ASSERT_EQ(result["pairs"].size(), 2u);
+  const json& pair = result["pairs"][0];
+  EXPECT_EQ(pair["name"], "a.png");
+  EXPECT_EQ(pair["artifact"], "cloud_a_png.ply");
+  EXPECT_EQ(pair["range_tiff"], "a_range.tiff");
+  EXPECT_EQ(pair["range_png"], "a_range.png");
+  EXPECT_NE(pair["warning"].get<std::string>().find("few confident pixels"), std::string::npos);
+  EXPECT_NE(result["warning"].get<std::string>().find("2 of 2 pairs"), std::string::npos);
+  EXPECT_FALSE(std::filesystem::exists(context_.output_dir / "cloud.ply"));
+  for (const char* file : {"cloud_a_png.ply", "cloud_b_png.ply", "a_range.tiff", "a_range.png",
+                           "b_range.tiff"}) {
+    EXPECT_TRUE(std::filesystem::exists(context_.output_dir / file)) << file;
+  }
+  const cv::Mat range =
+      cv::imread((context_.output_dir / "a_range.tiff").string(), cv::IMREAD_UNCHANGED);
+  EXPECT_EQ(range.type(), CV_32FC1);
+  EXPECT_EQ(cv::countNonZero(range), 0);
+  std::ifstream ply(context_.output_dir / "cloud_a_png.ply");
+  const std::string header((std::istreambuf_iterator<char>(ply)), std::istreambuf_iterator<char>());
+  EXPECT_NE(header.find("property float confidence"), std::string::npos);
+  EXPECT_EQ(last_fraction_, 1.0);
 }
 
 // The InvalidArgument message of running the job, or "" when it does not throw one.
@@ -157,6 +222,8 @@ TEST_F(StereoJobTest, RefusesBadInput) {
   AddImage("cam0/a.png", 320, 240);
   AddImage("cam1/a.png", 640, 480);
   EXPECT_NE(RunError({{"rig", "rig"}}, context_).find("cam1 image is 640x480"), std::string::npos);
+  EXPECT_NE(RunError({{"rig", "rig"}, {"method", "sparse"}}, context_).find("cam1 image is 640x480"),
+            std::string::npos);
   // A job whose result holds no rig, and a job without a result.
   EXPECT_NE(RunError({{"rig", "calib"}}, context_).find("holds no stereo rig"), std::string::npos);
   EXPECT_NE(RunError({{"rig", "missing"}}, context_).find("no result"), std::string::npos);

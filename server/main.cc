@@ -24,6 +24,8 @@ const Command kCommands[] = {
     {"relpose", "measure a stereo rig's metric relative pose from shared board views",
      omnirig::cli::RunRelpose},
     {"slam", "trajectory and metric map from a stereo sequence", omnirig::cli::RunSlam},
+    {"stereo", "3D from stereo pairs of a calibrated rig (dense range panoramas and clouds)",
+     omnirig::cli::RunStereo},
     {"submit", "upload a folder to a running server, run a job, download its results",
      omnirig::cli::RunSubmit},
 };

@@ -1,28 +1,15 @@
 #include "engine/slam/map_io.h"
 
-#include <cstring>
 #include <fstream>
 #include <iomanip>
 #include <sstream>
 #include <stdexcept>
 
+#include "engine/geometry/ply.h"
 #include "engine/util/check.h"
 
 namespace omnirig::slam {
 namespace {
-
-template <typename T>
-void AppendLittleEndian(const T& value, std::string* out) {
-  static_assert(std::is_trivially_copyable<T>::value, "plain values only");
-  char bytes[sizeof(T)];
-  std::memcpy(bytes, &value, sizeof(T));
-  // PLY says little-endian explicitly; swap on the (rare) big-endian host.
-  const std::uint16_t probe = 1;
-  if (*reinterpret_cast<const std::uint8_t*>(&probe) == 0) {
-    for (size_t i = 0; i < sizeof(T) / 2; ++i) std::swap(bytes[i], bytes[sizeof(T) - 1 - i]);
-  }
-  out->append(bytes, sizeof(T));
-}
 
 std::ofstream OpenForWriting(const std::filesystem::path& path, std::ios::openmode mode) {
   std::ofstream out(path, mode);
@@ -73,23 +60,15 @@ std::vector<StampedPose> ReadTum(const std::filesystem::path& path) {
 }
 
 void WritePly(const std::filesystem::path& path, const std::vector<MapPoint>& points) {
-  std::ostringstream header;
-  header << "ply\nformat binary_little_endian 1.0\ncomment omnirig SLAM map, metres\n"
-         << "element vertex " << points.size() << "\n"
-         << "property float x\nproperty float y\nproperty float z\n"
-         << "property uchar red\nproperty uchar green\nproperty uchar blue\n"
-         << "property int num_observations\nend_header\n";
-  std::string body;
-  body.reserve(points.size() * 19);
+  PlyCloud cloud;
+  cloud.comment = "omnirig SLAM map, metres";
+  cloud.has_num_observations = true;
   for (const MapPoint& point : points) {
-    for (int i = 0; i < 3; ++i) AppendLittleEndian(static_cast<float>(point.point_in_world[i]), &body);
-    for (int i = 0; i < 3; ++i) AppendLittleEndian(point.rgb[i], &body);
-    AppendLittleEndian(static_cast<std::int32_t>(point.num_observations), &body);
+    cloud.positions.push_back(point.point_in_world.cast<float>());
+    cloud.colours.push_back(point.rgb);
+    cloud.num_observations.push_back(static_cast<std::int32_t>(point.num_observations));
   }
-  std::ofstream out = OpenForWriting(path, std::ios::out | std::ios::binary | std::ios::trunc);
-  out << header.str();
-  out.write(body.data(), static_cast<std::streamsize>(body.size()));
-  if (!out) throw std::runtime_error("failed writing " + path.string());
+  omnirig::WritePly(path, cloud);
 }
 
 }  // namespace omnirig::slam

@@ -36,8 +36,8 @@ struct MapPoint {
   int num_observations = 0;
 };
 
-// Binary little-endian PLY: "vertex" with float x y z (metres), uchar red green blue, and
-// int num_observations. The header is ASCII, the body packed (19 bytes per vertex).
+// Binary little-endian PLY (engine/geometry/ply.h): "vertex" with float x y z (metres), uchar
+// red green blue, and int num_observations (19 bytes per vertex).
 void WritePly(const std::filesystem::path& path, const std::vector<MapPoint>& points);
 
 }  // namespace omnirig::slam

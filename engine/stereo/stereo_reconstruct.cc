@@ -1,8 +1,6 @@
 #include "engine/stereo/stereo_reconstruct.h"
 
 #include <cmath>
-#include <cstring>
-#include <fstream>
 #include <limits>
 #include <set>
 
@@ -10,6 +8,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "engine/calib/detect.h"
+#include "engine/geometry/ply.h"
 #include "engine/geometry/unified_camera.h"
 #include "engine/stereo/essential.h"
 #include "engine/stereo/sift_bias.h"
@@ -73,12 +72,6 @@ std::array<uint8_t, 3> ColourAt(const cv::Mat& image, const cv::Point2f& pt) {
   }
   const cv::Vec3b bgr = image.at<cv::Vec3b>(y, x);
   return {bgr[2], bgr[1], bgr[0]};
-}
-
-void PutFloatLe(float value, std::string* out) {
-  uint32_t bits;
-  std::memcpy(&bits, &value, sizeof(bits));
-  for (int k = 0; k < 4; ++k) out->push_back(static_cast<char>((bits >> (8 * k)) & 0xff));
 }
 
 }  // namespace
@@ -308,19 +301,13 @@ StereoPairReport ReconstructStereoPair(const StereoRig& rig, const cv::Mat& imag
 }
 
 void WriteColoredPly(const std::filesystem::path& path, const std::vector<StereoPoint>& points) {
-  std::string data;
-  data += "ply\nformat binary_little_endian 1.0\n";
-  data += "comment omnirig stereo_reconstruct: points in cam0's frame, metres\n";
-  data += "element vertex " + std::to_string(points.size()) + "\n";
-  data += "property float x\nproperty float y\nproperty float z\n";
-  data += "property uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n";
+  PlyCloud cloud;
+  cloud.comment = "omnirig stereo_reconstruct: points in cam0's frame, metres";
   for (const StereoPoint& p : points) {
-    for (int k = 0; k < 3; ++k) PutFloatLe(static_cast<float>(p.point_in_cam0[k]), &data);
-    for (int k = 0; k < 3; ++k) data.push_back(static_cast<char>(p.rgb[k]));
+    cloud.positions.push_back(p.point_in_cam0.cast<float>());
+    cloud.colours.push_back(p.rgb);
   }
-  std::ofstream out(path, std::ios::binary);
-  out.write(data.data(), static_cast<std::streamsize>(data.size()));
-  if (!out) throw std::runtime_error("cannot write " + path.string());
+  WritePly(path, cloud);
 }
 
 }  // namespace omnirig

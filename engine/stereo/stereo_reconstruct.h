@@ -112,8 +112,8 @@ StereoPairReport ReconstructStereoPair(const StereoRig& rig, const cv::Mat& imag
                                        const StereoReconstructOptions& options,
                                        const ProgressSink& progress = ProgressSink());
 
-// Writes a binary little-endian PLY: vertex x y z (float32, metres) and red green blue (uchar).
-// Throws std::runtime_error when the file cannot be written.
+// Writes a binary little-endian PLY (engine/geometry/ply.h): vertex x y z (float32, metres) and
+// red green blue (uchar). Throws std::runtime_error when the file cannot be written.
 void WriteColoredPly(const std::filesystem::path& path, const std::vector<StereoPoint>& points);
 
 }  // namespace omnirig

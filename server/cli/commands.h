@@ -13,6 +13,7 @@ int RunSynth(const Args& args);      // server/cli/synth.cc
 int RunCalibrate(const Args& args);  // server/cli/calibrate.cc
 int RunRelpose(const Args& args);    // server/cli/relpose.cc
 int RunSlam(const Args& args);       // server/cli/slam.cc
+int RunStereo(const Args& args);     // server/cli/stereo.cc
 int RunSubmit(const Args& args);     // server/cli/submit.cc
 
 }  // namespace omnirig::cli

@@ -2,7 +2,7 @@
 // artifacts and report as the `slam` job type.
 //
 //   omnirig slam --rig rig.json DIR [--gt traj.tum] -o OUTDIR [--options options.json]
-//       [--threads N] [--refine-calibration none|intrinsics|rig|all]
+//       [--threads N] [--refine-calibration none|intrinsics|rig|all] [--dense-map VOXEL_M]
 //
 // rig.json is a relative_pose result (cam0_from_cam1 and both cameras); DIR holds cam0/NAME and
 // cam1/NAME. OUTDIR receives trajectory.json, trajectory.tum, map.ply and report.json.
@@ -64,6 +64,9 @@ int RunSlam(const Args& raw_args) {
   args.AddOption("o", "slam_out", "output folder");
   args.AddOption("options", "", "JSON file with the job's \"options\" object");
   args.AddOption("threads", "2", "worker threads");
+  args.AddOption("dense-map", "",
+                 "voxel size in metres: also fuse the keyframes' dense clouds into "
+                 "dense_map.ply and write occupancy.pgm/.yaml (ROS map_server)");
   args.AddOption("refine-calibration", "",
                  "none|intrinsics|rig|all: refine the calibration in the global bundle adjustment "
                  "(overrides the options file)");
@@ -91,6 +94,13 @@ int RunSlam(const Args& raw_args) {
   std::optional<fs::path> ground_truth;
   if (args.Has("gt")) ground_truth = fs::path(args.Get("gt"));
 
+  std::optional<dense::DenseMapOptions> dense_map;
+  if (args.Has("dense-map")) {
+    dense_map = dense::DenseMapOptions();
+    dense_map->voxel_m = args.GetDouble("dense-map");
+    dense_map->occupancy_cell_m = std::max(dense_map->occupancy_cell_m, dense_map->voxel_m);
+    dense_map->Check();
+  }
   const fs::path dir = args.positional()[0];
   const ProgressSink progress{[](double fraction, const std::string&, const std::string& message) {
                                 std::cerr << "[" << static_cast<int>(100 * fraction) << "%] "
@@ -98,7 +108,7 @@ int RunSlam(const Args& raw_args) {
                               },
                               nullptr};
   const json report = api::RunSlamOnDataset(rig, dir, ListImages(dir), options, ground_truth,
-                                            args.Get("o"), progress, nullptr);
+                                            args.Get("o"), progress, nullptr, dense_map);
   std::cout << "frames: " << report["num_frames"] << ", tracked: " << report["num_tracked"]
             << ", map points: " << report["num_map_points"]
             << ", frames/s: " << report["frames_per_second"] << "\n";

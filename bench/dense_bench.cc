@@ -1,0 +1,216 @@
+// bench_dense: dense 3D from one pair of the vertical rig (issue 17's targets), next to
+// cv::omnidir::stereoReconstruct (RECTIFY_PERSPECTIVE and RECTIFY_LONGLATI, each rectifying and
+// running StereoSGBM) on the same renders, in the same run.
+//
+// Renders: the textured room of engine/synth/presets.h (MakeStereoSequence), 1024x768, image
+// noise 1 grey level, the default rig (100 mm vertical baseline), 4 frames along the path. Each
+// point is scored by its distance to the room's true surfaces (engine/slam/surface_distance.h)
+// divided by its range from cam0. Azimuth coverage: the fraction of 1-degree bins of the angle
+// around cam0's axis holding at least one point. Time: seconds per pair on the threads given
+// (default 2), after the per-rig set-up (omnirig's rectification tables, timed separately; the
+// peer has no such split and rebuilds its maps per call).
+//
+// Usage: bench_dense [--frames N] [--threads N]
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <ctime>
+#include <string>
+#include <vector>
+
+#include <opencv2/ccalib/omnidir.hpp>
+#include <opencv2/core.hpp>
+
+#include "engine/dense/dense_stereo.h"
+#include "engine/slam/surface_distance.h"
+#include "engine/synth/presets.h"
+
+namespace omnirig {
+namespace {
+
+double Seconds(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+// CPU seconds of the process (all threads): on a shared machine the wall time depends on the
+// other processes' load, the CPU time much less.
+double CpuSeconds() { return static_cast<double>(std::clock()) / CLOCKS_PER_SEC; }
+
+struct Score {
+  double points = 0.0;  // summed over pairs
+  double coverage = 0.0;
+  std::vector<double> relative;  // distance to the surfaces / range, all pairs
+  double seconds = 0.0;
+  double cpu_seconds = 0.0;
+  int pairs = 0;
+
+  void Add(const std::vector<Eigen::Vector3d>& points_in_cam0, const synth::Scene& scene,
+           const Rigid3d& world_from_cam0, double seconds_for_pair, double cpu_for_pair) {
+    cpu_seconds += cpu_for_pair;
+    std::vector<int> bins(360, 0);
+    for (const Eigen::Vector3d& p : points_in_cam0) {
+      const double range = p.norm();
+      if (!(range > 1e-6) || !std::isfinite(range)) continue;
+      relative.push_back(slam::DistanceToSceneSurface(scene, world_from_cam0 * p) / range);
+      double azimuth = std::atan2(p.y(), p.x()) * 180.0 / M_PI;
+      if (azimuth < 0) azimuth += 360.0;
+      ++bins[std::min(359, static_cast<int>(azimuth))];
+    }
+    points += static_cast<double>(points_in_cam0.size());
+    coverage += std::count_if(bins.begin(), bins.end(), [](int n) { return n > 0; }) / 360.0;
+    seconds += seconds_for_pair;
+    ++pairs;
+  }
+
+  void Print(const char* name) {
+    std::sort(relative.begin(), relative.end());
+    const double median = relative.empty() ? NAN : relative[relative.size() / 2];
+    const double within =
+        relative.empty() ? 0.0
+                         : static_cast<double>(std::upper_bound(relative.begin(), relative.end(),
+                                                                0.01) -
+                                               relative.begin()) /
+                               relative.size();
+    std::printf("| %-48s | %11.0f | %6.1f %% | %7.3f %% | %7.1f %% | %6.3f | %6.3f |\n", name,
+                points / pairs, 100.0 * coverage / pairs, 100.0 * median, 100.0 * within,
+                seconds / pairs, cpu_seconds / pairs);
+  }
+};
+
+// The rig in cv::omnidir's terms: K, D = (k1, k2, p1, p2), xi per camera, and (R, T) taking
+// cam0's frame into cam1's.
+struct PeerRig {
+  cv::Mat k[2], d[2], xi[2], r, t;
+};
+
+PeerRig ToPeer(const StereoRig& rig) {
+  PeerRig peer;
+  for (int c = 0; c < 2; ++c) {
+    const UnifiedIntrinsics& in = c == 0 ? rig.cam0.intrinsics : rig.cam1.intrinsics;
+    peer.k[c] = (cv::Mat_<double>(3, 3) << in.gamma_u(), in.gamma_u() * in.alpha(), in.u0(), 0,
+                 in.gamma_v(), in.v0(), 0, 0, 1);
+    peer.d[c] = (cv::Mat_<double>(1, 4) << in.k(1), in.k(2), in.k(3), in.k(4));
+    peer.xi[c] = (cv::Mat_<double>(1, 1) << in.xi());
+  }
+  const Rigid3d cam1_from_cam0 = rig.cam0_from_cam1.Inverse();
+  const Eigen::Matrix3d r = cam1_from_cam0.rotation.toRotationMatrix();
+  peer.r = cv::Mat(3, 3, CV_64F);
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) peer.r.at<double>(i, j) = r(i, j);
+  peer.t = (cv::Mat_<double>(3, 1) << cam1_from_cam0.translation.x(),
+            cam1_from_cam0.translation.y(), cam1_from_cam0.translation.z());
+  return peer;
+}
+
+// One cv::omnidir::stereoReconstruct call; its points (in the first camera's rectified frame,
+// rotated by stereoRectify's R1) turned back into cam0's frame.
+std::vector<Eigen::Vector3d> PeerReconstruct(const PeerRig& peer, const cv::Mat& image0,
+                                             const cv::Mat& image1, int flag, cv::Size size,
+                                             const cv::Mat& k_new, int num_disparities,
+                                             int window) {
+  cv::Mat disparity, rec0, rec1, cloud;
+  cv::omnidir::stereoReconstruct(image0, image1, peer.k[0], peer.d[0], peer.xi[0], peer.k[1],
+                                 peer.d[1], peer.xi[1], peer.r, peer.t, flag, num_disparities,
+                                 window, disparity, rec0, rec1, size, k_new, cloud,
+                                 cv::omnidir::XYZ);
+  cv::Mat r1, r2;
+  cv::omnidir::stereoRectify(peer.r, peer.t, r1, r2);
+  Eigen::Matrix3d cam0_from_rect;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) cam0_from_rect(i, j) = r1.at<double>(j, i);
+  std::vector<Eigen::Vector3d> points;
+  points.reserve(cloud.total());
+  for (size_t i = 0; i < cloud.total(); ++i) {
+    const cv::Vec3f p = cloud.at<cv::Vec3f>(static_cast<int>(i));
+    points.push_back(cam0_from_rect * Eigen::Vector3d(p[0], p[1], p[2]));
+  }
+  return points;
+}
+
+int Run(int num_frames, int threads) {
+  cv::setNumThreads(threads);
+  synth::StereoSequenceOptions options;
+  options.num_frames = num_frames;
+  options.render.noise_sigma = 1.0;
+  options.seed = 3;
+  std::printf("rendering %d pairs of the room at 1024x768...\n", num_frames);
+  const synth::StereoSequence sequence = synth::MakeStereoSequence(options);
+  std::printf("threads: %d (cv::setNumThreads)\n\n", threads);
+
+  auto start = std::chrono::steady_clock::now();
+  const dense::DenseStereo dense(sequence.rig, dense::DenseStereoOptions());
+  const double setup_s = Seconds(start);
+  Score ours;
+  for (int f = 0; f < num_frames; ++f) {
+    start = std::chrono::steady_clock::now();
+    const double cpu = CpuSeconds();
+    const dense::DensePairResult result =
+        dense.Reconstruct(sequence.images[0][f], sequence.images[1][f]);
+    const double s = Seconds(start), cpu_s = CpuSeconds() - cpu;
+    std::vector<Eigen::Vector3d> points;
+    points.reserve(result.points.size());
+    for (const dense::DensePoint& p : result.points) points.push_back(p.point_in_cam0.cast<double>());
+    ours.Add(points, sequence.scene, sequence.world_from_rig[f], s, cpu_s);
+  }
+
+  const PeerRig peer = ToPeer(sequence.rig);
+  struct PeerSetting {
+    const char* name;
+    int flag;
+    cv::Size size;
+    cv::Mat k_new;
+    int disparities, window;
+  };
+  const cv::Size perspective(1024, 768), longlati(2048, 768);
+  const std::vector<PeerSetting> settings = {
+      {"cv::omnidir PERSPECTIVE + SGBM (f = w/4, 80, 5)", cv::omnidir::RECTIFY_PERSPECTIVE,
+       perspective, (cv::Mat_<double>(3, 3) << 256, 0, 512, 0, 256, 384, 0, 0, 1), 80, 5},
+      {"cv::omnidir PERSPECTIVE + SGBM (f = w/3, 96, 7)", cv::omnidir::RECTIFY_PERSPECTIVE,
+       perspective, (cv::Mat_<double>(3, 3) << 341, 0, 512, 0, 341, 384, 0, 0, 1), 96, 7},
+      {"cv::omnidir LONGLATI + SGBM (2048x768, 80, 5)", cv::omnidir::RECTIFY_LONGLATI, longlati,
+       (cv::Mat_<double>(3, 3) << 2048 / M_PI, 0, 0, 0, 768 / M_PI, 0, 0, 0, 1), 80, 5},
+      {"cv::omnidir LONGLATI + SGBM (2048x768, 360, 80, 5)", cv::omnidir::RECTIFY_LONGLATI,
+       longlati, (cv::Mat_<double>(3, 3) << 2048 / M_PI, 0, 0, 0, 768 / (2 * M_PI), 0, 0, 0, 1),
+       80, 5},
+  };
+  std::printf("| %-48s | %11s | %8s | %9s | %9s | %6s | %6s |\n", "method", "points/pair",
+              "azimuth", "median/r", "within 1%", "s/pair", "CPU s");
+  std::printf("|%s|%s|%s|%s|%s|%s|%s|\n", std::string(50, '-').c_str(),
+              std::string(13, '-').c_str(), std::string(10, '-').c_str(),
+              std::string(11, '-').c_str(), std::string(11, '-').c_str(),
+              std::string(8, '-').c_str(), std::string(8, '-').c_str());
+  ours.Print("omnirig dense (spherical grid + SGBM + ZNCC)");
+  for (const PeerSetting& setting : settings) {
+    Score score;
+    for (int f = 0; f < num_frames; ++f) {
+      start = std::chrono::steady_clock::now();
+      const double cpu = CpuSeconds();
+      const std::vector<Eigen::Vector3d> points =
+          PeerReconstruct(peer, sequence.images[0][f], sequence.images[1][f], setting.flag,
+                          setting.size, setting.k_new, setting.disparities, setting.window);
+      const double s = Seconds(start), cpu_s = CpuSeconds() - cpu;
+      score.Add(points, sequence.scene, sequence.world_from_rig[f], s, cpu_s);
+    }
+    score.Print(setting.name);
+  }
+  std::printf("\nomnirig: grid %d x %d cells (step %.5f rad), %d disparities; rectification "
+              "tables built once per rig in %.3f s\n",
+              dense.rectifier().rows(), dense.rectifier().cols(),
+              dense.rectifier().theta_step_rad(), dense.num_disparities(), setup_s);
+  return 0;
+}
+
+}  // namespace
+}  // namespace omnirig
+
+int main(int argc, char** argv) {
+  int frames = 4, threads = 2;
+  for (int i = 1; i + 1 < argc; i += 2) {
+    if (!std::strcmp(argv[i], "--frames")) frames = std::max(1, std::atoi(argv[i + 1]));
+    if (!std::strcmp(argv[i], "--threads")) threads = std::max(1, std::atoi(argv[i + 1]));
+  }
+  return omnirig::Run(frames, threads);
+}

@@ -1,0 +1,166 @@
+#include "engine/dense/dense_map.h"
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <map>
+#include <stdexcept>
+
+#include "engine/util/check.h"
+
+namespace omnirig::dense {
+namespace {
+
+// 21 bits per axis (+-1048576 voxels, 20 km at 2 cm).
+int64_t Key(const Eigen::Vector3i& index) {
+  constexpr int64_t kOffset = 1 << 20, kMask = (1 << 21) - 1;
+  return ((index.x() + kOffset) & kMask) | (((index.y() + kOffset) & kMask) << 21) |
+         (((index.z() + kOffset) & kMask) << 42);
+}
+
+}  // namespace
+
+void DenseMapOptions::Check() const {
+  OMNIRIG_CHECK(voxel_m >= 0.005 && voxel_m <= 1.0,
+                "voxel_m must lie in [0.005, 1] m, got " << voxel_m);
+  OMNIRIG_CHECK(keyframe_spacing_m >= 0.0,
+                "keyframe_spacing_m must be non-negative, got " << keyframe_spacing_m);
+  OMNIRIG_CHECK(max_relative_range_std > 0.0,
+                "max_relative_range_std must be positive, got " << max_relative_range_std);
+  OMNIRIG_CHECK(min_points >= 1, "min_points must be at least 1, got " << min_points);
+  OMNIRIG_CHECK(min_frames >= 1, "min_frames must be at least 1, got " << min_frames);
+  OMNIRIG_CHECK(occupancy_cell_m >= voxel_m && occupancy_cell_m <= 2.0,
+                "occupancy_cell_m must lie in [voxel_m, 2] m, got " << occupancy_cell_m);
+  OMNIRIG_CHECK(min_obstacle_voxels >= 1,
+                "min_obstacle_voxels must be at least 1, got " << min_obstacle_voxels);
+  OMNIRIG_CHECK(obstacle_min_height_m > 0.0 && obstacle_max_height_m > obstacle_min_height_m,
+                "the obstacle band must satisfy 0 < obstacle_min_height_m < "
+                "obstacle_max_height_m");
+}
+
+DenseMap::DenseMap(const DenseMapOptions& options) : options_(options) { options_.Check(); }
+
+void DenseMap::Add(const Rigid3d& world_from_cam0, const std::vector<DensePoint>& points) {
+  const int frame = num_frames_++;
+  const double inverse_voxel = 1.0 / options_.voxel_m;
+  for (const DensePoint& point : points) {
+    if (point.range_std_m > options_.max_relative_range_std * point.point_in_cam0.norm()) continue;
+    const Eigen::Vector3d in_world = world_from_cam0 * point.point_in_cam0.cast<double>();
+    const Eigen::Vector3i index = (in_world * inverse_voxel).array().floor().cast<int>();
+    Voxel& voxel = voxels_[Key(index)];
+    const double std_m = std::max(static_cast<double>(point.range_std_m), 1e-4);
+    const double weight = point.confidence / (std_m * std_m);
+    voxel.weight += weight;
+    voxel.weighted_position += weight * in_world;
+    voxel.weighted_rgb += weight * Eigen::Vector3d(point.rgb[0], point.rgb[1], point.rgb[2]);
+    voxel.confidence_sum += point.confidence;
+    ++voxel.num_points;
+    if (voxel.last_frame != frame) {
+      voxel.last_frame = frame;
+      ++voxel.num_frames;
+    }
+  }
+}
+
+PlyCloud DenseMap::Cloud() const {
+  PlyCloud cloud;
+  cloud.comment = "omnirig dense map: confidence-weighted voxel means in the SLAM world, metres";
+  cloud.has_confidence = true;
+  for (const auto& [key, voxel] : voxels_) {
+    if (!Kept(voxel) || !(voxel.weight > 0.0)) continue;
+    cloud.positions.push_back((voxel.weighted_position / voxel.weight).cast<float>());
+    const Eigen::Vector3d rgb = voxel.weighted_rgb / voxel.weight;
+    cloud.colours.push_back({static_cast<uint8_t>(std::clamp(std::lround(rgb.x()), 0L, 255L)),
+                             static_cast<uint8_t>(std::clamp(std::lround(rgb.y()), 0L, 255L)),
+                             static_cast<uint8_t>(std::clamp(std::lround(rgb.z()), 0L, 255L))});
+    cloud.confidence.push_back(static_cast<float>(voxel.confidence_sum / voxel.num_points));
+  }
+  return cloud;
+}
+
+OccupancyGrid DenseMap::Occupancy() const {
+  OccupancyGrid grid;
+  grid.cell_m = options_.occupancy_cell_m;
+  std::vector<Eigen::Vector3d> kept;
+  for (const auto& [key, voxel] : voxels_) {
+    if (Kept(voxel) && voxel.weight > 0.0) kept.push_back(voxel.weighted_position / voxel.weight);
+  }
+  if (kept.empty()) {
+    grid.cells = cv::Mat::zeros(1, 1, CV_8U);
+    return grid;
+  }
+  // The floor: the most populated 2 cm height bin below the sensor (height = -z in the world,
+  // the first frame's sensor at 0).
+  std::map<int, int> histogram;
+  for (const Eigen::Vector3d& p : kept) {
+    if (-p.z() < -0.2) ++histogram[static_cast<int>(std::floor(-p.z() / 0.02))];
+  }
+  int floor_bin = 0, best = 0;
+  for (const auto& [bin, count] : histogram) {
+    if (count > best) {
+      best = count;
+      floor_bin = bin;
+    }
+  }
+  grid.floor_height_m = best > 0 ? (floor_bin + 0.5) * 0.02 : 0.0;
+  Eigen::Vector2d lo(kept[0].x(), kept[0].y()), hi = lo;
+  for (const Eigen::Vector3d& p : kept) {
+    lo = lo.cwiseMin(p.head<2>());
+    hi = hi.cwiseMax(p.head<2>());
+  }
+  grid.origin_m = lo;
+  const int cols = static_cast<int>(std::floor((hi.x() - lo.x()) / grid.cell_m)) + 1;
+  const int rows = static_cast<int>(std::floor((hi.y() - lo.y()) / grid.cell_m)) + 1;
+  grid.cells = cv::Mat::zeros(rows, cols, CV_8U);
+  const auto cell = [&](const Eigen::Vector3d& p) -> uint8_t& {
+    const int c = std::clamp(static_cast<int>((p.x() - lo.x()) / grid.cell_m), 0, cols - 1);
+    const int r = std::clamp(static_cast<int>((p.y() - lo.y()) / grid.cell_m), 0, rows - 1);
+    return grid.cells.at<uint8_t>(rows - 1 - r, c);  // row 0 is the largest y
+  };
+  // Obstacles stand: a cell is occupied when enough kept voxels lie in its band (a few stray
+  // points of a far floor or a wall seen at a grazing angle do not make an obstacle).
+  cv::Mat obstacle_voxels = cv::Mat::zeros(rows, cols, CV_32S);
+  for (const Eigen::Vector3d& p : kept) {
+    const double above_floor = -p.z() - grid.floor_height_m;
+    if (above_floor >= options_.obstacle_min_height_m &&
+        above_floor <= options_.obstacle_max_height_m) {
+      uint8_t& c = cell(p);
+      const int offset = static_cast<int>(&c - grid.cells.data);
+      if (++reinterpret_cast<int*>(obstacle_voxels.data)[offset] >=
+          options_.min_obstacle_voxels) {
+        c = OccupancyGrid::kOccupied;
+      }
+    }
+  }
+  for (const Eigen::Vector3d& p : kept) {
+    const double above_floor = -p.z() - grid.floor_height_m;
+    uint8_t& c = cell(p);
+    if (std::abs(above_floor) < 0.05 && c == OccupancyGrid::kUnknown) c = OccupancyGrid::kFree;
+  }
+  return grid;
+}
+
+void WriteOccupancyGrid(const std::filesystem::path& pgm_path,
+                        const std::filesystem::path& yaml_path, const OccupancyGrid& grid) {
+  std::ofstream pgm(pgm_path, std::ios::binary | std::ios::trunc);
+  if (!pgm) throw std::runtime_error("cannot write " + pgm_path.string());
+  pgm << "P5\n" << grid.cells.cols << " " << grid.cells.rows << "\n255\n";
+  for (int r = 0; r < grid.cells.rows; ++r) {
+    for (int c = 0; c < grid.cells.cols; ++c) {
+      const uint8_t v = grid.cells.at<uint8_t>(r, c);
+      pgm.put(static_cast<char>(v == OccupancyGrid::kOccupied ? 0
+                                : v == OccupancyGrid::kFree   ? 254
+                                                              : 205));
+    }
+  }
+  if (!pgm) throw std::runtime_error("failed writing " + pgm_path.string());
+  std::ofstream yaml(yaml_path, std::ios::trunc);
+  if (!yaml) throw std::runtime_error("cannot write " + yaml_path.string());
+  yaml << "image: " << pgm_path.filename().string() << "\n"
+       << "resolution: " << grid.cell_m << "\n"
+       << "origin: [" << grid.origin_m.x() << ", " << grid.origin_m.y() << ", 0.0]\n"
+       << "negate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n";
+  if (!yaml) throw std::runtime_error("failed writing " + yaml_path.string());
+}
+
+}  // namespace omnirig::dense

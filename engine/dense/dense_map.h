@@ -1,0 +1,105 @@
+#pragma once
+// A dense map fused from the range panoramas (dense clouds) of keyframes along an estimated
+// trajectory, and a 2D occupancy grid of the obstacles for navigation.
+//
+// Fusion is a confidence-weighted average per voxel: each point's weight is its confidence
+// divided by its range variance, so that the precise near points dominate the far ones. Open3D's
+// TSDF volumes (Debian 12 has Open3D 0.16) integrate pinhole RGB-D images; our panoramas are
+// spherical, and resampling them into virtual pinhole views would add a second interpolation and
+// lose the per-point uncertainty, which the weighted average uses directly. OctoMap stores
+// occupancy, not surface positions. Hence this small fusion of our own.
+//
+// Frames: the map is in the trajectory's world frame, metres. The occupancy grid assumes an
+// upright sensor as in the paper's Fig. 1: cam0's +z axis points down, so "up" is the world's -z
+// (the SLAM world is the first frame's cam0 frame).
+
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+#include <Eigen/Core>
+#include <opencv2/core.hpp>
+
+#include "engine/dense/dense_stereo.h"
+#include "engine/geometry/ply.h"
+#include "engine/geometry/rigid3.h"
+
+namespace omnirig::dense {
+
+struct DenseMapOptions {
+  double voxel_m = 0.02;
+  // Keyframes: a tracked frame is fused when it lies at least this far from the last fused one.
+  double keyframe_spacing_m = 0.5;
+  // A voxel is kept when at least this many points of at least min_frames keyframes fell in it
+  // (a surface seen once, or by one frame only, is not confirmed).
+  int min_points = 2;
+  int min_frames = 2;
+  // Points whose range std exceeds this fraction of their range are not fused (far points seen
+  // with little parallax would otherwise fill voxels of their own with their larger errors).
+  double max_relative_range_std = 0.02;
+  // Occupancy grid: cell size, and the band of heights above the floor that holds obstacles
+  // (the floor is the most populated height below the sensor).
+  double occupancy_cell_m = 0.05;
+  double obstacle_min_height_m = 0.15;
+  double obstacle_max_height_m = 2.0;
+  // Kept voxels in a cell's band that make it occupied.
+  int min_obstacle_voxels = 10;
+
+  void Check() const;
+};
+
+// A 2D grid in the world's x-y plane (ROS map_server conventions): row 0 is the largest y.
+struct OccupancyGrid {
+  enum Cell : uint8_t { kUnknown = 0, kFree = 1, kOccupied = 2 };
+  cv::Mat cells;  // CV_8U of Cell
+  double cell_m = 0.05;
+  Eigen::Vector2d origin_m = Eigen::Vector2d::Zero();  // x, y of the lower-left cell's corner
+  double floor_height_m = 0.0;                         // height (-z) of the floor in the world
+};
+
+class DenseMap {
+ public:
+  explicit DenseMap(const DenseMapOptions& options);
+
+  // Adds one keyframe's points (in its cam0 frame) at world_from_cam0.
+  void Add(const Rigid3d& world_from_cam0, const std::vector<DensePoint>& points);
+
+  // The kept voxels: weighted mean position and colour, mean confidence.
+  PlyCloud Cloud() const;
+
+  // Floor from the kept voxels' heights, then per cell: occupied when a kept voxel lies in the
+  // obstacle band, free when the floor was seen there and nothing stands in the band, unknown
+  // otherwise.
+  OccupancyGrid Occupancy() const;
+
+  int num_frames() const { return num_frames_; }
+  size_t num_voxels() const { return voxels_.size(); }
+
+ private:
+  struct Voxel {
+    double weight = 0.0;
+    Eigen::Vector3d weighted_position = Eigen::Vector3d::Zero();
+    Eigen::Vector3d weighted_rgb = Eigen::Vector3d::Zero();
+    double confidence_sum = 0.0;
+    int num_points = 0;
+    int num_frames = 0;
+    int last_frame = -1;
+  };
+  bool Kept(const Voxel& voxel) const {
+    return voxel.num_points >= options_.min_points && voxel.num_frames >= options_.min_frames;
+  }
+
+  DenseMapOptions options_;
+  std::unordered_map<int64_t, Voxel> voxels_;
+  int num_frames_ = 0;
+};
+
+// Writes `grid` as ROS map_server files: NAME.pgm (binary P5: occupied 0, free 254, unknown 205)
+// and NAME.yaml (image, resolution, origin, negate, occupied_thresh, free_thresh). Throws
+// std::runtime_error when a file cannot be written.
+void WriteOccupancyGrid(const std::filesystem::path& pgm_path,
+                        const std::filesystem::path& yaml_path, const OccupancyGrid& grid);
+
+}  // namespace omnirig::dense

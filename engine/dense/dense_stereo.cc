@@ -1,0 +1,309 @@
+#include "engine/dense/dense_stereo.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include <opencv2/calib3d.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "engine/util/check.h"
+
+namespace omnirig::dense {
+namespace {
+
+cv::Mat Grey(const cv::Mat& image) {
+  if (image.channels() == 1) return image;
+  cv::Mat grey;
+  cv::cvtColor(image, grey, cv::COLOR_BGR2GRAY);
+  return grey;
+}
+
+// The columns [first, last] where either mask holds a cell; empty (first > last) when none.
+std::pair<int, int> UsedColumns(const cv::Mat& mask0, const cv::Mat& mask1) {
+  cv::Mat any;
+  cv::bitwise_or(mask0, mask1, any);
+  cv::Mat column_max;
+  cv::reduce(any, column_max, 0, cv::REDUCE_MAX);
+  int first = column_max.cols, last = -1;
+  for (int c = 0; c < column_max.cols; ++c) {
+    if (column_max.at<uint8_t>(0, c)) {
+      first = std::min(first, c);
+      last = c;
+    }
+  }
+  return {first, last};
+}
+
+// Semi-global matching of the grid rows: cam0 is the left image (see spherical_rectification.h).
+// The images are padded with wrapped rows above and below (the azimuth is periodic, so the
+// matcher's vertical paths see across the 0/360 degree seam) and with num_disparities blank
+// columns on the left (the matcher leaves its left border undecided). Returns the disparity in
+// cells (CV_32F, negative where none) over the input's size.
+cv::Mat MatchRows(const cv::Mat& left, const cv::Mat& right, int num_disparities,
+                  const DenseStereoOptions& o) {
+  const int wrap = std::min(32, left.rows / 2);
+  cv::Mat l, r;
+  cv::copyMakeBorder(left, l, wrap, wrap, 0, 0, cv::BORDER_WRAP);
+  cv::copyMakeBorder(right, r, wrap, wrap, 0, 0, cv::BORDER_WRAP);
+  cv::copyMakeBorder(l, l, 0, 0, num_disparities, 0, cv::BORDER_CONSTANT, cv::Scalar(0));
+  cv::copyMakeBorder(r, r, 0, 0, num_disparities, 0, cv::BORDER_CONSTANT, cv::Scalar(0));
+  const int w2 = o.block_size * o.block_size;
+  cv::Ptr<cv::StereoSGBM> sgbm = cv::StereoSGBM::create(
+      0, num_disparities, o.block_size, 8 * w2, 32 * w2, o.left_right_max_diff_cells, 63,
+      o.uniqueness_ratio, o.speckle_window_cells, o.speckle_range_cells,
+      cv::StereoSGBM::MODE_SGBM_3WAY);
+  cv::Mat disparity16;
+  sgbm->compute(l, r, disparity16);
+  cv::Mat disparity;
+  disparity16(cv::Rect(num_disparities, wrap, left.cols, left.rows))
+      .convertTo(disparity, CV_32F, 1.0 / 16.0);
+  return disparity;
+}
+
+}  // namespace
+
+void DenseStereoOptions::Check() const {
+  grid.Check();
+  OMNIRIG_CHECK(max_parallax_deg > 0.0 && max_parallax_deg <= 45.0,
+                "max_parallax_deg must lie in (0, 45], got " << max_parallax_deg);
+  OMNIRIG_CHECK(block_size >= 1 && block_size <= 11 && block_size % 2 == 1,
+                "block_size must be odd and in [1, 11], got " << block_size);
+  OMNIRIG_CHECK(uniqueness_ratio >= 0 && uniqueness_ratio <= 100,
+                "uniqueness_ratio must lie in [0, 100], got " << uniqueness_ratio);
+  OMNIRIG_CHECK(speckle_window_cells >= 0, "speckle_window_cells must be non-negative, got "
+                                               << speckle_window_cells);
+  OMNIRIG_CHECK(speckle_range_cells >= 1 && speckle_range_cells <= 16,
+                "speckle_range_cells must lie in [1, 16], got " << speckle_range_cells);
+  OMNIRIG_CHECK(left_right_max_diff_cells >= 0 && left_right_max_diff_cells <= 16,
+                "left_right_max_diff_cells must lie in [0, 16], got "
+                    << left_right_max_diff_cells);
+  OMNIRIG_CHECK(confidence_window_cells >= 3 && confidence_window_cells <= 31 &&
+                    confidence_window_cells % 2 == 1,
+                "confidence_window_cells must be odd and in [3, 31], got "
+                    << confidence_window_cells);
+  OMNIRIG_CHECK(image_noise_grey >= 0.0 && image_noise_grey <= 50.0,
+                "image_noise_grey must lie in [0, 50], got " << image_noise_grey);
+  OMNIRIG_CHECK(min_confidence >= 0.0 && min_confidence < 1.0,
+                "min_confidence must lie in [0, 1), got " << min_confidence);
+  OMNIRIG_CHECK(disparity_std_cells > 0.0,
+                "disparity_std_cells must be positive, got " << disparity_std_cells);
+  OMNIRIG_CHECK(max_relative_range_std > 0.0,
+                "max_relative_range_std must be positive, got " << max_relative_range_std);
+  OMNIRIG_CHECK(dark_level >= 0.0 && dark_level < 255.0,
+                "dark_level must lie in [0, 255), got " << dark_level);
+  OMNIRIG_CHECK(mask_margin_cells >= 0 && mask_margin_cells <= 100,
+                "mask_margin_cells must lie in [0, 100], got " << mask_margin_cells);
+}
+
+cv::Mat GridMirrorMask(const cv::Mat& grey_on_grid, const cv::Mat& valid,
+                       const DenseStereoOptions& options) {
+  cv::Mat blurred;
+  cv::GaussianBlur(grey_on_grid, blurred, cv::Size(5, 5), 0.0);
+  cv::Mat mask = valid.clone();
+  const auto outside = [&](int r, int c) {
+    return !valid.at<uint8_t>(r, c) || blurred.at<uint8_t>(r, c) <= options.dark_level;
+  };
+  for (int r = 0; r < mask.rows; ++r) {
+    uint8_t* out = mask.ptr<uint8_t>(r);
+    for (int c = 0; c < mask.cols && outside(r, c); ++c) out[c] = 0;
+    for (int c = mask.cols - 1; c >= 0 && outside(r, c); --c) out[c] = 0;
+  }
+  if (options.mask_margin_cells > 0) {
+    const int k = 2 * options.mask_margin_cells + 1;
+    cv::erode(mask, mask, cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(k, k)),
+              cv::Point(-1, -1), 1, cv::BORDER_CONSTANT, cv::Scalar(0));
+  }
+  return mask;
+}
+
+cv::Mat WindowCorrelation(const cv::Mat& a, const cv::Mat& b, int window, double noise_grey) {
+  const cv::Size size(window, window);
+  cv::Mat mean_a, mean_b, mean_aa, mean_bb, mean_ab;
+  cv::boxFilter(a, mean_a, CV_32F, size);
+  cv::boxFilter(b, mean_b, CV_32F, size);
+  cv::boxFilter(a.mul(a), mean_aa, CV_32F, size);
+  cv::boxFilter(b.mul(b), mean_bb, CV_32F, size);
+  cv::boxFilter(a.mul(b), mean_ab, CV_32F, size);
+  const float noise2 = static_cast<float>(noise_grey * noise_grey);
+  cv::Mat out(a.size(), CV_32F);
+  cv::parallel_for_(cv::Range(0, a.rows), [&](const cv::Range& rows) {
+    for (int r = rows.start; r < rows.end; ++r) {
+      const float* ma = mean_a.ptr<float>(r);
+      const float* mb = mean_b.ptr<float>(r);
+      const float* maa = mean_aa.ptr<float>(r);
+      const float* mbb = mean_bb.ptr<float>(r);
+      const float* mab = mean_ab.ptr<float>(r);
+      float* o = out.ptr<float>(r);
+      for (int c = 0; c < a.cols; ++c) {
+        const float var_a = std::max(0.f, maa[c] - ma[c] * ma[c]) + noise2;
+        const float var_b = std::max(0.f, mbb[c] - mb[c] * mb[c]) + noise2;
+        const float cov = mab[c] - ma[c] * mb[c];
+        o[c] = var_a > 0.f && var_b > 0.f ? cov / std::sqrt(var_a * var_b) : 0.f;
+      }
+    }
+  });
+  return out;
+}
+
+namespace {
+// The rig, once the options are checked (so that the rectifier is built from valid options).
+const StereoRig& CheckedRig(const StereoRig& rig, const DenseStereoOptions& options) {
+  options.Check();
+  return rig;
+}
+}  // namespace
+
+DenseStereo::DenseStereo(const StereoRig& rig, const DenseStereoOptions& options)
+    : rig_(rig), options_(options), rectifier_(CheckedRig(rig, options), options.grid) {
+  const double max_parallax_rad = options_.max_parallax_deg * M_PI / 180.0;
+  const int cells = static_cast<int>(std::ceil(max_parallax_rad / rectifier_.theta_step_rad()));
+  num_disparities_ = std::max(16, (cells + 15) / 16 * 16);
+}
+
+void DenseStereo::Triangulate(const cv::Mat& disparity, const cv::Mat& correlation, int first,
+                              const cv::Mat& mask0, const cv::Mat& mask1, const cv::Mat& colour0,
+                              cv::Mat* range, cv::Mat* range_std, cv::Mat* confidence,
+                              DensePairResult* result) const {
+  const int rows = disparity.rows, width = disparity.cols;
+  const double step = rectifier_.theta_step_rad(), baseline = rectifier_.baseline_m();
+  // Per column: the angle from the baseline; per row: the azimuth's cosine and sine.
+  std::vector<double> theta(width), sin_theta(width), cos_theta(width);
+  for (int c = 0; c < width; ++c) {
+    theta[c] = rectifier_.Theta(first + c);
+    sin_theta[c] = std::sin(theta[c]);
+    cos_theta[c] = std::cos(theta[c]);
+  }
+  const Eigen::Matrix3d& cam0_from_grid = rectifier_.cam0_from_grid();
+  std::vector<std::vector<DensePoint>> row_points(rows);
+  std::vector<int> row_mirror(rows, 0), row_matched(rows, 0);
+  std::vector<double> row_confidence(rows, 0.0);
+  cv::parallel_for_(cv::Range(0, rows), [&](const cv::Range& range_of_rows) {
+    for (int r = range_of_rows.start; r < range_of_rows.end; ++r) {
+      const double phi = rectifier_.Phi(r);
+      const double cos_phi = std::cos(phi), sin_phi = std::sin(phi);
+      const float* d = disparity.ptr<float>(r);
+      const uint8_t* m0 = mask0.ptr<uint8_t>(r) + first;
+      const uint8_t* m1 = mask1.ptr<uint8_t>(r) + first;
+      const float* corr = correlation.ptr<float>(r);
+      float* range_row = range->ptr<float>(r) + first;
+      float* std_row = range_std->ptr<float>(r) + first;
+      float* conf_row = confidence->ptr<float>(r) + first;
+      for (int c = 0; c < width; ++c) {
+        if (!m0[c]) continue;
+        ++row_mirror[r];
+        if (!(d[c] > 0.f)) continue;
+        const int c1 = static_cast<int>(std::lround(c - d[c]));
+        if (c1 < 0 || !m1[c1]) continue;
+        ++row_matched[r];
+        const float conf = std::clamp(corr[c], 0.f, 1.f);
+        row_confidence[r] += conf;
+        conf_row[c] = conf;
+        const double theta1 = theta[c] + d[c] * step;
+        const double range_m = RangeFromAngles(theta[c], theta1, baseline);
+        const double std_m =
+            RangeDerivative(theta[c], theta1, baseline) * options_.disparity_std_cells * step;
+        if (conf < options_.min_confidence || !(range_m > 0.0) ||
+            std_m > options_.max_relative_range_std * range_m) {
+          continue;
+        }
+        range_row[c] = static_cast<float>(range_m);
+        std_row[c] = static_cast<float>(std_m);
+        DensePoint point;
+        const Eigen::Vector3d in_grid(sin_theta[c] * cos_phi, sin_theta[c] * sin_phi,
+                                      cos_theta[c]);
+        point.point_in_cam0 = (range_m * (cam0_from_grid * in_grid)).cast<float>();
+        if (colour0.channels() == 3) {
+          const cv::Vec3b bgr = colour0.at<cv::Vec3b>(r, first + c);
+          point.rgb = {bgr[2], bgr[1], bgr[0]};
+        } else {
+          const uint8_t g = colour0.at<uint8_t>(r, first + c);
+          point.rgb = {g, g, g};
+        }
+        point.confidence = conf;
+        point.range_std_m = static_cast<float>(std_m);
+        row_points[r].push_back(point);
+      }
+    }
+  });
+  size_t total = 0;
+  double confidence_sum = 0.0;
+  for (int r = 0; r < rows; ++r) {
+    total += row_points[r].size();
+    result->num_mirror_cells += row_mirror[r];
+    result->num_matched_cells += row_matched[r];
+    confidence_sum += row_confidence[r];
+  }
+  result->points.reserve(total);
+  for (const std::vector<DensePoint>& points : row_points) {
+    result->points.insert(result->points.end(), points.begin(), points.end());
+  }
+  if (result->num_matched_cells > 0) {
+    result->mean_confidence = confidence_sum / result->num_matched_cells;
+  }
+}
+
+DensePairResult DenseStereo::Reconstruct(const cv::Mat& image0, const cv::Mat& image1,
+                                         const ProgressSink& progress) const {
+  OMNIRIG_CHECK(image0.cols == rig_.cam0.width && image0.rows == rig_.cam0.height,
+                "cam0 image is " << image0.cols << "x" << image0.rows << " but the rig's cam0 is "
+                                 << rig_.cam0.width << "x" << rig_.cam0.height);
+  OMNIRIG_CHECK(image1.cols == rig_.cam1.width && image1.rows == rig_.cam1.height,
+                "cam1 image is " << image1.cols << "x" << image1.rows << " but the rig's cam1 is "
+                                 << rig_.cam1.width << "x" << rig_.cam1.height);
+  OMNIRIG_CHECK(image0.depth() == CV_8U && image1.depth() == CV_8U &&
+                    (image0.channels() == 1 || image0.channels() == 3) &&
+                    (image1.channels() == 1 || image1.channels() == 3),
+                "images must be 8-bit grey or BGR");
+  progress.Report(0.0, "rectify");
+  const cv::Mat colour0 = rectifier_.Rectify(image0, 0);
+  const cv::Mat grey0 = Grey(colour0);
+  const cv::Mat grey1 = rectifier_.Rectify(Grey(image1), 1);
+  const cv::Mat mask0 = GridMirrorMask(grey0, rectifier_.ValidMask(0), options_);
+  const cv::Mat mask1 = GridMirrorMask(grey1, rectifier_.ValidMask(1), options_);
+  progress.ThrowIfCancelled();
+
+  const int rows = rectifier_.rows(), cols = rectifier_.cols();
+  DensePairResult result;
+  cv::Mat range(rows, cols, CV_32F, cv::Scalar(0)), range_std(rows, cols, CV_32F, cv::Scalar(0)),
+      confidence(rows, cols, CV_32F, cv::Scalar(0));
+  const auto [first, last] = UsedColumns(mask0, mask1);
+  if (first <= last) {
+    progress.Report(0.1, "match");
+    const cv::Rect roi(first, 0, last - first + 1, rows);
+    const cv::Mat disparity = MatchRows(grey0(roi), grey1(roi), num_disparities_, options_);
+    progress.ThrowIfCancelled();
+    progress.Report(0.8, "confidence");
+
+    // cam1's grey level at each cell's match, for the correlation of the matched windows.
+    cv::Mat map_x(disparity.size(), CV_32F), map_y(disparity.size(), CV_32F);
+    for (int r = 0; r < rows; ++r) {
+      const float* d = disparity.ptr<float>(r);
+      float* mx = map_x.ptr<float>(r);
+      float* my = map_y.ptr<float>(r);
+      for (int c = 0; c < roi.width; ++c) {
+        mx[c] = d[c] >= 0.f ? static_cast<float>(c) - d[c] : -1.f;
+        my[c] = static_cast<float>(r);
+      }
+    }
+    cv::Mat left, right_matched;
+    grey0(roi).convertTo(left, CV_32F);
+    cv::Mat right;
+    grey1(roi).convertTo(right, CV_32F);
+    cv::remap(right, right_matched, map_x, map_y, cv::INTER_LINEAR, cv::BORDER_CONSTANT);
+    const cv::Mat correlation = WindowCorrelation(left, right_matched,
+                                                  options_.confidence_window_cells,
+                                                  options_.image_noise_grey);
+    progress.Report(0.9, "triangulate");
+
+    Triangulate(disparity, correlation, first, mask0, mask1, colour0, &range, &range_std,
+                &confidence, &result);
+  }
+  result.num_points = static_cast<int>(result.points.size());
+  cv::transpose(range, result.range_m);
+  cv::transpose(range_std, result.range_std_m);
+  cv::transpose(confidence, result.confidence);
+  progress.Report(1.0, "triangulate");
+  return result;
+}
+
+}  // namespace omnirig::dense

@@ -1,0 +1,117 @@
+#pragma once
+// Dense 3D from one pair of a calibrated omnidirectional stereo rig: 360-degree range panoramas
+// and dense clouds ("3D perception instantly, without moving", the paper's case for the vertical
+// rig). Reads as rectify (spherical_rectification.h) -> mask -> match (OpenCV's semi-global
+// matcher along the grid rows, its left-right check, sub-pixel disparity, speckle filter) ->
+// confidence (zero-mean normalised cross-correlation of the matched windows) -> range (exact
+// triangulation of the two angles, law of sines) with its uncertainty.
+//
+// Frames: points in cam0's frame, metres (the rig's baseline unit).
+
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include <Eigen/Core>
+#include <opencv2/core.hpp>
+
+#include "engine/dense/spherical_rectification.h"
+#include "engine/geometry/camera_model.h"
+#include "engine/util/progress.h"
+
+namespace omnirig::dense {
+
+struct DenseStereoOptions {
+  SphericalGridOptions grid;
+  // The largest parallax searched (the angle at the point between the two rays). A point at
+  // angle theta from the baseline and range r has parallax ~ baseline * sin(theta) / r: 8 degrees
+  // reaches 0.7 m for a 0.1 m baseline.
+  double max_parallax_deg = 8.0;
+  // cv::StereoSGBM: matching window (odd), smoothness P1 = 8 w^2 and P2 = 32 w^2 (grey levels),
+  // uniqueness margin in percent, speckle filter (regions smaller than speckle_window_cells whose
+  // disparity varies by at most speckle_range_cells are removed), and the left-right
+  // consistency check's largest disagreement in cells.
+  int block_size = 5;
+  int uniqueness_ratio = 10;
+  int speckle_window_cells = 100;
+  int speckle_range_cells = 2;
+  int left_right_max_diff_cells = 1;
+  // Confidence: the zero-mean normalised cross-correlation of the two confidence_window_cells
+  // square windows the disparity pairs, with image_noise_grey added to both windows' standard
+  // deviation so that textureless windows (whose correlation is noise) score low. Cells below
+  // min_confidence are not reported.
+  int confidence_window_cells = 7;
+  double image_noise_grey = 2.0;
+  double min_confidence = 0.5;
+  // Sub-pixel disparity noise (grid cells, 1 sigma) turned into the per-point range std.
+  double disparity_std_cells = 0.25;
+  // Points whose range std exceeds this fraction of their range are not reported.
+  double max_relative_range_std = 0.1;
+  // Mirror mask: along each grid row, cells whose 5x5-blurred grey level is at or below
+  // dark_level and that connect to either end of the row (beyond the mirror's rim, inside its
+  // central hole) are masked, then the mask is eroded by mask_margin_cells.
+  double dark_level = 20.0;
+  int mask_margin_cells = 4;
+
+  void Check() const;
+};
+
+struct DensePoint {
+  Eigen::Vector3f point_in_cam0 = Eigen::Vector3f::Zero();
+  std::array<uint8_t, 3> rgb{0, 0, 0};
+  float confidence = 0.f;
+  float range_std_m = 0.f;
+};
+
+// Panoramas are the grid transposed: one column per azimuth (360 degrees), one row per angle
+// from the baseline, row 0 being the largest angle (for an upright vertical rig, whose baseline
+// points down, row 0 is up).
+struct DensePairResult {
+  cv::Mat range_m;      // CV_32F, metres from cam0's centre; 0 where unknown
+  cv::Mat range_std_m;  // CV_32F; 0 where unknown
+  cv::Mat confidence;   // CV_32F in [0, 1]; 0 where unmatched
+  std::vector<DensePoint> points;  // one per known range cell
+  int num_mirror_cells = 0;   // cells inside both mirror masks: the ones that could match
+  int num_matched_cells = 0;  // disparity found (left-right consistent, not a speckle)
+  int num_points = 0;         // confident and certain enough: points.size()
+  double mean_confidence = 0.0;  // over the matched cells
+};
+
+// Built once per rig (the rectification tables); Reconstruct() is const.
+class DenseStereo {
+ public:
+  // Throws InvalidArgument for invalid options or rig.
+  DenseStereo(const StereoRig& rig, const DenseStereoOptions& options);
+
+  // Images are 8-bit BGR or grey, of the rig's image sizes (throws InvalidArgument otherwise).
+  DensePairResult Reconstruct(const cv::Mat& image0, const cv::Mat& image1,
+                              const ProgressSink& progress = ProgressSink()) const;
+
+  const SphericalRectifier& rectifier() const { return rectifier_; }
+  int num_disparities() const { return num_disparities_; }
+
+ private:
+  // Range, its std and the confidence of every matched cell of columns [first, first +
+  // disparity.cols) (disparity and correlation cover those columns), and the points.
+  void Triangulate(const cv::Mat& disparity, const cv::Mat& correlation, int first,
+                   const cv::Mat& mask0, const cv::Mat& mask1, const cv::Mat& colour0,
+                   cv::Mat* range, cv::Mat* range_std, cv::Mat* confidence,
+                   DensePairResult* result) const;
+
+  StereoRig rig_;
+  DenseStereoOptions options_;
+  SphericalRectifier rectifier_;
+  int num_disparities_ = 0;
+};
+
+// The mirror mask on the grid (CV_8U, 255 inside): see DenseStereoOptions::dark_level. `valid`
+// is the rectifier's ValidMask of the camera.
+cv::Mat GridMirrorMask(const cv::Mat& grey_on_grid, const cv::Mat& valid,
+                       const DenseStereoOptions& options);
+
+// Zero-mean normalised cross-correlation of the window x window neighbourhoods of `a` and `b`
+// (CV_32F, same size) at every cell, with noise added to both standard deviations (see
+// DenseStereoOptions::image_noise_grey). CV_32F in [-1, 1].
+cv::Mat WindowCorrelation(const cv::Mat& a, const cv::Mat& b, int window, double noise_grey);
+
+}  // namespace omnirig::dense

@@ -1,0 +1,183 @@
+#include "engine/dense/spherical_rectification.h"
+
+#include <algorithm>
+#include <cmath>
+#include <optional>
+
+#include <opencv2/imgproc.hpp>
+
+#include "engine/geometry/unified_camera.h"
+#include "engine/util/check.h"
+
+namespace omnirig::dense {
+namespace {
+
+// Radius of the largest circle around the principal point inside the image (pixel centres
+// from 0 to size - 1).
+double InscribedRadius(const CameraModel& camera) {
+  const double u0 = camera.intrinsics.u0(), v0 = camera.intrinsics.v0();
+  return std::min({u0, camera.width - 1.0 - u0, v0, camera.height - 1.0 - v0});
+}
+
+double AngleBetween(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
+  return std::atan2(a.cross(b).norm(), a.dot(b));
+}
+
+// A rotation whose third column is `pole` (unit), the first as close to cam0's x axis as the
+// pole allows.
+Eigen::Matrix3d FrameAroundPole(const Eigen::Vector3d& pole) {
+  Eigen::Vector3d x = Eigen::Vector3d::UnitX();
+  if (std::abs(pole.dot(x)) > 0.9) x = Eigen::Vector3d::UnitY();
+  x = (x - x.dot(pole) * pole).normalized();
+  Eigen::Matrix3d frame;
+  frame.col(0) = x;
+  frame.col(1) = pole.cross(x);
+  frame.col(2) = pole;
+  return frame;
+}
+
+// The range of angles from the pole, in cam0's frame, of the bearings seen inside the inscribed
+// circles of both images (a coarse sampling of the disks, widened by one sample's angle).
+std::pair<double, double> ThetaRange(const StereoRig& rig, const Eigen::Vector3d& pole,
+                                     double step_rad) {
+  double lo = M_PI, hi = 0.0;
+  const Eigen::Matrix3d cam0_from_cam1 = rig.cam0_from_cam1.rotation.toRotationMatrix();
+  for (int camera = 0; camera < 2; ++camera) {
+    const CameraModel& model = camera == 0 ? rig.cam0 : rig.cam1;
+    const double radius = InscribedRadius(model);
+    const double u0 = model.intrinsics.u0(), v0 = model.intrinsics.v0();
+    constexpr double kSamplePx = 4.0;
+    for (double dv = -radius; dv <= radius; dv += kSamplePx) {
+      for (double du = -radius; du <= radius; du += kSamplePx) {
+        if (du * du + dv * dv > radius * radius) continue;
+        const std::optional<Eigen::Vector3d> bearing =
+            Lift(model.intrinsics, Eigen::Vector2d(u0 + du, v0 + dv));
+        if (!bearing) continue;
+        const Eigen::Vector3d in_cam0 = camera == 0 ? *bearing : Eigen::Vector3d(cam0_from_cam1 * *bearing);
+        const double theta = AngleBetween(pole, in_cam0);
+        lo = std::min(lo, theta);
+        hi = std::max(hi, theta);
+      }
+    }
+  }
+  OMNIRIG_CHECK(hi > lo, "no pixel of the images lifts to a bearing");
+  return {std::max(0.0, lo - 4.0 * step_rad), std::min(M_PI, hi + 4.0 * step_rad)};
+}
+
+}  // namespace
+
+void SphericalGridOptions::Check() const {
+  OMNIRIG_CHECK(step_rad == 0.0 || (step_rad >= 1e-4 && step_rad <= 0.05),
+                "the grid step must be 0 (automatic) or lie in [1e-4, 0.05] rad, got "
+                    << step_rad);
+}
+
+double FinestAngularStep(const CameraModel& camera) {
+  const double radius = InscribedRadius(camera) - 1.0;
+  OMNIRIG_CHECK(radius > 2.0, "the principal point lies outside the image");
+  const double u0 = camera.intrinsics.u0(), v0 = camera.intrinsics.v0();
+  double finest = M_PI;
+  constexpr int kSamples = 720;
+  for (int k = 0; k < kSamples; ++k) {
+    const double a = 2.0 * M_PI * k / kSamples;
+    const Eigen::Vector2d radial(std::cos(a), std::sin(a));
+    const Eigen::Vector2d tangential(-radial.y(), radial.x());
+    for (double r = radius; r > 0.5 * radius; r -= 0.05 * radius) {
+      const Eigen::Vector2d p(u0 + r * radial.x(), v0 + r * radial.y());
+      const auto b = Lift(camera.intrinsics, p);
+      const auto b_radial = Lift(camera.intrinsics, p - radial);
+      const auto b_tangential = Lift(camera.intrinsics, p + tangential);
+      if (!b || !b_radial || !b_tangential) continue;  // outside the lifting domain: go inwards
+      finest = std::min({finest, AngleBetween(*b, *b_radial), AngleBetween(*b, *b_tangential)});
+      break;
+    }
+  }
+  OMNIRIG_CHECK(finest < M_PI, "no pixel of the image lifts to a bearing");
+  return finest;
+}
+
+SphericalRectifier::SphericalRectifier(const StereoRig& rig, const SphericalGridOptions& options) {
+  options.Check();
+  rig.cam0.intrinsics.Check();
+  rig.cam1.intrinsics.Check();
+  const Eigen::Vector3d c1_in_cam0 = rig.cam0_from_cam1.translation;
+  baseline_m_ = c1_in_cam0.norm();
+  OMNIRIG_CHECK(baseline_m_ > 0.0, "the rig's baseline is zero");
+  const Eigen::Vector3d pole = c1_in_cam0 / baseline_m_;
+  cam0_from_grid_ = FrameAroundPole(pole);
+
+  theta_step_rad_ = options.step_rad > 0.0
+                        ? options.step_rad
+                        : std::min(FinestAngularStep(rig.cam0), FinestAngularStep(rig.cam1));
+  rows_ = static_cast<int>(std::ceil(2.0 * M_PI / theta_step_rad_));
+  const auto [theta_lo, theta_hi] = ThetaRange(rig, pole, theta_step_rad_);
+  theta_max_rad_ = theta_hi;
+  cols_ = static_cast<int>(std::ceil((theta_hi - theta_lo) / theta_step_rad_)) + 1;
+
+  const Eigen::Matrix3d cam1_from_cam0 =
+      rig.cam0_from_cam1.rotation.conjugate().toRotationMatrix();
+  for (int camera = 0; camera < 2; ++camera) {
+    const CameraModel& model = camera == 0 ? rig.cam0 : rig.cam1;
+    const Eigen::Matrix3d cam_from_grid =
+        camera == 0 ? cam0_from_grid_ : Eigen::Matrix3d(cam1_from_cam0 * cam0_from_grid_);
+    map_x_[camera].create(rows_, cols_, CV_32F);
+    map_y_[camera].create(rows_, cols_, CV_32F);
+    valid_[camera] = cv::Mat::zeros(rows_, cols_, CV_8U);
+    cv::parallel_for_(cv::Range(0, rows_), [&](const cv::Range& range) {
+      for (int r = range.start; r < range.end; ++r) {
+        const double phi = Phi(r);
+        const double cos_phi = std::cos(phi), sin_phi = std::sin(phi);
+        float* mx = map_x_[camera].ptr<float>(r);
+        float* my = map_y_[camera].ptr<float>(r);
+        uint8_t* ok = valid_[camera].ptr<uint8_t>(r);
+        for (int c = 0; c < cols_; ++c) {
+          const double theta = Theta(c);
+          const Eigen::Vector3d in_grid(std::sin(theta) * cos_phi, std::sin(theta) * sin_phi,
+                                        std::cos(theta));
+          const std::optional<Eigen::Vector2d> pixel =
+              Project(model.intrinsics, cam_from_grid * in_grid);
+          const bool inside = pixel && pixel->x() >= 0.0 && pixel->y() >= 0.0 &&
+                              pixel->x() <= model.width - 1.0 && pixel->y() <= model.height - 1.0;
+          mx[c] = inside ? static_cast<float>(pixel->x()) : -1.f;
+          my[c] = inside ? static_cast<float>(pixel->y()) : -1.f;
+          ok[c] = inside ? 255 : 0;
+        }
+      }
+    });
+  }
+}
+
+Eigen::Vector3d SphericalRectifier::BearingInCam0(double row, double col) const {
+  const double theta = Theta(col), phi = Phi(row);
+  return cam0_from_grid_ * Eigen::Vector3d(std::sin(theta) * std::cos(phi),
+                                           std::sin(theta) * std::sin(phi), std::cos(theta));
+}
+
+Eigen::Vector2d SphericalRectifier::CellOfBearingInCam0(const Eigen::Vector3d& bearing) const {
+  const Eigen::Vector3d in_grid = cam0_from_grid_.transpose() * bearing.normalized();
+  double phi = std::atan2(in_grid.y(), in_grid.x());
+  if (phi < 0.0) phi += 2.0 * M_PI;
+  const double theta = std::acos(std::clamp(in_grid.z(), -1.0, 1.0));
+  return Eigen::Vector2d(phi / azimuth_step_rad(), (theta_max_rad_ - theta) / theta_step_rad_);
+}
+
+cv::Mat SphericalRectifier::Rectify(const cv::Mat& image, int camera) const {
+  OMNIRIG_CHECK(camera == 0 || camera == 1, "camera must be 0 or 1, got " << camera);
+  cv::Mat out;
+  cv::remap(image, out, map_x_[camera], map_y_[camera], cv::INTER_LINEAR, cv::BORDER_CONSTANT,
+            cv::Scalar::all(0));
+  return out;
+}
+
+double RangeFromAngles(double theta0_rad, double theta1_rad, double baseline_m) {
+  const double parallax = theta1_rad - theta0_rad;
+  if (!(parallax > 0.0)) return 0.0;
+  return baseline_m * std::sin(theta1_rad) / std::sin(parallax);
+}
+
+double RangeDerivative(double theta0_rad, double theta1_rad, double baseline_m) {
+  const double s = std::sin(theta1_rad - theta0_rad);
+  return baseline_m * std::sin(theta0_rad) / (s * s);
+}
+
+}  // namespace omnirig::dense

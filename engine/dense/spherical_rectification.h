@@ -1,0 +1,93 @@
+#pragma once
+// Epipolar-aligned spherical rectification of a calibrated stereo rig.
+//
+// Both cameras are resampled onto one grid of directions in a frame whose pole (+z) is the
+// baseline direction, from cam0's centre towards cam1's:
+//   row r  = the angle around the baseline (azimuth) phi = r * azimuth_step_rad, in [0, 2 pi);
+//   col c  = the angle from the baseline theta = theta_max_rad - c * theta_step_rad.
+// A scene point, cam0 and cam1 span one plane containing the baseline (the epipolar plane), so it
+// has the same phi from both cameras: every epipolar curve is one grid row. Seen from cam1 the
+// angle from the baseline is larger (theta1 = theta0 + parallax), so cam1's match of cam0's
+// column c lies at column c - d with d = parallax / theta_step_rad >= 0: cam0 is the "left"
+// image of OpenCV's stereo matchers and d their disparity.
+//
+// Lifting and projection are the unified model's (engine/geometry/unified_camera.h, eq. 6 of
+// the paper for the lifting); the grid's directions are projected into each camera once per rig
+// and stored as cv::remap tables.
+
+#include <opencv2/core.hpp>
+
+#include <Eigen/Core>
+
+#include "engine/geometry/camera_model.h"
+
+namespace omnirig::dense {
+
+struct SphericalGridOptions {
+  // Angular step of the grid in both directions; 0 = the images' finest angular resolution
+  // (the angle between neighbouring pixels at the mirror's outer edge, where the image is
+  // sharpest in angle), so that no detail of the images is lost.
+  double step_rad = 0.0;
+
+  void Check() const;
+};
+
+// The grid and its remap tables for one rig. Build once per rig; Rectify() is const and
+// thread-safe.
+class SphericalRectifier {
+ public:
+  // Throws InvalidArgument for invalid intrinsics, a zero baseline or invalid options.
+  SphericalRectifier(const StereoRig& rig, const SphericalGridOptions& options);
+
+  int rows() const { return rows_; }  // azimuth samples over 360 degrees
+  int cols() const { return cols_; }  // samples of the angle from the baseline
+  double azimuth_step_rad() const { return 2.0 * M_PI / rows_; }
+  double theta_step_rad() const { return theta_step_rad_; }
+  double theta_max_rad() const { return theta_max_rad_; }
+  double baseline_m() const { return baseline_m_; }
+  double Theta(double col) const { return theta_max_rad_ - col * theta_step_rad_; }
+  double Phi(double row) const { return row * azimuth_step_rad(); }
+
+  // Unit direction of grid cell (row, col) (fractional allowed) in cam0's frame.
+  Eigen::Vector3d BearingInCam0(double row, double col) const;
+
+  // The grid cell of a direction in cam0's frame (inverse of BearingInCam0): (row, col).
+  Eigen::Vector2d CellOfBearingInCam0(const Eigen::Vector3d& bearing_in_cam0) const;
+
+  // Camera `camera`'s image (0 or 1; any type cv::remap takes) resampled onto the grid
+  // (bilinear); cells whose direction does not project into the image are 0.
+  cv::Mat Rectify(const cv::Mat& image, int camera) const;
+
+  // 255 where cell's direction projects into camera `camera`'s image, else 0 (CV_8U).
+  const cv::Mat& ValidMask(int camera) const { return valid_[camera]; }
+
+  // cam0_from_grid: the rotation taking grid-frame directions into cam0's frame.
+  const Eigen::Matrix3d& cam0_from_grid() const { return cam0_from_grid_; }
+
+ private:
+  int rows_ = 0;
+  int cols_ = 0;
+  double theta_step_rad_ = 0.0;
+  double theta_max_rad_ = 0.0;
+  double baseline_m_ = 0.0;
+  Eigen::Matrix3d cam0_from_grid_;
+  cv::Mat map_x_[2], map_y_[2];  // CV_32F: source pixel of each cell
+  cv::Mat valid_[2];
+};
+
+// The finest angle between the bearings of neighbouring pixels (radially and tangentially) on
+// the largest circle around the principal point that fits in the image; the grid's default step.
+double FinestAngularStep(const CameraModel& camera);
+
+// Exact triangulation on the epipolar plane (law of sines): the range from cam0's centre of a
+// point seen at angle theta0 from the baseline by cam0 and theta1 by cam1, for a baseline of
+// baseline_m. The angle at the point is theta1 - theta0; returns 0 when it is not positive (no
+// intersection in front of both cameras).
+//   range0 = baseline * sin(theta1) / sin(theta1 - theta0).
+double RangeFromAngles(double theta0_rad, double theta1_rad, double baseline_m);
+
+// d(range0)/d(theta1) at fixed theta0, whose magnitude turns the parallax noise into the range
+// noise: |d range0 / d theta1| = baseline * sin(theta0) / sin^2(theta1 - theta0).
+double RangeDerivative(double theta0_rad, double theta1_rad, double baseline_m);
+
+}  // namespace omnirig::dense

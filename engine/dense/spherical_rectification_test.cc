@@ -1,0 +1,125 @@
+// The spherical grid: epipolar curves are grid rows, the remap tables are the unified model's
+// projection, and the law-of-sines range is exact.
+
+#include "engine/dense/spherical_rectification.h"
+
+#include <cmath>
+#include <random>
+
+#include <gtest/gtest.h>
+
+#include "engine/geometry/unified_camera.h"
+#include "engine/synth/presets.h"
+#include "engine/util/check.h"
+
+namespace omnirig::dense {
+namespace {
+
+StereoRig DefaultRig() {
+  StereoRig rig;
+  rig.cam0 = synth::DefaultCamera().model;
+  rig.cam1 = synth::DefaultSecondCamera().model;
+  rig.cam0_from_cam1 = synth::DefaultCam0FromCam1();
+  return rig;
+}
+
+// The grid cell of a point seen from cam1's centre, in the grid's (cam0-aligned) frame.
+Eigen::Vector2d CellFromCam1(const SphericalRectifier& rectifier, const StereoRig& rig,
+                             const Eigen::Vector3d& point_in_cam0) {
+  return rectifier.CellOfBearingInCam0(point_in_cam0 - rig.cam0_from_cam1.translation);
+}
+
+TEST(SphericalRectification, EveryEpipolarCurveIsOneRow) {
+  const StereoRig rig = DefaultRig();
+  const SphericalRectifier rectifier(rig, SphericalGridOptions());
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> unit(-1.0, 1.0), range(0.5, 8.0);
+  for (int k = 0; k < 1000; ++k) {
+    const Eigen::Vector3d point = range(rng) * Eigen::Vector3d(unit(rng), unit(rng), unit(rng)).normalized();
+    const Eigen::Vector2d cell0 = rectifier.CellOfBearingInCam0(point);
+    const Eigen::Vector2d cell1 = CellFromCam1(rectifier, rig, point);
+    double row_difference = std::abs(cell0.x() - cell1.x());
+    row_difference = std::min(row_difference, rectifier.rows() - row_difference);  // the seam
+    // Near the poles the azimuth is ill-defined; elsewhere the rows agree to rounding.
+    const double theta0 = rectifier.Theta(cell0.y());
+    if (std::sin(theta0) > 0.05) {
+      EXPECT_LT(row_difference, 1e-6) << point.transpose();
+    }
+    // cam1's match lies to the left (smaller column) by the parallax in cells.
+    const double parallax = std::acos(point.normalized().dot(
+        (point - rig.cam0_from_cam1.translation).normalized()));
+    EXPECT_NEAR(cell0.y() - cell1.y(), parallax / rectifier.theta_step_rad(), 1e-6);
+    // BearingInCam0 inverts CellOfBearingInCam0.
+    EXPECT_LT((rectifier.BearingInCam0(cell0.x(), cell0.y()) - point.normalized()).norm(), 1e-9);
+  }
+}
+
+TEST(SphericalRectification, GridCoversTheImagesAtTheirFinestResolution) {
+  const StereoRig rig = DefaultRig();
+  const SphericalRectifier rectifier(rig, SphericalGridOptions());
+  const double finest = std::min(FinestAngularStep(rig.cam0), FinestAngularStep(rig.cam1));
+  EXPECT_DOUBLE_EQ(rectifier.theta_step_rad(), finest);
+  // About 1 / 380 rad at the edge of a 1024x768 image's inscribed circle (radius ~380 px).
+  EXPECT_GT(finest, 1.0 / 600.0);
+  EXPECT_LT(finest, 1.0 / 300.0);
+  EXPECT_NEAR(rectifier.rows() * rectifier.azimuth_step_rad(), 2.0 * M_PI, 1e-12);
+  // The band reaches from the baseline (the hole) to beyond the horizon (the rim is ~20 degrees
+  // above it for DefaultCamera).
+  EXPECT_GT(rectifier.theta_max_rad(), 100.0 * M_PI / 180.0);
+  SphericalGridOptions coarse;
+  coarse.step_rad = 2.0 * finest;
+  const SphericalRectifier half(rig, coarse);
+  EXPECT_NEAR(half.rows(), rectifier.rows() / 2.0, 1.0);
+  coarse.step_rad = -1.0;
+  EXPECT_THROW(SphericalRectifier(rig, coarse), InvalidArgument);
+}
+
+TEST(SphericalRectification, RemapTablesAreTheModelsProjection) {
+  const StereoRig rig = DefaultRig();
+  const SphericalRectifier rectifier(rig, SphericalGridOptions());
+  // An image whose grey level encodes u + 2 v is resampled exactly (it is linear) where the
+  // direction projects inside the image.
+  cv::Mat ramp(rig.cam1.height, rig.cam1.width, CV_32F);
+  for (int v = 0; v < ramp.rows; ++v)
+    for (int u = 0; u < ramp.cols; ++u) ramp.at<float>(v, u) = static_cast<float>(u + 2 * v);
+  const cv::Mat on_grid = rectifier.Rectify(ramp, 1);
+  const Eigen::Matrix3d cam1_from_cam0 = rig.cam0_from_cam1.rotation.conjugate().toRotationMatrix();
+  int checked = 0;
+  for (int r = 0; r < rectifier.rows(); r += 37) {
+    for (int c = 0; c < rectifier.cols(); c += 11) {
+      if (!rectifier.ValidMask(1).at<uint8_t>(r, c)) continue;
+      const auto pixel =
+          Project(rig.cam1.intrinsics, cam1_from_cam0 * rectifier.BearingInCam0(r, c));
+      ASSERT_TRUE(pixel.has_value());
+      if (pixel->x() > ramp.cols - 2.0 || pixel->y() > ramp.rows - 2.0) continue;
+      // cv::remap quantises the source position to 1/32 px: u + 2 v is off by up to 3/64.
+      EXPECT_NEAR(on_grid.at<float>(r, c), pixel->x() + 2.0 * pixel->y(), 3.0 / 64 + 1e-3);
+      ++checked;
+    }
+  }
+  EXPECT_GT(checked, 1000);
+}
+
+TEST(SphericalRectification, LawOfSinesRangeIsExact) {
+  // cam1 at distance b along the pole; a point at range r and angle theta0 from the pole.
+  const double b = 0.1;
+  for (double theta0 : {0.3, 1.0, M_PI / 2, 2.0}) {
+    for (double r : {0.4, 2.0, 9.0}) {
+      const Eigen::Vector3d point(r * std::sin(theta0), 0.0, r * std::cos(theta0));
+      const Eigen::Vector3d from1 = point - Eigen::Vector3d(0, 0, b);
+      const double theta1 = std::atan2(from1.x(), from1.z());
+      EXPECT_NEAR(RangeFromAngles(theta0, theta1, b), r, 1e-9 * r);
+      // The derivative against a central difference.
+      const double h = 1e-7;
+      const double numeric =
+          (RangeFromAngles(theta0, theta1 + h, b) - RangeFromAngles(theta0, theta1 - h, b)) /
+          (2 * h);
+      EXPECT_NEAR(RangeDerivative(theta0, theta1, b), std::abs(numeric), 1e-4 * std::abs(numeric));
+    }
+  }
+  EXPECT_EQ(RangeFromAngles(1.0, 1.0, b), 0.0);
+  EXPECT_EQ(RangeFromAngles(1.0, 0.9, b), 0.0);
+}
+
+}  // namespace
+}  // namespace omnirig::dense

@@ -1,0 +1,115 @@
+// `omnirig stereo`: 3D from stereo pairs of a calibrated rig, the same engine call as the
+// `stereo_reconstruct` job type (api/stereo_json.h).
+//
+//   omnirig stereo --rig rig.json DIR -o OUTDIR [--method dense|sparse] [--options opts.json]
+//       [--threads N]
+//
+// rig.json is a relative_pose result (cam0_from_cam1 and both cameras); DIR holds cam0/NAME and
+// cam1/NAME images, paired by NAME. OUTDIR receives cloud.ply, per pair (dense)
+// NAME_range.tiff and NAME_range.png, cloud_NAME.ply with more than one pair, and result.json
+// (the job's result). opts.json holds the job's params other than "rig" and "method".
+
+#include <filesystem>
+#include <fstream>
+#include <iomanip>
+#include <iostream>
+
+#include <nlohmann/json.hpp>
+#include <opencv2/core/utility.hpp>
+
+#include "api/stereo_json.h"
+#include "engine/util/check.h"
+#include "server/cli/args.h"
+#include "server/cli/commands.h"
+
+namespace omnirig::cli {
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+json ReadJsonFile(const std::string& path, const std::string& flag) {
+  std::ifstream in(path);
+  OMNIRIG_CHECK(in, flag << ": cannot read '" << path << "'");
+  try {
+    return json::parse(in);
+  } catch (const json::exception& e) {
+    throw InvalidArgument(flag + ": '" + path + "' is not JSON: " + e.what());
+  }
+}
+
+// Every file under cam0/ and cam1/ of `dir`, as "camK/NAME" relative names (the job pairs them
+// by NAME and reports images without a partner).
+std::vector<std::string> ListPairImages(const fs::path& dir) {
+  OMNIRIG_CHECK(fs::is_directory(dir), "'" << dir.string() << "' is not a folder");
+  std::vector<std::string> names;
+  for (const char* camera : {"cam0", "cam1"}) {
+    if (!fs::is_directory(dir / camera)) continue;
+    for (const auto& entry : fs::directory_iterator(dir / camera)) {
+      if (entry.is_regular_file()) {
+        names.push_back(std::string(camera) + "/" + entry.path().filename().string());
+      }
+    }
+  }
+  std::sort(names.begin(), names.end());
+  return names;
+}
+
+}  // namespace
+
+int RunStereo(const Args& raw_args) {
+  ArgParser args("stereo",
+                 "3D from stereo pairs of a calibrated rig: dense range panoramas and clouds "
+                 "(default), or sparse SIFT points.");
+  args.AddOption("rig", "", "relative_pose result JSON (cam0_from_cam1 and both cameras)");
+  args.AddOption("method", "dense", "dense or sparse");
+  args.AddOption("o", "stereo_out", "output folder");
+  args.AddOption("options", "", "JSON file with the job's params other than rig and method");
+  args.AddOption("threads", "2", "threads for the dense matcher");
+  args.SetPositional("DIR", "folder with cam0/ and cam1/ images, paired by name");
+  if (!args.Parse(raw_args)) return args.exit_code();
+  OMNIRIG_CHECK(args.positional().size() == 1, "expected one DIR (see --help)");
+  OMNIRIG_CHECK(args.Has("rig"), "--rig is required (a relative_pose result JSON)");
+  const int threads = args.GetInt("threads");
+  OMNIRIG_CHECK(threads >= 1, "--threads must be at least 1");
+
+  json params = json::object();
+  if (args.Has("options")) {
+    params = ReadJsonFile(args.Get("options"), "--options");
+    OMNIRIG_CHECK(params.is_object(), "--options: expected a JSON object");
+  }
+  params["rig"] = args.Get("rig");
+  params["method"] = args.Get("method");
+
+  const fs::path out_dir = args.Get("o");
+  fs::create_directories(out_dir);
+  api::JobContext context;
+  context.job_id = "cli";
+  context.dataset_dir = args.positional()[0];
+  context.image_names = ListPairImages(context.dataset_dir);
+  context.output_dir = out_dir;
+  context.num_threads = threads;
+  context.progress.report = [](double fraction, const std::string& stage, const std::string&) {
+    std::cerr << "[" << std::setw(3) << static_cast<int>(100.0 * fraction) << "%] " << stage
+              << "\n";
+  };
+  context.log = [](const std::string& line) { std::cerr << line << "\n"; };
+  const std::string rig_path = args.Get("rig");
+  context.load_result = [&](const std::string&) { return ReadJsonFile(rig_path, "--rig"); };
+
+  cv::setNumThreads(threads);
+  const json result = api::RunStereoReconstructJob(params, context);
+  std::ofstream(out_dir / "result.json") << result.dump(2) << "\n";
+  std::cout << result["method"].get<std::string>() << ": " << result["num_points"] << " points in "
+            << result["pairs"].size() << " pairs\n";
+  for (const json& pair : result["pairs"]) {
+    std::cout << "  " << pair["name"].get<std::string>() << ": " << pair["num_points"]
+              << " points, median range " << pair["median_range_m"] << " m"
+              << (pair.contains("warning") ? " (" + pair["warning"].get<std::string>() + ")" : "")
+              << "\n";
+  }
+  std::cout << "wrote " << (out_dir / "cloud.ply").string() << ", result.json\n";
+  return 0;
+}
+
+}  // namespace omnirig::cli
