@@ -134,9 +134,9 @@ void WorkerPool::RunJob(const storage::JobRecord& job) {
   }
   try {
     if (handed_back) {
-      store_.RequeueJob(job.id);
+      store_.RequeueJob(job.id, job.lease_token);
     } else {
-      store_.FinishJob(job.id, outcome);
+      store_.FinishJob(job.id, job.lease_token, outcome);
       metrics_.ObserveJobDuration(
           job.type, storage::JobStateName(outcome.state),
           std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
