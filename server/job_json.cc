@@ -186,6 +186,13 @@ void AppendJobJson(const storage::JobRecord& job, std::string& out) {
   AppendJsonString(storage::JobStateName(job.state), out);
   AppendLiteral(",\"type\":", out);
   AppendJsonString(job.type, out);
+  // The worker that ran (or runs) the job's last attempt ("HOST:PID"), null before any claim.
+  AppendLiteral(",\"worker\":", out);
+  if (job.worker_id.empty()) {
+    AppendLiteral("null", out);
+  } else {
+    AppendJsonString(job.worker_id, out);
+  }
   out += '}';
 }
 

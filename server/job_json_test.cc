@@ -36,6 +36,7 @@ nlohmann::json JobJson(const storage::JobRecord& job) {
       {"finished_at", api::TimeJson(job.finished_at)},
       {"attempts", job.attempts},
       {"cancel_requested", job.cancel_requested},
+      {"worker", job.worker_id.empty() ? nlohmann::json(nullptr) : nlohmann::json(job.worker_id)},
       {"error", nullptr}};
   if (job.error) json["error"] = {{"code", job.error->code}, {"message", job.error->message}};
   return json;
@@ -62,6 +63,7 @@ storage::JobRecord FailedJob() {
   job.finished_at = 1795312399.999;
   job.attempts = 3;
   job.cancel_requested = true;
+  job.worker_id = "rig-02.lab:4711";
   job.progress = {0.5, "detect", "VMRImage1.jpg: found", 12.25};
   job.error = storage::JobError{
       "invalid_input",

@@ -7,6 +7,13 @@
 // when the job succeeds), a log (the `log.txt` artifact, kept for failed jobs too), throttled
 // progress written to the store (so polls after a restart still see it) and a cancellation
 // flag the cancel route sets.
+//
+// Leases: each claim is leased to this pool's worker id; a heartbeat thread renews the leases of
+// the running jobs, records the worker as alive (with its running jobs) and re-queues jobs whose
+// lease expired anywhere (another worker killed or cut off). A job whose lease this pool lost
+// (the process was stopped past it) is interrupted and its end is not written: the run that took
+// the job over owns it. With a store that notifies (PostgreSQL), a listener thread wakes idle
+// workers on jobs queued by any process; the idle poll is only the fallback.
 
 #include <atomic>
 #include <condition_variable>
@@ -24,7 +31,7 @@
 namespace omnirig::server {
 
 struct WorkerPoolOptions {
-  int num_workers = 1;
+  int num_workers = 1;  // 0: an API-only server that runs no jobs
   int threads_per_job = 1;
   double progress_interval_s = 0.2;  // at most one progress write per job per interval
   double idle_poll_s = 0.5;          // re-check the store this often when idle
@@ -32,8 +39,14 @@ struct WorkerPoolOptions {
   // SCHED_IDLE for worker threads: they run only when no HTTP thread wants the CPU, and a
   // waking HTTP thread preempts them at once (nice alone leaves a wake-up delay of a few ms).
   bool idle_scheduling = true;
+  std::string worker_id;  // in leases and heartbeats; empty: DefaultWorkerId()
+  double lease_s = 30;    // a claim's lease, renewed every lease_s / 3 while the job runs
+  int max_attempts = 3;   // runs started before a job whose lease keeps expiring fails
   void Check() const;
 };
+
+// "HOST:PID": unique among live processes sharing a store.
+std::string DefaultWorkerId();
 
 class WorkerPool {
  public:
@@ -52,14 +65,20 @@ class WorkerPool {
 
   int busy() const { return busy_.load(); }
   int size() const { return options_.num_workers; }
+  const std::string& worker_id() const { return options_.worker_id; }
 
  private:
   struct RunningJob {
+    std::string lease_token;
     std::atomic<bool> cancel{false};
     std::atomic<bool> interrupt{false};
+    std::atomic<bool> lease_lost{false};
   };
 
   void WorkerLoop();
+  void HeartbeatLoop();
+  void Heartbeat();
+  void ListenLoop();
   void RunJob(const storage::JobRecord& job);
   void WaitForWork(uint64_t seen_generation);
 
@@ -68,12 +87,15 @@ class WorkerPool {
   Metrics& metrics_;
   WorkerPoolOptions options_;
   std::vector<std::thread> threads_;
+  std::thread heartbeat_thread_, listener_thread_;
+  double started_at_ = 0;
   std::atomic<int> busy_{0};
 
   std::mutex mutex_;
   std::condition_variable wake_;
   uint64_t generation_ = 0;  // bumped by Notify(); a worker waits only if it has not changed
   bool stopping_ = false;
+  bool background_stopping_ = false;  // heartbeat and listener: after the workers stopped
   std::map<std::string, std::shared_ptr<RunningJob>> running_;
 };
 
