@@ -37,7 +37,12 @@ class JobLog {
     if (!file_) return;
     std::fclose(file_);
     file_ = nullptr;
-    storage::FsyncPath(path_);
+    try {
+      storage::FsyncPath(path_);
+    } catch (const std::exception&) {
+      // The folder is gone: the attempt lost its lease and the run that took the job over
+      // removed it. Nothing of this attempt is recorded, so nothing needs the log on disk.
+    }
   }
 
  private:
