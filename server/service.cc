@@ -104,6 +104,7 @@ Service::Service(const ServiceOptions& options) : state_(std::make_unique<Servic
   pool_options.max_attempts = options.max_attempts;
   // NOTIFY wakes idle workers at once; the poll only covers a lost notification.
   if (state.store->NotifiesQueueChanges()) pool_options.idle_poll_s = 5;
+  state.metrics.SetWorkerAliveWindow(options.lease_s);
   state.workers =
       std::make_unique<WorkerPool>(*state.store, *state.data_dir, state.metrics, pool_options);
 

@@ -84,6 +84,13 @@ class JobStore {
   // Jobs queued or running on the dataset.
   virtual int64_t CountActiveJobs(const std::string& dataset_id) = 0;
 
+  // Store copy (`omnirig store copy`): records inserted as they are, ids, states and times kept.
+  // A record whose id already exists is left alone (a copy that stopped half-way can be run
+  // again); returns false then.
+  virtual bool ImportDataset(const DatasetRecord& dataset) = 0;
+  virtual bool ImportJob(const JobRecord& job, const std::optional<std::string>& result,
+                         const std::vector<ArtifactRecord>& artifacts) = 0;
+
   // Workers: a heartbeat records the worker as alive now with its running jobs (upsert by id).
   virtual void RecordHeartbeat(const WorkerRecord& worker) = 0;
   // Workers whose last heartbeat is at most `seen_within_s` old, by id.

@@ -17,6 +17,7 @@
 #include "storage/postgres_job_store.h"
 #include "storage/postgres_test_server.h"
 #include "storage/sqlite_job_store.h"
+#include "storage/store_copy.h"
 #include "storage/test_util.h"
 
 namespace omnirig::storage {
@@ -225,6 +226,9 @@ TYPED_TEST(JobStoreContractTest, FiltersJobs) {
   by_state.state = JobState::kRunning;
   EXPECT_TRUE(store.ListJobs(by_state).empty());
   EXPECT_EQ(store.ListJobs(JobFilter{}).size(), 2u);
+  JobFilter unlimited;
+  unlimited.limit = -1;
+  EXPECT_EQ(store.ListJobs(unlimited).size(), 2u);
   EXPECT_EQ(store.CountActiveJobs("d1"), 1);
 }
 
@@ -445,6 +449,105 @@ TEST(PostgresJobStoreTest, MigratesOnceAndRefusesANewerSchema) {
     PQfinish(db);
   }
   EXPECT_THROW(PostgresJobStore newer(url), PostgresError);
+}
+
+void ExpectSameJob(const JobRecord& a, const JobRecord& b) {
+  EXPECT_EQ(a.id, b.id);
+  EXPECT_EQ(a.type, b.type);
+  EXPECT_EQ(a.dataset_id, b.dataset_id);
+  EXPECT_EQ(a.params, b.params);
+  EXPECT_EQ(a.state, b.state);
+  EXPECT_DOUBLE_EQ(a.progress.fraction, b.progress.fraction);
+  EXPECT_EQ(a.progress.stage, b.progress.stage);
+  EXPECT_EQ(a.progress.message, b.progress.message);
+  EXPECT_EQ(a.progress.eta_s, b.progress.eta_s);
+  EXPECT_DOUBLE_EQ(a.created_at, b.created_at);
+  EXPECT_EQ(a.started_at, b.started_at);
+  EXPECT_EQ(a.finished_at, b.finished_at);
+  EXPECT_EQ(a.attempts, b.attempts);
+  EXPECT_EQ(a.error.has_value(), b.error.has_value());
+  if (a.error && b.error) {
+    EXPECT_EQ(a.error->code, b.error->code);
+    EXPECT_EQ(a.error->message, b.error->message);
+  }
+  EXPECT_EQ(a.cancel_requested, b.cancel_requested);
+  EXPECT_EQ(a.worker_id, b.worker_id);
+  EXPECT_EQ(a.lease_token, b.lease_token);
+}
+
+// A one-machine service's records moved to PostgreSQL: every dataset, image, job (each state),
+// result and artifact record arrives unchanged; a second copy adds nothing; the queue and
+// recovery carry on from there.
+TEST(StoreCopyTest, SqliteToPostgresKeepsEveryRecord) {
+  testing::TempDir dir;
+  SqliteJobStore from((dir.path() / "omnirig.db").string());
+  const DatasetRecord dataset = from.CreateDataset("rig");
+  from.PutImages(dataset.id, {ImageRecord{"cam0/a.png", 10, "aa", 4, 3, "image/png"},
+                              ImageRecord{"cam1/b.png", 12, "bb", 5, 6, "image/png"}});
+  from.CreateDataset("empty");
+  const JobRecord succeeded = from.CreateJob("calibration", dataset.id, R"({"a":1})");
+  const JobRecord failed = from.CreateJob("calibration", dataset.id, "{}");
+  const JobRecord canceled = from.CreateJob("calibration", dataset.id, "{}");
+  const JobRecord running = from.CreateJob("calibration", dataset.id, "{}");
+  const JobRecord queued = from.CreateJob("calibration", dataset.id, R"({"q":2})");
+  JobOutcome ok;
+  ok.result = R"({"rms_px":0.1})";
+  ok.artifacts = {ArtifactRecord{"log.txt", "jobs/x/attempt-1/log.txt", 5, "cc", "text/plain"},
+                  ArtifactRecord{"result.json", "jobs/x/attempt-1/result.json", 9, "dd",
+                                 "application/json"}};
+  auto claim = from.ClaimNextJob(ClaimRequest{"box:1", 60});
+  from.UpdateProgress(claim->id, JobProgress{0.5, "solve", "half", 2.0});
+  ASSERT_TRUE(from.FinishJob(claim->id, claim->lease_token, ok));
+  claim = from.ClaimNextJob(ClaimRequest{"box:1", 60});
+  JobOutcome bad;
+  bad.state = JobState::kFailed;
+  bad.error = JobError{"invalid_input", "no board"};
+  ASSERT_TRUE(from.FinishJob(claim->id, claim->lease_token, bad));
+  from.RequestCancel(canceled.id);
+  ASSERT_EQ(from.ClaimNextJob(ClaimRequest{"box:1", 60})->id, running.id);
+
+  PostgresJobStore to(testing::SharedPostgresTestServer().CreateDatabase());
+  const StoreCopyReport report = CopyStore(from, to);
+  EXPECT_EQ(report.datasets, 2);
+  EXPECT_EQ(report.images, 2);
+  EXPECT_EQ(report.jobs, 5);
+  EXPECT_EQ(report.artifacts, 2);
+  ASSERT_EQ(to.ListDatasets().size(), 2u);
+  EXPECT_EQ(to.GetDataset(dataset.id)->name, "rig");
+  EXPECT_DOUBLE_EQ(to.GetDataset(dataset.id)->created_at, dataset.created_at);
+  EXPECT_EQ(to.GetDataset(dataset.id)->total_bytes, 22);
+  ASSERT_EQ(to.ListImages(dataset.id).size(), 2u);
+  EXPECT_EQ(to.ListImages(dataset.id)[1].sha256, "bb");
+  EXPECT_EQ(to.ListImages(dataset.id)[1].height, 6);
+  for (const JobRecord& job : from.ListJobs(JobFilter{})) {
+    SCOPED_TRACE(job.id);
+    ASSERT_TRUE(to.GetJob(job.id));
+    ExpectSameJob(*to.GetJob(job.id), job);
+    EXPECT_EQ(to.GetResult(job.id), from.GetResult(job.id));
+    const auto artifacts = to.ListArtifacts(job.id);
+    const auto expected = from.ListArtifacts(job.id);
+    ASSERT_EQ(artifacts.size(), expected.size());
+    for (size_t i = 0; i < artifacts.size(); ++i) {
+      EXPECT_EQ(artifacts[i].path, expected[i].path);
+      EXPECT_EQ(artifacts[i].sha256, expected[i].sha256);
+      EXPECT_EQ(artifacts[i].size, expected[i].size);
+    }
+  }
+  EXPECT_EQ(to.GetJob(succeeded.id)->state, JobState::kSucceeded);
+  EXPECT_EQ(to.GetJob(failed.id)->error->code, "invalid_input");
+
+  const StoreCopyReport again = CopyStore(from, to);
+  EXPECT_EQ(again.jobs + again.datasets, 0);
+  EXPECT_EQ(again.jobs_skipped, 5);
+  EXPECT_EQ(again.datasets_skipped, 2);
+
+  // The copied running job (its server stopped) counts as interrupted; the queued one is next.
+  EXPECT_EQ(to.RecoverExpiredLeases(3).requeued, std::vector<std::string>{running.id});
+  const auto next = to.ClaimNextJob(ClaimRequest{"pg:1", 60});
+  ASSERT_TRUE(next);
+  EXPECT_EQ(next->id, running.id);  // queued earlier than `queued`
+  EXPECT_EQ(next->attempts, 2);
+  EXPECT_EQ(to.ClaimNextJob(ClaimRequest{"pg:1", 60})->id, queued.id);
 }
 
 TEST(PostgresJobStoreTest, UnreachableServerIsAClearError) {

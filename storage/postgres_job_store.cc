@@ -433,7 +433,8 @@ std::vector<JobRecord> PostgresJobStore::ListJobs(const JobFilter& filter) {
           std::string("SELECT ") + kJobColumns +
               " FROM jobs WHERE ($1::TEXT IS NULL OR state = $1) AND ($2::TEXT IS NULL OR "
               "type = $2) AND ($3::TEXT IS NULL OR dataset_id = $3) "
-              "ORDER BY created_at DESC, seq DESC LIMIT $4",
+              "ORDER BY created_at DESC, seq DESC "
+              "LIMIT CASE WHEN $4::BIGINT < 0 THEN NULL ELSE $4::BIGINT END",
           {filter.state ? P(std::string(JobStateName(*filter.state))) : std::nullopt,
            P(filter.type), P(filter.dataset_id), P(int64_t{filter.limit})});
   std::vector<JobRecord> jobs;
@@ -655,6 +656,49 @@ int64_t PostgresJobStore::CountActiveJobs(const std::string& dataset_id) {
              "'running')",
              {P(dataset_id)})
       .Int(0, 0);
+}
+
+bool PostgresJobStore::ImportDataset(const DatasetRecord& dataset) {
+  Lease db = Borrow();
+  return Run(db.get(),
+             "INSERT INTO datasets(id, name, created_at) VALUES($1, $2, $3) "
+             "ON CONFLICT(id) DO NOTHING",
+             {P(dataset.id), P(dataset.name), P(dataset.created_at)})
+             .affected() > 0;
+}
+
+bool PostgresJobStore::ImportJob(const JobRecord& job, const std::optional<std::string>& result,
+                                 const std::vector<ArtifactRecord>& artifacts) {
+  Lease db = Borrow();
+  Transaction transaction(db.get());
+  const Result inserted =
+      Run(db.get(),
+          "INSERT INTO jobs(id, type, dataset_id, params, state, progress_fraction, "
+          "progress_stage, progress_message, eta_s, created_at, queued_at, started_at, "
+          "finished_at, attempts, error_code, error_message, result, cancel_requested, "
+          "worker_id, lease_token, lease_expires_at) VALUES($1, $2, $3, $4, $5, $6, $7, $8, $9, "
+          "$10, $10, $11, $12, $13, $14, $15, $16, $17, $18, $19, $20) "
+          "ON CONFLICT(id) DO NOTHING",
+          {P(job.id), P(job.type), P(job.dataset_id), P(job.params),
+           P(std::string(JobStateName(job.state))), P(job.progress.fraction),
+           P(job.progress.stage), P(job.progress.message), P(job.progress.eta_s),
+           P(job.created_at), P(job.started_at), P(job.finished_at), P(int64_t{job.attempts}),
+           job.error ? P(job.error->code) : std::nullopt,
+           job.error ? P(job.error->message) : std::nullopt, P(result),
+           P(int64_t{job.cancel_requested ? 1 : 0}), P(job.worker_id), P(job.lease_token),
+           P(job.lease_expires_at)});
+  if (inserted.affected() == 0) return false;
+  for (const ArtifactRecord& artifact : artifacts) {
+    Run(db.get(),
+        "INSERT INTO artifacts(job_id, name, path, size, sha256, content_type) "
+        "VALUES($1, $2, $3, $4, $5, $6)",
+        {P(job.id), P(artifact.name), P(artifact.path), P(artifact.size), P(artifact.sha256),
+         P(artifact.content_type)});
+  }
+  // A queued job copied in is work for the workers.
+  if (job.state == JobState::kQueued) Run(db.get(), std::string("NOTIFY ") + kChannel);
+  transaction.Commit();
+  return true;
 }
 
 void PostgresJobStore::RecordHeartbeat(const WorkerRecord& worker) {

@@ -73,6 +73,9 @@ class PostgresJobStore : public JobStore {
   RecoveryReport RecoverExpiredLeases(int max_attempts) override;
   std::map<JobState, int64_t> CountJobsByState() override;
   int64_t CountActiveJobs(const std::string& dataset_id) override;
+  bool ImportDataset(const DatasetRecord& dataset) override;
+  bool ImportJob(const JobRecord& job, const std::optional<std::string>& result,
+                 const std::vector<ArtifactRecord>& artifacts) override;
   void RecordHeartbeat(const WorkerRecord& worker) override;
   std::vector<WorkerRecord> ListWorkers(double seen_within_s) override;
   bool NotifiesQueueChanges() const override { return true; }

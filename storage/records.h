@@ -107,7 +107,7 @@ struct JobFilter {
   std::optional<JobState> state;
   std::optional<std::string> type;
   std::optional<std::string> dataset_id;
-  int limit = 1000;
+  int limit = 1000;  // negative: no limit
 };
 
 // What start-up recovery did with the jobs a crash left running.

@@ -488,6 +488,48 @@ RecoveryReport SqliteJobStore::RecoverRunning(int max_attempts,
   return report;
 }
 
+bool SqliteJobStore::ImportDataset(const DatasetRecord& dataset) {
+  std::lock_guard<std::mutex> lock(writer_mutex_);
+  Statement insert(*writer_,
+                   "INSERT OR IGNORE INTO datasets(id, name, created_at) VALUES(?,?,?)");
+  insert.Bind(1, dataset.id).Bind(2, dataset.name).Bind(3, dataset.created_at).Run();
+  return writer_->changes() > 0;
+}
+
+bool SqliteJobStore::ImportJob(const JobRecord& job, const std::optional<std::string>& result,
+                               const std::vector<ArtifactRecord>& artifacts) {
+  std::lock_guard<std::mutex> lock(writer_mutex_);
+  Transaction transaction(*writer_);
+  Statement insert(*writer_,
+                   "INSERT OR IGNORE INTO jobs(id, type, dataset_id, params, state, "
+                   "progress_fraction, progress_stage, progress_message, eta_s, created_at, "
+                   "queued_at, started_at, finished_at, attempts, error_code, error_message, "
+                   "result, cancel_requested, worker_id, lease_token, lease_expires_at) "
+                   "VALUES(?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)");
+  insert.Bind(1, job.id).Bind(2, job.type).Bind(3, job.dataset_id).Bind(4, job.params);
+  insert.Bind(5, std::string(JobStateName(job.state))).Bind(6, job.progress.fraction);
+  insert.Bind(7, job.progress.stage).Bind(8, job.progress.message).Bind(9, job.progress.eta_s);
+  insert.Bind(10, job.created_at).Bind(11, job.created_at).Bind(12, job.started_at);
+  insert.Bind(13, job.finished_at).Bind(14, job.attempts);
+  if (job.error) {
+    insert.Bind(15, job.error->code).Bind(16, job.error->message);
+  } else {
+    insert.BindNull(15).BindNull(16);
+  }
+  insert.Bind(17, result).Bind(18, job.cancel_requested ? 1 : 0).Bind(19, job.worker_id);
+  insert.Bind(20, job.lease_token).Bind(21, job.lease_expires_at).Run();
+  if (writer_->changes() == 0) return false;
+  for (const ArtifactRecord& artifact : artifacts) {
+    Statement add(*writer_,
+                  "INSERT INTO artifacts(job_id, name, path, size, sha256, content_type) "
+                  "VALUES(?,?,?,?,?,?)");
+    add.Bind(1, job.id).Bind(2, artifact.name).Bind(3, artifact.path).Bind(4, artifact.size);
+    add.Bind(5, artifact.sha256).Bind(6, artifact.content_type).Run();
+  }
+  transaction.Commit();
+  return true;
+}
+
 void SqliteJobStore::RecordHeartbeat(const WorkerRecord& worker) {
   std::lock_guard<std::mutex> lock(writer_mutex_);
   Statement upsert(*writer_,
