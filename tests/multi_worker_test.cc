@@ -302,6 +302,54 @@ TEST_F(MultiWorkerTest, StoppedWorkerDoesNotOverwriteTheTakeOver) {
   EXPECT_EQ(out->body, SleepJobOutput(64));
 }
 
+// A one-machine (SQLite) service's history moved to PostgreSQL with `omnirig store copy`: the
+// PostgreSQL-backed server then serves the same jobs, results and artifacts from the same folder.
+TEST_F(MultiWorkerTest, StoreCopyMovesAOneMachineServiceToPostgres) {
+  ServerProcess sqlite_server;
+  const int port = sqlite_server.Start({"--port", "0", "--data", data_.string(), "--workers", "1",
+                                        "--threads-per-job", "1", "--web", ""},
+                                       dir_.path() / "sqlite-server.log");
+  auto sqlite_client = MakeClient(port);
+  const std::string dataset = JsonOf(sqlite_client->Post(
+      "/api/v1/datasets", R"({"name": "history"})", "application/json"))["id"];
+  httplib::MultipartFormDataItems items = {{"files", PngBytes(64, 48), "cam0/a.png", "image/png"}};
+  ASSERT_EQ(
+      sqlite_client->Post(("/api/v1/datasets/" + dataset + "/images").c_str(), items)->status,
+      201);
+  const json params = {{"steps", 2}, {"step_ms", 1}, {"output_kb", 16}};
+  const std::string id = JsonOf(sqlite_client->Post(
+      "/api/v1/jobs",
+      json{{"type", "test_sleep"}, {"dataset", dataset}, {"params", params}}.dump(),
+      "application/json"))["id"];
+  const json done = WaitForJob(*sqlite_client, id, 30);
+  ASSERT_EQ(done["state"], "succeeded") << done.dump();
+  const std::string result = sqlite_client->Get(("/api/v1/jobs/" + id + "/result").c_str())->body;
+  sqlite_client.reset();
+  sqlite_server.Kill(SIGTERM);
+  ASSERT_EQ(sqlite_server.Wait(), 0);
+
+  const char* binary_dir = std::getenv("OMNIRIG_BINARY_DIR");
+  const fs::path omnirig = fs::path(binary_dir ? binary_dir : ".") / "server" / "omnirig";
+  const std::string copy = omnirig.string() + " store copy --from sqlite:" + data_.string() +
+                           " --to " + database_ + " > " + (dir_.path() / "copy.log").string();
+  ASSERT_EQ(std::system(copy.c_str()), 0) << ReadText(dir_.path() / "copy.log");
+  EXPECT_NE(ReadText(dir_.path() / "copy.log").find("copied 1 dataset(s) with 1 image record(s), "
+                                                    "1 job(s) with 3 artifact record(s)"),
+            std::string::npos)
+      << ReadText(dir_.path() / "copy.log");
+
+  const json copied = JsonOf(client_->Get(("/api/v1/jobs/" + id).c_str()));
+  EXPECT_EQ(copied["state"], "succeeded");
+  EXPECT_EQ(copied["params"], params);
+  EXPECT_EQ(client_->Get(("/api/v1/jobs/" + id + "/result").c_str())->body, result);
+  ASSERT_NO_FATAL_FAILURE(CheckArtifactsIntact(copied));
+  EXPECT_EQ(client_->Get(("/api/v1/jobs/" + id + "/artifacts/out.bin").c_str())->body,
+            SleepJobOutput(16));
+  const json images = JsonOf(client_->Get(("/api/v1/datasets/" + dataset).c_str()))["images"];
+  ASSERT_EQ(images.size(), 1u);
+  EXPECT_EQ(images[0]["name"], "cam0/a.png");
+}
+
 }  // namespace
 }  // namespace omnirig::testing
 
