@@ -108,8 +108,10 @@ void WorkerPool::Heartbeat() {
   }
   storage::WorkerRecord self{options_.worker_id, started_at_, 0, {}};
   for (const auto& [id, job] : running) {
+    if (job->ending) continue;
     try {
-      if (!store_.RenewLease(id, job->lease_token, options_.lease_s)) {
+      // Refused while `ending` is still false: our own end had not started, the lease is lost.
+      if (!store_.RenewLease(id, job->lease_token, options_.lease_s) && !job->ending) {
         // Stopped or cut off past the lease: the job was re-queued and may run elsewhere now.
         job->lease_lost = true;
         job->interrupt = true;
@@ -213,6 +215,7 @@ void WorkerPool::RunJob(const storage::JobRecord& job) {
     } catch (const std::exception&) {
     }
   }
+  running->ending = true;
   try {
     if (running->lease_lost) {
       // Another worker owns the job now; FinishJob would be refused anyway.

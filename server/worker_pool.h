@@ -73,6 +73,7 @@ class WorkerPool {
     std::atomic<bool> cancel{false};
     std::atomic<bool> interrupt{false};
     std::atomic<bool> lease_lost{false};
+    std::atomic<bool> ending{false};  // its end is being written: the heartbeat leaves it alone
   };
 
   void WorkerLoop();
