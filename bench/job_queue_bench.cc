@@ -135,8 +135,9 @@ pid_t StartWorkerProcess(const std::string& url, const fs::path& data, const std
     if (quiet >= 0) ::dup2(quiet, STDERR_FILENO);  // the table stays readable
     ::close(out[0]);
     const std::vector<std::string> args = {
-        "/proc/self/exe", "--worker", "--database", url, "--data", data.string(), "--threads",
-        "1", "--threads-per-job", "1", "--worker-nice", "0", "--worker-id", id};
+        "/proc/self/exe", "--worker", "--database",        url, "--data",        data.string(),
+        "--threads",      "1",        "--threads-per-job", "1", "--worker-nice", "0",
+        "--worker-id",    id};
     std::vector<char*> argv;
     for (const auto& arg : args) argv.push_back(const_cast<char*>(arg.c_str()));
     argv.push_back(nullptr);

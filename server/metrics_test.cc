@@ -42,11 +42,9 @@ TEST(MetricsTest, WorkersSeenAliveByHeartbeatWithTheirRunningJobs) {
   store.RecordHeartbeat(storage::WorkerRecord{"rig-b:9", now, 0, {}});
   text = metrics.Render(store, 0, 0);
   EXPECT_NE(text.find("\nomnirig_workers_alive 2\n"), std::string::npos) << text;
-  EXPECT_NE(text.find("\nomnirig_worker_running_jobs{worker=\"rig-a:17\"} 2\n"),
-            std::string::npos)
+  EXPECT_NE(text.find("\nomnirig_worker_running_jobs{worker=\"rig-a:17\"} 2\n"), std::string::npos)
       << text;
-  EXPECT_NE(text.find("\nomnirig_worker_running_jobs{worker=\"rig-b:9\"} 0\n"),
-            std::string::npos)
+  EXPECT_NE(text.find("\nomnirig_worker_running_jobs{worker=\"rig-b:9\"} 0\n"), std::string::npos)
       << text;
   metrics.SetWorkerAliveWindow(-1);  // a heartbeat from the future only: none alive
   EXPECT_NE(metrics.Render(store, 0, 0).find("\nomnirig_workers_alive 0\n"), std::string::npos);

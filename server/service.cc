@@ -44,9 +44,10 @@ int DefaultThreadsPerJob(int num_workers) {
 
 std::unique_ptr<storage::JobStore> OpenJobStore(const std::string& database,
                                                 const storage::DataDir& data_dir) {
-  if (storage::IsPostgresUrl(database)) return std::make_unique<storage::PostgresJobStore>(database);
-  OMNIRIG_CHECK(database.empty(), "unsupported --database '" << database
-                                                             << "' (expected postgresql://...)");
+  if (storage::IsPostgresUrl(database))
+    return std::make_unique<storage::PostgresJobStore>(database);
+  OMNIRIG_CHECK(database.empty(),
+                "unsupported --database '" << database << "' (expected postgresql://...)");
   return std::make_unique<storage::SqliteJobStore>(data_dir.DatabasePath().string());
 }
 

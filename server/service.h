@@ -24,7 +24,7 @@ struct ServiceOptions {
   std::string database;
   std::filesystem::path web_dir;  // static files; empty: none
   std::string token;              // bearer token; required for non-loopback hosts
-  int num_workers = 1;  // 0: API only (workers elsewhere, through PostgreSQL)
+  int num_workers = 1;            // 0: API only (workers elsewhere, through PostgreSQL)
   int threads_per_job = 1;
   double lease_s = 30;  // a claimed job's lease, renewed by the worker's heartbeat
   int http_threads = 128;

@@ -119,8 +119,7 @@ void WorkerPool::Heartbeat() {
         continue;
       }
     } catch (const std::exception& e) {
-      std::cerr << "omnirig: cannot renew the lease of job " << id << ": " << e.what()
-                << std::endl;
+      std::cerr << "omnirig: cannot renew the lease of job " << id << ": " << e.what() << std::endl;
     }
     self.running_jobs.push_back(id);
   }

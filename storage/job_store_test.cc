@@ -257,7 +257,6 @@ TYPED_TEST(JobStoreContractTest, SecondStoreSeesCancelAndProgressOfTheFirst) {
   EXPECT_EQ(api_side.GetJob(job.id)->state, JobState::kCanceled);
 }
 
-
 TYPED_TEST(JobStoreContractTest, ClaimLeasesTheJobToTheWorker) {
   auto owned = this->Open();
   JobStore& store = *owned;
@@ -492,9 +491,9 @@ TEST(StoreCopyTest, SqliteToPostgresKeepsEveryRecord) {
   const JobRecord queued = from.CreateJob("calibration", dataset.id, R"({"q":2})");
   JobOutcome ok;
   ok.result = R"({"rms_px":0.1})";
-  ok.artifacts = {ArtifactRecord{"log.txt", "jobs/x/attempt-1/log.txt", 5, "cc", "text/plain"},
-                  ArtifactRecord{"result.json", "jobs/x/attempt-1/result.json", 9, "dd",
-                                 "application/json"}};
+  ok.artifacts = {
+      ArtifactRecord{"log.txt", "jobs/x/attempt-1/log.txt", 5, "cc", "text/plain"},
+      ArtifactRecord{"result.json", "jobs/x/attempt-1/result.json", 9, "dd", "application/json"}};
   auto claim = from.ClaimNextJob(ClaimRequest{"box:1", 60});
   from.UpdateProgress(claim->id, JobProgress{0.5, "solve", "half", 2.0});
   ASSERT_TRUE(from.FinishJob(claim->id, claim->lease_token, ok));

@@ -202,8 +202,8 @@ constexpr char kDatasetSelect[] =
     "FROM datasets d LEFT JOIN images i ON i.dataset_id = d.id ";
 
 DatasetRecord ReadDataset(const Result& rows, int row) {
-  return DatasetRecord{rows.Text(row, 0), rows.Text(row, 1), rows.Double(row, 2),
-                       rows.Int(row, 3), rows.Int(row, 4)};
+  return DatasetRecord{rows.Text(row, 0), rows.Text(row, 1), rows.Double(row, 2), rows.Int(row, 3),
+                       rows.Int(row, 4)};
 }
 
 ImageRecord ReadImage(const Result& rows, int row) {
@@ -223,7 +223,8 @@ PGconn* Connect(const std::string& url) {
     throw PostgresError("cannot connect to PostgreSQL: " + message);
   }
   // Notices (e.g. "relation already exists, skipping") are not errors; keep stderr quiet.
-  PQsetNoticeProcessor(db, [](void*, const char*) {}, nullptr);
+  PQsetNoticeProcessor(
+      db, [](void*, const char*) {}, nullptr);
   return db;
 }
 
@@ -368,8 +369,8 @@ void PostgresJobStore::PutImages(const std::string& dataset_id,
         "VALUES($1, $2, $3, $4, $5, $6, $7) ON CONFLICT(dataset_id, name) DO UPDATE SET "
         "size = EXCLUDED.size, sha256 = EXCLUDED.sha256, width = EXCLUDED.width, "
         "height = EXCLUDED.height, content_type = EXCLUDED.content_type",
-        {P(dataset_id), P(image.name), P(image.size), P(image.sha256),
-         P(int64_t{image.width}), P(int64_t{image.height}), P(image.content_type)});
+        {P(dataset_id), P(image.name), P(image.size), P(image.sha256), P(int64_t{image.width}),
+         P(int64_t{image.height}), P(image.content_type)});
   }
   transaction.Commit();
 }
@@ -597,13 +598,13 @@ RecoveryReport PostgresJobStore::RecoverRunning(int max_attempts, bool only_expi
   Lease db = Borrow();
   Transaction transaction(db.get());
   // SKIP LOCKED: a job being finished or renewed right now is not expired; leave it.
-  const Result running = Run(
-      db.get(),
-      std::string("SELECT id, attempts, cancel_requested FROM jobs WHERE state = 'running' ") +
-          (only_expired ? std::string("AND (lease_expires_at IS NULL OR lease_expires_at <= ") +
-                              kDbNow + ") "
-                        : std::string()) +
-          "ORDER BY seq FOR UPDATE SKIP LOCKED");
+  const Result running =
+      Run(db.get(),
+          std::string("SELECT id, attempts, cancel_requested FROM jobs WHERE state = 'running' ") +
+              (only_expired ? std::string("AND (lease_expires_at IS NULL OR lease_expires_at <= ") +
+                                  kDbNow + ") "
+                            : std::string()) +
+              "ORDER BY seq FOR UPDATE SKIP LOCKED");
   RecoveryReport report;
   const double now = NowSeconds();
   for (int row = 0; row < running.rows(); ++row) {
@@ -679,13 +680,25 @@ bool PostgresJobStore::ImportJob(const JobRecord& job, const std::optional<std::
           "worker_id, lease_token, lease_expires_at) VALUES($1, $2, $3, $4, $5, $6, $7, $8, $9, "
           "$10, $10, $11, $12, $13, $14, $15, $16, $17, $18, $19, $20) "
           "ON CONFLICT(id) DO NOTHING",
-          {P(job.id), P(job.type), P(job.dataset_id), P(job.params),
-           P(std::string(JobStateName(job.state))), P(job.progress.fraction),
-           P(job.progress.stage), P(job.progress.message), P(job.progress.eta_s),
-           P(job.created_at), P(job.started_at), P(job.finished_at), P(int64_t{job.attempts}),
+          {P(job.id),
+           P(job.type),
+           P(job.dataset_id),
+           P(job.params),
+           P(std::string(JobStateName(job.state))),
+           P(job.progress.fraction),
+           P(job.progress.stage),
+           P(job.progress.message),
+           P(job.progress.eta_s),
+           P(job.created_at),
+           P(job.started_at),
+           P(job.finished_at),
+           P(int64_t{job.attempts}),
            job.error ? P(job.error->code) : std::nullopt,
-           job.error ? P(job.error->message) : std::nullopt, P(result),
-           P(int64_t{job.cancel_requested ? 1 : 0}), P(job.worker_id), P(job.lease_token),
+           job.error ? P(job.error->message) : std::nullopt,
+           P(result),
+           P(int64_t{job.cancel_requested ? 1 : 0}),
+           P(job.worker_id),
+           P(job.lease_token),
            P(job.lease_expires_at)});
   if (inserted.affected() == 0) return false;
   for (const ArtifactRecord& artifact : artifacts) {

@@ -109,7 +109,7 @@ PostgresTestServer::PostgresTestServer(const PostgresTestServerOptions& options)
   }
   StartReaper();
   const fs::path data = dir_ / "data";
-  const fs::path log = dir_ / "commands.log";  // written by this process
+  const fs::path log = dir_ / "commands.log";       // written by this process
   const fs::path server_log = dir_ / "server.log";  // written by the server's user
   if (RunLogged(AsServerUser({(bin_dir_ / "initdb").string(), "-D", data.string(), "-A", "trust",
                               "-U", "postgres", "-E", "UTF8", "--locale=C", "--no-sync"}),
@@ -124,9 +124,10 @@ PostgresTestServer::PostgresTestServer(const PostgresTestServerOptions& options)
         "-p " + std::to_string(port_) + " -k " + dir_.string() +
         " -c listen_addresses=127.0.0.1 -c max_connections=200 -c fsync=" +
         (options.fsync ? "on" : "off") + (options.fsync ? "" : " -c synchronous_commit=off");
-    if (RunLogged(AsServerUser({(bin_dir_ / "pg_ctl").string(), "-D", data.string(), "-l",
-                                server_log.string(), "-o", server_options, "-w", "-t", "60", "start"}),
-                  log) == 0) {
+    if (RunLogged(
+            AsServerUser({(bin_dir_ / "pg_ctl").string(), "-D", data.string(), "-l",
+                          server_log.string(), "-o", server_options, "-w", "-t", "60", "start"}),
+            log) == 0) {
       return;
     }
   }

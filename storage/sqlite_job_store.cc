@@ -351,11 +351,12 @@ bool SqliteJobStore::FinishJob(const std::string& id, const std::string& lease_t
                                const JobOutcome& outcome) {
   std::lock_guard<std::mutex> lock(writer_mutex_);
   Transaction transaction(*writer_);
-  Statement finish(*writer_,
-                   "UPDATE jobs SET state = ?, finished_at = ?, error_code = ?, error_message = ?, "
-                   "result = ?, eta_s = NULL, progress_fraction = CASE WHEN ? THEN 1 ELSE "
-                   "progress_fraction END, lease_expires_at = NULL WHERE id = ? AND state = 'running' AND "
-                   "lease_token = ?");
+  Statement finish(
+      *writer_,
+      "UPDATE jobs SET state = ?, finished_at = ?, error_code = ?, error_message = ?, "
+      "result = ?, eta_s = NULL, progress_fraction = CASE WHEN ? THEN 1 ELSE "
+      "progress_fraction END, lease_expires_at = NULL WHERE id = ? AND state = 'running' AND "
+      "lease_token = ?");
   finish.Bind(1, std::string(JobStateName(outcome.state))).Bind(2, NowSeconds());
   if (outcome.error) {
     finish.Bind(3, outcome.error->code).Bind(4, outcome.error->message);
@@ -490,8 +491,7 @@ RecoveryReport SqliteJobStore::RecoverRunning(int max_attempts,
 
 bool SqliteJobStore::ImportDataset(const DatasetRecord& dataset) {
   std::lock_guard<std::mutex> lock(writer_mutex_);
-  Statement insert(*writer_,
-                   "INSERT OR IGNORE INTO datasets(id, name, created_at) VALUES(?,?,?)");
+  Statement insert(*writer_, "INSERT OR IGNORE INTO datasets(id, name, created_at) VALUES(?,?,?)");
   insert.Bind(1, dataset.id).Bind(2, dataset.name).Bind(3, dataset.created_at).Run();
   return writer_->changes() > 0;
 }
@@ -548,8 +548,8 @@ std::vector<WorkerRecord> SqliteJobStore::ListWorkers(double seen_within_s) {
   select.Bind(1, NowSeconds() - seen_within_s);
   std::vector<WorkerRecord> workers;
   while (select.Step()) {
-    workers.push_back(WorkerRecord{select.Text(0), select.Double(1), select.Double(2),
-                                   SplitIds(select.Text(3))});
+    workers.push_back(
+        WorkerRecord{select.Text(0), select.Double(1), select.Double(2), SplitIds(select.Text(3))});
   }
   return workers;
 }

@@ -14,7 +14,7 @@ namespace omnirig::storage {
 
 struct StoreCopyReport {
   int64_t datasets = 0, images = 0, jobs = 0, artifacts = 0;  // copied
-  int64_t datasets_skipped = 0, jobs_skipped = 0;              // already in the destination
+  int64_t datasets_skipped = 0, jobs_skipped = 0;             // already in the destination
 };
 
 StoreCopyReport CopyStore(JobStore& from, JobStore& to);

@@ -112,9 +112,18 @@ class MultiWorkerTest : public ::testing::Test {
   std::string StartWorker(size_t index, const std::vector<std::string>& extra = {}) {
     if (workers_.size() <= index) workers_.resize(index + 1);
     const std::string id = "w" + std::to_string(index) + "-" + std::to_string(++generation_);
-    std::vector<std::string> args = {"--database", database_, "--data",  data_.string(),
-                                     "--threads",  "1",       "--threads-per-job", "1",
-                                     "--worker-id", id,       "--lease-seconds", "2"};
+    std::vector<std::string> args = {"--database",
+                                     database_,
+                                     "--data",
+                                     data_.string(),
+                                     "--threads",
+                                     "1",
+                                     "--threads-per-job",
+                                     "1",
+                                     "--worker-id",
+                                     id,
+                                     "--lease-seconds",
+                                     "2"};
     args.insert(args.end(), extra.begin(), extra.end());
     workers_[index] = std::make_unique<WorkerProcess>();
     workers_[index]->Start(args, dir_.path() / (id + ".log"));
@@ -123,8 +132,8 @@ class MultiWorkerTest : public ::testing::Test {
   }
 
   std::string CreateDataset(const std::string& name) {
-    return JsonOf(client_->Post("/api/v1/datasets", json{{"name", name}}.dump(),
-                                "application/json"))["id"];
+    return JsonOf(
+        client_->Post("/api/v1/datasets", json{{"name", name}}.dump(), "application/json"))["id"];
   }
 
   std::string Submit(const json& body) {
@@ -186,8 +195,8 @@ TEST_F(MultiWorkerTest, KilledWorkersLoseNothingAndRunNothingTwice) {
   httplib::MultipartFormDataItems items;
   for (const auto& entry : fs::directory_iterator(dir_.path() / "boards")) {
     if (entry.path().extension() != ".png") continue;
-    items.push_back({"files", ReadText(entry.path()), entry.path().filename().string(),
-                     "image/png"});
+    items.push_back(
+        {"files", ReadText(entry.path()), entry.path().filename().string(), "image/png"});
   }
   const auto upload = client_->Post(("/api/v1/datasets/" + dataset + "/images").c_str(), items);
   ASSERT_EQ(upload->status, 201) << upload->body;
@@ -196,7 +205,8 @@ TEST_F(MultiWorkerTest, KilledWorkersLoseNothingAndRunNothingTwice) {
   const json board = {{"type", "checkerboard"}, {"cols", 8}, {"rows", 6}, {"square_size_mm", 40}};
   std::vector<std::string> ids;
   for (int i = 0; i < num_jobs; ++i) {
-    ids.push_back(Submit({{"type", "calibration"}, {"dataset", dataset}, {"params", {{"board", board}}}}));
+    ids.push_back(
+        Submit({{"type", "calibration"}, {"dataset", dataset}, {"params", {{"board", board}}}}));
   }
 
   // Kill a random worker once one of its jobs has made progress, after every 3 finished jobs.
@@ -310,16 +320,14 @@ TEST_F(MultiWorkerTest, StoreCopyMovesAOneMachineServiceToPostgres) {
                                         "--threads-per-job", "1", "--web", ""},
                                        dir_.path() / "sqlite-server.log");
   auto sqlite_client = MakeClient(port);
-  const std::string dataset = JsonOf(sqlite_client->Post(
-      "/api/v1/datasets", R"({"name": "history"})", "application/json"))["id"];
+  const std::string dataset = JsonOf(
+      sqlite_client->Post("/api/v1/datasets", R"({"name": "history"})", "application/json"))["id"];
   httplib::MultipartFormDataItems items = {{"files", PngBytes(64, 48), "cam0/a.png", "image/png"}};
-  ASSERT_EQ(
-      sqlite_client->Post(("/api/v1/datasets/" + dataset + "/images").c_str(), items)->status,
-      201);
+  ASSERT_EQ(sqlite_client->Post(("/api/v1/datasets/" + dataset + "/images").c_str(), items)->status,
+            201);
   const json params = {{"steps", 2}, {"step_ms", 1}, {"output_kb", 16}};
   const std::string id = JsonOf(sqlite_client->Post(
-      "/api/v1/jobs",
-      json{{"type", "test_sleep"}, {"dataset", dataset}, {"params", params}}.dump(),
+      "/api/v1/jobs", json{{"type", "test_sleep"}, {"dataset", dataset}, {"params", params}}.dump(),
       "application/json"))["id"];
   const json done = WaitForJob(*sqlite_client, id, 30);
   ASSERT_EQ(done["state"], "succeeded") << done.dump();
@@ -333,8 +341,9 @@ TEST_F(MultiWorkerTest, StoreCopyMovesAOneMachineServiceToPostgres) {
   const std::string copy = omnirig.string() + " store copy --from sqlite:" + data_.string() +
                            " --to " + database_ + " > " + (dir_.path() / "copy.log").string();
   ASSERT_EQ(std::system(copy.c_str()), 0) << ReadText(dir_.path() / "copy.log");
-  EXPECT_NE(ReadText(dir_.path() / "copy.log").find("copied 1 dataset(s) with 1 image record(s), "
-                                                    "1 job(s) with 3 artifact record(s)"),
+  EXPECT_NE(ReadText(dir_.path() / "copy.log")
+                .find("copied 1 dataset(s) with 1 image record(s), "
+                      "1 job(s) with 3 artifact record(s)"),
             std::string::npos)
       << ReadText(dir_.path() / "copy.log");
 
