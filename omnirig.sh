@@ -16,7 +16,7 @@ ROOT=$(pwd)
 APT_PACKAGES=(build-essential cmake ninja-build ccache pkg-config git
   libeigen3-dev libopencv-dev libopencv-contrib-dev libceres-dev libcpp-httplib-dev
   nlohmann-json3-dev libsqlite3-dev sqlite3 googletest libgtest-dev libbenchmark-dev
-  libssl-dev nodejs npm chromium curl jq)
+  libssl-dev nodejs npm chromium curl jq postgresql libpq-dev)
 JOBS=${OMNIRIG_JOBS:-$(nproc)}
 # Cache compiles by paths relative to the checkout, so that a second clone reuses them.
 export CCACHE_BASEDIR="$ROOT"

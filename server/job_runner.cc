@@ -37,7 +37,12 @@ class JobLog {
     if (!file_) return;
     std::fclose(file_);
     file_ = nullptr;
-    storage::FsyncPath(path_);
+    try {
+      storage::FsyncPath(path_);
+    } catch (const std::exception&) {
+      // The folder is gone: the attempt lost its lease and the run that took the job over
+      // removed it. Nothing of this attempt is recorded, so nothing needs the log on disk.
+    }
   }
 
  private:
@@ -230,19 +235,6 @@ std::vector<storage::ArtifactRecord> CollectArtifacts(const fs::path& dir,
   return artifacts;
 }
 
-namespace {
-
-// Output folders of earlier attempts (interrupted by a crash or a drain) hold nothing the
-// records point to once this attempt has ended.
-void RemoveOtherAttempts(const fs::path& job_dir, const fs::path& keep) {
-  std::error_code error;
-  for (const auto& entry : fs::directory_iterator(job_dir, error)) {
-    if (entry.path() != keep) fs::remove_all(entry.path(), error);
-  }
-}
-
-}  // namespace
-
 storage::JobOutcome RunJobAttempt(const storage::JobRecord& job, storage::JobStore& store,
                                   const storage::DataDir& data_dir, const JobRunOptions& options,
                                   const JobRunFlags& flags) {
@@ -297,8 +289,15 @@ storage::JobOutcome RunJobAttempt(const storage::JobRecord& job, storage::JobSto
       outcome = Failed("job_failed", std::string("cannot record the log: ") + e.what());
     }
   }
-  RemoveOtherAttempts(data_dir.JobDir(job.id), output_dir);
   return outcome;
+}
+
+void RemoveOtherAttempts(const storage::DataDir& data_dir, const storage::JobRecord& job) {
+  const fs::path keep = data_dir.AttemptDir(job.id, job.attempts);
+  std::error_code error;
+  for (const auto& entry : fs::directory_iterator(data_dir.JobDir(job.id), error)) {
+    if (entry.path() != keep) fs::remove_all(entry.path(), error);
+  }
 }
 
 }  // namespace omnirig::server

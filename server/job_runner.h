@@ -32,6 +32,12 @@ storage::JobOutcome RunJobAttempt(const storage::JobRecord& job, storage::JobSto
                                   const storage::DataDir& data_dir, const JobRunOptions& options,
                                   const JobRunFlags& flags);
 
+// Removes the output folders of the job's other attempts (interrupted by a crash, a drain or a
+// lost lease): they hold nothing the records point to. Called only once the store accepted this
+// attempt's end, so a worker that lost its lease never removes the folder of the run that took
+// its job over.
+void RemoveOtherAttempts(const storage::DataDir& data_dir, const storage::JobRecord& job);
+
 // Every regular file under `dir` as an artifact (name relative to dir), fsynced and hashed.
 std::vector<storage::ArtifactRecord> CollectArtifacts(const std::filesystem::path& dir,
                                                       const std::filesystem::path& data_root);

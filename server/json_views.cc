@@ -43,6 +43,8 @@ nlohmann::json JobJson(const storage::JobRecord& job) {
       {"finished_at", api::TimeJson(job.finished_at)},
       {"attempts", job.attempts},
       {"cancel_requested", job.cancel_requested},
+      // The worker that ran (or runs) the job's last attempt ("HOST:PID"), null before any claim.
+      {"worker", job.worker_id.empty() ? nlohmann::json(nullptr) : nlohmann::json(job.worker_id)},
       {"error", nullptr}};
   if (job.error) json["error"] = {{"code", job.error->code}, {"message", job.error->message}};
   return json;

@@ -18,6 +18,10 @@ struct Command {
 
 const Command kCommands[] = {
     {"serve", "run the HTTP service (REST API, job workers, web page)", omnirig::cli::RunServe},
+    {"worker", "run jobs from a PostgreSQL job store shared by several machines",
+     omnirig::cli::RunWorker},
+    {"store", "store copy: move a service's records from SQLite to PostgreSQL",
+     omnirig::cli::RunStore},
     {"synth", "render synthetic omnidirectional images with ground truth", omnirig::cli::RunSynth},
     {"calibrate", "calibrate one catadioptric camera from board images",
      omnirig::cli::RunCalibrate},

@@ -82,6 +82,16 @@ std::string Metrics::Render(storage::JobStore& store, int busy_workers, int num_
   out << "# HELP omnirig_workers_busy Workers running a job in this process.\n"
       << "# TYPE omnirig_workers_busy gauge\nomnirig_workers_busy " << busy_workers << "\n"
       << "# TYPE omnirig_workers gauge\nomnirig_workers " << num_workers << "\n";
+  // Every worker process sharing the store (this one's included), by heartbeat.
+  const auto alive = store.ListWorkers(worker_alive_window_s_);
+  out << "# HELP omnirig_workers_alive Worker processes whose heartbeat was seen within the "
+      << "lease.\n# TYPE omnirig_workers_alive gauge\nomnirig_workers_alive " << alive.size()
+      << "\n# HELP omnirig_worker_running_jobs Jobs each live worker process was running at its "
+      << "last heartbeat.\n# TYPE omnirig_worker_running_jobs gauge\n";
+  for (const storage::WorkerRecord& worker : alive) {
+    out << "omnirig_worker_running_jobs{worker=\"" << Escape(worker.id) << "\"} "
+        << worker.running_jobs.size() << "\n";
+  }
   out << "# HELP omnirig_http_open_connections Open HTTP connections, idle keep-alive ones "
       << "included.\n# TYPE omnirig_http_open_connections gauge\nomnirig_http_open_connections "
       << (open_connections_ ? open_connections_() : 0) << "\n";

@@ -25,6 +25,9 @@ class Metrics {
   // Where the omnirig_http_open_connections gauge reads its value when the page is rendered
   // (HttpServer::OpenConnections); 0 until set. Set before serving starts.
   void SetOpenConnectionsGauge(std::function<int64_t()> open_connections);
+  // A worker counts as alive while its last heartbeat is at most this old (the lease: workers
+  // heartbeat three times per lease).
+  void SetWorkerAliveWindow(double seconds) { worker_alive_window_s_ = seconds; }
   // The whole exposition text; `busy_workers` is the number of jobs running in this process.
   std::string Render(storage::JobStore& store, int busy_workers, int num_workers) const;
 
@@ -35,6 +38,7 @@ class Metrics {
     int64_t count = 0;
   };
   std::function<int64_t()> open_connections_;
+  double worker_alive_window_s_ = 30;
   mutable std::mutex mutex_;
   std::vector<double> request_bounds_s_, job_bounds_s_;
   std::map<std::pair<std::string, int>, int64_t> requests_;

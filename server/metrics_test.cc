@@ -31,5 +31,24 @@ TEST(MetricsTest, OpenConnectionsGaugeReadsItsSourceWhenRendered) {
   EXPECT_NE(text.find("# HELP omnirig_http_open_connections "), std::string::npos);
 }
 
+TEST(MetricsTest, WorkersSeenAliveByHeartbeatWithTheirRunningJobs) {
+  storage::testing::TempDir dir;
+  storage::SqliteJobStore store((dir.path() / "db.sqlite").string());
+  Metrics metrics;
+  std::string text = metrics.Render(store, 0, 0);
+  EXPECT_NE(text.find("\nomnirig_workers_alive 0\n"), std::string::npos) << text;
+  const double now = storage::NowSeconds();
+  store.RecordHeartbeat(storage::WorkerRecord{"rig-a:17", now, 0, {"j1", "j2"}});
+  store.RecordHeartbeat(storage::WorkerRecord{"rig-b:9", now, 0, {}});
+  text = metrics.Render(store, 0, 0);
+  EXPECT_NE(text.find("\nomnirig_workers_alive 2\n"), std::string::npos) << text;
+  EXPECT_NE(text.find("\nomnirig_worker_running_jobs{worker=\"rig-a:17\"} 2\n"), std::string::npos)
+      << text;
+  EXPECT_NE(text.find("\nomnirig_worker_running_jobs{worker=\"rig-b:9\"} 0\n"), std::string::npos)
+      << text;
+  metrics.SetWorkerAliveWindow(-1);  // a heartbeat from the future only: none alive
+  EXPECT_NE(metrics.Render(store, 0, 0).find("\nomnirig_workers_alive 0\n"), std::string::npos);
+}
+
 }  // namespace
 }  // namespace omnirig::server

@@ -25,11 +25,15 @@ void DeclareOptions(cli::ArgParser& parser) {
   parser.AddOption("host", "127.0.0.1", "address to bind (non-loopback needs --token)");
   parser.AddOption("port", "8080", "TCP port (0 picks a free one, printed on stdout)");
   parser.AddOption("data", "./data", "folder holding the SQLite database and all files");
+  parser.AddOption("database", "",
+                   "job store shared with other machines: postgresql://USER@HOST:PORT/DB "
+                   "(default: SQLite under --data; see docs/multi-machine.md)");
   parser.AddOption("web", OMNIRIG_WEB_DIR, "folder of the web page's static files");
   parser.AddOption("token", "",
                    "bearer token required for every API call (default: $OMNIRIG_TOKEN)");
   parser.AddOption("workers", std::to_string(DefaultWorkers()),
-                   "jobs run at the same time (half the cores by default)");
+                   "jobs run at the same time (half the cores by default; 0: API only, jobs "
+                   "run by `omnirig worker` processes)");
   parser.AddOption("threads-per-job", "", "solver threads per job (default: cores / workers)");
   parser.AddOption("http-threads", "256",
                    "HTTP threads: one per open connection (keep-alive clients and event streams "
@@ -47,6 +51,8 @@ void DeclareOptions(cli::ArgParser& parser) {
                    "when nothing else on the machine wants the CPU)");
   parser.AddOption("max-attempts", "3",
                    "runs a job may start before crashes make it fail ('interrupted')");
+  parser.AddOption("lease-seconds", "30",
+                   "a running job's lease: a worker silent this long loses the job to another");
   parser.AddOption("max-file-mb", "256", "largest image upload, MB");
   parser.AddOption("max-dataset-mb", "8192", "largest dataset, MB");
   parser.AddOption("max-images", "20000", "most images in one dataset");
@@ -76,6 +82,7 @@ ServiceOptions ToOptions(const cli::ArgParser& parser) {
   options.host = parser.Get("host");
   options.port = parser.GetInt("port");
   options.data_dir = parser.Get("data");
+  options.database = parser.Get("database");
   options.web_dir = parser.Get("web");
   options.token = parser.Get("token");
   if (options.token.empty() && std::getenv("OMNIRIG_TOKEN")) {
@@ -95,6 +102,7 @@ ServiceOptions ToOptions(const cli::ArgParser& parser) {
   options.worker_nice = parser.GetInt("worker-nice");
   options.worker_idle_scheduling = OneOf(parser, "worker-sched", "idle", "normal") == "idle";
   options.max_attempts = parser.GetInt("max-attempts");
+  options.lease_s = parser.GetDouble("lease-seconds");
   options.max_file_bytes = Megabytes(parser, "max-file-mb");
   options.max_dataset_bytes = Megabytes(parser, "max-dataset-mb");
   options.max_images_per_dataset = parser.GetInt("max-images");
@@ -109,6 +117,8 @@ extern "C" void OnStopSignal(int signal_number) {
   const char byte = static_cast<char>(signal_number);
   [[maybe_unused]] const ssize_t ignored = ::write(signal_pipe[1], &byte, 1);
 }
+
+}  // namespace
 
 void InstallStopSignalHandlers() {
   if (::pipe2(signal_pipe, O_CLOEXEC) != 0) throw std::runtime_error("cannot create a pipe");
@@ -133,8 +143,6 @@ int WaitForSignal() {
   }
   return byte;
 }
-
-}  // namespace
 
 int ServeCommand(const std::vector<std::string>& args) {
   cli::ArgParser parser("serve",

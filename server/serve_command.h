@@ -6,6 +6,11 @@
 
 namespace omnirig::server {
 
+// SIGTERM and SIGINT, from any thread, wake WaitForSignal (which returns the signal number).
+// Shared by `omnirig serve` and `omnirig worker`.
+void InstallStopSignalHandlers();
+int WaitForSignal();
+
 // Runs the service until SIGTERM or SIGINT; returns the process exit code. Prints
 // "omnirig listening on http://HOST:PORT" on stdout once the port is bound (with --port 0 the
 // line names the port the system chose).

@@ -6,13 +6,18 @@
 #include "api/job_types.h"
 #include "engine/util/check.h"
 #include "server/sample_job.h"
+#include "storage/postgres_job_store.h"
+#include "storage/sqlite_job_store.h"
 
 namespace omnirig::server {
 
 void ServiceOptions::Check() const {
   OMNIRIG_CHECK(port >= 0 && port <= 65535, "--port must be in [0, 65535], got " << port);
   OMNIRIG_CHECK(!data_dir.empty(), "--data must name a folder");
-  OMNIRIG_CHECK(num_workers >= 1 && num_workers <= 256, "--workers must be in [1, 256]");
+  OMNIRIG_CHECK(num_workers >= 0 && num_workers <= 256, "--workers must be in [0, 256]");
+  OMNIRIG_CHECK(database.empty() || storage::IsPostgresUrl(database),
+                "--database must be a postgresql:// URL (or omitted for SQLite under --data)");
+  OMNIRIG_CHECK(lease_s > 0, "--lease-seconds must be positive");
   OMNIRIG_CHECK(threads_per_job >= 1, "--threads-per-job must be at least 1");
   OMNIRIG_CHECK(http_threads >= 2, "--http-threads must be at least 2");
   OMNIRIG_CHECK(max_connections >= 0, "--max-connections must not be negative");
@@ -36,6 +41,15 @@ int DefaultWorkers() {
 int DefaultThreadsPerJob(int num_workers) {
   const int cores = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
   return std::max(1, cores / std::max(1, num_workers));
+}
+
+std::unique_ptr<storage::JobStore> OpenJobStore(const std::string& database,
+                                                const storage::DataDir& data_dir) {
+  if (storage::IsPostgresUrl(database))
+    return std::make_unique<storage::PostgresJobStore>(database);
+  OMNIRIG_CHECK(database.empty(),
+                "unsupported --database '" << database << "' (expected postgresql://...)");
+  return std::make_unique<storage::SqliteJobStore>(data_dir.DatabasePath().string());
 }
 
 namespace {
@@ -65,13 +79,23 @@ Service::Service(const ServiceOptions& options) : state_(std::make_unique<Servic
   state.options = options;
   state.started_at = storage::NowSeconds();
   state.data_dir = std::make_unique<storage::DataDir>(options.data_dir);
-  state.store = std::make_unique<storage::SqliteJobStore>(state.data_dir->DatabasePath().string());
-  state.consistency = storage::CheckConsistency(*state.data_dir, *state.store);
-  if (state.consistency.integrity != "ok") {
-    throw std::runtime_error("the database " + state.data_dir->DatabasePath().string() +
-                             " fails its integrity check: " + state.consistency.integrity);
+  state.store = OpenJobStore(options.database, *state.data_dir);
+  if (options.database.empty()) {
+    state.consistency = storage::CheckConsistency(*state.data_dir, *state.store);
+  } else {
+    // A shared store and folder: other processes are writing right now (temporary files,
+    // new datasets), so start-up repairs would race them. Only the store's check runs.
+    state.consistency.integrity = state.store->IntegrityCheck();
   }
-  state.recovery = state.store->RecoverInterruptedJobs(options.max_attempts);
+  if (state.consistency.integrity != "ok") {
+    throw std::runtime_error("the job store fails its integrity check: " +
+                             state.consistency.integrity);
+  }
+  // SQLite is this process's alone: whatever it left running was interrupted. PostgreSQL is
+  // shared: only jobs whose lease expired are (the others run on live workers elsewhere).
+  state.recovery = options.database.empty()
+                       ? state.store->RecoverInterruptedJobs(options.max_attempts)
+                       : state.store->RecoverExpiredLeases(options.max_attempts);
   state.events = std::make_unique<JobEvents>(*state.store);
   PrintStartupReport(state);
   WorkerPoolOptions pool_options;
@@ -83,6 +107,11 @@ Service::Service(const ServiceOptions& options) : state_(std::make_unique<Servic
   pool_options.on_job_changed = [events = state.events.get()](const std::string& id) {
     events->Changed(id);
   };
+  pool_options.lease_s = options.lease_s;
+  pool_options.max_attempts = options.max_attempts;
+  // NOTIFY wakes idle workers at once; the poll only covers a lost notification.
+  if (state.store->NotifiesQueueChanges()) pool_options.idle_poll_s = 5;
+  state.metrics.SetWorkerAliveWindow(options.lease_s);
   state.workers =
       std::make_unique<WorkerPool>(*state.store, *state.data_dir, state.metrics, pool_options);
 

@@ -12,7 +12,7 @@
 #include "server/metrics.h"
 #include "server/worker_pool.h"
 #include "storage/data_dir.h"
-#include "storage/sqlite_job_store.h"
+#include "storage/job_store.h"
 
 namespace omnirig::server {
 
@@ -20,10 +20,14 @@ struct ServiceOptions {
   std::string host = "127.0.0.1";
   int port = 8080;  // 0 picks a free port
   std::filesystem::path data_dir = "./data";
+  // The job store: empty for SQLite under data_dir (one machine), or a PostgreSQL URL shared by
+  // the API servers and workers of several machines (postgresql://USER@HOST:PORT/DB).
+  std::string database;
   std::filesystem::path web_dir;  // static files; empty: none
   std::string token;              // bearer token; required for non-loopback hosts
-  int num_workers = 1;
+  int num_workers = 1;            // 0: API only (workers elsewhere, through PostgreSQL)
   int threads_per_job = 1;
+  double lease_s = 30;  // a claimed job's lease, renewed by the worker's heartbeat
   int http_threads = 256;   // one per open connection (see HttpServerOptions)
   int max_connections = 0;  // open HTTP connections at most, then 503 (0: no cap; see serve)
   bool worker_idle_scheduling = false;  // SCHED_IDLE for worker (and solver) threads
@@ -42,12 +46,15 @@ struct ServiceOptions {
 int DefaultWorkers();
 // Cores per job: the machine's cores shared among the workers.
 int DefaultThreadsPerJob(int num_workers);
+// The job store `database` names (see ServiceOptions::database), migrated.
+std::unique_ptr<storage::JobStore> OpenJobStore(const std::string& database,
+                                                const storage::DataDir& data_dir);
 
 // Shared by the route files.
 struct ServiceState {
   ServiceOptions options;
   std::unique_ptr<storage::DataDir> data_dir;
-  std::unique_ptr<storage::SqliteJobStore> store;
+  std::unique_ptr<storage::JobStore> store;
   std::unique_ptr<JobEvents> events;  // GET /api/v1/events
   Metrics metrics;
   std::unique_ptr<WorkerPool> workers;

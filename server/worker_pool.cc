@@ -15,21 +15,34 @@
 namespace omnirig::server {
 
 void WorkerPoolOptions::Check() const {
-  OMNIRIG_CHECK(num_workers >= 1, "--workers must be at least 1, got " << num_workers);
+  OMNIRIG_CHECK(num_workers >= 0, "--workers must not be negative, got " << num_workers);
   OMNIRIG_CHECK(threads_per_job >= 1, "threads per job must be at least 1");
   OMNIRIG_CHECK(progress_interval_s >= 0 && idle_poll_s > 0, "invalid worker intervals");
+  OMNIRIG_CHECK(lease_s > 0, "--lease-seconds must be positive, got " << lease_s);
+  OMNIRIG_CHECK(max_attempts >= 1, "--max-attempts must be at least 1");
+}
+
+std::string DefaultWorkerId() {
+  char host[256] = {};
+  if (::gethostname(host, sizeof(host) - 1) != 0) std::strcpy(host, "localhost");
+  return std::string(host) + ":" + std::to_string(::getpid());
 }
 
 WorkerPool::WorkerPool(storage::JobStore& store, const storage::DataDir& data_dir, Metrics& metrics,
                        const WorkerPoolOptions& options)
     : store_(store), data_dir_(data_dir), metrics_(metrics), options_(options) {
   options_.Check();
+  if (options_.worker_id.empty()) options_.worker_id = DefaultWorkerId();
 }
 
 WorkerPool::~WorkerPool() { Drain(0); }
 
 void WorkerPool::Start() {
+  if (options_.num_workers == 0) return;
+  started_at_ = storage::NowSeconds();
   for (int i = 0; i < options_.num_workers; ++i) threads_.emplace_back([this] { WorkerLoop(); });
+  heartbeat_thread_ = std::thread([this] { HeartbeatLoop(); });
+  if (store_.NotifiesQueueChanges()) listener_thread_ = std::thread([this] { ListenLoop(); });
 }
 
 void WorkerPool::Notify() {
@@ -66,7 +79,75 @@ int WorkerPool::Drain(double timeout_s) {
     if (thread.joinable()) thread.join();
   }
   threads_.clear();
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    background_stopping_ = true;
+    wake_.notify_all();
+  }
+  if (heartbeat_thread_.joinable()) heartbeat_thread_.join();
+  if (listener_thread_.joinable()) listener_thread_.join();
   return interrupted;
+}
+
+void WorkerPool::HeartbeatLoop() {
+  const auto interval = std::chrono::duration<double>(options_.lease_s / 3);
+  std::unique_lock<std::mutex> lock(mutex_);
+  while (!background_stopping_) {
+    lock.unlock();
+    Heartbeat();
+    lock.lock();
+    wake_.wait_for(lock, interval, [this] { return background_stopping_; });
+  }
+}
+
+void WorkerPool::Heartbeat() {
+  std::map<std::string, std::shared_ptr<RunningJob>> running;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    running = running_;
+  }
+  storage::WorkerRecord self{options_.worker_id, started_at_, 0, {}};
+  for (const auto& [id, job] : running) {
+    if (job->ending) continue;
+    try {
+      // Refused while `ending` is still false: our own end had not started, the lease is lost.
+      if (!store_.RenewLease(id, job->lease_token, options_.lease_s) && !job->ending) {
+        // Stopped or cut off past the lease: the job was re-queued and may run elsewhere now.
+        job->lease_lost = true;
+        job->interrupt = true;
+        std::cerr << "omnirig: lost the lease of job " << id << "; stopping it" << std::endl;
+        continue;
+      }
+    } catch (const std::exception& e) {
+      std::cerr << "omnirig: cannot renew the lease of job " << id << ": " << e.what() << std::endl;
+    }
+    self.running_jobs.push_back(id);
+  }
+  try {
+    store_.RecordHeartbeat(self);
+    if (!store_.RecoverExpiredLeases(options_.max_attempts).requeued.empty()) Notify();
+  } catch (const std::exception& e) {
+    std::cerr << "omnirig: heartbeat not recorded: " << e.what() << std::endl;
+  }
+}
+
+void WorkerPool::ListenLoop() {
+  while (true) {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (background_stopping_) return;
+    }
+    bool woken = false;
+    try {
+      woken = store_.WaitForQueueChange(0.25);  // short: Drain() waits for this thread
+    } catch (const std::exception& e) {
+      std::cerr << "omnirig: queue notifications unavailable: " << e.what() << std::endl;
+      std::unique_lock<std::mutex> lock(mutex_);
+      wake_.wait_for(lock, std::chrono::duration<double>(options_.idle_poll_s),
+                     [this] { return background_stopping_; });
+    }
+    if (woken) Notify();
+  }
 }
 
 void WorkerPool::WaitForWork(uint64_t seen_generation) {
@@ -96,7 +177,7 @@ void WorkerPool::WorkerLoop() {
     }
     std::optional<storage::JobRecord> job;
     try {
-      job = store_.ClaimNextJob();
+      job = store_.ClaimNextJob(storage::ClaimRequest{options_.worker_id, options_.lease_s});
     } catch (const std::exception& e) {
       std::cerr << "omnirig: cannot claim a job: " << e.what() << std::endl;
     }
@@ -110,6 +191,7 @@ void WorkerPool::WorkerLoop() {
 
 void WorkerPool::RunJob(const storage::JobRecord& job) {
   auto running = std::make_shared<RunningJob>();
+  running->lease_token = job.lease_token;
   running->cancel = job.cancel_requested;
   {
     std::lock_guard<std::mutex> lock(mutex_);
@@ -136,17 +218,25 @@ void WorkerPool::RunJob(const storage::JobRecord& job) {
     } catch (const std::exception&) {
     }
   }
+  running->ending = true;
   try {
-    if (handed_back) {
-      store_.RequeueJob(job.id);
+    if (running->lease_lost) {
+      // Another worker owns the job now; FinishJob would be refused anyway.
+      std::cerr << "omnirig: job " << job.id << " stopped after losing its lease" << std::endl;
+    } else if (handed_back) {
+      if (store_.RequeueJob(job.id, job.lease_token)) RemoveOtherAttempts(data_dir_, job);
+    } else if (!store_.FinishJob(job.id, job.lease_token, outcome)) {
+      // The lease ran out before the heartbeat saw it (or the job is no longer running).
+      std::cerr << "omnirig: the end of job " << job.id
+                << " was refused: its lease went to another run" << std::endl;
     } else {
-      store_.FinishJob(job.id, outcome);
+      RemoveOtherAttempts(data_dir_, job);
       metrics_.ObserveJobDuration(
           job.type, storage::JobStateName(outcome.state),
           std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
     }
   } catch (const std::exception& e) {
-    // The job stays `running` in the store; start-up recovery re-queues it.
+    // The job stays `running` in the store; its lease expires and it is re-queued.
     std::cerr << "omnirig: cannot record the end of job " << job.id << ": " << e.what()
               << std::endl;
   }

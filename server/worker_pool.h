@@ -7,6 +7,13 @@
 // when the job succeeds), a log (the `log.txt` artifact, kept for failed jobs too), throttled
 // progress written to the store (so polls after a restart still see it) and a cancellation
 // flag the cancel route sets.
+//
+// Leases: each claim is leased to this pool's worker id; a heartbeat thread renews the leases of
+// the running jobs, records the worker as alive (with its running jobs) and re-queues jobs whose
+// lease expired anywhere (another worker killed or cut off). A job whose lease this pool lost
+// (the process was stopped past it) is interrupted and its end is not written: the run that took
+// the job over owns it. With a store that notifies (PostgreSQL), a listener thread wakes idle
+// workers on jobs queued by any process; the idle poll is only the fallback.
 
 #include <atomic>
 #include <condition_variable>
@@ -25,7 +32,7 @@
 namespace omnirig::server {
 
 struct WorkerPoolOptions {
-  int num_workers = 1;
+  int num_workers = 1;  // 0: an API-only server that runs no jobs
   int threads_per_job = 1;
   double progress_interval_s = 0.2;  // at most one progress write per job per interval
   double idle_poll_s = 0.5;          // re-check the store this often when idle
@@ -36,8 +43,14 @@ struct WorkerPoolOptions {
   // Called with a job's id when this pool changed it (claimed, progress, finished, handed
   // back), e.g. JobEvents::Changed; may be empty.
   std::function<void(const std::string&)> on_job_changed;
+  std::string worker_id;  // in leases and heartbeats; empty: DefaultWorkerId()
+  double lease_s = 30;    // a claim's lease, renewed every lease_s / 3 while the job runs
+  int max_attempts = 3;   // runs started before a job whose lease keeps expiring fails
   void Check() const;
 };
+
+// "HOST:PID": unique among live processes sharing a store.
+std::string DefaultWorkerId();
 
 class WorkerPool {
  public:
@@ -56,14 +69,21 @@ class WorkerPool {
 
   int busy() const { return busy_.load(); }
   int size() const { return options_.num_workers; }
+  const std::string& worker_id() const { return options_.worker_id; }
 
  private:
   struct RunningJob {
+    std::string lease_token;
     std::atomic<bool> cancel{false};
     std::atomic<bool> interrupt{false};
+    std::atomic<bool> lease_lost{false};
+    std::atomic<bool> ending{false};  // its end is being written: the heartbeat leaves it alone
   };
 
   void WorkerLoop();
+  void HeartbeatLoop();
+  void Heartbeat();
+  void ListenLoop();
   void RunJob(const storage::JobRecord& job);
   void WaitForWork(uint64_t seen_generation);
 
@@ -72,12 +92,15 @@ class WorkerPool {
   Metrics& metrics_;
   WorkerPoolOptions options_;
   std::vector<std::thread> threads_;
+  std::thread heartbeat_thread_, listener_thread_;
+  double started_at_ = 0;
   std::atomic<int> busy_{0};
 
   std::mutex mutex_;
   std::condition_variable wake_;
   uint64_t generation_ = 0;  // bumped by Notify(); a worker waits only if it has not changed
   bool stopping_ = false;
+  bool background_stopping_ = false;  // heartbeat and listener: after the workers stopped
   std::map<std::string, std::shared_ptr<RunningJob>> running_;
 };
 

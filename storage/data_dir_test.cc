@@ -36,12 +36,13 @@ TEST(DataDir, ReportsMissingArtifacts) {
   DataDir data(dir.path());
   SqliteJobStore store(data.DatabasePath().string());
   const auto job = store.CreateJob("t", "d", "{}");
-  store.ClaimNextJob();
+  const auto claimed = store.ClaimNextJob();
+  ASSERT_TRUE(claimed);
   JobOutcome outcome;
   outcome.result = "{}";
   outcome.artifacts.push_back(
       ArtifactRecord{"out.bin", "jobs/" + job.id + "/attempt-1/out.bin", 3, "x", "a/b"});
-  store.FinishJob(job.id, outcome);
+  ASSERT_TRUE(store.FinishJob(job.id, claimed->lease_token, outcome));
   std::filesystem::create_directories(data.AttemptDir(job.id, 1));
   const ConsistencyReport report = CheckConsistency(data, store);
   EXPECT_FALSE(report.ok());

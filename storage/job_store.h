@@ -1,9 +1,16 @@
 #pragma once
-// The record store behind the service, as an interface: SQLite on one machine today
-// (sqlite_job_store.h); a PostgreSQL implementation lets workers on several machines share
-// one queue later, with nothing above storage/ changing. Every state change is one committed
-// transaction. Methods that change a job's state check the state they expect inside that
-// transaction and return false (or nullopt) when another actor got there first.
+// The record store behind the service, as an interface: SQLite on one machine
+// (sqlite_job_store.h) or PostgreSQL shared by workers on several machines
+// (postgres_job_store.h), with nothing above storage/ changing. Every state change is one
+// committed transaction. Methods that change a job's state check the state they expect inside
+// that transaction and return false (or nullopt) when another actor got there first.
+//
+// Leases: a claim gives the job to one worker with a fresh lease token and an expiry; the
+// worker's heartbeat renews it while the job runs. A job whose lease expired (its worker was
+// killed, stopped or cut off) is queued again with its attempt counted, or failed after the
+// maximum number of attempts (RecoverExpiredLeases). The worker's end of the job (FinishJob,
+// RequeueJob) is accepted only while its token still matches, so a worker that lost its lease
+// never overwrites the outcome of the run that took the job over.
 
 #include <map>
 #include <optional>
@@ -40,16 +47,25 @@ class JobStore {
                               const std::string& params) = 0;
   virtual std::optional<JobRecord> GetJob(const std::string& id) = 0;
   virtual std::vector<JobRecord> ListJobs(const JobFilter& filter) = 0;  // newest first
-  // Takes the oldest queued job: running, started_at now, attempts + 1.
-  virtual std::optional<JobRecord> ClaimNextJob() = 0;
+  // Takes the oldest queued job: running, started_at now, attempts + 1, leased to
+  // `request.worker_id` with a new lease token until now + `request.lease_s`.
+  virtual std::optional<JobRecord> ClaimNextJob(const ClaimRequest& request) = 0;
+  std::optional<JobRecord> ClaimNextJob() { return ClaimNextJob(ClaimRequest()); }
+  // Extends a running job's lease to now + `lease_s`; false when the job is no longer running
+  // under `lease_token` (the lease was lost: the worker must stop the job).
+  virtual bool RenewLease(const std::string& id, const std::string& lease_token,
+                          double lease_s) = 0;
   virtual void UpdateProgress(const std::string& id, const JobProgress& progress) = 0;
   // Queued -> canceled at once; running -> cancel_requested (the worker stops it). Returns the
   // state after the call, nullopt when the job does not exist.
   virtual std::optional<JobState> RequestCancel(const std::string& id) = 0;
-  // Running -> the outcome's state, with result and artifacts.
-  virtual bool FinishJob(const std::string& id, const JobOutcome& outcome) = 0;
-  // Running -> queued (a drained server hands the job back); the attempt is not counted.
-  virtual bool RequeueJob(const std::string& id) = 0;
+  // Running under `lease_token` -> the outcome's state, with result and artifacts; false (and
+  // nothing written) when the job is not running or its lease went to another claim.
+  virtual bool FinishJob(const std::string& id, const std::string& lease_token,
+                         const JobOutcome& outcome) = 0;
+  // Running under `lease_token` -> queued (a drained worker hands the job back); the attempt is
+  // not counted.
+  virtual bool RequeueJob(const std::string& id, const std::string& lease_token) = 0;
   // Failed or canceled -> queued with attempts, error, result and artifacts cleared.
   virtual bool RetryJob(const std::string& id) = 0;
   // Removes a job that is not running, with its artifact records.
@@ -58,12 +74,35 @@ class JobStore {
   virtual std::vector<ArtifactRecord> ListArtifacts(const std::string& job_id) = 0;
   // Jobs left running by a crash: canceled when a cancel was requested, failed with code
   // "interrupted" once `max_attempts` runs were started, queued again otherwise.
+  // Every running job counts as interrupted: only for a store no other process uses (SQLite
+  // at start-up).
   virtual RecoveryReport RecoverInterruptedJobs(int max_attempts) = 0;
+  // The same for running jobs whose lease expired, whoever holds the store: any worker may call
+  // it at any time.
+  virtual RecoveryReport RecoverExpiredLeases(int max_attempts) = 0;
   virtual std::map<JobState, int64_t> CountJobsByState() = 0;
   // Jobs queued or running on the dataset.
   virtual int64_t CountActiveJobs(const std::string& dataset_id) = 0;
 
-  // "ok", or SQLite's list of problems.
+  // Store copy (`omnirig store copy`): records inserted as they are, ids, states and times kept.
+  // A record whose id already exists is left alone (a copy that stopped half-way can be run
+  // again); returns false then.
+  virtual bool ImportDataset(const DatasetRecord& dataset) = 0;
+  virtual bool ImportJob(const JobRecord& job, const std::optional<std::string>& result,
+                         const std::vector<ArtifactRecord>& artifacts) = 0;
+
+  // Workers: a heartbeat records the worker as alive now with its running jobs (upsert by id).
+  virtual void RecordHeartbeat(const WorkerRecord& worker) = 0;
+  // Workers whose last heartbeat is at most `seen_within_s` old, by id.
+  virtual std::vector<WorkerRecord> ListWorkers(double seen_within_s) = 0;
+
+  // Whether WaitForQueueChange can wake on jobs queued by other processes (PostgreSQL NOTIFY).
+  virtual bool NotifiesQueueChanges() const { return false; }
+  // Blocks up to `timeout_s` until a job may have been queued by any process; true when woken
+  // by a notification, false on timeout (or when the store cannot notify).
+  virtual bool WaitForQueueChange(double /*timeout_s*/) { return false; }
+
+  // "ok", or the database's list of problems.
   virtual std::string IntegrityCheck() = 0;
 };
 

@@ -64,6 +64,27 @@ struct JobRecord {
   int attempts = 0;  // runs started, including ones interrupted by a crash
   std::optional<JobError> error;
   bool cancel_requested = false;
+  // The lease of the last claim: the worker that ran (or runs) the job, the claim's token (a
+  // worker's end of the job is accepted only while the token still matches) and, while running,
+  // when the lease expires unless renewed. Empty before the first claim.
+  std::string worker_id;
+  std::string lease_token;
+  std::optional<double> lease_expires_at;
+};
+
+// What a worker asks for when it claims a job: who it is and how long its lease lasts before
+// a heartbeat must renew it.
+struct ClaimRequest {
+  std::string worker_id = "local";
+  double lease_s = 60;
+};
+
+// A worker process seen by its heartbeat, with the jobs it was running then.
+struct WorkerRecord {
+  std::string id;
+  double started_at = 0;
+  double last_seen_at = 0;
+  std::vector<std::string> running_jobs;
 };
 
 struct ArtifactRecord {
@@ -86,12 +107,26 @@ struct JobFilter {
   std::optional<JobState> state;
   std::optional<std::string> type;
   std::optional<std::string> dataset_id;
-  int limit = 1000;
+  int limit = 1000;  // negative: no limit
 };
 
 // What start-up recovery did with the jobs a crash left running.
 struct RecoveryReport {
   std::vector<std::string> requeued, failed, canceled;
 };
+
+// A random 16-hex-digit identifier (records and lease tokens).
+std::string NewId();
+
+// What recovery does with a running job found interrupted (server crash, expired lease): a
+// requested cancel wins, then a job that used up `max_attempts` runs fails, else it runs again.
+enum class RecoveryAction { kCancel, kFail, kRequeue };
+RecoveryAction DecideRecovery(bool cancel_requested, int64_t attempts, int max_attempts);
+// The error message of a job failed by recovery.
+std::string InterruptedMessage(int64_t attempts, int max_attempts);
+
+// A list of job ids as stored in one text column ("a,b,c") and back.
+std::string JoinIds(const std::vector<std::string>& ids);
+std::vector<std::string> SplitIds(const std::string& joined);
 
 }  // namespace omnirig::storage

@@ -1,7 +1,5 @@
 #include "storage/sqlite_job_store.h"
 
-#include <random>
-
 namespace omnirig::storage {
 namespace {
 
@@ -52,12 +50,23 @@ CREATE TABLE artifacts(
   content_type TEXT NOT NULL,
   PRIMARY KEY(job_id, name));
 )sql",
+    // 2: leases (who runs a job, until when) and worker heartbeats.
+    R"sql(
+ALTER TABLE jobs ADD COLUMN worker_id TEXT NOT NULL DEFAULT '';
+ALTER TABLE jobs ADD COLUMN lease_token TEXT NOT NULL DEFAULT '';
+ALTER TABLE jobs ADD COLUMN lease_expires_at REAL;
+CREATE TABLE workers(
+  id TEXT PRIMARY KEY,
+  started_at REAL NOT NULL,
+  last_seen_at REAL NOT NULL,
+  running_jobs TEXT NOT NULL DEFAULT '');
+)sql",
 };
 
 constexpr char kJobColumns[] =
     "id, type, dataset_id, params, state, progress_fraction, progress_stage, progress_message, "
     "eta_s, created_at, started_at, finished_at, attempts, error_code, error_message, "
-    "cancel_requested";
+    "cancel_requested, worker_id, lease_token, lease_expires_at";
 
 JobRecord ReadJob(const Statement& row) {
   JobRecord job;
@@ -73,6 +82,9 @@ JobRecord ReadJob(const Statement& row) {
   job.attempts = static_cast<int>(row.Int(12));
   if (!row.IsNull(13)) job.error = JobError{row.Text(13), row.Text(14)};
   job.cancel_requested = row.Int(15) != 0;
+  job.worker_id = row.Text(16);
+  job.lease_token = row.Text(17);
+  job.lease_expires_at = row.OptionalDouble(18);
   return job;
 }
 
@@ -95,15 +107,6 @@ constexpr char kDatasetSelect[] =
     "FROM datasets d LEFT JOIN images i ON i.dataset_id = d.id ";
 
 }  // namespace
-
-std::string NewId() {
-  thread_local std::mt19937_64 engine{std::random_device{}()};
-  static const char kHex[] = "0123456789abcdef";
-  std::string id;
-  uint64_t bits = engine();
-  for (int i = 0; i < 16; ++i, bits >>= 4) id.push_back(kHex[bits & 15]);
-  return id;
-}
 
 class SqliteJobStore::ReaderLease {
  public:
@@ -286,7 +289,7 @@ std::vector<JobRecord> SqliteJobStore::ListJobs(const JobFilter& filter) {
   return jobs;
 }
 
-std::optional<JobRecord> SqliteJobStore::ClaimNextJob() {
+std::optional<JobRecord> SqliteJobStore::ClaimNextJob(const ClaimRequest& request) {
   std::lock_guard<std::mutex> lock(writer_mutex_);
   Transaction transaction(*writer_);
   Statement next(*writer_,
@@ -296,11 +299,24 @@ std::optional<JobRecord> SqliteJobStore::ClaimNextJob() {
   Statement claim(*writer_,
                   "UPDATE jobs SET state = 'running', started_at = ?, finished_at = NULL, "
                   "attempts = attempts + 1, progress_fraction = 0, progress_stage = 'starting', "
-                  "progress_message = '', eta_s = NULL WHERE id = ?");
-  claim.Bind(1, NowSeconds()).Bind(2, id).Run();
+                  "progress_message = '', eta_s = NULL, worker_id = ?, lease_token = ?, "
+                  "lease_expires_at = ? WHERE id = ?");
+  const double now = NowSeconds();
+  claim.Bind(1, now).Bind(2, request.worker_id).Bind(3, NewId()).Bind(4, now + request.lease_s);
+  claim.Bind(5, id).Run();
   std::optional<JobRecord> job = SelectJob(*writer_, id);
   transaction.Commit();
   return job;
+}
+
+bool SqliteJobStore::RenewLease(const std::string& id, const std::string& lease_token,
+                                double lease_s) {
+  std::lock_guard<std::mutex> lock(writer_mutex_);
+  Statement renew(*writer_,
+                  "UPDATE jobs SET lease_expires_at = ? WHERE id = ? AND state = 'running' AND "
+                  "lease_token = ?");
+  renew.Bind(1, NowSeconds() + lease_s).Bind(2, id).Bind(3, lease_token).Run();
+  return writer_->changes() > 0;
 }
 
 void SqliteJobStore::UpdateProgress(const std::string& id, const JobProgress& progress) {
@@ -331,13 +347,16 @@ std::optional<JobState> SqliteJobStore::RequestCancel(const std::string& id) {
   return job->state;
 }
 
-bool SqliteJobStore::FinishJob(const std::string& id, const JobOutcome& outcome) {
+bool SqliteJobStore::FinishJob(const std::string& id, const std::string& lease_token,
+                               const JobOutcome& outcome) {
   std::lock_guard<std::mutex> lock(writer_mutex_);
   Transaction transaction(*writer_);
-  Statement finish(*writer_,
-                   "UPDATE jobs SET state = ?, finished_at = ?, error_code = ?, error_message = ?, "
-                   "result = ?, eta_s = NULL, progress_fraction = CASE WHEN ? THEN 1 ELSE "
-                   "progress_fraction END WHERE id = ? AND state = 'running'");
+  Statement finish(
+      *writer_,
+      "UPDATE jobs SET state = ?, finished_at = ?, error_code = ?, error_message = ?, "
+      "result = ?, eta_s = NULL, progress_fraction = CASE WHEN ? THEN 1 ELSE "
+      "progress_fraction END, lease_expires_at = NULL WHERE id = ? AND state = 'running' AND "
+      "lease_token = ?");
   finish.Bind(1, std::string(JobStateName(outcome.state))).Bind(2, NowSeconds());
   if (outcome.error) {
     finish.Bind(3, outcome.error->code).Bind(4, outcome.error->message);
@@ -345,7 +364,7 @@ bool SqliteJobStore::FinishJob(const std::string& id, const JobOutcome& outcome)
     finish.BindNull(3).BindNull(4);
   }
   finish.Bind(5, outcome.result).Bind(6, outcome.state == JobState::kSucceeded ? 1 : 0);
-  finish.Bind(7, id).Run();
+  finish.Bind(7, id).Bind(8, lease_token).Run();
   if (writer_->changes() == 0) return false;
   Statement clear(*writer_, "DELETE FROM artifacts WHERE job_id = ?");
   clear.Bind(1, id).Run();
@@ -360,13 +379,14 @@ bool SqliteJobStore::FinishJob(const std::string& id, const JobOutcome& outcome)
   return true;
 }
 
-bool SqliteJobStore::RequeueJob(const std::string& id) {
+bool SqliteJobStore::RequeueJob(const std::string& id, const std::string& lease_token) {
   std::lock_guard<std::mutex> lock(writer_mutex_);
   Statement requeue(*writer_,
                     "UPDATE jobs SET state = 'queued', attempts = MAX(attempts - 1, 0), "
-                    "started_at = NULL, progress_stage = 'requeued', eta_s = NULL "
-                    "WHERE id = ? AND state = 'running'");
-  requeue.Bind(1, id).Run();
+                    "started_at = NULL, progress_stage = 'requeued', eta_s = NULL, "
+                    "lease_expires_at = NULL WHERE id = ? AND state = 'running' AND "
+                    "lease_token = ?");
+  requeue.Bind(1, id).Bind(2, lease_token).Run();
   return writer_->changes() > 0;
 }
 
@@ -417,40 +437,121 @@ std::vector<ArtifactRecord> SqliteJobStore::ListArtifacts(const std::string& job
 }
 
 RecoveryReport SqliteJobStore::RecoverInterruptedJobs(int max_attempts) {
+  return RecoverRunning(max_attempts, std::nullopt);
+}
+
+RecoveryReport SqliteJobStore::RecoverExpiredLeases(int max_attempts) {
+  return RecoverRunning(max_attempts, NowSeconds());
+}
+
+RecoveryReport SqliteJobStore::RecoverRunning(int max_attempts,
+                                              std::optional<double> expired_before) {
   std::lock_guard<std::mutex> lock(writer_mutex_);
   Transaction transaction(*writer_);
   RecoveryReport report;
+  // A job claimed before leases existed (no expiry) counts as expired.
   Statement running(*writer_,
-                    "SELECT id, attempts, cancel_requested FROM jobs WHERE state = 'running'");
+                    "SELECT id, attempts, cancel_requested FROM jobs WHERE state = 'running' "
+                    "AND (?1 IS NULL OR lease_expires_at IS NULL OR lease_expires_at <= ?1)");
+  running.Bind(1, expired_before);
   const double now = NowSeconds();
   while (running.Step()) {
     const std::string id = running.Text(0);
     const int64_t attempts = running.Int(1);
-    if (running.Int(2) != 0) {
-      Statement cancel(*writer_,
-                       "UPDATE jobs SET state = 'canceled', finished_at = ? WHERE id = ?");
-      cancel.Bind(1, now).Bind(2, id).Run();
-      report.canceled.push_back(id);
-    } else if (attempts >= max_attempts) {
-      Statement fail(*writer_,
-                     "UPDATE jobs SET state = 'failed', finished_at = ?, error_code = "
-                     "'interrupted', error_message = ? WHERE id = ?");
-      fail.Bind(1, now)
-          .Bind(2, "the server stopped during each of the job's " + std::to_string(attempts) +
-                       " attempts (maximum " + std::to_string(max_attempts) + ")")
-          .Bind(3, id)
-          .Run();
-      report.failed.push_back(id);
-    } else {
-      Statement requeue(*writer_,
-                        "UPDATE jobs SET state = 'queued', started_at = NULL, progress_stage = "
-                        "'requeued', eta_s = NULL WHERE id = ?");
-      requeue.Bind(1, id).Run();
-      report.requeued.push_back(id);
+    switch (DecideRecovery(running.Int(2) != 0, attempts, max_attempts)) {
+      case RecoveryAction::kCancel: {
+        Statement cancel(*writer_,
+                         "UPDATE jobs SET state = 'canceled', finished_at = ?, lease_expires_at "
+                         "= NULL WHERE id = ?");
+        cancel.Bind(1, now).Bind(2, id).Run();
+        report.canceled.push_back(id);
+        break;
+      }
+      case RecoveryAction::kFail: {
+        Statement fail(*writer_,
+                       "UPDATE jobs SET state = 'failed', finished_at = ?, error_code = "
+                       "'interrupted', error_message = ?, lease_expires_at = NULL WHERE id = ?");
+        fail.Bind(1, now).Bind(2, InterruptedMessage(attempts, max_attempts)).Bind(3, id).Run();
+        report.failed.push_back(id);
+        break;
+      }
+      case RecoveryAction::kRequeue: {
+        Statement requeue(*writer_,
+                          "UPDATE jobs SET state = 'queued', started_at = NULL, progress_stage = "
+                          "'requeued', eta_s = NULL, lease_expires_at = NULL WHERE id = ?");
+        requeue.Bind(1, id).Run();
+        report.requeued.push_back(id);
+        break;
+      }
     }
   }
   transaction.Commit();
   return report;
+}
+
+bool SqliteJobStore::ImportDataset(const DatasetRecord& dataset) {
+  std::lock_guard<std::mutex> lock(writer_mutex_);
+  Statement insert(*writer_, "INSERT OR IGNORE INTO datasets(id, name, created_at) VALUES(?,?,?)");
+  insert.Bind(1, dataset.id).Bind(2, dataset.name).Bind(3, dataset.created_at).Run();
+  return writer_->changes() > 0;
+}
+
+bool SqliteJobStore::ImportJob(const JobRecord& job, const std::optional<std::string>& result,
+                               const std::vector<ArtifactRecord>& artifacts) {
+  std::lock_guard<std::mutex> lock(writer_mutex_);
+  Transaction transaction(*writer_);
+  Statement insert(*writer_,
+                   "INSERT OR IGNORE INTO jobs(id, type, dataset_id, params, state, "
+                   "progress_fraction, progress_stage, progress_message, eta_s, created_at, "
+                   "queued_at, started_at, finished_at, attempts, error_code, error_message, "
+                   "result, cancel_requested, worker_id, lease_token, lease_expires_at) "
+                   "VALUES(?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)");
+  insert.Bind(1, job.id).Bind(2, job.type).Bind(3, job.dataset_id).Bind(4, job.params);
+  insert.Bind(5, std::string(JobStateName(job.state))).Bind(6, job.progress.fraction);
+  insert.Bind(7, job.progress.stage).Bind(8, job.progress.message).Bind(9, job.progress.eta_s);
+  insert.Bind(10, job.created_at).Bind(11, job.created_at).Bind(12, job.started_at);
+  insert.Bind(13, job.finished_at).Bind(14, job.attempts);
+  if (job.error) {
+    insert.Bind(15, job.error->code).Bind(16, job.error->message);
+  } else {
+    insert.BindNull(15).BindNull(16);
+  }
+  insert.Bind(17, result).Bind(18, job.cancel_requested ? 1 : 0).Bind(19, job.worker_id);
+  insert.Bind(20, job.lease_token).Bind(21, job.lease_expires_at).Run();
+  if (writer_->changes() == 0) return false;
+  for (const ArtifactRecord& artifact : artifacts) {
+    Statement add(*writer_,
+                  "INSERT INTO artifacts(job_id, name, path, size, sha256, content_type) "
+                  "VALUES(?,?,?,?,?,?)");
+    add.Bind(1, job.id).Bind(2, artifact.name).Bind(3, artifact.path).Bind(4, artifact.size);
+    add.Bind(5, artifact.sha256).Bind(6, artifact.content_type).Run();
+  }
+  transaction.Commit();
+  return true;
+}
+
+void SqliteJobStore::RecordHeartbeat(const WorkerRecord& worker) {
+  std::lock_guard<std::mutex> lock(writer_mutex_);
+  Statement upsert(*writer_,
+                   "INSERT INTO workers(id, started_at, last_seen_at, running_jobs) "
+                   "VALUES(?1, ?2, ?3, ?4) ON CONFLICT(id) DO UPDATE SET last_seen_at = ?3, "
+                   "running_jobs = ?4");
+  upsert.Bind(1, worker.id).Bind(2, worker.started_at).Bind(3, NowSeconds());
+  upsert.Bind(4, JoinIds(worker.running_jobs)).Run();
+}
+
+std::vector<WorkerRecord> SqliteJobStore::ListWorkers(double seen_within_s) {
+  ReaderLease db = Reader();
+  Statement select(*db,
+                   "SELECT id, started_at, last_seen_at, running_jobs FROM workers "
+                   "WHERE last_seen_at >= ? ORDER BY id");
+  select.Bind(1, NowSeconds() - seen_within_s);
+  std::vector<WorkerRecord> workers;
+  while (select.Step()) {
+    workers.push_back(
+        WorkerRecord{select.Text(0), select.Double(1), select.Double(2), SplitIds(select.Text(3))});
+  }
+  return workers;
 }
 
 std::map<JobState, int64_t> SqliteJobStore::CountJobsByState() {

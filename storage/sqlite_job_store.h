@@ -38,18 +38,27 @@ class SqliteJobStore : public JobStore {
                       const std::string& params) override;
   std::optional<JobRecord> GetJob(const std::string& id) override;
   std::vector<JobRecord> ListJobs(const JobFilter& filter) override;
-  std::optional<JobRecord> ClaimNextJob() override;
+  using JobStore::ClaimNextJob;
+  std::optional<JobRecord> ClaimNextJob(const ClaimRequest& request) override;
+  bool RenewLease(const std::string& id, const std::string& lease_token, double lease_s) override;
   void UpdateProgress(const std::string& id, const JobProgress& progress) override;
   std::optional<JobState> RequestCancel(const std::string& id) override;
-  bool FinishJob(const std::string& id, const JobOutcome& outcome) override;
-  bool RequeueJob(const std::string& id) override;
+  bool FinishJob(const std::string& id, const std::string& lease_token,
+                 const JobOutcome& outcome) override;
+  bool RequeueJob(const std::string& id, const std::string& lease_token) override;
   bool RetryJob(const std::string& id) override;
   bool DeleteJob(const std::string& id) override;
   std::optional<std::string> GetResult(const std::string& id) override;
   std::vector<ArtifactRecord> ListArtifacts(const std::string& job_id) override;
   RecoveryReport RecoverInterruptedJobs(int max_attempts) override;
+  RecoveryReport RecoverExpiredLeases(int max_attempts) override;
   std::map<JobState, int64_t> CountJobsByState() override;
   int64_t CountActiveJobs(const std::string& dataset_id) override;
+  bool ImportDataset(const DatasetRecord& dataset) override;
+  bool ImportJob(const JobRecord& job, const std::optional<std::string>& result,
+                 const std::vector<ArtifactRecord>& artifacts) override;
+  void RecordHeartbeat(const WorkerRecord& worker) override;
+  std::vector<WorkerRecord> ListWorkers(double seen_within_s) override;
   std::string IntegrityCheck() override;
 
  private:
@@ -57,6 +66,9 @@ class SqliteJobStore : public JobStore {
   class ReaderLease;
   ReaderLease Reader();
   void Migrate();
+  // Requeues, fails or cancels the running jobs (those whose lease ended before `expired_before`
+  // when given).
+  RecoveryReport RecoverRunning(int max_attempts, std::optional<double> expired_before);
 
   std::string path_;
   std::mutex writer_mutex_;
@@ -65,8 +77,5 @@ class SqliteJobStore : public JobStore {
   std::condition_variable readers_available_;
   std::vector<std::unique_ptr<Connection>> idle_readers_;
 };
-
-// A random 16-hex-digit identifier.
-std::string NewId();
 
 }  // namespace omnirig::storage

@@ -9,6 +9,8 @@ namespace omnirig::cli {
 using Args = std::vector<std::string>;
 
 int RunServe(const Args& args);      // server/cli/serve.cc
+int RunWorker(const Args& args);     // server/cli/serve.cc
+int RunStore(const Args& args);      // server/cli/serve.cc
 int RunSynth(const Args& args);      // server/cli/synth.cc
 int RunCalibrate(const Args& args);  // server/cli/calibrate.cc
 int RunRelpose(const Args& args);    // server/cli/relpose.cc

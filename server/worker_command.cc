@@ -1,0 +1,79 @@
+#include "server/worker_command.h"
+
+#include <signal.h>
+
+#include <iostream>
+
+#include "api/job_types.h"
+#include "engine/util/check.h"
+#include "server/cli/args.h"
+#include "server/metrics.h"
+#include "server/serve_command.h"
+#include "server/service.h"
+#include "server/worker_pool.h"
+#include "storage/postgres_job_store.h"
+
+namespace omnirig::server {
+
+int WorkerCommand(const std::vector<std::string>& args) {
+  cli::ArgParser parser("worker",
+                        "Runs jobs from a PostgreSQL job store shared with `omnirig serve "
+                        "--database` and other workers, on this or other machines. Serves no "
+                        "HTTP.");
+  parser.AddOption("database", "", "the shared job store: postgresql://USER@HOST:PORT/DB");
+  parser.AddOption("data", "./data",
+                   "the shared data folder, mounted at the same path on every machine");
+  parser.AddOption("threads", std::to_string(DefaultWorkers()),
+                   "jobs run at the same time (half the cores by default)");
+  parser.AddOption("threads-per-job", "", "solver threads per job (default: cores / --threads)");
+  parser.AddOption("worker-id", "", "name in leases, heartbeats and /metrics (default: HOST:PID)");
+  parser.AddOption("lease-seconds", "30",
+                   "a running job's lease, renewed every third of it; a worker silent this long "
+                   "loses the job to another");
+  parser.AddOption("max-attempts", "3",
+                   "runs a job may start before expired leases make it fail ('interrupted')");
+  parser.AddOption("worker-nice", "10", "niceness of job threads (0-19)");
+  parser.AddOption("drain-timeout", "20",
+                   "seconds SIGTERM waits for running jobs before re-queuing them");
+  if (!parser.Parse(args)) return parser.exit_code();
+  const std::string database = parser.Get("database");
+  if (!storage::IsPostgresUrl(database)) {
+    throw InvalidArgument("--database must be a postgresql:// URL (workers share its queue)");
+  }
+  WorkerPoolOptions options;
+  options.num_workers = parser.GetInt("threads");
+  OMNIRIG_CHECK(options.num_workers >= 1, "--threads must be at least 1");
+  options.threads_per_job = parser.Get("threads-per-job").empty()
+                                ? DefaultThreadsPerJob(options.num_workers)
+                                : parser.GetInt("threads-per-job");
+  options.worker_id = parser.Get("worker-id");
+  options.lease_s = parser.GetDouble("lease-seconds");
+  options.max_attempts = parser.GetInt("max-attempts");
+  options.nice = parser.GetInt("worker-nice");
+  // This process serves no HTTP: job threads need not yield to anything.
+  options.idle_scheduling = false;
+  // NOTIFY wakes idle workers at once; the poll only covers a lost notification.
+  options.idle_poll_s = 5;
+  options.Check();
+  const double drain_timeout_s = parser.GetDouble("drain-timeout");
+
+  InstallStopSignalHandlers();
+  signal(SIGPIPE, SIG_IGN);
+  api::RegisterBuiltinJobTypes();
+  const storage::DataDir data_dir(parser.Get("data"));
+  storage::PostgresJobStore store(database);
+  Metrics metrics;
+  WorkerPool pool(store, data_dir, metrics, options);
+  pool.Start();
+  std::cout << "omnirig worker " << pool.worker_id() << " running " << options.num_workers
+            << " job(s) at a time" << std::endl;
+  const int received = WaitForSignal();
+  std::cerr << "omnirig worker: " << (received == SIGTERM ? "SIGTERM" : "SIGINT")
+            << ": draining (up to " << drain_timeout_s << " s)" << std::endl;
+  const int requeued = pool.Drain(drain_timeout_s);
+  std::cerr << "omnirig worker: stopped; " << requeued << " running job(s) handed back"
+            << std::endl;
+  return 0;
+}
+
+}  // namespace omnirig::server

@@ -1,0 +1,101 @@
+#pragma once
+// JobStore on PostgreSQL (libpq), shared by API servers and workers on several machines: one
+// transactional source of truth for records and the queue. Workers claim with
+// SELECT ... FOR UPDATE SKIP LOCKED (two claims never wait on or share a row), and every change
+// that queues a job sends NOTIFY omnirig_jobs, so idle workers wake at once instead of polling.
+//
+// The schema has the same versions and migrations as the SQLite store (sqlite_job_store.cc),
+// written in PostgreSQL's dialect; the version lives in the table omnirig_schema and
+// migrations run under an advisory lock, so processes starting together migrate once.
+// Lease expiry is compared with the database server's clock, so the machines' clocks need not
+// agree.
+
+#include <condition_variable>
+#include <memory>
+#include <mutex>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "storage/job_store.h"
+
+typedef struct pg_conn PGconn;
+
+namespace omnirig::storage {
+
+class PostgresError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+// True for "postgresql://..." and "postgres://..." connection URLs.
+bool IsPostgresUrl(const std::string& url);
+
+class PostgresJobStore : public JobStore {
+ public:
+  // Connects to `url` (a libpq connection URL, postgresql://USER@HOST:PORT/DB) and applies
+  // pending migrations. At most `max_connections` connections are opened, on demand.
+  explicit PostgresJobStore(const std::string& url, int max_connections = 8);
+  ~PostgresJobStore() override;
+
+  static int SchemaVersion();
+  // The schema version recorded in the database.
+  int StoredSchemaVersion();
+
+  DatasetRecord CreateDataset(const std::string& name) override;
+  std::vector<DatasetRecord> ListDatasets() override;
+  std::optional<DatasetRecord> GetDataset(const std::string& id) override;
+  bool DeleteDataset(const std::string& id) override;
+  void PutImage(const std::string& dataset_id, const ImageRecord& image) override;
+  void PutImages(const std::string& dataset_id, const std::vector<ImageRecord>& images) override;
+  bool DeleteImage(const std::string& dataset_id, const std::string& name) override;
+  std::vector<ImageRecord> ListImages(const std::string& dataset_id) override;
+  std::optional<ImageRecord> GetImage(const std::string& dataset_id,
+                                      const std::string& name) override;
+
+  JobRecord CreateJob(const std::string& type, const std::string& dataset_id,
+                      const std::string& params) override;
+  std::optional<JobRecord> GetJob(const std::string& id) override;
+  std::vector<JobRecord> ListJobs(const JobFilter& filter) override;
+  using JobStore::ClaimNextJob;
+  std::optional<JobRecord> ClaimNextJob(const ClaimRequest& request) override;
+  bool RenewLease(const std::string& id, const std::string& lease_token, double lease_s) override;
+  void UpdateProgress(const std::string& id, const JobProgress& progress) override;
+  std::optional<JobState> RequestCancel(const std::string& id) override;
+  bool FinishJob(const std::string& id, const std::string& lease_token,
+                 const JobOutcome& outcome) override;
+  bool RequeueJob(const std::string& id, const std::string& lease_token) override;
+  bool RetryJob(const std::string& id) override;
+  bool DeleteJob(const std::string& id) override;
+  std::optional<std::string> GetResult(const std::string& id) override;
+  std::vector<ArtifactRecord> ListArtifacts(const std::string& job_id) override;
+  RecoveryReport RecoverInterruptedJobs(int max_attempts) override;
+  RecoveryReport RecoverExpiredLeases(int max_attempts) override;
+  std::map<JobState, int64_t> CountJobsByState() override;
+  int64_t CountActiveJobs(const std::string& dataset_id) override;
+  bool ImportDataset(const DatasetRecord& dataset) override;
+  bool ImportJob(const JobRecord& job, const std::optional<std::string>& result,
+                 const std::vector<ArtifactRecord>& artifacts) override;
+  void RecordHeartbeat(const WorkerRecord& worker) override;
+  std::vector<WorkerRecord> ListWorkers(double seen_within_s) override;
+  bool NotifiesQueueChanges() const override { return true; }
+  bool WaitForQueueChange(double timeout_s) override;
+  std::string IntegrityCheck() override;
+
+ private:
+  class Lease;
+  Lease Borrow();
+  void Migrate();
+  RecoveryReport RecoverRunning(int max_attempts, bool only_expired);
+
+  std::string url_;
+  int max_connections_;
+  std::mutex pool_mutex_;
+  std::condition_variable pool_available_;
+  std::vector<PGconn*> idle_;
+  int open_ = 0;
+  std::mutex listener_mutex_;
+  PGconn* listener_ = nullptr;  // LISTEN omnirig_jobs, opened by the first wait
+};
+
+}  // namespace omnirig::storage
