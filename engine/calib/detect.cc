@@ -569,19 +569,19 @@ int PlacedId(const BoardSpec& board, int sub_cols, int sub_rows, int symmetry, i
   return row * board.cols + col;
 }
 
-// A partial grid of sub_cols x sub_rows corners found by OpenCV without validation.
+// A partial grid of sub_cols x sub_rows corners found by OpenCV's classic (sb false) or
+// sector-based detector, without validation.
 std::optional<std::vector<Eigen::Vector2d>> FindPartialGrid(const cv::Mat& grey, int sub_cols,
-                                                            int sub_rows) {
+                                                            int sub_rows, bool sb) {
   BoardSpec sub;
   sub.cols = sub_cols;
   sub.rows = sub_rows;
   std::vector<Eigen::Vector2d> grid;
-  const int classic =
-      cv::CALIB_CB_ADAPTIVE_THRESH | cv::CALIB_CB_NORMALIZE_IMAGE | cv::CALIB_CB_FAST_CHECK;
-  if (RunOpenCvDetector(grey, 1.0, sub, false, classic, &grid)) return grid;
   const bool small = std::max(grey.cols, grey.rows) <= 800;
-  const int sb = cv::CALIB_CB_NORMALIZE_IMAGE | (small ? cv::CALIB_CB_ACCURACY : 0);
-  if (RunOpenCvDetector(grey, 1.0, sub, true, sb, &grid)) return grid;
+  const int flags =
+      sb ? cv::CALIB_CB_NORMALIZE_IMAGE | (small ? cv::CALIB_CB_ACCURACY : 0)
+         : cv::CALIB_CB_ADAPTIVE_THRESH | cv::CALIB_CB_NORMALIZE_IMAGE | cv::CALIB_CB_FAST_CHECK;
+  if (RunOpenCvDetector(grey, 1.0, sub, sb, flags, &grid)) return grid;
   return std::nullopt;
 }
 
@@ -743,14 +743,19 @@ BoardDetection RedetectWithModel(const cv::Mat& image, const BoardSpec& board,
   options.Check();
   OMNIRIG_CHECK(!image.empty(), "detect: empty image");
   const cv::Mat grey = ToGreyscale8(image);
-  for (const auto& [sub_cols, sub_rows] : PartialGridSizes(board)) {
-    const auto grid = FindPartialGrid(grey, sub_cols, sub_rows);
-    if (!grid) continue;
-    BoardDetection detection =
-        BestPlacement(grey, board, model, *grid, sub_cols, sub_rows, options);
-    if (detection.found) {
-      detection.method = "model-grown";
-      return detection;
+  // The classic detector over every size first: it takes milliseconds where the sector-based
+  // one takes most of a second per size (bench_calib profile: KaidanOmni8's re-detection spent
+  // over 20 s in it), and a smaller grid grows to the whole board with the model all the same.
+  for (const bool sb : {false, true}) {
+    for (const auto& [sub_cols, sub_rows] : PartialGridSizes(board)) {
+      const auto grid = FindPartialGrid(grey, sub_cols, sub_rows, sb);
+      if (!grid) continue;
+      BoardDetection detection =
+          BestPlacement(grey, board, model, *grid, sub_cols, sub_rows, options);
+      if (detection.found) {
+        detection.method = "model-grown";
+        return detection;
+      }
     }
   }
   BoardDetection detection;
