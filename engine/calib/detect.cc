@@ -423,8 +423,14 @@ BoardDetection DetectCheckerboard(const cv::Mat& grey, const BoardSpec& board,
     if (auto detection = try_one(plain.front(), exhaustive)) return *detection;
   }
   BoardDetection detection;
-  detection.reason = last_reason.empty() ? "no " + board.Describe() + " found"
-                                         : "rejected candidate: " + last_reason;
+  // In words a user can act on: what a detectable view needs.
+  detection.reason = last_reason.empty()
+                         ? "no " + board.Describe() +
+                               " found: the whole board must be in view (every inner corner, "
+                               "clear of the mirror's rim, the camera's reflection and hands), "
+                               "sharp, and not washed out by glare; cols and rows count inner "
+                               "corners"
+                         : "rejected candidate: " + last_reason;
   return detection;
 }
 
