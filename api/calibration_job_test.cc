@@ -4,6 +4,7 @@
 #include <filesystem>
 
 #include <gtest/gtest.h>
+#include <opencv2/core.hpp>
 #include <unistd.h>
 
 #include "api/calibration_json.h"
@@ -56,6 +57,29 @@ TEST(CalibrationJob, RunsOnTheVmrSetWithOverlays) {
   EXPECT_LT(svp["principal_point_offset_px"].get<double>(), 5.0);
   EXPECT_TRUE(svp["predicted_circle_px"].is_null());
   EXPECT_TRUE(fs::exists(out / svp["overlay"].get<std::string>()));
+  // The exports, read back with OpenCV's FileStorage: the calibrated camera.
+  const json& exports = result["exports"];
+  cv::FileStorage opencv((out / exports["opencv_omnidir"].get<std::string>()).string(),
+                         cv::FileStorage::READ);
+  ASSERT_TRUE(opencv.isOpened());
+  cv::Mat k;
+  opencv["camera_matrix"] >> k;
+  ASSERT_EQ(k.total(), 9u);
+  EXPECT_DOUBLE_EQ(k.at<double>(0, 2), result["camera"]["intrinsics"]["u0"].get<double>());
+  EXPECT_DOUBLE_EQ(static_cast<double>(opencv["xi"]),
+                   result["camera"]["intrinsics"]["xi"].get<double>());
+  EXPECT_EQ(static_cast<int>(opencv["image_width"]), 1024);
+  EXPECT_TRUE(fs::exists(out / exports["kalibr"].get<std::string>()));
+  // The report of what to do next: the disk from the rim the SVP check found.
+  const json& coverage = result["coverage"];
+  EXPECT_EQ(coverage["disk_from"], "svp_rim");
+  EXPECT_TRUE(fs::exists(out / coverage["image"].get<std::string>()));
+  EXPECT_GT(coverage["covered_fraction"].get<double>(), 0.05);
+  EXPECT_LT(coverage["covered_fraction"].get<double>(), 1.0);
+  ASSERT_TRUE(coverage["max_uncertainty_px"].is_number()) << coverage.dump();
+  EXPECT_GT(coverage["max_uncertainty_px"].get<double>(), 0.0);
+  EXPECT_TRUE(fs::exists(out / coverage["uncertainty_image"].get<std::string>()));
+  EXPECT_TRUE(coverage["advice"].is_array());
   fs::remove_all(out);
 }
 

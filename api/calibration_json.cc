@@ -1,9 +1,15 @@
 #include "api/calibration_json.h"
 
+#include <algorithm>
+#include <fstream>
 #include <set>
+
+#include <opencv2/imgcodecs.hpp>
 
 #include "api/camera_json.h"
 #include "api/job_types.h"
+#include "engine/calib/coverage.h"
+#include "engine/calib/model_io.h"
 #include "engine/util/check.h"
 
 namespace omnirig::api {
@@ -280,6 +286,73 @@ json CalibrationReportToJson(const CalibrationReport& report) {
   return result;
 }
 
+namespace {
+
+void WriteTextFile(const std::filesystem::path& path, const std::string& text) {
+  std::filesystem::create_directories(path.parent_path());
+  std::ofstream out(path, std::ios::binary | std::ios::trunc);
+  out << text;
+  out.close();
+  OMNIRIG_CHECK(out, "cannot write " << path.filename().string());
+}
+
+}  // namespace
+
+json WriteCameraExports(const CameraModel& camera, const std::filesystem::path& dir) {
+  std::vector<std::string> warnings;
+  WriteTextFile(dir / kCameraOpenCvFileName, ToOpenCvOmnidir(camera, &warnings));
+  std::vector<std::string> kalibr_warnings;
+  WriteTextFile(dir / kCameraKalibrFileName, ToKalibrOmniRadtan(camera, &kalibr_warnings));
+  for (const std::string& warning : kalibr_warnings) {
+    if (std::find(warnings.begin(), warnings.end(), warning) == warnings.end()) {
+      warnings.push_back("kalibr: " + warning);
+    }
+  }
+  return {{"opencv_omnidir", kCameraOpenCvFileName},
+          {"kalibr", kCameraKalibrFileName},
+          {"warnings", warnings}};
+}
+
+json WriteCoverageReport(const CalibrationReport& report, const BoardSpec& board,
+                         const std::filesystem::path& dataset_dir,
+                         const std::filesystem::path& dir) {
+  cv::Mat background;
+  for (const CalibrationImageReport& image : report.images) {
+    if (!image.used) continue;
+    background = cv::imread((dataset_dir / image.name).string(), cv::IMREAD_COLOR);
+    break;
+  }
+  const Eigen::Vector3d* rim =
+      report.svp && report.svp->found_circle_px ? &*report.svp->found_circle_px : nullptr;
+  const CoverageOptions options;
+  const CoverageReport coverage = AnalyseCoverage(report, board, background, rim, options);
+  std::filesystem::create_directories(dir);
+  cv::imwrite((dir / kCoverageImageFileName).string(), coverage.coverage_image);
+  json result = {{"image", kCoverageImageFileName},
+                 {"disk_centre_px", {coverage.disk_centre_px.x(), coverage.disk_centre_px.y()}},
+                 {"disk_radius_px", coverage.disk_radius_px},
+                 {"disk_from", rim ? "svp_rim" : "principal_point_inscribed_circle"},
+                 {"near_px", options.near_px},
+                 {"covered_fraction", coverage.covered_fraction},
+                 {"uncertainty_image", nullptr},
+                 {"max_uncertainty_px", nullptr},
+                 {"median_uncertainty_px", nullptr},
+                 {"advice", coverage.advice}};
+  if (coverage.uncertainty_valid) {
+    cv::imwrite((dir / kUncertaintyImageFileName).string(), coverage.uncertainty_image);
+    result["uncertainty_image"] = kUncertaintyImageFileName;
+    result["max_uncertainty_px"] = coverage.max_uncertainty_px;
+    result["median_uncertainty_px"] = coverage.median_uncertainty_px;
+  }
+  return result;
+}
+
+json WriteRigExports(const StereoRig& rig, const std::filesystem::path& dir) {
+  std::vector<std::string> warnings;
+  WriteTextFile(dir / kCamchainKalibrFileName, ToKalibrCamchain(rig, &warnings));
+  return {{"kalibr_camchain", kCamchainKalibrFileName}, {"warnings", warnings}};
+}
+
 void RegisterCalibrationJobType() {
   JobType type;
   type.name = "calibration";
@@ -293,7 +366,11 @@ void RegisterCalibrationJobType() {
                         context.output_dir, context.progress);
     context.Log("calibration: RMS " + std::to_string(report.rms_px) + " px over " +
                 std::to_string(report.num_views_used) + " views; " + report.solver.brief);
-    return CalibrationReportToJson(report);
+    json result = CalibrationReportToJson(report);
+    result["exports"] = WriteCameraExports(report.camera, context.output_dir);
+    result["coverage"] =
+        WriteCoverageReport(report, request.board, context.dataset_dir, context.output_dir);
+    return result;
   };
   RegisterJobType(std::move(type));
 }

@@ -21,8 +21,11 @@
 //          "solver": {...}, "timings_s": {...},
 //          "svp": {"image", "found", "reason", "predicted_circle_px", "found_circle_px",
 //                  "centre_offset_px", "radius_offset_px", "principal_point_px",
-//                  "principal_point_offset_px", "num_edge_points", "overlay"}}  (when asked)
+//                  "principal_point_offset_px", "num_edge_points", "overlay"}}  (when asked),
+//          "exports": {"opencv_omnidir", "kalibr", "warnings"} (see WriteCameraExports),
+//          "coverage": {...} (see WriteCoverageReport)}
 
+#include <filesystem>
 #include <string>
 
 #include <nlohmann/json.hpp>
@@ -44,6 +47,33 @@ CalibrationRequest CalibrationRequestFromJson(const nlohmann::json& params);
 BoardSpec BoardFromJson(const nlohmann::json& board);
 
 nlohmann::json CalibrationReportToJson(const CalibrationReport& report);
+
+// The exports every calibration job writes into its output folder (they become artifacts):
+// kCameraOpenCvFileName (OpenCV omnidir FileStorage: camera_matrix K, distortion_coefficients D
+// = (k1, k2, p1, p2), xi, image_width, image_height) and kCameraKalibrFileName (Kalibr
+// camera_model omni, distortion_model radtan, intrinsics [xi, fu, fv, pu, pv]). Returns
+// {"opencv_omnidir": NAME, "kalibr": NAME, "warnings": [what the formats drop]}, the result's
+// "exports".
+inline constexpr const char* kCameraOpenCvFileName = "camera_opencv.yaml";
+inline constexpr const char* kCameraKalibrFileName = "camera_kalibr.yaml";
+nlohmann::json WriteCameraExports(const CameraModel& camera, const std::filesystem::path& dir);
+
+// The report of what to do next (engine/calib/coverage.h) for a calibration of images in
+// `dataset_dir`: writes kCoverageImageFileName and, when the covariance allows,
+// kUncertaintyImageFileName into `dir`, and returns the result's "coverage": {"image",
+// "disk_centre_px", "disk_radius_px", "disk_from", "near_px", "covered_fraction",
+// "uncertainty_image", "max_uncertainty_px", "median_uncertainty_px" (null when singular),
+// "advice": [sentences]}.
+inline constexpr const char* kCoverageImageFileName = "coverage.png";
+inline constexpr const char* kUncertaintyImageFileName = "uncertainty.png";
+nlohmann::json WriteCoverageReport(const CalibrationReport& report, const BoardSpec& board,
+                                   const std::filesystem::path& dataset_dir,
+                                   const std::filesystem::path& dir);
+
+// The export every relative_pose job writes: kCamchainKalibrFileName, a Kalibr camchain of both
+// cameras with cam1's T_cn_cnm1 = cam1_from_cam0. Returns {"kalibr_camchain": NAME, "warnings"}.
+inline constexpr const char* kCamchainKalibrFileName = "camchain_kalibr.yaml";
+nlohmann::json WriteRigExports(const StereoRig& rig, const std::filesystem::path& dir);
 
 // Registers the job type "calibration" (called from RegisterBuiltinJobTypes()).
 void RegisterCalibrationJobType();

@@ -4,14 +4,18 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
+#include <string>
 
 #include <unistd.h>
 
 #include <gtest/gtest.h>
+#include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 
 #include "api/camera_json.h"
 #include "api/job_types.h"
+#include "engine/calib/model_io.h"
 #include "engine/calib/synthetic_corners.h"
 
 namespace omnirig::api {
@@ -203,6 +207,74 @@ TEST(CalibrationJob, IsRegisteredAndFailsClearlyOnUnusableImages) {
     EXPECT_NE(message.find("truncated.jpg: cannot read the image"), std::string::npos) << message;
   }
   EXPECT_EQ(detect_reports, 2);  // one per image, readable or not
+  fs::remove_all(dir);
+}
+
+CameraModel ExportCamera() {
+  CameraModel camera;
+  camera.width = 1280;
+  camera.height = 1024;
+  camera.intrinsics.params = {1.02, 405.5, 406.25, 641.5, 509.75, 0.0,
+                              -0.11, 0.013, 1.5e-3, -7.5e-4, 0.0};
+  return camera;
+}
+
+TEST(CalibrationExports, OpenCvAndKalibrFilesReadBack) {
+  const fs::path dir =
+      fs::temp_directory_path() / ("omnirig_calib_exports_" + std::to_string(::getpid()));
+  const CameraModel camera = ExportCamera();
+  const json exports = WriteCameraExports(camera, dir);
+  EXPECT_EQ(exports["opencv_omnidir"], "camera_opencv.yaml");
+  EXPECT_EQ(exports["kalibr"], "camera_kalibr.yaml");
+  EXPECT_TRUE(exports["warnings"].empty());
+  // OpenCV's own reader: K, D, xi and the image size as cv::omnidir uses them.
+  cv::FileStorage fs_cv((dir / "camera_opencv.yaml").string(), cv::FileStorage::READ);
+  ASSERT_TRUE(fs_cv.isOpened());
+  cv::Mat k, d;
+  fs_cv["camera_matrix"] >> k;
+  fs_cv["distortion_coefficients"] >> d;
+  ASSERT_EQ(k.total(), 9u);
+  ASSERT_EQ(d.total(), 4u);
+  const UnifiedIntrinsics& in = camera.intrinsics;
+  EXPECT_DOUBLE_EQ(k.at<double>(0, 0), in.gamma_u());
+  EXPECT_DOUBLE_EQ(k.at<double>(1, 1), in.gamma_v());
+  EXPECT_DOUBLE_EQ(k.at<double>(0, 2), in.u0());
+  EXPECT_DOUBLE_EQ(k.at<double>(1, 2), in.v0());
+  EXPECT_DOUBLE_EQ(d.at<double>(0), in.k(1));
+  EXPECT_DOUBLE_EQ(d.at<double>(3), in.k(4));
+  EXPECT_DOUBLE_EQ(static_cast<double>(fs_cv["xi"]), in.xi());
+  EXPECT_EQ(static_cast<int>(fs_cv["image_width"]), 1280);
+  EXPECT_EQ(static_cast<int>(fs_cv["image_height"]), 1024);
+  // Kalibr: omni-radtan, intrinsics [xi, fu, fv, pu, pv].
+  std::ifstream kalibr_file(dir / "camera_kalibr.yaml");
+  const std::string kalibr((std::istreambuf_iterator<char>(kalibr_file)),
+                           std::istreambuf_iterator<char>());
+  EXPECT_NE(kalibr.find("camera_model: omni"), std::string::npos) << kalibr;
+  EXPECT_NE(kalibr.find("distortion_model: radtan"), std::string::npos) << kalibr;
+  const CameraModel back = FromKalibrOmniRadtan(kalibr);
+  for (int i = 0; i < UnifiedIntrinsics::kNumParams; ++i) {
+    EXPECT_DOUBLE_EQ(back.intrinsics.params[i], in.params[i]) << UnifiedIntrinsics::kNames[i];
+  }
+  fs::remove_all(dir);
+}
+
+TEST(CalibrationExports, RigCamchainReadsBackWithBothCameras) {
+  const fs::path dir =
+      fs::temp_directory_path() / ("omnirig_rig_exports_" + std::to_string(::getpid()));
+  StereoRig rig;
+  rig.cam0 = ExportCamera();
+  rig.cam1 = ExportCamera();
+  rig.cam1.intrinsics.xi() = 0.98;
+  rig.cam0_from_cam1 = Rigid3d(Eigen::Quaterniond(Eigen::AngleAxisd(0.02, Eigen::Vector3d::UnitX())),
+                               Eigen::Vector3d(0.001, 0.0, 0.1));
+  const json exports = WriteRigExports(rig, dir);
+  EXPECT_EQ(exports["kalibr_camchain"], "camchain_kalibr.yaml");
+  std::ifstream file(dir / "camchain_kalibr.yaml");
+  const std::string text((std::istreambuf_iterator<char>(file)), std::istreambuf_iterator<char>());
+  const StereoRig back = FromKalibrCamchain(text);
+  EXPECT_DOUBLE_EQ(back.cam1.intrinsics.xi(), 0.98);
+  EXPECT_LT((back.cam0_from_cam1.translation - rig.cam0_from_cam1.translation).norm(), 1e-12);
+  EXPECT_LT(back.cam0_from_cam1.rotation.angularDistance(rig.cam0_from_cam1.rotation), 1e-12);
   fs::remove_all(dir);
 }
 

@@ -480,7 +480,11 @@ void RegisterRelativePoseJobType() {
     if (parsed.cam1_calibration_job) ids.push_back(*parsed.cam1_calibration_job);
     return ids;
   };
-  type.run = RunRelativePoseJob;
+  type.run = [](const json& params, const JobContext& context) {
+    json result = RunRelativePoseJob(params, context);
+    result["exports"] = WriteRigExports(RigFromJson(result), context.output_dir);
+    return result;
+  };
   RegisterJobType(std::move(type));
 }
 

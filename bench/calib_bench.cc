@@ -7,12 +7,15 @@
 //      and the 10 real VMR images, wall and CPU time.
 
 #include <cstdio>
+#include <cstdlib>
 #include <ctime>
 #include <filesystem>
 #include <string>
 
 #include <opencv2/ccalib/omnidir.hpp>
+#include <opencv2/calib3d.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "engine/calib/board_pose.h"
 #include "engine/calib/model_io.h"
@@ -359,10 +362,120 @@ void DetectAndCalibrateSpeed() {
       "   target: 10 images of 1280x1024 in < 2 s wall. cpu_s: process CPU (both threads).\n");
 }
 
+// OpenCV's detector as the data README's peer runs it: findChessboardCorners, falling back to
+// findChessboardCornersSB, then cornerSubPix.
+BoardDetection OpenCvDetect(const cv::Mat& image, const BoardSpec& board) {
+  cv::Mat grey;
+  cv::cvtColor(image, grey, cv::COLOR_BGR2GRAY);
+  std::vector<cv::Point2f> corners;
+  const cv::Size size(board.cols, board.rows);
+  bool found = cv::findChessboardCorners(grey, size, corners,
+                                         cv::CALIB_CB_ADAPTIVE_THRESH | cv::CALIB_CB_NORMALIZE_IMAGE);
+  if (!found) found = cv::findChessboardCornersSB(grey, size, corners, cv::CALIB_CB_NORMALIZE_IMAGE);
+  BoardDetection detection;
+  if (!found || static_cast<int>(corners.size()) != board.NumCorners()) return detection;
+  cv::cornerSubPix(grey, corners, cv::Size(11, 11), cv::Size(-1, -1),
+                   cv::TermCriteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 30, 0.01));
+  detection.found = true;
+  for (int i = 0; i < board.NumCorners(); ++i) {
+    detection.corners_px.emplace_back(corners[i].x, corners[i].y);
+    detection.corner_ids.push_back(i);
+  }
+  return detection;
+}
+
+// Section "profile": every real image set, per image the time of omnirig's detector and of
+// OpenCV's, then the whole detect + calibrate (CalibrateImages, 2 threads, with its re-detection
+// pass) against OpenCV's detector + cv::omnidir on the same images: views, RMS, wall seconds.
+void ProfileRealSets() {
+  // The environment's OMNIRIG_SOURCE_DIR (as the tests read it) wins over the build's, for a
+  // worktree that is not beside ../shared.
+  const char* source = std::getenv("OMNIRIG_SOURCE_DIR");
+  const fs::path real =
+      fs::path(source ? source : OMNIRIG_SOURCE_DIR) / ".." / "shared" / "data" / "real";
+  std::printf("\n4. Real image sets: per image and per stage (target: <= 1 s wall per 10 views)\n");
+  if (!fs::is_directory(real)) {
+    std::printf("   (no real data at %s)\n", real.string().c_str());
+    return;
+  }
+  struct Set {
+    std::string folder, prefix;
+    int cols, rows;
+    double square_m;
+  };
+  const std::vector<Set> sets = {{"ocamcalib-kaidanomni", "", 7, 11, 0.03},
+                                 {"ocamcalib-vmr", "", 6, 7, 0.03},
+                                 {"fisheye-stereo-pairs", "left", 9, 6, 0.02423},
+                                 {"fisheye-stereo-pairs", "right", 9, 6, 0.02423}};
+  for (const Set& set : sets) {
+    const fs::path dir = real / set.folder;
+    std::vector<std::string> names;
+    for (const auto& entry : fs::directory_iterator(dir)) {
+      const std::string name = entry.path().filename().string();
+      if (entry.path().extension() == ".jpg" && name.rfind(set.prefix, 0) == 0) names.push_back(name);
+    }
+    std::sort(names.begin(), names.end());
+    BoardSpec board;
+    board.cols = set.cols;
+    board.rows = set.rows;
+    board.square_size_m = set.square_m;
+    std::printf("   %s%s%s (%zu images, %dx%d)\n", set.folder.c_str(), set.prefix.empty() ? "" : " ",
+                set.prefix.c_str(), names.size(), set.cols, set.rows);
+    std::printf("     %-18s %9s %-16s %9s %5s\n", "image", "ours_s", "method", "opencv_s", "cv");
+    std::vector<CalibrationView> cv_views;
+    double ours_total = 0.0, cv_total = 0.0;
+    int width = 0, height = 0;
+    for (const std::string& name : names) {
+      const cv::Mat image = cv::imread((dir / name).string());
+      width = image.cols;
+      height = image.rows;
+      Timer timer;
+      const BoardDetection ours = DetectBoard(image, board, DetectOptions());
+      const double ours_s = timer.ElapsedSeconds();
+      timer.Restart();
+      const BoardDetection theirs = OpenCvDetect(image, board);
+      const double cv_s = timer.ElapsedSeconds();
+      ours_total += ours_s;
+      cv_total += cv_s;
+      cv_views.push_back({name, theirs});
+      std::printf("     %-18s %9.3f %-16s %9.3f %5s\n", name.c_str(), ours_s,
+                  ours.found ? ours.method.c_str() : "-", cv_s, theirs.found ? "yes" : "no");
+    }
+    ImageCalibrationOptions options;
+    options.calibrate.num_threads = 2;
+    Timer wall;
+    CalibrationReport report;
+    std::string failure;
+    try {
+      report = CalibrateImages(dir, names, board, options, "", ProgressSink());
+    } catch (const std::exception& e) {
+      failure = e.what();
+    }
+    const double ours_wall = wall.ElapsedSeconds();
+    wall.Restart();
+    const OmnidirResult omnidir = RunOmnidir(cv_views, board, width, height);
+    const double cv_wall = cv_total + wall.ElapsedSeconds();
+    std::printf("     detect (1 thread, sum): ours %.2f s, OpenCV %.2f s\n", ours_total, cv_total);
+    if (!failure.empty()) {
+      std::printf("     omnirig failed: %s\n", failure.substr(0, 200).c_str());
+      continue;
+    }
+    std::printf("     CalibrateImages (2 threads): %.2f s wall = detect %.2f + redetect %.2f + "
+                "init %.2f + solve %.2f + covariance %.2f; %.2f s per 10 views\n",
+                ours_wall, report.timings.detect_s, report.timings.redetect_s,
+                report.timings.init_s, report.timings.solve_s, report.timings.covariance_s,
+                10.0 * ours_wall / std::max<size_t>(1, names.size()));
+    std::printf("     views: ours %d, OpenCV detector %d; RMS ours %.4f px, cv::omnidir %.4f px; "
+                "wall ours / (OpenCV detect 1 thread + omnidir) = %.2f\n",
+                report.num_views_used, omnidir.views_used, report.rms_px, omnidir.rms_px,
+                ours_wall / std::max(1e-9, cv_wall));
+  }
+}
+
 }  // namespace
 }  // namespace omnirig
 
-// Sections: "synth", "real", "speed" (all by default).
+// Sections: "synth", "real", "speed", "profile" (all by default).
 int main(int argc, char** argv) {
   std::setvbuf(stdout, nullptr, _IONBF, 0);
   const std::string only = argc > 1 ? argv[1] : "";
@@ -370,6 +483,7 @@ int main(int argc, char** argv) {
     if (only.empty() || only == "synth") omnirig::SyntheticAccuracy();
     if (only.empty() || only == "real") omnirig::RealSets();
     if (only.empty() || only == "speed") omnirig::DetectAndCalibrateSpeed();
+    if (only.empty() || only == "profile") omnirig::ProfileRealSets();
   } catch (const std::exception& e) {
     std::fprintf(stderr, "bench_calib: %s\n", e.what());
     return 1;

@@ -91,6 +91,7 @@ class ImageUpload {
       head_.append(data, std::min(size, storage::kImageProbeBytes - head_.size()));
     }
     writer_.Append(data, size);
+    completeness_.Append(data, size);
   }
 
   // Checks the header (415 or 422 for what is not an image) and seals the file: written and
@@ -103,6 +104,13 @@ class ImageUpload {
     }
     if (header.status == storage::ImageHeader::Status::kCorrupt) {
       throw HttpError(422, "corrupt_image", name_ + ": " + header.problem, {{"name", name_}});
+    }
+    // A file cut short or damaged in transfer is refused whole (its header alone looks fine).
+    if (header.format != "tum") {
+      const std::string problem = completeness_.Finish(header, head_);
+      if (!problem.empty()) {
+        throw HttpError(422, "corrupt_image", name_ + ": " + problem, {{"name", name_}});
+      }
     }
     const storage::FileDigest digest = writer_.Seal();
     std::string().swap(head_);  // a batch holds many sealed uploads
@@ -158,6 +166,7 @@ class ImageUpload {
   std::string name_;
   storage::AtomicFileWriter writer_;
   std::string head_;
+  storage::ImageCompletenessCheck completeness_;
   storage::ImageRecord record_;  // set by Seal()
 };
 

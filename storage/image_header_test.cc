@@ -1,6 +1,11 @@
 #include "storage/image_header.h"
 
+#include <algorithm>
+#include <string>
+#include <vector>
+
 #include <gtest/gtest.h>
+#include <opencv2/imgcodecs.hpp>
 
 namespace omnirig::storage {
 namespace {
@@ -50,6 +55,69 @@ TEST(ImageHeader, RefusesNonImagesAndCorruptHeaders) {
   EXPECT_EQ(ProbeImageHeader(PngHeader(0, 100)).status, ImageHeader::Status::kCorrupt);
   EXPECT_EQ(ProbeImageHeader(std::string("\xFF\xD8\xFF\xE0\x00\x10", 6)).status,
             ImageHeader::Status::kCorrupt);
+}
+
+std::string Encode(const std::string& ext, const cv::Mat& image,
+                   const std::vector<int>& params = {}) {
+  std::vector<uint8_t> bytes;
+  EXPECT_TRUE(cv::imencode(ext, image, bytes, params));
+  return std::string(bytes.begin(), bytes.end());
+}
+
+cv::Mat Gradient(int channels) {
+  cv::Mat image(48, 64, CV_8UC(channels));
+  for (int y = 0; y < image.rows; ++y) {
+    for (int x = 0; x < image.cols * channels; ++x) image.ptr<uint8_t>(y)[x] = (x * 7 + y * 3) % 256;
+  }
+  return image;
+}
+
+// The completeness check's verdict on `bytes`, fed in pieces of `piece` bytes as an upload
+// arrives.
+std::string Completeness(const std::string& bytes, size_t piece = 1000) {
+  const std::string head = bytes.substr(0, kImageProbeBytes);
+  const ImageHeader header = ProbeImageHeader(head);
+  EXPECT_EQ(header.status, ImageHeader::Status::kOk) << header.problem;
+  ImageCompletenessCheck check;
+  for (size_t at = 0; at < bytes.size(); at += piece) {
+    check.Append(bytes.data() + at, std::min(piece, bytes.size() - at));
+  }
+  return check.Finish(header, head);
+}
+
+TEST(ImageCompleteness, WholeFilesOfEveryFormatPass) {
+  for (const std::string ext : {".png", ".jpg", ".pgm", ".ppm", ".bmp"}) {
+    const cv::Mat image = Gradient(ext == ".pgm" ? 1 : 3);
+    EXPECT_EQ(Completeness(Encode(ext, image)), "") << ext;
+    EXPECT_EQ(Completeness(Encode(ext, image), 1), "") << ext << " byte by byte";
+  }
+  // ASCII PGM, a progressive JPEG, and a trailer after the end.
+  EXPECT_EQ(Completeness(Encode(".pgm", Gradient(1), {cv::IMWRITE_PXM_BINARY, 0})), "");
+  EXPECT_EQ(Completeness(Encode(".jpg", Gradient(3), {cv::IMWRITE_JPEG_PROGRESSIVE, 1})), "");
+  EXPECT_EQ(Completeness(Encode(".jpg", Gradient(3)) + "trailer"), "");
+}
+
+TEST(ImageCompleteness, TruncatedFilesAreRefusedWithTheReason) {
+  for (const std::string ext : {".png", ".jpg", ".pgm", ".ppm", ".bmp"}) {
+    const std::string whole = Encode(ext, Gradient(ext == ".pgm" ? 1 : 3));
+    for (const size_t cut : {whole.size() - 1, whole.size() - 20, whole.size() / 2}) {
+      const std::string problem = Completeness(whole.substr(0, cut));
+      EXPECT_NE(problem.find("truncated"), std::string::npos) << ext << " cut at " << cut;
+    }
+  }
+  const std::string ascii = Encode(".pgm", Gradient(1), {cv::IMWRITE_PXM_BINARY, 0});
+  EXPECT_NE(Completeness(ascii.substr(0, ascii.size() / 2)).find("truncated"), std::string::npos);
+  const std::string progressive = Encode(".jpg", Gradient(3), {cv::IMWRITE_JPEG_PROGRESSIVE, 1});
+  EXPECT_NE(Completeness(progressive.substr(0, progressive.size() - 2)).find("truncated"),
+            std::string::npos);
+}
+
+TEST(ImageCompleteness, ACorruptPngChunkFailsItsCrc) {
+  std::string png = Encode(".png", Gradient(3));
+  png[png.size() / 2] = static_cast<char>(png[png.size() / 2] ^ 0x10);  // inside IDAT
+  const std::string problem = Completeness(png);
+  EXPECT_NE(problem.find("CRC"), std::string::npos) << problem;
+  EXPECT_NE(problem.find("IDAT"), std::string::npos) << problem;
 }
 
 }  // namespace

@@ -4,6 +4,7 @@
 
 #include <arpa/inet.h>
 #include <gtest/gtest.h>
+#include <opencv2/imgcodecs.hpp>
 #include <netinet/in.h>
 #include <sys/socket.h>
 #include <sys/time.h>
@@ -16,6 +17,7 @@
 #include <map>
 #include <set>
 #include <thread>
+#include <vector>
 
 #include "api/camera_json.h"
 #include "api/job_types.h"
@@ -260,6 +262,22 @@ TEST_F(ServerApiTest, RefusesBadUploads) {
               "unsupported_media_type");
   ExpectError(client.Put((base + "b.png").c_str(), PngBytes(8, 8).substr(0, 16), "image/png"), 422,
               "corrupt_image");
+  // Whole headers, cut short after them: refused with the reason, nothing stored.
+  const std::string png = PngBytes(8, 8);
+  const auto cut_png = client.Put((base + "c.png").c_str(), png.substr(0, png.size() - 6),
+                                  "image/png");
+  ExpectError(cut_png, 422, "corrupt_image");
+  EXPECT_NE(cut_png->body.find("truncated"), std::string::npos) << cut_png->body;
+  std::vector<uint8_t> jpeg_bytes;
+  ASSERT_TRUE(cv::imencode(".jpg", cv::Mat(8, 8, CV_8UC1, cv::Scalar(90)), jpeg_bytes));
+  const std::string jpeg(jpeg_bytes.begin(), jpeg_bytes.end());
+  const auto cut_jpeg = client.Put((base + "d.jpg").c_str(), jpeg.substr(0, jpeg.size() - 2),
+                                   "image/jpeg");
+  ExpectError(cut_jpeg, 422, "corrupt_image");
+  EXPECT_NE(cut_jpeg->body.find("end-of-image"), std::string::npos) << cut_jpeg->body;
+  ExpectError(client.Put((base + "e.pgm").c_str(), "P5\n8 8\n255\n" + std::string(40, 'x'),
+                         "image/x-portable-graymap"),
+              422, "corrupt_image");
   ExpectError(client.Put((base + "..%2F..%2Fescape.png").c_str(), PngBytes(8, 8), "image/png"), 400,
               "invalid_name");
   ExpectError(client.Put((base + ".hidden.png").c_str(), PngBytes(8, 8), "image/png"), 400,

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <optional>
 
 #include <opencv2/aruco/charuco.hpp>
 #include <opencv2/calib3d.hpp>
@@ -52,29 +53,127 @@ bool LooksLikeXCorner(const cv::Mat& grey, const Eigen::Vector2d& center, double
   return changes == 4;
 }
 
-// A full grid is a sub-board of a larger board when, along some edge, the points one square
-// beyond the edge are inner corners too.
-bool ExtendsBeyondAnEdge(const cv::Mat& grey, const std::vector<Eigen::Vector2d>& grid,
-                         const BoardSpec& board) {
-  auto at = [&](int r, int c) { return grid[r * board.cols + c]; };
-  auto edge_extends = [&](int n, auto edge, auto inner) {
-    int hits = 0;
-    for (int i = 0; i < n; ++i) {
-      const Eigen::Vector2d beyond = 2.0 * edge(i) - inner(i);
-      const double radius = 0.3 * (edge(i) - inner(i)).norm();
-      hits += radius >= 2.0 && LooksLikeXCorner(grey, beyond, radius);
+// Mean grey level in a disc of `radius` pixels around `center`; nullopt when the disc leaves the
+// image.
+std::optional<double> MeanInDisc(const cv::Mat& grey, const Eigen::Vector2d& center,
+                                 double radius) {
+  const int r = std::max(1, static_cast<int>(std::floor(radius)));
+  const int u0 = static_cast<int>(std::lround(center.x()));
+  const int v0 = static_cast<int>(std::lround(center.y()));
+  if (!center.allFinite() || u0 - r < 0 || v0 - r < 0 || u0 + r >= grey.cols ||
+      v0 + r >= grey.rows) {
+    return std::nullopt;
+  }
+  double sum = 0.0;
+  int n = 0;
+  for (int dv = -r; dv <= r; ++dv) {
+    for (int du = -r; du <= r; ++du) {
+      if (du * du + dv * dv > r * r) continue;
+      sum += grey.at<uint8_t>(v0 + dv, u0 + du);
+      ++n;
     }
-    return 2 * hits > n;
-  };
+  }
+  return sum / n;
+}
+
+// How one edge of a full grid continues. A board of cols x rows inner corners has one more
+// row of squares beyond each edge line of corners (its outer squares), then its margin. The
+// cells one square further out (between one and two square pitches beyond the edge line, along
+// the grid's predicted continuation) are checker squares only on a larger board: there each has
+// the colour of the square two rows inwards, the inside square next to the edge line, distinctly
+// dark or light, so the row alternates in the board's own pitch and phase. A white margin of any
+// width, a frame or holder of another grey, a hand, glare or the background is uniform along
+// the edge (or random), so at most about half of its cells match.
+//
+// edge[i], inner[i], inner2[i]: the corners of the edge line, the next line inwards and the one
+// after (inner2 empty when the board has only two lines across).
+bool EdgeContinues(const cv::Mat& grey, const std::vector<Eigen::Vector2d>& edge,
+                   const std::vector<Eigen::Vector2d>& inner,
+                   const std::vector<Eigen::Vector2d>& inner2) {
+  const size_t n = edge.size();
+  std::vector<Eigen::Vector2d> beyond1(n), beyond2(n);
+  for (size_t i = 0; i < n; ++i) {
+    // Lagrange extrapolation of the quadratic through the lines at grid offsets 0, -1, -2 to +1
+    // and +2: it follows the curvature of a mirror's image of the board.
+    if (inner2.empty()) {
+      beyond1[i] = 2.0 * edge[i] - inner[i];
+      beyond2[i] = 3.0 * edge[i] - 2.0 * inner[i];
+    } else {
+      beyond1[i] = 3.0 * edge[i] - 3.0 * inner[i] + inner2[i];
+      beyond2[i] = 6.0 * edge[i] - 8.0 * inner[i] + 3.0 * inner2[i];
+    }
+  }
+  std::vector<double> inside, outside;
+  for (size_t i = 0; i + 1 < n; ++i) {
+    const double side = std::min((edge[i + 1] - edge[i]).norm(), (edge[i] - inner[i]).norm());
+    const double radius = 0.2 * side;
+    std::optional<double> in, out;
+    if (radius >= 1.0) {
+      in = MeanInDisc(grey, 0.25 * (edge[i] + edge[i + 1] + inner[i] + inner[i + 1]), radius);
+      out = MeanInDisc(grey, 0.25 * (beyond1[i] + beyond1[i + 1] + beyond2[i] + beyond2[i + 1]),
+                       radius);
+    }
+    // Cells too small or off the image are left out, keeping the alternation's index.
+    if (!in || !out) {
+      inside.push_back(std::numeric_limits<double>::quiet_NaN());
+      outside.push_back(0.0);
+      continue;
+    }
+    inside.push_back(*in);
+    outside.push_back(*out);
+  }
+  // The board's own dark and light levels: the squares inside alternate along the edge.
+  double sum[2] = {0.0, 0.0};
+  int count[2] = {0, 0};
+  for (size_t i = 0; i < inside.size(); ++i) {
+    if (std::isnan(inside[i])) continue;
+    sum[i % 2] += inside[i];
+    ++count[i % 2];
+  }
+  if (count[0] == 0 || count[1] == 0) return false;
+  const double level0 = sum[0] / count[0], level1 = sum[1] / count[1];
+  const double contrast = std::abs(level0 - level1);
+  if (contrast < 20.0) return false;
+  const double mid = 0.5 * (level0 + level1);
+  int valid = 0, matches = 0;
+  for (size_t i = 0; i < inside.size(); ++i) {
+    if (std::isnan(inside[i])) continue;
+    ++valid;
+    const bool inside_light = (i % 2 == 0 ? level0 : level1) > mid;
+    const bool outside_light = outside[i] > mid;
+    matches += inside_light == outside_light && std::abs(outside[i] - mid) > 0.25 * contrast;
+  }
+  return valid >= 2 && 5 * matches >= 4 * valid;
+}
+
+// The edges along which a full grid continues as a checkerboard (a sub-board of a larger
+// board): extra columns (left, right) and rows (top, bottom) seen beyond it.
+struct GridExtension {
+  int extra_cols = 0;
+  int extra_rows = 0;
+};
+
+GridExtension FindGridExtension(const cv::Mat& grey, const std::vector<Eigen::Vector2d>& grid,
+                                const BoardSpec& board) {
   const int R = board.rows, C = board.cols;
-  return edge_extends(
-             C, [&](int c) { return at(0, c); }, [&](int c) { return at(1, c); }) ||
-         edge_extends(
-             C, [&](int c) { return at(R - 1, c); }, [&](int c) { return at(R - 2, c); }) ||
-         edge_extends(
-             R, [&](int r) { return at(r, 0); }, [&](int r) { return at(r, 1); }) ||
-         edge_extends(
-             R, [&](int r) { return at(r, C - 1); }, [&](int r) { return at(r, C - 2); });
+  auto row = [&](int r) {
+    std::vector<Eigen::Vector2d> line;
+    if (r < 0 || r >= R) return line;
+    for (int c = 0; c < C; ++c) line.push_back(grid[r * C + c]);
+    return line;
+  };
+  auto col = [&](int c) {
+    std::vector<Eigen::Vector2d> line;
+    if (c < 0 || c >= C) return line;
+    for (int r = 0; r < R; ++r) line.push_back(grid[r * C + c]);
+    return line;
+  };
+  GridExtension extension;
+  extension.extra_rows += EdgeContinues(grey, row(0), row(1), R > 2 ? row(2) : row(-1));
+  extension.extra_rows += EdgeContinues(grey, row(R - 1), row(R - 2), R > 2 ? row(R - 3) : row(-1));
+  extension.extra_cols += EdgeContinues(grey, col(0), col(1), C > 2 ? col(2) : col(-1));
+  extension.extra_cols += EdgeContinues(grey, col(C - 1), col(C - 2), C > 2 ? col(C - 3) : col(-1));
+  return extension;
 }
 
 // Refinement window half-size (pixels) for a corner whose local square is square_px.
@@ -206,10 +305,14 @@ std::string ValidateGridImpl(const cv::Mat& grey, const BoardSpec& board,
     }
     if (!(LocalSquarePx(grid, board, id) > 1.5)) return "collapsed squares";
   }
-  if (ExtendsBeyondAnEdge(grey, grid, board)) {
-    return "the pattern extends beyond " + std::to_string(board.cols) + "x" +
-           std::to_string(board.rows) +
-           " inner corners (a sub-board of a larger board: check cols and rows)";
+  const GridExtension extension = FindGridExtension(grey, grid, board);
+  if (extension.extra_cols > 0 || extension.extra_rows > 0) {
+    return "the board size looks wrong: the checker squares continue beyond " +
+           std::to_string(board.cols) + "x" + std::to_string(board.rows) +
+           " inner corners, the board has at least " +
+           std::to_string(board.cols + extension.extra_cols) + "x" +
+           std::to_string(board.rows + extension.extra_rows) +
+           " (a sub-board of a larger board: check cols and rows, counted as inner corners)";
   }
   return "";
 }
@@ -320,8 +423,14 @@ BoardDetection DetectCheckerboard(const cv::Mat& grey, const BoardSpec& board,
     if (auto detection = try_one(plain.front(), exhaustive)) return *detection;
   }
   BoardDetection detection;
-  detection.reason = last_reason.empty() ? "no " + board.Describe() + " found"
-                                         : "rejected candidate: " + last_reason;
+  // In words a user can act on: what a detectable view needs.
+  detection.reason = last_reason.empty()
+                         ? "no " + board.Describe() +
+                               " found: the whole board must be in view (every inner corner, "
+                               "clear of the mirror's rim, the camera's reflection and hands), "
+                               "sharp, and not washed out by glare; cols and rows count inner "
+                               "corners"
+                         : "rejected candidate: " + last_reason;
   return detection;
 }
 
@@ -466,19 +575,19 @@ int PlacedId(const BoardSpec& board, int sub_cols, int sub_rows, int symmetry, i
   return row * board.cols + col;
 }
 
-// A partial grid of sub_cols x sub_rows corners found by OpenCV without validation.
+// A partial grid of sub_cols x sub_rows corners found by OpenCV's classic (sb false) or
+// sector-based detector, without validation.
 std::optional<std::vector<Eigen::Vector2d>> FindPartialGrid(const cv::Mat& grey, int sub_cols,
-                                                            int sub_rows) {
+                                                            int sub_rows, bool sb) {
   BoardSpec sub;
   sub.cols = sub_cols;
   sub.rows = sub_rows;
   std::vector<Eigen::Vector2d> grid;
-  const int classic =
-      cv::CALIB_CB_ADAPTIVE_THRESH | cv::CALIB_CB_NORMALIZE_IMAGE | cv::CALIB_CB_FAST_CHECK;
-  if (RunOpenCvDetector(grey, 1.0, sub, false, classic, &grid)) return grid;
   const bool small = std::max(grey.cols, grey.rows) <= 800;
-  const int sb = cv::CALIB_CB_NORMALIZE_IMAGE | (small ? cv::CALIB_CB_ACCURACY : 0);
-  if (RunOpenCvDetector(grey, 1.0, sub, true, sb, &grid)) return grid;
+  const int flags =
+      sb ? cv::CALIB_CB_NORMALIZE_IMAGE | (small ? cv::CALIB_CB_ACCURACY : 0)
+         : cv::CALIB_CB_ADAPTIVE_THRESH | cv::CALIB_CB_NORMALIZE_IMAGE | cv::CALIB_CB_FAST_CHECK;
+  if (RunOpenCvDetector(grey, 1.0, sub, sb, flags, &grid)) return grid;
   return std::nullopt;
 }
 
@@ -640,14 +749,19 @@ BoardDetection RedetectWithModel(const cv::Mat& image, const BoardSpec& board,
   options.Check();
   OMNIRIG_CHECK(!image.empty(), "detect: empty image");
   const cv::Mat grey = ToGreyscale8(image);
-  for (const auto& [sub_cols, sub_rows] : PartialGridSizes(board)) {
-    const auto grid = FindPartialGrid(grey, sub_cols, sub_rows);
-    if (!grid) continue;
-    BoardDetection detection =
-        BestPlacement(grey, board, model, *grid, sub_cols, sub_rows, options);
-    if (detection.found) {
-      detection.method = "model-grown";
-      return detection;
+  // The classic detector over every size first: it takes milliseconds where the sector-based
+  // one takes most of a second per size (bench_calib profile: KaidanOmni8's re-detection spent
+  // over 20 s in it), and a smaller grid grows to the whole board with the model all the same.
+  for (const bool sb : {false, true}) {
+    for (const auto& [sub_cols, sub_rows] : PartialGridSizes(board)) {
+      const auto grid = FindPartialGrid(grey, sub_cols, sub_rows, sb);
+      if (!grid) continue;
+      BoardDetection detection =
+          BestPlacement(grey, board, model, *grid, sub_cols, sub_rows, options);
+      if (detection.found) {
+        detection.method = "model-grown";
+        return detection;
+      }
     }
   }
   BoardDetection detection;

@@ -89,8 +89,12 @@ BoardDetection RedetectWithModel(const cv::Mat& image, const BoardSpec& board,
                                  const CameraModel& model, const DetectOptions& options);
 
 // Checks a full grid (corner id i at grid[i]): every corner inside the image, no collapsed
-// squares, and no sub-board of a larger pattern (the points one square beyond an edge must not
-// look like inner corners). Returns the reason it fails, or "" when it passes.
+// squares, and no sub-board of a larger pattern: beyond the board's outer squares, along the
+// grid's predicted continuation, the cells must not continue the checker pattern (each the
+// colour of the square two rows inwards, in the board's pitch and phase). A margin of any width,
+// a frame of another grey, a hand, glare or the background do not. Returns the reason it fails
+// (for a larger board: "the board size looks wrong ... at least COLSxROWS"), or "" when it
+// passes.
 std::string ValidateBoardGrid(const cv::Mat& image, const BoardSpec& board,
                               const std::vector<Eigen::Vector2d>& grid);
 

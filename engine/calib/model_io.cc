@@ -171,6 +171,83 @@ std::string ToKalibrOmniRadtan(const CameraModel& camera, std::vector<std::strin
   return os.str();
 }
 
+// The camera block of ToKalibrOmniRadtan's text without its comment lines (the warnings are
+// collected by the caller).
+std::string KalibrBlockWithoutComments(const std::string& text) {
+  std::istringstream is(text);
+  std::ostringstream os;
+  std::string line;
+  while (std::getline(is, line)) {
+    if (!line.empty() && line[0] != '#') os << line << "\n";
+  }
+  return os.str();
+}
+
+std::string ToKalibrCamchain(const StereoRig& rig, std::vector<std::string>* warnings) {
+  std::vector<std::string> dropped[2];
+  const std::string cam0 = ToKalibrOmniRadtan(rig.cam0, &dropped[0], "cam0");
+  const std::string cam1 = ToKalibrOmniRadtan(rig.cam1, &dropped[1], "cam1");
+  std::vector<std::string> all;
+  for (int c = 0; c < 2; ++c) {
+    for (const std::string& warning : dropped[c]) {
+      all.push_back("cam" + std::to_string(c) + ": " + warning);
+    }
+  }
+  if (warnings) *warnings = all;
+  const Eigen::Matrix<double, 3, 4> cam1_from_cam0 = rig.cam0_from_cam1.Inverse().ToMatrix3x4();
+  std::ostringstream os;
+  os << std::setprecision(17);
+  os << "# Stereo rig exported by omnirig for Kalibr (omni-radtan camchain)\n";
+  for (const std::string& warning : all) os << "# WARNING: " << warning << "\n";
+  os << KalibrBlockWithoutComments(cam0);
+  std::string cam1_block = KalibrBlockWithoutComments(cam1);
+  std::ostringstream transform;
+  transform << std::setprecision(17) << "  T_cn_cnm1: [";
+  for (int r = 0; r < 4; ++r) {
+    transform << (r ? ", [" : "[");
+    for (int c = 0; c < 4; ++c) {
+      const double value = r < 3 ? cam1_from_cam0(r, c) : (c == 3 ? 1.0 : 0.0);
+      transform << (c ? ", " : "") << value;
+    }
+    transform << "]";
+  }
+  transform << "]\n";
+  const size_t header_end = cam1_block.find('\n') + 1;
+  cam1_block.insert(header_end, transform.str());
+  os << cam1_block;
+  return os.str();
+}
+
+StereoRig FromKalibrCamchain(const std::string& text) {
+  StereoRig rig;
+  rig.cam0 = FromKalibrOmniRadtan(text, "cam0");
+  rig.cam1 = FromKalibrOmniRadtan(text, "cam1");
+  const std::map<std::string, std::string> block = KalibrCameraBlock(text, "cam1");
+  const auto it = block.find("T_cn_cnm1");
+  OMNIRIG_CHECK(it != block.end(), "kalibr: camera 'cam1' has no 'T_cn_cnm1'");
+  std::string numbers = it->second;
+  for (char& c : numbers) {
+    if (c == '[' || c == ']' || c == ',') c = ' ';
+  }
+  std::istringstream is(numbers);
+  std::vector<double> values;
+  double x;
+  while (is >> x) values.push_back(x);
+  OMNIRIG_CHECK(is.eof() && values.size() == 16,
+                "kalibr: T_cn_cnm1 must be a 4x4 matrix in one [[..], ..] list");
+  Eigen::Matrix3d rotation;
+  Eigen::Vector3d translation;
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) rotation(r, c) = values[4 * r + c];
+    translation[r] = values[4 * r + 3];
+  }
+  OMNIRIG_CHECK((rotation * rotation.transpose() - Eigen::Matrix3d::Identity()).norm() < 1e-6 &&
+                    rotation.determinant() > 0.0,
+                "kalibr: T_cn_cnm1's rotation is not a rotation");
+  rig.cam0_from_cam1 = Rigid3d(Eigen::Quaterniond(rotation), translation).Inverse();
+  return rig;
+}
+
 CameraModel FromKalibrOmniRadtan(const std::string& text, const std::string& camera_name) {
   const std::map<std::string, std::string> block = KalibrCameraBlock(text, camera_name);
   auto get = [&](const std::string& key) -> const std::string& {

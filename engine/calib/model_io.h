@@ -34,6 +34,14 @@ std::string ToKalibrOmniRadtan(const CameraModel& camera, std::vector<std::strin
 // camera or distortion model or missing keys.
 CameraModel FromKalibrOmniRadtan(const std::string& text, const std::string& camera_name = "cam0");
 
+// A Kalibr camchain YAML of a stereo rig: cam0 and cam1 as ToKalibrOmniRadtan writes them,
+// cam1 with T_cn_cnm1 = cam1_from_cam0 (maps points in cam0's frame into cam1's; translation in
+// metres) as a 4x4 matrix. `warnings` receives what the format drops, per camera.
+std::string ToKalibrCamchain(const StereoRig& rig, std::vector<std::string>* warnings);
+// Parses a two-camera Kalibr camchain (cam0, cam1 with T_cn_cnm1; omni-radtan). Throws
+// InvalidArgument for missing keys or a T_cn_cnm1 that is not a rigid transform.
+StereoRig FromKalibrCamchain(const std::string& text);
+
 // The corners of a FileStorage file (YAML or XML) holding the sequences "objectPoints" (per
 // view, board points in the board's plane z = 0, as 3-channel matrices) and "imagePoints" (per
 // view, pixels as 2-channel matrices), as OpenCV's omnidir tutorial data and

@@ -2,6 +2,8 @@
 
 #include <cstdlib>
 #include <filesystem>
+#include <iomanip>
+#include <sstream>
 
 #include <gtest/gtest.h>
 #include <opencv2/ccalib/omnidir.hpp>
@@ -93,6 +95,39 @@ TEST(ModelIo, ReadsKalibrCamchainWithTwoCameras) {
   EXPECT_EQ(camera.intrinsics.k(4), 0.002);
   EXPECT_EQ(camera.width, 640);
   EXPECT_THROW(FromKalibrOmniRadtan(text, "cam1"), InvalidArgument);  // pinhole
+}
+
+TEST(ModelIo, KalibrCamchainRoundTripKeepsBothCamerasAndTheExtrinsic) {
+  StereoRig rig;
+  rig.cam0 = Camera();
+  rig.cam1 = Camera();
+  rig.cam1.intrinsics.gamma_u() = 431.0;
+  rig.cam1.intrinsics.xi() = 0.97;
+  rig.cam0_from_cam1 =
+      Rigid3d(Eigen::Quaterniond(Eigen::AngleAxisd(0.01, Eigen::Vector3d(1, 0.5, 0.2).normalized())),
+              Eigen::Vector3d(0.002, -0.001, 0.1));
+  std::vector<std::string> warnings;
+  const std::string text = ToKalibrCamchain(rig, &warnings);
+  EXPECT_TRUE(warnings.empty());
+  EXPECT_NE(text.find("T_cn_cnm1"), std::string::npos) << text;
+  const StereoRig back = FromKalibrCamchain(text);
+  ExpectSameCamera(rig.cam0, back.cam0);
+  ExpectSameCamera(rig.cam1, back.cam1);
+  // T_cn_cnm1 maps cam0's points into cam1: a point 1 m along cam0's axis.
+  const Eigen::Vector3d point_in_cam0(0.3, -0.2, 1.0);
+  EXPECT_LT((back.cam0_from_cam1.Inverse() * point_in_cam0 -
+             rig.cam0_from_cam1.Inverse() * point_in_cam0)
+                .norm(),
+            1e-12);
+  // Kalibr's own convention, read straight from the text: the translation column of
+  // T_cn_cnm1 is cam1_from_cam0's translation.
+  const Eigen::Vector3d t = rig.cam0_from_cam1.Inverse().translation;
+  std::ostringstream first_row_end;
+  first_row_end << std::setprecision(17) << t.x() << "], [";
+  EXPECT_NE(text.find(first_row_end.str()), std::string::npos) << text;
+  EXPECT_THROW(FromKalibrCamchain(ToKalibrOmniRadtan(rig.cam0, nullptr, "cam0") +
+                                  ToKalibrOmniRadtan(rig.cam1, nullptr, "cam1")),
+               InvalidArgument);
 }
 
 TEST(ModelIo, MalformedInputsThrow) {

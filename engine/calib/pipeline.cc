@@ -1,6 +1,8 @@
 #include "engine/calib/pipeline.h"
 
+#include <algorithm>
 #include <sstream>
+#include <utility>
 
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -87,6 +89,50 @@ std::vector<CalibrationView> DetectAll(const std::filesystem::path& dir,
   progress.ThrowIfCancelled();
   CheckImageSizes(sizes, &views, width, height);
   return views;
+}
+
+// When no view shows the board at the given size: the first board size near it (one more of
+// both, cols and rows swapped, one more or one less of either) that an image shows, searched on up to three
+// readable images with the cheap detector attempts only. Returns the message for the user.
+std::string DescribeBoardSizeMismatch(const std::filesystem::path& dir,
+                                      const std::vector<CalibrationView>& views,
+                                      const BoardSpec& board) {
+  // Largest first: a smaller size is found inside a larger board, not the other way round.
+  std::vector<std::pair<int, int>> sizes = {{board.cols + 1, board.rows + 1},
+                                            {board.rows, board.cols},
+                                            {board.cols + 1, board.rows},
+                                            {board.cols, board.rows + 1},
+                                            {board.cols - 1, board.rows},
+                                            {board.cols, board.rows - 1},
+                                            {board.cols - 1, board.rows - 1}};
+  DetectOptions quick;
+  quick.try_enhanced = false;
+  quick.refine_subpixel = false;
+  int tried = 0;
+  for (const CalibrationView& view : views) {
+    if (tried >= 3) break;
+    std::string unused;
+    const cv::Mat image = ReadImage(dir / view.name, &unused);
+    if (image.empty()) continue;
+    ++tried;
+    for (const auto& [cols, rows] : sizes) {
+      if (cols < 2 || rows < 2 || (cols == board.cols && rows == board.rows)) continue;
+      BoardSpec other = board;
+      other.cols = cols;
+      other.rows = rows;
+      if (!DetectBoard(image, other, quick).found) continue;
+      std::ostringstream os;
+      os << "the board size looks wrong: no image shows " << board.cols << "x" << board.rows
+         << " inner corners, but " << view.name << " shows a board of " << cols << "x" << rows
+         << " inner corners (cols and rows count the inner corners, one less than the squares)";
+      return os.str();
+    }
+  }
+  std::ostringstream os;
+  os << "no image shows a checkerboard of " << board.cols << "x" << board.rows
+     << " inner corners (nor a size near it); check the board's cols and rows (inner corners, "
+        "one less than the squares) and that the board is in view";
+  return os.str();
 }
 
 // Re-detects the views the detector missed with the model of a first calibration. Returns true
@@ -227,6 +273,16 @@ CalibrationReport CalibrateImages(const std::filesystem::path& dir,
       DetectAll(dir, names, board, options, &width, &height, progress);
   const double detect_s = timer.ElapsedSeconds();
   OMNIRIG_CHECK(width > 0, "calibration: none of the " << names.size() << " images could be read");
+  if (board.type == BoardSpec::Type::kCheckerboard && options.hints.empty() &&
+      std::none_of(views.begin(), views.end(),
+                   [](const CalibrationView& view) { return view.detection.found; })) {
+    std::ostringstream os;
+    os << DescribeBoardSizeMismatch(dir, views, board) << ":";
+    for (const CalibrationView& view : views) {
+      os << "\n  " << view.name << ": " << view.detection.reason;
+    }
+    throw InvalidArgument(os.str());
+  }
   CalibrationReport report =
       Calibrate(views, width, height, board, options.calibrate, ScaledSink(progress, 0.5, 0.8));
   timer.Restart();

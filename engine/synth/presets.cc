@@ -117,6 +117,64 @@ void CheckCam0FromCam1(const Rigid3d& cam0_from_cam1) {
                 "cam0_from_cam1 must be a finite rigid transform");
 }
 
+// Adds the frame and the hand of `look` around a board at world_from_board.
+void AddBoardSurroundings(const CheckerboardSpec& board, const BoardLook& look,
+                          const Rigid3d& world_from_board, const Eigen::Vector3d& eye_in_world,
+                          Scene* scene) {
+  // The side of the board the eye is on (the printed side): the frame goes behind, the hand in
+  // front.
+  const Eigen::Vector3d eye_in_board = world_from_board.Inverse() * eye_in_world;
+  const double front = eye_in_board.z() >= 0.0 ? 1.0 : -1.0;
+  const std::vector<Eigen::Vector3d> outline = BoardOutline(board);
+  const Eigen::Vector3d centre = 0.5 * (outline[0] + outline[2]);
+  TextureSpec plain;
+  plain.style = TextureSpec::Style::kPlain;
+  if (look.frame_width_m > 0.0) {
+    plain.color_rgb = Eigen::Vector3d::Constant(look.frame_grey);
+    const Rigid3d board_from_frame(Eigen::Quaterniond::Identity(),
+                                   centre - Eigen::Vector3d(0.0, 0.0, 0.002 * front));
+    scene->AddPlane(world_from_board * board_from_frame,
+                    board.width_m() + 2.0 * look.frame_width_m,
+                    board.height_m() + 2.0 * look.frame_width_m, plain, "frame");
+  }
+  if (look.hand) {
+    // A palm of 7 x 9 cm, 2 cm thick, just in front of the board, reaching 2.5 cm into the board
+    // from the outline's first corner along both sides: the margin and, with a narrow margin,
+    // part of the outer square.
+    plain.color_rgb = Eigen::Vector3d(0.85, 0.75, 0.65);
+    const Eigen::Vector3d palm_centre = outline[0] + Eigen::Vector3d(-0.01, -0.02, 0.012 * front);
+    scene->AddBox(world_from_board * Rigid3d(Eigen::Quaterniond::Identity(), palm_centre),
+                  Eigen::Vector3d(0.07, 0.09, 0.02), plain, "hand");
+  }
+}
+
+// Adds the specular highlight of `look` to a rendered view: a Gaussian spot centred on the
+// board's second square of its second row, sized from the squares around it in the image.
+void AddHighlight(const BoardLook& look, const CheckerboardSpec& board,
+                  const std::vector<Eigen::Vector2d>& corners_px, cv::Mat* image) {
+  if (look.highlight_sigma_squares <= 0.0) return;
+  const int c = std::min(1, board.cols - 2), r = std::min(1, board.rows - 2);
+  const Eigen::Vector2d& a = corners_px[r * board.cols + c];
+  const Eigen::Vector2d& b = corners_px[(r + 1) * board.cols + c + 1];
+  if (!a.allFinite() || !b.allFinite()) return;
+  const Eigen::Vector2d centre = 0.5 * (a + b);
+  const double sigma = look.highlight_sigma_squares * (b - a).norm() / std::sqrt(2.0);
+  const int reach = static_cast<int>(std::ceil(3.0 * sigma));
+  const int channels = image->channels();
+  for (int v = std::max(0, static_cast<int>(centre.y()) - reach);
+       v <= std::min(image->rows - 1, static_cast<int>(centre.y()) + reach); ++v) {
+    uint8_t* row = image->ptr<uint8_t>(v);
+    for (int u = std::max(0, static_cast<int>(centre.x()) - reach);
+         u <= std::min(image->cols - 1, static_cast<int>(centre.x()) + reach); ++u) {
+      const double d2 = (Eigen::Vector2d(u, v) - centre).squaredNorm();
+      const double add = look.highlight_level * std::exp(-0.5 * d2 / (sigma * sigma));
+      for (int k = 0; k < channels; ++k) {
+        row[u * channels + k] = cv::saturate_cast<uint8_t>(row[u * channels + k] + add);
+      }
+    }
+  }
+}
+
 }  // namespace
 
 void BoardPoseOptions::Check() const {
@@ -195,11 +253,21 @@ Scene MakeCalibrationBackground(uint64_t seed) {
   return scene;
 }
 
+void BoardLook::Check() const {
+  OMNIRIG_CHECK(frame_width_m >= 0.0 && frame_width_m <= 1.0, "frame_width_m must be in [0, 1]");
+  OMNIRIG_CHECK(frame_grey > 0.0 && frame_grey <= 1.0, "frame_grey must be in (0, 1]");
+  OMNIRIG_CHECK(highlight_sigma_squares >= 0.0 && highlight_sigma_squares <= 10.0,
+                "highlight_sigma_squares must be in [0, 10]");
+  OMNIRIG_CHECK(highlight_level >= 0.0 && highlight_level <= 255.0,
+                "highlight_level must be in [0, 255]");
+}
+
 void MonoCalibrationOptions::Check() const {
   OMNIRIG_CHECK(num_views >= 1 && num_views <= 10000, "num_views must be in [1, 10000]");
   CheckImageSize(width, height);
   if (camera) camera->Check();
   board.Check();
+  look.Check();
   poses.Check();
   render.Check();
 }
@@ -220,11 +288,15 @@ MonoCalibrationSet MakeMonoCalibrationSet(const MonoCalibrationOptions& options,
         SampleBoardPose({set.camera}, {Rigid3d()}, options.board, options.poses, view,
                         options.num_views, options.seed);
     scene.SetBoardPose(board_index, cam_from_board);  // world frame = camera frame
+    Scene view_scene = scene;
+    AddBoardSurroundings(options.board, options.look, cam_from_board, Eigen::Vector3d::Zero(),
+                         &view_scene);
     set.names.push_back(IndexedName("view", view));
-    set.images.push_back(renderer.Render(scene, Rigid3d(),
+    set.images.push_back(renderer.Render(view_scene, Rigid3d(),
                                          ViewRenderOptions(options.render, options.seed, view, 0)));
     set.cam_from_board.push_back(cam_from_board);
     set.corners_px.push_back(ProjectBoardCorners(set.camera, cam_from_board, options.board));
+    AddHighlight(options.look, options.board, set.corners_px.back(), &set.images.back());
     progress.Report(static_cast<double>(view + 1) / options.num_views, "render", set.names.back());
   }
   return set;

@@ -59,6 +59,25 @@ std::vector<Eigen::Vector2d> ProjectBoardCorners(const SynthCamera& camera,
 // A room around the origin with low-contrast (kSoft) walls, used behind calibration boards.
 Scene MakeCalibrationBackground(uint64_t seed);
 
+// How a board looks beyond its printed squares, as real boards do: the margin width is
+// CheckerboardSpec::margin_m; these add what is held around and over it.
+struct BoardLook {
+  // A frame or holder around the board's outline, of another grey, frame_width_m wide (0:
+  // none) and a hair behind the board; frame_grey in (0, 1] of the plain texture's level (160).
+  double frame_width_m = 0.0;
+  double frame_grey = 0.6;
+  // A hand-like blob (a box of skin grey, in front of the board) over the board's outer corner
+  // at its first corner's side: it covers the margin there and part of the outer square, no
+  // inner corner.
+  bool hand = false;
+  // A specular highlight: a bright Gaussian spot on the board of this standard deviation in
+  // squares (0: none), highlight_level grey levels at its peak (added, saturating at 255).
+  double highlight_sigma_squares = 0.0;
+  double highlight_level = 120.0;
+
+  void Check() const;
+};
+
 struct MonoCalibrationOptions {
   int num_views = 20;
   int width = 1024;
@@ -67,6 +86,7 @@ struct MonoCalibrationOptions {
   CheckerboardSpec board;
   BoardPoseOptions poses;
   bool textured_background = true;  // a soft-textured room; otherwise plain background
+  BoardLook look;
   RenderOptions render;             // noise, blur, supersampling, threads (render.seed is
                                     // replaced per view by a value derived from seed)
   uint64_t seed = 0;

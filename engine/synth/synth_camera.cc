@@ -69,6 +69,14 @@ SynthCamera DefaultSecondCamera(int width, int height) {
                     {0.96, 0.334, 0.3352, -0.0029, 0.0031, 0.0, -0.055, 0.010, -2e-4, 3e-4, 0.0});
 }
 
+SynthCamera ParabolicCamera(int width, int height) {
+  SynthCamera camera =
+      MakeCamera(width, height, {1.0, 0.4, 0.4, 0.0041, -0.0027, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0});
+  camera.hole_radius_px = 0.15 * std::min(width, height);
+  camera.Check();
+  return camera;
+}
+
 bool InAnnulus(const SynthCamera& camera, const Eigen::Vector2d& pixel, double margin_px) {
   const UnifiedIntrinsics& k = camera.model.intrinsics;
   if (!(pixel.x() >= 0.0 && pixel.y() >= 0.0 && pixel.x() <= camera.model.width - 1.0 &&

@@ -40,6 +40,12 @@ SynthCamera DefaultCamera(int width = 1024, int height = 768);
 // DefaultCamera() (as two real units would be), same image size, same mirror radii.
 SynthCamera DefaultSecondCamera(int width = 1024, int height = 768);
 
+// A paracatadioptric camera (parabolic mirror, telecentric lens): xi = 1, gamma_u = 0.4 *
+// min(width, height) (410 px at 1280x1024), no distortion, principal point a few pixels off the
+// image centre; rim radius 0.48 * min(width, height) (10 degrees above the horizon) and a large
+// central hole of 0.15 * min(width, height) where the mirror shows the camera itself.
+SynthCamera ParabolicCamera(int width = 1280, int height = 1024);
+
 // True when `pixel` lies in the mirror annulus, at least margin_px inside the rim and outside
 // the hole.
 bool InAnnulus(const SynthCamera& camera, const Eigen::Vector2d& pixel, double margin_px = 0.0);

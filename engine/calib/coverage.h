@@ -1,0 +1,62 @@
+#pragma once
+// What a calibration tells its user to do next: where on the mirror disk the used corners fall,
+// how uncertain the calibrated projection is over the disk, and where views are missing.
+//
+// The disk: the rim circle found by the single-viewpoint check when it ran, else the largest
+// circle around the principal point inside the image. Coverage: the fraction of the disk's area
+// within near_px of a used (inlier) corner. Uncertainty: the standard deviation of the projected
+// pixel of a bearing, sqrt(trace(J' C J'^T)), where C is the covariance of the free intrinsics
+// (the Gauss-Newton normal matrix of every used corner's reprojection, the board poses
+// eliminated by the Schur complement, scaled by the residual variance per coordinate) and J' =
+// d pixel / d intrinsics at the bearing the model lifts the pixel to, less the part a common
+// rotation of every bearing explains (the camera frame's orientation is fixed only through the
+// board poses; mrcal's treatment). Advice: every
+// sector of azimuth_sector_deg and radial band (inner half of the radius, outer half "near the
+// rim") whose coverage is below min_sector_coverage. Azimuth is measured in the image around the
+// disk's centre, 0 deg along +u (right), 90 deg along +v (down).
+
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+#include <opencv2/core.hpp>
+
+#include "engine/calib/board.h"
+#include "engine/calib/calibrate.h"
+
+namespace omnirig {
+
+struct CoverageOptions {
+  double near_px = 30.0;
+  int grid_step_px = 4;  // of the coverage and uncertainty grids
+  double azimuth_sector_deg = 90.0;
+  double min_sector_coverage = 0.1;
+
+  void Check() const;
+};
+
+struct CoverageReport {
+  Eigen::Vector2d disk_centre_px = Eigen::Vector2d::Zero();
+  double disk_radius_px = 0.0;
+  double covered_fraction = 0.0;  // of the disk's area within near_px of a used corner
+  // Predicted projection uncertainty over the disk (px, 1 sigma); max and median over the disk.
+  bool uncertainty_valid = false;  // false when the covariance is singular
+  double max_uncertainty_px = 0.0;
+  double median_uncertainty_px = 0.0;
+  // The uncertainty (px) at pixel (col, row) * uncertainty_step_px, 0 outside the disk.
+  cv::Mat uncertainty_px;  // CV_32FC1
+  int uncertainty_step_px = 0;
+  std::vector<std::string> advice;  // plain sentences, empty when the disk is covered
+  // Images the size of the calibrated camera's: the used corners and the covered area over
+  // `background` (or grey); the uncertainty as a colour map with its scale in the caption.
+  cv::Mat coverage_image;
+  cv::Mat uncertainty_image;
+};
+
+// Analyses `report` (a successful calibration of `board`). `background` may be empty or an image
+// of the camera's size (drawn under the coverage). `rim_circle_px` (u, v, r) when known.
+CoverageReport AnalyseCoverage(const CalibrationReport& report, const BoardSpec& board,
+                               const cv::Mat& background, const Eigen::Vector3d* rim_circle_px,
+                               const CoverageOptions& options);
+
+}  // namespace omnirig

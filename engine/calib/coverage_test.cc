@@ -1,0 +1,91 @@
+#include "engine/calib/coverage.h"
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+
+#include <gtest/gtest.h>
+
+#include "engine/calib/synthetic_corners.h"
+
+namespace omnirig {
+namespace {
+
+CameraModel Camera() {
+  CameraModel camera;
+  camera.width = 1024;
+  camera.height = 768;
+  camera.intrinsics.params = {0.95, 260.0, 261.0, 515.0, 380.0, 0.0,
+                              -0.05, 0.01, 0.0, 0.0, 0.0};
+  return camera;
+}
+
+BoardSpec Board() {
+  BoardSpec board;
+  board.cols = 8;
+  board.rows = 6;
+  board.square_size_m = 0.04;
+  return board;
+}
+
+// Calibrates the views whose corners' mean azimuth around the principal point lies in
+// [from_deg, to_deg).
+CalibrationReport CalibrateSector(const SyntheticCornerSet& set, double from_deg, double to_deg) {
+  const CameraModel camera = Camera();
+  std::vector<CalibrationView> views;
+  for (const CalibrationView& view : set.views) {
+    Eigen::Vector2d mean = Eigen::Vector2d::Zero();
+    for (const Eigen::Vector2d& corner : view.detection.corners_px) mean += corner;
+    mean /= static_cast<double>(view.detection.corners_px.size());
+    double azimuth = std::atan2(mean.y() - camera.intrinsics.v0(),
+                                mean.x() - camera.intrinsics.u0()) * 180.0 / M_PI;
+    if (azimuth < 0.0) azimuth += 360.0;
+    if (azimuth >= from_deg && azimuth < to_deg) views.push_back(view);
+  }
+  EXPECT_GE(views.size(), 5u);
+  return Calibrate(views, camera.width, camera.height, Board(), CalibrationOptions(),
+                   ProgressSink());
+}
+
+TEST(Coverage, NamesTheMissingSectorsAndPredictsMoreUncertaintyThere) {
+  SyntheticCornerOptions options;
+  options.num_views = 40;
+  options.noise_px = 0.3;
+  options.seed = 5;
+  const SyntheticCornerSet set = MakeSyntheticCornerSet(Camera(), Board(), options);
+  const CalibrationReport all = CalibrateSector(set, 0.0, 360.0);
+  const CalibrationReport half = CalibrateSector(set, 0.0, 180.0);
+  const CoverageReport everywhere =
+      AnalyseCoverage(all, Board(), cv::Mat(), nullptr, CoverageOptions());
+  const CoverageReport lower = AnalyseCoverage(half, Board(), cv::Mat(), nullptr, CoverageOptions());
+
+  EXPECT_GT(everywhere.covered_fraction, lower.covered_fraction + 0.1);
+  EXPECT_GT(lower.covered_fraction, 0.05);
+  // Boards only below the centre (image azimuth 0-180 deg, +v down): the advice names the
+  // upper sectors near the rim, and not the lower ones.
+  auto advises = [](const CoverageReport& report, const std::string& text) {
+    for (const std::string& line : report.advice) {
+      if (line.find(text) != std::string::npos) return true;
+    }
+    return false;
+  };
+  EXPECT_TRUE(advises(lower, "between azimuth 180 and 270 deg near the rim"));
+  EXPECT_TRUE(advises(lower, "between azimuth 180 and 270 deg in the inner half"));
+  EXPECT_FALSE(advises(lower, "between azimuth 0 and 90 deg near the rim"));
+  EXPECT_FALSE(advises(everywhere, "near the rim"));
+
+  ASSERT_TRUE(everywhere.uncertainty_valid);
+  ASSERT_TRUE(lower.uncertainty_valid);
+  EXPECT_GT(lower.max_uncertainty_px, everywhere.max_uncertainty_px);
+  EXPECT_GT(lower.median_uncertainty_px, everywhere.median_uncertainty_px);
+  // The uncertainty map is dominated by the weakly observable xi / gamma direction (the board
+  // poses absorb it at the corners, a fixed bearing's pixel moves everywhere): it shrinks with
+  // more and better spread views but does not single out the empty sectors; the advice does.
+  EXPECT_EQ(lower.uncertainty_px.type(), CV_32FC1);
+  EXPECT_GT(lower.uncertainty_step_px, 0);
+  EXPECT_EQ(everywhere.coverage_image.size(), cv::Size(1024, 768));
+  EXPECT_EQ(lower.uncertainty_image.size(), cv::Size(1024, 768));
+}
+
+}  // namespace
+}  // namespace omnirig
