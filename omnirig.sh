@@ -16,16 +16,18 @@ ROOT=$(pwd)
 APT_PACKAGES=(build-essential cmake ninja-build ccache pkg-config git
   libeigen3-dev libopencv-dev libopencv-contrib-dev libceres-dev libcpp-httplib-dev
   nlohmann-json3-dev libsqlite3-dev sqlite3 googletest libgtest-dev libbenchmark-dev
-  libssl-dev nodejs npm chromium curl jq postgresql libpq-dev)
+  libssl-dev libpq-dev nodejs npm curl jq)
+# Only the tests need these: the browser they drive, and a PostgreSQL server they start themselves.
+TEST_APT_PACKAGES=(chromium postgresql)
 JOBS=${OMNIRIG_JOBS:-$(nproc)}
 # Cache compiles by paths relative to the checkout, so that a second clone reuses them.
 export CCACHE_BASEDIR="$ROOT"
 
 log() { printf '\033[1m[omnirig]\033[0m %s\n' "$*" >&2; }
 
-install_apt_packages() {
+install_apt_packages() {  # package...
   local missing=()
-  for pkg in "${APT_PACKAGES[@]}"; do
+  for pkg in "$@"; do
     # Node.js may come from elsewhere than Debian (e.g. nodesource); only install when absent.
     if [[ $pkg == nodejs && -x "$(command -v node)" ]] || [[ $pkg == npm && -x "$(command -v npm)" ]]; then
       continue
@@ -65,7 +67,7 @@ configure_and_build() {  # build_dir [cmake args...]
 }
 
 cmd_run() {
-  install_apt_packages
+  install_apt_packages "${APT_PACKAGES[@]}"
   install_npm_packages
   configure build
   # Serving needs the `omnirig` executable only: tests and benchmarks are built by `test`.
@@ -86,7 +88,7 @@ cmd_run() {
 }
 
 cmd_test() {
-  install_apt_packages
+  install_apt_packages "${APT_PACKAGES[@]}" "${TEST_APT_PACKAGES[@]}"
   install_npm_packages
   configure_and_build build
   log "unit, integration and browser tests (Release)"

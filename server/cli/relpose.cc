@@ -21,38 +21,13 @@
 #include "engine/util/check.h"
 #include "server/cli/args.h"
 #include "server/cli/commands.h"
+#include "server/cli/files.h"
 
 namespace omnirig::cli {
 namespace {
 
 namespace fs = std::filesystem;
 using nlohmann::json;
-
-bool IsImageFile(const fs::path& path) {
-  static const std::set<std::string> kExtensions = {".png", ".jpg", ".jpeg", ".bmp",
-                                                    ".tif", ".tiff", ".pgm", ".ppm"};
-  std::string ext = path.extension().string();
-  for (char& ch : ext) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
-  return kExtensions.count(ext) > 0;
-}
-
-// "cam0/NAME" and "cam1/NAME" for every image file in DIR/cam0 and DIR/cam1, sorted.
-std::vector<std::string> ListPairImages(const fs::path& dir) {
-  OMNIRIG_CHECK(fs::is_directory(dir), "'" << dir.string() << "' is not a directory");
-  std::vector<std::string> names;
-  for (const char* camera : {"cam0", "cam1"}) {
-    const fs::path sub = dir / camera;
-    OMNIRIG_CHECK(fs::is_directory(sub), "'" << sub.string()
-                                             << "' is missing: DIR must hold cam0/ and cam1/");
-    for (const auto& entry : fs::directory_iterator(sub)) {
-      if (entry.is_regular_file() && IsImageFile(entry.path())) {
-        names.push_back(std::string(camera) + "/" + entry.path().filename().string());
-      }
-    }
-  }
-  std::sort(names.begin(), names.end());
-  return names;
-}
 
 // A calibration file as a job result: `omnirig calibrate`'s JSON has "camera"; a bare camera
 // object is wrapped.

@@ -22,40 +22,12 @@
 #include "engine/util/check.h"
 #include "server/cli/args.h"
 #include "server/cli/commands.h"
+#include "server/cli/files.h"
 
 namespace omnirig::cli {
-namespace {
 
 namespace fs = std::filesystem;
 using nlohmann::json;
-
-json ReadJsonFile(const std::string& path, const std::string& flag) {
-  std::ifstream in(path);
-  OMNIRIG_CHECK(in, flag << ": cannot read '" << path << "'");
-  try {
-    return json::parse(in);
-  } catch (const json::exception& e) {
-    throw InvalidArgument(flag + ": '" + path + "' is not JSON: " + e.what());
-  }
-}
-
-// Every file under cam0/ and cam1/ of `dir`, as "camK/NAME" relative names.
-std::vector<std::string> ListImages(const fs::path& dir) {
-  OMNIRIG_CHECK(fs::is_directory(dir), "'" << dir.string() << "' is not a folder");
-  std::vector<std::string> names;
-  for (const char* camera : {"cam0", "cam1"}) {
-    if (!fs::is_directory(dir / camera)) continue;
-    for (const auto& entry : fs::directory_iterator(dir / camera)) {
-      if (entry.is_regular_file()) {
-        names.push_back(std::string(camera) + "/" + entry.path().filename().string());
-      }
-    }
-  }
-  std::sort(names.begin(), names.end());
-  return names;
-}
-
-}  // namespace
 
 int RunSlam(const Args& raw_args) {
   ArgParser args("slam", "Trajectory and metric map from a stereo sequence (cam0/NAME, cam1/NAME).");
@@ -107,7 +79,7 @@ int RunSlam(const Args& raw_args) {
                                           << message << "\n";
                               },
                               nullptr};
-  const json report = api::RunSlamOnDataset(rig, dir, ListImages(dir), options, ground_truth,
+  const json report = api::RunSlamOnDataset(rig, dir, ListPairImages(dir), options, ground_truth,
                                             args.Get("o"), progress, nullptr, dense_map);
   std::cout << "frames: " << report["num_frames"] << ", tracked: " << report["num_tracked"]
             << ", map points: " << report["num_map_points"]

@@ -21,41 +21,12 @@
 #include "engine/util/check.h"
 #include "server/cli/args.h"
 #include "server/cli/commands.h"
+#include "server/cli/files.h"
 
 namespace omnirig::cli {
-namespace {
 
 namespace fs = std::filesystem;
 using nlohmann::json;
-
-json ReadJsonFile(const std::string& path, const std::string& flag) {
-  std::ifstream in(path);
-  OMNIRIG_CHECK(in, flag << ": cannot read '" << path << "'");
-  try {
-    return json::parse(in);
-  } catch (const json::exception& e) {
-    throw InvalidArgument(flag + ": '" + path + "' is not JSON: " + e.what());
-  }
-}
-
-// Every file under cam0/ and cam1/ of `dir`, as "camK/NAME" relative names (the job pairs them
-// by NAME and reports images without a partner).
-std::vector<std::string> ListPairImages(const fs::path& dir) {
-  OMNIRIG_CHECK(fs::is_directory(dir), "'" << dir.string() << "' is not a folder");
-  std::vector<std::string> names;
-  for (const char* camera : {"cam0", "cam1"}) {
-    if (!fs::is_directory(dir / camera)) continue;
-    for (const auto& entry : fs::directory_iterator(dir / camera)) {
-      if (entry.is_regular_file()) {
-        names.push_back(std::string(camera) + "/" + entry.path().filename().string());
-      }
-    }
-  }
-  std::sort(names.begin(), names.end());
-  return names;
-}
-
-}  // namespace
 
 int RunStereo(const Args& raw_args) {
   ArgParser args("stereo",

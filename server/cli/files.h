@@ -1,0 +1,21 @@
+#pragma once
+// Reading a subcommand's inputs from disk: a JSON file named by a flag, and a stereo folder's
+// image pairs.
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+namespace omnirig::cli {
+
+// The JSON document in `path`; InvalidArgument naming `flag` when it cannot be read or parsed.
+nlohmann::json ReadJsonFile(const std::string& path, const std::string& flag);
+
+// "cam0/NAME" and "cam1/NAME" for every image file (by extension) in DIR/cam0 and DIR/cam1,
+// sorted; the jobs pair them by NAME and report images without a partner. InvalidArgument when
+// DIR, DIR/cam0 or DIR/cam1 is missing.
+std::vector<std::string> ListPairImages(const std::filesystem::path& dir);
+
+}  // namespace omnirig::cli
