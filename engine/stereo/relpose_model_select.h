@@ -100,9 +100,8 @@ struct RigModelSelection {
 // Fits every candidate on all pairs with `options` (its refine_intrinsics and
 // fixed_intrinsics replaced by the model's), then scores it by leave-one-pair-out prediction
 // over the pairs every candidate used. Each fold restarts the joint refinement from the
-// all-pairs solution without the held-out pair (same corner orders, same rejected pairs, and
-// the board motion prior of relpose_motion.h when the all-pairs fit used one); the
-// per-camera calibrations are not redone per fold, so the "fixed" model's intrinsics have seen
+// all-pairs solution without the held-out pair (same corner orders, same rejected pairs);
+// the per-camera calibrations are not redone per fold, so the "fixed" model's intrinsics have seen
 // one image of each held-out pair (a slight advantage to it).
 // Choice (the one-standard-error rule of cross-validation): the simplest candidate (fewest
 // free intrinsics) whose mean squared held-out error exceeds the lowest by no more than one

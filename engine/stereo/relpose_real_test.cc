@@ -79,16 +79,13 @@ class RelativePoseReal : public ::testing::Test {
     return *cached;
   }
 
-  // The job's rig with the intrinsics refined, default fixed set and synchronisation test
-  // (and with the board motion model of relpose_motion.h, off by default, when asked): several
-  // tests check different properties of these estimates, each computed once.
-  static const RelativePoseReport& JointEstimate(bool model_board_motion = false) {
-    static std::optional<RelativePoseReport> cached[2];
-    std::optional<RelativePoseReport>& estimate = cached[model_board_motion];
+  // The rig with the intrinsics refined, default fixed set and synchronisation test (the
+  // "free" model): several tests check different properties of this estimate, computed once.
+  static const RelativePoseReport& JointEstimate() {
+    static std::optional<RelativePoseReport> estimate;
     if (!estimate) {
       RelativePoseOptions options;
       options.refine_intrinsics = true;
-      options.model_board_motion = model_board_motion;
       estimate = EstimateRelativePose(Camera(0, false), Camera(1, false), board_, *pairs_, options);
     }
     return *estimate;
@@ -122,13 +119,10 @@ TEST_F(RelativePoseReal, FisheyePairsGiveTheReferenceBaseline) {
 // Kannala-Brandt reference's degrees of freedom and lands on its baseline, at almost the same
 // RMS; with them it lands 0.4 % shorter, many times eq. 20's covariance standard deviation
 // away (bench_relpose prints both next to cv::fisheye and cv::omnidir on the same corners).
-// With the board motion model both baselines move up by about a millimetre, their difference
-// stays about 0.5 mm, and its honest std (0.2 mm) makes that about 2 std.
 TEST_F(RelativePoseReal, TangentialTermsMoveTheBaselineByMoreThanItsStd) {
   const RelativePoseReport& with_tangential = JointEstimate();
   RelativePoseOptions options;
   options.refine_intrinsics = true;
-  options.model_board_motion = false;
   options.fixed_intrinsics[UnifiedIntrinsics::kK3] = true;
   options.fixed_intrinsics[UnifiedIntrinsics::kK4] = true;
   const RelativePoseReport without =
@@ -172,31 +166,6 @@ TEST_F(RelativePoseReal, UnsynchronisedPairsAreLeftOut) {
   }
   EXPECT_LT(report.rms_px, kept.rms_px);
   EXPECT_LT(report.rms_px, 2.0 * std::sqrt(2.0) * report.sync_test.corner_noise_px[1]);
-}
-
-// The kept pairs disagree on the board's pose far beyond their corner noise (the
-// synchronisation test's dispersion is about 25): the board motion model (relpose_motion.h)
-// must find that significant, estimate a motion of the order the pairs' disagreements show
-// (0.15-1.1 mm and 0.15-0.8 deg at the board's centre, norms: a few tenths per axis), keep the
-// pairs the test kept, and report a baseline std several times eq. 20's (whose 0.06 mm is
-// about 8 times below the leave-one-pair-out spread bench_relpose measures).
-TEST_F(RelativePoseReal, BoardMotionIsModelledAndWidensTheStd) {
-  const RelativePoseReport& report = JointEstimate(true);
-  const RelativePoseReport& eq20 = JointEstimate();
-  ASSERT_TRUE(report.success) << report.message;
-  ASSERT_TRUE(eq20.success) << eq20.message;
-  const BoardMotionEstimate& motion = report.board_motion;
-  ASSERT_TRUE(motion.used);
-  EXPECT_GT(motion.statistic, 5.0 * motion.limit);
-  EXPECT_EQ(motion.num_pairs, report.num_pairs_used);
-  EXPECT_EQ(report.num_pairs_used, eq20.num_pairs_used);
-  EXPECT_GT(motion.rotation_std_rad * 180.0 / M_PI, 0.1);
-  EXPECT_LT(motion.rotation_std_rad * 180.0 / M_PI, 0.4);
-  EXPECT_GT(motion.translation_std_m, 1e-4);
-  EXPECT_LT(motion.translation_std_m, 6e-4);
-  EXPECT_GT(report.baseline_std_m, 3.0 * eq20.baseline_std_m);
-  EXPECT_LT(report.rms_px, 0.5);
-  EXPECT_FALSE(eq20.board_motion.used);
 }
 
 // The kept pairs disagree far beyond their corner noise, so eq. 20's covariance understates the
