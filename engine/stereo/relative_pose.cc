@@ -375,6 +375,13 @@ std::vector<StereoRig> SyncTestRigs(const std::vector<RigPairCorners>& corners,
   }
   RigRefinementOptions refine = options.RefinementOptions();
   refine.refine_intrinsics = true;
+  // Every refit without one pair starts from the fit with all: a few iterations each.
+  StereoRig all = rig;
+  std::vector<Rigid3d> all_poses = cam0_from_board;
+  if (!RefineRig(corners, refine, &all, &all_poses, nullptr).usable) {
+    all = rig;
+    all_poses = cam0_from_board;
+  }
   std::vector<StereoRig> rigs(corners.size(), rig);
   for (size_t i = 0; i < corners.size(); ++i) {
     std::vector<RigPairCorners> others;
@@ -382,9 +389,9 @@ std::vector<StereoRig> SyncTestRigs(const std::vector<RigPairCorners>& corners,
     for (size_t j = 0; j < corners.size(); ++j) {
       if (j == i) continue;
       others.push_back(corners[j]);
-      poses.push_back(cam0_from_board[j]);
+      poses.push_back(all_poses[j]);
     }
-    StereoRig refined = rig;
+    StereoRig refined = all;
     if (RefineRig(others, refine, &refined, &poses, nullptr).usable) rigs[i] = refined;
   }
   return rigs;
