@@ -63,9 +63,10 @@ std::vector<RigIntrinsicsModel> PerCameraTangentialModels(
 
 // The candidates of the relative_pose job's "intrinsics_model": "auto", simplest first: the
 // standard ones with the per-camera tangential models between "tangential_fixed" and "free"
-// (on the real fisheye pairs of bench_relpose the cross-validation prefers freeing cam0's
-// tangential terms alone: it predicts as well as "free" with two parameters fewer). Models
-// that coincide with another for this `base` (tangential terms already fixed) are left out.
+// (on the real fisheye pairs of bench_relpose the rule chose freeing cam0's tangential terms
+// alone until the synchronisation test stopped dropping the "fixed" candidate's pairs for its
+// calibration error; over the folds that leaves, it chooses "tangential_fixed"). Models that
+// coincide with another for this `base` (tangential terms already fixed) are left out.
 std::vector<RigIntrinsicsModel> AutoRigIntrinsicsModels(
     const std::array<bool, UnifiedIntrinsics::kNumParams>& base);
 
