@@ -362,7 +362,7 @@ std::string UnsynchronisedReason(const PairSyncStatistic& pair, const SyncTestRe
 // calibrations' errors (systematic, different at every board position, and large against
 // corner noise of a few hundredths of a pixel) would count as the pairs' disagreement: on
 // synchronised renders of 20 pairs the test then lost 1 to 5 pairs per rig (statistics up to
-// 64 against a limit of 24; relpose_sync_render_test.cc). So each pair is also judged by the
+// 64 against a limit of 24 over 4 seeds of QuickStereoBoardOptions). So each pair is also judged by the
 // rig refitted without it, the intrinsics refined (options.fixed_intrinsics held): a camera
 // model near the given one that the other pairs support; the test keeps the reference with
 // the smaller median statistic. Without the pair, so that its own
