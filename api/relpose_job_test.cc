@@ -9,8 +9,12 @@
 #include <gtest/gtest.h>
 #include <opencv2/imgcodecs.hpp>
 
+#include "api/calibration_json.h"
 #include "api/camera_json.h"
 #include "api/relpose_json.h"
+#include "engine/calib/calibrate.h"
+#include "engine/calib/detect.h"
+#include "engine/synth/calib_board.h"
 #include "engine/synth/presets.h"
 
 namespace omnirig::api {
@@ -75,8 +79,10 @@ TEST_F(RelposeJob, WithCalibrationsRecoversTheRenderedRig) {
     monotone = monotone && fraction >= last_fraction - 1e-12;
     last_fraction = fraction;
   };
+  // "fixed": the given cameras kept (without it the job may refine them, the test below).
   const json params = {{"board", Board()},
-                       {"calibrations", {{"cam0", "truth0"}, {"cam1", "truth1"}}}};
+                       {"calibrations", {{"cam0", "truth0"}, {"cam1", "truth1"}}},
+                       {"intrinsics_model", "fixed"}};
   const json result = RunRelativePoseJob(params, context);
   const StereoRig rig = RigFromJson(result);
   const Rigid3d& truth = set_->rig.cam0_from_cam1;
@@ -105,6 +111,58 @@ TEST_F(RelposeJob, WithCalibrationsRecoversTheRenderedRig) {
   EXPECT_FALSE(result["intrinsics_model"].contains("candidates"));
   EXPECT_TRUE(monotone);
   EXPECT_NEAR(last_fraction, 1.0, 1e-9);
+}
+
+// Given calibrations made from each camera's 8 pair images and 8 views of its own (another
+// render set's): the default ("auto") chooses between keeping them and refining them with the
+// rig, using their 8 own views (the pair images among their views are recognised and not
+// counted twice), and the result says which observations it used.
+TEST_F(RelposeJob, WithCalibrationsUsesTheirViewsToo) {
+  const synth::StereoBoardSet mono = synth::MakeStereoBoardSet(synth::QuickStereoBoardOptions(8, 6));
+  const BoardSpec board = ToBoardSpec(set_->board);
+  std::array<json, 2> calibrations;
+  for (int c = 0; c < 2; ++c) {
+    std::vector<CalibrationView> views;
+    for (size_t i = 0; i < set_->names.size(); ++i) {
+      views.push_back({"pair_" + set_->names[i], DetectBoard(set_->images[c][i], board, DetectOptions())});
+      views.push_back({"mono_" + mono.names[i], DetectBoard(mono.images[c][i], board, DetectOptions())});
+    }
+    const CameraModel& size_of = c == 0 ? set_->rig.cam0 : set_->rig.cam1;
+    calibrations[c] = CalibrationReportToJson(
+        Calibrate(views, size_of.width, size_of.height, board, CalibrationOptions(), ProgressSink()));
+  }
+  JobContext context = Context();
+  context.load_result = [&calibrations](const std::string& id) -> json {
+    return calibrations[id == "cal0" ? 0 : 1];
+  };
+  const json result = RunRelativePoseJob(
+      {{"board", Board()}, {"calibrations", {{"cam0", "cal0"}, {"cam1", "cal1"}}}}, context);
+  const json& model = result["intrinsics_model"];
+  EXPECT_EQ(model["selection"], "cross_validation");
+  ASSERT_EQ(model["candidates"].size(), 2u);  // fixed, free: given calibrations are not redone
+  EXPECT_EQ(model["candidates"][0]["name"], "fixed");
+  EXPECT_EQ(model["candidates"][1]["name"], "free");
+  const json& observations = result["observations"];
+  EXPECT_EQ(observations["pairs_given"].get<int>(), 8);
+  EXPECT_EQ(observations["pairs_used"].get<int>(), 8);
+  int mono_found = 0;
+  for (int c = 0; c < 2; ++c) {
+    for (const cv::Mat& image : mono.images[c]) {
+      mono_found += DetectBoard(image, board, DetectOptions()).found ? 1 : 0;
+    }
+  }
+  EXPECT_EQ(observations["single_camera_views_given"].get<int>(), mono_found);
+  EXPECT_GE(mono_found, 12);
+  const bool refined = result["intrinsics_refined"].get<bool>();
+  EXPECT_EQ(observations["single_camera_views_used"].get<int>(), refined ? mono_found : 0);
+  ASSERT_EQ(result["single_camera_views"].size(), static_cast<size_t>(mono_found));
+  for (const json& view : result["single_camera_views"]) {
+    EXPECT_EQ(view["used"].get<bool>(), refined) << view.dump();
+    EXPECT_NE(view["name"].get<std::string>().find("calibration view mono_"), std::string::npos);
+  }
+  EXPECT_EQ(result["pairs"].size(), 8u);
+  EXPECT_NEAR(result["baseline_m"].get<double>(), set_->rig.cam0_from_cam1.translation.norm(),
+              5e-4);
 }
 
 TEST_F(RelposeJob, WithoutCalibrationsCalibratesEachCameraFirst) {

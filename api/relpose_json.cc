@@ -56,14 +56,12 @@ std::string JobIdField(const json& calibrations, const std::string& camera) {
   return id.get<std::string>();
 }
 
-// params.intrinsics_model, or its default: "auto" when the job calibrates the cameras itself
-// and the intrinsics options were not given, "" (those options as given) otherwise.
+// params.intrinsics_model, or its default: "auto" when the intrinsics options were not given,
+// "" (those options as given) otherwise.
 std::string IntrinsicsModelField(const json& params, bool self_calibrating) {
   const bool explicit_options =
       params.contains("refine_intrinsics") || params.contains("fixed_intrinsics");
-  if (!params.contains("intrinsics_model")) {
-    return self_calibrating && !explicit_options ? "auto" : "";
-  }
+  if (!params.contains("intrinsics_model")) return explicit_options ? "" : "auto";
   OMNIRIG_CHECK(params["intrinsics_model"].is_string(),
                 "field 'params.intrinsics_model' must be a string");
   const std::string model = params["intrinsics_model"].get<std::string>();
@@ -75,7 +73,7 @@ std::string IntrinsicsModelField(const json& params, bool self_calibrating) {
                     << model << "'");
   OMNIRIG_CHECK(!params.contains("refine_intrinsics"),
                 "give 'params.intrinsics_model' or 'params.refine_intrinsics', not both");
-  OMNIRIG_CHECK(self_calibrating || model == "fixed" || model == "free",
+  OMNIRIG_CHECK(self_calibrating || model == "auto" || model == "fixed" || model == "free",
                 "'params.intrinsics_model' " << model << " needs the job to calibrate the cameras "
                                                          "itself (no 'params.calibrations')");
   return model;
@@ -92,7 +90,7 @@ RelativePoseParams RelativePoseParamsFromJson(const json& params) {
   CheckKnownFields(params, "params",
                    {"board", "calibrations", "refine_intrinsics", "fixed_intrinsics",
                     "intrinsics_model", "resolve_corner_order", "huber_loss_px",
-                    "max_num_iterations", "sync_false_alarm_rate", "model_board_motion"});
+                    "max_num_iterations", "sync_false_alarm_rate"});
   OMNIRIG_CHECK(params.contains("board"), "missing field 'params.board'");
   RelativePoseParams out;
   out.board = BoardFromJson(params["board"]);
@@ -143,9 +141,6 @@ RelativePoseParams RelativePoseParamsFromJson(const json& params) {
                   "field 'params.sync_false_alarm_rate' must be in [0, 1), got " << rate);
     out.options.sync_test.false_alarm_rate = rate;
   }
-  if (params.contains("model_board_motion")) {
-    out.options.model_board_motion = BoolField(params, "model_board_motion");
-  }
   out.options.Check();
   return out;
 }
@@ -194,8 +189,19 @@ json RelativePoseResultToJson(const RelativePoseReport& report, const json& came
   result["averaged_cam0_from_cam1"] = PoseToJson(report.averaged_cam0_from_cam1);
   result["spread_eigen_ratio"] = report.spread_eigen_ratio;
   result["intrinsics_refined"] = intrinsics_refined;
-  json pairs = json::array();
+  json pairs = json::array(), single_views = json::array();
+  int num_single_views = 0;
   for (const RelativePosePairReport& pair : report.pairs) {
+    if (pair.single_camera >= 0) {
+      ++num_single_views;
+      single_views.push_back({{"name", pair.name},
+                              {"camera", "cam" + std::to_string(pair.single_camera)},
+                              {"used", pair.used},
+                              {"reason", pair.reason},
+                              {"rms_px", NullableRms(pair.used ? pair.rms_px : -1.0)},
+                              {"num_corners", pair.num_corners}});
+      continue;
+    }
     json entry = {{"name", pair.name},
                   {"used", pair.used},
                   {"reason", pair.reason},
@@ -209,6 +215,14 @@ json RelativePoseResultToJson(const RelativePoseReport& report, const json& came
     pairs.push_back(entry);
   }
   result["pairs"] = pairs;
+  // Which observations the estimate used: the pairs, and the given calibrations' own views
+  // (each in one camera; they join the fit where the intrinsics are refined).
+  result["single_camera_views"] = single_views;
+  result["observations"] = {
+      {"pairs_given", report.pairs.size() - num_single_views},
+      {"pairs_used", report.num_pairs_used},
+      {"single_camera_views_given", num_single_views},
+      {"single_camera_views_used", report.num_single_camera_views_used}};
   const SyncTestReport& sync = report.sync_test;
   result["sync_test"] = {{"run", sync.run},
                          {"corner_noise_px", {sync.corner_noise_px[0], sync.corner_noise_px[1]}},
@@ -216,16 +230,6 @@ json RelativePoseResultToJson(const RelativePoseReport& report, const json& came
                          {"median_statistic", sync.median_statistic},
                          {"limit", sync.limit},
                          {"num_pairs_left_out", report.sync_rounds}};
-  // The board's motion between the two exposures (engine/stereo/relpose_motion.h): the
-  // estimated std per axis (0 when not used), and the significance test behind "used".
-  const BoardMotionEstimate& motion = report.board_motion;
-  result["board_motion"] = {{"used", motion.used},
-                            {"rotation_std_deg", motion.rotation_std_rad * 180.0 / M_PI},
-                            {"translation_std_m", motion.translation_std_m},
-                            {"statistic", motion.statistic},
-                            {"dof", motion.dof},
-                            {"limit", motion.limit},
-                            {"num_pairs", motion.num_pairs}};
   result["solver"] = {{"initial_cost", report.solver.initial_cost},
                       {"final_cost", report.solver.final_cost},
                       {"num_iterations", report.solver.num_iterations},
@@ -241,7 +245,31 @@ struct CameraSource {
   CameraModel model;
   json camera_json;
   json provenance;
+  // A given calibration's used views (its result's "images"): corners and ids.
+  std::vector<CalibrationView> views;
 };
+
+// The used views of a calibration result, as detections.
+std::vector<CalibrationView> CalibrationViewsOf(const json& result) {
+  std::vector<CalibrationView> views;
+  if (!result.contains("images") || !result["images"].is_array()) return views;
+  for (const json& image : result["images"]) {
+    if (!image.is_object() || !image.value("used", false) || !image.contains("corners_px") ||
+        !image.contains("corner_ids")) {
+      continue;
+    }
+    CalibrationView view;
+    view.name = image.value("name", "");
+    for (const json& corner : image["corners_px"]) {
+      view.detection.corners_px.emplace_back(corner.at(0).get<double>(),
+                                             corner.at(1).get<double>());
+    }
+    view.detection.corner_ids = image["corner_ids"].get<std::vector<int>>();
+    view.detection.found = view.detection.corners_px.size() == view.detection.corner_ids.size();
+    if (view.detection.found) views.push_back(std::move(view));
+  }
+  return views;
+}
 
 
 CameraSource LoadCalibration(const JobContext& context, const std::string& job_id,
@@ -259,6 +287,7 @@ CameraSource LoadCalibration(const JobContext& context, const std::string& job_i
     throw InvalidArgument("calibration job " + job_id + " (" + camera + "): " + e.what());
   }
   source.camera_json = result["camera"];
+  source.views = CalibrationViewsOf(result);
   source.provenance = {{"source", "job"}, {"job_id", job_id}};
   if (result.contains("rms_px")) source.provenance["rms_px"] = result["rms_px"];
   return source;
@@ -327,6 +356,39 @@ CameraSource CalibrateFromOwnImages(const std::vector<std::string>& names,
   return source;
 }
 
+// Whether two detections are the same image's (a given calibration that included the pairs'
+// own images): the same corners at the same pixels.
+bool SameDetection(const BoardDetection& a, const BoardDetection& b) {
+  if (a.corners_px.size() != b.corners_px.size() || a.corner_ids != b.corner_ids) return false;
+  for (size_t c = 0; c < a.corners_px.size(); ++c) {
+    if ((a.corners_px[c] - b.corners_px[c]).norm() > 1e-6) return false;
+  }
+  return true;
+}
+
+// The given calibrations' views, as single-camera views after the pairs (relative_pose.h):
+// those that are not one of the pairs' own images. With the intrinsics refined they join the
+// joint fit, a camera chain in the manner of Kalibr.
+void AddCalibrationViews(const std::array<std::optional<CameraSource>, 2>& cameras,
+                         std::vector<StereoBoardPair>* board_pairs) {
+  const size_t num_pairs = board_pairs->size();
+  for (int c = 0; c < 2; ++c) {
+    if (!cameras[c]) continue;
+    for (const CalibrationView& view : cameras[c]->views) {
+      bool own = false;
+      for (size_t i = 0; i < num_pairs && !own; ++i) {
+        own = SameDetection(view.detection, c == 0 ? (*board_pairs)[i].cam0 : (*board_pairs)[i].cam1);
+      }
+      if (own) continue;
+      StereoBoardPair single;
+      single.name = "cam" + std::to_string(c) + " calibration view " + view.name;
+      (c == 0 ? single.cam0 : single.cam1) = view.detection;
+      single.single_camera_view = true;
+      board_pairs->push_back(std::move(single));
+    }
+  }
+}
+
 void LogBaseline(const RelativePoseReport& report, const JobContext& context) {
   context.Log("baseline " + std::to_string(report.baseline_m * 1e3) + " mm from " +
               std::to_string(report.num_pairs_used) + " pairs, RMS " +
@@ -368,7 +430,16 @@ json RunAutoModel(const RelativePoseParams& parsed, const RelativePoseOptions& o
   std::vector<std::array<const CameraSource*, 2>> sources;
   std::array<std::optional<CameraSource>, 2> recalibrated;
   const std::array<bool, UnifiedIntrinsics::kNumParams>& base = parsed.base_fixed_intrinsics;
-  for (const RigIntrinsicsModel& model : AutoRigIntrinsicsModels(base)) {
+  // Given calibrations are not redone: their own intrinsics kept, or refined with the rig.
+  std::vector<RigIntrinsicsModel> models = AutoRigIntrinsicsModels(base);
+  if (parsed.cam0_calibration_job) {
+    models.erase(std::remove_if(models.begin(), models.end(),
+                                [](const RigIntrinsicsModel& model) {
+                                  return model.name != "fixed" && model.name != "free";
+                                }),
+                 models.end());
+  }
+  for (const RigIntrinsicsModel& model : models) {
     std::array<const CameraSource*, 2> source{};
     for (int c = 0; c < 2; ++c) {
       if (model.CalibrationFixed(c) == base) {
@@ -449,6 +520,7 @@ json RunRelativePoseJob(const json& params, const JobContext& context) {
   for (size_t i = 0; i < pairs.size(); ++i) {
     board_pairs.push_back({pairs[i].name, detections[0][i], detections[1][i]});
   }
+  AddCalibrationViews(cameras, &board_pairs);
   RelativePoseOptions options = parsed.options;
   options.num_threads = std::max(1, context.num_threads);
   if (parsed.intrinsics_model == "auto") {

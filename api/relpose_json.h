@@ -18,14 +18,19 @@
 //                                 tangential terms trade against the rig pose),
 //    "intrinsics_model": "auto" | "fixed" | "tangential_fixed" | "tangential_free_cam0" |
 //                        "tangential_free_cam1" | "free"
-//        (default "auto" when the job calibrates the cameras itself and neither
-//        refine_intrinsics nor fixed_intrinsics is given: each candidate model (each camera's
+//        (default "auto" when neither refine_intrinsics nor fixed_intrinsics is given: each
+//        candidate model (each camera's
 //        own calibration kept; k3 = k4 = 0 and the rest refined with the rig; the same with one
 //        camera's k3, k4 free, "tangential_free_cam0" / "_cam1"; everything but
 //        fixed_intrinsics refined with the rig) is scored by leave-one-pair-out prediction of
 //        one camera's corners from the other's, and the simplest within one standard error of
-//        the best is used. fixed_intrinsics is then the models' common fixed set. Not with
-//        refine_intrinsics; all but "fixed" and "free" need the job's own calibrations),
+//        the best is used. fixed_intrinsics is then the models' common fixed set. With
+//        given calibrations the candidates are "fixed" (today's behaviour, also by name) and
+//        "free", where the calibrations' own used views (their result's "images": corners,
+//        ids) join the pairs in the joint fit as single-camera views, a camera chain in the
+//        manner of Kalibr; a view that is one of the pairs' own images is not counted twice.
+//        Not with refine_intrinsics; all but "auto", "fixed" and "free" need the job's own
+//        calibrations),
 //    "resolve_corner_order": bool, "huber_loss_px": number, "max_num_iterations": int,
 //    "sync_false_alarm_rate": number in [0, 1) (default 0.01: the probability that a set of
 //        simultaneous pairs loses one to the synchronisation test, engine/stereo/relpose_sync.h;
@@ -44,6 +49,9 @@
 //    "spread_eigen_ratio", "calibrations": {...}, "solver": {...},
 //    "sync_test": {"run", "corner_noise_px": [cam0, cam1], "dispersion", "median_statistic",
 //                  "limit", "num_pairs_left_out"},
+//    "observations": {"pairs_given", "pairs_used", "single_camera_views_given",
+//                     "single_camera_views_used"},
+//    "single_camera_views": [{"name", "camera", "used", "reason", "rms_px", "num_corners"}],
 //    "intrinsics_model": {"chosen", "selection": "cross_validation" | "given", "rule",
 //                         "held_out_pairs", "candidates": [{"name", "num_free_intrinsics",
 //                         "baseline_m", "rms_px", "num_pairs_used", "cv_rms_px",

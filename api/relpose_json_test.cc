@@ -37,8 +37,7 @@ TEST(RelposeJson, ParamsParseBoardCalibrationsAndOptions) {
                        {"calibrations", {{"cam0", "job-a"}, {"cam1", "job-b"}}},
                        {"refine_intrinsics", true},
                        {"huber_loss_px", 0.5},
-                       {"sync_false_alarm_rate", 0.05},
-                       {"model_board_motion", true}};
+                       {"sync_false_alarm_rate", 0.05}};
   const RelativePoseParams parsed = RelativePoseParamsFromJson(params);
   EXPECT_EQ(parsed.board.cols, 9);
   EXPECT_EQ(parsed.board.rows, 6);
@@ -48,9 +47,7 @@ TEST(RelposeJson, ParamsParseBoardCalibrationsAndOptions) {
   EXPECT_TRUE(parsed.options.refine_intrinsics);
   EXPECT_EQ(parsed.options.huber_loss_px, 0.5);
   EXPECT_EQ(parsed.options.sync_test.false_alarm_rate, 0.05);
-  EXPECT_TRUE(parsed.options.model_board_motion);
   const RelativePoseParams self_calibrating = RelativePoseParamsFromJson({{"board", Board()}});
-  EXPECT_FALSE(self_calibrating.options.model_board_motion);  // the default
   EXPECT_FALSE(self_calibrating.cam0_calibration_job);
   EXPECT_TRUE(self_calibrating.options.refine_intrinsics);
   EXPECT_FALSE(RelativePoseParamsFromJson(
@@ -80,14 +77,15 @@ TEST(RelposeJson, FixedIntrinsicsReplaceTheDefaultSet) {
             std::string::npos);
 }
 
-// "auto" is the default only when the job calibrates the cameras and no intrinsics option was
-// given; a named model sets the options it stands for, on top of fixed_intrinsics.
+// "auto" is the default when no intrinsics option was given (with given calibrations too: it
+// then chooses between keeping them and refining them with their own views, issue 16); a
+// named model sets the options it stands for, on top of fixed_intrinsics.
 TEST(RelposeJson, IntrinsicsModelDefaultsAndNamedModels) {
   EXPECT_EQ(RelativePoseParamsFromJson({{"board", Board()}}).intrinsics_model, "auto");
   const json calibrations = {{"cam0", "a"}, {"cam1", "b"}};
   EXPECT_EQ(RelativePoseParamsFromJson({{"board", Board()}, {"calibrations", calibrations}})
                 .intrinsics_model,
-            "");
+            "auto");
   EXPECT_EQ(RelativePoseParamsFromJson({{"board", Board()}, {"refine_intrinsics", false}})
                 .intrinsics_model,
             "");
@@ -164,7 +162,7 @@ TEST(RelposeJson, IntrinsicsModelConflictsAreRefused) {
                   {{"board", Board()}, {"intrinsics_model", "free"}, {"refine_intrinsics", true}});
             }).find("not both"),
             std::string::npos);
-  for (const char* model : {"auto", "tangential_fixed"}) {
+  for (const char* model : {"tangential_fixed"}) {
     EXPECT_NE(ErrorOf([model] {
                 RelativePoseParamsFromJson({{"board", Board()},
                                             {"calibrations", {{"cam0", "a"}, {"cam1", "b"}}},
@@ -263,10 +261,6 @@ TEST(RelposeJson, ResultHasTheIssueKeys) {
   report.sync_test.run = true;
   report.sync_test.corner_noise_px = {0.12, 0.13};
   report.sync_test.limit = 21.6;
-  report.board_motion.used = true;
-  report.board_motion.rotation_std_rad = M_PI / 180.0 * 0.25;
-  report.board_motion.translation_std_m = 4e-4;
-  report.board_motion.dof = 120;
   const json camera0 = {{"model", "unified"}, {"marker", 0}};
   const json result = RelativePoseResultToJson(report, camera0, camera0, false);
   EXPECT_EQ(result["cam0_from_cam1"]["rotation_wxyz"].size(), 4u);
@@ -289,10 +283,6 @@ TEST(RelposeJson, ResultHasTheIssueKeys) {
   EXPECT_TRUE(result["pairs"][1]["sync_statistic"].is_null());
   EXPECT_EQ(result["sync_test"]["corner_noise_px"][1].get<double>(), 0.13);
   EXPECT_EQ(result["sync_test"]["limit"].get<double>(), 21.6);
-  EXPECT_TRUE(result["board_motion"]["used"].get<bool>());
-  EXPECT_NEAR(result["board_motion"]["rotation_std_deg"].get<double>(), 0.25, 1e-12);
-  EXPECT_EQ(result["board_motion"]["translation_std_m"].get<double>(), 4e-4);
-  EXPECT_EQ(result["board_motion"]["dof"].get<int>(), 120);
   // With refined intrinsics the cameras are the refined ones.
   const json refined = RelativePoseResultToJson(report, camera0, camera0, true);
   EXPECT_EQ(refined["cameras"]["cam0"]["image_size"][0], 640);

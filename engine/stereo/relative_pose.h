@@ -17,11 +17,7 @@
 //      rotation's standard deviations;
 //   5. the pair whose two images disagree most on the board's pose, if by more than the
 //      corner noise explains (the board moved between two unsynchronised exposures;
-//      relpose_sync.h), is left out and steps 3-4 run again, until no pair is flagged;
-//   6. on the pairs kept, the board's small motion between the two exposures as a random
-//      effect (relpose_motion.h): its variance estimated from the pairs' disagreement, and,
-//      when significant, step 4 again with cam1's own board pose per pair tied to the rig by
-//      that prior; the reported uncertainty then includes the motion.
+//      relpose_sync.h), is left out and steps 3-4 run again, until no pair is flagged.
 //
 // Frames: cam0_from_cam1 maps points in cam1's frame into cam0's (eq. 8); the board frame is
 // BoardSpec's (metres). Pixels: the centre of the top-left pixel is (0, 0).
@@ -37,7 +33,6 @@
 #include "engine/calib/detect.h"
 #include "engine/geometry/camera_model.h"
 #include "engine/geometry/rigid3.h"
-#include "engine/stereo/relpose_motion.h"
 #include "engine/stereo/relpose_refine.h"
 #include "engine/stereo/relpose_sync.h"
 #include "engine/util/progress.h"
@@ -45,10 +40,15 @@
 namespace omnirig {
 
 // One image pair: the board as detected in cam0's and in cam1's image, taken at one instant.
+// Or, with `single_camera_view`, one camera's image alone (a calibration view; the other
+// detection is empty): it constrains that camera's intrinsics where the joint refinement frees
+// them (a camera chain in the manner of Kalibr), never the rig itself, and is neither tested
+// for synchronisation nor held out by the cross-validation.
 struct StereoBoardPair {
   std::string name;
   BoardDetection cam0;
   BoardDetection cam1;
+  bool single_camera_view = false;
 };
 
 struct RelativePoseOptions {
@@ -78,21 +78,6 @@ struct RelativePoseOptions {
   // unsynchronised exposures) are found by a statistical test against the corner noise and
   // left out, the rig refitted (relpose_sync.h states the rule).
   SyncTestOptions sync_test;
-  // Step 6: model the board's motion between the two exposures of each kept pair as a random
-  // effect, used only when the data show it (relpose_motion.h states the rule; without it
-  // the fit is eq. 20 exactly). On synthetic rigs like the real fisheye pairs whose boards
-  // move 0.3 deg / 0.5 mm per axis between the shots (relpose_motion_synth_test.cc, 30 seeds)
-  // it keeps the rig error, lowers the translation error and makes the baseline std honest
-  // (|error| < 2 std in 26-27 of 30 seeds against 10-12); with a still board it is not used.
-  // Off by default: on the real fisheye pairs of bench_relpose, where the kept pairs disagree
-  // ~25 times beyond their corner noise, rigs fitted with it predict held-out pairs worse
-  // than eq. 20's (leave-one-pair-out, relpose_model_select.h: 0.50 against 0.45 px for
-  // "free", 0.54 against 0.45 px for "tangential_free_cam0"), so that disagreement is not the
-  // random, pose-independent motion the model assumes. Its std (0.21 mm there) matches the
-  // leave-one-pair-out spread; eq. 20's covariance (0.06 mm) is ~8 times below it, its
-  // cluster-robust std (baseline_std_robust_m) is not.
-  bool model_board_motion = false;
-  BoardMotionOptions board_motion;
   // Huber loss scale on the pixel residuals of the joint refinement.
   double huber_loss_px = 1.0;
   int max_num_iterations = 100;
@@ -114,11 +99,12 @@ struct RelativePosePairReport {
   std::string name;
   bool used = false;
   std::string reason;          // why not used (empty when used)
-  // Both images' corners after the joint refinement, one board pose through the rig (with the
-  // board motion model: refitted to both images, so the RMS means the same); -1 if unused.
+  // Both images' corners after the joint refinement, one board pose through the rig; -1 if
+  // unused.
   double rms_px = -1.0;
   int num_corners = 0;         // corners seen by both cameras
   int cam1_order = 0;          // 0: cam1's corner order as detected; k: the k-th symmetry
+  int single_camera = -1;      // the camera of a single-camera view; -1 for a pair
   Rigid3d cam0_from_board;     // after refinement (used pairs), at cam0's exposure
   // The synchronisation test (relpose_sync.h) of the last round the pair took part in: its
   // statistic (compared with RelativePoseReport::sync_test.limit) and the two cameras' own
@@ -144,8 +130,7 @@ struct RelativePoseReport {
 
   StereoRig rig;  // cameras (refined when asked) and cam0_from_cam1
   double baseline_m = 0.0;
-  // Along the baseline direction, from the covariance (with the board motion model it
-  // includes the motion's variance, not the corner noise alone).
+  // Along the baseline direction, from the covariance.
   double baseline_std_m = 0.0;
   Eigen::Vector3d translation_std_m = Eigen::Vector3d::Zero();
   double rotation_std_deg = 0.0;      // RMS angle of the rotation's uncertainty
@@ -164,14 +149,13 @@ struct RelativePoseReport {
 
   bool degenerate = false;
   double spread_eigen_ratio = 0.0;
-  int num_pairs_used = 0;
+  int num_pairs_used = 0;               // pairs, not single-camera views
+  int num_single_camera_views_used = 0;  // used only with refine_intrinsics
   // The synchronisation test on the final rig's pairs (its per-pair entries are copied into
   // `pairs`), and how many rounds of test, rejection of one pair and refit ran (the number of
   // pairs it left out).
   SyncTestReport sync_test;
   int sync_rounds = 0;
-  // Step 6 (all zero and used = false when model_board_motion is off or too few pairs).
-  BoardMotionEstimate board_motion;
   RelativePoseSolverSummary solver;
   std::vector<RelativePosePairReport> pairs;
 };

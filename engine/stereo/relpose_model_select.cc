@@ -6,7 +6,6 @@
 
 #include "engine/calib/board_pose.h"
 #include "engine/stereo/relpose_corner_order.h"
-#include "engine/stereo/relpose_motion.h"
 #include "engine/stereo/relpose_refine.h"
 #include "engine/util/parallel.h"
 
@@ -220,11 +219,12 @@ void FitCandidates(const BoardSpec& board, const std::vector<StereoBoardPair>& p
       });
 }
 
-// The folds: every pair that all fitted candidates used.
-std::vector<size_t> CommonPairs(const RigModelSelection& selection, size_t num_pairs) {
+// The folds: every pair (not a single camera's view) that all fitted candidates used.
+std::vector<size_t> CommonPairs(const RigModelSelection& selection,
+                                const std::vector<StereoBoardPair>& pairs) {
   std::vector<size_t> held_out;
-  for (size_t i = 0; i < num_pairs; ++i) {
-    bool all = true;
+  for (size_t i = 0; i < pairs.size(); ++i) {
+    bool all = !pairs[i].single_camera_view;
     for (const RigModelScore& score : selection.candidates) {
       if (score.fit.success && !score.fit.pairs[i].used) all = false;
     }
@@ -244,7 +244,7 @@ RigModelSelection SelectRigIntrinsicsModel(const BoardSpec& board,
   RigModelSelection selection;
   std::vector<RelativePoseOptions> candidate_options;
   FitCandidates(board, pairs, candidates, options, progress, &candidate_options, &selection);
-  const std::vector<size_t> held_out = CommonPairs(selection, pairs.size());
+  const std::vector<size_t> held_out = CommonPairs(selection, pairs);
   for (size_t i : held_out) selection.held_out.push_back(pairs[i].name);
   const std::vector<BoardSymmetry> symmetries = BoardGridSymmetries(board);
   // Every (candidate, fold) pair is one task; the sums are taken in fold order afterwards.
@@ -255,17 +255,10 @@ RigModelSelection SelectRigIntrinsicsModel(const BoardSpec& board,
   }
   std::vector<std::vector<std::pair<double, int>>> folds(
       candidates.size(), std::vector<std::pair<double, int>>(held_out.size()));
-  // Each fold refits the candidate as its all-pairs fit was made: with the board motion prior
-  // that fit estimated (relpose_motion.h), when it used one, so that the folds score the
-  // estimator the job reports. The prior is not re-estimated per fold (like the corner orders
-  // and the pairs the synchronisation test left out).
+  // Each fold refits the candidate as its all-pairs fit was made.
   std::vector<RigRefinementOptions> fold_refine;
   for (size_t k = 0; k < candidates.size(); ++k) {
     fold_refine.push_back(candidate_options[k].RefinementOptions());
-    const BoardMotionEstimate& motion = selection.candidates[k].fit.board_motion;
-    if (motion.used) {
-      fold_refine.back().board_motion = ToBoardMotionPrior(motion, motion.corner_noise_px);
-    }
   }
   int num_done = 0;
   RunTasks(

@@ -63,9 +63,10 @@ std::vector<RigIntrinsicsModel> PerCameraTangentialModels(
 
 // The candidates of the relative_pose job's "intrinsics_model": "auto", simplest first: the
 // standard ones with the per-camera tangential models between "tangential_fixed" and "free"
-// (on the real fisheye pairs of bench_relpose the cross-validation prefers freeing cam0's
-// tangential terms alone: it predicts as well as "free" with two parameters fewer). Models
-// that coincide with another for this `base` (tangential terms already fixed) are left out.
+// (on the real fisheye pairs of bench_relpose the rule chose freeing cam0's tangential terms
+// alone until the synchronisation test stopped dropping the "fixed" candidate's pairs for its
+// calibration error; over the folds that leaves, it chooses "tangential_fixed"). Models that
+// coincide with another for this `base` (tangential terms already fixed) are left out.
 std::vector<RigIntrinsicsModel> AutoRigIntrinsicsModels(
     const std::array<bool, UnifiedIntrinsics::kNumParams>& base);
 
@@ -100,9 +101,8 @@ struct RigModelSelection {
 // Fits every candidate on all pairs with `options` (its refine_intrinsics and
 // fixed_intrinsics replaced by the model's), then scores it by leave-one-pair-out prediction
 // over the pairs every candidate used. Each fold restarts the joint refinement from the
-// all-pairs solution without the held-out pair (same corner orders, same rejected pairs, and
-// the board motion prior of relpose_motion.h when the all-pairs fit used one); the
-// per-camera calibrations are not redone per fold, so the "fixed" model's intrinsics have seen
+// all-pairs solution without the held-out pair (same corner orders, same rejected pairs);
+// the per-camera calibrations are not redone per fold, so the "fixed" model's intrinsics have seen
 // one image of each held-out pair (a slight advantage to it).
 // Choice (the one-standard-error rule of cross-validation): the simplest candidate (fewest
 // free intrinsics) whose mean squared held-out error exceeds the lowest by no more than one

@@ -8,7 +8,6 @@
 
 #include "engine/geometry/ceres_problem.h"
 #include "engine/geometry/reprojection_cost.h"
-#include "engine/stereo/relpose_motion.h"
 
 namespace omnirig {
 
@@ -47,16 +46,13 @@ class ProgressCallback : public ceres::IterationCallback {
 struct RigBlocks {
   std::array<double, 7> cam0_from_cam1;
   std::vector<std::array<double, 7>> cam0_from_board;
-  std::vector<std::array<double, 7>> cam1_from_board;  // with a board motion prior only
   std::array<double, UnifiedIntrinsics::kNumParams> intrinsics0, intrinsics1;
 };
 
-RigBlocks BlocksOf(const StereoRig& rig, const std::vector<Rigid3d>& cam0_from_board,
-                   const std::vector<Rigid3d>& cam1_from_board) {
+RigBlocks BlocksOf(const StereoRig& rig, const std::vector<Rigid3d>& cam0_from_board) {
   RigBlocks blocks;
   blocks.cam0_from_cam1 = rig.cam0_from_cam1.ToParams();
   for (const Rigid3d& pose : cam0_from_board) blocks.cam0_from_board.push_back(pose.ToParams());
-  for (const Rigid3d& pose : cam1_from_board) blocks.cam1_from_board.push_back(pose.ToParams());
   blocks.intrinsics0 = rig.cam0.intrinsics.params;
   blocks.intrinsics1 = rig.cam1.intrinsics.params;
   return blocks;
@@ -80,26 +76,11 @@ void AddResiduals(const std::vector<RigPairCorners>& pairs, const RigRefinementO
                   ReprojectionCost::BoardCorner(pairs[i].points_in_board0[c], pairs[i].pixels0[c]),
                   loss, board, blocks->intrinsics0.data()));
     }
-    if (options.board_motion) {
-      // cam1's own board pose, tied to the rig's prediction by the motion prior.
-      double* board1 = blocks->cam1_from_board[i].data();
-      for (size_t c = 0; c < pairs[i].pixels1.size(); ++c) {
-        keep(i, problem->AddResidualBlock(
-                    ReprojectionCost::BoardCorner(pairs[i].points_in_board1[c], pairs[i].pixels1[c]),
-                    loss, board1, blocks->intrinsics1.data()));
-      }
+    for (size_t c = 0; c < pairs[i].pixels1.size(); ++c) {
       keep(i, problem->AddResidualBlock(
-                  BoardMotionLinkCost::Create(RigPairBoardCentre(pairs[i]), *options.board_motion),
-                  nullptr, board, blocks->cam0_from_cam1.data(), board1));
-      problem->SetManifold(board1, NewPoseManifold());
-    } else {
-      for (size_t c = 0; c < pairs[i].pixels1.size(); ++c) {
-        keep(i,
-             problem->AddResidualBlock(
-                 ReprojectionCost::BoardCornerThroughRig(pairs[i].points_in_board1[c],
-                                                         pairs[i].pixels1[c]),
-                 loss, board, blocks->cam0_from_cam1.data(), blocks->intrinsics1.data()));
-      }
+                  ReprojectionCost::BoardCornerThroughRig(pairs[i].points_in_board1[c],
+                                                          pairs[i].pixels1[c]),
+                  loss, board, blocks->cam0_from_cam1.data(), blocks->intrinsics1.data()));
     }
     problem->SetManifold(board, NewPoseManifold());
   }
@@ -255,27 +236,6 @@ RigUncertainty EstimateUncertainty(
 
 }  // namespace
 
-namespace {
-
-// cam1's board poses of a problem: none without a motion prior; with one, those given, or the
-// rig's predictions when none are.
-std::vector<Rigid3d> Cam1Poses(const RigRefinementOptions& options, const StereoRig& rig,
-                               const std::vector<Rigid3d>& cam0_from_board,
-                               const std::vector<Rigid3d>& cam1_from_board) {
-  if (!options.board_motion) return {};
-  if (!cam1_from_board.empty()) {
-    OMNIRIG_CHECK(cam1_from_board.size() == cam0_from_board.size(),
-                  "one cam1 board pose per pair expected");
-    return cam1_from_board;
-  }
-  std::vector<Rigid3d> predicted;
-  const Rigid3d cam1_from_cam0 = rig.cam0_from_cam1.Inverse();
-  for (const Rigid3d& pose : cam0_from_board) predicted.push_back(cam1_from_cam0 * pose);
-  return predicted;
-}
-
-}  // namespace
-
 Eigen::Vector3d RigPairBoardCentre(const RigPairCorners& pair) {
   Eigen::Vector3d centre = Eigen::Vector3d::Zero();
   for (const auto& p : pair.points_in_board0) centre += p;
@@ -286,11 +246,9 @@ Eigen::Vector3d RigPairBoardCentre(const RigPairCorners& pair) {
 
 RigUncertainty EstimateRigUncertainty(const std::vector<RigPairCorners>& pairs,
                                       const RigRefinementOptions& options, const StereoRig& rig,
-                                      const std::vector<Rigid3d>& cam0_from_board,
-                                      const std::vector<Rigid3d>& cam1_from_board) {
+                                      const std::vector<Rigid3d>& cam0_from_board) {
   OMNIRIG_CHECK(cam0_from_board.size() == pairs.size(), "one board pose per pair expected");
-  RigBlocks blocks =
-      BlocksOf(rig, cam0_from_board, Cam1Poses(options, rig, cam0_from_board, cam1_from_board));
+  RigBlocks blocks = BlocksOf(rig, cam0_from_board);
   ceres::Problem problem;
   std::vector<std::vector<ceres::ResidualBlockId>> pair_residuals;
   AddResiduals(pairs, options, &blocks, &problem, &pair_residuals);
@@ -301,20 +259,8 @@ RigRefinementSummary RefineRig(const std::vector<RigPairCorners>& pairs,
                                const RigRefinementOptions& options, StereoRig* rig,
                                std::vector<Rigid3d>* cam0_from_board, RigUncertainty* uncertainty,
                                const ProgressSink& progress) {
-  std::vector<Rigid3d> cam1_from_board;
-  return RefineRigWithBoardMotion(pairs, options, rig, cam0_from_board, &cam1_from_board,
-                                  uncertainty, progress);
-}
-
-RigRefinementSummary RefineRigWithBoardMotion(const std::vector<RigPairCorners>& pairs,
-                                              const RigRefinementOptions& options, StereoRig* rig,
-                                              std::vector<Rigid3d>* cam0_from_board,
-                                              std::vector<Rigid3d>* cam1_from_board,
-                                              RigUncertainty* uncertainty,
-                                              const ProgressSink& progress) {
   OMNIRIG_CHECK(cam0_from_board->size() == pairs.size(), "one board pose per pair expected");
-  RigBlocks blocks = BlocksOf(*rig, *cam0_from_board,
-                              Cam1Poses(options, *rig, *cam0_from_board, *cam1_from_board));
+  RigBlocks blocks = BlocksOf(*rig, *cam0_from_board);
 
   ceres::Problem problem;
   std::vector<std::vector<ceres::ResidualBlockId>> pair_residuals;
@@ -343,10 +289,6 @@ RigRefinementSummary RefineRigWithBoardMotion(const std::vector<RigPairCorners>&
   rig->cam0_from_cam1 = Rigid3d::FromParams(blocks.cam0_from_cam1.data());
   for (size_t i = 0; i < pairs.size(); ++i) {
     (*cam0_from_board)[i] = Rigid3d::FromParams(blocks.cam0_from_board[i].data());
-  }
-  cam1_from_board->clear();
-  for (const auto& pose : blocks.cam1_from_board) {
-    cam1_from_board->push_back(Rigid3d::FromParams(pose.data()));
   }
   rig->cam0.intrinsics.params = blocks.intrinsics0;
   rig->cam1.intrinsics.params = blocks.intrinsics1;
@@ -390,11 +332,8 @@ double FitBoardThroughRig(const StereoRig& rig, const RigPairCorners& pair,
   return 2.0 * summary.final_cost;
 }
 
-double PairRmsPx(const StereoRig& rig, const Rigid3d& cam0_from_board, const RigPairCorners& pair,
-                 const Rigid3d* cam1_from_board_given) {
-  const Rigid3d cam1_from_board = cam1_from_board_given != nullptr
-                                      ? *cam1_from_board_given
-                                      : rig.cam0_from_cam1.Inverse() * cam0_from_board;
+double PairRmsPx(const StereoRig& rig, const Rigid3d& cam0_from_board, const RigPairCorners& pair) {
+  const Rigid3d cam1_from_board = rig.cam0_from_cam1.Inverse() * cam0_from_board;
   double sum = 0.0;
   int count = 0;
   const auto accumulate = [&](const CameraModel& camera, const Rigid3d& cam_from_board,

@@ -23,28 +23,14 @@ struct RigPairCorners {
 };
 
 // The board's centre in the board frame: the mean of both cameras' object points (zero when
-// there are none). Where the synchronisation test and the board motion model compare poses.
+// there are none). Where the synchronisation test compares poses.
 Eigen::Vector3d RigPairBoardCentre(const RigPairCorners& pair);
 
 // Skew (alpha) and k5 fixed, every other intrinsic free.
 std::array<bool, UnifiedIntrinsics::kNumParams> DefaultFixedIntrinsics();
 
-// The board's motion between the two exposures of a pair as a random effect
-// (relpose_motion.h): cam1 sees its own board pose per pair, tied to the rig's prediction
-// cam1_from_cam0 * cam0_from_board by a Gaussian prior of these standard deviations per axis
-// (rotation, and translation of the board's centre). The prior's residuals are scaled by
-// `corner_noise_px` so that they share the pixel residuals' variance (the covariance's scale
-// factor then applies to both).
-struct BoardMotionPrior {
-  double rotation_std_rad = 0.0;
-  double translation_std_m = 0.0;
-  double corner_noise_px = 0.0;
-};
-
+// cam1's corners go through cam0's board pose and the rig (eq. 20).
 struct RigRefinementOptions {
-  // With a prior, every pair gets its own cam1 board pose linked to the rig by it; without
-  // (the default), cam1's corners go through cam0's board pose and the rig (eq. 20 exactly).
-  std::optional<BoardMotionPrior> board_motion;
   bool refine_intrinsics = false;
   // With refine_intrinsics: the intrinsics (UnifiedIntrinsics order) that stay constant...
   std::array<bool, UnifiedIntrinsics::kNumParams> fixed_intrinsics = DefaultFixedIntrinsics();
@@ -89,23 +75,12 @@ RigRefinementSummary RefineRig(const std::vector<RigPairCorners>& pairs,
                                std::vector<Rigid3d>* cam0_from_board, RigUncertainty* uncertainty,
                                const ProgressSink& progress = {});
 
-// RefineRig with options.board_motion set: `cam1_from_board` (one per pair) is cam1's own
-// board pose, a start point and the solution. Empty on entry: started at the rig's prediction.
-RigRefinementSummary RefineRigWithBoardMotion(const std::vector<RigPairCorners>& pairs,
-                                              const RigRefinementOptions& options, StereoRig* rig,
-                                              std::vector<Rigid3d>* cam0_from_board,
-                                              std::vector<Rigid3d>* cam1_from_board,
-                                              RigUncertainty* uncertainty,
-                                              const ProgressSink& progress = {});
-
 // The uncertainty RefineRig reports, of a solution it returned (the same problem, evaluated at
-// `rig` and `cam0_from_board`, and `cam1_from_board` with options.board_motion): for a caller
-// that refits several times and needs only the last fit's. With a board motion prior the
-// covariance includes the motion's: the rig's std then reflects both error sources.
+// `rig` and `cam0_from_board`): for a caller that refits several times and needs only the last
+// fit's.
 RigUncertainty EstimateRigUncertainty(const std::vector<RigPairCorners>& pairs,
                                       const RigRefinementOptions& options, const StereoRig& rig,
-                                      const std::vector<Rigid3d>& cam0_from_board,
-                                      const std::vector<Rigid3d>& cam1_from_board = {});
+                                      const std::vector<Rigid3d>& cam0_from_board);
 
 // The board pose of one pair with the rig and both cameras held fixed: plain (not robust)
 // least squares over both images' corners, each camera's residuals divided by its corner noise
@@ -116,9 +91,7 @@ double FitBoardThroughRig(const StereoRig& rig, const RigPairCorners& pair,
                           const std::array<double, 2>& noise_px, Rigid3d* cam0_from_board);
 
 // RMS (pixels) over one pair's corners in both images; a corner that does not project counts
-// as a residual of 1e3 px (never silently dropped). cam1's board pose is the rig's prediction
-// unless `cam1_from_board` is given (the board motion model's own pose).
-double PairRmsPx(const StereoRig& rig, const Rigid3d& cam0_from_board, const RigPairCorners& pair,
-                 const Rigid3d* cam1_from_board = nullptr);
+// as a residual of 1e3 px (never silently dropped). cam1's board pose is the rig's prediction.
+double PairRmsPx(const StereoRig& rig, const Rigid3d& cam0_from_board, const RigPairCorners& pair);
 
 }  // namespace omnirig

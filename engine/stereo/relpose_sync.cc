@@ -135,9 +135,12 @@ std::array<double, 2> EstimatePairCornerNoise(const StereoRig& rig,
 SyncTestReport TestPairSynchronisation(const StereoRig& rig,
                                        const std::vector<RigPairCorners>& pairs,
                                        const std::vector<Rigid3d>& cam0_from_board,
-                                       const SyncTestOptions& options) {
+                                       const SyncTestOptions& options,
+                                       const std::vector<StereoRig>& rig_of_pair) {
   options.Check();
   OMNIRIG_CHECK(cam0_from_board.size() == pairs.size(), "one board pose per pair expected");
+  OMNIRIG_CHECK(rig_of_pair.empty() || rig_of_pair.size() == pairs.size(),
+                "one rig per pair expected");
   SyncTestReport report;
   report.pairs.resize(pairs.size());
   if (pairs.size() < 3 || options.false_alarm_rate == 0.0) return report;
@@ -146,6 +149,13 @@ SyncTestReport TestPairSynchronisation(const StereoRig& rig,
   report.corner_noise_px = CornerNoise(separate, options);
   std::vector<double> raw(pairs.size(), 0.0), valid_raw;
   for (size_t i = 0; i < pairs.size(); ++i) {
+    if (!rig_of_pair.empty()) {
+      separate[i] = FitSeparately(rig_of_pair[i], pairs[i]);
+      report.pairs[i] = PairStatistic(rig_of_pair[i], pairs[i], separate[i],
+                                      report.corner_noise_px, cam0_from_board[i], &raw[i]);
+      if (report.pairs[i].valid) valid_raw.push_back(raw[i]);
+      continue;
+    }
     report.pairs[i] = PairStatistic(rig, pairs[i], separate[i], report.corner_noise_px,
                                     cam0_from_board[i], &raw[i]);
     if (report.pairs[i].valid) valid_raw.push_back(raw[i]);

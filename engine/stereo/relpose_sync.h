@@ -97,10 +97,13 @@ std::array<double, 2> EstimatePairCornerNoise(const StereoRig& rig,
                                               const SyncTestOptions& options);
 
 // Tests every pair of a fitted rig. `cam0_from_board`: the joint fit's board poses (starting
-// points of the fits through the rig). Needs at least 3 pairs (else report.run is false).
+// points of the fits through the rig). With `rig_of_pair` (one per pair), pair i is judged by
+// its own rig instead (its separate fits and the fit through the rig use that rig's cameras);
+// the corner noise still comes from `rig`'s. Needs at least 3 pairs (else report.run is false).
 SyncTestReport TestPairSynchronisation(const StereoRig& rig,
                                        const std::vector<RigPairCorners>& pairs,
                                        const std::vector<Rigid3d>& cam0_from_board,
-                                       const SyncTestOptions& options);
+                                       const SyncTestOptions& options,
+                                       const std::vector<StereoRig>& rig_of_pair = {});
 
 }  // namespace omnirig

@@ -34,8 +34,7 @@ export function renderStereo(container, job, result) {
           el('dt', 'Roll, pitch, yaw'), el('dd', rpy.map((a) => `${formatNumber(a, 4)}°`).join(', ')),
           el('dt', 'Quaternion (w, x, y, z)'), el('dd.mono', q.map((x) => formatNumber(x, 6)).join(', ')),
           el('dt', 'RMS reprojection error'), el('dd', `${formatNumber(result.rms_px, 3)} px`),
-          el('dt', 'Pairs used'), el('dd', `${pairs.filter((p) => p.used).length} of ${pairs.length}`),
-          boardMotionRow(result.board_motion)),
+          el('dt', 'Pairs used'), el('dd', `${pairs.filter((p) => p.used).length} of ${pairs.length}`)),
         el('div.grow', uncertaintyList(result)))),
     el('div.card', el('h2', 'Per-pair RMS error'), chart),
     droppedPairsCard(pairs, result.sync_test),
@@ -57,21 +56,6 @@ function droppedPairsCard(pairs, sync) {
         el('td.num', p.sync_statistic !== null && p.sync_statistic !== undefined
           ? `${formatNumber(p.sync_statistic, 1)}${limit !== null ? ` (limit ${formatNumber(limit, 1)})` : ''}` : '–')))))
       : el('p.muted', 'Every pair was used.'));
-}
-
-// The board's motion between the two exposures of a pair (unsynchronised cameras, a handheld
-// board), when the job was asked to model it ("model_board_motion"): its estimated size, which
-// the uncertainties then include; num_pairs is 0 when it was not asked.
-function boardMotionRow(motion) {
-  if (!motion) return null;
-  let text = 'not modelled (the job param "model_board_motion": true models it)';
-  if (motion.used) {
-    text = `modelled: ${formatSignificant(motion.rotation_std_deg, 2)}° and ` +
-      `${formatSignificant(motion.translation_std_m * 1000, 2)} mm per axis (included in the ± values)`;
-  } else if (motion.num_pairs > 0) {
-    text = 'not significant (the pairs agree within their corner noise)';
-  }
-  return [el('dt', 'Board motion between exposures'), el('dd#board-motion', text)];
 }
 
 // " ± std" after a value (a number or one per axis), or nothing when the result has none.
