@@ -100,7 +100,7 @@ bool ReprojectionCost::Evaluate(double const* const* parameters, double* residua
                              wanted(translation_block);
   Eigen::Vector2d pixel;
   Eigen::Matrix<double, 2, 3> d_pixel_d_cam;
-  Eigen::Matrix<double, 2, UnifiedIntrinsics::kNumParams> d_pixel_d_intrinsics;
+  IntrinsicsJacobianOf<double> d_pixel_d_intrinsics;
   if (!Project(intrinsics, point_in_cam, &pixel, want_geometry ? &d_pixel_d_cam : nullptr,
                wanted(intrinsics_block) ? &d_pixel_d_intrinsics : nullptr)) {
     return false;

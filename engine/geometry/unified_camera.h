@@ -78,8 +78,11 @@ template <typename T>
 using Vector3 = Eigen::Matrix<T, 3, 1>;
 // An Eigen matrix whose scalar is not deduced from the argument (so that nullptr is accepted for
 // an optional Jacobian).
-template <typename T, int Rows, int Cols>
-using JacobianOf = Eigen::Matrix<typename Eigen::NumTraits<T>::Real, Rows, Cols>;
+template <typename T, int Rows, int Cols, int Options = Eigen::ColMajor>
+using JacobianOf = Eigen::Matrix<typename Eigen::NumTraits<T>::Real, Rows, Cols, Options>;
+// d pixel / d params is row-major, as Ceres lays out a parameter block's Jacobian.
+template <typename T>
+using IntrinsicsJacobianOf = JacobianOf<T, 2, UnifiedIntrinsics::kNumParams, Eigen::RowMajor>;
 
 // Eq. (3): the distortion D applied to a point m on the normalised plane.
 template <typename T>
@@ -150,7 +153,7 @@ inline bool ProjectToPixel(const T* params, const T* point_in_cam, T* pixel) {
 template <typename T>
 inline bool Project(const T* params, const Vector3<T>& point_in_cam, Vector2<T>* pixel,
                     JacobianOf<T, 2, 3>* d_pixel_d_point = nullptr,
-                    JacobianOf<T, 2, UnifiedIntrinsics::kNumParams>* d_pixel_d_params = nullptr) {
+                    IntrinsicsJacobianOf<T>* d_pixel_d_params = nullptr) {
   using I = UnifiedIntrinsics;
   if (d_pixel_d_point == nullptr && d_pixel_d_params == nullptr) {
     return ProjectToPixel(params, point_in_cam.data(), pixel->data());
@@ -176,7 +179,7 @@ inline bool Project(const T* params, const Vector3<T>& point_in_cam, Vector2<T>*
     *d_pixel_d_point = dp_dm * dm_ds * ds_dX;
   }
   if (d_pixel_d_params != nullptr) {
-    Eigen::Matrix<T, 2, I::kNumParams>& J = *d_pixel_d_params;
+    IntrinsicsJacobianOf<T>& J = *d_pixel_d_params;
     const T rho2 = x * x + y * y, rho4 = rho2 * rho2;
     J.setZero();
     J.col(I::kXi) = dp_dm * Vector2<T>(-x / denom, -y / denom);
