@@ -100,7 +100,7 @@ bool ReprojectionCost::Evaluate(double const* const* parameters, double* residua
                              wanted(translation_block);
   Eigen::Vector2d pixel;
   Eigen::Matrix<double, 2, 3> d_pixel_d_cam;
-  Eigen::Matrix<double, 2, UnifiedIntrinsics::kNumParams> d_pixel_d_intrinsics;
+  IntrinsicsJacobianOf<double> d_pixel_d_intrinsics;
   if (!Project(intrinsics, point_in_cam, &pixel, want_geometry ? &d_pixel_d_cam : nullptr,
                wanted(intrinsics_block) ? &d_pixel_d_intrinsics : nullptr)) {
     return false;
@@ -115,7 +115,8 @@ bool ReprojectionCost::Evaluate(double const* const* parameters, double* residua
   }
   if (!want_geometry) return true;
   using RowMajor2x7 = Eigen::Matrix<double, 2, 7, Eigen::RowMajor>;
-  const Eigen::Matrix<double, 2, 3> d_pixel_d_posed = d_pixel_d_cam * d_cam_d_posed;
+  const Eigen::Matrix<double, 2, 3> d_pixel_d_posed =
+      rig_ == Rig::kNone ? d_pixel_d_cam : Eigen::Matrix<double, 2, 3>(d_pixel_d_cam * d_cam_d_posed);
   if (wanted(0)) {
     Eigen::Map<RowMajor2x7> jacobian(jacobians[0]);
     jacobian.leftCols<4>() = d_pixel_d_posed * RotatedPointJacobian(rotation, point);

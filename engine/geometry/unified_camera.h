@@ -78,8 +78,11 @@ template <typename T>
 using Vector3 = Eigen::Matrix<T, 3, 1>;
 // An Eigen matrix whose scalar is not deduced from the argument (so that nullptr is accepted for
 // an optional Jacobian).
-template <typename T, int Rows, int Cols>
-using JacobianOf = Eigen::Matrix<typename Eigen::NumTraits<T>::Real, Rows, Cols>;
+template <typename T, int Rows, int Cols, int Options = Eigen::ColMajor>
+using JacobianOf = Eigen::Matrix<typename Eigen::NumTraits<T>::Real, Rows, Cols, Options>;
+// d pixel / d params is row-major, as Ceres lays out a parameter block's Jacobian.
+template <typename T>
+using IntrinsicsJacobianOf = JacobianOf<T, 2, UnifiedIntrinsics::kNumParams, Eigen::RowMajor>;
 
 // Eq. (3): the distortion D applied to a point m on the normalised plane.
 template <typename T>
@@ -111,25 +114,33 @@ inline Eigen::Matrix<T, 2, 2> DistortionJacobian(const T* params, const T& x, co
   return jacobian;
 }
 
+// Eq. (2): the point's norm and its image m = (x, y) on the normalised plane. False outside
+// the valid domain documented above. Templated for Ceres Jets.
+template <typename T>
+inline bool NormalisedPlanePoint(const T* params, const T* point_in_cam, T* norm, T* x, T* y) {
+  using std::sqrt;
+  const T norm2 = point_in_cam[0] * point_in_cam[0] + point_in_cam[1] * point_in_cam[1] +
+                  point_in_cam[2] * point_in_cam[2];
+  if (!(norm2 > T(1e-300))) return false;
+  *norm = sqrt(norm2);
+  const T zs = point_in_cam[2] / *norm;
+  const T& xi = params[UnifiedIntrinsics::kXi];
+  // zs > -min(xi, 1/xi)  <=>  zs + xi > 0 and (xi <= 1 or xi * zs + 1 > 0).
+  if (!(zs + xi > T(1e-12))) return false;
+  if (xi > T(1) && !(xi * zs + T(1) > T(1e-12))) return false;
+  const T denom = zs + xi;
+  *x = point_in_cam[0] / *norm / denom;
+  *y = point_in_cam[1] / *norm / denom;
+  return true;
+}
+
 // Eqs. (2)-(4): projects a point in the mirror (camera) frame to a pixel. Returns false, leaving
 // `pixel` untouched, outside the valid domain documented above. Templated for Ceres Jets.
 template <typename T>
 inline bool ProjectToPixel(const T* params, const T* point_in_cam, T* pixel) {
   using I = UnifiedIntrinsics;
-  using std::sqrt;
-  const T norm2 = point_in_cam[0] * point_in_cam[0] + point_in_cam[1] * point_in_cam[1] +
-                  point_in_cam[2] * point_in_cam[2];
-  if (!(norm2 > T(1e-300))) return false;
-  const T norm = sqrt(norm2);
-  const T zs = point_in_cam[2] / norm;
-  const T& xi = params[I::kXi];
-  // zs > -min(xi, 1/xi)  <=>  zs + xi > 0 and (xi <= 1 or xi * zs + 1 > 0).
-  if (!(zs + xi > T(1e-12))) return false;
-  if (xi > T(1) && !(xi * zs + T(1) > T(1e-12))) return false;
-  const T denom = zs + xi;
-  const T x = point_in_cam[0] / norm / denom;
-  const T y = point_in_cam[1] / norm / denom;
-  T xd, yd;
+  T norm, x, y, xd, yd;
+  if (!NormalisedPlanePoint(params, point_in_cam, &norm, &x, &y)) return false;
   Distort(params, x, y, &xd, &yd);
   pixel[0] = params[I::kGammaU] * (xd + params[I::kAlpha] * yd) + params[I::kU0];
   pixel[1] = params[I::kGammaV] * yd + params[I::kV0];
@@ -142,15 +153,20 @@ inline bool ProjectToPixel(const T* params, const T* point_in_cam, T* pixel) {
 template <typename T>
 inline bool Project(const T* params, const Vector3<T>& point_in_cam, Vector2<T>* pixel,
                     JacobianOf<T, 2, 3>* d_pixel_d_point = nullptr,
-                    JacobianOf<T, 2, UnifiedIntrinsics::kNumParams>* d_pixel_d_params = nullptr) {
+                    IntrinsicsJacobianOf<T>* d_pixel_d_params = nullptr) {
   using I = UnifiedIntrinsics;
-  if (!ProjectToPixel(params, point_in_cam.data(), pixel->data())) return false;
-  if (d_pixel_d_point == nullptr && d_pixel_d_params == nullptr) return true;
-  // The chain point -> unit sphere s -> normalised plane m -> distorted m_d -> pixel.
-  const T norm = point_in_cam.norm();
+  if (d_pixel_d_point == nullptr && d_pixel_d_params == nullptr) {
+    return ProjectToPixel(params, point_in_cam.data(), pixel->data());
+  }
+  // The chain point -> unit sphere s -> normalised plane m -> distorted m_d -> pixel, each
+  // step's value computed once (as ProjectToPixel does).
+  T norm, x, y, xd, yd;
+  if (!NormalisedPlanePoint(params, point_in_cam.data(), &norm, &x, &y)) return false;
+  Distort(params, x, y, &xd, &yd);
+  (*pixel)[0] = params[I::kGammaU] * (xd + params[I::kAlpha] * yd) + params[I::kU0];
+  (*pixel)[1] = params[I::kGammaV] * yd + params[I::kV0];
   const Vector3<T> s = point_in_cam / norm;
   const T denom = s.z() + params[I::kXi];
-  const T x = s.x() / denom, y = s.y() / denom;
   Eigen::Matrix<T, 2, 2> dp_dmd;
   dp_dmd << params[I::kGammaU], params[I::kGammaU] * params[I::kAlpha], T(0), params[I::kGammaV];
   const Eigen::Matrix<T, 2, 2> dp_dm = dp_dmd * DistortionJacobian(params, x, y);
@@ -163,10 +179,8 @@ inline bool Project(const T* params, const Vector3<T>& point_in_cam, Vector2<T>*
     *d_pixel_d_point = dp_dm * dm_ds * ds_dX;
   }
   if (d_pixel_d_params != nullptr) {
-    Eigen::Matrix<T, 2, I::kNumParams>& J = *d_pixel_d_params;
+    IntrinsicsJacobianOf<T>& J = *d_pixel_d_params;
     const T rho2 = x * x + y * y, rho4 = rho2 * rho2;
-    T xd, yd;
-    Distort(params, x, y, &xd, &yd);
     J.setZero();
     J.col(I::kXi) = dp_dm * Vector2<T>(-x / denom, -y / denom);
     J(0, I::kGammaU) = xd + params[I::kAlpha] * yd;

@@ -132,7 +132,7 @@ void CheckProjectionJacobians(T step, T tolerance) {
     const Vector3<T> point = point_d.cast<T>();
     Vector2<T> pixel;
     Eigen::Matrix<T, 2, 3> d_point;
-    Eigen::Matrix<T, 2, I::kNumParams> d_params;
+    IntrinsicsJacobianOf<T> d_params;
     ASSERT_TRUE(Project(params.data(), point, &pixel, &d_point, &d_params));
     EXPECT_LT((pixel.template cast<double>() - *Project(camera, point_d)).norm(),
               1e4 * Eigen::NumTraits<T>::epsilon());
@@ -183,7 +183,7 @@ TEST(UnifiedCamera, IntrinsicsJacobianMatchesJets) {
   for (int i = 0; i < 200; ++i) {
     const Eigen::Vector3d point(u(rng) * 3, u(rng) * 3, u(rng) * 1.5);
     Eigen::Vector2d pixel;
-    Eigen::Matrix<double, 2, I::kNumParams> analytic;
+    IntrinsicsJacobianOf<double> analytic;
     if (!InImage(Project(camera, point))) continue;
     ASSERT_TRUE(Project(camera.params.data(), point, &pixel, nullptr, &analytic));
     Jet params[I::kNumParams];
