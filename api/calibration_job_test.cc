@@ -7,7 +7,7 @@
 #include <opencv2/core.hpp>
 #include <unistd.h>
 
-#include "api/calibration_json.h"
+#include "api/calibration_job.h"
 #include "api/job_types.h"
 
 namespace omnirig::api {

@@ -3,10 +3,10 @@
 #include <memory>
 #include <mutex>
 
-#include "api/calibration_json.h"
-#include "api/relpose_json.h"
-#include "api/slam_json.h"
-#include "api/stereo_json.h"
+#include "api/calibration_job.h"
+#include "api/relpose_job.h"
+#include "api/slam_job.h"
+#include "api/stereo_job.h"
 
 namespace omnirig::api {
 namespace {

@@ -9,9 +9,9 @@
 #include <gtest/gtest.h>
 #include <opencv2/imgcodecs.hpp>
 
-#include "api/calibration_json.h"
+#include "api/calibration_job.h"
 #include "api/camera_json.h"
-#include "api/relpose_json.h"
+#include "api/relpose_job.h"
 #include "engine/calib/calibrate.h"
 #include "engine/calib/detect.h"
 #include "engine/synth/calib_board.h"

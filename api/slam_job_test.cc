@@ -8,7 +8,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "api/camera_json.h"
-#include "api/slam_json.h"
+#include "api/slam_job.h"
 #include "engine/slam/map_io.h"
 #include "engine/synth/presets.h"
 

@@ -8,7 +8,7 @@
 
 #include "api/job_types.h"
 #include "api/service_json.h"
-#include "api/stereo_json.h"
+#include "api/stereo_job.h"
 #include "engine/util/check.h"
 #include "server/json_views.h"
 #include "server/service.h"
@@ -229,7 +229,7 @@ double RequiredNumber(const HttpRequest& request, const std::string& name) {
   return value;
 }
 
-// The epipolar curve of a pixel, for a succeeded relative_pose job (api/stereo_json.h).
+// The epipolar curve of a pixel, for a succeeded relative_pose job (api/stereo_job.h).
 void GetEpipolar(ServiceState& state, const HttpRequest& request, HttpResponse& response) {
   const std::string& id = request.Param("id");
   const storage::JobRecord job = RequireJob(state, id);

@@ -22,16 +22,6 @@ std::optional<Eigen::Vector2d> Project(const UnifiedIntrinsics& intrinsics,
   return pixel;
 }
 
-std::optional<Eigen::Vector2d> ProjectWithJacobian(const UnifiedIntrinsics& intrinsics,
-                                                   const Eigen::Vector3d& point_in_cam,
-                                                   Eigen::Matrix<double, 2, 3>* d_pixel_d_point) {
-  Eigen::Vector2d pixel;
-  if (!Project(intrinsics.params.data(), point_in_cam, &pixel, d_pixel_d_point)) {
-    return std::nullopt;
-  }
-  return pixel;
-}
-
 std::optional<Eigen::Vector2d> Undistort(const UnifiedIntrinsics& intrinsics,
                                          const Eigen::Vector2d& distorted) {
   Eigen::Vector2d undistorted;

@@ -272,11 +272,6 @@ inline bool Lift(const T* params, const Vector2<T>& pixel, Vector3<T>* bearing,
 std::optional<Eigen::Vector2d> Project(const UnifiedIntrinsics& intrinsics,
                                        const Eigen::Vector3d& point_in_cam);
 
-// Projection with its Jacobian d(pixel)/d(point_in_cam).
-std::optional<Eigen::Vector2d> ProjectWithJacobian(const UnifiedIntrinsics& intrinsics,
-                                                   const Eigen::Vector3d& point_in_cam,
-                                                   Eigen::Matrix<double, 2, 3>* d_pixel_d_point);
-
 std::optional<Eigen::Vector2d> Undistort(const UnifiedIntrinsics& intrinsics,
                                          const Eigen::Vector2d& distorted);
 

@@ -85,7 +85,11 @@ TEST(UnifiedCamera, JacobianMatchesJetsAndCentralDifferences) {
   for (int i = 0; i < 200; ++i) {
     const Eigen::Vector3d point(u(rng) * 3, u(rng) * 3, u(rng) * 1.5);
     Eigen::Matrix<double, 2, 3> analytic;
-    const auto pixel = ProjectWithJacobian(camera, point, &analytic);
+    Eigen::Vector2d projected;
+    const std::optional<Eigen::Vector2d> pixel =
+        Project(camera.params.data(), point, &projected, &analytic)
+            ? std::optional<Eigen::Vector2d>(projected)
+            : std::nullopt;
     if (!InImage(pixel)) continue;
     // Jets.
     Jet params[UnifiedIntrinsics::kNumParams];

@@ -14,7 +14,7 @@
 
 #include <nlohmann/json.hpp>
 
-#include "api/calibration_json.h"
+#include "api/calibration_job.h"
 #include "engine/calib/model_io.h"
 #include "engine/util/check.h"
 #include "server/cli/args.h"

@@ -17,7 +17,7 @@
 
 #include <nlohmann/json.hpp>
 
-#include "api/relpose_json.h"
+#include "api/relpose_job.h"
 #include "engine/util/check.h"
 #include "server/cli/args.h"
 #include "server/cli/commands.h"

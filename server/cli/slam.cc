@@ -18,7 +18,7 @@
 #include <nlohmann/json.hpp>
 
 #include "api/camera_json.h"
-#include "api/slam_json.h"
+#include "api/slam_job.h"
 #include "engine/util/check.h"
 #include "server/cli/args.h"
 #include "server/cli/commands.h"

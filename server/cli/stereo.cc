@@ -1,5 +1,5 @@
 // `omnirig stereo`: 3D from stereo pairs of a calibrated rig, the same engine call as the
-// `stereo_reconstruct` job type (api/stereo_json.h).
+// `stereo_reconstruct` job type (api/stereo_job.h).
 //
 //   omnirig stereo --rig rig.json DIR -o OUTDIR [--method dense|sparse] [--options opts.json]
 //       [--threads N]
@@ -17,7 +17,7 @@
 #include <nlohmann/json.hpp>
 #include <opencv2/core/utility.hpp>
 
-#include "api/stereo_json.h"
+#include "api/stereo_job.h"
 #include "engine/util/check.h"
 #include "server/cli/args.h"
 #include "server/cli/commands.h"

@@ -1,4 +1,4 @@
-#include "api/relpose_json.h"
+#include "api/relpose_job.h"
 
 #include <algorithm>
 #include <array>
@@ -9,7 +9,7 @@
 
 #include <opencv2/imgcodecs.hpp>
 
-#include "api/calibration_json.h"
+#include "api/calibration_job.h"
 #include "api/camera_json.h"
 #include "engine/calib/calibrate.h"
 #include "engine/calib/detect.h"

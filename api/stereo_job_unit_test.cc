@@ -1,4 +1,4 @@
-#include "api/stereo_json.h"
+#include "api/stereo_job.h"
 
 #include <filesystem>
 #include <fstream>

@@ -1,4 +1,4 @@
-#include "api/calibration_json.h"
+#include "api/calibration_job.h"
 
 #include <cmath>
 #include <cstdlib>

@@ -1,4 +1,4 @@
-#include "api/stereo_json.h"
+#include "api/stereo_job.h"
 
 #include <algorithm>
 #include <cmath>
@@ -8,7 +8,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "api/camera_json.h"
-#include "api/relpose_json.h"
+#include "api/relpose_job.h"
 #include "engine/dense/range_io.h"
 #include "engine/geometry/ply.h"
 #include "engine/stereo/epipolar.h"

@@ -1,4 +1,4 @@
-#include "api/slam_json.h"
+#include "api/slam_job.h"
 
 #include <filesystem>
 #include <fstream>

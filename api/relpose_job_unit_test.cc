@@ -1,4 +1,4 @@
-#include "api/relpose_json.h"
+#include "api/relpose_job.h"
 
 #include <cmath>
 #include <filesystem>

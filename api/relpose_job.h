@@ -5,7 +5,7 @@
 // Dataset: images named cam0/NAME and cam1/NAME, paired by NAME.
 // Params (unknown fields are refused):
 //   {"board": {"type": "checkerboard" | "charuco", "cols", "rows", "square_size_mm",
-//              "marker_size_mm", "aruco_dictionary"},             (api/calibration_json.h)
+//              "marker_size_mm", "aruco_dictionary"},             (api/calibration_job.h)
 //    "calibrations": {"cam0": JOB_ID, "cam1": JOB_ID},            (optional: without it both
 //                                                                  cameras are calibrated from
 //                                                                  their own images first)
