@@ -103,11 +103,21 @@ function coverageCard(job, coverage) {
           (Number.isFinite(coverage.median_uncertainty_px) ? ` (median ${formatSignificant(coverage.median_uncertainty_px, 2)} px)` : '')
         : 'not available (the intrinsics\' covariance could not be computed)')),
     el('h3', 'Advice'),
-    advice.length ? el('ul.advice#coverage-advice', advice.map((a) => el('li', a)))
-      : el('p.muted#coverage-advice', 'No advice: the calibration covers the mirror well.'),
+    advice.length ? el('ul.advice#coverage-advice', advice.map((a) => el('li', a, whereInImage(a))))
+      : el('p.muted#coverage-advice', 'The service gave no advice for this calibration.'),
     el('div.overlays',
       figure(coverage.image, 'Where the board was seen: used corners on the mirror disk', 'coverage-image'),
       figure(coverage.uncertainty_image, 'Uncertainty of a projected point across the image (1 σ, px)', 'uncertainty-image')));
+}
+
+// The image region an advice's azimuth range names (azimuth about the disk's centre, 0 deg to
+// the right, 90 deg down: engine/calib/coverage.h), in words.
+function whereInImage(advice) {
+  const m = /azimuth (\d+(?:\.\d+)?) and (\d+(?:\.\d+)?) deg/.exec(advice);
+  if (!m) return null;
+  const mid = ((Number(m[1]) + Number(m[2])) / 2) % 360;
+  const names = ['right', 'lower right', 'bottom', 'lower left', 'left', 'upper left', 'top', 'upper right'];
+  return el('span.muted', ` (the ${names[Math.round(mid / 45) % 8]} of the image)`);
 }
 
 function solverCard(solver) {
