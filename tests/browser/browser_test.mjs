@@ -817,6 +817,7 @@ async function checkReconstructPairs(page, server, jobId) {
     if (!pair.range_png) continue;
     check(text.includes(`${(100 * pair.confident_fraction).toFixed(1)} % of the mirror cells`), `pair ${pair.name} shows its confident fraction`);
     check(text.includes(`${pair.median_range_m.toFixed(3)} m`), `pair ${pair.name} shows its median range`);
+    await page.$eval(block, (b) => b.scrollIntoView());  // the previews load lazily, as a person scrolls
     const [[w, h]] = await imagesLoaded(page, `${block} figure.range-preview img`, `the range preview of ${pair.name}`);
     check(await page.$eval(`${block} figure.range-preview img`, (i, name) => decodeURIComponent(i.src).endsWith(`/artifacts/${name}`), pair.range_png),
       `the preview of ${pair.name} is its range_png ${pair.range_png}`);
