@@ -798,7 +798,31 @@ async function reconstructAndView(page, server, datasetId, rigJob) {
   check(drawn.n > 50, `points were drawn (${drawn.n} pixels)`);
   await screenshot(page, 'viewer-stereo-reconstruct');
   const pairs = await checkReconstructPairs(page, server, jobId);
-  return `stereo_reconstruct job ${jobId}: ${hud}, ${drawn.n} pixels drawn; ${pairs}`;
+  const warned = await checkPairWarnings(page, server, datasetId, rigJob);
+  return `stereo_reconstruct job ${jobId}: ${hud}, ${drawn.n} pixels drawn; ${pairs}; ${warned}`;
+}
+
+// A pair's warning in words: a confidence threshold above most pixels' confidence leaves fewer
+// than half the mirror cells confident, and the page shows each pair's warning and the job's.
+async function checkPairWarnings(page, server, datasetId, rigJob) {
+  const jobId = await submitJob(page, server, datasetId, 'stereo_reconstruct', async (p) => {
+    await p.selectOption('#job-form select[name=rig]', rigJob);
+    await p.fill('#job-form textarea[name=extra]', '{"min_confidence": 0.95}');
+  });
+  await followJob(page, server, jobId, null);
+  await page.waitForSelector('#reconstruct-pairs');
+  const result = await (await fetch(`${server.url}/api/v1/jobs/${jobId}/result`)).json();
+  const warned = (result.pairs || []).filter((p) => p.warning);
+  check(warned.length > 0 && result.warning, `min_confidence 0.95 leaves pairs with few confident pixels (${JSON.stringify(result.pairs.map((p) => p.confident_fraction))})`);
+  check((await page.textContent('#reconstruct-warning')).trim() === result.warning, `the job's warning is shown (${result.warning})`);
+  for (const pair of warned) {
+    const shown = (await page.textContent(`#reconstruct-pairs .range-pair[data-pair="${pair.name}"] .pair-warning`)).trim();
+    check(shown === pair.warning, `pair ${pair.name} shows its warning (${shown})`);
+  }
+  await page.$eval('#reconstruct-pairs', (c) => c.scrollIntoView());
+  await screenshot(page, 'reconstruct-warnings');
+  log(`min_confidence 0.95: ${warned.length} pair warning(s) shown, e.g. "${warned[0].warning}"`);
+  return `with min_confidence 0.95 the page shows "${result.warning}" and ${warned.length} pair warning(s)`;
 }
 
 // The pairs of a stereo_reconstruct job: each dense pair's range preview loads, its numbers and
@@ -837,6 +861,7 @@ async function checkReconstructPairs(page, server, jobId) {
       && Number(document.querySelector('#viewer')?.dataset.frames || 0) > 0, last.artifact, { timeout: 60000 });
     const drawn = await drawnPixels(page);
     check(drawn.n > 50, `the cloud of pair ${last.name} was drawn (${drawn.n} pixels)`);
+    log(`"Show this pair in the 3D viewer" on ${last.name}: ${last.artifact} drawn, ${drawn.n} pixels`);
   }
   return `${pairs.length} pair(s) shown${dense.length ? `, ${dense.length} range preview(s) loaded` : ''}, range TIFF and PLY downloads answer 200`;
 }
