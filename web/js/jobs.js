@@ -15,7 +15,7 @@ export const JOB_TYPES = {
 // browser tests submit them).
 export const EXTRA_PLACEHOLDERS = {
   calibration: '{"options": {"fix": ["k5", "alpha"]}}',
-  relative_pose: '{"model_board_motion": true}',
+  relative_pose: '{"sync_false_alarm_rate": 0.01}',
   stereo_reconstruct: '{"max_features": 4000}',
   slam: '{"options": {"max_features": 1500}}',
 };

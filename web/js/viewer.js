@@ -82,11 +82,14 @@ export async function renderJobReport(container, job) {
   const [trajectory, groundTruth, report] = await Promise.all([
     loadTrajectory(job, artifacts, result), loadGroundTruth(job, artifacts, result), Promise.resolve(loadReport(job.id, artifacts, result))]);
   let scene = null;
+  let shown = 0;  // the latest request: an earlier load that finishes later is dropped
   const show = async (artifact) => {
+    const request = ++shown;
     if (scene) scene.dispose();
     scene = null;
     clear(sceneHolder);
     const cloud = artifact ? await loadCloud(job.id, artifact, status) : null;
+    if (request !== shown) return;
     if (cloud || trajectory) scene = createScene(sceneHolder, { cloud, trajectory, title: artifact && artifact.name });
   };
   const main = mainCloud(artifacts, result);
