@@ -65,7 +65,8 @@ async function startServer(extraArgs = []) {
   if (ARGS.url) return { url: ARGS.url.replace(/\/$/, ''), stop: async () => {} };
   const dataDir = path.join(TEMP, 'data');
   fs.mkdirSync(dataDir);
-  const child = spawn(ARGS.omnirig, ['serve', '--host', '127.0.0.1', '--port', '0', '--data', dataDir, ...extraArgs],
+  // --web: the page of this source tree (the binary's default is the tree it was built from).
+  const child = spawn(ARGS.omnirig, ['serve', '--host', '127.0.0.1', '--port', '0', '--data', dataDir, '--web', WEB_DIR, ...extraArgs],
     { stdio: ['ignore', 'pipe', 'pipe'], env: { ...process.env, OMNIRIG_TOKEN: '' } });
   const output = [];
   const url = await new Promise((resolve, reject) => {
@@ -242,6 +243,32 @@ async function screenshot(page, name) {
 
 function check(condition, message) {
   if (!condition) throw new Error(`check failed: ${message}`);
+}
+
+// The one-click download links under `selector`: each must name an artifact of the job and
+// answer 200 with a non-empty body. Returns the artifact names.
+async function checkDownloads(page, server, jobId, selector, expected) {
+  const links = await page.$$eval(`${selector} a.download`, (as) => as.map((a) => ({
+    artifact: a.dataset.artifact, href: a.href, download: a.getAttribute('download'), text: a.textContent })));
+  const names = links.map((l) => l.artifact);
+  for (const name of expected) check(names.includes(name), `a download link for ${name} under ${selector} (${names.join(', ')})`);
+  for (const link of links) {
+    check(link.download && link.href.endsWith(`/jobs/${encodeURIComponent(jobId)}/artifacts/${link.artifact.split('/').map(encodeURIComponent).join('/')}`),
+      `the link "${link.text}" downloads the artifact ${link.artifact} (${link.href})`);
+    const response = await fetch(link.href);
+    const body = await response.arrayBuffer();
+    check(response.status === 200 && body.byteLength > 0, `${link.artifact} answers 200 with a body (HTTP ${response.status}, ${body.byteLength} bytes)`);
+  }
+  return names;
+}
+
+// Waits until the <img> elements matched by `selector` have loaded (decoded, non-zero size).
+async function imagesLoaded(page, selector, what) {
+  await page.waitForFunction((sel) => {
+    const images = [...document.querySelectorAll(sel)];
+    return images.length > 0 && images.every((i) => i.complete && i.naturalWidth > 0);
+  }, selector).catch(() => check(false, `${what} loaded (${selector})`));
+  return page.$$eval(selector, (images) => images.map((i) => [i.naturalWidth, i.naturalHeight]));
 }
 
 // ---- steps --------------------------------------------------------------------------------------
@@ -440,9 +467,72 @@ async function stepCalibration(page, server) {
   await page.waitForFunction(() => [...document.querySelectorAll('#image-overlays img')].slice(0, 4).every((i) => i.complete && i.naturalWidth > 0));
   await page.waitForSelector('#artifacts tr[data-artifact]');
   await screenshot(page, 'calibration-report');
+  const coverage = await checkCoverage(page, server, jobId);
   const hinted = await rerunWithHint(page, server, jobId, s.board);
   const retried = await retryAndDelete(page, server, second);
-  return `calibration job on ${s.source}: RMS ${rms} px, ${used} images used; ${hinted}; ${retried}`;
+  const advised = await checkAdvice(page, server, s);
+  return `calibration job on ${s.source}: RMS ${rms} px, ${used} images used; ${coverage}; ${advised}; ${hinted}; ${retried}`;
+}
+
+// Advice in words: a calibration from only three of the views leaves sectors of the mirror disk
+// without a board; the page lists the result's advice, sentence by sentence.
+async function checkAdvice(page, server, s) {
+  const files = {};
+  for (const f of imagesIn(s.dir).sort().slice(0, 3)) files[f] = path.join(s.dir, f);
+  const { id } = await uploadDataset(page, server, 'browser-calibration-3-views', copySet('three-views', files));
+  const jobId = await submitJob(page, server, id, 'calibration', (p) => fillBoard(p, s.board));
+  await followJob(page, server, jobId, null);
+  await page.waitForSelector('#coverage');
+  const result = await (await fetch(`${server.url}/api/v1/jobs/${jobId}/result`)).json();
+  const given = result.coverage.advice || [];
+  check(given.length > 0, `three views leave part of the disk uncovered: the result gives advice (${JSON.stringify(result.coverage)})`);
+  const shown = await page.$$eval('#coverage-advice li', (items) => items.map((i) => i.textContent.trim()));
+  check(shown.length === given.length && given.every((a, i) => shown[i].startsWith(a)), `the page lists the advice (${shown.length} shown of ${given.length})`);
+  // Azimuths 180-270 deg (from +u towards +v) are the image's upper left.
+  given.forEach((a, i) => {
+    if (/azimuth 180 and 270 deg/.test(a)) check(shown[i].endsWith('(the upper left of the image)'), `the advice says where in the image (${shown[i]})`);
+  });
+  const percent = (await page.textContent('#coverage-percent')).trim();
+  check(percent.startsWith(`${Math.round(100 * result.coverage.covered_fraction)} %`), `the three-view coverage is shown (${percent})`);
+  await page.$eval('#coverage', (c) => c.scrollIntoView());
+  await screenshot(page, 'calibration-advice');
+  log(`three views: "${percent}"; advice: ${shown.join(' | ')}`);
+  return `three views: "${percent}", advice shown: "${shown[0]}"${shown.length > 1 ? ` and ${shown.length - 1} more` : ''}`;
+}
+
+// The coverage report and the exports as a person reads them: the percentage of the mirror disk
+// near a used corner, the largest uncertainty, each piece of advice, both images, the downloads.
+async function checkCoverage(page, server, jobId) {
+  const result = await (await fetch(`${server.url}/api/v1/jobs/${jobId}/result`)).json();
+  const coverage = result.coverage;
+  check(coverage && Number.isFinite(coverage.covered_fraction), `the result has a coverage report (${JSON.stringify(coverage)})`);
+  const percentText = (await page.textContent('#coverage-percent')).trim();
+  const expected = `${Math.round(100 * coverage.covered_fraction)} % of the mirror disk within ${Math.round(coverage.near_px)} px of a used corner`;
+  check(percentText === expected, `the page says "${expected}" (shows "${percentText}")`);
+  const uncertaintyText = (await page.textContent('#max-uncertainty')).trim();
+  if (Number.isFinite(coverage.max_uncertainty_px)) {
+    const shown = Number((uncertaintyText.match(/at most ([0-9.eE+-]+) px/) || [])[1]);
+    // Shown with two significant digits: off by at most half a unit of the second digit.
+    const halfUnit = 0.5 * 10 ** (Math.floor(Math.log10(coverage.max_uncertainty_px)) - 1);
+    check(Math.abs(shown - coverage.max_uncertainty_px) <= halfUnit * (1 + 1e-9),
+      `the largest uncertainty shown (${uncertaintyText}) is the result's ${coverage.max_uncertainty_px} px`);
+  }
+  const advice = await page.$$eval('#coverage-advice li', (items) => items.map((i) => i.textContent.trim()));
+  check(advice.length === (coverage.advice || []).length && advice.every((a, i) => a.startsWith(coverage.advice[i])),
+    `each piece of advice is shown in plain words (${advice.length} shown, ${(coverage.advice || []).length} given)`);
+  const images = ['#coverage-image img', ...(coverage.uncertainty_image ? ['#uncertainty-image img'] : [])];
+  for (const selector of images) {
+    const [[w, h]] = await imagesLoaded(page, selector, 'the coverage image');
+    check(w > 0 && h > 0, `${selector} loaded (${w}x${h})`);
+  }
+  check(await page.$eval('#coverage-image img', (i) => i.src.endsWith(`/artifacts/${'coverage.png'}`)), 'the coverage image is the coverage.png artifact');
+  const exports = result.exports || {};
+  const names = await checkDownloads(page, server, jobId, '#export-downloads', [exports.opencv_omnidir, exports.kalibr]);
+  check(names.includes('camera_opencv.yaml') && names.includes('camera_kalibr.yaml'), `the exports are camera_opencv.yaml and camera_kalibr.yaml (${names})`);
+  await page.$eval('#coverage', (c) => c.scrollIntoView());
+  await screenshot(page, 'calibration-coverage');
+  log(`coverage: "${percentText}"; ${uncertaintyText}; advice: ${advice.join(' | ') || 'none'}; downloads ${names.join(', ')}`);
+  return `coverage "${percentText}", ${advice.length} advice line(s), ${uncertaintyText}, downloads ${names.join(' and ')} answer 200`;
 }
 
 // From the Jobs page just after submitting `first`: submits the same job again and cancels it
@@ -562,6 +652,7 @@ async function stepStereo(page, server) {
   const truth = s.groundTruth && s.groundTruth.rig && s.groundTruth.rig.baseline_m;
   log(`baseline shown: ${baseline}; result ${result.baseline_m} m${truth ? `; ground truth ${truth} m` : ''}`);
   check(baseline.startsWith(`${(result.baseline_m * 1000).toFixed(3)} mm`), 'the page shows the result\'s baseline in mm');
+  const rigReport = await checkRigReport(page, server, jobId, result);
   // Click pixels around the image until one has a curve in the other image (a pixel outside the
   // mirror disk has none, and the page says so).
   let found = null;
@@ -580,7 +671,21 @@ async function stepStereo(page, server) {
   check(back.points.some((n) => n > 1), 'a click on cam1 drew an epipolar curve on cam0');
   await screenshot(page, 'stereo-epipolar-cam1-to-cam0');
   const instant = await reconstructAndView(page, server, datasetId, jobId);
-  return `relative_pose on ${s.source}: baseline ${baseline}; cam0 click -> ${found.text}; cam1 click -> ${back.text}; ${instant}`;
+  return `relative_pose on ${s.source}: baseline ${baseline}; ${rigReport}; cam0 click -> ${found.text}; cam1 click -> ${back.text}; ${instant}`;
+}
+
+// The rig report's observations line and its Kalibr camchain download.
+async function checkRigReport(page, server, jobId, result) {
+  let observations = 'no observations in the result';
+  if (result.observations) {
+    const o = result.observations;
+    observations = (await page.textContent('#observations')).trim();
+    check(observations.startsWith(`${o.pairs_used} of ${o.pairs_given} stereo pairs`), `the observations line counts the pairs (${observations})`);
+  }
+  check(result.exports && result.exports.kalibr_camchain === 'camchain_kalibr.yaml', `the result names camchain_kalibr.yaml (${JSON.stringify(result.exports)})`);
+  await checkDownloads(page, server, jobId, '#rig-downloads', ['camchain_kalibr.yaml']);
+  log(`rig report: observations "${observations}"; camchain_kalibr.yaml downloads`);
+  return `observations "${observations}", camchain_kalibr.yaml downloads`;
 }
 
 // Counts canvas pixels that differ from the viewer's background.
@@ -692,7 +797,73 @@ async function reconstructAndView(page, server, datasetId, rigJob) {
   log(`viewer on job ${jobId}: ${hud}; ${drawn.n} pixels drawn`);
   check(drawn.n > 50, `points were drawn (${drawn.n} pixels)`);
   await screenshot(page, 'viewer-stereo-reconstruct');
-  return `stereo_reconstruct job ${jobId}: ${hud}, ${drawn.n} pixels drawn`;
+  const pairs = await checkReconstructPairs(page, server, jobId);
+  const warned = await checkPairWarnings(page, server, datasetId, rigJob);
+  return `stereo_reconstruct job ${jobId}: ${hud}, ${drawn.n} pixels drawn; ${pairs}; ${warned}`;
+}
+
+// A pair's warning in words: a confidence threshold above most pixels' confidence leaves fewer
+// than half the mirror cells confident, and the page shows each pair's warning and the job's.
+async function checkPairWarnings(page, server, datasetId, rigJob) {
+  const jobId = await submitJob(page, server, datasetId, 'stereo_reconstruct', async (p) => {
+    await p.selectOption('#job-form select[name=rig]', rigJob);
+    await p.fill('#job-form textarea[name=extra]', '{"min_confidence": 0.95}');
+  });
+  await followJob(page, server, jobId, null);
+  await page.waitForSelector('#reconstruct-pairs');
+  const result = await (await fetch(`${server.url}/api/v1/jobs/${jobId}/result`)).json();
+  const warned = (result.pairs || []).filter((p) => p.warning);
+  check(warned.length > 0 && result.warning, `min_confidence 0.95 leaves pairs with few confident pixels (${JSON.stringify(result.pairs.map((p) => p.confident_fraction))})`);
+  check((await page.textContent('#reconstruct-warning')).trim() === result.warning, `the job's warning is shown (${result.warning})`);
+  for (const pair of warned) {
+    const shown = (await page.textContent(`#reconstruct-pairs .range-pair[data-pair="${pair.name}"] .pair-warning`)).trim();
+    check(shown === pair.warning, `pair ${pair.name} shows its warning (${shown})`);
+  }
+  await page.$eval('#reconstruct-pairs', (c) => c.scrollIntoView());
+  await screenshot(page, 'reconstruct-warnings');
+  log(`min_confidence 0.95: ${warned.length} pair warning(s) shown, e.g. "${warned[0].warning}"`);
+  return `with min_confidence 0.95 the page shows "${result.warning}" and ${warned.length} pair warning(s)`;
+}
+
+// The pairs of a stereo_reconstruct job: each dense pair's range preview loads, its numbers and
+// warning are shown, its range TIFF and PLY download; a pair's button puts its cloud in the viewer.
+async function checkReconstructPairs(page, server, jobId) {
+  const result = await (await fetch(`${server.url}/api/v1/jobs/${jobId}/result`)).json();
+  await page.waitForSelector('#reconstruct-pairs');
+  const pairs = result.pairs || [];
+  check(pairs.length > 0, 'the result has pairs');
+  const dense = pairs.filter((p) => p.range_png);
+  for (const pair of pairs) {
+    const block = `#reconstruct-pairs .range-pair[data-pair="${pair.name}"]`;
+    const text = await page.textContent(block);
+    check(text.includes(Number(pair.num_points).toLocaleString('en-US')), `pair ${pair.name} shows its ${pair.num_points} points`);
+    if (pair.warning) check(text.includes(pair.warning), `pair ${pair.name} shows its warning`);
+    if (!pair.range_png) continue;
+    check(text.includes(`${(100 * pair.confident_fraction).toFixed(1)} % of the mirror cells`), `pair ${pair.name} shows its confident fraction`);
+    check(text.includes(`${pair.median_range_m.toFixed(3)} m`), `pair ${pair.name} shows its median range`);
+    await page.$eval(block, (b) => b.scrollIntoView());  // the previews load lazily, as a person scrolls
+    const [[w, h]] = await imagesLoaded(page, `${block} figure.range-preview img`, `the range preview of ${pair.name}`);
+    check(await page.$eval(`${block} figure.range-preview img`, (i, name) => decodeURIComponent(i.src).endsWith(`/artifacts/${name}`), pair.range_png),
+      `the preview of ${pair.name} is its range_png ${pair.range_png}`);
+    const cloud = pair.artifact || (pairs.length === 1 ? result.artifact : null);
+    await checkDownloads(page, server, jobId, block, [pair.range_tiff, ...(cloud ? [cloud] : [])]);
+    log(`pair ${pair.name}: range preview ${w}x${h}, ${pair.num_points} points, ${(100 * pair.confident_fraction).toFixed(1)} % confident` +
+      `${pair.warning ? `, warning "${pair.warning}"` : ''}`);
+  }
+  await page.$eval('#reconstruct-pairs', (c) => c.scrollIntoView());
+  await screenshot(page, 'reconstruct-pairs');
+  // The last pair's "show in 3D" button swaps the viewer's cloud.
+  const last = pairs[pairs.length - 1];
+  const button = await page.$(`#reconstruct-pairs .range-pair[data-pair="${last.name}"] button.view-cloud`);
+  if (button && pairs.length > 1) {
+    await button.click();
+    await page.waitForFunction((name) => document.querySelector('#viewer .hud strong')?.textContent === name
+      && Number(document.querySelector('#viewer')?.dataset.frames || 0) > 0, last.artifact, { timeout: 60000 });
+    const drawn = await drawnPixels(page);
+    check(drawn.n > 50, `the cloud of pair ${last.name} was drawn (${drawn.n} pixels)`);
+    log(`"Show this pair in the 3D viewer" on ${last.name}: ${last.artifact} drawn, ${drawn.n} pixels`);
+  }
+  return `${pairs.length} pair(s) shown${dense.length ? `, ${dense.length} range preview(s) loaded` : ''}, range TIFF and PLY downloads answer 200`;
 }
 
 // SLAM on a synthetic sequence: the rig from a stereo-board set, the sequence uploaded with its

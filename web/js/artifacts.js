@@ -25,3 +25,16 @@ export async function renderArtifacts(container, jobId) {
         el('td.mono.muted', { title: a.sha256 || '' }, (a.sha256 || '').slice(0, 12))))))) :
       el('p.muted', 'This job wrote no artifacts.'));
 }
+
+// One-click downloads of named artifacts: [{name, label}] (entries without a name are left out).
+// Each link carries data-artifact with the artifact's name.
+export function downloadList(jobId, files, id) {
+  const shown = files.filter((f) => f && f.name);
+  if (!shown.length) return null;
+  return el(`ul.downloads${id ? `#${id}` : ''}`, shown.map((f) => {
+    const link = downloadLink(artifactUrl(jobId, f.name), f.name.split('/').pop(), `Download ${f.label}`);
+    link.className = 'download';
+    link.dataset.artifact = f.name;
+    return el('li', link, el('span.muted.mono', ` ${f.name}`));
+  }));
+}

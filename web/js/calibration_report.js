@@ -4,7 +4,7 @@
 // on an image where detection failed, then re-run the job with them.
 
 import { artifactUrl, get, imageUrl, post } from './api.js';
-import { listArtifacts } from './artifacts.js';
+import { downloadList, listArtifacts } from './artifacts.js';
 import { apiImage, clear, el, errorBox, formatNumber, formatSignificant } from './ui.js';
 import { drawBarChart } from './chart.js';
 import { clickableImage } from './image_overlay.js';
@@ -12,6 +12,8 @@ import { clickableImage } from './image_overlay.js';
 const INTRINSICS = ['xi', 'gamma_u', 'gamma_v', 'u0', 'v0', 'alpha', 'k1', 'k2', 'k3', 'k4', 'k5'];
 // Artifacts of the mirror-rim check: svp or rim as a word of the name (not the "rim" in "VMRImage").
 const SVP_NAME = /(^|[_\-/.])(svp|rim)([_\-/.]|$)/i;
+// The coverage report's own images (not an image's overlay).
+const REPORT_IMAGES = /^(coverage|uncertainty)\.png$/i;
 const UNITS = { gamma_u: 'px', gamma_v: 'px', u0: 'px', v0: 'px' };
 
 export async function renderJobReport(container, job) {
@@ -37,7 +39,9 @@ export function renderCalibration(container, job, result, artifacts) {
           el('dt', 'Images used'), el('dd', `${used.length} of ${images.length}`),
           el('dt', 'Image size'), el('dd', camera.image_size ? camera.image_size.join(' × ') : '–'),
           el('dt', 'Model'), el('dd', camera.model || '–')),
-        el('div.grow', intrinsicsTable(camera)))),
+        el('div.grow', intrinsicsTable(camera))),
+      exportsBlock(job, result.exports)),
+    coverageCard(job, result.coverage),
     el('div.card', el('h2', 'Per-image RMS error'), chart,
       el('p.muted', 'Bars: RMS corner error of each image (px); grey: image not used; the line is the overall RMS.')),
     solverCard(result.solver),
@@ -58,6 +62,62 @@ function intrinsicsTable(camera) {
       el('td.mono', n), el('td.num', formatNumber(values[n], 5)),
       el('td.num', stds[n] === undefined ? '–' : `± ${formatSignificant(stds[n], 2)}`),
       el('td.muted', UNITS[n] || '')))));
+}
+
+// The calibrated camera in other tools' formats: one click each, and what the formats drop.
+function exportsBlock(job, exports) {
+  if (!exports) return null;
+  const warnings = exports.warnings || [];
+  return el('div#calibration-exports',
+    el('h3', 'Use this calibration elsewhere'),
+    downloadList(job.id, [
+      { name: exports.opencv_omnidir, label: 'OpenCV omnidir (cv::omnidir) YAML' },
+      { name: exports.kalibr, label: 'Kalibr camera YAML (omni-radtan)' }], 'export-downloads'),
+    warnings.length ? el('div.warning#export-warnings', el('strong', 'What these formats leave out:'),
+      el('ul', warnings.map((w) => el('li', w)))) : null);
+}
+
+// Where the board has been seen on the mirror disk, how uncertain the calibration still is
+// across the image, and what to do next.
+function coverageCard(job, coverage) {
+  if (!coverage) return null;
+  const percent = Number.isFinite(coverage.covered_fraction) ? Math.round(100 * coverage.covered_fraction) : null;
+  const near = Number.isFinite(coverage.near_px) ? formatNumber(coverage.near_px, 0) : '?';
+  const disk = coverage.disk_from === 'svp_rim' ? 'the mirror rim found in the image'
+    : 'a circle about the principal point (the mirror rim was not measured)';
+  const figure = (name, caption, id) => name ? el(`figure#${id}`,
+    el('a', { href: artifactUrl(job.id, name), target: '_blank', title: 'full size' },
+      apiImage(artifactUrl(job.id, name), { alt: caption })), el('figcaption', caption)) : null;
+  const advice = coverage.advice || [];
+  const hasUncertainty = Number.isFinite(coverage.max_uncertainty_px);
+  return el('div.card#coverage', el('h2', 'Coverage and what to do next'),
+    el('dl.kv',
+      el('dt', 'Board coverage'),
+      el('dd.big#coverage-percent', percent === null ? '–'
+        : `${percent} % of the mirror disk within ${near} px of a used corner`),
+      el('dt', 'Mirror disk'), el('dd', `centre (${(coverage.disk_centre_px || []).map((x) => formatNumber(x, 1)).join(', ')}) px, ` +
+        `radius ${formatNumber(coverage.disk_radius_px, 1)} px, from ${disk}`),
+      el('dt', 'Projection uncertainty'),
+      el('dd#max-uncertainty', hasUncertainty
+        ? `at most ${formatSignificant(coverage.max_uncertainty_px, 2)} px over the disk` +
+          (Number.isFinite(coverage.median_uncertainty_px) ? ` (median ${formatSignificant(coverage.median_uncertainty_px, 2)} px)` : '')
+        : 'not available (the intrinsics\' covariance could not be computed)')),
+    el('h3', 'Advice'),
+    advice.length ? el('ul.advice#coverage-advice', advice.map((a) => el('li', a, whereInImage(a))))
+      : el('p.muted#coverage-advice', 'The service gave no advice for this calibration.'),
+    el('div.overlays',
+      figure(coverage.image, 'Where the board was seen: used corners on the mirror disk', 'coverage-image'),
+      figure(coverage.uncertainty_image, 'Uncertainty of a projected point across the image (1 σ, px)', 'uncertainty-image')));
+}
+
+// The image region an advice's azimuth range names (azimuth about the disk's centre, 0 deg to
+// the right, 90 deg down: engine/calib/coverage.h), in words.
+function whereInImage(advice) {
+  const m = /azimuth (\d+(?:\.\d+)?) and (\d+(?:\.\d+)?) deg/.exec(advice);
+  if (!m) return null;
+  const mid = ((Number(m[1]) + Number(m[2])) / 2) % 360;
+  const names = ['right', 'lower right', 'bottom', 'lower left', 'left', 'upper left', 'top', 'upper right'];
+  return el('span.muted', ` (the ${names[Math.round(mid / 45) % 8]} of the image)`);
 }
 
 function solverCard(solver) {
@@ -83,7 +143,7 @@ function guessType(name) {
 export function overlayFor(imageName, artifacts) {
   const stem = imageName.replace(/\.[^.]+$/, '');
   const keys = [stem, stem.replace(/\//g, '_'), stem.replace(/\//g, '-'), stem.split('/').pop()];
-  const pngs = artifacts.filter((a) => /\.png$/i.test(a.name) && !SVP_NAME.test(a.name));
+  const pngs = artifacts.filter((a) => /\.png$/i.test(a.name) && !SVP_NAME.test(a.name) && !REPORT_IMAGES.test(a.name));
   for (const key of keys) {
     const match = pngs.find((a) => a.name.includes(key));
     if (match) return match;

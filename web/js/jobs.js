@@ -15,8 +15,8 @@ export const JOB_TYPES = {
 // browser tests submit them).
 export const EXTRA_PLACEHOLDERS = {
   calibration: '{"options": {"fix": ["k5", "alpha"]}}',
-  relative_pose: '{"model_board_motion": true}',
-  stereo_reconstruct: '{"max_features": 4000}',
+  relative_pose: '{"sync_false_alarm_rate": 0.01}',
+  stereo_reconstruct: '{"method": "dense", "min_confidence": 0.5}',
   slam: '{"options": {"max_features": 1500}}',
 };
 const TERMINAL = new Set(['succeeded', 'failed', 'canceled', 'cancelled']);

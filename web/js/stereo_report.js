@@ -3,6 +3,7 @@
 // and its epipolar curve, computed by the server from the calibrated rig, is drawn on the other.
 
 import { get, imageUrl } from './api.js';
+import { downloadList } from './artifacts.js';
 import { clear, el, errorBox, formatNumber, formatSignificant, quaternionToAxisAngle, quaternionToRpyDeg } from './ui.js';
 import { clickableImage } from './image_overlay.js';
 import { drawBarChart } from './chart.js';
@@ -34,14 +35,35 @@ export function renderStereo(container, job, result) {
           el('dt', 'Roll, pitch, yaw'), el('dd', rpy.map((a) => `${formatNumber(a, 4)}°`).join(', ')),
           el('dt', 'Quaternion (w, x, y, z)'), el('dd.mono', q.map((x) => formatNumber(x, 6)).join(', ')),
           el('dt', 'RMS reprojection error'), el('dd', `${formatNumber(result.rms_px, 3)} px`),
-          el('dt', 'Pairs used'), el('dd', `${pairs.filter((p) => p.used).length} of ${pairs.length}`)),
-        el('div.grow', uncertaintyList(result)))),
+          el('dt', 'Pairs used'), el('dd', `${pairs.filter((p) => p.used).length} of ${pairs.length}`),
+          observationsRows(result.observations)),
+        el('div.grow', uncertaintyList(result))),
+      rigExports(job, result.exports)),
     el('div.card', el('h2', 'Per-pair RMS error'), chart),
     droppedPairsCard(pairs, result.sync_test),
     el('div.card#epipolar-explorer', el('h2', 'Epipolar explorer'), epipolarExplorer(job, result)),
     camerasCard(result.cameras));
   drawBarChart(chart, pairs.map((p) => ({ label: p.name, value: p.used ? p.rms_px : 0, muted: !p.used, note: p.used ? '' : '×' })),
     { reference: result.rms_px, unit: 'px' });
+}
+
+// What the joint fit used: the stereo pairs and the calibrations' single-camera views.
+function observationsRows(observations) {
+  if (!observations) return null;
+  const o = observations;
+  return [el('dt', 'Observations used'), el('dd#observations',
+    `${o.pairs_used} of ${o.pairs_given} stereo pairs` +
+    (o.single_camera_views_given ? `, ${o.single_camera_views_used} of ${o.single_camera_views_given} single-camera views`
+      : ', no single-camera views'))];
+}
+
+// The rig for other tools: the Kalibr camchain (both cameras and cam1's pose), one click.
+function rigExports(job, exports) {
+  if (!exports) return null;
+  const warnings = exports.warnings || [];
+  return el('div#rig-exports', el('h3', 'Use this rig elsewhere'),
+    downloadList(job.id, [{ name: exports.kalibr_camchain, label: 'Kalibr camchain YAML (both cameras and the rig)' }], 'rig-downloads'),
+    warnings.length ? el('div.warning', el('strong', 'What the format leaves out:'), el('ul', warnings.map((w) => el('li', w)))) : null);
 }
 
 // The pairs the estimate left out, each with its reason in words (the chart only marks them).

@@ -11,6 +11,7 @@ import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
 import { fetchArtifactBytes, fetchArtifactJson, fetchArtifactText, fetchWithAuth, get, imageUrl } from './api.js';
 import { listArtifacts, renderArtifacts } from './artifacts.js';
 import { parsePly } from './ply.js';
+import { reconstructPairsCard } from './reconstruct_report.js';
 import { drawTopView, inversePose, parseTum, trajectoryFromJson, transformTrajectory } from './topview.js';
 import { clear, el, errorBox, formatBytes, formatNumber, progressBar } from './ui.js';
 
@@ -81,11 +82,14 @@ export async function renderJobReport(container, job) {
   const [trajectory, groundTruth, report] = await Promise.all([
     loadTrajectory(job, artifacts, result), loadGroundTruth(job, artifacts, result), Promise.resolve(loadReport(job.id, artifacts, result))]);
   let scene = null;
+  let shown = 0;  // the latest request: an earlier load that finishes later is dropped
   const show = async (artifact) => {
+    const request = ++shown;
     if (scene) scene.dispose();
     scene = null;
     clear(sceneHolder);
     const cloud = artifact ? await loadCloud(job.id, artifact, status) : null;
+    if (request !== shown) return;
     if (cloud || trajectory) scene = createScene(sceneHolder, { cloud, trajectory, title: artifact && artifact.name });
   };
   const main = mainCloud(artifacts, result);
@@ -93,7 +97,16 @@ export async function renderJobReport(container, job) {
   if (cloudSelect) cloudSelect.addEventListener('change', () => show(clouds.find((a) => a.name === cloudSelect.value)));
   if (!main) clear(status, el('p.muted', 'This job has no PLY point cloud.'));
   await show(main);
+  // A pair's "show in 3D" button: that pair's cloud in the viewer above.
+  const viewCloud = (name) => {
+    const artifact = clouds.find((a) => a.name === name);
+    if (!artifact) return;
+    if (cloudSelect) cloudSelect.value = name;
+    sceneHolder.scrollIntoView({ behavior: 'smooth', block: 'center' });
+    show(artifact);
+  };
   clear(below,
+    job.type === 'stereo_reconstruct' ? reconstructPairsCard(job, result, viewCloud) : null,
     trajectory && job.type === 'slam' ? el('div.card#top-view-card', el('h2', 'Top view of the trajectory'), topView(trajectory, groundTruth)) : null,
     summaryCard(result),
     await report ? statsCard(await report) : null);
