@@ -59,7 +59,7 @@ TEST(RealData, VmrEveryViewAndRmsNoHigherThanOmnidir) {
   for (const auto& image : report.images)
     EXPECT_TRUE(image.used) << image.name << ": " << image.reason;
   std::printf("VMR: rms %.4f px, all corners %.4f px\n", report.rms_px, report.rms_all_px);
-  EXPECT_LE(report.rms_px, 0.3273);  // README: cv::omnidir 0.3273 px
+  EXPECT_LE(report.rms_px, 0.2985);  // docs/accuracy.md: 0.298 px (cv::omnidir 0.3273 px)
   EXPECT_LE(report.rms_all_px, 0.3273);
 }
 
@@ -104,7 +104,7 @@ TEST(RealData, KaidanOmniRmsNoHigherThanOmnidir) {
     }
   }
   std::printf("KaidanOmni: rms %.4f px, all corners %.4f px\n", report.rms_px, report.rms_all_px);
-  EXPECT_LE(report.rms_px, 0.4503);  // README: cv::omnidir 0.4503 px
+  EXPECT_LE(report.rms_px, 0.3175);  // docs/accuracy.md: 0.317 px (cv::omnidir 0.4503 px)
 }
 
 TEST(RealData, OpencvTutorialCornersRmsNoHigherThanOmnidir) {
@@ -117,7 +117,7 @@ TEST(RealData, OpencvTutorialCornersRmsNoHigherThanOmnidir) {
       Calibrate(views, 1280, 960, board, OmnidirLikeOptions().calibrate, {});
   EXPECT_EQ(report.num_views_used, 15);
   std::printf("tutorial: rms %.4f px, all corners %.4f px\n", report.rms_px, report.rms_all_px);
-  EXPECT_LE(report.rms_px, 0.8118);  // README: cv::omnidir 0.8118 px
+  EXPECT_LE(report.rms_px, 0.5785);  // docs/accuracy.md: 0.578 px (cv::omnidir 0.8118 px)
 }
 
 }  // namespace
