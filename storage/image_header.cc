@@ -94,11 +94,18 @@ ImageHeader ProbeBmp(std::string_view head) {
   return Accept("bmp", "image/bmp", width, height < 0 ? -static_cast<int64_t>(height) : height);
 }
 
-// PNM: "P5" then whitespace/comment separated width, height, maxval.
-ImageHeader ProbePnm(std::string_view head) {
+// A PNM header: "P5" (or P2, P3, P6), then width, height and maxval separated by whitespace and
+// '#' comments. `length` is the offset just past the single whitespace after maxval, where a
+// binary PNM's pixels start (0 when `head` ends at maxval). nullopt when a field is missing.
+struct PnmHeader {
+  int64_t values[3] = {0, 0, 0};  // width, height, maxval
+  size_t length = 0;
+};
+
+std::optional<PnmHeader> ParsePnmHeader(std::string_view head) {
+  PnmHeader header;
   size_t offset = 2;
-  int64_t values[3] = {0, 0, 0};
-  for (int64_t& value : values) {
+  for (int64_t& value : header.values) {
     while (offset < head.size()) {
       if (head[offset] == '#') {
         while (offset < head.size() && head[offset] != '\n') ++offset;
@@ -109,13 +116,21 @@ ImageHeader ProbePnm(std::string_view head) {
       }
     }
     if (offset >= head.size() || !std::isdigit(static_cast<unsigned char>(head[offset]))) {
-      return Corrupt("pnm", "PNM header truncated or malformed");
+      return std::nullopt;
     }
     while (offset < head.size() && std::isdigit(static_cast<unsigned char>(head[offset])) &&
            value < 1000000) {
       value = value * 10 + (head[offset++] - '0');
     }
   }
+  if (offset < head.size()) header.length = offset + 1;
+  return header;
+}
+
+ImageHeader ProbePnm(std::string_view head) {
+  const std::optional<PnmHeader> header = ParsePnmHeader(head);
+  if (!header) return Corrupt("pnm", "PNM header truncated or malformed");
+  const int64_t* values = header->values;
   if (values[2] <= 0 || values[2] > 65535) return Corrupt("pnm", "PNM maxval out of range");
   const std::string type =
       head[1] == '5' || head[1] == '2' ? "image/x-portable-graymap" : "image/x-portable-pixmap";
@@ -162,26 +177,9 @@ uint32_t CrcUpdate(uint32_t crc, uint8_t byte) {
 // The header's length of a binary PNM (up to the single whitespace after maxval), its maxval;
 // nullopt when the header is malformed (ProbeImageHeader refuses those first).
 std::optional<std::pair<size_t, int64_t>> PnmHeaderLength(std::string_view head) {
-  size_t offset = 2;
-  int64_t value = 0;
-  for (int field = 0; field < 3; ++field) {
-    while (offset < head.size()) {
-      if (head[offset] == '#') {
-        while (offset < head.size() && head[offset] != '\n') ++offset;
-      } else if (std::isspace(static_cast<unsigned char>(head[offset]))) {
-        ++offset;
-      } else {
-        break;
-      }
-    }
-    value = 0;
-    while (offset < head.size() && std::isdigit(static_cast<unsigned char>(head[offset])) &&
-           value < 1000000) {
-      value = value * 10 + (head[offset++] - '0');
-    }
-  }
-  if (offset >= head.size()) return std::nullopt;
-  return std::make_pair(offset + 1, value);
+  const std::optional<PnmHeader> header = ParsePnmHeader(head);
+  if (!header || header->length == 0) return std::nullopt;
+  return std::make_pair(header->length, header->values[2]);
 }
 
 std::string Truncated(const std::string& what, uint64_t have, uint64_t need) {

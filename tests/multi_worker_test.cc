@@ -35,53 +35,17 @@ namespace {
 using nlohmann::json;
 namespace fs = std::filesystem;
 
-// `omnirig worker` in a child process: this binary with "--worker ARGS...".
-class WorkerProcess {
+// `omnirig worker` in a child process: this binary with "--worker ARGS...". (A worker stopped
+// with SIGSTOP still dies of the SIGKILL ServerProcess's destructor sends.)
+class WorkerProcess : public ServerProcess {
  public:
-  ~WorkerProcess() {
-    if (pid_ > 0) {
-      ::kill(pid_, SIGCONT);
-      ::kill(pid_, SIGKILL);
-      Wait();
-    }
-  }
   void Start(const std::vector<std::string>& worker_args, const fs::path& log_path) {
-    int out[2];
-    if (::pipe(out) != 0) throw std::runtime_error("pipe failed");
-    pid_ = ::fork();
-    if (pid_ == 0) {
-      ::dup2(out[1], STDOUT_FILENO);
-      FILE* log = std::fopen(log_path.c_str(), "a");
-      if (log) ::dup2(fileno(log), STDERR_FILENO);
-      ::close(out[0]);
-      std::vector<std::string> args = {"/proc/self/exe", "--worker"};
-      args.insert(args.end(), worker_args.begin(), worker_args.end());
-      std::vector<char*> argv;
-      for (auto& arg : args) argv.push_back(arg.data());
-      argv.push_back(nullptr);
-      ::execv("/proc/self/exe", argv.data());
-      ::_exit(127);
-    }
-    ::close(out[1]);
-    std::string line;
-    char c;
-    while (::read(out[0], &c, 1) == 1 && c != '\n') line.push_back(c);
-    ::close(out[0]);
+    const std::string line = StartChild("--worker", worker_args, log_path);
     if (line.rfind("omnirig worker ", 0) != 0) {
       throw std::runtime_error("worker did not start: '" + line + "' (see " + log_path.string() +
                                ")");
     }
   }
-  void Kill(int signal) { ::kill(pid_, signal); }
-  int Wait() {
-    int status = 0;
-    ::waitpid(pid_, &status, 0);
-    pid_ = -1;
-    return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
-  }
-
- private:
-  pid_t pid_ = -1;
 };
 
 std::string ReadText(const fs::path& path) {

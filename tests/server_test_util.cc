@@ -203,7 +203,9 @@ ServerProcess::~ServerProcess() {
   }
 }
 
-int ServerProcess::Start(const std::vector<std::string>& serve_args, const fs::path& log_path) {
+std::string ServerProcess::StartChild(const std::string& mode,
+                                      const std::vector<std::string>& child_args,
+                                      const fs::path& log_path) {
   int out[2];
   if (::pipe(out) != 0) throw std::runtime_error("pipe failed");
   pid_ = ::fork();
@@ -212,8 +214,8 @@ int ServerProcess::Start(const std::vector<std::string>& serve_args, const fs::p
     FILE* log = std::fopen(log_path.c_str(), "a");
     if (log) ::dup2(fileno(log), STDERR_FILENO);
     ::close(out[0]);
-    std::vector<std::string> args = {"/proc/self/exe", "--serve"};
-    args.insert(args.end(), serve_args.begin(), serve_args.end());
+    std::vector<std::string> args = {"/proc/self/exe", mode};
+    args.insert(args.end(), child_args.begin(), child_args.end());
     std::vector<char*> argv;
     for (auto& arg : args) argv.push_back(arg.data());
     argv.push_back(nullptr);
@@ -225,6 +227,11 @@ int ServerProcess::Start(const std::vector<std::string>& serve_args, const fs::p
   char c;
   while (::read(out[0], &c, 1) == 1 && c != '\n') line.push_back(c);
   ::close(out[0]);
+  return line;
+}
+
+int ServerProcess::Start(const std::vector<std::string>& serve_args, const fs::path& log_path) {
+  const std::string line = StartChild("--serve", serve_args, log_path);
   const size_t colon = line.rfind(':');
   if (line.rfind("omnirig listening on http://", 0) != 0 || colon == std::string::npos) {
     throw std::runtime_error("server did not start: '" + line + "' (see " + log_path.string() +

@@ -59,6 +59,10 @@ class ServerProcess {
   ~ServerProcess();
   // Starts and waits for the "listening" line; returns the port.
   int Start(const std::vector<std::string>& serve_args, const std::filesystem::path& log_path);
+  // This test binary re-executed as `/proc/self/exe MODE ARGS...` (e.g. "--worker"), stderr
+  // appended to `log_path`; returns the first line it prints (empty when it exits first).
+  std::string StartChild(const std::string& mode, const std::vector<std::string>& args,
+                         const std::filesystem::path& log_path);
   void Kill(int signal);
   // Waits for exit; returns the exit status (128 + signal when killed).
   int Wait();
