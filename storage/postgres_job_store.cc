@@ -262,12 +262,23 @@ class PostgresJobStore::Lease {
 
 PostgresJobStore::PostgresJobStore(const std::string& url, int max_connections)
     : url_(url), max_connections_(std::max(1, max_connections)) {
-  Migrate();
+  try {
+    Migrate();
+  } catch (...) {
+    // No destructor runs for a constructor that throws: the migration's connection, back in the
+    // pool by now, is closed here.
+    CloseConnections();
+    throw;
+  }
 }
 
-PostgresJobStore::~PostgresJobStore() {
+PostgresJobStore::~PostgresJobStore() { CloseConnections(); }
+
+void PostgresJobStore::CloseConnections() {
   for (PGconn* db : idle_) PQfinish(db);
+  idle_.clear();
   if (listener_) PQfinish(listener_);
+  listener_ = nullptr;
 }
 
 int PostgresJobStore::SchemaVersion() {

@@ -85,6 +85,8 @@ class PostgresJobStore : public JobStore {
  private:
   class Lease;
   Lease Borrow();
+  // Closes the idle connections and the listener (the destructor, a failed construction).
+  void CloseConnections();
   void Migrate();
   RecoveryReport RecoverRunning(int max_attempts, bool only_expired);
 
