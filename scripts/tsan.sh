@@ -22,9 +22,11 @@ declare -A TESTS=(
   [engine/relpose_model_select]=engine_relpose_model_select_test  # candidates, folds: 3-4 threads
   [api/calibration_job]=api_calibration_job_test                  # parallel detection, 2 threads
   [api/slam_job]=api_slam_job_test                                # pipelined front/back end
-  [engine/synth_render]=engine_synth_render_test                  # ParallelRows, renderer cache
+  [engine/synth_render]=engine_synth_render_test                  # RunTasks rows, renderer cache
   [storage/sqlite_job_store]=storage_sqlite_job_store_test        # concurrent claims, readers
-  [server/http]=server_http_test                                  # epoll loop, threads, refuser
+  [server/http]=server_http_test                                  # thread per connection, refuser
+  [server/events]=server_events_test                              # SSE streams
+  [server/worker_pool]=server_worker_pool_test                    # workers, heartbeat, drain
   [tests/server_api]=tests_server_api_test                        # workers, queue, cancel, drain
   [tests/server_crash]=tests_server_crash_test                    # SIGKILLed server, restarts
 )
