@@ -91,18 +91,6 @@ bool OpenCvFinds(const cv::Mat& image, const BoardSpec& board) {
          cv::findChessboardCornersSB(image, size, corners, cv::CALIB_CB_NORMALIZE_IMAGE);
 }
 
-double MeanCornerError(const BoardDetection& detection,
-                       const std::vector<Eigen::Vector2d>& truth) {
-  double direct = 0.0, turned = 0.0;
-  const int n = static_cast<int>(truth.size());
-  for (size_t i = 0; i < detection.corners_px.size(); ++i) {
-    const int id = detection.corner_ids[i];
-    direct += (detection.corners_px[i] - truth[id]).norm();
-    turned += (detection.corners_px[i] - truth[n - 1 - id]).norm();
-  }
-  return std::min(direct, turned) / std::max<size_t>(1, detection.corners_px.size());
-}
-
 TEST(DetectLooks, EveryBoardOpenCvFindsIsFoundAndNoneIsCalledASubBoard) {
   for (const LookCase& c : Cases()) {
     SCOPED_TRACE(c.name);

@@ -33,20 +33,6 @@ const synth::MonoCalibrationSet& RenderedSet() {
   return set;
 }
 
-// Mean corner error against the truth. A checkerboard's numbering is defined up to the 180
-// degree turn of the board (both are rigid poses), so the better of the two is taken.
-double MeanCornerError(const BoardDetection& detection,
-                       const std::vector<Eigen::Vector2d>& truth) {
-  double direct = 0.0, turned = 0.0;
-  const int n = static_cast<int>(truth.size());
-  for (size_t i = 0; i < detection.corners_px.size(); ++i) {
-    const int id = detection.corner_ids[i];
-    direct += (detection.corners_px[i] - truth[id]).norm();
-    turned += (detection.corners_px[i] - truth[n - 1 - id]).norm();
-  }
-  return std::min(direct, turned) / std::max<size_t>(1, detection.corners_px.size());
-}
-
 TEST(Detect, GreyscaleViewOfColourAndDeepImages) {
   cv::Mat bgr(2, 2, CV_8UC3, cv::Scalar(10, 200, 30));
   const cv::Mat from_bgr = ToGreyscale8(bgr);
