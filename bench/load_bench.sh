@@ -105,7 +105,7 @@ poll_run() {  # ARRIVALS PREFIX
 }
 # SSE event latency, measured during the independent polling run.
 ( sleep 2; python3 "$ROOT/bench/sse_latency.py" "$URL" "$DATASET" calibration \
-    "${PARAMS:-{\}}" 50 > "$WORK/sse.txt" 2>&1 ) &
+    "${PARAMS:-{\}}" 250 > "$WORK/sse.txt" 2>&1 ) &
 SSE_PID=$!
 poll_run independent poll_
 wait "$SSE_PID" || true

@@ -197,9 +197,9 @@ TEST_F(MultiWorkerTest, KilledWorkersLoseNothingAndRunNothingTwice) {
   std::map<std::string, std::string> killed_while_running;  // job id -> killed worker's id
   int kills = 0, next_kill_at = 2;
   size_t victim = random() % 3;
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::minutes(4);
+  // No deadline of its own: a loaded machine runs the jobs slower, and ctest's TIMEOUT stops a
+  // run that hangs.
   while (true) {
-    ASSERT_LT(std::chrono::steady_clock::now(), deadline) << "jobs did not finish";
     const json jobs = JsonOf(client_->Get("/api/v1/jobs"));
     int finished = 0;
     for (const json& job : jobs) finished += job["state"] != "queued" && job["state"] != "running";
