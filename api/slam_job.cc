@@ -641,13 +641,14 @@ json RunSlamOnDataset(const StereoRig& rig, const fs::path& dataset_dir,
                       const ProgressSink& progress,
                       const std::function<void(const std::string&)>& log,
                       const std::optional<dense::DenseMapOptions>& dense_map,
-                      const slam::VideoFrameOptions& frames) {
+                      const slam::VideoFrameOptions& frame_options) {
   options.Check();
-  frames.Check();
+  frame_options.Check();
   const auto videos = FindStereoVideos(dataset_dir, image_names);
   const SlamInput input =
-      videos ? PrepareVideoInput(rig, *videos, frames, ground_truth, progress)
-             : PrepareImageInput(rig, dataset_dir, image_names, frames.frame_step, ground_truth);
+      videos ? PrepareVideoInput(rig, *videos, frame_options, ground_truth, progress)
+             : PrepareImageInput(rig, dataset_dir, image_names, frame_options.frame_step,
+                                 ground_truth);
   const std::vector<slam::StampedPose>& gt = input.ground_truth;
   const slam::StereoFrameLoader& load = input.load;
   const ProgressSink frame_progress{

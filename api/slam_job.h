@@ -139,7 +139,7 @@ nlohmann::json RunSlamOnDataset(const StereoRig& rig, const std::filesystem::pat
                                 const std::function<void(const std::string&)>& log,
                                 const std::optional<dense::DenseMapOptions>& dense_map =
                                     std::nullopt,
-                                const slam::VideoFrameOptions& frames = {});
+                                const slam::VideoFrameOptions& frame_options = {});
 
 nlohmann::json RunSlamJob(const nlohmann::json& params, const JobContext& context);
 
