@@ -10,6 +10,7 @@
 #include <unistd.h>
 
 #include <atomic>
+#include <map>
 #include <fstream>
 #include <optional>
 #include <random>
@@ -21,6 +22,7 @@
 #include "api/camera_json.h"
 #include "api/job_types.h"
 #include "api/synth_json.h"
+#include "engine/geometry/camera_model.h"
 #include "engine/slam/map_io.h"
 #include "engine/synth/presets.h"
 #include "server/service.h"
@@ -262,6 +264,147 @@ TEST_F(ServerVideoTest, ResumableUploadProtocol) {
   EXPECT_EQ(client_->Delete(("/api/v1/datasets/" + dataset + "/uploads/cam2.mkv").c_str())->status,
             204);
   EXPECT_EQ(UploadStatus(dataset, "cam2.mkv")["received_bytes"], 0);
+}
+
+// A relative_pose job that returns `rig`: registered after the service started, it replaces the
+// real type in this test binary only (the slam job's contract is the rig JSON, not the solver).
+std::string SubmitRig(httplib::Client& client, int port, const std::string& dataset,
+                      const StereoRig& rig) {
+  api::JobType fake;
+  fake.name = "relative_pose";
+  fake.validate = [](const json&) {};
+  fake.reads_images = false;
+  fake.run = [rig](const json&, const api::JobContext&) { return api::RigToJson(rig); };
+  api::RegisterJobType(fake);
+  const auto created = client.Post(
+      "/api/v1/jobs", json{{"type", "relative_pose"}, {"dataset", dataset}}.dump(), "application/json");
+  EXPECT_EQ(created->status, 202) << created->body;
+  const std::string id = JsonOf(created)["id"];
+  EXPECT_EQ(WaitForJob(port, id, 30)["state"], "succeeded");
+  return id;
+}
+
+// A rendered sequence written as cam0.mp4 and cam1.mp4 (mp4v, lossy), uploaded in chunks, runs
+// as a slam job: frames named by the containers' timestamps, the trajectory near the ground
+// truth at the bound the image test holds (api/slam_job_test.cc), frame_step and a time range.
+TEST_F(ServerVideoTest, SlamJobOnAVideoPair) {
+  synth::StereoSequenceOptions options;
+  options.num_frames = 12;
+  options.path_length_m = 1.65;
+  options.width = 640;
+  options.height = 480;
+  options.render.noise_sigma = 1.0;
+  options.render.num_threads = 2;
+  const synth::StereoSequence sequence = synth::MakeStereoSequence(options);
+  const fs::path rendered = dir_.path() / "rendered";
+  api::WriteStereoSequenceVideos(sequence, "room", rendered.string(), "mp4", false);
+
+  auto& client = Start();
+  const std::string dataset = CreateDataset();
+  for (const char* name : {"cam0.mp4", "cam1.mp4", "trajectory.tum"}) {
+    const std::string bytes = ReadFile(rendered / name);
+    const auto stored = UploadFrom(dataset, name, bytes, 0);
+    ASSERT_TRUE(stored);
+    ASSERT_EQ(stored->status, 201) << name << ": " << stored->body;
+  }
+  const std::string rig = SubmitRig(client, port_, dataset, sequence.rig);
+  const auto run = [&](const json& extra) {
+    json params = {{"rig", rig}, {"ground_truth", "trajectory.tum"}};
+    params.update(extra);
+    const auto created = client.Post(
+        "/api/v1/jobs", json{{"type", "slam"}, {"dataset", dataset}, {"params", params}}.dump(),
+        "application/json");
+    EXPECT_EQ(created->status, 202) << created->body;
+    const std::string id = JsonOf(created)["id"];
+    const json job = WaitForJob(port_, id, 240);
+    EXPECT_EQ(job["state"], "succeeded") << job.dump();
+    return std::make_pair(id, JsonOf(client.Get(("/api/v1/jobs/" + id + "/result").c_str())));
+  };
+
+  const auto [id, result] = run(json::object());
+  ASSERT_EQ(result["num_frames"], 12) << result.dump();
+  EXPECT_EQ(result["num_tracked"], 12);
+  EXPECT_EQ(result["frames"][3]["name"], "t000000.300");
+  EXPECT_LT(result["evaluation"]["ate_rmse_m"].get<double>(), 0.02) << result["evaluation"];
+  EXPECT_LT(result["evaluation"]["final_drift_percent"].get<double>(), 3.0);
+  const std::string tum =
+      client.Get(("/api/v1/jobs/" + id + "/artifacts/trajectory.tum").c_str())->body;
+  std::ofstream(dir_.path() / "estimate.tum") << tum;
+  const auto poses = slam::ReadTum(dir_.path() / "estimate.tum");
+  ASSERT_EQ(poses.size(), 12u);
+  EXPECT_NEAR(poses[7].timestamp_s, 0.7, 1e-6);  // the container's time, not an index
+
+  // Every second frame of [0.2, 0.9] s: 0.2, 0.4, 0.6, 0.8.
+  const auto [step_id, stepped] =
+      run({{"frame_step", 2}, {"start_s", 0.2}, {"end_s", 0.9}});
+  ASSERT_EQ(stepped["num_frames"], 4) << stepped.dump();
+  EXPECT_EQ(stepped["frames"][0]["name"], "t000000.200");
+  EXPECT_EQ(stepped["frames"][3]["name"], "t000000.800");
+  EXPECT_EQ(stepped["evaluation"]["num_poses"], 4);
+}
+
+// Each bad recording is refused at submission (422, the reason), before any job is queued.
+TEST_F(ServerVideoTest, BadVideosAreRefusedAtSubmission) {
+  auto& client = Start();
+  StereoRig rig;
+  for (CameraModel* camera : {&rig.cam0, &rig.cam1}) {
+    camera->intrinsics.params = {1.0, 30, 30, 32, 24, 0, 0, 0, 0, 0, 0};
+    camera->width = 64;
+    camera->height = 48;
+  }
+  rig.cam0_from_cam1 = Rigid3d(Eigen::Quaterniond::Identity(), Eigen::Vector3d(0, 0, 0.1));
+  const std::string rig_job = SubmitRig(client, port_, CreateDataset(), rig);
+  const auto submit = [&](const std::map<std::string, std::string>& files,
+                          const json& extra = json::object()) {
+    const std::string dataset = CreateDataset();
+    for (const auto& [name, bytes] : files) {
+      const auto stored =
+          client.Put(("/api/v1/datasets/" + dataset + "/images/" + name).c_str(), bytes,
+                     "application/octet-stream");
+      EXPECT_EQ(stored->status, 201) << name << ": " << stored->body;
+    }
+    json params = {{"rig", rig_job}};
+    params.update(extra);
+    return client.Post("/api/v1/jobs",
+                       json{{"type", "slam"}, {"dataset", dataset}, {"params", params}}.dump(),
+                       "application/json");
+  };
+  const std::string twelve = NoiseVideo(dir_.path() / "a.mkv", 12, 10.0);
+  const std::string eight = NoiseVideo(dir_.path() / "b.mkv", 8, 10.0);
+  const std::string fast = NoiseVideo(dir_.path() / "c.mkv", 12, 20.0);
+  const std::string large = NoiseVideo(dir_.path() / "d.mkv", 12, 10.0, 80, 48);
+  // A file whose container is whole but whose content no decoder reads.
+  const auto box = [](const std::string& type, const std::string& payload) {
+    const uint32_t size = static_cast<uint32_t>(8 + payload.size());
+    return std::string{static_cast<char>(size >> 24), static_cast<char>(size >> 16),
+                       static_cast<char>(size >> 8), static_cast<char>(size)} +
+           type + payload;
+  };
+  const std::string undecodable =
+      box("ftyp", "isom\0\0\0\0") + box("moov", std::string(64, 'q')) + box("mdat", "zz");
+
+  ExpectError(submit({{"cam0.mkv", twelve}, {"cam1.mkv", eight}}), 422, "invalid_input",
+              "different frame counts (12 and 8)");
+  ExpectError(submit({{"cam0.mkv", twelve}, {"cam1.mkv", fast}}), 422, "invalid_input",
+              "different frame rates");
+  ExpectError(submit({{"cam0.mkv", twelve}, {"cam1.mp4", undecodable}}), 422, "invalid_input",
+              "cam1.mp4 cannot be opened as a video");
+  ExpectError(submit({{"cam0.mkv", large}, {"cam1.mkv", large}}), 422, "invalid_input",
+              "cam0.mkv's frames are 80x48 but the rig's cam0 is calibrated for 64x48");
+  ExpectError(submit({{"cam0.mkv", twelve}}), 422, "invalid_input", "has no partner");
+  ExpectError(submit({{"cam0.mkv", twelve}, {"cam1.mkv", twelve}, {"stacked.mkv", twelve}}), 422,
+              "invalid_input", "both a video pair and a stacked video");
+  ExpectError(submit({{"cam0/a.png", PngBytes(64, 48)}, {"cam1/a.png", PngBytes(64, 48)}},
+                     {{"start_s", 1.0}}),
+              422, "invalid_input", "holds none");
+  ExpectError(submit({{"cam0.mkv", twelve}, {"cam1.mkv", twelve}}, {{"frame_step", 0}}), 400,
+              "invalid_params", "frame_step");
+  // The good pair passes (it would run; it is noise, so it is canceled).
+  const auto accepted = submit({{"cam0.mkv", twelve}, {"cam1.mkv", twelve}});
+  ASSERT_EQ(accepted->status, 202) << accepted->body;
+  const std::string id = JsonOf(accepted)["id"];
+  client.Post(("/api/v1/jobs/" + id + "/cancel").c_str(), "", "application/json");
+  EXPECT_NE(WaitForJob(port_, id, 60)["state"], "succeeded");
 }
 
 }  // namespace
