@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cctype>
 #include <chrono>
+#include <ctime>
 #include <fstream>
 #include <map>
 #include <memory>
@@ -470,6 +471,13 @@ std::string Lower(std::string text) {
   return text;
 }
 
+// CPU seconds of the whole process (the decoder may run threads of its own).
+double ProcessCpuSeconds() {
+  timespec now{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &now);
+  return static_cast<double>(now.tv_sec) + 1e-9 * static_cast<double>(now.tv_nsec);
+}
+
 // Checks that each camera's frames have the size the rig was calibrated for.
 void CheckVideoSizes(const StereoRig& rig, const slam::StereoVideoFiles& files,
                      const slam::StereoVideoInfo& info) {
@@ -495,6 +503,7 @@ struct SlamInput {
   std::vector<double> timestamps_s;
   std::vector<slam::StampedPose> ground_truth;
   slam::StereoFrameLoader load;
+  nlohmann::json source;  // the result's "input": what was read, and how
 };
 
 // The ground truth's pose nearest each frame's timestamp, within `tolerance_s`.
@@ -533,9 +542,28 @@ SlamInput PrepareVideoInput(const StereoRig& rig, const slam::StereoVideoFiles& 
                             progress.Report(0.0, stage, message);
                           },
                           progress.is_cancelled};
+  const double pass_start_s = ProcessCpuSeconds();
+  const auto pass_wall_start = std::chrono::steady_clock::now();
   std::vector<slam::StereoVideoFrame> frames =
       slam::PairStereoVideoFrames(files, frame_options, pass);
   SlamInput input;
+  json file_names = {files.cam0.filename().string()};
+  if (!files.stacked()) file_names.push_back(files.cam1.filename().string());
+  input.source = {
+      {"kind", files.stacked() ? "stacked_video" : "video_pair"},
+      {"files", file_names},
+      {"codec", info.video[0].codec},
+      {"fps", info.video[0].fps},
+      {"frame_count", info.video[0].frame_count},
+      {"frame_size", {info.width[0], info.height[0]}},
+      {"pair_tolerance_s", frame_options.pair_tolerance_s > 0 ? frame_options.pair_tolerance_s
+                                                              : 0.25 / info.video[0].fps},
+      {"frame_step", frame_options.frame_step},
+      {"num_frames", frames.size()},
+      // The pass that reads and pairs every timestamp before the first frame (decoding only).
+      {"timestamp_pass_s", std::chrono::duration<double>(std::chrono::steady_clock::now() -
+                                                         pass_wall_start).count()},
+      {"timestamp_pass_cpu_s", ProcessCpuSeconds() - pass_start_s}};
   for (const auto& frame : frames) {
     input.names.push_back(frame.name);
     input.timestamps_s.push_back(frame.timestamp_s);
@@ -567,6 +595,10 @@ SlamInput PrepareImageInput(const StereoRig& rig, const fs::path& dataset_dir,
     if (!gt.empty()) input.ground_truth.push_back(gt[i]);
   }
   input.names = sequence->names;
+  input.source = {{"kind", "images"},
+                  {"frame_step", frame_step},
+                  {"num_frames", input.names.size()},
+                  {"num_image_pairs", all.names.size()}};
   input.load = [sequence, dataset_dir](int i) {
     slam::StereoImages images;
     cv::Mat* targets[2] = {&images.cam0, &images.cam1};
@@ -661,6 +693,7 @@ json RunSlamOnDataset(const StereoRig& rig, const fs::path& dataset_dir,
 
   json report;
   report["artifacts"] = WriteArtifacts(rig, result, input.timestamps_s, output_dir);
+  report["input"] = input.source;
   report["num_frames"] = result.frames.size();
   report["num_tracked"] = result.num_tracked;
   report["num_lost"] = result.num_lost;

@@ -29,6 +29,10 @@
 //                    unknown 205)
 // Result:
 //   {"artifacts": {"trajectory_json", "trajectory_tum", "map_ply", "report_json"},
+//    "input": {"kind": "images", "frame_step", "num_frames", "num_image_pairs"} |
+//             {"kind": "video_pair" | "stacked_video", "files", "codec", "fps", "frame_count",
+//              "frame_size", "pair_tolerance_s", "frame_step", "num_frames",
+//              "timestamp_pass_s", "timestamp_pass_cpu_s" (the pass that pairs timestamps)},
 //    "num_frames", "num_tracked", "num_lost", "num_map_points", "frames_per_second",
 //    "frames": [{"name", "state", "reason", "motion_source", "num_features": [cam0, cam1],
 //                "num_stereo_points", "num_matches", "num_essential_inliers",

@@ -214,6 +214,24 @@ TEST_F(ServerVideoTest, ResumableUploadProtocol) {
   ASSERT_EQ(status["received_bytes"], kChunk + 30000) << status.dump();
   EXPECT_TRUE(status["stored"].is_null());
 
+  // A restart (a crash alike: the part is outside the images folder) keeps the part, and still
+  // shows no file.
+  done = true;
+  reader.join();
+  service_.reset();
+  Start();
+  EXPECT_EQ(UploadStatus(dataset, "cam0.mkv")["received_bytes"], kChunk + 30000);
+  EXPECT_EQ(client_->Get(url.c_str())->status, 404);
+  done = false;
+  std::thread second_reader([&] {
+    auto client = MakeClient(port_);
+    while (!done) {
+      const auto got = client->Get(url.c_str());
+      if (got && got->status == 200 && got->body != video) ++half_files;
+      ++reads;
+    }
+  });
+
   // Resume from the server's offset (a request still holding the part would get upload_busy).
   std::optional<httplib::Result> last;
   for (int i = 0; i < 500; ++i) {
@@ -226,7 +244,7 @@ TEST_F(ServerVideoTest, ResumableUploadProtocol) {
   EXPECT_EQ(JsonOf(*last)["sha256"], storage::Sha256Hex(video));
   EXPECT_EQ(JsonOf(*last)["content_type"], "video/x-matroska");
   done = true;
-  reader.join();
+  second_reader.join();
   EXPECT_GT(reads.load(), 0);
   EXPECT_EQ(half_files.load(), 0);
   EXPECT_EQ(client_->Get(url.c_str())->body, video);
@@ -333,6 +351,9 @@ TEST_F(ServerVideoTest, SlamJobOnAVideoPair) {
   const auto poses = slam::ReadTum(dir_.path() / "estimate.tum");
   ASSERT_EQ(poses.size(), 12u);
   EXPECT_NEAR(poses[7].timestamp_s, 0.7, 1e-6);  // the container's time, not an index
+  EXPECT_EQ(result["input"]["kind"], "video_pair");
+  EXPECT_EQ(result["input"]["codec"], "mp4v");
+  EXPECT_EQ(result["input"]["frame_count"], 12);
 
   // Every second frame of [0.2, 0.9] s: 0.2, 0.4, 0.6, 0.8.
   const auto [step_id, stepped] =
