@@ -47,7 +47,7 @@ inline ProgressSink SubRange(const ProgressSink& progress, double begin, double 
 // What a job type may look at of the dataset when a job is submitted (JobType::check_dataset).
 struct DatasetView {
   std::string dataset_id;
-  std::filesystem::path dataset_dir;  // the files, by name
+  std::filesystem::path dataset_dir;    // the files, by name
   std::vector<std::string> file_names;  // sorted
   // The result JSON of an earlier succeeded job (checked to exist and be of the referenced
   // type before check_dataset runs); throws InvalidArgument when it has none.

@@ -354,24 +354,26 @@ json FuseDenseMap(const StereoRig& rig, const slam::SlamResult& result,
            std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count()}};
 }
 
-const std::set<std::string> kParamFields = {"rig",        "ground_truth", "options",
-                                             "dense_map",  "frame_step",   "start_s",
-                                             "end_s",      "pair_tolerance_s"};
+const std::set<std::string> kParamFields = {"rig",       "ground_truth",    "options",
+                                            "dense_map", "frame_step",      "start_s",
+                                            "end_s",     "pair_tolerance_s"};
 
 // "frame_step", "start_s", "end_s", "pair_tolerance_s" of the params (each optional).
 slam::VideoFrameOptions VideoFrameOptionsFromJson(const json& params) {
   slam::VideoFrameOptions frames;
   if (params.contains("frame_step")) {
-    OMNIRIG_CHECK(params["frame_step"].is_number_integer() && params["frame_step"].get<int64_t>() >= 1,
-                  "field 'params.frame_step' must be an integer >= 1");
+    OMNIRIG_CHECK(
+        params["frame_step"].is_number_integer() && params["frame_step"].get<int64_t>() >= 1,
+        "field 'params.frame_step' must be an integer >= 1");
     frames.frame_step = params["frame_step"].get<int>();
   }
   const std::map<std::string, double*> seconds = {{"start_s", &frames.start_s},
-                                                   {"end_s", &frames.end_s},
-                                                   {"pair_tolerance_s", &frames.pair_tolerance_s}};
+                                                  {"end_s", &frames.end_s},
+                                                  {"pair_tolerance_s", &frames.pair_tolerance_s}};
   for (const auto& [key, target] : seconds) {
     if (!params.contains(key)) continue;
-    OMNIRIG_CHECK(params[key].is_number(), "field 'params." << key << "' must be a number of seconds");
+    OMNIRIG_CHECK(params[key].is_number(),
+                  "field 'params." << key << "' must be a number of seconds");
     *target = params[key].get<double>();
   }
   try {
@@ -488,11 +490,10 @@ void CheckVideoSizes(const StereoRig& rig, const slam::StereoVideoFiles& files,
         files.stacked() ? files.cam0.filename().string() + "'s " + (c == 0 ? "top" : "bottom") +
                               " half (cam" + std::to_string(c) + ")"
                         : (c == 0 ? files.cam0 : files.cam1).filename().string() + "'s frames";
-    throw InvalidArgument(what + " are " + std::to_string(info.width[c]) + "x" +
-                          std::to_string(info.height[c]) + " but the rig's cam" +
-                          std::to_string(c) + " is calibrated for " +
-                          std::to_string(camera[c]->width) + "x" +
-                          std::to_string(camera[c]->height));
+    throw InvalidArgument(
+        what + " are " + std::to_string(info.width[c]) + "x" + std::to_string(info.height[c]) +
+        " but the rig's cam" + std::to_string(c) + " is calibrated for " +
+        std::to_string(camera[c]->width) + "x" + std::to_string(camera[c]->height));
   }
 }
 
@@ -520,7 +521,8 @@ std::vector<slam::StampedPose> MatchGroundTruth(const fs::path& path,
   for (const double t : stamps) {
     auto it = std::lower_bound(poses.begin(), poses.end(), t,
                                [](const auto& pose, double v) { return pose.timestamp_s < v; });
-    if (it == poses.end() || (it != poses.begin() && t - (it - 1)->timestamp_s < it->timestamp_s - t)) {
+    if (it == poses.end() ||
+        (it != poses.begin() && t - (it - 1)->timestamp_s < it->timestamp_s - t)) {
       --it;
     }
     OMNIRIG_CHECK(std::abs(it->timestamp_s - t) <= tolerance_s,
@@ -561,8 +563,8 @@ SlamInput PrepareVideoInput(const StereoRig& rig, const slam::StereoVideoFiles& 
       {"frame_step", frame_options.frame_step},
       {"num_frames", frames.size()},
       // The pass that reads and pairs every timestamp before the first frame (decoding only).
-      {"timestamp_pass_s", std::chrono::duration<double>(std::chrono::steady_clock::now() -
-                                                         pass_wall_start).count()},
+      {"timestamp_pass_s",
+       std::chrono::duration<double>(std::chrono::steady_clock::now() - pass_wall_start).count()},
       {"timestamp_pass_cpu_s", ProcessCpuSeconds() - pass_start_s}};
   for (const auto& frame : frames) {
     input.names.push_back(frame.name);
@@ -615,7 +617,7 @@ SlamInput PrepareImageInput(const StereoRig& rig, const fs::path& dataset_dir,
 }  // namespace
 
 std::optional<slam::StereoVideoFiles> FindStereoVideos(const fs::path& dataset_dir,
-                                                        const std::vector<std::string>& names) {
+                                                       const std::vector<std::string>& names) {
   std::vector<std::string> found[3];  // cam0, cam1, stacked
   bool has_pair_images = false;
   for (const std::string& name : names) {
@@ -629,13 +631,13 @@ std::optional<slam::StereoVideoFiles> FindStereoVideos(const fs::path& dataset_d
   const char* kinds[3] = {"cam0", "cam1", "stacked"};
   for (int k = 0; k < 3; ++k) {
     OMNIRIG_CHECK(found[k].size() <= 1, "the dataset holds " << found[k].size() << " " << kinds[k]
-                                            << " videos (" << found[k][0] << ", " << found[k][1]
-                                            << "): keep one");
+                                                             << " videos (" << found[k][0] << ", "
+                                                             << found[k][1] << "): keep one");
   }
   const bool pair = !found[0].empty() || !found[1].empty();
-  OMNIRIG_CHECK(!(pair && !found[2].empty()),
-                "the dataset holds both a video pair and a stacked video (" << found[2][0]
-                                                                            << "): keep one");
+  OMNIRIG_CHECK(
+      !(pair && !found[2].empty()),
+      "the dataset holds both a video pair and a stacked video (" << found[2][0] << "): keep one");
   OMNIRIG_CHECK(!has_pair_images,
                 "the dataset holds both videos and cam0/ cam1/ images: a slam job reads one "
                 "recording; put the other in its own dataset");
@@ -653,22 +655,22 @@ void CheckSlamDataset(const json& params, const DatasetView& dataset) {
   if (!videos) {
     OMNIRIG_CHECK(!parsed.video_only_fields,
                   "'start_s', 'end_s' and 'pair_tolerance_s' select frames of videos, and dataset "
-                      << dataset.dataset_id << " holds none (cam0.EXT and cam1.EXT, or stacked.EXT)");
+                      << dataset.dataset_id
+                      << " holds none (cam0.EXT and cam1.EXT, or stacked.EXT)");
     return;
   }
   StereoRig rig;
   try {
     rig = RigFromJson(dataset.load_result(parsed.rig_job));
   } catch (const InvalidArgument& e) {
-    throw InvalidArgument("rig job " + parsed.rig_job + " is not a usable relative_pose result: " +
-                          e.what());
+    throw InvalidArgument("rig job " + parsed.rig_job +
+                          " is not a usable relative_pose result: " + e.what());
   }
   CheckVideoSizes(rig, *videos, slam::ProbeStereoVideo(*videos));
 }
 
 json RunSlamOnDataset(const StereoRig& rig, const fs::path& dataset_dir,
-                      const std::vector<std::string>& image_names,
-                      const slam::SlamOptions& options,
+                      const std::vector<std::string>& image_names, const slam::SlamOptions& options,
                       const std::optional<fs::path>& ground_truth, const fs::path& output_dir,
                       const ProgressSink& progress,
                       const std::function<void(const std::string&)>& log,

@@ -110,7 +110,7 @@ SlamParams SlamParamsFromJson(const nlohmann::json& params);
 // Throws InvalidArgument when it is ambiguous (two cam0 videos, a pair and a stacked video, or
 // videos and cam0/ cam1/ images together).
 std::optional<slam::StereoVideoFiles> FindStereoVideos(const std::filesystem::path& dataset_dir,
-                                                        const std::vector<std::string>& names);
+                                                       const std::vector<std::string>& names);
 
 // The check at submission (JobType::check_dataset): a video dataset's files open, pair (frame
 // counts and rates) and have the rig's frame size, read from their headers; the video-only
@@ -133,17 +133,16 @@ SlamSequence PrepareSlamSequence(const StereoRig& rig, const std::filesystem::pa
 // Runs SLAM over a dataset of images or videos, writes the artifacts into output_dir and
 // returns the result JSON. A ground truth (TUM file) is read and checked (one pose per frame)
 // and a recording's timestamps are read and paired, before the first frame is processed.
-// `frames` selects frames (frame_step for both; the rest for videos). `log` may be empty.
-nlohmann::json RunSlamOnDataset(const StereoRig& rig, const std::filesystem::path& dataset_dir,
-                                const std::vector<std::string>& image_names,
-                                const slam::SlamOptions& options,
-                                const std::optional<std::filesystem::path>& ground_truth,
-                                const std::filesystem::path& output_dir,
-                                const ProgressSink& progress,
-                                const std::function<void(const std::string&)>& log,
-                                const std::optional<dense::DenseMapOptions>& dense_map =
-                                    std::nullopt,
-                                const slam::VideoFrameOptions& frame_options = {});
+// `frame_options` selects frames (frame_step for both; the rest for videos). `log` may be
+// empty.
+nlohmann::json RunSlamOnDataset(
+    const StereoRig& rig, const std::filesystem::path& dataset_dir,
+    const std::vector<std::string>& image_names, const slam::SlamOptions& options,
+    const std::optional<std::filesystem::path>& ground_truth,
+    const std::filesystem::path& output_dir, const ProgressSink& progress,
+    const std::function<void(const std::string&)>& log,
+    const std::optional<dense::DenseMapOptions>& dense_map = std::nullopt,
+    const slam::VideoFrameOptions& frame_options = {});
 
 nlohmann::json RunSlamJob(const nlohmann::json& params, const JobContext& context);
 

@@ -227,8 +227,11 @@ TEST(SlamJobType, IsRegisteredAndValidates) {
 
 // The frame selection params: parsed, checked, and named when wrong.
 TEST(SlamParams, FrameSelection) {
-  const SlamParams parsed = SlamParamsFromJson(
-      {{"rig", "r"}, {"frame_step", 3}, {"start_s", 1.5}, {"end_s", 4}, {"pair_tolerance_s", 0.002}});
+  const SlamParams parsed = SlamParamsFromJson({{"rig", "r"},
+                                                {"frame_step", 3},
+                                                {"start_s", 1.5},
+                                                {"end_s", 4},
+                                                {"pair_tolerance_s", 0.002}});
   EXPECT_EQ(parsed.frames.frame_step, 3);
   EXPECT_EQ(parsed.frames.start_s, 1.5);
   EXPECT_EQ(parsed.frames.end_s, 4.0);

@@ -20,12 +20,12 @@
 //                   [--max-features N] [--local-window N] [--local-iterations N] [--no-decode]
 //                   [--black-frame I] [--no-calibration-runs] [--video mp4|avi|mkv]
 
+#include <unistd.h>
 #include <algorithm>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <ctime>
-#include <unistd.h>
 #include <string>
 #include <vector>
 
@@ -74,7 +74,8 @@ Args ParseArgs(int argc, char** argv) {
     else if (a == "--no-decode") args.decode = false;
     else if (a == "--black-frame") args.black_frame = next();
     else if (a == "--no-calibration-runs") args.calibration_runs = false;
-    else if (a == "--video" && i + 1 < argc) args.video = argv[++i];
+    else if (a == "--video" && i + 1 < argc)
+      args.video = argv[++i];
     else if (a == "--max-features") args.max_features = next();
     else if (a == "--local-window") args.local_window = next();
     else if (a == "--local-iterations") args.local_iterations = next();
@@ -132,8 +133,8 @@ slam::StereoVideoFiles WriteVideos(const synth::StereoSequence& sequence, const 
   const double fps = 1.0 / (sequence.timestamps_s[1] - sequence.timestamps_s[0]);
   slam::StereoVideoFiles files{dir / ("cam0." + format), dir / ("cam1." + format)};
   for (int c = 0; c < 2; ++c) {
-    cv::VideoWriter writer((c == 0 ? files.cam0 : files.cam1).string(), cv::CAP_FFMPEG, fourcc,
-                           fps, sequence.images[c][0].size());
+    cv::VideoWriter writer((c == 0 ? files.cam0 : files.cam1).string(), cv::CAP_FFMPEG, fourcc, fps,
+                           sequence.images[c][0].size());
     for (const cv::Mat& image : sequence.images[c]) writer.write(image);
   }
   return files;
@@ -262,8 +263,8 @@ int Run(const Args& args) {
     const char* name;
     double wall_s, cpu_s;
   } stages[] = {{!args.video.empty() ? "load (video decode)"
-                 : args.decode      ? "load (PNG decode)"
-                                    : "load",
+                 : args.decode       ? "load (PNG decode)"
+                                     : "load",
                  t.load_s, c.load_s},
                 {"detect (mask + SIFT)", t.detect_s, c.detect_s},
                 {"stereo match + triangulate", t.stereo_s, c.stereo_s},

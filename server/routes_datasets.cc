@@ -86,8 +86,8 @@ storage::ImageHeader ProbeUpload(const std::string& name, const std::string& hea
     const bool text = std::all_of(head.begin(), head.end(), [](char c) {
       return c == '\n' || c == '\r' || c == '\t' || (c >= 32 && c < 127);
     });
-    header.status = text ? storage::ImageHeader::Status::kOk
-                         : storage::ImageHeader::Status::kNotAnImage;
+    header.status =
+        text ? storage::ImageHeader::Status::kOk : storage::ImageHeader::Status::kNotAnImage;
     header.format = "tum";
     header.content_type = "text/plain";
     header.problem = text ? "" : "a .tum trajectory must be plain text";
@@ -324,7 +324,8 @@ ContentRange ParseContentRange(const std::string& text) {
       consumed != static_cast<int>(text.size()) || first < 0 || last < first || total <= last) {
     throw HttpError(400, "invalid_argument",
                     "Content-Range must be 'bytes FIRST-LAST/TOTAL' with 0 <= FIRST <= LAST < "
-                    "TOTAL, got '" + text + "'");
+                    "TOTAL, got '" +
+                        text + "'");
   }
   range.first = first;
   range.last = last;
@@ -364,19 +365,22 @@ storage::ImageRecord CheckCompleteFile(const std::string& name, const std::files
   if (header.status == storage::ImageHeader::Status::kNotAnImage) {
     throw HttpError(415, "unsupported_media_type", name + ": " + header.problem, {{"name", name}});
   }
-  std::string problem = header.status == storage::ImageHeader::Status::kCorrupt ? header.problem : "";
+  std::string problem =
+      header.status == storage::ImageHeader::Status::kCorrupt ? header.problem : "";
   if (problem.empty() && header.format != "tum") problem = completeness.Finish(header, head);
-  if (!problem.empty()) throw HttpError(422, "corrupt_image", name + ": " + problem, {{"name", name}});
+  if (!problem.empty())
+    throw HttpError(422, "corrupt_image", name + ": " + problem, {{"name", name}});
   return storage::ImageRecord{name,         digest.size,   digest.sha256,
                               header.width, header.height, header.content_type};
 }
 
 // The checks of a chunk before its body is read: sizes (413 with the limit), the declared
 // length, the dataset's room.
-void CheckChunk(ServiceState& state, const storage::DatasetRecord& dataset,
-                const std::string& name, const ContentRange& range, const HttpRequest& request) {
+void CheckChunk(ServiceState& state, const storage::DatasetRecord& dataset, const std::string& name,
+                const ContentRange& range, const HttpRequest& request) {
   const int64_t limit = MaxFileBytes(state, name);
-  if (range.total > limit) TooLarge(name + " is larger than " + std::to_string(limit) + " bytes", limit);
+  if (range.total > limit)
+    TooLarge(name + " is larger than " + std::to_string(limit) + " bytes", limit);
   if (range.length() > state.options.max_chunk_bytes) {
     TooLarge("a chunk of " + std::to_string(range.length()) + " bytes is larger than the " +
                  std::to_string(state.options.max_chunk_bytes) +
@@ -474,7 +478,8 @@ void PutChunk(ServiceState& state, const storage::DatasetRecord& dataset, const 
 void GetUpload(ServiceState& state, const HttpRequest& request, HttpResponse& response) {
   const storage::DatasetRecord dataset = RequireDataset(state, request.Param("id"));
   const std::string name = CheckedName(request.Param("name"));
-  const storage::UploadPartStatus part = storage::FindUploadPart(UploadsDir(state, dataset.id), name);
+  const storage::UploadPartStatus part =
+      storage::FindUploadPart(UploadsDir(state, dataset.id), name);
   response.headers.emplace("Upload-Offset", std::to_string(part.received_bytes));
   response.headers.emplace("Cache-Control", "no-store");
   response.Json(200, UploadStatusJson(name, part, state.store->GetImage(dataset.id, name)));
@@ -492,7 +497,8 @@ void DeleteUpload(ServiceState& state, const HttpRequest& request, HttpResponse&
 void PutImage(ServiceState& state, const HttpRequest& request, HttpResponse& response) {
   const storage::DatasetRecord dataset = RequireDataset(state, request.Param("id"));
   const std::string name = CheckedName(request.Param("name"));
-  if (!request.header("Content-Range").empty()) return PutChunk(state, dataset, name, request, response);
+  if (!request.header("Content-Range").empty())
+    return PutChunk(state, dataset, name, request, response);
   const auto length = DeclaredLength(request);
   if (length && *length > MaxFileBytes(state, name)) {
     TooLarge(name + " is larger than " + std::to_string(MaxFileBytes(state, name)) + " bytes",

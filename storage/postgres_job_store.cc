@@ -204,8 +204,8 @@ constexpr char kDatasetSelect[] =
     "FROM datasets d LEFT JOIN images i ON i.dataset_id = d.id ";
 
 DatasetRecord ReadDataset(const Result& rows, int row) {
-  return DatasetRecord{rows.Text(row, 0), rows.Text(row, 1), rows.Double(row, 2), rows.Int(row, 3),
-                       rows.Int(row, 4),  rows.Int(row, 5)};
+  return DatasetRecord{rows.Text(row, 0), rows.Text(row, 1), rows.Double(row, 2),
+                       rows.Int(row, 3),  rows.Int(row, 4),  rows.Int(row, 5)};
 }
 
 ImageRecord ReadImage(const Result& rows, int row) {

@@ -101,7 +101,8 @@ UploadPartWriter::~UploadPartWriter() {
 
 void UploadPartWriter::Truncate() {
   buffer_.clear();
-  if (::ftruncate(fd_, 0) != 0 || ::lseek(fd_, 0, SEEK_SET) < 0) ThrowErrno("cannot truncate", path_);
+  if (::ftruncate(fd_, 0) != 0 || ::lseek(fd_, 0, SEEK_SET) < 0)
+    ThrowErrno("cannot truncate", path_);
   size_ = 0;
 }
 
@@ -139,7 +140,8 @@ void UploadPartWriter::Sync() {
 void UploadPartWriter::Publish(const fs::path& final_path) {
   Sync();
   fs::create_directories(final_path.parent_path());
-  if (::rename(path_.c_str(), final_path.c_str()) != 0) ThrowErrno("cannot rename onto", final_path);
+  if (::rename(path_.c_str(), final_path.c_str()) != 0)
+    ThrowErrno("cannot rename onto", final_path);
   ::close(fd_);
   fd_ = -1;
   FsyncPath(final_path.parent_path());

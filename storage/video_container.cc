@@ -61,7 +61,8 @@ VideoContainer CheckIsoBoxes(std::ifstream& in, uint64_t file_size) {
     }
     uint64_t size = BigEndian(head, 4), header = 8;
     if (size == 1) {
-      if (!ReadAt(in, pos + 8, head + 8, 8)) return corrupt("the file ends inside box '" + type + "'");
+      if (!ReadAt(in, pos + 8, head + 8, 8))
+        return corrupt("the file ends inside box '" + type + "'");
       size = BigEndian(head + 8, 8);
       header = 16;
     } else if (size == 0) {
@@ -77,8 +78,9 @@ VideoContainer CheckIsoBoxes(std::ifstream& in, uint64_t file_size) {
     pos += size;
   }
   if (!has_moov) {
-    return corrupt("no 'moov' box (the index a recorder writes when it stops): the recording "
-                   "was not finished");
+    return corrupt(
+        "no 'moov' box (the index a recorder writes when it stops): the recording "
+        "was not finished");
   }
   return Result(Status::kOk, format, type_name);
 }
@@ -160,8 +162,8 @@ VideoContainer CheckAvi(std::ifstream& in, uint64_t file_size) {
 }  // namespace
 
 bool IsVideoName(const std::string& name) {
-  static const std::set<std::string> kExtensions = {".mp4", ".m4v", ".mov", ".mkv", ".webm",
-                                                    ".avi"};
+  static const std::set<std::string> kExtensions = {".mp4", ".m4v",  ".mov",
+                                                    ".mkv", ".webm", ".avi"};
   return kExtensions.count(Lower(fs::path(name).extension().string())) > 0;
 }
 

@@ -112,13 +112,13 @@ TEST_F(SubmitTest, UploadsVideosInChunksAndResumes) {
   const std::string cam0 = Mp4Bytes(300000, 1), cam1 = Mp4Bytes(300000, 2);
   WriteFile(folder / "cam0.mp4", cam0);
   WriteFile(folder / "cam1.mp4", cam1);
-  const std::string dataset = JsonOf(client_->Post("/api/v1/datasets", R"({"name": "rec"})",
-                                                   "application/json"))["id"];
+  const std::string dataset =
+      JsonOf(client_->Post("/api/v1/datasets", R"({"name": "rec"})", "application/json"))["id"];
   // An earlier run sent the first 100000 bytes of cam0.mp4, then stopped.
-  const auto first = client_->Put(
-      ("/api/v1/datasets/" + dataset + "/images/cam0.mp4").c_str(),
-      {{"Content-Range", "bytes 0-99999/" + std::to_string(cam0.size())}}, cam0.substr(0, 100000),
-      "application/octet-stream");
+  const auto first =
+      client_->Put(("/api/v1/datasets/" + dataset + "/images/cam0.mp4").c_str(),
+                   {{"Content-Range", "bytes 0-99999/" + std::to_string(cam0.size())}},
+                   cam0.substr(0, 100000), "application/octet-stream");
   ASSERT_EQ(first->status, 202) << first->body;
   std::string stdout_text, stderr_text;
   ASSERT_EQ(Submit("--type test_sleep --no-wait --chunk-mb 0.0625 --dataset " + dataset + " " +

@@ -10,8 +10,8 @@
 #include <unistd.h>
 
 #include <atomic>
-#include <map>
 #include <fstream>
+#include <map>
 #include <optional>
 #include <random>
 #include <sstream>
@@ -61,7 +61,8 @@ std::string NoiseVideo(const fs::path& path, int frames, double fps, int width =
 }
 
 std::string ContentRange(int64_t first, int64_t last, int64_t total) {
-  return "bytes " + std::to_string(first) + "-" + std::to_string(last) + "/" + std::to_string(total);
+  return "bytes " + std::to_string(first) + "-" + std::to_string(last) + "/" +
+         std::to_string(total);
 }
 
 class ServerVideoTest : public ::testing::Test {
@@ -83,8 +84,8 @@ class ServerVideoTest : public ::testing::Test {
   }
 
   std::string CreateDataset() {
-    const auto result = client_->Post("/api/v1/datasets", json{{"name", "video"}}.dump(),
-                                      "application/json");
+    const auto result =
+        client_->Post("/api/v1/datasets", json{{"name", "video"}}.dump(), "application/json");
     EXPECT_EQ(result->status, 201);
     return JsonOf(result)["id"];
   }
@@ -92,8 +93,8 @@ class ServerVideoTest : public ::testing::Test {
   // PUT of bytes [first, first + size) of `file` with its Content-Range.
   httplib::Result PutChunk(const std::string& dataset, const std::string& name,
                            const std::string& file, int64_t first, int64_t size) {
-    httplib::Headers headers = {
-        {"Content-Range", ContentRange(first, first + size - 1, static_cast<int64_t>(file.size()))}};
+    httplib::Headers headers = {{"Content-Range", ContentRange(first, first + size - 1,
+                                                               static_cast<int64_t>(file.size()))}};
     return client_->Put(("/api/v1/datasets/" + dataset + "/images/" + name).c_str(), headers,
                         file.substr(first, size), "application/octet-stream");
   }
@@ -195,9 +196,10 @@ TEST_F(ServerVideoTest, ResumableUploadProtocol) {
   ExpectError(big, 413, "payload_too_large", "send the file in smaller chunks");
   EXPECT_EQ(JsonOf(big)["error"]["details"]["limit_bytes"], kChunk);
   // Content-Length and Content-Range disagree; a malformed range.
-  ExpectError(client_->Put(url.c_str(), {{"Content-Range", ContentRange(kChunk, kChunk + 9, total)}},
-                           std::string(5, 'x'), "application/octet-stream"),
-              400, "invalid_argument", "Content-Length");
+  ExpectError(
+      client_->Put(url.c_str(), {{"Content-Range", ContentRange(kChunk, kChunk + 9, total)}},
+                   std::string(5, 'x'), "application/octet-stream"),
+      400, "invalid_argument", "Content-Length");
   ExpectError(client_->Put(url.c_str(), {{"Content-Range", "bytes 0-9/*"}}, std::string(10, 'x'),
                            "application/octet-stream"),
               400, "invalid_argument", "Content-Range");
@@ -271,7 +273,8 @@ TEST_F(ServerVideoTest, ResumableUploadProtocol) {
                           box("moov", 16384, 100);  // the index declares more than was sent
   const auto refused = UploadFrom(dataset, "cam1.mp4", cut, 0);
   ExpectError(refused, 422, "corrupt_video", "incomplete");
-  EXPECT_EQ(client_->Get(("/api/v1/datasets/" + dataset + "/images/cam1.mp4").c_str())->status, 404);
+  EXPECT_EQ(client_->Get(("/api/v1/datasets/" + dataset + "/images/cam1.mp4").c_str())->status,
+            404);
   EXPECT_EQ(UploadStatus(dataset, "cam1.mp4")["received_bytes"], 0);
   // Not a video at all, by a plain PUT: 415.
   ExpectError(client_->Put(("/api/v1/datasets/" + dataset + "/images/x.avi").c_str(),
@@ -294,8 +297,9 @@ std::string SubmitRig(httplib::Client& client, int port, const std::string& data
   fake.reads_images = false;
   fake.run = [rig](const json&, const api::JobContext&) { return api::RigToJson(rig); };
   api::RegisterJobType(fake);
-  const auto created = client.Post(
-      "/api/v1/jobs", json{{"type", "relative_pose"}, {"dataset", dataset}}.dump(), "application/json");
+  const auto created =
+      client.Post("/api/v1/jobs", json{{"type", "relative_pose"}, {"dataset", dataset}}.dump(),
+                  "application/json");
   EXPECT_EQ(created->status, 202) << created->body;
   const std::string id = JsonOf(created)["id"];
   EXPECT_EQ(WaitForJob(port, id, 30)["state"], "succeeded");
@@ -356,8 +360,7 @@ TEST_F(ServerVideoTest, SlamJobOnAVideoPair) {
   EXPECT_EQ(result["input"]["frame_count"], 12);
 
   // Every second frame of [0.2, 0.9] s: 0.2, 0.4, 0.6, 0.8.
-  const auto [step_id, stepped] =
-      run({{"frame_step", 2}, {"start_s", 0.2}, {"end_s", 0.9}});
+  const auto [step_id, stepped] = run({{"frame_step", 2}, {"start_s", 0.2}, {"end_s", 0.9}});
   ASSERT_EQ(stepped["num_frames"], 4) << stepped.dump();
   EXPECT_EQ(stepped["frames"][0]["name"], "t000000.200");
   EXPECT_EQ(stepped["frames"][3]["name"], "t000000.800");
@@ -379,9 +382,8 @@ TEST_F(ServerVideoTest, BadVideosAreRefusedAtSubmission) {
                           const json& extra = json::object()) {
     const std::string dataset = CreateDataset();
     for (const auto& [name, bytes] : files) {
-      const auto stored =
-          client.Put(("/api/v1/datasets/" + dataset + "/images/" + name).c_str(), bytes,
-                     "application/octet-stream");
+      const auto stored = client.Put(("/api/v1/datasets/" + dataset + "/images/" + name).c_str(),
+                                     bytes, "application/octet-stream");
       EXPECT_EQ(stored->status, 201) << name << ": " << stored->body;
     }
     json params = {{"rig", rig_job}};

@@ -65,9 +65,8 @@ std::vector<double> ReadTimestamps(const fs::path& path, double last_s, int64_t 
                       FileName(path) + ": " + std::to_string(stamps.size()) + " frames");
     }
   }
-  OMNIRIG_CHECK(decoded_any,
-                FileName(path) << ": no frame could be decoded (codec "
-                               << FourCc(capture.get(cv::CAP_PROP_FOURCC)) << ")");
+  OMNIRIG_CHECK(decoded_any, FileName(path) << ": no frame could be decoded (codec "
+                                            << FourCc(capture.get(cv::CAP_PROP_FOURCC)) << ")");
   return stamps;
 }
 
@@ -84,8 +83,8 @@ VideoInfo ProbeVideo(const fs::path& path) {
   OMNIRIG_CHECK(info.width > 0 && info.height > 0,
                 FileName(path) << " holds no video stream with a frame size");
   OMNIRIG_CHECK(info.frame_count > 0, FileName(path) << " holds no frames");
-  OMNIRIG_CHECK(std::isfinite(info.fps) && info.fps > 0,
-                FileName(path) << " declares no frame rate");
+  OMNIRIG_CHECK(std::isfinite(info.fps) && info.fps > 0, FileName(path)
+                                                             << " declares no frame rate");
   return info;
 }
 
@@ -94,10 +93,10 @@ StereoVideoInfo ProbeStereoVideo(const StereoVideoFiles& files) {
   info.video[0] = ProbeVideo(files.cam0);
   if (files.stacked()) {
     const VideoInfo& video = info.video[0];
-    OMNIRIG_CHECK(video.height % 2 == 0,
-                  FileName(files.cam0) << " is " << video.width << "x" << video.height
-                                       << ": a stacked video (cam0 on top of cam1) needs an "
-                                          "even height");
+    OMNIRIG_CHECK(video.height % 2 == 0, FileName(files.cam0)
+                                             << " is " << video.width << "x" << video.height
+                                             << ": a stacked video (cam0 on top of cam1) needs an "
+                                                "even height");
     info.video[1] = video;
     for (int c = 0; c < 2; ++c) {
       info.width[c] = video.width;
@@ -112,9 +111,9 @@ StereoVideoInfo ProbeStereoVideo(const StereoVideoFiles& files) {
   OMNIRIG_CHECK(std::abs(a.fps - b.fps) <= 1e-3 * std::max(a.fps, b.fps),
                 names << " have different frame rates (" << a.fps << " and " << b.fps
                       << " frames/s): their frames cannot be paired");
-  OMNIRIG_CHECK(a.frame_count == b.frame_count,
-                names << " have different frame counts (" << a.frame_count << " and "
-                      << b.frame_count << "): their frames cannot be paired");
+  OMNIRIG_CHECK(a.frame_count == b.frame_count, names << " have different frame counts ("
+                                                      << a.frame_count << " and " << b.frame_count
+                                                      << "): their frames cannot be paired");
   for (int c = 0; c < 2; ++c) {
     info.width[c] = info.video[c].width;
     info.height[c] = info.video[c].height;
@@ -127,8 +126,8 @@ void VideoFrameOptions::Check() const {
                 "pair_tolerance_s must be a non-negative number of seconds");
   OMNIRIG_CHECK(frame_step >= 1, "frame_step must be at least 1");
   OMNIRIG_CHECK(std::isfinite(start_s) && start_s >= 0, "start_s must be a time >= 0 s");
-  OMNIRIG_CHECK(end_s > start_s, "end_s (" << end_s << ") must be after start_s (" << start_s
-                                           << ")");
+  OMNIRIG_CHECK(end_s > start_s,
+                "end_s (" << end_s << ") must be after start_s (" << start_s << ")");
 }
 
 std::vector<std::pair<int64_t, int64_t>> PairTimestamps(const std::vector<double>& t0_s,
@@ -154,8 +153,8 @@ std::vector<std::pair<int64_t, int64_t>> PairTimestamps(const std::vector<double
   for (; i < t0_s.size(); ++i) note(0, i, t0_s[i]);
   for (; j < t1_s.size(); ++j) note(1, j, t1_s[j]);
   OMNIRIG_CHECK(num_unpaired == 0, num_unpaired << " frame(s) have no partner within "
-                                                << tolerance_s * 1000 << " ms in the other video:"
-                                                << unpaired.str());
+                                                << tolerance_s * 1000
+                                                << " ms in the other video:" << unpaired.str());
   return pairs;
 }
 
@@ -181,10 +180,10 @@ std::vector<StereoVideoFrame> PairStereoVideoFrames(const StereoVideoFiles& file
     if (in_range++ % options.frame_step != 0) continue;
     frames.push_back({FrameName(t), t, {i, j}});
   }
-  OMNIRIG_CHECK(!frames.empty(), "no stereo frame lies in the time range [" << options.start_s
-                                     << ", " << options.end_s << "] s (the videos hold "
-                                     << stamps[0].front() << " to " << stamps[0].back()
-                                     << " s)");
+  OMNIRIG_CHECK(!frames.empty(), "no stereo frame lies in the time range ["
+                                     << options.start_s << ", " << options.end_s
+                                     << "] s (the videos hold " << stamps[0].front() << " to "
+                                     << stamps[0].back() << " s)");
   return frames;
 }
 

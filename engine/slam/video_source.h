@@ -50,8 +50,8 @@ struct VideoInfo {
 VideoInfo ProbeVideo(const std::filesystem::path& path);
 
 struct StereoVideoInfo {
-  VideoInfo video[2];              // cam0's and cam1's files (a stacked video: the same twice)
-  int width[2] = {0, 0};           // per camera (a stacked video: half the height each)
+  VideoInfo video[2];     // cam0's and cam1's files (a stacked video: the same twice)
+  int width[2] = {0, 0};  // per camera (a stacked video: half the height each)
   int height[2] = {0, 0};
 };
 
@@ -65,16 +65,16 @@ struct VideoFrameOptions {
   // quarter of the frame period (from the container's rate), which two videos of one clock meet
   // and neighbouring frames never do.
   double pair_tolerance_s = 0.0;
-  int frame_step = 1;     // every frame_step-th pair of the time range
-  double start_s = 0.0;   // the time range, container time of cam0, both ends included
+  int frame_step = 1;    // every frame_step-th pair of the time range
+  double start_s = 0.0;  // the time range, container time of cam0, both ends included
   double end_s = std::numeric_limits<double>::infinity();
   void Check() const;
 };
 
 // One selected stereo frame: where it lies in each video.
 struct StereoVideoFrame {
-  std::string name;        // "t%010.3f" of the timestamp, e.g. "t000012.345"
-  double timestamp_s = 0;  // cam0's
+  std::string name;           // "t%010.3f" of the timestamp, e.g. "t000012.345"
+  double timestamp_s = 0;     // cam0's
   int64_t index[2] = {0, 0};  // frame index in cam0's and cam1's video (stacked: equal)
 };
 

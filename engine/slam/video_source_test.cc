@@ -140,8 +140,9 @@ TEST_F(VideoSource, RefusesVideosThatCannotBePaired) {
     }
     return std::string("accepted");
   };
-  EXPECT_NE(message({cam0, Write("short.mkv", 8, 10.0, 20)}).find("different frame counts (12 and 8)"),
-            std::string::npos);
+  EXPECT_NE(
+      message({cam0, Write("short.mkv", 8, 10.0, 20)}).find("different frame counts (12 and 8)"),
+      std::string::npos);
   EXPECT_NE(message({cam0, Write("fast.mkv", 12, 20.0, 20)}).find("different frame rates"),
             std::string::npos);
   std::ofstream(dir_ / "garbage.mp4") << "this is not a video at all";

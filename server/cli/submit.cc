@@ -112,8 +112,9 @@ void UploadWithRetries(httplib::Client& client, const std::string& url, const fs
 // part is of another size or there is none).
 int64_t ReceivedBytes(httplib::Client& client, const std::string& dataset, const std::string& name,
                       int64_t total) {
-  const json status = Expect(client.Get(("/api/v1/datasets/" + dataset + "/uploads/" + name).c_str()),
-                             {200}, "upload status of " + name);
+  const json status =
+      Expect(client.Get(("/api/v1/datasets/" + dataset + "/uploads/" + name).c_str()), {200},
+             "upload status of " + name);
   const bool same = status["total_bytes"].is_number() && status["total_bytes"] == total;
   return same ? status["received_bytes"].get<int64_t>() : 0;
 }
@@ -135,9 +136,9 @@ void UploadInChunks(httplib::Client& client, const std::string& dataset, const s
     in.clear();
     in.seekg(static_cast<std::streamoff>(offset));
     in.read(chunk.data(), static_cast<std::streamsize>(size));
-    const httplib::Headers range = {
-        {"Content-Range", "bytes " + std::to_string(offset) + "-" +
-                              std::to_string(offset + size - 1) + "/" + std::to_string(total)}};
+    const httplib::Headers range = {{"Content-Range", "bytes " + std::to_string(offset) + "-" +
+                                                          std::to_string(offset + size - 1) + "/" +
+                                                          std::to_string(total)}};
     const auto result = client.Put(url.c_str(), range, chunk, "application/octet-stream");
     const bool retry = !result || result->status >= 500 || result->status == 409;
     if (retry && ++failures > 5) Expect(result, {202}, "upload of " + path.string());
@@ -262,8 +263,9 @@ int RunSubmit(const Args& args) {
                    "files the server already holds are skipped, a video's upload goes on where "
                    "it stopped), runs a job on it, shows its progress and "
                    "downloads the result and artifacts.");
-  parser.SetPositional("FOLDER", "images, at top level or one folder deep (cam0/, cam1/), and "
-                                 "videos (cam0.mp4 and cam1.mp4, or stacked.mp4)");
+  parser.SetPositional("FOLDER",
+                       "images, at top level or one folder deep (cam0/, cam1/), and "
+                       "videos (cam0.mp4 and cam1.mp4, or stacked.mp4)");
   parser.AddOption("chunk-mb", "16",
                    "videos and larger files go up in chunks of this size, resumable (at most the "
                    "server's --max-chunk-mb)");
