@@ -44,6 +44,16 @@ inline ProgressSink SubRange(const ProgressSink& progress, double begin, double 
           progress.is_cancelled};
 }
 
+// What a job type may look at of the dataset when a job is submitted (JobType::check_dataset).
+struct DatasetView {
+  std::string dataset_id;
+  std::filesystem::path dataset_dir;    // the files, by name
+  std::vector<std::string> file_names;  // sorted
+  // The result JSON of an earlier succeeded job (checked to exist and be of the referenced
+  // type before check_dataset runs); throws InvalidArgument when it has none.
+  std::function<nlohmann::json(const std::string& job_id)> load_result;
+};
+
 struct JobType {
   std::string name;
   // Validates `params` at submission; throws InvalidArgument with a message naming the field.
@@ -56,6 +66,11 @@ struct JobType {
   // Whether the job reads its dataset's images (the server then refuses an empty dataset with
   // 422 at submission instead of queueing a job that can only fail).
   bool reads_images = true;
+  // Optional: checks the dataset against `params` at submission (the server answers 422 with
+  // the message of the InvalidArgument it throws), from what the files' headers tell (e.g. a
+  // slam job's videos: that they open, pair and match the rig). Runs on an HTTP thread: no
+  // pixel decoding.
+  std::function<void(const nlohmann::json& params, const DatasetView& dataset)> check_dataset;
   // Runs the job and returns its result JSON. Throws omnirig::Cancelled on cancellation,
   // InvalidArgument for bad input discovered while running, anything else for failures.
   std::function<nlohmann::json(const nlohmann::json& params, const JobContext& context)> run;

@@ -3,8 +3,10 @@
 #include <algorithm>
 #include <cctype>
 #include <chrono>
+#include <ctime>
 #include <fstream>
 #include <map>
+#include <memory>
 #include <set>
 #include <sstream>
 
@@ -352,13 +354,42 @@ json FuseDenseMap(const StereoRig& rig, const slam::SlamResult& result,
            std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count()}};
 }
 
+const std::set<std::string> kParamFields = {"rig",       "ground_truth",    "options",
+                                            "dense_map", "frame_step",      "start_s",
+                                            "end_s",     "pair_tolerance_s"};
+
+// "frame_step", "start_s", "end_s", "pair_tolerance_s" of the params (each optional).
+slam::VideoFrameOptions VideoFrameOptionsFromJson(const json& params) {
+  slam::VideoFrameOptions frames;
+  if (params.contains("frame_step")) {
+    OMNIRIG_CHECK(
+        params["frame_step"].is_number_integer() && params["frame_step"].get<int64_t>() >= 1,
+        "field 'params.frame_step' must be an integer >= 1");
+    frames.frame_step = params["frame_step"].get<int>();
+  }
+  const std::map<std::string, double*> seconds = {{"start_s", &frames.start_s},
+                                                  {"end_s", &frames.end_s},
+                                                  {"pair_tolerance_s", &frames.pair_tolerance_s}};
+  for (const auto& [key, target] : seconds) {
+    if (!params.contains(key)) continue;
+    OMNIRIG_CHECK(params[key].is_number(),
+                  "field 'params." << key << "' must be a number of seconds");
+    *target = params[key].get<double>();
+  }
+  try {
+    frames.Check();
+  } catch (const InvalidArgument& e) {
+    throw InvalidArgument(std::string("invalid 'params': ") + e.what());
+  }
+  return frames;
+}
+
 }  // namespace
 
 SlamParams SlamParamsFromJson(const json& params) {
   OMNIRIG_CHECK(params.is_object(), "params must be a JSON object");
   for (const auto& [key, value] : params.items()) {
-    OMNIRIG_CHECK(key == "rig" || key == "ground_truth" || key == "options" || key == "dense_map",
-                  "unknown field 'params." << key << "'");
+    OMNIRIG_CHECK(kParamFields.count(key) > 0, "unknown field 'params." << key << "'");
   }
   SlamParams parsed;
   OMNIRIG_CHECK(params.contains("rig"), "missing field 'params.rig' (a relative_pose job id)");
@@ -376,6 +407,9 @@ SlamParams SlamParamsFromJson(const json& params) {
   }
   if (params.contains("options")) parsed.options = SlamOptionsFromJson(params["options"]);
   if (params.contains("dense_map")) parsed.dense_map = DenseMapOptionsFromJson(params["dense_map"]);
+  parsed.frames = VideoFrameOptionsFromJson(params);
+  parsed.video_only_fields =
+      params.contains("start_s") || params.contains("end_s") || params.contains("pair_tolerance_s");
   return parsed;
 }
 
@@ -424,37 +458,244 @@ SlamSequence PrepareSlamSequence(const StereoRig& rig, const fs::path& dataset_d
   return sequence;
 }
 
-json RunSlamOnDataset(const StereoRig& rig, const fs::path& dataset_dir,
-                      const std::vector<std::string>& image_names,
-                      const slam::SlamOptions& options,
-                      const std::optional<fs::path>& ground_truth, const fs::path& output_dir,
-                      const ProgressSink& progress,
-                      const std::function<void(const std::string&)>& log,
-                      const std::optional<dense::DenseMapOptions>& dense_map) {
-  options.Check();
-  const SlamSequence sequence = PrepareSlamSequence(rig, dataset_dir, image_names);
+namespace {
+
+// Names the service stores as videos (as storage/video_container.h's IsVideoName).
+bool IsVideoFileName(const std::string& name) {
+  std::string ext = fs::path(name).extension().string();
+  for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return ext == ".mp4" || ext == ".m4v" || ext == ".mov" || ext == ".mkv" || ext == ".webm" ||
+         ext == ".avi";
+}
+
+std::string Lower(std::string text) {
+  for (char& c : text) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return text;
+}
+
+// CPU seconds of the whole process (the decoder may run threads of its own).
+double ProcessCpuSeconds() {
+  timespec now{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &now);
+  return static_cast<double>(now.tv_sec) + 1e-9 * static_cast<double>(now.tv_nsec);
+}
+
+// Checks that each camera's frames have the size the rig was calibrated for.
+void CheckVideoSizes(const StereoRig& rig, const slam::StereoVideoFiles& files,
+                     const slam::StereoVideoInfo& info) {
+  const CameraModel* camera[2] = {&rig.cam0, &rig.cam1};
+  for (int c = 0; c < 2; ++c) {
+    if (info.width[c] == camera[c]->width && info.height[c] == camera[c]->height) continue;
+    const std::string what =
+        files.stacked() ? files.cam0.filename().string() + "'s " + (c == 0 ? "top" : "bottom") +
+                              " half (cam" + std::to_string(c) + ")"
+                        : (c == 0 ? files.cam0 : files.cam1).filename().string() + "'s frames";
+    throw InvalidArgument(
+        what + " are " + std::to_string(info.width[c]) + "x" + std::to_string(info.height[c]) +
+        " but the rig's cam" + std::to_string(c) + " is calibrated for " +
+        std::to_string(camera[c]->width) + "x" + std::to_string(camera[c]->height));
+  }
+}
+
+// What RunSlam reads: the frames' names, their timestamps (for trajectory.tum), the ground truth
+// per frame (or none) and the loader.
+struct SlamInput {
+  std::vector<std::string> names;
+  std::vector<double> timestamps_s;
+  std::vector<slam::StampedPose> ground_truth;
+  slam::StereoFrameLoader load;
+  nlohmann::json source;  // the result's "input": what was read, and how
+};
+
+// The ground truth's pose nearest each frame's timestamp, within `tolerance_s`.
+std::vector<slam::StampedPose> MatchGroundTruth(const fs::path& path,
+                                                const std::vector<double>& stamps,
+                                                double tolerance_s) {
+  OMNIRIG_CHECK(fs::is_regular_file(path),
+                "ground truth " << path.filename().string() << " is not in the dataset");
+  std::vector<slam::StampedPose> poses = slam::ReadTum(path);
+  std::sort(poses.begin(), poses.end(),
+            [](const auto& a, const auto& b) { return a.timestamp_s < b.timestamp_s; });
+  OMNIRIG_CHECK(!poses.empty(), "ground truth " << path.filename().string() << " holds no pose");
+  std::vector<slam::StampedPose> matched;
+  for (const double t : stamps) {
+    auto it = std::lower_bound(poses.begin(), poses.end(), t,
+                               [](const auto& pose, double v) { return pose.timestamp_s < v; });
+    if (it == poses.end() ||
+        (it != poses.begin() && t - (it - 1)->timestamp_s < it->timestamp_s - t)) {
+      --it;
+    }
+    OMNIRIG_CHECK(std::abs(it->timestamp_s - t) <= tolerance_s,
+                  "ground truth " << path.filename().string() << " has no pose within "
+                                  << tolerance_s * 1000 << " ms of the frame at " << t << " s");
+    matched.push_back({t, it->world_from_rig});
+  }
+  return matched;
+}
+
+SlamInput PrepareVideoInput(const StereoRig& rig, const slam::StereoVideoFiles& files,
+                            const slam::VideoFrameOptions& frame_options,
+                            const std::optional<fs::path>& ground_truth,
+                            const ProgressSink& progress) {
+  const slam::StereoVideoInfo info = slam::ProbeStereoVideo(files);
+  CheckVideoSizes(rig, files, info);
+  // The timestamp pass reads the whole recording once; SLAM's own fractions follow it.
+  const ProgressSink pass{[&](double, const std::string& stage, const std::string& message) {
+                            progress.Report(0.0, stage, message);
+                          },
+                          progress.is_cancelled};
+  const double pass_start_s = ProcessCpuSeconds();
+  const auto pass_wall_start = std::chrono::steady_clock::now();
+  std::vector<slam::StereoVideoFrame> frames =
+      slam::PairStereoVideoFrames(files, frame_options, pass);
+  SlamInput input;
+  json file_names = {files.cam0.filename().string()};
+  if (!files.stacked()) file_names.push_back(files.cam1.filename().string());
+  input.source = {
+      {"kind", files.stacked() ? "stacked_video" : "video_pair"},
+      {"files", file_names},
+      {"codec", info.video[0].codec},
+      {"fps", info.video[0].fps},
+      {"frame_count", info.video[0].frame_count},
+      {"frame_size", {info.width[0], info.height[0]}},
+      {"pair_tolerance_s", frame_options.pair_tolerance_s > 0 ? frame_options.pair_tolerance_s
+                                                              : 0.25 / info.video[0].fps},
+      {"frame_step", frame_options.frame_step},
+      {"num_frames", frames.size()},
+      // The pass that reads and pairs every timestamp before the first frame (decoding only).
+      {"timestamp_pass_s",
+       std::chrono::duration<double>(std::chrono::steady_clock::now() - pass_wall_start).count()},
+      {"timestamp_pass_cpu_s", ProcessCpuSeconds() - pass_start_s}};
+  for (const auto& frame : frames) {
+    input.names.push_back(frame.name);
+    input.timestamps_s.push_back(frame.timestamp_s);
+  }
+  if (ground_truth) {
+    const double tolerance_s = frame_options.pair_tolerance_s > 0 ? frame_options.pair_tolerance_s
+                                                                  : 0.25 / info.video[0].fps;
+    input.ground_truth = MatchGroundTruth(*ground_truth, input.timestamps_s, tolerance_s);
+  }
+  auto reader = std::make_shared<slam::StereoVideoReader>(files, std::move(frames));
+  input.load = [reader](int i) { return reader->Load(i); };
+  return input;
+}
+
+SlamInput PrepareImageInput(const StereoRig& rig, const fs::path& dataset_dir,
+                            const std::vector<std::string>& image_names, int frame_step,
+                            const std::optional<fs::path>& ground_truth) {
+  const SlamSequence all = PrepareSlamSequence(rig, dataset_dir, image_names);
   std::vector<slam::StampedPose> gt;
-  if (ground_truth) gt = ReadGroundTruth(*ground_truth, sequence.names.size());
-  auto load = [&](int i) {
+  if (ground_truth) gt = ReadGroundTruth(*ground_truth, all.names.size());
+  const std::vector<double> all_stamps = Timestamps(all.names, gt);
+  auto sequence = std::make_shared<SlamSequence>();
+  SlamInput input;
+  for (size_t i = 0; i < all.names.size(); i += frame_step) {
+    sequence->names.push_back(all.names[i]);
+    sequence->cam0.push_back(all.cam0[i]);
+    sequence->cam1.push_back(all.cam1[i]);
+    input.timestamps_s.push_back(all_stamps[i]);
+    if (!gt.empty()) input.ground_truth.push_back(gt[i]);
+  }
+  input.names = sequence->names;
+  input.source = {{"kind", "images"},
+                  {"frame_step", frame_step},
+                  {"num_frames", input.names.size()},
+                  {"num_image_pairs", all.names.size()}};
+  input.load = [sequence, dataset_dir](int i) {
     slam::StereoImages images;
     cv::Mat* targets[2] = {&images.cam0, &images.cam1};
-    const std::string* names[2] = {&sequence.cam0[i], &sequence.cam1[i]};
+    const std::string* names[2] = {&sequence->cam0[i], &sequence->cam1[i]};
     for (int c = 0; c < 2; ++c) {
       *targets[c] = cv::imread((dataset_dir / *names[c]).string(), cv::IMREAD_COLOR);
       OMNIRIG_CHECK(!targets[c]->empty(), "image " << *names[c] << " cannot be read");
     }
     return images;
   };
+  return input;
+}
+
+}  // namespace
+
+std::optional<slam::StereoVideoFiles> FindStereoVideos(const fs::path& dataset_dir,
+                                                       const std::vector<std::string>& names) {
+  std::vector<std::string> found[3];  // cam0, cam1, stacked
+  bool has_pair_images = false;
+  for (const std::string& name : names) {
+    if (name.rfind("cam0/", 0) == 0 || name.rfind("cam1/", 0) == 0) has_pair_images = true;
+    if (name.find('/') != std::string::npos || !IsVideoFileName(name)) continue;
+    const std::string stem = Lower(fs::path(name).stem().string());
+    const int slot = stem == "cam0" ? 0 : stem == "cam1" ? 1 : stem == "stacked" ? 2 : -1;
+    if (slot >= 0) found[slot].push_back(name);
+  }
+  if (found[0].empty() && found[1].empty() && found[2].empty()) return std::nullopt;
+  const char* kinds[3] = {"cam0", "cam1", "stacked"};
+  for (int k = 0; k < 3; ++k) {
+    OMNIRIG_CHECK(found[k].size() <= 1, "the dataset holds " << found[k].size() << " " << kinds[k]
+                                                             << " videos (" << found[k][0] << ", "
+                                                             << found[k][1] << "): keep one");
+  }
+  const bool pair = !found[0].empty() || !found[1].empty();
+  OMNIRIG_CHECK(
+      !(pair && !found[2].empty()),
+      "the dataset holds both a video pair and a stacked video (" << found[2][0] << "): keep one");
+  OMNIRIG_CHECK(!has_pair_images,
+                "the dataset holds both videos and cam0/ cam1/ images: a slam job reads one "
+                "recording; put the other in its own dataset");
+  if (!pair) return slam::StereoVideoFiles{dataset_dir / found[2][0], ""};
+  for (int c = 0; c < 2; ++c) {
+    OMNIRIG_CHECK(!found[c].empty(), found[1 - c][0] << " has no partner: a video pair is cam0.EXT "
+                                                        "and cam1.EXT");
+  }
+  return slam::StereoVideoFiles{dataset_dir / found[0][0], dataset_dir / found[1][0]};
+}
+
+void CheckSlamDataset(const json& params, const DatasetView& dataset) {
+  const SlamParams parsed = SlamParamsFromJson(params);
+  const auto videos = FindStereoVideos(dataset.dataset_dir, dataset.file_names);
+  if (!videos) {
+    OMNIRIG_CHECK(!parsed.video_only_fields,
+                  "'start_s', 'end_s' and 'pair_tolerance_s' select frames of videos, and dataset "
+                      << dataset.dataset_id
+                      << " holds none (cam0.EXT and cam1.EXT, or stacked.EXT)");
+    return;
+  }
+  StereoRig rig;
+  try {
+    rig = RigFromJson(dataset.load_result(parsed.rig_job));
+  } catch (const InvalidArgument& e) {
+    throw InvalidArgument("rig job " + parsed.rig_job +
+                          " is not a usable relative_pose result: " + e.what());
+  }
+  CheckVideoSizes(rig, *videos, slam::ProbeStereoVideo(*videos));
+}
+
+json RunSlamOnDataset(const StereoRig& rig, const fs::path& dataset_dir,
+                      const std::vector<std::string>& image_names, const slam::SlamOptions& options,
+                      const std::optional<fs::path>& ground_truth, const fs::path& output_dir,
+                      const ProgressSink& progress,
+                      const std::function<void(const std::string&)>& log,
+                      const std::optional<dense::DenseMapOptions>& dense_map,
+                      const slam::VideoFrameOptions& frame_options) {
+  options.Check();
+  frame_options.Check();
+  const auto videos = FindStereoVideos(dataset_dir, image_names);
+  const SlamInput input =
+      videos ? PrepareVideoInput(rig, *videos, frame_options, ground_truth, progress)
+             : PrepareImageInput(rig, dataset_dir, image_names, frame_options.frame_step,
+                                 ground_truth);
+  const std::vector<slam::StampedPose>& gt = input.ground_truth;
+  const slam::StereoFrameLoader& load = input.load;
   const ProgressSink frame_progress{
       [&](double fraction, const std::string& stage, const std::string& message) {
         progress.Report(fraction, stage, message);
         if (log && !message.empty()) log(message);
       },
       progress.is_cancelled};
-  const slam::SlamResult result = slam::RunSlam(rig, sequence.names, load, options, frame_progress);
+  const slam::SlamResult result = slam::RunSlam(rig, input.names, load, options, frame_progress);
 
   json report;
-  report["artifacts"] = WriteArtifacts(rig, result, Timestamps(sequence.names, gt), output_dir);
+  report["artifacts"] = WriteArtifacts(rig, result, input.timestamps_s, output_dir);
+  report["input"] = input.source;
   report["num_frames"] = result.frames.size();
   report["num_tracked"] = result.num_tracked;
   report["num_lost"] = result.num_lost;
@@ -519,7 +760,8 @@ json RunSlamJob(const json& params, const JobContext& context) {
   std::optional<fs::path> ground_truth;
   if (parsed.ground_truth) ground_truth = context.dataset_dir / *parsed.ground_truth;
   return RunSlamOnDataset(rig, context.dataset_dir, context.image_names, options, ground_truth,
-                          context.output_dir, context.progress, context.log, parsed.dense_map);
+                          context.output_dir, context.progress, context.log, parsed.dense_map,
+                          parsed.frames);
 }
 
 void RegisterSlamJobType() {
@@ -530,6 +772,7 @@ void RegisterSlamJobType() {
   type.referenced_jobs = [](const json& params) {
     return std::vector<std::string>{SlamParamsFromJson(params).rig_job};
   };
+  type.check_dataset = CheckSlamDataset;
   type.run = RunSlamJob;
   RegisterJobType(std::move(type));
 }

@@ -2,13 +2,21 @@
 // The `slam` job type and the `omnirig slam` command: trajectory and metric map from a stereo
 // sequence (engine/slam/slam.h).
 //
-// Dataset: images named cam0/NAME and cam1/NAME, paired by NAME and ordered by NAME; optionally
-// a ground-truth trajectory (TUM format, one pose per frame in the same order).
+// Dataset: images named cam0/NAME and cam1/NAME, paired by NAME and ordered by NAME; or a
+// recording as videos (any container and codec OpenCV's FFmpeg back-end reads: .mp4 .m4v .mov
+// .mkv .webm .avi): cam0.EXT and cam1.EXT, or one stacked.EXT holding cam0 on top of cam1 in
+// every frame (engine/slam/video_source.h; frames paired by container timestamp, named
+// "t000012.345" by it). Optionally a ground-truth trajectory (TUM format): for images one pose
+// per image pair in the same order; for videos poses matched to the frames by timestamp.
 // Params (unknown fields are refused):
 //   {"rig": JOB_ID,                 a succeeded relative_pose job (its cam0_from_cam1, cameras)
 //    "ground_truth": "NAME.tum",    optional, a file of the dataset
 //    "options": {...},              optional, see SlamOptionsFromJson
-//    "dense_map": {"voxel_m": 0.02}} optional, see SlamParams::dense_map
+//    "dense_map": {"voxel_m": 0.02}, optional, see SlamParams::dense_map
+//    "frame_step": 1,               optional, every n-th stereo frame (images or videos)
+//    "start_s": 0, "end_s": 12.5,   optional, videos only: the time range (container time)
+//    "pair_tolerance_s": 0.005}     optional, videos only: pairing tolerance (default a
+//                                   quarter of the frame period)
 // Artifacts written to the output folder:
 //   trajectory.json  {"world_frame", "frames": [{"name", "state", "reason", "timestamp_s",
 //                     "world_from_rig": {"rotation_wxyz", "translation_m"} | null}], "rig"}
@@ -21,6 +29,10 @@
 //                    unknown 205)
 // Result:
 //   {"artifacts": {"trajectory_json", "trajectory_tum", "map_ply", "report_json"},
+//    "input": {"kind": "images", "frame_step", "num_frames", "num_image_pairs"} |
+//             {"kind": "video_pair" | "stacked_video", "files", "codec", "fps", "frame_count",
+//              "frame_size", "pair_tolerance_s", "frame_step", "num_frames",
+//              "timestamp_pass_s", "timestamp_pass_cpu_s" (the pass that pairs timestamps)},
 //    "num_frames", "num_tracked", "num_lost", "num_map_points", "frames_per_second",
 //    "frames": [{"name", "state", "reason", "motion_source", "num_features": [cam0, cam1],
 //                "num_stereo_points", "num_matches", "num_essential_inliers",
@@ -54,6 +66,7 @@
 #include "engine/dense/dense_map.h"
 #include "engine/geometry/camera_model.h"
 #include "engine/slam/slam.h"
+#include "engine/slam/video_source.h"
 
 namespace omnirig::api {
 
@@ -86,8 +99,23 @@ struct SlamParams {
   // keyframes along the trajectory into dense_map.ply and write occupancy.pgm + occupancy.yaml
   // (ROS map_server); the result's "dense_map" reports it.
   std::optional<dense::DenseMapOptions> dense_map;
+  // "frame_step", "start_s", "end_s", "pair_tolerance_s"; which of them were given (the time
+  // fields are refused on an image dataset).
+  slam::VideoFrameOptions frames;
+  bool video_only_fields = false;
 };
 SlamParams SlamParamsFromJson(const nlohmann::json& params);
+
+// The dataset's videos when it holds a recording (see above): nullopt when it holds none.
+// Throws InvalidArgument when it is ambiguous (two cam0 videos, a pair and a stacked video, or
+// videos and cam0/ cam1/ images together).
+std::optional<slam::StereoVideoFiles> FindStereoVideos(const std::filesystem::path& dataset_dir,
+                                                       const std::vector<std::string>& names);
+
+// The check at submission (JobType::check_dataset): a video dataset's files open, pair (frame
+// counts and rates) and have the rig's frame size, read from their headers; the video-only
+// params are refused on images. Throws InvalidArgument with the reason.
+void CheckSlamDataset(const nlohmann::json& params, const DatasetView& dataset);
 
 // The sequence's frames after the checks that run before any work.
 struct SlamSequence {
@@ -102,18 +130,19 @@ struct SlamSequence {
 SlamSequence PrepareSlamSequence(const StereoRig& rig, const std::filesystem::path& dataset_dir,
                                  const std::vector<std::string>& image_names);
 
-// Runs SLAM over a prepared dataset, writes the artifacts into output_dir and returns the
-// result JSON. A ground truth (TUM file) is read and checked (one pose per frame) before any
-// work. `log` may be empty.
-nlohmann::json RunSlamOnDataset(const StereoRig& rig, const std::filesystem::path& dataset_dir,
-                                const std::vector<std::string>& image_names,
-                                const slam::SlamOptions& options,
-                                const std::optional<std::filesystem::path>& ground_truth,
-                                const std::filesystem::path& output_dir,
-                                const ProgressSink& progress,
-                                const std::function<void(const std::string&)>& log,
-                                const std::optional<dense::DenseMapOptions>& dense_map =
-                                    std::nullopt);
+// Runs SLAM over a dataset of images or videos, writes the artifacts into output_dir and
+// returns the result JSON. A ground truth (TUM file) is read and checked (one pose per frame)
+// and a recording's timestamps are read and paired, before the first frame is processed.
+// `frame_options` selects frames (frame_step for both; the rest for videos). `log` may be
+// empty.
+nlohmann::json RunSlamOnDataset(
+    const StereoRig& rig, const std::filesystem::path& dataset_dir,
+    const std::vector<std::string>& image_names, const slam::SlamOptions& options,
+    const std::optional<std::filesystem::path>& ground_truth,
+    const std::filesystem::path& output_dir, const ProgressSink& progress,
+    const std::function<void(const std::string&)>& log,
+    const std::optional<dense::DenseMapOptions>& dense_map = std::nullopt,
+    const slam::VideoFrameOptions& frame_options = {});
 
 nlohmann::json RunSlamJob(const nlohmann::json& params, const JobContext& context);
 

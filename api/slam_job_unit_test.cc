@@ -225,5 +225,43 @@ TEST(SlamJobType, IsRegisteredAndValidates) {
   EXPECT_EQ(type->referenced_jobs({{"rig", "r1"}}), std::vector<std::string>{"r1"});
 }
 
+// The frame selection params: parsed, checked, and named when wrong.
+TEST(SlamParams, FrameSelection) {
+  const SlamParams parsed = SlamParamsFromJson({{"rig", "r"},
+                                                {"frame_step", 3},
+                                                {"start_s", 1.5},
+                                                {"end_s", 4},
+                                                {"pair_tolerance_s", 0.002}});
+  EXPECT_EQ(parsed.frames.frame_step, 3);
+  EXPECT_EQ(parsed.frames.start_s, 1.5);
+  EXPECT_EQ(parsed.frames.end_s, 4.0);
+  EXPECT_EQ(parsed.frames.pair_tolerance_s, 0.002);
+  EXPECT_TRUE(parsed.video_only_fields);
+  EXPECT_FALSE(SlamParamsFromJson({{"rig", "r"}, {"frame_step", 2}}).video_only_fields);
+  for (const json& bad : {json{{"frame_step", 0}}, json{{"frame_step", 1.5}},
+                          json{{"start_s", "1"}}, json{{"start_s", 5}, {"end_s", 2}}}) {
+    json params = bad;
+    params["rig"] = "r";
+    EXPECT_THROW(SlamParamsFromJson(params), InvalidArgument) << bad;
+  }
+}
+
+// Which files make a recording, and which mixtures are refused.
+TEST(FindStereoVideos, PairStackedAndAmbiguity) {
+  const fs::path dir = "/data";
+  EXPECT_FALSE(FindStereoVideos(dir, {"cam0/a.png", "cam1/a.png", "gt.tum"}));
+  const auto pair = FindStereoVideos(dir, {"CAM0.MP4", "cam1.mkv", "gt.tum"});
+  ASSERT_TRUE(pair);
+  EXPECT_EQ(pair->cam0, dir / "CAM0.MP4");
+  EXPECT_EQ(pair->cam1, dir / "cam1.mkv");
+  const auto stacked = FindStereoVideos(dir, {"stacked.avi", "notes.mp4"});
+  ASSERT_TRUE(stacked);
+  EXPECT_TRUE(stacked->stacked());
+  EXPECT_THROW(FindStereoVideos(dir, {"cam0.mp4", "cam0.mkv", "cam1.mp4"}), InvalidArgument);
+  EXPECT_THROW(FindStereoVideos(dir, {"cam0.mp4"}), InvalidArgument);
+  EXPECT_THROW(FindStereoVideos(dir, {"cam0.mp4", "cam1.mp4", "stacked.mp4"}), InvalidArgument);
+  EXPECT_THROW(FindStereoVideos(dir, {"cam0.mp4", "cam1.mp4", "cam0/a.png"}), InvalidArgument);
+}
+
 }  // namespace
 }  // namespace omnirig::api

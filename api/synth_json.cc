@@ -6,7 +6,12 @@
 #include <sstream>
 #include <stdexcept>
 
+#include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/videoio.hpp>
+
 #include "api/camera_json.h"
+#include "engine/util/check.h"
 
 namespace omnirig::api {
 namespace {
@@ -202,6 +207,55 @@ void WriteStereoSequence(const synth::StereoSequence& sequence, const std::strin
     std::filesystem::create_directories(folder);
     for (size_t i = 0; i < sequence.images[k].size(); ++i) {
       synth::WritePng(sequence.images[k][i], (folder / PngName(sequence.names[i])).string());
+    }
+  }
+  WriteText(StereoSequenceToJson(sequence, environment).dump(2) + "\n", root / "ground_truth.json");
+  WriteText(TrajectoryToTum(sequence), root / "trajectory.tum");
+}
+
+namespace {
+
+int FourCcOfFormat(const std::string& format) {
+  if (format == "mp4") return cv::VideoWriter::fourcc('m', 'p', '4', 'v');
+  if (format == "avi") return cv::VideoWriter::fourcc('M', 'J', 'P', 'G');
+  if (format == "mkv") return cv::VideoWriter::fourcc('F', 'F', 'V', '1');
+  throw InvalidArgument("video format must be mp4, avi or mkv, not '" + format + "'");
+}
+
+cv::Mat Bgr(const cv::Mat& image) {
+  if (image.channels() == 3) return image;
+  cv::Mat bgr;
+  cv::cvtColor(image, bgr, cv::COLOR_GRAY2BGR);
+  return bgr;
+}
+
+}  // namespace
+
+void WriteStereoSequenceVideos(const synth::StereoSequence& sequence,
+                               const std::string& environment, const std::string& dir,
+                               const std::string& format, bool stacked) {
+  const int fourcc = FourCcOfFormat(format);
+  OMNIRIG_CHECK(sequence.timestamps_s.size() >= 2 && !sequence.images[0].empty(),
+                "a video needs at least two frames");
+  const double fps = 1.0 / (sequence.timestamps_s[1] - sequence.timestamps_s[0]);
+  const std::filesystem::path root(dir);
+  std::filesystem::create_directories(root);
+  const cv::Size size = sequence.images[0][0].size();
+  const std::vector<std::string> files =
+      stacked ? std::vector<std::string>{"stacked." + format}
+              : std::vector<std::string>{"cam0." + format, "cam1." + format};
+  for (size_t f = 0; f < files.size(); ++f) {
+    const cv::Size frame_size(size.width, stacked ? 2 * size.height : size.height);
+    cv::VideoWriter writer((root / files[f]).string(), cv::CAP_FFMPEG, fourcc, fps, frame_size);
+    if (!writer.isOpened()) throw std::runtime_error("cannot write " + files[f]);
+    for (size_t i = 0; i < sequence.images[0].size(); ++i) {
+      if (!stacked) {
+        writer.write(Bgr(sequence.images[f][i]));
+        continue;
+      }
+      cv::Mat both;
+      cv::vconcat(Bgr(sequence.images[0][i]), Bgr(sequence.images[1][i]), both);
+      writer.write(both);
     }
   }
   WriteText(StereoSequenceToJson(sequence, environment).dump(2) + "\n", root / "ground_truth.json");

@@ -60,4 +60,14 @@ void WriteStereoBoardSet(const synth::StereoBoardSet& set, const std::string& di
 void WriteStereoSequence(const synth::StereoSequence& sequence, const std::string& environment,
                          const std::string& dir);
 
+// The sequence as videos instead of PNG folders, with the same ground_truth.json and
+// trajectory.tum: DIR/cam0.EXT and DIR/cam1.EXT, or with `stacked` one DIR/stacked.EXT (cam0 on
+// top of cam1). `format`: "mp4" (MPEG-4 part 2, 'mp4v', lossy), "avi" (Motion JPEG, lossy) or
+// "mkv" (FFV1, lossless): codecs Debian's OpenCV writes through FFmpeg. The frame rate is
+// 1 / the sequence's frame interval, so the containers' timestamps are the ground truth's.
+// Throws InvalidArgument for another format, std::runtime_error when the writer cannot open.
+void WriteStereoSequenceVideos(const synth::StereoSequence& sequence,
+                               const std::string& environment, const std::string& dir,
+                               const std::string& format, bool stacked);
+
 }  // namespace omnirig::api

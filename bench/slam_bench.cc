@@ -6,7 +6,10 @@
 //
 // End to end means from encoded images to the trajectory: the frames are PNG-encoded in memory
 // beforehand (as `omnirig synth` writes them) and decoded by the loader inside the timed run
-// (--no-decode hands SLAM the rendered images instead).
+// (--no-decode hands SLAM the rendered images instead). With --video mp4|avi|mkv the frames are
+// written as cam0.EXT and cam1.EXT (mp4v, MJPG or lossless FFV1, as `omnirig synth --video`)
+// before the timed run, which then pairs their timestamps (one pass, reported apart) and decodes
+// them frame by frame (engine/slam/video_source.h).
 //
 // After the timed run, two untimed ones with a wrong calibration (slam::PerturbedCalibration:
 // focal +0.5 %, principal points 1-1.5 px off, cam1 turned 0.2 deg; the stereo gate widened
@@ -15,8 +18,9 @@
 //
 // usage: bench_slam [--frames N] [--width W] [--height H] [--threads T] [--street]
 //                   [--max-features N] [--local-window N] [--local-iterations N] [--no-decode]
-//                   [--black-frame I] [--no-calibration-runs]
+//                   [--black-frame I] [--no-calibration-runs] [--video mp4|avi|mkv]
 
+#include <unistd.h>
 #include <algorithm>
 #include <cstdio>
 #include <cstdlib>
@@ -25,12 +29,17 @@
 #include <string>
 #include <vector>
 
+#include <filesystem>
+#include <memory>
+
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/videoio.hpp>
 
 #include "engine/slam/evaluation.h"
 #include "engine/slam/sequence_accuracy.h"
 #include "engine/slam/slam.h"
 #include "engine/slam/surface_distance.h"
+#include "engine/slam/video_source.h"
 #include "engine/synth/presets.h"
 #include "engine/util/timer.h"
 
@@ -49,6 +58,7 @@ struct Args {
   int local_iterations = -1;
   int black_frame = -1;  // this frame's cam0 image is replaced by a black one (tracking loss)
   bool calibration_runs = true;
+  std::string video;  // "", "mp4", "avi", "mkv"
 };
 
 Args ParseArgs(int argc, char** argv) {
@@ -64,6 +74,8 @@ Args ParseArgs(int argc, char** argv) {
     else if (a == "--no-decode") args.decode = false;
     else if (a == "--black-frame") args.black_frame = next();
     else if (a == "--no-calibration-runs") args.calibration_runs = false;
+    else if (a == "--video" && i + 1 < argc)
+      args.video = argv[++i];
     else if (a == "--max-features") args.max_features = next();
     else if (a == "--local-window") args.local_window = next();
     else if (a == "--local-iterations") args.local_iterations = next();
@@ -111,6 +123,23 @@ void CalibrationRuns(const Args& args, const synth::StereoSequence& sequence,
   }
 }
 
+// Writes the sequence as DIR/cam0.EXT and DIR/cam1.EXT at 1 / frame interval frames/s.
+slam::StereoVideoFiles WriteVideos(const synth::StereoSequence& sequence, const std::string& format,
+                                   const std::filesystem::path& dir) {
+  std::filesystem::create_directories(dir);
+  const int fourcc = format == "mkv"   ? cv::VideoWriter::fourcc('F', 'F', 'V', '1')
+                     : format == "avi" ? cv::VideoWriter::fourcc('M', 'J', 'P', 'G')
+                                       : cv::VideoWriter::fourcc('m', 'p', '4', 'v');
+  const double fps = 1.0 / (sequence.timestamps_s[1] - sequence.timestamps_s[0]);
+  slam::StereoVideoFiles files{dir / ("cam0." + format), dir / ("cam1." + format)};
+  for (int c = 0; c < 2; ++c) {
+    cv::VideoWriter writer((c == 0 ? files.cam0 : files.cam1).string(), cv::CAP_FFMPEG, fourcc, fps,
+                           sequence.images[c][0].size());
+    for (const cv::Mat& image : sequence.images[c]) writer.write(image);
+  }
+  return files;
+}
+
 int Run(const Args& args) {
   synth::StereoSequenceOptions sequence_options;
   sequence_options.num_frames = args.frames;
@@ -135,13 +164,36 @@ int Run(const Args& args) {
       }
     }
   }
-  auto load = [&](int i) {
+  auto decoded_load = [&](int i) {
     if (!args.decode) return slam::StereoImages{sequence.images[0][i], sequence.images[1][i]};
     return slam::StereoImages{cv::imdecode(png[0][i], cv::IMREAD_COLOR),
                               cv::imdecode(png[1][i], cv::IMREAD_COLOR)};
   };
 
+  std::unique_ptr<slam::StereoVideoReader> reader;
+  slam::StereoVideoFiles video_files;
+  if (!args.video.empty()) {
+    video_files = WriteVideos(sequence, args.video,
+                              std::filesystem::temp_directory_path() /
+                                  ("omnirig_bench_slam_" + std::to_string(::getpid())));
+    std::printf("wrote %s and %s (%.1f + %.1f MB)\n", video_files.cam0.c_str(),
+                video_files.cam1.c_str(), std::filesystem::file_size(video_files.cam0) / 1e6,
+                std::filesystem::file_size(video_files.cam1) / 1e6);
+  }
   const std::clock_t cpu_start = std::clock();
+  if (!args.video.empty()) {
+    const Timer pass_timer;
+    const std::clock_t pass_cpu_start = std::clock();
+    reader = std::make_unique<slam::StereoVideoReader>(
+        video_files, slam::PairStereoVideoFrames(video_files, slam::VideoFrameOptions()));
+    std::printf("timestamp pass (read + pair every frame's time): %.3f s wall, %.3f s CPU\n",
+                pass_timer.ElapsedSeconds(),
+                static_cast<double>(std::clock() - pass_cpu_start) / CLOCKS_PER_SEC);
+  }
+  const slam::StereoFrameLoader load = [&](int i) {
+    if (reader) return reader->Load(i);
+    return decoded_load(i);
+  };
   slam::SlamOptions options;
   options.num_threads = args.threads;
   if (args.max_features >= 0) options.features.max_features = args.max_features;
@@ -210,7 +262,10 @@ int Run(const Args& args) {
   const struct {
     const char* name;
     double wall_s, cpu_s;
-  } stages[] = {{args.decode ? "load (PNG decode)" : "load", t.load_s, c.load_s},
+  } stages[] = {{!args.video.empty() ? "load (video decode)"
+                 : args.decode       ? "load (PNG decode)"
+                                     : "load",
+                 t.load_s, c.load_s},
                 {"detect (mask + SIFT)", t.detect_s, c.detect_s},
                 {"stereo match + triangulate", t.stereo_s, c.stereo_s},
                 {"temporal match", t.match_s, c.match_s},
@@ -233,6 +288,7 @@ int Run(const Args& args) {
   std::printf("CPU per frame %.3f s; on 2 idle cores that is at best %.1f frames/s\n",
               result.total_cpu_s / args.frames, 2.0 * args.frames / result.total_cpu_s);
   if (args.calibration_runs) CalibrationRuns(args, sequence, load);
+  if (!args.video.empty()) std::filesystem::remove_all(video_files.cam0.parent_path());
   return 0;
 }
 

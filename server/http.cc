@@ -431,6 +431,7 @@ void HttpServer::Impl::Dispatch(const RouteInfo& route, std::map<std::string, st
     route.handler(request, response);
   } catch (const HttpError& e) {
     response = HttpResponse{};
+    response.headers = e.headers;
     response.Json(e.status, api::ErrorJson(e.code, e.what(), e.details));
   } catch (const InvalidArgument& e) {
     if (!e.where().empty()) {

@@ -31,6 +31,8 @@ class HttpError : public std::runtime_error {
   int status;
   std::string code;
   nlohmann::json details;
+  // Sent with the error (e.g. a resumable upload's Upload-Offset on 409).
+  std::multimap<std::string, std::string> headers;
 };
 
 // One part of a multipart/form-data body, as announced before its bytes arrive.

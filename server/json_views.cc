@@ -9,6 +9,7 @@ nlohmann::json DatasetJson(const storage::DatasetRecord& dataset) {
           {"name", dataset.name},
           {"created_at", api::TimeJson(dataset.created_at)},
           {"image_count", dataset.image_count},
+          {"video_count", dataset.video_count},
           {"total_bytes", dataset.total_bytes}};
 }
 

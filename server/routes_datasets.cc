@@ -1,8 +1,12 @@
-// Datasets and their images: create, list, get, delete; idempotent PUT of one image and
+// Datasets and their files (images, videos, .tum trajectories): create, list, get, delete;
+// idempotent PUT of one file, resumable PUT of a large one in chunks (Content-Range), and
 // multipart POST of many, streamed to disk with limits checked before the body is read.
 
 #include <algorithm>
+#include <cstdio>
 #include <cstdlib>
+#include <fstream>
+#include <optional>
 #include <set>
 
 #include "api/service_json.h"
@@ -11,6 +15,8 @@
 #include "storage/atomic_file.h"
 #include "storage/image_header.h"
 #include "storage/names.h"
+#include "storage/upload_part.h"
+#include "storage/video_container.h"
 
 namespace omnirig::server {
 namespace {
@@ -70,6 +76,56 @@ storage::DatasetRecord CurrentDataset(ServiceState& state, const std::string& id
   return *dataset;
 }
 
+// Images, and one kind of text file: a ground-truth trajectory in TUM format (NAME.tum) that a
+// slam job can evaluate against; the job parses it and names any bad line.
+storage::ImageHeader ProbeUpload(const std::string& name, const std::string& head) {
+  const std::string suffix = ".tum";
+  if (name.size() > suffix.size() &&
+      name.compare(name.size() - suffix.size(), suffix.size(), suffix) == 0) {
+    storage::ImageHeader header;
+    const bool text = std::all_of(head.begin(), head.end(), [](char c) {
+      return c == '\n' || c == '\r' || c == '\t' || (c >= 32 && c < 127);
+    });
+    header.status =
+        text ? storage::ImageHeader::Status::kOk : storage::ImageHeader::Status::kNotAnImage;
+    header.format = "tum";
+    header.content_type = "text/plain";
+    header.problem = text ? "" : "a .tum trajectory must be plain text";
+    return header;
+  }
+  return storage::ProbeImageHeader(head);
+}
+
+// The largest upload of a file of this name: videos have their own limit.
+int64_t MaxFileBytes(const ServiceState& state, const std::string& name) {
+  return storage::IsVideoName(name) ? state.options.max_video_bytes : state.options.max_file_bytes;
+}
+
+// The record of a video whose bytes are at `path` (415 when it is no container omnirig reads,
+// 422 when its structure is incomplete; storage/video_container.h). Width and height stay 0:
+// only the job's decoder knows them.
+storage::ImageRecord VideoRecord(const std::string& name, const std::filesystem::path& path,
+                                 const storage::FileDigest& digest) {
+  const storage::VideoContainer video = storage::CheckVideoContainer(path);
+  if (video.status == storage::VideoContainer::Status::kNotAVideo) {
+    throw HttpError(415, "unsupported_media_type", name + ": " + video.problem, {{"name", name}});
+  }
+  if (video.status == storage::VideoContainer::Status::kCorrupt) {
+    throw HttpError(422, "corrupt_video", name + ": " + video.problem, {{"name", name}});
+  }
+  return storage::ImageRecord{name, digest.size, digest.sha256, 0, 0, video.content_type};
+}
+
+// Under files_mutex: 413 when a new image would exceed the dataset's image limit (videos and
+// files replacing one of the same name take no new place).
+void CheckImageLimit(ServiceState& state, const std::string& dataset_id, const std::string& name) {
+  const storage::DatasetRecord current = CurrentDataset(state, dataset_id);
+  if (!storage::IsVideoName(name) && current.image_count >= state.options.max_images_per_dataset &&
+      !state.store->GetImage(dataset_id, name)) {
+    TooManyImages(current, state.options.max_images_per_dataset);
+  }
+}
+
 // One image on its way to disk: streamed into an atomic temporary file while the first bytes
 // are kept for the header check; sealed (fsynced under its temporary name) once it passed, and
 // put into place (rename) with its record only when everything passed.
@@ -82,10 +138,13 @@ class ImageUpload {
         writer_(state.data_dir->ImagesDir(dataset.id) / name_) {}
 
   void Append(const char* data, size_t size) {
-    if (writer_.bytes_written() + static_cast<int64_t>(size) > state_.options.max_file_bytes) {
-      TooLarge("image " + name_ + " is larger than " +
-                   std::to_string(state_.options.max_file_bytes) + " bytes",
-               state_.options.max_file_bytes);
+    const int64_t limit = MaxFileBytes(state_, name_);
+    if (writer_.bytes_written() + static_cast<int64_t>(size) > limit) {
+      TooLarge(name_ + " is larger than " + std::to_string(limit) + " bytes", limit);
+    }
+    if (video_) {
+      writer_.Append(data, size);
+      return;
     }
     if (head_.size() < storage::kImageProbeBytes) {
       head_.append(data, std::min(size, storage::kImageProbeBytes - head_.size()));
@@ -97,7 +156,12 @@ class ImageUpload {
   // Checks the header (415 or 422 for what is not an image) and seals the file: written and
   // fsynced under its temporary name, holding no descriptor. Returns the record it will have.
   const storage::ImageRecord& Seal() {
-    const storage::ImageHeader header = ProbeUpload();
+    if (video_) {
+      const storage::FileDigest digest = writer_.Seal();
+      record_ = VideoRecord(name_, writer_.temp_path(), digest);
+      return record_;
+    }
+    const storage::ImageHeader header = ProbeUpload(name_, head_);
     if (header.status == storage::ImageHeader::Status::kNotAnImage) {
       throw HttpError(415, "unsupported_media_type", name_ + ": " + header.problem,
                       {{"name", name_}});
@@ -126,11 +190,7 @@ class ImageUpload {
   storage::ImageRecord Commit() {
     Seal();
     std::lock_guard<std::mutex> lock(state_.files_mutex);
-    const storage::DatasetRecord current = CurrentDataset(state_, dataset_.id);
-    if (current.image_count >= state_.options.max_images_per_dataset &&
-        !state_.store->GetImage(dataset_.id, name_)) {
-      TooManyImages(current, state_.options.max_images_per_dataset);
-    }
+    CheckImageLimit(state_, dataset_.id, name_);
     Publish(/*sync_folder=*/true);
     state_.store->PutImage(dataset_.id, record_);
     return record_;
@@ -141,30 +201,11 @@ class ImageUpload {
   const std::filesystem::path& final_path() const { return writer_.final_path(); }
 
  private:
-  // Images, and one kind of text file: a ground-truth trajectory in TUM format (NAME.tum) that a
-  // slam job can evaluate against; the job parses it and names any bad line.
-  storage::ImageHeader ProbeUpload() const {
-    const std::string suffix = ".tum";
-    if (name_.size() > suffix.size() &&
-        name_.compare(name_.size() - suffix.size(), suffix.size(), suffix) == 0) {
-      storage::ImageHeader header;
-      const bool text = std::all_of(head_.begin(), head_.end(), [](char c) {
-        return c == '\n' || c == '\r' || c == '\t' || (c >= 32 && c < 127);
-      });
-      header.status = text ? storage::ImageHeader::Status::kOk
-                           : storage::ImageHeader::Status::kNotAnImage;
-      header.format = "tum";
-      header.content_type = "text/plain";
-      header.problem = text ? "" : "a .tum trajectory must be plain text";
-      return header;
-    }
-    return storage::ProbeImageHeader(head_);
-  }
-
   ServiceState& state_;
   storage::DatasetRecord dataset_;
   std::string name_;
   storage::AtomicFileWriter writer_;
+  bool video_ = storage::IsVideoName(name_);
   std::string head_;
   storage::ImageCompletenessCheck completeness_;
   storage::ImageRecord record_;  // set by Seal()
@@ -219,8 +260,10 @@ std::set<std::string> ImageBatch::KeepWhatFits(std::vector<std::string>& over_li
   for (; fitting < sealed_.size(); ++fitting) {
     const std::string& name = sealed_[fitting]->name();
     if (new_names.count(name) || state_.store->GetImage(dataset_.id, name)) continue;
-    if (count >= state_.options.max_images_per_dataset) break;
-    ++count;
+    if (!storage::IsVideoName(name)) {
+      if (count >= state_.options.max_images_per_dataset) break;
+      ++count;
+    }
     new_names.insert(name);
   }
   for (size_t i = fitting; i < sealed_.size(); ++i) over_limit.push_back(sealed_[i]->name());
@@ -265,14 +308,201 @@ std::vector<storage::ImageRecord> ImageBatch::Commit(std::vector<std::string>& o
   return records;
 }
 
+// ---- resumable uploads (PUT with Content-Range; storage/upload_part.h) -----------------------
+
+struct ContentRange {
+  int64_t first = 0, last = 0, total = 0;
+  int64_t length() const { return last - first + 1; }
+};
+
+// "bytes FIRST-LAST/TOTAL", with 0 <= FIRST <= LAST < TOTAL; 400 otherwise.
+ContentRange ParseContentRange(const std::string& text) {
+  ContentRange range;
+  long long first = -1, last = -1, total = -1;
+  int consumed = 0;
+  if (std::sscanf(text.c_str(), "bytes %lld-%lld/%lld%n", &first, &last, &total, &consumed) != 3 ||
+      consumed != static_cast<int>(text.size()) || first < 0 || last < first || total <= last) {
+    throw HttpError(400, "invalid_argument",
+                    "Content-Range must be 'bytes FIRST-LAST/TOTAL' with 0 <= FIRST <= LAST < "
+                    "TOTAL, got '" +
+                        text + "'");
+  }
+  range.first = first;
+  range.last = last;
+  range.total = total;
+  return range;
+}
+
+std::filesystem::path UploadsDir(const ServiceState& state, const std::string& dataset_id) {
+  return state.data_dir->DatasetDir(dataset_id) / "uploads";
+}
+
+// What the server holds of an upload, as JSON (and its Upload-Offset header).
+nlohmann::json UploadStatusJson(const std::string& name, const storage::UploadPartStatus& part,
+                                const std::optional<storage::ImageRecord>& stored) {
+  return {{"name", name},
+          {"received_bytes", part.received_bytes},
+          {"total_bytes", part.total_bytes ? nlohmann::json(*part.total_bytes) : nullptr},
+          {"stored", stored ? ImageJson(*stored) : nlohmann::json(nullptr)}};
+}
+
+// The record of a complete file on disk, checked as a plain PUT checks its body: a video's
+// container, or an image's header and completeness (read once, in blocks).
+storage::ImageRecord CheckCompleteFile(const std::string& name, const std::filesystem::path& path) {
+  const storage::FileDigest digest = storage::DigestFile(path);
+  if (storage::IsVideoName(name)) return VideoRecord(name, path, digest);
+  std::ifstream in(path, std::ios::binary);
+  std::string head, block(1 << 20, '\0');
+  storage::ImageCompletenessCheck completeness;
+  while (in.read(block.data(), static_cast<std::streamsize>(block.size())) || in.gcount() > 0) {
+    const size_t got = static_cast<size_t>(in.gcount());
+    if (head.size() < storage::kImageProbeBytes) {
+      head.append(block.data(), std::min(got, storage::kImageProbeBytes - head.size()));
+    }
+    completeness.Append(block.data(), got);
+  }
+  const storage::ImageHeader header = ProbeUpload(name, head);
+  if (header.status == storage::ImageHeader::Status::kNotAnImage) {
+    throw HttpError(415, "unsupported_media_type", name + ": " + header.problem, {{"name", name}});
+  }
+  std::string problem =
+      header.status == storage::ImageHeader::Status::kCorrupt ? header.problem : "";
+  if (problem.empty() && header.format != "tum") problem = completeness.Finish(header, head);
+  if (!problem.empty())
+    throw HttpError(422, "corrupt_image", name + ": " + problem, {{"name", name}});
+  return storage::ImageRecord{name,         digest.size,   digest.sha256,
+                              header.width, header.height, header.content_type};
+}
+
+// The checks of a chunk before its body is read: sizes (413 with the limit), the declared
+// length, the dataset's room.
+void CheckChunk(ServiceState& state, const storage::DatasetRecord& dataset, const std::string& name,
+                const ContentRange& range, const HttpRequest& request) {
+  const int64_t limit = MaxFileBytes(state, name);
+  if (range.total > limit)
+    TooLarge(name + " is larger than " + std::to_string(limit) + " bytes", limit);
+  if (range.length() > state.options.max_chunk_bytes) {
+    TooLarge("a chunk of " + std::to_string(range.length()) + " bytes is larger than the " +
+                 std::to_string(state.options.max_chunk_bytes) +
+                 " bytes this server takes at once: send the file in smaller chunks",
+             state.options.max_chunk_bytes);
+  }
+  const auto length = DeclaredLength(request);
+  if (length && *length != range.length()) {
+    throw HttpError(400, "invalid_argument",
+                    "Content-Length " + std::to_string(*length) + " differs from the " +
+                        std::to_string(range.length()) + " bytes of the Content-Range");
+  }
+  CheckRoom(state, dataset, range.total - range.first);
+}
+
+[[noreturn]] void OffsetMismatch(const std::string& name, int64_t have, int64_t total,
+                                 int64_t first) {
+  HttpError error(409, "upload_offset_mismatch",
+                  "the server has " + std::to_string(have) + " bytes of " + name +
+                      ", but this chunk starts at byte " + std::to_string(first) +
+                      ": send the chunk that starts at " + std::to_string(have),
+                  {{"name", name}, {"received_bytes", have}, {"total_bytes", total}});
+  error.headers.emplace("Upload-Offset", std::to_string(have));
+  throw error;
+}
+
+// The part is whole: check it, rename it into the images folder and record it.
+void CompleteUpload(ServiceState& state, const std::string& dataset_id, const std::string& name,
+                    storage::UploadPartWriter& part, HttpResponse& response) {
+  part.Sync();
+  storage::ImageRecord record;
+  try {
+    record = CheckCompleteFile(name, part.path());
+  } catch (const HttpError&) {
+    part.Remove();  // refused content: the client starts over
+    throw;
+  }
+  std::lock_guard<std::mutex> lock(state.files_mutex);
+  CheckImageLimit(state, dataset_id, name);
+  const bool replaced = state.store->GetImage(dataset_id, name).has_value();
+  part.Publish(state.data_dir->ImagesDir(dataset_id) / name);
+  state.store->PutImage(dataset_id, record);
+  response.Json(replaced ? 200 : 201, ImageJson(record));
+}
+
+// PUT .../images/{name} with Content-Range: appends the chunk to the upload's part when it
+// starts where the part ends (409 with the part's size otherwise); 202 with the size while
+// incomplete; the last chunk publishes the file (201/200 as a plain PUT, or its 415/422).
+// A chunk at byte 0 starts the upload over. A body cut short keeps what arrived.
+void PutChunk(ServiceState& state, const storage::DatasetRecord& dataset, const std::string& name,
+              const HttpRequest& request, HttpResponse& response) {
+  const ContentRange range = ParseContentRange(request.header("Content-Range"));
+  CheckChunk(state, dataset, name, range, request);
+  const std::filesystem::path uploads = UploadsDir(state, dataset.id);
+  if (range.first == 0) {
+    storage::RemoveUploadParts(uploads, name, range.total);
+  } else if (const auto held = storage::FindUploadPart(uploads, name);
+             held.total_bytes && *held.total_bytes != range.total) {
+    OffsetMismatch(name, 0, range.total, range.first);  // another file's part: start over
+  }
+  std::optional<storage::UploadPartWriter> part;
+  try {
+    part.emplace(uploads, name, range.total);
+  } catch (const storage::UploadBusy& e) {
+    throw HttpError(409, "upload_busy", e.what(), {{"name", name}});
+  }
+  if (range.first == 0) part->Truncate();
+  if (part->size() != range.first) OffsetMismatch(name, part->size(), range.total, range.first);
+  std::exception_ptr failure;
+  const bool whole = request.read_body([&](const char* data, size_t size) {
+    try {
+      if (part->size() + static_cast<int64_t>(size) > range.last + 1) {
+        throw HttpError(400, "invalid_argument", "the body is longer than its Content-Range");
+      }
+      part->Append(data, size);
+      return true;
+    } catch (...) {
+      failure = std::current_exception();
+      return false;
+    }
+  });
+  part->Sync();
+  if (failure) std::rethrow_exception(failure);
+  if (!whole || part->size() != range.last + 1) {
+    throw HttpError(400, "incomplete_body",
+                    "the chunk ended after " + std::to_string(part->size() - range.first) + " of " +
+                        std::to_string(range.length()) + " bytes; the server keeps them",
+                    {{"received_bytes", part->size()}});
+  }
+  if (part->size() == range.total) return CompleteUpload(state, dataset.id, name, *part, response);
+  response.headers.emplace("Upload-Offset", std::to_string(part->size()));
+  response.Json(202, UploadStatusJson(name, {part->size(), range.total}, std::nullopt));
+}
+
+void GetUpload(ServiceState& state, const HttpRequest& request, HttpResponse& response) {
+  const storage::DatasetRecord dataset = RequireDataset(state, request.Param("id"));
+  const std::string name = CheckedName(request.Param("name"));
+  const storage::UploadPartStatus part =
+      storage::FindUploadPart(UploadsDir(state, dataset.id), name);
+  response.headers.emplace("Upload-Offset", std::to_string(part.received_bytes));
+  response.headers.emplace("Cache-Control", "no-store");
+  response.Json(200, UploadStatusJson(name, part, state.store->GetImage(dataset.id, name)));
+}
+
+void DeleteUpload(ServiceState& state, const HttpRequest& request, HttpResponse& response) {
+  const storage::DatasetRecord dataset = RequireDataset(state, request.Param("id"));
+  const std::string name = CheckedName(request.Param("name"));
+  if (storage::RemoveUploadParts(UploadsDir(state, dataset.id), name) == 0) {
+    throw HttpError(404, "upload_not_found", "no upload of " + name + " in progress");
+  }
+  response.status = 204;
+}
+
 void PutImage(ServiceState& state, const HttpRequest& request, HttpResponse& response) {
   const storage::DatasetRecord dataset = RequireDataset(state, request.Param("id"));
   const std::string name = CheckedName(request.Param("name"));
+  if (!request.header("Content-Range").empty())
+    return PutChunk(state, dataset, name, request, response);
   const auto length = DeclaredLength(request);
-  if (length && *length > state.options.max_file_bytes) {
-    TooLarge("image " + name + " is larger than " + std::to_string(state.options.max_file_bytes) +
-                 " bytes",
-             state.options.max_file_bytes);
+  if (length && *length > MaxFileBytes(state, name)) {
+    TooLarge(name + " is larger than " + std::to_string(MaxFileBytes(state, name)) + " bytes",
+             MaxFileBytes(state, name));
   }
   const auto previous = state.store->GetImage(dataset.id, name);
   CheckRoom(state, dataset, length.value_or(0) - (previous ? previous->size : 0));
@@ -438,6 +668,14 @@ void AddDatasetRoutes(HttpServer& http, ServiceState& state) {
         PostImages(state, request, response);
       },
       /*streaming=*/true);
+  http.Route("GET", "/api/v1/datasets/{id}/uploads/{name+}",
+             [&state](const HttpRequest& request, HttpResponse& response) {
+               GetUpload(state, request, response);
+             });
+  http.Route("DELETE", "/api/v1/datasets/{id}/uploads/{name+}",
+             [&state](const HttpRequest& request, HttpResponse& response) {
+               DeleteUpload(state, request, response);
+             });
   http.Route("GET", "/api/v1/datasets/{id}/images/{name+}",
              [&state](const HttpRequest& request, HttpResponse& response) {
                GetImage(state, request, response);

@@ -1,6 +1,7 @@
 // Jobs: create (validated by the job type), list, get (with ETag), cancel, delete, retry, result
 // and artifacts (with Content-Length, ETag and Range), and their changes as Server-Sent Events.
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -51,6 +52,28 @@ void CheckReferencedJobs(ServiceState& state, const api::JobType& type,
   }
 }
 
+// The job type's own look at the dataset (e.g. a slam job's videos): 422 with the reason.
+void CheckDataset(ServiceState& state, const api::JobType& type,
+                  const api::CreateJobRequest& request) {
+  api::DatasetView view;
+  view.dataset_id = request.dataset;
+  view.dataset_dir = state.data_dir->ImagesDir(request.dataset);
+  for (const auto& image : state.store->ListImages(request.dataset)) {
+    view.file_names.push_back(image.name);
+  }
+  std::sort(view.file_names.begin(), view.file_names.end());
+  view.load_result = [&state](const std::string& id) {
+    const auto result = state.store->GetResult(id);
+    if (!result) throw InvalidArgument("job " + id + " has no result");
+    return nlohmann::json::parse(*result);
+  };
+  try {
+    type.check_dataset(request.params, view);
+  } catch (const InvalidArgument& e) {
+    throw HttpError(422, "invalid_input", e.what(), {{"dataset", request.dataset}});
+  }
+}
+
 void CreateJob(ServiceState& state, const HttpRequest& request, HttpResponse& response) {
   const api::CreateJobRequest parsed = api::ParseCreateJobRequest(request.body);
   const api::JobType* type = api::FindJobType(parsed.type);
@@ -75,12 +98,13 @@ void CreateJob(ServiceState& state, const HttpRequest& request, HttpResponse& re
   }
   CheckReferencedJobs(state, *type, parsed.params);
   // A job on an empty dataset would be queued only to fail once it ran.
-  if (type->reads_images && dataset->image_count == 0) {
+  if (type->reads_images && dataset->image_count + dataset->video_count == 0) {
     throw HttpError(
         422, "dataset_empty",
         "dataset " + parsed.dataset + " has no images: upload them before creating a job",
         {{"dataset", parsed.dataset}});
   }
+  if (type->check_dataset) CheckDataset(state, *type, parsed);
   const int64_t queued = state.store->CountJobsByState().at(storage::JobState::kQueued);
   if (queued >= state.options.max_queued_jobs) {
     response.headers.emplace("Retry-After", "10");

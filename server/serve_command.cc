@@ -54,6 +54,9 @@ void DeclareOptions(cli::ArgParser& parser) {
   parser.AddOption("lease-seconds", "30",
                    "a running job's lease: a worker silent this long loses the job to another");
   parser.AddOption("max-file-mb", "256", "largest image upload, MB");
+  parser.AddOption("max-video-mb", "8192", "largest video upload, MB");
+  parser.AddOption("max-chunk-mb", "64",
+                   "largest chunk of a resumable upload (PUT with Content-Range), MB");
   parser.AddOption("max-dataset-mb", "8192", "largest dataset, MB");
   parser.AddOption("max-images", "20000", "most images in one dataset");
   parser.AddOption("max-queued-jobs", "1000", "most jobs waiting in the queue (then 503)");
@@ -104,6 +107,8 @@ ServiceOptions ToOptions(const cli::ArgParser& parser) {
   options.max_attempts = parser.GetInt("max-attempts");
   options.lease_s = parser.GetDouble("lease-seconds");
   options.max_file_bytes = Megabytes(parser, "max-file-mb");
+  options.max_video_bytes = Megabytes(parser, "max-video-mb");
+  options.max_chunk_bytes = Megabytes(parser, "max-chunk-mb");
   options.max_dataset_bytes = Megabytes(parser, "max-dataset-mb");
   options.max_images_per_dataset = parser.GetInt("max-images");
   options.max_queued_jobs = parser.GetInt("max-queued-jobs");

@@ -25,6 +25,8 @@ void ServiceOptions::Check() const {
   OMNIRIG_CHECK(max_attempts >= 1, "--max-attempts must be at least 1");
   OMNIRIG_CHECK(max_file_bytes > 0 && max_dataset_bytes >= max_file_bytes,
                 "--max-file-mb must be positive and at most --max-dataset-mb");
+  OMNIRIG_CHECK(max_video_bytes > 0, "--max-video-mb must be positive");
+  OMNIRIG_CHECK(max_chunk_bytes >= (64 << 10), "--max-chunk-mb must be at least 64 KiB");
   OMNIRIG_CHECK(max_images_per_dataset >= 1 && max_queued_jobs >= 1,
                 "--max-images and --max-queued-jobs must be at least 1");
   OMNIRIG_CHECK(min_free_bytes >= 0, "--min-free-mb must not be negative");

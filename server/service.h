@@ -33,7 +33,11 @@ struct ServiceOptions {
   bool worker_idle_scheduling = false;  // SCHED_IDLE for worker (and solver) threads
   int worker_nice = 0;                  // niceness of worker (and solver) threads
   int max_attempts = 3;  // runs started before a crash-looping job fails
-  int64_t max_file_bytes = 256LL << 20;
+  int64_t max_file_bytes = 256LL << 20;  // an image (or .tum) upload
+  int64_t max_video_bytes = 8LL << 30;   // a video upload (mp4, mkv, avi, ...)
+  // A resumable upload's chunk (PUT with Content-Range) at most: the client sends a large file
+  // in pieces this size or smaller; the server never holds more than a buffer of one.
+  int64_t max_chunk_bytes = 64LL << 20;
   int64_t max_dataset_bytes = 8LL << 30;
   int64_t max_images_per_dataset = 20000;
   int64_t max_queued_jobs = 1000;

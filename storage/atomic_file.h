@@ -38,6 +38,8 @@ class AtomicFileWriter {
   // (a batch of renames fsyncs each folder once instead); returns what was written.
   FileDigest Commit(bool sync_folder = true);
   const std::filesystem::path& final_path() const { return final_path_; }
+  // Where the content is until Commit() (readable once sealed, e.g. to check it).
+  const std::filesystem::path& temp_path() const { return temp_path_; }
 
  private:
   void Flush();

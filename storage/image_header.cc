@@ -392,6 +392,11 @@ std::string ContentTypeForName(const std::string& name) {
   if (ext == "ply") return "application/octet-stream";
   if (ext == "yml" || ext == "yaml") return "application/yaml";
   if (ext == "svg") return "image/svg+xml";
+  if (ext == "mp4" || ext == "m4v") return "video/mp4";
+  if (ext == "mov") return "video/quicktime";
+  if (ext == "mkv") return "video/x-matroska";
+  if (ext == "webm") return "video/webm";
+  if (ext == "avi") return "video/x-msvideo";
   return "application/octet-stream";
 }
 

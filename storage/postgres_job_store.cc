@@ -198,12 +198,14 @@ std::optional<JobRecord> SelectJob(PGconn* db, const std::string& id, bool for_u
 }
 
 constexpr char kDatasetSelect[] =
-    "SELECT d.id, d.name, d.created_at, COUNT(i.name), COALESCE(SUM(i.size), 0) "
+    "SELECT d.id, d.name, d.created_at, "
+    "COUNT(i.name) - COUNT(CASE WHEN i.content_type LIKE 'video/%' THEN 1 END), "
+    "COALESCE(SUM(i.size), 0), COUNT(CASE WHEN i.content_type LIKE 'video/%' THEN 1 END) "
     "FROM datasets d LEFT JOIN images i ON i.dataset_id = d.id ";
 
 DatasetRecord ReadDataset(const Result& rows, int row) {
-  return DatasetRecord{rows.Text(row, 0), rows.Text(row, 1), rows.Double(row, 2), rows.Int(row, 3),
-                       rows.Int(row, 4)};
+  return DatasetRecord{rows.Text(row, 0), rows.Text(row, 1), rows.Double(row, 2),
+                       rows.Int(row, 3),  rows.Int(row, 4),  rows.Int(row, 5)};
 }
 
 ImageRecord ReadImage(const Result& rows, int row) {

@@ -99,11 +99,13 @@ std::optional<JobRecord> SelectJob(Connection& db, const std::string& id) {
 }
 
 DatasetRecord ReadDataset(const Statement& row) {
-  return DatasetRecord{row.Text(0), row.Text(1), row.Double(2), row.Int(3), row.Int(4)};
+  return DatasetRecord{row.Text(0), row.Text(1), row.Double(2), row.Int(3), row.Int(4), row.Int(5)};
 }
 
 constexpr char kDatasetSelect[] =
-    "SELECT d.id, d.name, d.created_at, COUNT(i.name), COALESCE(SUM(i.size), 0) "
+    "SELECT d.id, d.name, d.created_at, "
+    "COUNT(i.name) - COUNT(CASE WHEN i.content_type LIKE 'video/%' THEN 1 END), "
+    "COALESCE(SUM(i.size), 0), COUNT(CASE WHEN i.content_type LIKE 'video/%' THEN 1 END) "
     "FROM datasets d LEFT JOIN images i ON i.dataset_id = d.id ";
 
 }  // namespace

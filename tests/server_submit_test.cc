@@ -92,6 +92,49 @@ TEST_F(SubmitTest, UploadsResumesRunsAndDownloads) {
   EXPECT_EQ(JsonOf(client_->Get(("/api/v1/datasets/" + dataset).c_str()))["image_count"], 4);
 }
 
+// An MP4 whose boxes are whole (the upload check reads no further): ftyp, a random mdat, moov.
+std::string Mp4Bytes(size_t payload, unsigned seed) {
+  const auto box = [](const std::string& type, const std::string& content) {
+    const auto size = static_cast<uint32_t>(8 + content.size());
+    return std::string{static_cast<char>(size >> 24), static_cast<char>(size >> 16),
+                       static_cast<char>(size >> 8), static_cast<char>(size)} +
+           type + content;
+  };
+  std::string data(payload, '\0');
+  for (size_t i = 0; i < payload; ++i) data[i] = static_cast<char>((i * 2654435761u + seed) >> 13);
+  return box("ftyp", std::string("isom\0\0\0\0", 8)) + box("mdat", data) +
+         box("moov", std::string(64, 'm'));
+}
+
+// Videos go up in chunks; a run after an interrupted one goes on where the server's part ends.
+TEST_F(SubmitTest, UploadsVideosInChunksAndResumes) {
+  const fs::path folder = dir_.path() / "recording";
+  const std::string cam0 = Mp4Bytes(300000, 1), cam1 = Mp4Bytes(300000, 2);
+  WriteFile(folder / "cam0.mp4", cam0);
+  WriteFile(folder / "cam1.mp4", cam1);
+  const std::string dataset =
+      JsonOf(client_->Post("/api/v1/datasets", R"({"name": "rec"})", "application/json"))["id"];
+  // An earlier run sent the first 100000 bytes of cam0.mp4, then stopped.
+  const auto first =
+      client_->Put(("/api/v1/datasets/" + dataset + "/images/cam0.mp4").c_str(),
+                   {{"Content-Range", "bytes 0-99999/" + std::to_string(cam0.size())}},
+                   cam0.substr(0, 100000), "application/octet-stream");
+  ASSERT_EQ(first->status, 202) << first->body;
+  std::string stdout_text, stderr_text;
+  ASSERT_EQ(Submit("--type test_sleep --no-wait --chunk-mb 0.0625 --dataset " + dataset + " " +
+                       folder.string(),
+                   &stdout_text, &stderr_text),
+            0)
+      << stderr_text;
+  EXPECT_NE(stderr_text.find("resuming cam0.mp4 at byte 100000"), std::string::npos) << stderr_text;
+  EXPECT_NE(stderr_text.find("2 sent, 0 already"), std::string::npos) << stderr_text;
+  const json listed = JsonOf(client_->Get(("/api/v1/datasets/" + dataset).c_str()));
+  EXPECT_EQ(listed["video_count"], 2);
+  EXPECT_EQ(listed["image_count"], 0);
+  EXPECT_EQ(client_->Get(("/api/v1/datasets/" + dataset + "/images/cam0.mp4").c_str())->body, cam0);
+  EXPECT_EQ(client_->Get(("/api/v1/datasets/" + dataset + "/images/cam1.mp4").c_str())->body, cam1);
+}
+
 TEST_F(SubmitTest, FailedJobGivesExitCode1AndItsLog) {
   const fs::path folder = dir_.path() / "one";
   WriteFile(folder / "a.png", PngBytes(8, 8));

@@ -49,4 +49,14 @@ std::vector<std::string> ListPairImages(const fs::path& dir) {
   return names;
 }
 
+std::vector<std::string> ListFiles(const fs::path& dir) {
+  OMNIRIG_CHECK(fs::is_directory(dir), "'" << dir.string() << "' is not a directory");
+  std::vector<std::string> names;
+  for (const auto& entry : fs::directory_iterator(dir)) {
+    if (entry.is_regular_file()) names.push_back(entry.path().filename().string());
+  }
+  std::sort(names.begin(), names.end());
+  return names;
+}
+
 }  // namespace omnirig::cli

@@ -17,5 +17,7 @@ nlohmann::json ReadJsonFile(const std::string& path, const std::string& flag);
 // sorted; the jobs pair them by NAME and report images without a partner. InvalidArgument when
 // DIR, DIR/cam0 or DIR/cam1 is missing.
 std::vector<std::string> ListPairImages(const std::filesystem::path& dir);
+// The names of the regular files directly in DIR, sorted (e.g. a recording's videos).
+std::vector<std::string> ListFiles(const std::filesystem::path& dir);
 
 }  // namespace omnirig::cli

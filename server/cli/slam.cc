@@ -42,7 +42,14 @@ int RunSlam(const Args& raw_args) {
   args.AddOption("refine-calibration", "",
                  "none|intrinsics|rig|all: refine the calibration in the global bundle adjustment "
                  "(overrides the options file)");
-  args.SetPositional("DIR", "folder with cam0/ and cam1/ images, paired and ordered by name");
+  args.AddOption("frame-step", "1", "every n-th stereo frame");
+  args.AddOption("start-s", "0", "videos: first timestamp to read, seconds");
+  args.AddOption("end-s", "", "videos: last timestamp to read, seconds (default: to the end)");
+  args.AddOption("pair-tolerance-s", "0",
+                 "videos: frames of cam0 and cam1 pair within this (0: a quarter frame period)");
+  args.SetPositional("DIR",
+                     "folder with cam0/ and cam1/ images, paired and ordered by name, or "
+                     "with videos cam0.EXT and cam1.EXT (or stacked.EXT: cam0 on top)");
   if (!args.Parse(raw_args)) return args.exit_code();
   OMNIRIG_CHECK(args.positional().size() == 1, "expected one DIR (see --help)");
   OMNIRIG_CHECK(args.Has("rig"), "--rig is required (a relative_pose result JSON)");
@@ -79,8 +86,15 @@ int RunSlam(const Args& raw_args) {
                                           << message << "\n";
                               },
                               nullptr};
-  const json report = api::RunSlamOnDataset(rig, dir, ListPairImages(dir), options, ground_truth,
-                                            args.Get("o"), progress, nullptr, dense_map);
+  slam::VideoFrameOptions frames;
+  frames.frame_step = args.GetInt("frame-step");
+  frames.start_s = args.GetDouble("start-s");
+  if (args.Has("end-s")) frames.end_s = args.GetDouble("end-s");
+  frames.pair_tolerance_s = args.GetDouble("pair-tolerance-s");
+  frames.Check();
+  const json report = api::RunSlamOnDataset(
+      rig, dir, fs::is_directory(dir / "cam0") ? ListPairImages(dir) : ListFiles(dir), options,
+      ground_truth, args.Get("o"), progress, nullptr, dense_map, frames);
   std::cout << "frames: " << report["num_frames"] << ", tracked: " << report["num_tracked"]
             << ", map points: " << report["num_map_points"]
             << ", frames/s: " << report["frames_per_second"] << "\n";

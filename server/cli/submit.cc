@@ -1,6 +1,8 @@
-// `omnirig submit`: the scripting client. Uploads a folder of images (skipping those the server
-// already holds with the same size and SHA-256, so an interrupted upload resumes), creates a job,
-// shows a progress bar, and downloads the result and every artifact.
+// `omnirig submit`: the scripting client. Uploads a folder of images and videos (skipping those
+// the server already holds with the same size and SHA-256, so an interrupted upload resumes),
+// creates a job, shows a progress bar, and downloads the result and every artifact. Videos and
+// files larger than a chunk go up in chunks (PUT with Content-Range), resuming where the server's
+// part ends: after a dropped connection, or a later run of the same command.
 
 #include <httplib.h>
 
@@ -25,14 +27,26 @@ namespace {
 namespace fs = std::filesystem;
 using nlohmann::json;
 
-bool IsImageFile(const fs::path& path) {
+std::string Extension(const fs::path& path) {
   std::string ext = path.extension().string();
   for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  return ext == ".png" || ext == ".jpg" || ext == ".jpeg" || ext == ".bmp" || ext == ".pgm" ||
-         ext == ".ppm";
+  return ext;
 }
 
-// Image files of `folder` and of its direct sub-folders (e.g. cam0/, cam1/), by upload name.
+bool IsVideoFile(const fs::path& path) {
+  const std::string ext = Extension(path);
+  return ext == ".mp4" || ext == ".m4v" || ext == ".mov" || ext == ".mkv" || ext == ".webm" ||
+         ext == ".avi";
+}
+
+bool IsImageFile(const fs::path& path) {
+  const std::string ext = Extension(path);
+  return ext == ".png" || ext == ".jpg" || ext == ".jpeg" || ext == ".bmp" || ext == ".pgm" ||
+         ext == ".ppm" || IsVideoFile(path);
+}
+
+// Image and video files of `folder` and of its direct sub-folders (e.g. cam0/, cam1/), by
+// upload name.
 std::map<std::string, fs::path> CollectImages(const fs::path& folder) {
   if (!fs::is_directory(folder)) throw InvalidArgument(folder.string() + " is not a folder");
   std::map<std::string, fs::path> images;
@@ -81,9 +95,78 @@ void UploadFile(httplib::Client& client, const std::string& url, const fs::path&
   Expect(result, {200, 201}, "upload of " + path.string());
 }
 
+// One PUT of the whole file, tried 3 times unless the server refuses it (4xx).
+void UploadWithRetries(httplib::Client& client, const std::string& url, const fs::path& path) {
+  for (int attempt = 1;; ++attempt) {
+    try {
+      UploadFile(client, url, path);
+      return;
+    } catch (const std::runtime_error& e) {
+      if (attempt == 3 || std::string(e.what()).find("HTTP 4") != std::string::npos) throw;
+      std::cerr << "\n" << e.what() << "; retrying\n";
+    }
+  }
+}
+
+// The bytes of `name` the server already holds towards a file of `total` bytes (0 when its
+// part is of another size or there is none).
+int64_t ReceivedBytes(httplib::Client& client, const std::string& dataset, const std::string& name,
+                      int64_t total) {
+  const json status =
+      Expect(client.Get(("/api/v1/datasets/" + dataset + "/uploads/" + name).c_str()), {200},
+             "upload status of " + name);
+  const bool same = status["total_bytes"].is_number() && status["total_bytes"] == total;
+  return same ? status["received_bytes"].get<int64_t>() : 0;
+}
+
+// PUT with Content-Range, chunk by chunk from where the server's part ends. A dropped connection
+// or a server error asks the server where it stands and goes on from there (5 times in a row at
+// most); a 409 says where the server's part ends.
+void UploadInChunks(httplib::Client& client, const std::string& dataset, const std::string& name,
+                    const fs::path& path, int64_t chunk_bytes) {
+  const int64_t total = static_cast<int64_t>(fs::file_size(path));
+  const std::string url = "/api/v1/datasets/" + dataset + "/images/" + name;
+  int64_t offset = ReceivedBytes(client, dataset, name, total);
+  if (offset > 0) std::cerr << "\rresuming " << name << " at byte " << offset << "\n";
+  std::ifstream in(path, std::ios::binary);
+  std::string chunk;
+  for (int failures = 0;;) {
+    const int64_t size = std::min(chunk_bytes, total - offset);
+    chunk.resize(static_cast<size_t>(size));
+    in.clear();
+    in.seekg(static_cast<std::streamoff>(offset));
+    in.read(chunk.data(), static_cast<std::streamsize>(size));
+    const httplib::Headers range = {{"Content-Range", "bytes " + std::to_string(offset) + "-" +
+                                                          std::to_string(offset + size - 1) + "/" +
+                                                          std::to_string(total)}};
+    const auto result = client.Put(url.c_str(), range, chunk, "application/octet-stream");
+    const bool retry = !result || result->status >= 500 || result->status == 409;
+    if (retry && ++failures > 5) Expect(result, {202}, "upload of " + path.string());
+    if (!result || result->status >= 500) {
+      std::this_thread::sleep_for(std::chrono::seconds(1));
+      offset = ReceivedBytes(client, dataset, name, total);
+      continue;
+    }
+    if (result->status == 409) {
+      const json error = json::parse(result->body, nullptr, false);
+      const json& details = error["error"]["details"];
+      if (details.contains("received_bytes")) {
+        offset = details["received_bytes"].get<int64_t>();
+      } else {
+        std::this_thread::sleep_for(std::chrono::seconds(1));  // another request holds it
+      }
+      continue;
+    }
+    const json body = Expect(result, {200, 201, 202}, "upload of " + path.string());
+    if (result->status != 202) return;
+    offset = body["received_bytes"].get<int64_t>();
+    failures = 0;
+  }
+}
+
 // Uploads what the server lacks; returns the number of files sent.
 int SyncImages(httplib::Client& client, const std::string& dataset,
-               const std::map<std::string, fs::path>& images) {
+               const std::map<std::string, fs::path>& images, int64_t chunk_bytes) {
   const json listing =
       Expect(client.Get(("/api/v1/datasets/" + dataset).c_str()), {200}, "dataset " + dataset);
   std::map<std::string, std::pair<int64_t, std::string>> remote;
@@ -101,14 +184,10 @@ int SyncImages(httplib::Client& client, const std::string& dataset,
       if (local.size == it->second.first && local.sha256 == it->second.second) continue;
     }
     const std::string url = "/api/v1/datasets/" + dataset + "/images/" + name;
-    for (int attempt = 1;; ++attempt) {
-      try {
-        UploadFile(client, url, path);
-        break;
-      } catch (const std::runtime_error& e) {
-        if (attempt == 3 || std::string(e.what()).find("HTTP 4") != std::string::npos) throw;
-        std::cerr << "\n" << e.what() << "; retrying\n";
-      }
+    if (IsVideoFile(path) || static_cast<int64_t>(fs::file_size(path)) > chunk_bytes) {
+      UploadInChunks(client, dataset, name, path, chunk_bytes);
+    } else {
+      UploadWithRetries(client, url, path);
     }
     ++sent;
     bytes += static_cast<int64_t>(fs::file_size(path));
@@ -180,10 +259,16 @@ json ReadParams(const std::string& text) {
 
 int RunSubmit(const Args& args) {
   ArgParser parser("submit",
-                   "Uploads a folder of images to a running omnirig server (resuming: images the "
-                   "server already holds are skipped), runs a job on it, shows its progress and "
+                   "Uploads a folder of images or videos to a running omnirig server (resuming: "
+                   "files the server already holds are skipped, a video's upload goes on where "
+                   "it stopped), runs a job on it, shows its progress and "
                    "downloads the result and artifacts.");
-  parser.SetPositional("FOLDER", "images, at top level or one folder deep (cam0/, cam1/)");
+  parser.SetPositional("FOLDER",
+                       "images, at top level or one folder deep (cam0/, cam1/), and "
+                       "videos (cam0.mp4 and cam1.mp4, or stacked.mp4)");
+  parser.AddOption("chunk-mb", "16",
+                   "videos and larger files go up in chunks of this size, resumable (at most the "
+                   "server's --max-chunk-mb)");
   parser.AddOption("server", "http://127.0.0.1:8080", "server URL");
   parser.AddOption("token", "", "bearer token (default: $OMNIRIG_TOKEN)");
   parser.AddOption("type", "", "job type: calibration, relative_pose, stereo_reconstruct, slam");
@@ -215,7 +300,9 @@ int RunSubmit(const Args& args) {
                {201}, "create dataset")["id"];
   }
   std::cerr << "dataset " << dataset << ": " << images.size() << " image(s) in " << folder << "\n";
-  SyncImages(client, dataset, images);
+  const auto chunk_bytes = static_cast<int64_t>(parser.GetDouble("chunk-mb") * (1 << 20));
+  if (chunk_bytes < 1) throw InvalidArgument("--chunk-mb must be positive");
+  SyncImages(client, dataset, images, chunk_bytes);
   const json job = Expect(
       client.Post(
           "/api/v1/jobs",

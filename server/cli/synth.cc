@@ -2,7 +2,8 @@
 //
 //   omnirig synth --preset mono-calib|stereo-board|stereo-sequence --out DIR
 //       [--width 1024 --height 768 --views 20 --frames 40 --scene room|street --noise 0
-//        --blur 0 --vignetting 0 --seed 0 --supersampling 4 --threads 0 --grayscale ...]
+//        --blur 0 --vignetting 0 --seed 0 --supersampling 4 --threads 0 --grayscale
+//        --video mp4|avi|mkv [--stacked] ...]
 
 #include <unistd.h>
 
@@ -48,6 +49,10 @@ void DeclareOptions(ArgParser* parser) {
   parser->AddOption("vignetting", "0", "brightness loss at the mirror rim, fraction in [0, 1]");
   parser->AddOption("supersampling", "4", "s: s x s samples per pixel (boards are exact anyway)");
   parser->AddFlag("grayscale", "write 8-bit grey images instead of BGR colour");
+  parser->AddOption("video", "",
+                    "stereo-sequence: write videos instead of PNG folders: mp4 (mp4v), avi (MJPG) "
+                    "or mkv (FFV1, lossless) as DIR/cam0.EXT and DIR/cam1.EXT");
+  parser->AddFlag("stacked", "with --video: one DIR/stacked.EXT, cam0 on top of cam1");
   parser->AddOption("seed", "0", "seed of poses, textures and noise: same seed, same output");
   parser->AddOption("threads", "0", "render threads, 0 = all cores");
 }
@@ -151,7 +156,16 @@ void RunPreset(const ArgParser& args, const std::string& preset, const std::stri
     options.cam0_from_cam1 = Cam0FromCam1FromArgs(args);
     options.render = RenderOptionsFromArgs(args);
     options.seed = seed;
-    api::WriteStereoSequence(synth::MakeStereoSequence(options, progress), scene, out);
+    const std::string video = args.Get("video");
+    if (!video.empty() && video != "mp4" && video != "avi" && video != "mkv") {
+      throw InvalidArgument("--video must be mp4, avi or mkv, got '" + video + "'");
+    }
+    const synth::StereoSequence sequence = synth::MakeStereoSequence(options, progress);
+    if (video.empty()) {
+      api::WriteStereoSequence(sequence, scene, out);
+    } else {
+      api::WriteStereoSequenceVideos(sequence, scene, out, video, args.Has("stacked"));
+    }
   } else {
     throw InvalidArgument("--preset must be mono-calib, stereo-board or stereo-sequence, got '" +
                           preset + "'");
@@ -166,7 +180,8 @@ int RunSynth(const Args& arguments) {
                  "model, with ground truth: intrinsics, every pose, board corners and their exact "
                  "pixel projections, the scene's primitives (DIR/ground_truth.json), and for "
                  "sequences DIR/trajectory.tum. Mono images are DIR/NAME.png; stereo images are "
-                 "DIR/cam0/NAME.png and DIR/cam1/NAME.png, pairs matched by NAME.");
+                 "DIR/cam0/NAME.png and DIR/cam1/NAME.png, pairs matched by NAME; with --video, "
+                 "DIR/cam0.EXT and DIR/cam1.EXT (or DIR/stacked.EXT).");
   DeclareOptions(&args);
   if (!args.Parse(arguments)) return args.exit_code();
   const std::string preset = args.Get("preset"), out = args.Get("out");

@@ -5,7 +5,8 @@
 //
 // STEP is one of:
 //   datasets    create a dataset, upload a folder (cam0/ kept), resume (nothing re-sent),
-//               thumbnails, a non-image refused with the server's JSON message shown
+//               thumbnails, a non-image refused with the server's JSON message shown, a video
+//               sent in chunks resuming where the server's part ends
 //   calibration upload a calibration set, submit a calibration job from the form, watch its
 //               progress reach done, read the report (RMS, intrinsics, chart, overlays)
 //   stereo      upload a stereo board set, run relative_pose, read the report, click a pixel in
@@ -407,11 +408,52 @@ async function stepDatasets(page, server) {
   log('non-image upload refused with:', errorText.trim());
   // The page shows the server's JSON message, not a bare status line.
   check(!/HTTP \d{3}/.test(errorText), `the error shows the server's message (${errorText})`);
+  const video = await videoResumes(page, server, id);
   await page.goto(`${server.url}/#/datasets`);
   await page.waitForSelector(`tr[data-dataset-id="${id}"]`);
   await screenshot(page, 'datasets-list');
   const errors = await jobErrors(page, server, id);
-  return `uploaded ${count} images (${s.source}), resume skipped all, one dropped, non-image refused: ${errorText.trim()}; ${errors}`;
+  return `uploaded ${count} images (${s.source}), resume skipped all, one dropped, non-image refused: ${errorText.trim()}; ${video}; ${errors}`;
+}
+
+// A video larger than one chunk (16 MiB), whose first chunk an earlier session sent: the page
+// asks the server, sends only the rest (one PUT with its Content-Range), and the dataset lists
+// it as a video. The MP4's boxes are whole; its content is noise (the upload decodes nothing).
+async function videoResumes(page, server, datasetId) {
+  const chunk = 16 << 20;
+  const payload = Buffer.alloc(chunk + (3 << 20));
+  for (let i = 0; i < payload.length; i += 4) payload.writeUInt32LE((i * 2654435761) >>> 0, i);
+  const box = (type, content) => {
+    const head = Buffer.alloc(8);
+    head.writeUInt32BE(8 + content.length, 0);
+    head.write(type, 4, 'latin1');
+    return Buffer.concat([head, content]);
+  };
+  const mp4 = Buffer.concat([box('ftyp', Buffer.from('isom\0\0\0\0', 'latin1')), box('mdat', payload),
+    box('moov', Buffer.alloc(64, 109))]);
+  const file = path.join(TEMP, 'video', 'cam0.mp4');
+  fs.mkdirSync(path.dirname(file), { recursive: true });
+  fs.writeFileSync(file, mp4);
+  const url = `${server.url}/api/v1/datasets/${datasetId}/images/cam0.mp4`;
+  const first = await fetch(url, { method: 'PUT', body: mp4.subarray(0, chunk),
+    headers: { 'Content-Range': `bytes 0-${chunk - 1}/${mp4.length}` } });
+  check(first.status === 202, `the first chunk is taken (${first.status})`);
+  const ranges = [];
+  const onRequest = (request) => {
+    if (request.method() === 'PUT' && request.url().endsWith('/cam0.mp4')) ranges.push(request.headers()['content-range']);
+  };
+  page.on('request', onRequest);
+  const refused = await uploadOneMore(page, file);
+  page.off('request', onRequest);
+  check(refused === null, `the video is stored (${refused})`);
+  check(ranges.length === 1 && ranges[0] === `bytes ${chunk}-${mp4.length - 1}/${mp4.length}`,
+    `the page resumed at the server's offset (${ranges.join(', ')})`);
+  const listing = await (await fetch(`${server.url}/api/v1/datasets/${datasetId}`)).json();
+  const stored = listing.images.find((i) => i.name === 'cam0.mp4');
+  check(stored && stored.size === mp4.length && stored.content_type === 'video/mp4', `the whole video is listed (${JSON.stringify(stored)})`);
+  check(listing.video_count === 1, `video_count counts it (${listing.video_count})`);
+  await page.waitForFunction(() => document.querySelector('#videos')?.textContent === 'cam0.mp4');
+  return `a ${(mp4.length / (1 << 20)).toFixed(1)} MiB video resumed at ${chunk} bytes`;
 }
 
 // Errors on the Jobs page: a refused submission shows the server's message naming the field, and

@@ -118,6 +118,79 @@ export function putImage(datasetId, name, file, onProgress) {
   });
 }
 
+// A resumable upload (PUT with Content-Range), for videos and large files: asks the server how
+// much of the file it holds (GET .../uploads/{name}), then sends the rest in chunks of
+// chunkBytes, each a slice of the File (never the whole file in memory). A 409 says where the
+// server's part ends; a dropped connection asks again and goes on (5 times in a row at most).
+// onProgress(sentBytes, totalBytes). Resolves with the stored file's JSON.
+export async function putFileInChunks(datasetId, name, file, onProgress, chunkBytes = 16 << 20) {
+  const statusPath = `/datasets/${encodeURIComponent(datasetId)}/uploads/${encodeName(name)}`;
+  const serverOffset = async () => {
+    const status = await request('GET', statusPath);
+    return status && status.total_bytes === file.size ? status.received_bytes : 0;
+  };
+  let offset = await serverOffset();
+  for (let failures = 0; ;) {
+    const end = Math.min(offset + chunkBytes, file.size);
+    const range = `bytes ${offset}-${end - 1}/${file.size}`;
+    const base = offset;
+    let answer;
+    try {
+      answer = await putRange(datasetId, name, file.slice(offset, end), range,
+        (sent) => onProgress && onProgress(base + sent, file.size));
+    } catch (err) {
+      const retry = err.status === 0 || err.status >= 500 || err.code === 'upload_busy';
+      if (!retry || ++failures > 5) throw err;
+      await new Promise((resolve) => setTimeout(resolve, 1000));
+      offset = await serverOffset();
+      continue;
+    }
+    if (answer.status === 409) {
+      if (++failures > 5) throw errorFromBody(409, 'Conflict', answer.text);
+      offset = answer.json.error.details.received_bytes;
+      continue;
+    }
+    failures = 0;
+    if (answer.status !== 202) {
+      onProgress && onProgress(file.size, file.size);
+      return answer.json;
+    }
+    offset = answer.json.received_bytes;
+  }
+}
+
+// One chunk's PUT; resolves {status, json, text} for 2xx and 409 (an offset mismatch), rejects
+// with ApiError otherwise.
+function putRange(datasetId, name, blob, range, onProgress) {
+  return new Promise((resolve, reject) => {
+    const xhr = new XMLHttpRequest();
+    xhr.open('PUT', imageUrl(datasetId, name));
+    xhr.setRequestHeader('Content-Type', 'application/octet-stream');
+    xhr.setRequestHeader('Content-Range', range);
+    for (const [k, v] of Object.entries(authHeaders())) xhr.setRequestHeader(k, v);
+    xhr.upload.onprogress = (e) => onProgress && onProgress(e.loaded);
+    xhr.onload = () => {
+      let json = null;
+      try {
+        json = xhr.responseText ? JSON.parse(xhr.responseText) : null;
+      } catch (_) {
+        json = null;
+      }
+      const offsetMismatch = xhr.status === 409 && json && json.error &&
+        json.error.code === 'upload_offset_mismatch';
+      if ((xhr.status >= 200 && xhr.status < 300) || offsetMismatch) {
+        resolve({ status: xhr.status, json, text: xhr.responseText });
+      } else {
+        noteUnauthorized(xhr.status);
+        reject(errorFromBody(xhr.status, xhr.statusText, xhr.responseText));
+      }
+    };
+    xhr.onerror = () => reject(new ApiError(0, 'network', 'The upload was interrupted (network error).'));
+    xhr.onabort = () => reject(new ApiError(0, 'aborted', 'The upload was stopped.'));
+    xhr.send(blob);
+  });
+}
+
 // Fetches an artifact as bytes with download progress: onProgress(loaded, total).
 export async function fetchArtifactBytes(jobId, name, onProgress) {
   const response = await fetch(artifactUrl(jobId, name), { headers: authHeaders() });

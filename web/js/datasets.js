@@ -2,12 +2,16 @@
 // files or whole folders (cam0/ and cam1/ kept), with per-file progress, resume of an interrupted
 // upload (names already on the server with the same size are skipped) and thumbnails.
 
-import { asList, del, get, imageUrl, post, putImage } from './api.js';
+import { asList, del, get, imageUrl, post, putFileInChunks, putImage } from './api.js';
 import { apiImage, clear, el, errorBox, formatBytes, formatTime, progressBar, showError } from './ui.js';
 
-// What a dataset holds: the images the server decodes, and TUM trajectories (a SLAM job's
-// optional ground truth is a file of its dataset).
-const DATASET_FILES = /\.(png|jpe?g|bmp|pgm|ppm|pnm|tum)$/i;
+// What a dataset holds: the images the server decodes, TUM trajectories (a SLAM job's optional
+// ground truth is a file of its dataset) and videos (a SLAM job reads cam0.mp4 + cam1.mp4, or
+// one stacked.mp4).
+const DATASET_FILES = /\.(png|jpe?g|bmp|pgm|ppm|pnm|tum|mp4|m4v|mov|mkv|webm|avi)$/i;
+const VIDEO = /\.(mp4|m4v|mov|mkv|webm|avi)$/i;
+// Videos and files above this go up in chunks that resume (the server takes 64 MiB at most).
+const CHUNK_BYTES = 16 << 20;
 const PARALLEL_UPLOADS = 3;
 const THUMBNAILS_SHOWN = 120;
 
@@ -19,13 +23,15 @@ export async function render(view, id) {
 
 const TRAJECTORY = /\.tum$/i;
 
-// Images and trajectories apart: a dataset's "image_count" counts every file it holds.
+// Images, trajectories and videos apart: a dataset's "image_count" counts images and
+// trajectories, "video_count" its videos.
 function datasetStats(dataset) {
   const files = Array.isArray(dataset.images) ? dataset.images : null;
   const trajectories = files ? files.filter((i) => TRAJECTORY.test(i.name)) : [];
-  const count = files ? files.length - trajectories.length : dataset.image_count ?? dataset.num_images ?? 0;
+  const videos = files ? files.filter((i) => VIDEO.test(i.name)) : [];
+  const count = files ? files.length - trajectories.length - videos.length : dataset.image_count ?? dataset.num_images ?? 0;
   const bytes = files ? files.reduce((s, i) => s + (i.size || 0), 0) : dataset.total_bytes ?? dataset.size;
-  return { count, bytes, trajectories: trajectories.map((t) => t.name) };
+  return { count, bytes, trajectories: trajectories.map((t) => t.name), videos: videos.map((v) => v.name) };
 }
 
 async function renderList(view) {
@@ -66,11 +72,12 @@ async function refreshList(container) {
   const details = await Promise.all(datasets.slice(0, 100).map((d) =>
     get(`/datasets/${encodeURIComponent(d.id)}`).catch(() => d)));
   const rows = details.concat(datasets.slice(100)).map((d) => {
-    const { count, bytes, trajectories } = datasetStats(d);
+    const { count, bytes, trajectories, videos } = datasetStats(d);
+    const apart = trajectories.concat(videos);
     return el('tr', { dataset: { datasetId: d.id } },
       el('td', el('a', { href: `#/datasets/${encodeURIComponent(d.id)}` }, d.name || d.id)),
       el('td.mono', d.id), el('td.num', { dataset: { images: count } }, String(count),
-        trajectories.length ? el('span.muted', ` + ${trajectories.join(', ')}`) : null),
+        apart.length ? el('span.muted', ` + ${apart.join(', ')}`) : null),
       el('td.num', formatBytes(bytes)),
       el('td', formatTime(d.created_at)),
       el('td', el('button.danger', {
@@ -112,14 +119,14 @@ async function renderDataset(view, id) {
   };
   state.refresh = refresh;
 
-  const fileInput = el('input', { type: 'file', multiple: true, accept: 'image/*', name: 'files',
+  const fileInput = el('input', { type: 'file', multiple: true, accept: 'image/*,video/*,.tum', name: 'files',
     onchange: (e) => enqueueFiles(state, [...e.target.files].map((f) => ({ file: f, path: f.name })), uploads, status) });
   const folderInput = el('input', { type: 'file', multiple: true, webkitdirectory: true, name: 'folder',
     onchange: (e) => enqueueFiles(state, [...e.target.files].map((f) => ({ file: f, path: f.webkitRelativePath || f.name })), uploads, status) });
   const dropzone = el('div.dropzone#dropzone',
-    el('p', el('strong', 'Drop image files or whole folders here'), ' (a folder holding cam0/ and cam1/ keeps them).'),
+    el('p', el('strong', 'Drop image files, videos or whole folders here'), ' (a folder holding cam0/ and cam1/ keeps them; a recording is cam0.mp4 + cam1.mp4, or one stacked.mp4 with cam0 on top).'),
     el('p', 'or choose ', el('label', 'files ', fileInput), ' or a ', el('label', 'folder ', folderInput)),
-    el('p.muted', 'An interrupted upload resumes: drop the same files again and only what the server lacks is sent.'));
+    el('p.muted', 'An interrupted upload resumes: drop the same files again and only what the server lacks is sent (a video goes on from the last chunk the server holds).'));
   wireDropzone(dropzone, (entries) => enqueueFiles(state, entries, uploads, status));
 
   clear(view,
@@ -133,8 +140,8 @@ async function renderDataset(view, id) {
 }
 
 function renderSummary(container, dataset) {
-  const images = (dataset.images || []).filter((i) => !TRAJECTORY.test(i.name));
-  const { trajectories } = datasetStats(dataset);
+  const images = (dataset.images || []).filter((i) => !TRAJECTORY.test(i.name) && !VIDEO.test(i.name));
+  const { trajectories, videos } = datasetStats(dataset);
   const byFolder = new Map();
   for (const image of images) {
     const folder = image.name.includes('/') ? image.name.split('/')[0] : '(top level)';
@@ -147,6 +154,7 @@ function renderSummary(container, dataset) {
       el('dt', 'Id'), el('dd.mono', dataset.id),
       el('dt', 'Images'), el('dd#image-count', String(images.length)),
       el('dt', 'Trajectories'), el('dd#trajectories', trajectories.join(', ') || '–'),
+      el('dt', 'Videos'), el('dd#videos', videos.join(', ') || '–'),
       el('dt', 'Folders'), el('dd', [...byFolder].map(([f, n]) => `${f}: ${n}`).join(', ') || '–'),
       el('dt', 'Total size'), el('dd', formatBytes(bytes)),
       el('dt', 'Image sizes'), el('dd', [...sizes].join(', ') || '–'),
@@ -242,7 +250,7 @@ function enqueueFiles(state, entries, list, status) {
   clear(status, notes.length ? el('p.notice', notes.join('; ') + '.') : null);
   if (skipped.length) {
     const shown = skipped.slice(0, 10).join(', ') + (skipped.length > 10 ? ` and ${skipped.length - 10} more` : '');
-    status.append(el('p.notice#upload-skipped', `Skipped (not an image or a .tum trajectory, or hidden): ${shown}.`));
+    status.append(el('p.notice#upload-skipped', `Skipped (not an image, a video or a .tum trajectory, or hidden): ${shown}.`));
   }
   pump(state, status);
 }
@@ -261,6 +269,7 @@ export function uploadErrorText(err, name) {
   const code = err && err.code;
   if (code === 'unsupported_media_type') return `not an image: skip it (${message})`;
   if (code === 'corrupt_image') return `a damaged image: export it again, or skip it (${message})`;
+  if (code === 'corrupt_video') return `a damaged or unfinished video: copy it again from the recorder (${message})`;
   if (code === 'payload_too_large') return `too large: ${message}; skip it or make room`;
   if (code === 'insufficient_storage') return `the server's disk is full: ${message}`;
   if (code === 'network' || code === 'aborted') return `${message}: drop the same files again to resume`;
@@ -272,7 +281,10 @@ function pump(state, status) {
   while (!state.stopped && state.running < PARALLEL_UPLOADS && state.queue.length) {
     const item = state.queue.shift();
     state.running += 1;
-    putImage(state.id, item.name, item.file, (sent, total) =>
+    const upload = VIDEO.test(item.name) || item.file.size > CHUNK_BYTES
+      ? (onProgress) => putFileInChunks(state.id, item.name, item.file, onProgress, CHUNK_BYTES)
+      : (onProgress) => putImage(state.id, item.name, item.file, onProgress);
+    upload((sent, total) =>
       showUploadRow(item, total ? sent / total : 0, `${Math.round((100 * sent) / (total || 1))}%`))
       .then(() => {
         showUploadRow(item, 1, 'done');
