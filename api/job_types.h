@@ -44,15 +44,41 @@ inline ProgressSink SubRange(const ProgressSink& progress, double begin, double 
           progress.is_cancelled};
 }
 
+// A job a job reads: its id, the type it must have (empty: any) and the parameter naming it.
+struct JobReference {
+  std::string id;
+  std::string type;
+  std::string field;  // e.g. "rig"
+  bool operator==(const JobReference& other) const {
+    return id == other.id && type == other.type && field == other.field;
+  }
+};
+
+// What the server knows of a job's inputs at submission: the dataset's images with the sizes
+// read from their headers at upload, and the referenced jobs' results.
+struct SubmissionInputs {
+  struct Image {
+    std::string name;
+    int width = 0, height = 0;
+  };
+  std::vector<Image> images;
+  std::function<nlohmann::json(const std::string& job_id)> load_result;
+};
+
 struct JobType {
   std::string name;
   // Validates `params` at submission; throws InvalidArgument with a message naming the field.
   std::function<void(const nlohmann::json& params)> validate;
-  // Ids of earlier jobs this job reads (so the server can check they exist before queueing).
-  std::function<std::vector<std::string>(const nlohmann::json& params)> referenced_jobs;
-  // The type every referenced job must have (empty: any), e.g. "relative_pose" for a job that
-  // reads a rig: the server refuses a reference of another type with 422 at submission.
-  std::string referenced_job_type;
+  // Earlier jobs this job reads, each with the type it must have (e.g. "relative_pose" for a
+  // job that reads a rig): the server refuses, at submission, a reference to a missing job
+  // (404), to a job of another type or one that has not succeeded (422).
+  std::function<std::vector<JobReference>(const nlohmann::json& params)> referenced_jobs;
+  // Checks at submission, without decoding pixels, that the dataset's images fit the
+  // referenced jobs' results (e.g. a rig calibrated for another image size); runs after the
+  // references were found succeeded. Throws InvalidArgument with the reason (the server
+  // answers 422 inputs_mismatch). Optional.
+  std::function<void(const nlohmann::json& params, const SubmissionInputs& inputs)>
+      check_inputs;
   // Whether the job reads its dataset's images (the server then refuses an empty dataset with
   // 422 at submission instead of queueing a job that can only fail).
   bool reads_images = true;

@@ -81,10 +81,10 @@ struct SlamParams {
   std::string rig_job;
   std::optional<std::string> ground_truth;  // a file name in the dataset
   slam::SlamOptions options;
-  // "dense_map": {"voxel_m", "keyframe_spacing_m", "occupancy_cell_m", "obstacle_min_height_m",
-  // "obstacle_max_height_m"} (each optional; engine/dense/dense_map.h): fuse the dense clouds of
-  // keyframes along the trajectory into dense_map.ply and write occupancy.pgm + occupancy.yaml
-  // (ROS map_server); the result's "dense_map" reports it.
+  // "dense_map": {"voxel_m", "keyframe_spacing_m", "grid_step_factor", "occupancy_cell_m",
+  // "obstacle_min_height_m", "obstacle_max_height_m"} (each optional; engine/dense/dense_map.h):
+  // fuse the dense clouds of keyframes along the trajectory into dense_map.ply and write
+  // occupancy.pgm + occupancy.yaml (ROS map_server); the result's "dense_map" reports it.
   std::optional<dense::DenseMapOptions> dense_map;
 };
 SlamParams SlamParamsFromJson(const nlohmann::json& params);

@@ -28,26 +28,52 @@ storage::JobRecord RequireJob(ServiceState& state, const std::string& id) {
 void CheckReferencedJobs(ServiceState& state, const api::JobType& type,
                          const nlohmann::json& params) {
   if (!type.referenced_jobs) return;
-  for (const std::string& id : type.referenced_jobs(params)) {
+  for (const api::JobReference& reference : type.referenced_jobs(params)) {
+    const std::string& id = reference.id;
     const auto job = state.store->GetJob(id);
     if (!job) {
       throw HttpError(404, "job_not_found", "referenced job " + id + " does not exist",
-                      {{"job", id}});
+                      {{"job", id}, {"field", reference.field}});
     }
-    const std::string& wanted = type.referenced_job_type;
+    const std::string& wanted = reference.type;
+    const std::string there = " job in '" + reference.field + "'";
     if (!wanted.empty() && job->type != wanted) {
       throw HttpError(422, "wrong_job_type",
                       "job " + id + " is a " + job->type + " job, but a " + type.name +
-                          " job needs a succeeded " + wanted + " job there",
-                      {{"job", id}, {"type", job->type}, {"expected_type", wanted}});
+                          " job needs a succeeded " + wanted + there,
+                      {{"job", id},
+                       {"type", job->type},
+                       {"expected_type", wanted},
+                       {"field", reference.field}});
     }
     if (job->state != storage::JobState::kSucceeded) {
       throw HttpError(422, "dependency_not_ready",
                       "job " + id + " is " + storage::JobStateName(job->state) + ", but a " +
                           type.name + " job needs a succeeded " +
-                          (wanted.empty() ? job->type : wanted) + " job there",
-                      {{"job", id}, {"state", storage::JobStateName(job->state)}});
+                          (wanted.empty() ? job->type : wanted) + there,
+                      {{"job", id},
+                       {"state", storage::JobStateName(job->state)},
+                       {"field", reference.field}});
     }
+  }
+}
+
+// The job type's own check of the inputs (e.g. images of another size than the rig's
+// calibration), on the image sizes the uploads read from the headers: no decoding here.
+void CheckInputs(ServiceState& state, const api::JobType& type, const std::string& dataset_id,
+                 const nlohmann::json& params) {
+  if (!type.check_inputs) return;
+  api::SubmissionInputs inputs;
+  for (const storage::ImageRecord& image : state.store->ListImages(dataset_id)) {
+    inputs.images.push_back({image.name, image.width, image.height});
+  }
+  inputs.load_result = [&state](const std::string& id) {
+    return nlohmann::json::parse(state.store->GetResult(id).value_or("null"), nullptr, false);
+  };
+  try {
+    type.check_inputs(params, inputs);
+  } catch (const InvalidArgument& e) {
+    throw HttpError(422, "inputs_mismatch", e.what());
   }
 }
 
@@ -74,6 +100,7 @@ void CreateJob(ServiceState& state, const HttpRequest& request, HttpResponse& re
     throw HttpError(400, "invalid_params", e.what());
   }
   CheckReferencedJobs(state, *type, parsed.params);
+  CheckInputs(state, *type, parsed.dataset, parsed.params);
   // A job on an empty dataset would be queued only to fail once it ran.
   if (type->reads_images && dataset->image_count == 0) {
     throw HttpError(
