@@ -9,6 +9,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "engine/util/check.h"
+#include "engine/util/timer.h"
 
 namespace omnirig::dense {
 namespace {
@@ -252,10 +253,14 @@ void DenseStereo::Triangulate(const cv::Mat& disparity, const cv::Mat& correlati
         const float conf = std::clamp(corr[c], 0.f, 1.f) * scale;
         row_confidence[r] += conf;
         conf_row[c] = conf;
-        const double theta1 = theta[c] + d[c] * step;
-        const double range_m = RangeFromAngles(theta[c], theta1, baseline);
+        // RangeFromAngles and RangeDerivative with theta1 = theta0 + parallax, expanded so
+        // that one sincos of the parallax serves both (the per-cell cost is trigonometry).
+        const double parallax = d[c] * step;
+        const double sin_p = std::sin(parallax), cos_p = std::cos(parallax);
+        const double range_m =
+            baseline * (sin_theta[c] * cos_p + cos_theta[c] * sin_p) / sin_p;
         const double std_m =
-            RangeDerivative(theta[c], theta1, baseline) * options_.disparity_std_cells * step;
+            baseline * sin_theta[c] / (sin_p * sin_p) * options_.disparity_std_cells * step;
         if (conf < options_.min_confidence || !(range_m > 0.0) ||
             std_m > options_.max_relative_range_std * range_m) {
           continue;
@@ -309,6 +314,7 @@ DensePairResult DenseStereo::Reconstruct(const cv::Mat& image0, const cv::Mat& i
                     (image1.channels() == 1 || image1.channels() == 3),
                 "images must be 8-bit grey or BGR");
   progress.Report(0.0, "rectify");
+  Timer timer;
   const cv::Mat colour0 = rectifier_.Rectify(image0, 0);
   const cv::Mat grey0 = Grey(colour0);
   const cv::Mat grey1 = rectifier_.Rectify(Grey(image1), 1);
@@ -318,15 +324,19 @@ DensePairResult DenseStereo::Reconstruct(const cv::Mat& image0, const cv::Mat& i
 
   const int rows = rectifier_.rows(), cols = rectifier_.cols();
   DensePairResult result;
+  result.seconds.rectify = timer.ElapsedSeconds();
   cv::Mat range(rows, cols, CV_32F, cv::Scalar(0)), range_std(rows, cols, CV_32F, cv::Scalar(0)),
       confidence(rows, cols, CV_32F, cv::Scalar(0));
   const auto [first, last] = UsedColumns(mask0, mask1);
   if (first <= last) {
     progress.Report(0.1, "match");
+    timer.Restart();
     const cv::Rect roi(first, 0, last - first + 1, rows);
     const cv::Mat disparity = MatchRows(grey0(roi), grey1(roi), num_disparities_, options_);
     progress.ThrowIfCancelled();
     progress.Report(0.8, "confidence");
+    result.seconds.match = timer.ElapsedSeconds();
+    timer.Restart();
 
     // cam1's grey level at each cell's match, for the correlation of the matched windows.
     cv::Mat map_x(disparity.size(), CV_32F), map_y(disparity.size(), CV_32F);
@@ -348,12 +358,16 @@ DensePairResult DenseStereo::Reconstruct(const cv::Mat& image0, const cv::Mat& i
                                                   options_.confidence_window_cells,
                                                   options_.image_noise_grey);
     progress.Report(0.9, "triangulate");
+    result.seconds.confidence = timer.ElapsedSeconds();
+    timer.Restart();
     std::tie(result.epipolar_offset_cells, result.num_epipolar_samples) =
         EpipolarOffset(grey0, grey1, mask0, num_disparities_, options_);
     if (result.epipolar_offset_cells > options_.max_epipolar_offset_cells) {
       result.confidence_scale = options_.max_epipolar_offset_cells / result.epipolar_offset_cells;
     }
 
+    result.seconds.epipolar = timer.ElapsedSeconds();
+    timer.Restart();
     Triangulate(disparity, correlation, first, mask0, mask1, colour0, &range, &range_std,
                 &confidence, &result);
   }
@@ -361,6 +375,7 @@ DensePairResult DenseStereo::Reconstruct(const cv::Mat& image0, const cv::Mat& i
   cv::transpose(range, result.range_m);
   cv::transpose(range_std, result.range_std_m);
   cv::transpose(confidence, result.confidence);
+  result.seconds.triangulate = timer.ElapsedSeconds();
   progress.Report(1.0, "triangulate");
   return result;
 }

@@ -93,6 +93,11 @@ struct DensePairResult {
   double epipolar_offset_cells = -1.0;
   int num_epipolar_samples = 0;
   double confidence_scale = 1.0;
+  // Wall seconds of each stage (rectification and masks, semi-global matching, the matched
+  // windows' correlation, the pair-level check, triangulation and panoramas).
+  struct Seconds {
+    double rectify = 0.0, match = 0.0, confidence = 0.0, epipolar = 0.0, triangulate = 0.0;
+  } seconds;
 };
 
 // Built once per rig (the rectification tables); Reconstruct() is const.
