@@ -119,7 +119,10 @@ TEST_F(RelposeJob, WithCalibrationsRecoversTheRenderedRig) {
   EXPECT_NEAR(last_fraction, 1.0, 1e-9);
   // The job ends on its summary (issue 20), not a bare "done".
   EXPECT_EQ(last_stage, "done");
-  EXPECT_EQ(last_message.rfind("baseline 100.", 0), 0u) << last_message;
+  std::ostringstream baseline;
+  baseline << std::fixed << std::setprecision(2) << "baseline "
+           << result["baseline_m"].get<double>() * 1e3 << " +- ";
+  EXPECT_EQ(last_message.rfind(baseline.str(), 0), 0u) << last_message;
   EXPECT_NE(last_message.find(" mm, rotation "), std::string::npos) << last_message;
   EXPECT_NE(last_message.find("8 of 8 pairs used"), std::string::npos) << last_message;
 }
