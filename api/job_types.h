@@ -44,13 +44,34 @@ inline ProgressSink SubRange(const ProgressSink& progress, double begin, double 
           progress.is_cancelled};
 }
 
-// What a job type may look at of the dataset when a job is submitted (JobType::check_dataset).
-struct DatasetView {
+// A job a job reads: its id, the type it must have (empty: any) and the parameter naming it.
+struct JobReference {
+  std::string id;
+  std::string type;
+  std::string field;  // e.g. "rig"
+  bool operator==(const JobReference& other) const {
+    return id == other.id && type == other.type && field == other.field;
+  }
+};
+
+// What the server knows of a job's inputs at submission (JobType::check_inputs): the dataset's
+// files with the image sizes read from their headers at upload (0 for videos and other files),
+// and the referenced jobs' results.
+struct SubmissionInputs {
+  struct Image {
+    std::string name;
+    int width = 0, height = 0;
+  };
   std::string dataset_id;
-  std::filesystem::path dataset_dir;    // the files, by name
-  std::vector<std::string> file_names;  // sorted
-  // The result JSON of an earlier succeeded job (checked to exist and be of the referenced
-  // type before check_dataset runs); throws InvalidArgument when it has none.
+  std::filesystem::path dataset_dir;  // the files, by name
+  std::vector<Image> images;          // sorted by name
+  std::vector<std::string> file_names() const {
+    std::vector<std::string> names;
+    for (const Image& image : images) names.push_back(image.name);
+    return names;
+  }
+  // The result JSON of a referenced job (found succeeded before check_inputs runs); throws
+  // InvalidArgument when it has none.
   std::function<nlohmann::json(const std::string& job_id)> load_result;
 };
 
@@ -58,19 +79,21 @@ struct JobType {
   std::string name;
   // Validates `params` at submission; throws InvalidArgument with a message naming the field.
   std::function<void(const nlohmann::json& params)> validate;
-  // Ids of earlier jobs this job reads (so the server can check they exist before queueing).
-  std::function<std::vector<std::string>(const nlohmann::json& params)> referenced_jobs;
-  // The type every referenced job must have (empty: any), e.g. "relative_pose" for a job that
-  // reads a rig: the server refuses a reference of another type with 422 at submission.
-  std::string referenced_job_type;
+  // Earlier jobs this job reads, each with the type it must have (e.g. "relative_pose" for a
+  // job that reads a rig): the server refuses, at submission, a reference to a missing job
+  // (404), to a job of another type or one that has not succeeded (422).
+  std::function<std::vector<JobReference>(const nlohmann::json& params)> referenced_jobs;
+  // Checks at submission, without decoding pixels, that the dataset's files fit `params` and
+  // the referenced jobs' results (e.g. images of another size than the rig's calibration, a
+  // slam job's videos that do not open, pair or match the rig: what the files' headers tell);
+  // runs on an HTTP thread after the references were found succeeded. Throws InvalidArgument
+  // with the reason (the server answers 422 invalid_input, the code of a job that fails on
+  // its input while running). Optional.
+  std::function<void(const nlohmann::json& params, const SubmissionInputs& inputs)>
+      check_inputs;
   // Whether the job reads its dataset's images (the server then refuses an empty dataset with
   // 422 at submission instead of queueing a job that can only fail).
   bool reads_images = true;
-  // Optional: checks the dataset against `params` at submission (the server answers 422 with
-  // the message of the InvalidArgument it throws), from what the files' headers tell (e.g. a
-  // slam job's videos: that they open, pair and match the rig). Runs on an HTTP thread: no
-  // pixel decoding.
-  std::function<void(const nlohmann::json& params, const DatasetView& dataset)> check_dataset;
   // Runs the job and returns its result JSON. Throws omnirig::Cancelled on cancellation,
   // InvalidArgument for bad input discovered while running, anything else for failures.
   std::function<nlohmann::json(const nlohmann::json& params, const JobContext& context)> run;

@@ -467,6 +467,8 @@ json RunAutoModel(const RelativePoseParams& parsed, const RelativePoseOptions& o
   const RigModelScore& chosen = selection.candidates[selection.chosen];
   context.Log("intrinsics model: " + selection.rule);
   LogBaseline(chosen.fit, context);
+  // The candidates each ended on their own summary: the job ends on the chosen one's.
+  context.progress.Report(1.0, "done", RelativePoseSummary(chosen.fit));
   const auto& source = sources[selection.chosen];
   json result = RelativePoseResultToJson(chosen.fit, source[0]->camera_json,
                                          source[1]->camera_json,
@@ -544,13 +546,16 @@ void RegisterRelativePoseJobType() {
   JobType type;
   type.name = "relative_pose";
   type.validate = [](const json& params) { RelativePoseParamsFromJson(params); };
-  type.referenced_job_type = "calibration";
   type.referenced_jobs = [](const json& params) {
     const RelativePoseParams parsed = RelativePoseParamsFromJson(params);
-    std::vector<std::string> ids;
-    if (parsed.cam0_calibration_job) ids.push_back(*parsed.cam0_calibration_job);
-    if (parsed.cam1_calibration_job) ids.push_back(*parsed.cam1_calibration_job);
-    return ids;
+    std::vector<JobReference> references;
+    if (parsed.cam0_calibration_job) {
+      references.push_back({*parsed.cam0_calibration_job, "calibration", "calibrations.cam0"});
+    }
+    if (parsed.cam1_calibration_job) {
+      references.push_back({*parsed.cam1_calibration_job, "calibration", "calibrations.cam1"});
+    }
+    return references;
   };
   type.run = [](const json& params, const JobContext& context) {
     json result = RunRelativePoseJob(params, context);

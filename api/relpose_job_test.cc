@@ -4,7 +4,9 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <iomanip>
 #include <random>
+#include <sstream>
 
 #include <gtest/gtest.h>
 #include <opencv2/imgcodecs.hpp>
@@ -75,9 +77,13 @@ TEST_F(RelposeJob, WithCalibrationsRecoversTheRenderedRig) {
   JobContext context = Context();
   double last_fraction = -1.0;
   bool monotone = true;
-  context.progress.report = [&](double fraction, const std::string&, const std::string&) {
+  std::string last_stage, last_message;
+  context.progress.report = [&](double fraction, const std::string& stage,
+                                const std::string& message) {
     monotone = monotone && fraction >= last_fraction - 1e-12;
     last_fraction = fraction;
+    last_stage = stage;
+    last_message = message;
   };
   // "fixed": the given cameras kept (without it the job may refine them, the test below).
   const json params = {{"board", Board()},
@@ -111,6 +117,14 @@ TEST_F(RelposeJob, WithCalibrationsRecoversTheRenderedRig) {
   EXPECT_FALSE(result["intrinsics_model"].contains("candidates"));
   EXPECT_TRUE(monotone);
   EXPECT_NEAR(last_fraction, 1.0, 1e-9);
+  // The job ends on its summary (issue 20), not a bare "done".
+  EXPECT_EQ(last_stage, "done");
+  std::ostringstream baseline;
+  baseline << std::fixed << std::setprecision(2) << "baseline "
+           << result["baseline_m"].get<double>() * 1e3 << " +- ";
+  EXPECT_EQ(last_message.rfind(baseline.str(), 0), 0u) << last_message;
+  EXPECT_NE(last_message.find(" mm, rotation "), std::string::npos) << last_message;
+  EXPECT_NE(last_message.find("8 of 8 pairs used"), std::string::npos) << last_message;
 }
 
 // Given calibrations made from each camera's 8 pair images and 8 views of its own (another
@@ -134,6 +148,10 @@ TEST_F(RelposeJob, WithCalibrationsUsesTheirViewsToo) {
   JobContext context = Context();
   context.load_result = [&calibrations](const std::string& id) -> json {
     return calibrations[id == "cal0" ? 0 : 1];
+  };
+  std::string last_message;
+  context.progress.report = [&](double, const std::string&, const std::string& message) {
+    last_message = message;
   };
   const json result = RunRelativePoseJob(
       {{"board", Board()}, {"calibrations", {{"cam0", "cal0"}, {"cam1", "cal1"}}}}, context);
@@ -163,6 +181,11 @@ TEST_F(RelposeJob, WithCalibrationsUsesTheirViewsToo) {
   EXPECT_EQ(result["pairs"].size(), 8u);
   EXPECT_NEAR(result["baseline_m"].get<double>(), set_->rig.cam0_from_cam1.translation.norm(),
               5e-4);
+  // The chosen candidate's summary, not the last candidate's.
+  std::ostringstream chosen_baseline;
+  chosen_baseline << std::fixed << std::setprecision(2) << "baseline "
+                  << result["baseline_m"].get<double>() * 1e3 << " +- ";
+  EXPECT_EQ(last_message.rfind(chosen_baseline.str(), 0), 0u) << last_message;
 }
 
 TEST_F(RelposeJob, WithoutCalibrationsCalibratesEachCameraFirst) {

@@ -217,7 +217,9 @@ TEST(RelposeJson, JobTypeIsRegisteredAndNamesItsCalibrations) {
   ASSERT_NE(type, nullptr);
   const json params = {{"board", Board()}, {"calibrations", {{"cam0", "c0"}, {"cam1", "c1"}}}};
   EXPECT_NO_THROW(type->validate(params));
-  EXPECT_EQ(type->referenced_jobs(params), (std::vector<std::string>{"c0", "c1"}));
+  EXPECT_EQ(type->referenced_jobs(params),
+            (std::vector<JobReference>{{"c0", "calibration", "calibrations.cam0"},
+                                       {"c1", "calibration", "calibrations.cam1"}}));
   EXPECT_TRUE(type->referenced_jobs({{"board", Board()}}).empty());
   EXPECT_THROW(type->validate({{"board", Board()}, {"extra", 1}}), InvalidArgument);
 }

@@ -13,6 +13,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "api/camera_json.h"
+#include "api/stereo_job.h"
 #include "engine/calib/calibrate.h"
 #include "engine/geometry/ply.h"
 #include "engine/slam/evaluation.h"
@@ -301,6 +302,7 @@ dense::DenseMapOptions DenseMapOptionsFromJson(const json& object) {
   const std::map<std::string, double*> fields = {
       {"voxel_m", &options.voxel_m},
       {"keyframe_spacing_m", &options.keyframe_spacing_m},
+      {"grid_step_factor", &options.grid_step_factor},
       {"occupancy_cell_m", &options.occupancy_cell_m},
       {"obstacle_min_height_m", &options.obstacle_min_height_m},
       {"obstacle_max_height_m", &options.obstacle_max_height_m}};
@@ -321,26 +323,29 @@ dense::DenseMapOptions DenseMapOptionsFromJson(const json& object) {
 // the estimated trajectory and writes dense_map.ply and the occupancy grid.
 json FuseDenseMap(const StereoRig& rig, const slam::SlamResult& result,
                   const std::function<slam::StereoImages(int)>& load,
-                  const dense::DenseMapOptions& options, const fs::path& output_dir,
-                  const ProgressSink& progress) {
+                  const dense::DenseMapOptions& options, int num_threads,
+                  const fs::path& output_dir, const ProgressSink& progress) {
   const auto start = std::chrono::steady_clock::now();
-  const dense::DenseStereo stereo(rig, dense::DenseStereoOptions());
   dense::DenseMap map(options);
-  std::optional<Eigen::Vector3d> last;
-  json keyframes = json::array();
-  for (size_t i = 0; i < result.frames.size(); ++i) {
-    const std::optional<Rigid3d>& pose = result.frames[i].world_from_rig;
-    if (!pose || (last && (pose->translation - *last).norm() < options.keyframe_spacing_m)) {
-      continue;
-    }
-    progress.ThrowIfCancelled();
-    // SLAM has reported 1.0; the fusion's stage is named, its fraction stays there.
-    progress.Report(1.0, "dense_map", result.frames[i].name);
-    const slam::StereoImages images = load(static_cast<int>(i));
-    map.Add(*pose, stereo.Reconstruct(images.cam0, images.cam1).points);
-    last = pose->translation;
-    keyframes.push_back(result.frames[i].name);
+  std::vector<std::optional<Rigid3d>> world_from_rig;
+  for (const slam::FrameReport& frame : result.frames) {
+    world_from_rig.push_back(frame.world_from_rig);
   }
+  // SLAM has reported 1.0; the fusion's stage is named, its fraction stays there.
+  const ProgressSink fusion_progress{
+      [&](double, const std::string& stage, const std::string& message) {
+        progress.Report(1.0, stage, message);
+      },
+      progress.is_cancelled};
+  const dense::KeyframeFusionReport fusion = dense::FuseKeyframes(
+      rig, world_from_rig,
+      [&](int i) {
+        slam::StereoImages images = load(i);
+        return std::array<cv::Mat, 2>{images.cam0, images.cam1};
+      },
+      num_threads, fusion_progress, &map);
+  json keyframes = json::array();
+  for (int i : fusion.keyframes) keyframes.push_back(result.frames[i].name);
   const PlyCloud cloud = map.Cloud();
   WritePly(output_dir / "dense_map.ply", cloud);
   const dense::OccupancyGrid grid = map.Occupancy();
@@ -348,6 +353,9 @@ json FuseDenseMap(const StereoRig& rig, const slam::SlamResult& result,
   return {{"keyframes", keyframes},
           {"num_points", cloud.size()},
           {"voxel_m", options.voxel_m},
+          {"keyframe_spacing_m", options.keyframe_spacing_m},
+          {"grid_step_factor", options.grid_step_factor},
+          {"stereo_seconds", fusion.stereo_s},
           {"floor_height_m", grid.floor_height_m},
           {"occupancy_size", {grid.cells.cols, grid.cells.rows}},
           {"seconds",
@@ -649,9 +657,10 @@ std::optional<slam::StereoVideoFiles> FindStereoVideos(const fs::path& dataset_d
   return slam::StereoVideoFiles{dataset_dir / found[0][0], dataset_dir / found[1][0]};
 }
 
-void CheckSlamDataset(const json& params, const DatasetView& dataset) {
+void CheckSlamInputs(const json& params, const SubmissionInputs& dataset) {
+  CheckImagesFitRig(params, dataset);
   const SlamParams parsed = SlamParamsFromJson(params);
-  const auto videos = FindStereoVideos(dataset.dataset_dir, dataset.file_names);
+  const auto videos = FindStereoVideos(dataset.dataset_dir, dataset.file_names());
   if (!videos) {
     OMNIRIG_CHECK(!parsed.video_only_fields,
                   "'start_s', 'end_s' and 'pair_tolerance_s' select frames of videos, and dataset "
@@ -735,7 +744,8 @@ json RunSlamOnDataset(const StereoRig& rig, const fs::path& dataset_dir,
                                : json(nullptr);
   }
   if (dense_map) {
-    report["dense_map"] = FuseDenseMap(rig, result, load, *dense_map, output_dir, progress);
+    report["dense_map"] = FuseDenseMap(rig, result, load, *dense_map, options.num_threads,
+                                       output_dir, progress);
     report["artifacts"]["dense_map_ply"] = "dense_map.ply";
     report["artifacts"]["occupancy_pgm"] = "occupancy.pgm";
     report["artifacts"]["occupancy_yaml"] = "occupancy.yaml";
@@ -768,11 +778,10 @@ void RegisterSlamJobType() {
   JobType type;
   type.name = "slam";
   type.validate = [](const json& params) { SlamParamsFromJson(params); };
-  type.referenced_job_type = "relative_pose";
   type.referenced_jobs = [](const json& params) {
-    return std::vector<std::string>{SlamParamsFromJson(params).rig_job};
+    return std::vector<JobReference>{{SlamParamsFromJson(params).rig_job, "relative_pose", "rig"}};
   };
-  type.check_dataset = CheckSlamDataset;
+  type.check_inputs = CheckSlamInputs;
   type.run = RunSlamJob;
   RegisterJobType(std::move(type));
 }

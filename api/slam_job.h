@@ -94,10 +94,10 @@ struct SlamParams {
   std::string rig_job;
   std::optional<std::string> ground_truth;  // a file name in the dataset
   slam::SlamOptions options;
-  // "dense_map": {"voxel_m", "keyframe_spacing_m", "occupancy_cell_m", "obstacle_min_height_m",
-  // "obstacle_max_height_m"} (each optional; engine/dense/dense_map.h): fuse the dense clouds of
-  // keyframes along the trajectory into dense_map.ply and write occupancy.pgm + occupancy.yaml
-  // (ROS map_server); the result's "dense_map" reports it.
+  // "dense_map": {"voxel_m", "keyframe_spacing_m", "grid_step_factor", "occupancy_cell_m",
+  // "obstacle_min_height_m", "obstacle_max_height_m"} (each optional; engine/dense/dense_map.h):
+  // fuse the dense clouds of keyframes along the trajectory into dense_map.ply and write
+  // occupancy.pgm + occupancy.yaml (ROS map_server); the result's "dense_map" reports it.
   std::optional<dense::DenseMapOptions> dense_map;
   // "frame_step", "start_s", "end_s", "pair_tolerance_s"; which of them were given (the time
   // fields are refused on an image dataset).
@@ -112,10 +112,10 @@ SlamParams SlamParamsFromJson(const nlohmann::json& params);
 std::optional<slam::StereoVideoFiles> FindStereoVideos(const std::filesystem::path& dataset_dir,
                                                        const std::vector<std::string>& names);
 
-// The check at submission (JobType::check_dataset): a video dataset's files open, pair (frame
-// counts and rates) and have the rig's frame size, read from their headers; the video-only
-// params are refused on images. Throws InvalidArgument with the reason.
-void CheckSlamDataset(const nlohmann::json& params, const DatasetView& dataset);
+// The check at submission (JobType::check_inputs): the images have the rig's calibrated size,
+// a video dataset's files open, pair (frame counts and rates) and have the rig's frame size,
+// read from their headers; the video-only params are refused on images. Throws InvalidArgument with the reason.
+void CheckSlamInputs(const nlohmann::json& params, const SubmissionInputs& dataset);
 
 // The sequence's frames after the checks that run before any work.
 struct SlamSequence {

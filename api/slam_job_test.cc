@@ -129,7 +129,9 @@ TEST_F(SlamJob, DenseMapFusesKeyframesAndWritesAnOccupancyGrid) {
   RegisterSlamJobType();
   const JobType* type = FindJobType("slam");
   ASSERT_NE(type, nullptr);
-  const json params = {{"rig", "rig-job"}, {"dense_map", {{"voxel_m", 0.02}}}};
+  // Keyframes 0.5 m apart (the default is 1.5 m) on this short sequence.
+  const json params = {{"rig", "rig-job"},
+                       {"dense_map", {{"voxel_m", 0.02}, {"keyframe_spacing_m", 0.5}}}};
   type->validate(params);
   EXPECT_THROW(type->validate({{"rig", "rig-job"}, {"dense_map", {{"voxel", 0.02}}}}),
                InvalidArgument);
@@ -140,6 +142,7 @@ TEST_F(SlamJob, DenseMapFusesKeyframesAndWritesAnOccupancyGrid) {
   const json& map = result["dense_map"];
   // ~20 cm steps over 1.65 m with keyframes 0.5 m apart.
   EXPECT_GE(map["keyframes"].size(), 3u);
+  EXPECT_EQ(map["keyframe_spacing_m"], 0.5);
   EXPECT_GT(map["num_points"].get<int>(), 20000);  // 40,569 measured (640x480)
   // The sensor is 1 m above the floor; the world is the first frame's cam0 frame (z down).
   EXPECT_NEAR(map["floor_height_m"].get<double>(), -1.0, 0.05);

@@ -222,7 +222,8 @@ TEST(SlamJobType, IsRegisteredAndValidates) {
   const JobType* type = FindJobType("slam");
   ASSERT_NE(type, nullptr);
   EXPECT_THROW(type->validate(json::object()), InvalidArgument);
-  EXPECT_EQ(type->referenced_jobs({{"rig", "r1"}}), std::vector<std::string>{"r1"});
+  EXPECT_EQ(type->referenced_jobs({{"rig", "r1"}}),
+            (std::vector<JobReference>{{"r1", "relative_pose", "rig"}}));
 }
 
 // The frame selection params: parsed, checked, and named when wrong.

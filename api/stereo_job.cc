@@ -2,8 +2,15 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <iomanip>
+#include <map>
+#include <optional>
 #include <set>
 #include <sstream>
+#include <utility>
+#include <vector>
 
 #include <opencv2/imgcodecs.hpp>
 
@@ -11,6 +18,7 @@
 #include "api/relpose_job.h"
 #include "engine/dense/range_io.h"
 #include "engine/geometry/ply.h"
+#include "engine/slam/map_io.h"
 #include "engine/stereo/epipolar.h"
 #include "engine/util/check.h"
 
@@ -43,7 +51,8 @@ const std::set<std::string> kDenseFields = {"grid_step_rad",
                                             "disparity_std_cells",
                                             "max_relative_range_std",
                                             "dark_level",
-                                            "mask_margin_cells"};
+                                            "mask_margin_cells",
+                                            "max_epipolar_offset_cells"};
 
 // A pair whose confident cells are fewer than this fraction of its mirror cells is reported as
 // a bad pair (dark, blurred, out of sync): the room renders give about 0.8, a pair with one
@@ -156,6 +165,7 @@ void ReadDenseOptions(const json& params, dense::DenseStereoOptions* options) {
   ReadNumber(params, "max_relative_range_std", &o.max_relative_range_std);
   ReadNumber(params, "dark_level", &o.dark_level);
   ReadInteger(params, "mask_margin_cells", &o.mask_margin_cells);
+  ReadNumber(params, "max_epipolar_offset_cells", &o.max_epipolar_offset_cells);
   o.Check();
 }
 
@@ -173,7 +183,7 @@ StereoReconstructParams StereoReconstructParamsFromJson(const json& params) {
   const std::set<std::string>& fields = out.method == "dense" ? kDenseFields : kSparseFields;
   const std::set<std::string>& other = out.method == "dense" ? kSparseFields : kDenseFields;
   for (const auto& [key, value] : params.items()) {
-    if (key == "rig" || key == "method" || fields.count(key)) continue;
+    if (key == "rig" || key == "method" || key == "trajectory" || fields.count(key)) continue;
     OMNIRIG_CHECK(other.count(key) == 0, "field 'params." << key << "' applies to method '"
                                                           << (out.method == "dense" ? "sparse" : "dense")
                                                           << "' only (this job's method is '"
@@ -185,6 +195,12 @@ StereoReconstructParams StereoReconstructParamsFromJson(const json& params) {
   OMNIRIG_CHECK(params["rig"].is_string() && !params["rig"].get<std::string>().empty(),
                 "field 'params.rig' must be a job id (a non-empty string)");
   out.rig_job = params["rig"].get<std::string>();
+  if (params.contains("trajectory")) {
+    const json& trajectory = params["trajectory"];
+    OMNIRIG_CHECK(trajectory.is_string() && !trajectory.get<std::string>().empty(),
+                  "field 'params.trajectory' must be a job id (a succeeded slam job)");
+    out.trajectory_job = params["trajectory"].get<std::string>();
+  }
   if (out.method == "dense") {
     ReadDenseOptions(params, &out.dense);
   } else {
@@ -220,7 +236,8 @@ json DenseStereoOptionsToJson(const dense::DenseStereoOptions& o) {
           {"disparity_std_cells", o.disparity_std_cells},
           {"max_relative_range_std", o.max_relative_range_std},
           {"dark_level", o.dark_level},
-          {"mask_margin_cells", o.mask_margin_cells}};
+          {"mask_margin_cells", o.mask_margin_cells},
+          {"max_epipolar_offset_cells", o.max_epipolar_offset_cells}};
 }
 
 namespace {
@@ -235,10 +252,172 @@ std::string RangeBaseName(const std::string& pair_name) {
   return out;
 }
 
+// Each pair's cam0 pose in one world, when a trajectory gives it: a slam job's (frames named as
+// the pairs) or the dataset's .tum file (by timestamp when the pairs are named by time, else one
+// pose per pair in order, as slam's ground truth).
+struct PairPlacement {
+  std::string source;                                   // "slam job ID" or "NAME.tum"
+  std::vector<std::optional<Rigid3d>> world_from_cam0;  // per pair
+  std::string warning;  // why some or all pairs could not be placed
+};
+
+PairPlacement PlaceBySlamJob(const std::string& job_id, const std::vector<ImagePairNames>& pairs,
+                             const JobContext& context) {
+  const json slam = context.load_result(job_id);
+  OMNIRIG_CHECK(slam.contains("frames") && slam["frames"].is_array(),
+                "job " << job_id << " holds no trajectory (is it a slam job?)");
+  std::map<std::string, std::optional<Rigid3d>> by_name;
+  for (const json& frame : slam["frames"]) {
+    if (!frame.contains("name") || !frame["name"].is_string()) continue;
+    const json& pose = frame.value("world_from_rig", json(nullptr));
+    by_name[frame["name"].get<std::string>()] =
+        pose.is_null() ? std::nullopt : std::optional<Rigid3d>(PoseFromJson(pose));
+  }
+  PairPlacement placement{"slam job " + job_id, {}, ""};
+  int num_unknown = 0;
+  for (const ImagePairNames& pair : pairs) {
+    const auto it = by_name.find(pair.name);
+    num_unknown += it == by_name.end();
+    placement.world_from_cam0.push_back(it == by_name.end() ? std::nullopt : it->second);
+  }
+  OMNIRIG_CHECK(num_unknown < static_cast<int>(pairs.size()),
+                "no pair of this dataset is a frame of slam job "
+                    << job_id << " (its frames are named as the pairs, e.g. "
+                    << (by_name.empty() ? std::string("none") : by_name.begin()->first) << ")");
+  return placement;
+}
+
+// NAME read as a number (datasets often name frames by time).
+std::optional<double> NameAsNumber(const std::string& name) {
+  const std::string stem = std::filesystem::path(name).stem().string();
+  char* end = nullptr;
+  const double value = std::strtod(stem.c_str(), &end);
+  if (stem.empty() || end != stem.c_str() + stem.size()) return std::nullopt;
+  return value;
+}
+
+PairPlacement PlaceByTum(const std::string& file, const std::vector<ImagePairNames>& pairs,
+                         const JobContext& context) {
+  PairPlacement placement{file, std::vector<std::optional<Rigid3d>>(pairs.size()), ""};
+  const std::vector<slam::StampedPose> poses = slam::ReadTum(context.dataset_dir / file);
+  int num_by_time = 0;
+  for (size_t k = 0; k < pairs.size(); ++k) {
+    const std::optional<double> stamp = NameAsNumber(pairs[k].name);
+    for (const slam::StampedPose& pose : poses) {
+      if (stamp && std::abs(pose.timestamp_s - *stamp) < 1e-6 * std::max(1.0, std::abs(*stamp))) {
+        placement.world_from_cam0[k] = pose.world_from_rig;
+        ++num_by_time;
+        break;
+      }
+    }
+  }
+  if (num_by_time > 0) return placement;
+  if (poses.size() == pairs.size()) {
+    for (size_t k = 0; k < pairs.size(); ++k) {
+      placement.world_from_cam0[k] = poses[k].world_from_rig;
+    }
+    return placement;
+  }
+  placement.warning = file + " has " + std::to_string(poses.size()) + " poses for " +
+                      std::to_string(pairs.size()) +
+                      " pairs and no timestamp equal to a pair's name: the pairs are not placed";
+  return placement;
+}
+
+std::optional<PairPlacement> PlacePairs(const StereoReconstructParams& parsed,
+                                        const std::vector<ImagePairNames>& pairs,
+                                        const JobContext& context) {
+  if (parsed.trajectory_job) return PlaceBySlamJob(*parsed.trajectory_job, pairs, context);
+  std::vector<std::string> tum;
+  for (const std::string& name : context.image_names) {
+    if (name.size() > 4 && name.compare(name.size() - 4, 4, ".tum") == 0) tum.push_back(name);
+  }
+  if (tum.empty()) return std::nullopt;
+  if (tum.size() > 1) {
+    return PairPlacement{tum[0], std::vector<std::optional<Rigid3d>>(pairs.size()),
+                         "the dataset holds " + std::to_string(tum.size()) +
+                             " .tum trajectories: name a slam job in 'trajectory' instead"};
+  }
+  return PlaceByTum(tum[0], pairs, context);
+}
+
+// Where the pairs' clouds go (issue 20). Without a trajectory: one pair writes cloud.ply, in its
+// cam0 frame; several write cloud_NAME.ply each in its own cam0 frame and no merged cloud (the
+// pairs of a moving rig share no frame). With one: cloud_NAME.ply per pair as well, and
+// cloud.ply with every placed pair moved into the trajectory's world.
+class CloudOutputs {
+ public:
+  CloudOutputs(const std::filesystem::path& dir, size_t num_pairs,
+               std::optional<PairPlacement> placement)
+      : dir_(dir), num_pairs_(num_pairs), placement_(std::move(placement)),
+        merged_(dir / "cloud.ply") {}
+
+  void Add(size_t k, const std::string& pair_name, const PlyCloud& cloud, json* pair) {
+    if (num_pairs_ == 1 && !placement_) {
+      WritePly(dir_ / "cloud.ply", cloud);
+      return;
+    }
+    const std::string artifact = SafeArtifactName(pair_name);
+    WritePly(dir_ / artifact, cloud);
+    (*pair)["artifact"] = artifact;
+    if (!placement_) return;
+    const std::optional<Rigid3d>& world_from_cam0 = placement_->world_from_cam0[k];
+    (*pair)["placed"] = world_from_cam0.has_value();
+    if (!world_from_cam0) return;
+    PlyCloud in_world = cloud;
+    in_world.comment = "omnirig stereo_reconstruct: all placed pairs in the world of " +
+                       placement_->source + ", metres";
+    for (Eigen::Vector3f& p : in_world.positions) {
+      p = (*world_from_cam0 * p.cast<double>()).cast<float>();
+    }
+    merged_.Append(in_world);
+    ++num_placed_;
+  }
+
+  void Finish(json* result) {
+    if (placement_) {
+      json trajectory = {{"source", placement_->source}, {"num_pairs_placed", num_placed_}};
+      if (num_placed_ < static_cast<int>(num_pairs_) && placement_->warning.empty()) {
+        placement_->warning = std::to_string(num_pairs_ - num_placed_) +
+                              " pair(s) have no pose in the trajectory and are not in cloud.ply";
+      }
+      if (!placement_->warning.empty()) trajectory["warning"] = placement_->warning;
+      (*result)["trajectory"] = trajectory;
+    }
+    if (num_placed_ > 0) {
+      merged_.Finish();
+      (*result)["artifact"] = "cloud.ply";
+      (*result)["clouds_merged"] = true;
+    } else if (num_pairs_ == 1) {
+      (*result)["artifact"] = "cloud.ply";
+    } else if (num_pairs_ > 1) {
+      (*result)["artifact"] = (*result)["pairs"][0]["artifact"];
+      (*result)["clouds_merged"] = false;
+    }
+  }
+
+ private:
+  std::filesystem::path dir_;
+  size_t num_pairs_;
+  std::optional<PairPlacement> placement_;
+  PlyAppender merged_;
+  int num_placed_ = 0;
+};
+
+PlyCloud SparseCloud(const std::vector<StereoPoint>& points) {
+  PlyCloud cloud;
+  cloud.comment = "omnirig stereo_reconstruct: points in cam0's frame, metres";
+  for (const StereoPoint& p : points) {
+    cloud.positions.push_back(p.point_in_cam0.cast<float>());
+    cloud.colours.push_back(p.rgb);
+  }
+  return cloud;
+}
+
 size_t RunSparse(const StereoReconstructParams& parsed, const StereoRig& rig,
-               const std::vector<ImagePairNames>& pairs, const JobContext& context,
-               json* result) {
-  std::vector<StereoPoint> all_points;
+                 const std::vector<ImagePairNames>& pairs, const JobContext& context,
+                 CloudOutputs* outputs, json* result) {
+  size_t num_points = 0;
   for (size_t k = 0; k < pairs.size(); ++k) {
     context.progress.ThrowIfCancelled();
     const cv::Mat image0 = ReadImage(context, pairs[k].cam0);
@@ -253,18 +432,13 @@ size_t RunSparse(const StereoReconstructParams& parsed, const StereoRig& rig,
       throw InvalidArgument("pair '" + pairs[k].name + "': " + e.what());
     }
     json pair = PairJson(pairs[k].name, report);
-    if (pairs.size() > 1) {
-      const std::string artifact = SafeArtifactName(pairs[k].name);
-      WriteColoredPly(context.output_dir / artifact, report.points);
-      pair["artifact"] = artifact;
-    }
+    outputs->Add(k, pairs[k].name, SparseCloud(report.points), &pair);
     context.Log("pair " + pairs[k].name + ": " + std::to_string(report.num_matches) +
                 " matches, " + std::to_string(report.points.size()) + " points");
     (*result)["pairs"].push_back(pair);
-    all_points.insert(all_points.end(), report.points.begin(), report.points.end());
+    num_points += report.points.size();
   }
-  if (pairs.size() == 1) WriteColoredPly(context.output_dir / "cloud.ply", all_points);
-  return all_points.size();
+  return num_points;
 }
 
 PlyCloud DenseCloud(const std::vector<dense::DensePoint>& points) {
@@ -299,20 +473,30 @@ json DensePairJson(const std::string& name, const dense::DensePairResult& r) {
                {"confident_fraction", confident_fraction},
                {"mean_confidence", r.mean_confidence},
                {"median_range_m", Median(ranges)},
-               {"median_range_std_m", Median(stds)}};
+               {"median_range_std_m", Median(stds)},
+               {"epipolar_offset_cells", r.epipolar_offset_cells},
+               {"num_epipolar_samples", r.num_epipolar_samples},
+               {"confidence_scale", r.confidence_scale}};
+  std::ostringstream warning;
+  if (r.confidence_scale < 1.0) {
+    warning << std::setprecision(2) << "the images do not fit the rig: their matches lie "
+            << r.epipolar_offset_cells << " cells off the epipolar lines (median of "
+            << r.num_epipolar_samples << " samples), so every confidence was scaled by "
+            << r.confidence_scale << " (one image shifted or out of sync, or a wrong rig)";
+  }
   if (confident_fraction < kFewConfidentFraction) {
-    std::ostringstream warning;
+    if (!warning.str().empty()) warning << "; ";
     warning << "few confident pixels: " << r.num_points << " of " << r.num_mirror_cells
             << " mirror cells (" << std::lround(100.0 * confident_fraction)
             << "%); the images may be dark, blurred or out of sync, or the rig may not fit them";
-    pair["warning"] = warning.str();
   }
+  if (!warning.str().empty()) pair["warning"] = warning.str();
   return pair;
 }
 
 size_t RunDense(const StereoReconstructParams& parsed, const StereoRig& rig,
                 const std::vector<ImagePairNames>& pairs, const JobContext& context,
-                json* result) {
+                CloudOutputs* outputs, json* result) {
   context.progress.Report(0.0, "rectify", "building the rectification tables");
   const dense::DenseStereo dense(rig, parsed.dense);
   size_t num_points = 0;
@@ -338,17 +522,12 @@ size_t RunDense(const StereoReconstructParams& parsed, const StereoRig& rig,
     pair["range_tiff"] = base + "_range.tiff";
     pair["range_png"] = base + "_range.png";
     const PlyCloud cloud = DenseCloud(pair_result.points);
-    if (pairs.size() > 1) {
-      const std::string artifact = SafeArtifactName(pairs[k].name);
-      WritePly(context.output_dir / artifact, cloud);
-      pair["artifact"] = artifact;
-    }
+    outputs->Add(k, pairs[k].name, cloud, &pair);
     context.Log("pair " + pairs[k].name + ": " + std::to_string(pair_result.num_points) +
                 " points of " + std::to_string(pair_result.num_mirror_cells) + " mirror cells" +
                 (pair.contains("warning") ? " (" + pair["warning"].get<std::string>() + ")" : ""));
     (*result)["pairs"].push_back(pair);
     num_points += cloud.size();
-    if (pairs.size() == 1) WritePly(context.output_dir / "cloud.ply", cloud);
   }
   (*result)["grid"] = {{"rows", dense.rectifier().rows()},
                        {"cols", dense.rectifier().cols()},
@@ -373,32 +552,58 @@ json RunStereoReconstructJob(const json& params, const JobContext& context) {
                  {"options", parsed.method == "dense" ? DenseStereoOptionsToJson(parsed.dense)
                                                       : StereoReconstructOptionsToJson(parsed.options)},
                  {"pairs", json::array()}};
+  CloudOutputs outputs(context.output_dir, pairs.size(), PlacePairs(parsed, pairs, context));
   const size_t num_points = parsed.method == "dense"
-                                ? RunDense(parsed, rig, pairs, context, &result)
-                                : RunSparse(parsed, rig, pairs, context, &result);
+                                ? RunDense(parsed, rig, pairs, context, &outputs, &result)
+                                : RunSparse(parsed, rig, pairs, context, &outputs, &result);
   result["num_points"] = num_points;
-  // Each pair's points are in that pair's own cam0 frame: merged, the pairs of a moving rig
-  // would pile up into an unreadable blob. One pair makes cloud.ply; several stay apart (the
-  // result's artifact is the first pair's cloud), since nothing here places them in one frame.
-  if (pairs.size() == 1) {
-    result["artifact"] = "cloud.ply";
-  } else if (!pairs.empty()) {
-    result["artifact"] = result["pairs"][0]["artifact"];
-    result["clouds_merged"] = false;
-  }
+  outputs.Finish(&result);
   context.progress.Report(1.0, "done", std::to_string(num_points) + " points from " +
                                            std::to_string(pairs.size()) + " pair(s)");
   return result;
+}
+
+void CheckImagesFitRig(const json& params, const SubmissionInputs& inputs) {
+  if (!params.contains("rig") || !params["rig"].is_string() || !inputs.load_result) return;
+  const std::string rig_job = params["rig"].get<std::string>();
+  StereoRig rig;
+  try {
+    rig = RigFromJson(inputs.load_result(rig_job));
+  } catch (const std::exception&) {
+    return;
+  }
+  const CameraModel* cameras[2] = {&rig.cam0, &rig.cam1};
+  std::ostringstream sizes;
+  int num_bad = 0;
+  for (const SubmissionInputs::Image& image : inputs.images) {
+    for (int c = 0; c < 2; ++c) {
+      const std::string prefix = "cam" + std::to_string(c) + "/";
+      if (image.name.rfind(prefix, 0) != 0 || image.width <= 0) continue;
+      if (image.width == cameras[c]->width && image.height == cameras[c]->height) continue;
+      if (num_bad++ < 3) {
+        sizes << (num_bad > 1 ? "; " : " ") << image.name << " is " << image.width << "x"
+              << image.height << " but the rig's cam" << c << " is calibrated for "
+              << cameras[c]->width << "x" << cameras[c]->height;
+      }
+    }
+  }
+  OMNIRIG_CHECK(num_bad == 0, num_bad << " image(s) do not fit the rig of job " << rig_job << ":"
+                                      << sizes.str()
+                                      << " (calibrate the cameras at this image size, or "
+                                         "upload images of the calibrated size)");
 }
 
 void RegisterStereoReconstructJobType() {
   JobType type;
   type.name = "stereo_reconstruct";
   type.validate = [](const json& params) { StereoReconstructParamsFromJson(params); };
-  type.referenced_job_type = "relative_pose";
   type.referenced_jobs = [](const json& params) {
-    return std::vector<std::string>{StereoReconstructParamsFromJson(params).rig_job};
+    const StereoReconstructParams parsed = StereoReconstructParamsFromJson(params);
+    std::vector<JobReference> references = {{parsed.rig_job, "relative_pose", "rig"}};
+    if (parsed.trajectory_job) references.push_back({*parsed.trajectory_job, "slam", "trajectory"});
+    return references;
   };
+  type.check_inputs = CheckImagesFitRig;
   type.run = RunStereoReconstructJob;
   RegisterJobType(std::move(type));
 }

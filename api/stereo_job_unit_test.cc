@@ -1,7 +1,11 @@
 #include "api/stereo_job.h"
 
+#include <algorithm>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <string>
+#include <vector>
 
 #include <unistd.h>
 
@@ -10,6 +14,8 @@
 
 #include "api/camera_json.h"
 #include "engine/geometry/unified_camera.h"
+#include "engine/slam/map_io.h"
+#include "engine/synth/presets.h"
 #include "engine/util/check.h"
 
 namespace omnirig::api {
@@ -86,7 +92,11 @@ TEST(StereoJson, RegistersTheJobType) {
   RegisterStereoReconstructJobType();
   const JobType* type = FindJobType("stereo_reconstruct");
   ASSERT_NE(type, nullptr);
-  EXPECT_EQ(type->referenced_jobs({{"rig", "abc"}}), std::vector<std::string>{"abc"});
+  EXPECT_EQ(type->referenced_jobs({{"rig", "abc"}}),
+            (std::vector<JobReference>{{"abc", "relative_pose", "rig"}}));
+  EXPECT_EQ(type->referenced_jobs({{"rig", "abc"}, {"trajectory", "s1"}}),
+            (std::vector<JobReference>{{"abc", "relative_pose", "rig"},
+                                       {"s1", "slam", "trajectory"}}));
   EXPECT_THROW(type->validate(json::object()), InvalidArgument);
 }
 
@@ -229,6 +239,106 @@ TEST_F(StereoJobTest, RefusesBadInput) {
   EXPECT_NE(RunError({{"rig", "missing"}}, context_).find("no result"), std::string::npos);
   AddImage("cam0/b.png", 320, 240);  // no partner
   EXPECT_NE(RunError({{"rig", "rig"}}, context_).find("without a partner"), std::string::npos);
+}
+
+// Vertex i of a binary PLY with float x y z, uchar rgb and (dense) float confidence.
+Eigen::Vector3f PlyVertex(const std::filesystem::path& path, size_t i, size_t* count) {
+  std::ifstream in(path, std::ios::binary);
+  const std::string data((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const size_t element = data.find("element vertex ");
+  *count = std::stoul(data.substr(element + 15));
+  const size_t body = data.find("end_header\n") + 11;
+  const size_t stride = data.find("property float confidence") < body ? 19 : 15;
+  float xyz[3];
+  std::memcpy(xyz, data.data() + body + stride * i, sizeof(xyz));
+  return Eigen::Vector3f(xyz[0], xyz[1], xyz[2]);
+}
+
+// Two rendered pairs of a moving rig (320x240), their rig and poses.
+class StereoTrajectoryTest : public StereoJobTest {
+ protected:
+  void SetUp() override {
+    StereoJobTest::SetUp();
+    synth::StereoSequenceOptions options;
+    options.num_frames = 2;
+    options.width = 320;
+    options.height = 240;
+    options.path_length_m = 1.0;
+    sequence_ = synth::MakeStereoSequence(options);
+    for (int f = 0; f < 2; ++f) {
+      for (int c = 0; c < 2; ++c) {
+        const std::string name = "cam" + std::to_string(c) + "/" + sequence_.names[f] + ".png";
+        cv::imwrite((context_.dataset_dir / name).string(), sequence_.images[c][f]);
+        context_.image_names.push_back(name);
+      }
+    }
+    std::sort(context_.image_names.begin(), context_.image_names.end());
+    context_.load_result = [this](const std::string& id) -> json {
+      if (id == "rig") return RigToJson(sequence_.rig);
+      json frames = json::array();
+      for (int f = 0; f < 2; ++f) {
+        frames.push_back({{"name", sequence_.names[f] + ".png"},
+                          {"world_from_rig", PoseToJson(sequence_.world_from_rig[f])}});
+      }
+      frames.push_back({{"name", "lost.png"}, {"world_from_rig", nullptr}});
+      return {{"frames", frames}};
+    };
+  }
+
+  // Checks cloud.ply: both pairs, the second's first point moved by its pose.
+  void ExpectMerged(const json& result, const std::string& source) {
+    EXPECT_EQ(result["artifact"], "cloud.ply");
+    EXPECT_EQ(result["clouds_merged"], true);
+    EXPECT_EQ(result["trajectory"]["source"], source);
+    EXPECT_EQ(result["trajectory"]["num_pairs_placed"], 2);
+    EXPECT_FALSE(result["trajectory"].contains("warning"));
+    const size_t first = result["pairs"][0]["num_points"].get<size_t>();
+    const size_t second = result["pairs"][1]["num_points"].get<size_t>();
+    ASSERT_GT(first, 20u);
+    ASSERT_GT(second, 20u);
+    size_t merged_count = 0, pair_count = 0;
+    const Eigen::Vector3f merged =
+        PlyVertex(context_.output_dir / "cloud.ply", first, &merged_count);
+    const Eigen::Vector3f in_cam0 = PlyVertex(
+        context_.output_dir / result["pairs"][1]["artifact"].get<std::string>(), 0, &pair_count);
+    EXPECT_EQ(merged_count, first + second);
+    EXPECT_EQ(pair_count, second);
+    const Eigen::Vector3d expected = sequence_.world_from_rig[1] * in_cam0.cast<double>();
+    EXPECT_LT((merged.cast<double>() - expected).norm(), 1e-4);
+  }
+
+  synth::StereoSequence sequence_;
+};
+
+TEST_F(StereoTrajectoryTest, ASlamJobPlacesThePairsInItsWorld) {
+  const json result = RunStereoReconstructJob({{"rig", "rig"}, {"trajectory", "slam"}}, context_);
+  ExpectMerged(result, "slam job slam");
+  EXPECT_EQ(result["pairs"][0]["placed"], true);
+  // A slam job none of whose frames is a pair of the dataset is refused.
+  context_.load_result = [this](const std::string& id) -> json {
+    if (id == "rig") return RigToJson(sequence_.rig);
+    return {{"frames", json::array({{{"name", "other.png"}, {"world_from_rig", nullptr}}})}};
+  };
+  EXPECT_NE(RunError({{"rig", "rig"}, {"trajectory", "slam"}}, context_).find("no pair"),
+            std::string::npos);
+}
+
+TEST_F(StereoTrajectoryTest, TheDatasetsTumTrajectoryPlacesThePairsInOrder) {
+  std::vector<slam::StampedPose> poses;
+  for (int f = 0; f < 2; ++f) poses.push_back({0.1 * f, sequence_.world_from_rig[f]});
+  slam::WriteTum(context_.dataset_dir / "truth.tum", poses);
+  context_.image_names.push_back("truth.tum");
+  std::sort(context_.image_names.begin(), context_.image_names.end());
+  ExpectMerged(RunStereoReconstructJob({{"rig", "rig"}, {"method", "sparse"}}, context_),
+               "truth.tum");
+  // One pose too many: not placed, and said so; the pairs keep their own clouds.
+  last_fraction_ = 0.0;
+  poses.push_back(poses.back());
+  slam::WriteTum(context_.dataset_dir / "truth.tum", poses);
+  const json result = RunStereoReconstructJob({{"rig", "rig"}, {"method", "sparse"}}, context_);
+  EXPECT_EQ(result["clouds_merged"], false);
+  EXPECT_NE(result["trajectory"]["warning"].get<std::string>().find("3 poses for 2 pairs"),
+            std::string::npos);
 }
 
 }  // namespace

@@ -10,7 +10,9 @@
 // (default 2), after the per-rig set-up (omnirig's rectification tables, timed separately; the
 // peer has no such split and rebuilds its maps per call).
 //
-// Usage: bench_dense [--frames N] [--threads N]
+// --no-peer runs omnirig only (for profiling).
+//
+// Usage: bench_dense [--frames N] [--threads N] [--no-peer]
 
 #include <algorithm>
 #include <chrono>
@@ -130,7 +132,7 @@ std::vector<Eigen::Vector3d> PeerReconstruct(const PeerRig& peer, const cv::Mat&
   return points;
 }
 
-int Run(int num_frames, int threads) {
+int Run(int num_frames, int threads, bool with_peer) {
   cv::setNumThreads(threads);
   synth::StereoSequenceOptions options;
   options.num_frames = num_frames;
@@ -144,12 +146,18 @@ int Run(int num_frames, int threads) {
   const dense::DenseStereo dense(sequence.rig, dense::DenseStereoOptions());
   const double setup_s = Seconds(start);
   Score ours;
+  dense::DensePairResult::Seconds stages;
   for (int f = 0; f < num_frames; ++f) {
     start = std::chrono::steady_clock::now();
     const double cpu = CpuSeconds();
     const dense::DensePairResult result =
         dense.Reconstruct(sequence.images[0][f], sequence.images[1][f]);
     const double s = Seconds(start), cpu_s = CpuSeconds() - cpu;
+    stages.rectify += result.seconds.rectify / num_frames;
+    stages.match += result.seconds.match / num_frames;
+    stages.confidence += result.seconds.confidence / num_frames;
+    stages.epipolar += result.seconds.epipolar / num_frames;
+    stages.triangulate += result.seconds.triangulate / num_frames;
     std::vector<Eigen::Vector3d> points;
     points.reserve(result.points.size());
     for (const dense::DensePoint& p : result.points) points.push_back(p.point_in_cam0.cast<double>());
@@ -183,7 +191,7 @@ int Run(int num_frames, int threads) {
               std::string(11, '-').c_str(), std::string(11, '-').c_str(),
               std::string(8, '-').c_str(), std::string(8, '-').c_str());
   ours.Print("omnirig dense (spherical grid + SGBM + ZNCC)");
-  for (const PeerSetting& setting : settings) {
+  for (const PeerSetting& setting : with_peer ? settings : std::vector<PeerSetting>()) {
     Score score;
     for (int f = 0; f < num_frames; ++f) {
       start = std::chrono::steady_clock::now();
@@ -196,7 +204,11 @@ int Run(int num_frames, int threads) {
     }
     score.Print(setting.name);
   }
-  std::printf("\nomnirig: grid %d x %d cells (step %.5f rad), %d disparities; rectification "
+  std::printf("\nomnirig per pair, wall s by stage: rectify + masks %.3f, SGBM %.3f, confidence "
+              "%.3f, epipolar fit check %.3f, triangulate + panoramas %.3f\n",
+              stages.rectify, stages.match, stages.confidence, stages.epipolar,
+              stages.triangulate);
+  std::printf("omnirig: grid %d x %d cells (step %.5f rad), %d disparities; rectification "
               "tables built once per rig in %.3f s\n",
               dense.rectifier().rows(), dense.rectifier().cols(),
               dense.rectifier().theta_step_rad(), dense.num_disparities(), setup_s);
@@ -208,9 +220,12 @@ int Run(int num_frames, int threads) {
 
 int main(int argc, char** argv) {
   int frames = 4, threads = 2;
-  for (int i = 1; i + 1 < argc; i += 2) {
-    if (!std::strcmp(argv[i], "--frames")) frames = std::max(1, std::atoi(argv[i + 1]));
-    if (!std::strcmp(argv[i], "--threads")) threads = std::max(1, std::atoi(argv[i + 1]));
+  bool with_peer = true;
+  for (int i = 1; i < argc; ++i) {
+    if (!std::strcmp(argv[i], "--no-peer")) with_peer = false;
+    if (i + 1 >= argc) continue;
+    if (!std::strcmp(argv[i], "--frames")) frames = std::max(1, std::atoi(argv[++i]));
+    else if (!std::strcmp(argv[i], "--threads")) threads = std::max(1, std::atoi(argv[++i]));
   }
-  return omnirig::Run(frames, threads);
+  return omnirig::Run(frames, threads, with_peer);
 }

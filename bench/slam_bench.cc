@@ -16,15 +16,25 @@
 // to 0.02 rad for both), without and with the global adjustment's calibration refinement
 // (--no-calibration-runs skips them).
 //
+// --dense-map: after the timed run, the dense map of the slam job's "dense_map" (issue 17) is
+// fused along the estimated trajectory with the same loader (PNG decode included), timed in wall
+// and CPU seconds against the SLAM run's (target: at most 30 % added to the job's wall time),
+// and scored against the room (median distance to the true surfaces <= 0.5 % of range,
+// occupancy agreeing in >= 95 % of the observed cells). --grid-step-factor and
+// --keyframe-spacing set DenseMapOptions' fields of the same names.
+//
 // usage: bench_slam [--frames N] [--width W] [--height H] [--threads T] [--street]
 //                   [--max-features N] [--local-window N] [--local-iterations N] [--no-decode]
 //                   [--black-frame I] [--no-calibration-runs] [--video mp4|avi|mkv]
+//                   [--dense-map [--grid-step-factor F] [--keyframe-spacing M]]
 
 #include <unistd.h>
 #include <algorithm>
+#include <array>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <optional>
 #include <ctime>
 #include <string>
 #include <vector>
@@ -35,6 +45,8 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/videoio.hpp>
 
+#include "engine/dense/dense_map.h"
+#include "engine/dense/map_accuracy.h"
 #include "engine/slam/evaluation.h"
 #include "engine/slam/sequence_accuracy.h"
 #include "engine/slam/slam.h"
@@ -59,7 +71,23 @@ struct Args {
   int black_frame = -1;  // this frame's cam0 image is replaced by a black one (tracking loss)
   bool calibration_runs = true;
   std::string video;  // "", "mp4", "avi", "mkv"
+  bool dense_map = false;
+  // Each combination is fused and scored after the one SLAM run; empty: the library defaults.
+  std::vector<double> grid_step_factors;
+  std::vector<double> keyframe_spacings_m;
 };
+
+// "1,1.5,2" -> {1, 1.5, 2}.
+std::vector<double> Numbers(const std::string& list) {
+  std::vector<double> values;
+  size_t start = 0;
+  while (start <= list.size()) {
+    const size_t end = std::min(list.find(',', start), list.size());
+    values.push_back(std::atof(list.substr(start, end - start).c_str()));
+    start = end + 1;
+  }
+  return values;
+}
 
 Args ParseArgs(int argc, char** argv) {
   Args args;
@@ -76,6 +104,11 @@ Args ParseArgs(int argc, char** argv) {
     else if (a == "--no-calibration-runs") args.calibration_runs = false;
     else if (a == "--video" && i + 1 < argc)
       args.video = argv[++i];
+    else if (a == "--dense-map") args.dense_map = true;
+    else if (a == "--grid-step-factor" && i + 1 < argc)
+      args.grid_step_factors = Numbers(argv[++i]);
+    else if (a == "--keyframe-spacing" && i + 1 < argc)
+      args.keyframe_spacings_m = Numbers(argv[++i]);
     else if (a == "--max-features") args.max_features = next();
     else if (a == "--local-window") args.local_window = next();
     else if (a == "--local-iterations") args.local_iterations = next();
@@ -87,6 +120,56 @@ double Median(std::vector<double> v) {
   if (v.empty()) return 0;
   std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
   return v[v.size() / 2];
+}
+
+// The dense map along the estimated trajectory, timed against the SLAM run and scored.
+void DenseMapRun(const Args& args, const synth::StereoSequence& sequence,
+                 const slam::StereoFrameLoader& load, const slam::SlamResult& result,
+                 double slam_cpu_s, const dense::DenseMapOptions& options) {
+  dense::DenseMap map(options);
+  std::vector<std::optional<Rigid3d>> world_from_rig;
+  for (const slam::FrameReport& frame : result.frames) {
+    world_from_rig.push_back(frame.world_from_rig);
+  }
+  const Timer timer;
+  const std::clock_t cpu_start = std::clock();
+  const dense::KeyframeFusionReport fusion = dense::FuseKeyframes(
+      sequence.rig, world_from_rig,
+      [&](int i) {
+        const slam::StereoImages images = load(i);
+        return std::array<cv::Mat, 2>{images.cam0, images.cam1};
+      },
+      args.threads, ProgressSink(), &map);
+  const PlyCloud cloud = map.Cloud();
+  const dense::OccupancyGrid grid = map.Occupancy();
+  const double wall_s = timer.ElapsedSeconds();
+  const double cpu_s = static_cast<double>(std::clock() - cpu_start) / CLOCKS_PER_SEC;
+  if (fusion.keyframes.empty() || !world_from_rig[fusion.keyframes[0]]) return;
+  // The map's world is the estimate's: into the scene's by the first keyframe's alignment.
+  const int first = fusion.keyframes[0];
+  const Rigid3d true_from_map = sequence.world_from_rig[first] * world_from_rig[first]->Inverse();
+  std::vector<Eigen::Vector3d> keyframes_in_scene;
+  for (int i : fusion.keyframes) {
+    keyframes_in_scene.push_back(sequence.world_from_rig[i].translation);
+  }
+  const dense::DenseMapAccuracy accuracy =
+      dense::EvaluateDenseMap(sequence.scene, true_from_map, keyframes_in_scene, map);
+  std::printf("\ndense map (voxel %.3f m, grid step factor %.2f, keyframe spacing %.2f m): %zu "
+              "keyframes, %d points\n",
+              options.voxel_m, options.grid_step_factor, options.keyframe_spacing_m,
+              fusion.keyframes.size(), accuracy.num_points);
+  std::printf("  wall: rectification tables %.3f s, keyframes' dense stereo %.3f s, fusion %.3f s, "
+              "total with cloud + occupancy %.3f s = %.1f %% of SLAM's %.3f s (target <= 30 %%)\n",
+              fusion.setup_s, fusion.stereo_s, fusion.fusion_s, wall_s,
+              100.0 * wall_s / result.total_s, result.total_s);
+  std::printf("  CPU: %.3f s = %.1f %% of SLAM's %.3f s\n", cpu_s, 100.0 * cpu_s / slam_cpu_s,
+              slam_cpu_s);
+  std::printf("  accuracy: median distance to the surfaces %.3f %% of range (target <= 0.5), "
+              "%.1f %% within 1 %%; occupancy %.1f %% of %d observed cells agree (target >= 95), "
+              "%d occupied (%d wrongly); floor %.3f m below the first frame, %zu voxels kept\n",
+              100 * accuracy.median_relative, 100 * accuracy.within_1_percent,
+              100 * accuracy.agreement, accuracy.num_known_cells, accuracy.num_occupied_cells,
+              accuracy.num_false_occupied_cells, grid.floor_height_m, cloud.size());
 }
 
 // The untimed runs with PerturbedCalibration, without and with refinement: one table row each.
@@ -287,6 +370,23 @@ int Run(const Args& args) {
   }
   std::printf("CPU per frame %.3f s; on 2 idle cores that is at best %.1f frames/s\n",
               result.total_cpu_s / args.frames, 2.0 * args.frames / result.total_cpu_s);
+  if (args.dense_map) {
+    const dense::DenseMapOptions defaults;
+    const std::vector<double> factors = args.grid_step_factors.empty()
+                                            ? std::vector<double>{defaults.grid_step_factor}
+                                            : args.grid_step_factors;
+    const std::vector<double> spacings = args.keyframe_spacings_m.empty()
+                                             ? std::vector<double>{defaults.keyframe_spacing_m}
+                                             : args.keyframe_spacings_m;
+    for (double factor : factors) {
+      for (double spacing : spacings) {
+        dense::DenseMapOptions options;
+        options.grid_step_factor = factor;
+        options.keyframe_spacing_m = spacing;
+        DenseMapRun(args, sequence, load, result, cpu_s, options);
+      }
+    }
+  }
   if (args.calibration_runs) CalibrationRuns(args, sequence, load);
   if (!args.video.empty()) std::filesystem::remove_all(video_files.cam0.parent_path());
   return 0;

@@ -29,46 +29,56 @@ storage::JobRecord RequireJob(ServiceState& state, const std::string& id) {
 void CheckReferencedJobs(ServiceState& state, const api::JobType& type,
                          const nlohmann::json& params) {
   if (!type.referenced_jobs) return;
-  for (const std::string& id : type.referenced_jobs(params)) {
+  for (const api::JobReference& reference : type.referenced_jobs(params)) {
+    const std::string& id = reference.id;
     const auto job = state.store->GetJob(id);
     if (!job) {
       throw HttpError(404, "job_not_found", "referenced job " + id + " does not exist",
-                      {{"job", id}});
+                      {{"job", id}, {"field", reference.field}});
     }
-    const std::string& wanted = type.referenced_job_type;
+    const std::string& wanted = reference.type;
+    const std::string there = " job in '" + reference.field + "'";
     if (!wanted.empty() && job->type != wanted) {
       throw HttpError(422, "wrong_job_type",
                       "job " + id + " is a " + job->type + " job, but a " + type.name +
-                          " job needs a succeeded " + wanted + " job there",
-                      {{"job", id}, {"type", job->type}, {"expected_type", wanted}});
+                          " job needs a succeeded " + wanted + there,
+                      {{"job", id},
+                       {"type", job->type},
+                       {"expected_type", wanted},
+                       {"field", reference.field}});
     }
     if (job->state != storage::JobState::kSucceeded) {
       throw HttpError(422, "dependency_not_ready",
                       "job " + id + " is " + storage::JobStateName(job->state) + ", but a " +
                           type.name + " job needs a succeeded " +
-                          (wanted.empty() ? job->type : wanted) + " job there",
-                      {{"job", id}, {"state", storage::JobStateName(job->state)}});
+                          (wanted.empty() ? job->type : wanted) + there,
+                      {{"job", id},
+                       {"state", storage::JobStateName(job->state)},
+                       {"field", reference.field}});
     }
   }
 }
 
-// The job type's own look at the dataset (e.g. a slam job's videos): 422 with the reason.
-void CheckDataset(ServiceState& state, const api::JobType& type,
-                  const api::CreateJobRequest& request) {
-  api::DatasetView view;
-  view.dataset_id = request.dataset;
-  view.dataset_dir = state.data_dir->ImagesDir(request.dataset);
-  for (const auto& image : state.store->ListImages(request.dataset)) {
-    view.file_names.push_back(image.name);
+// The job type's own check of the inputs (e.g. images of another size than the rig's
+// calibration, videos that do not pair), on what the files' headers tell: no decoding here.
+void CheckInputs(ServiceState& state, const api::JobType& type,
+                 const api::CreateJobRequest& request) {
+  if (!type.check_inputs) return;
+  api::SubmissionInputs inputs;
+  inputs.dataset_id = request.dataset;
+  inputs.dataset_dir = state.data_dir->ImagesDir(request.dataset);
+  for (const storage::ImageRecord& image : state.store->ListImages(request.dataset)) {
+    inputs.images.push_back({image.name, image.width, image.height});
   }
-  std::sort(view.file_names.begin(), view.file_names.end());
-  view.load_result = [&state](const std::string& id) {
+  std::sort(inputs.images.begin(), inputs.images.end(),
+            [](const auto& a, const auto& b) { return a.name < b.name; });
+  inputs.load_result = [&state](const std::string& id) {
     const auto result = state.store->GetResult(id);
     if (!result) throw InvalidArgument("job " + id + " has no result");
     return nlohmann::json::parse(*result);
   };
   try {
-    type.check_dataset(request.params, view);
+    type.check_inputs(request.params, inputs);
   } catch (const InvalidArgument& e) {
     throw HttpError(422, "invalid_input", e.what(), {{"dataset", request.dataset}});
   }
@@ -104,7 +114,7 @@ void CreateJob(ServiceState& state, const HttpRequest& request, HttpResponse& re
         "dataset " + parsed.dataset + " has no images: upload them before creating a job",
         {{"dataset", parsed.dataset}});
   }
-  if (type->check_dataset) CheckDataset(state, *type, parsed);
+  CheckInputs(state, *type, parsed);
   const int64_t queued = state.store->CountJobsByState().at(storage::JobState::kQueued);
   if (queued >= state.options.max_queued_jobs) {
     response.headers.emplace("Retry-After", "10");

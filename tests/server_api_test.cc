@@ -848,6 +848,25 @@ TEST_F(ServerApiTest, EpipolarCurveOfARelativePoseResult) {
   ExpectError(client.Get((url + "?from=cam2&u=1&v=2").c_str()), 400, "invalid_argument");
   ExpectError(client.Get((url + "?from=cam1&u=1").c_str()), 400, "invalid_argument");
   ExpectError(client.Get((url + "?from=cam1&u=abc&v=2").c_str()), 400, "invalid_argument");
+
+  // Jobs that read this rig are refused at submission when the images are not of the size the
+  // cameras were calibrated for (the sizes come from the upload's header check).
+  for (const char* name : {"cam0/a.png", "cam1/a.png"}) {
+    const auto put = client.Put(("/api/v1/datasets/" + dataset + "/images/" + name).c_str(),
+                                PngBytes(320, 240), "image/png");
+    ASSERT_EQ(put->status, 201) << put->body;
+  }
+  for (const char* type : {"stereo_reconstruct", "slam"}) {
+    const auto refused = client.Post(
+        "/api/v1/jobs",
+        json{{"type", type}, {"dataset", dataset}, {"params", {{"rig", id}}}}.dump(),
+        "application/json");
+    ExpectError(refused, 422, "invalid_input");
+    EXPECT_NE(refused->body.find("cam0/a.png is 320x240 but the rig's cam0 is calibrated for "
+                                 "640x480"),
+              std::string::npos)
+        << refused->body;
+  }
 }
 
 // Live progress is pushed: GET /api/v1/events streams every job's changes (state and progress)

@@ -84,9 +84,11 @@ void RegisterSleepJobType() {
   type.name = "test_sleep";
   type.validate = ValidateSleep;
   type.referenced_jobs = [](const nlohmann::json& params) {
-    std::vector<std::string> ids;
-    if (params.contains("after")) ids.push_back(params["after"].get<std::string>());
-    return ids;
+    std::vector<api::JobReference> references;
+    if (params.contains("after")) {
+      references.push_back({params["after"].get<std::string>(), "", "after"});
+    }
+    return references;
   };
   type.run = RunSleep;
   type.reads_images = false;  // the service's tests queue sleeps on empty datasets

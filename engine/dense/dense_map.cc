@@ -5,8 +5,11 @@
 #include <fstream>
 #include <map>
 #include <stdexcept>
+#include <string>
 
 #include "engine/util/check.h"
+#include "engine/util/parallel.h"
+#include "engine/util/timer.h"
 
 namespace omnirig::dense {
 namespace {
@@ -25,6 +28,8 @@ void DenseMapOptions::Check() const {
                 "voxel_m must lie in [0.005, 1] m, got " << voxel_m);
   OMNIRIG_CHECK(keyframe_spacing_m >= 0.0,
                 "keyframe_spacing_m must be non-negative, got " << keyframe_spacing_m);
+  OMNIRIG_CHECK(grid_step_factor >= 1.0 && grid_step_factor <= 8.0,
+                "grid_step_factor must lie in [1, 8], got " << grid_step_factor);
   OMNIRIG_CHECK(max_relative_range_std > 0.0,
                 "max_relative_range_std must be positive, got " << max_relative_range_std);
   OMNIRIG_CHECK(min_points >= 1, "min_points must be at least 1, got " << min_points);
@@ -43,6 +48,9 @@ DenseMap::DenseMap(const DenseMapOptions& options) : options_(options) { options
 void DenseMap::Add(const Rigid3d& world_from_cam0, const std::vector<DensePoint>& points) {
   const int frame = num_frames_++;
   const double inverse_voxel = 1.0 / options_.voxel_m;
+  // Rehashing while inserting a keyframe's points costs as much as the lookups; a keyframe adds
+  // about one new voxel for every 4-5 of its points on the room renders.
+  voxels_.reserve(voxels_.size() + points.size() / 4);
   for (const DensePoint& point : points) {
     if (point.range_std_m > options_.max_relative_range_std * point.point_in_cam0.norm()) continue;
     const Eigen::Vector3d in_world = world_from_cam0 * point.point_in_cam0.cast<double>();
@@ -161,6 +169,63 @@ void WriteOccupancyGrid(const std::filesystem::path& pgm_path,
        << "origin: [" << grid.origin_m.x() << ", " << grid.origin_m.y() << ", 0.0]\n"
        << "negate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n";
   if (!yaml) throw std::runtime_error("failed writing " + yaml_path.string());
+}
+
+std::vector<int> SelectKeyframes(const std::vector<std::optional<Rigid3d>>& world_from_rig,
+                                 double keyframe_spacing_m) {
+  std::vector<int> keyframes;
+  std::optional<Eigen::Vector3d> last;
+  for (size_t i = 0; i < world_from_rig.size(); ++i) {
+    const std::optional<Rigid3d>& pose = world_from_rig[i];
+    if (!pose || (last && (pose->translation - *last).norm() < keyframe_spacing_m)) continue;
+    keyframes.push_back(static_cast<int>(i));
+    last = pose->translation;
+  }
+  return keyframes;
+}
+
+KeyframeFusionReport FuseKeyframes(const StereoRig& rig,
+                                   const std::vector<std::optional<Rigid3d>>& world_from_rig,
+                                   const StereoPairLoader& load, int num_threads,
+                                   const ProgressSink& progress, DenseMap* map) {
+  OMNIRIG_CHECK(num_threads >= 1, "num_threads must be at least 1, got " << num_threads);
+  KeyframeFusionReport report;
+  report.keyframes = SelectKeyframes(world_from_rig, map->options().keyframe_spacing_m);
+  if (report.keyframes.empty()) return report;
+  Timer timer;
+  DenseStereoOptions stereo_options;
+  stereo_options.grid.step_factor = map->options().grid_step_factor;
+  // Points the map would not fuse are not made.
+  stereo_options.max_relative_range_std =
+      std::min(stereo_options.max_relative_range_std, map->options().max_relative_range_std);
+  const DenseStereo stereo(rig, stereo_options);
+  report.setup_s = timer.ElapsedSeconds();
+  // Batches of num_threads keyframes, each reconstructed on one thread, then fused in frame
+  // order: the map does not depend on the thread count, and at most one batch of clouds is held.
+  const int num_keyframes = static_cast<int>(report.keyframes.size());
+  for (int first = 0; first < num_keyframes; first += num_threads) {
+    const int batch = std::min(num_threads, num_keyframes - first);
+    std::vector<std::vector<DensePoint>> clouds(batch);
+    timer.Restart();
+    RunTasks(
+        batch, num_threads, progress,
+        [&](int i, const ProgressSink&) {
+          const std::array<cv::Mat, 2> images = load(report.keyframes[first + i]);
+          clouds[i] = stereo.Reconstruct(images[0], images[1]).points;
+        },
+        [](int) {});
+    report.stereo_s += timer.ElapsedSeconds();
+    timer.Restart();
+    for (int i = 0; i < batch; ++i) {
+      const int frame = report.keyframes[first + i];
+      map->Add(*world_from_rig[frame], clouds[i]);
+      progress.Report((first + i + 1.0) / num_keyframes, "dense_map",
+                      "keyframe " + std::to_string(first + i + 1) + " of " +
+                          std::to_string(num_keyframes));
+    }
+    report.fusion_s += timer.ElapsedSeconds();
+  }
+  return report;
 }
 
 }  // namespace omnirig::dense

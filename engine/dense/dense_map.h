@@ -13,8 +13,11 @@
 // upright sensor as in the paper's Fig. 1: cam0's +z axis points down, so "up" is the world's -z
 // (the SLAM world is the first frame's cam0 frame).
 
+#include <array>
 #include <cstdint>
 #include <filesystem>
+#include <functional>
+#include <optional>
 #include <string>
 #include <unordered_map>
 #include <vector>
@@ -31,7 +34,17 @@ namespace omnirig::dense {
 struct DenseMapOptions {
   double voxel_m = 0.02;
   // Keyframes: a tracked frame is fused when it lies at least this far from the last fused one.
-  double keyframe_spacing_m = 0.5;
+  // The keyframes' dense stereo is the fusion's cost: bench_slam --dense-map on the 40-frame
+  // room (6.3 m) gives 4 keyframes at 1.5 m, 6 at 1 m, 10 at 0.5 m, for 37 %, 60 % and 96 % of
+  // SLAM's CPU time, with the same accuracy (median 0.40-0.55 % of range) and fewer observed
+  // occupancy cells (14,600, 19,200, 22,200). docs/dense.md has the table.
+  double keyframe_spacing_m = 1.5;
+  // The keyframes' dense stereo runs on a grid this many times coarser than the images' finest
+  // angular resolution (SphericalGridOptions::step_factor). Coarser is cheaper but its range
+  // std grows with the step, so fewer points pass max_relative_range_std and those that do are
+  // less precise: at 1.5 the median rose to 0.44-0.53 % of range and the observed occupancy
+  // cells fell by a third to a half; at 2 the median exceeded 0.65 %.
+  double grid_step_factor = 1.0;
   // A voxel is kept when at least this many points of at least min_frames keyframes fell in it
   // (a surface seen once, or by one frame only, is not confirmed).
   int min_points = 2;
@@ -74,6 +87,7 @@ class DenseMap {
   // otherwise.
   OccupancyGrid Occupancy() const;
 
+  const DenseMapOptions& options() const { return options_; }
   int num_frames() const { return num_frames_; }
   size_t num_voxels() const { return voxels_.size(); }
 
@@ -95,6 +109,33 @@ class DenseMap {
   std::unordered_map<int64_t, Voxel> voxels_;
   int num_frames_ = 0;
 };
+
+// The frames fused into a map: those with a pose, each at least keyframe_spacing_m from the
+// last one kept (the first posed frame is kept).
+std::vector<int> SelectKeyframes(const std::vector<std::optional<Rigid3d>>& world_from_rig,
+                                 double keyframe_spacing_m);
+
+// Loads frame `index`'s images (cam0, cam1; 8-bit BGR or grey). Called from up to num_threads
+// threads at once (FuseKeyframes).
+using StereoPairLoader = std::function<std::array<cv::Mat, 2>(int index)>;
+
+struct KeyframeFusionReport {
+  std::vector<int> keyframes;
+  // Wall seconds: the rectification tables (once per rig), the keyframes' dense stereo
+  // (loading included) and their fusion into the voxels.
+  double setup_s = 0.0;
+  double stereo_s = 0.0;
+  double fusion_s = 0.0;
+};
+
+// Reconstructs the keyframes of `world_from_rig` (SelectKeyframes with the map's spacing) with
+// DenseStereo on the map's grid (DenseMapOptions::grid_step_factor), num_threads keyframes at a
+// time (each on one thread), and adds them to `map` in frame order. Throws Cancelled through
+// `progress`, InvalidArgument for images that do not fit the rig.
+KeyframeFusionReport FuseKeyframes(const StereoRig& rig,
+                                   const std::vector<std::optional<Rigid3d>>& world_from_rig,
+                                   const StereoPairLoader& load, int num_threads,
+                                   const ProgressSink& progress, DenseMap* map);
 
 // Writes `grid` as ROS map_server files: NAME.pgm (binary P5: occupied 0, free 254, unknown 205)
 // and NAME.yaml (image, resolution, origin, negate, occupied_thresh, free_thresh). Throws

@@ -4,17 +4,18 @@
 
 #include "engine/dense/dense_map.h"
 
-#include <algorithm>
-#include <cmath>
+#include <array>
+#include <optional>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <string>
+#include <vector>
 
 #include <gtest/gtest.h>
 #include <unistd.h>
 
-#include "engine/slam/surface_distance.h"
+#include "engine/dense/map_accuracy.h"
 #include "engine/synth/presets.h"
 #include "engine/util/check.h"
 
@@ -23,66 +24,42 @@ namespace {
 
 TEST(DenseMap, RoomKeyframesFuseOntoTheTrueSurfaces) {
   synth::StereoSequenceOptions sequence_options;
-  sequence_options.num_frames = 6;
+  sequence_options.num_frames = 4;  // 2 m apart along the 6 m path: all keyframes
   sequence_options.render.noise_sigma = 1.0;
   sequence_options.seed = 3;
   const synth::StereoSequence sequence = synth::MakeStereoSequence(sequence_options);
-  const DenseStereo dense(sequence.rig, DenseStereoOptions());
   DenseMapOptions options;
   DenseMap map(options);
+  // The true trajectory in the first frame's cam0 frame, as SLAM's world is.
   const Rigid3d first_from_world = sequence.world_from_rig[0].Inverse();
-  for (int f = 0; f < sequence_options.num_frames; ++f) {
-    const DensePairResult pair = dense.Reconstruct(sequence.images[0][f], sequence.images[1][f]);
-    map.Add(first_from_world * sequence.world_from_rig[f], pair.points);
+  std::vector<std::optional<Rigid3d>> first_from_rig;
+  std::vector<Eigen::Vector3d> keyframes_in_scene;
+  for (const Rigid3d& pose : sequence.world_from_rig) {
+    first_from_rig.push_back(first_from_world * pose);
+    keyframes_in_scene.push_back(pose.translation);
   }
-  const PlyCloud cloud = map.Cloud();
-  std::vector<double> relative;
-  for (const Eigen::Vector3f& p : cloud.positions) {
-    const Eigen::Vector3d in_world = sequence.world_from_rig[0] * p.cast<double>();
-    double range = INFINITY;  // from the nearest keyframe
-    for (const Rigid3d& pose : sequence.world_from_rig) {
-      range = std::min(range, (in_world - pose.translation).norm());
-    }
-    relative.push_back(slam::DistanceToSceneSurface(sequence.scene, in_world) / range);
-  }
-  ASSERT_FALSE(relative.empty());
-  std::sort(relative.begin(), relative.end());
-  const double median = relative[relative.size() / 2];
-
+  const KeyframeFusionReport fusion = FuseKeyframes(
+      sequence.rig, first_from_rig,
+      [&](int i) { return std::array<cv::Mat, 2>{sequence.images[0][i], sequence.images[1][i]}; },
+      2, ProgressSink(), &map);
+  EXPECT_EQ(fusion.keyframes.size(), 4u);
+  const DenseMapAccuracy accuracy =
+      EvaluateDenseMap(sequence.scene, sequence.world_from_rig[0], keyframes_in_scene, map);
   const OccupancyGrid grid = map.Occupancy();
-  int known = 0, agree = 0, occupied = 0, false_occupied = 0;
-  for (int r = 0; r < grid.cells.rows; ++r) {
-    for (int c = 0; c < grid.cells.cols; ++c) {
-      const uint8_t state = grid.cells.at<uint8_t>(r, c);
-      if (state == OccupancyGrid::kUnknown) continue;
-      ++known;
-      occupied += state == OccupancyGrid::kOccupied;
-      const double x = grid.origin_m.x() + (c + 0.5) * grid.cell_m;
-      const double y = grid.origin_m.y() + (grid.cells.rows - 1 - r + 0.5) * grid.cell_m;
-      bool truly_occupied = false;
-      for (double h = options.obstacle_min_height_m; h <= options.obstacle_max_height_m;
-           h += 0.5 * grid.cell_m) {
-        const Eigen::Vector3d in_first(x, y, -(grid.floor_height_m + h));
-        if (slam::DistanceToSceneSurface(sequence.scene, sequence.world_from_rig[0] * in_first) <=
-            0.75 * grid.cell_m) {
-          truly_occupied = true;
-          break;
-        }
-      }
-      agree += truly_occupied == (state == OccupancyGrid::kOccupied);
-      false_occupied += !truly_occupied && state == OccupancyGrid::kOccupied;
-    }
-  }
-  std::printf("%d keyframes, %zu voxels, %zu kept; distance to the surfaces / range: median "
-              "%.3f%%; floor at %.3f m below the first frame; occupancy: %d known cells "
-              "(%d occupied, %d of them wrongly), %.1f%% agree with the room\n",
-              map.num_frames(), map.num_voxels(), cloud.size(), 100 * median,
-              grid.floor_height_m, known, occupied, false_occupied, 100.0 * agree / std::max(known, 1));
+  std::printf("%d keyframes, %zu voxels, %d kept; distance to the surfaces / range: median "
+              "%.3f%%, %.1f%% within 1%%; floor at %.3f m below the first frame; occupancy: %d "
+              "known cells (%d occupied, %d of them wrongly), %.1f%% agree with the room\n",
+              map.num_frames(), map.num_voxels(), accuracy.num_points,
+              100 * accuracy.median_relative, 100 * accuracy.within_1_percent,
+              grid.floor_height_m, accuracy.num_known_cells, accuracy.num_occupied_cells,
+              accuracy.num_false_occupied_cells, 100.0 * accuracy.agreement);
   // The targets: median at most 0.5 % of range, 95 % of the observed cells agreeing.
-  // Measured: 0.42 %, 98.5 % of 19,766 cells.
-  EXPECT_LE(median, 0.005);
-  EXPECT_GT(known, 15000);
-  EXPECT_GE(agree, 0.95 * known);
+  // Measured: 0.35 %, 99.2 % of 14,368 cells (4 keyframes 2 m apart).
+  EXPECT_LE(accuracy.median_relative, 0.005);
+  // Coverage: 14,368 observed cells from the 4 keyframes (19,766 from 6 at 1.2 m apart before
+  // keyframe_spacing_m became 1.5 m).
+  EXPECT_GT(accuracy.num_known_cells, 13000);
+  EXPECT_GE(accuracy.agreement, 0.95);
   // The sensor is 1 m above the floor (StereoSequenceOptions::sensor_height_m).
   EXPECT_NEAR(-grid.floor_height_m, sequence_options.sensor_height_m, 0.03);
 
@@ -100,6 +77,16 @@ TEST(DenseMap, RoomKeyframesFuseOntoTheTrueSurfaces) {
   std::filesystem::remove_all(dir);
 }
 
+TEST(DenseMap, KeyframesArePosedFramesSpacedApart) {
+  const auto at = [](double x) { return std::optional<Rigid3d>(Rigid3d(
+                                     Eigen::Quaterniond::Identity(), Eigen::Vector3d(x, 0, 0))); };
+  const std::vector<std::optional<Rigid3d>> poses = {std::nullopt, at(0.0), at(0.3), at(0.6),
+                                                     std::nullopt, at(1.0), at(1.05), at(2.0)};
+  EXPECT_EQ(SelectKeyframes(poses, 0.5), (std::vector<int>{1, 3, 7}));
+  EXPECT_EQ(SelectKeyframes(poses, 0.0), (std::vector<int>{1, 2, 3, 5, 6, 7}));
+  EXPECT_TRUE(SelectKeyframes({std::nullopt}, 0.5).empty());
+}
+
 TEST(DenseMap, RefusesBadOptions) {
   DenseMapOptions options;
   options.voxel_m = 0.0;
@@ -107,6 +94,9 @@ TEST(DenseMap, RefusesBadOptions) {
   options = DenseMapOptions();
   options.occupancy_cell_m = 0.01;  // finer than the voxels
   EXPECT_THROW(DenseMap{options}, InvalidArgument);
+  options = DenseMapOptions();
+  options.grid_step_factor = 0.5;  // finer than the images
+  EXPECT_THROW(options.Check(), InvalidArgument);
 }
 
 }  // namespace

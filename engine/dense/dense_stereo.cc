@@ -2,11 +2,14 @@
 
 #include <algorithm>
 #include <cmath>
+#include <tuple>
+#include <vector>
 
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "engine/util/check.h"
+#include "engine/util/timer.h"
 
 namespace omnirig::dense {
 namespace {
@@ -93,6 +96,12 @@ void DenseStereoOptions::Check() const {
                 "dark_level must lie in [0, 255), got " << dark_level);
   OMNIRIG_CHECK(mask_margin_cells >= 0 && mask_margin_cells <= 100,
                 "mask_margin_cells must lie in [0, 100], got " << mask_margin_cells);
+  OMNIRIG_CHECK(epipolar_samples >= 0, "epipolar_samples must be non-negative, got "
+                                           << epipolar_samples);
+  OMNIRIG_CHECK(epipolar_search_rows >= 1 && epipolar_search_rows <= 16,
+                "epipolar_search_rows must lie in [1, 16], got " << epipolar_search_rows);
+  OMNIRIG_CHECK(max_epipolar_offset_cells > 0.0,
+                "max_epipolar_offset_cells must be positive, got " << max_epipolar_offset_cells);
 }
 
 cv::Mat GridMirrorMask(const cv::Mat& grey_on_grid, const cv::Mat& valid,
@@ -114,6 +123,51 @@ cv::Mat GridMirrorMask(const cv::Mat& grey_on_grid, const cv::Mat& valid,
               cv::Point(-1, -1), 1, cv::BORDER_CONSTANT, cv::Scalar(0));
   }
   return mask;
+}
+
+std::pair<double, int> EpipolarOffset(const cv::Mat& grey0, const cv::Mat& grey1,
+                                      const cv::Mat& mask0, int num_disparities,
+                                      const DenseStereoOptions& options) {
+  constexpr int kHalf = 5;                 // 11 x 11 windows
+  constexpr double kMinCorrelation = 0.8;  // a clear match
+  constexpr double kMinTextureGrey = 8.0;  // window standard deviation
+  const int search = options.epipolar_search_rows;
+  const int margin = kHalf + search + 1;
+  const int lattice_rows = std::max(1, static_cast<int>(std::sqrt(options.epipolar_samples * 5.0)));
+  const int lattice_cols = std::max(1, options.epipolar_samples / lattice_rows);
+  std::vector<double> offsets;
+  for (int i = 0; i < lattice_rows; ++i) {
+    const int r = margin + (grey0.rows - 2 * margin) * (2 * i + 1) / (2 * lattice_rows);
+    for (int j = 0; j < lattice_cols; ++j) {
+      const int c = kHalf + 1 + (grey0.cols - 2 * kHalf - 2) * (2 * j + 1) / (2 * lattice_cols);
+      if (r < margin || r >= grey0.rows - margin || !mask0.at<uint8_t>(r, c)) continue;
+      const cv::Rect window(c - kHalf, r - kHalf, 2 * kHalf + 1, 2 * kHalf + 1);
+      cv::Scalar mean, deviation;
+      cv::meanStdDev(grey0(window), mean, deviation);
+      if (deviation[0] < kMinTextureGrey) continue;
+      // cam1's match of column c lies at c - d, d in [0, num_disparities).
+      const int left = std::max(0, c - num_disparities - kHalf);
+      const cv::Rect area(left, r - search - kHalf, c + kHalf + 1 - left,
+                          2 * (search + kHalf) + 1);
+      cv::Mat scores;
+      cv::matchTemplate(grey1(area), grey0(window), scores, cv::TM_CCOEFF_NORMED);
+      double best = 0.0;
+      cv::Point at;
+      cv::minMaxLoc(scores, nullptr, &best, nullptr, &at);
+      if (!(best >= kMinCorrelation)) continue;
+      double offset = at.y - search;
+      if (at.y > 0 && at.y + 1 < scores.rows) {  // parabola through the best and its neighbours
+        const double a = scores.at<float>(at.y - 1, at.x), b = scores.at<float>(at.y + 1, at.x);
+        const double curvature = a + b - 2.0 * best;
+        if (curvature < 0.0) offset += 0.5 * (a - b) / curvature;
+      }
+      offsets.push_back(std::abs(offset));
+    }
+  }
+  const int num = static_cast<int>(offsets.size());
+  if (num < 30) return {-1.0, num};
+  std::nth_element(offsets.begin(), offsets.begin() + num / 2, offsets.end());
+  return {offsets[num / 2], num};
 }
 
 cv::Mat WindowCorrelation(const cv::Mat& a, const cv::Mat& b, int window, double noise_grey) {
@@ -174,6 +228,7 @@ void DenseStereo::Triangulate(const cv::Mat& disparity, const cv::Mat& correlati
     cos_theta[c] = std::cos(theta[c]);
   }
   const Eigen::Matrix3d& cam0_from_grid = rectifier_.cam0_from_grid();
+  const float scale = static_cast<float>(result->confidence_scale);
   std::vector<std::vector<DensePoint>> row_points(rows);
   std::vector<int> row_mirror(rows, 0), row_matched(rows, 0);
   std::vector<double> row_confidence(rows, 0.0);
@@ -195,13 +250,17 @@ void DenseStereo::Triangulate(const cv::Mat& disparity, const cv::Mat& correlati
         const int c1 = static_cast<int>(std::lround(c - d[c]));
         if (c1 < 0 || !m1[c1]) continue;
         ++row_matched[r];
-        const float conf = std::clamp(corr[c], 0.f, 1.f);
+        const float conf = std::clamp(corr[c], 0.f, 1.f) * scale;
         row_confidence[r] += conf;
         conf_row[c] = conf;
-        const double theta1 = theta[c] + d[c] * step;
-        const double range_m = RangeFromAngles(theta[c], theta1, baseline);
+        // RangeFromAngles and RangeDerivative with theta1 = theta0 + parallax, expanded so
+        // that one sincos of the parallax serves both (the per-cell cost is trigonometry).
+        const double parallax = d[c] * step;
+        const double sin_p = std::sin(parallax), cos_p = std::cos(parallax);
+        const double range_m =
+            baseline * (sin_theta[c] * cos_p + cos_theta[c] * sin_p) / sin_p;
         const double std_m =
-            RangeDerivative(theta[c], theta1, baseline) * options_.disparity_std_cells * step;
+            baseline * sin_theta[c] / (sin_p * sin_p) * options_.disparity_std_cells * step;
         if (conf < options_.min_confidence || !(range_m > 0.0) ||
             std_m > options_.max_relative_range_std * range_m) {
           continue;
@@ -255,6 +314,7 @@ DensePairResult DenseStereo::Reconstruct(const cv::Mat& image0, const cv::Mat& i
                     (image1.channels() == 1 || image1.channels() == 3),
                 "images must be 8-bit grey or BGR");
   progress.Report(0.0, "rectify");
+  Timer timer;
   const cv::Mat colour0 = rectifier_.Rectify(image0, 0);
   const cv::Mat grey0 = Grey(colour0);
   const cv::Mat grey1 = rectifier_.Rectify(Grey(image1), 1);
@@ -264,15 +324,19 @@ DensePairResult DenseStereo::Reconstruct(const cv::Mat& image0, const cv::Mat& i
 
   const int rows = rectifier_.rows(), cols = rectifier_.cols();
   DensePairResult result;
+  result.seconds.rectify = timer.ElapsedSeconds();
   cv::Mat range(rows, cols, CV_32F, cv::Scalar(0)), range_std(rows, cols, CV_32F, cv::Scalar(0)),
       confidence(rows, cols, CV_32F, cv::Scalar(0));
   const auto [first, last] = UsedColumns(mask0, mask1);
   if (first <= last) {
     progress.Report(0.1, "match");
+    timer.Restart();
     const cv::Rect roi(first, 0, last - first + 1, rows);
     const cv::Mat disparity = MatchRows(grey0(roi), grey1(roi), num_disparities_, options_);
     progress.ThrowIfCancelled();
     progress.Report(0.8, "confidence");
+    result.seconds.match = timer.ElapsedSeconds();
+    timer.Restart();
 
     // cam1's grey level at each cell's match, for the correlation of the matched windows.
     cv::Mat map_x(disparity.size(), CV_32F), map_y(disparity.size(), CV_32F);
@@ -294,7 +358,16 @@ DensePairResult DenseStereo::Reconstruct(const cv::Mat& image0, const cv::Mat& i
                                                   options_.confidence_window_cells,
                                                   options_.image_noise_grey);
     progress.Report(0.9, "triangulate");
+    result.seconds.confidence = timer.ElapsedSeconds();
+    timer.Restart();
+    std::tie(result.epipolar_offset_cells, result.num_epipolar_samples) =
+        EpipolarOffset(grey0, grey1, mask0, num_disparities_, options_);
+    if (result.epipolar_offset_cells > options_.max_epipolar_offset_cells) {
+      result.confidence_scale = options_.max_epipolar_offset_cells / result.epipolar_offset_cells;
+    }
 
+    result.seconds.epipolar = timer.ElapsedSeconds();
+    timer.Restart();
     Triangulate(disparity, correlation, first, mask0, mask1, colour0, &range, &range_std,
                 &confidence, &result);
   }
@@ -302,6 +375,7 @@ DensePairResult DenseStereo::Reconstruct(const cv::Mat& image0, const cv::Mat& i
   cv::transpose(range, result.range_m);
   cv::transpose(range_std, result.range_std_m);
   cv::transpose(confidence, result.confidence);
+  result.seconds.triangulate = timer.ElapsedSeconds();
   progress.Report(1.0, "triangulate");
   return result;
 }

@@ -10,6 +10,7 @@
 
 #include <array>
 #include <cstdint>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Core>
@@ -52,6 +53,17 @@ struct DenseStereoOptions {
   // central hole) are masked, then the mask is eroded by mask_margin_cells.
   double dark_level = 20.0;
   int mask_margin_cells = 4;
+  // Pair-level check that the images fit the rig: a shift of one image, or a rig that does not
+  // fit, moves every match along the epipolar line too, a disparity offset no per-cell test can
+  // see; but it also moves matches across the lines (grid rows) at most azimuths. About
+  // epipolar_samples textured cells of cam0 on a lattice are matched in cam1 over the whole
+  // disparity range and epipolar_search_rows rows either side (normalised cross-correlation of
+  // 11 x 11 windows, kept when above 0.8); when the median distance of the matches from their
+  // row exceeds max_epipolar_offset_cells, every cell's confidence is scaled by
+  // max_epipolar_offset_cells / offset.
+  int epipolar_samples = 720;
+  int epipolar_search_rows = 4;
+  double max_epipolar_offset_cells = 0.75;
 
   void Check() const;
 };
@@ -75,6 +87,17 @@ struct DensePairResult {
   int num_matched_cells = 0;  // disparity found (left-right consistent, not a speckle)
   int num_points = 0;         // confident and certain enough: points.size()
   double mean_confidence = 0.0;  // over the matched cells
+  // The pair-level check (DenseStereoOptions::max_epipolar_offset_cells): the median distance
+  // of the sample matches from their epipolar line (grid cells; -1 when fewer than 30 samples
+  // matched), how many matched, and the factor every confidence was scaled by (1 = fits).
+  double epipolar_offset_cells = -1.0;
+  int num_epipolar_samples = 0;
+  double confidence_scale = 1.0;
+  // Wall seconds of each stage (rectification and masks, semi-global matching, the matched
+  // windows' correlation, the pair-level check, triangulation and panoramas).
+  struct Seconds {
+    double rectify = 0.0, match = 0.0, confidence = 0.0, epipolar = 0.0, triangulate = 0.0;
+  } seconds;
 };
 
 // Built once per rig (the rectification tables); Reconstruct() is const.
@@ -93,6 +116,7 @@ class DenseStereo {
  private:
   // Range, its std and the confidence of every matched cell of columns [first, first +
   // disparity.cols) (disparity and correlation cover those columns), and the points.
+  // Confidences are scaled by result->confidence_scale.
   void Triangulate(const cv::Mat& disparity, const cv::Mat& correlation, int first,
                    const cv::Mat& mask0, const cv::Mat& mask1, const cv::Mat& colour0,
                    cv::Mat* range, cv::Mat* range_std, cv::Mat* confidence,
@@ -108,6 +132,13 @@ class DenseStereo {
 // is the rectifier's ValidMask of the camera.
 cv::Mat GridMirrorMask(const cv::Mat& grey_on_grid, const cv::Mat& valid,
                        const DenseStereoOptions& options);
+
+// The median distance (grid cells) of cam0's textured cells' best matches in cam1 from their
+// grid row, and how many samples matched (see DenseStereoOptions::epipolar_samples); -1 when
+// fewer than 30 did. grey0/grey1 are the rectified images, mask0 cam0's mirror mask.
+std::pair<double, int> EpipolarOffset(const cv::Mat& grey0, const cv::Mat& grey1,
+                                      const cv::Mat& mask0, int num_disparities,
+                                      const DenseStereoOptions& options);
 
 // Zero-mean normalised cross-correlation of the window x window neighbourhoods of `a` and `b`
 // (CV_32F, same size) at every cell, with noise added to both standard deviations (see

@@ -70,6 +70,8 @@ void SphericalGridOptions::Check() const {
   OMNIRIG_CHECK(step_rad == 0.0 || (step_rad >= 1e-4 && step_rad <= 0.05),
                 "the grid step must be 0 (automatic) or lie in [1e-4, 0.05] rad, got "
                     << step_rad);
+  OMNIRIG_CHECK(step_factor >= 1.0 && step_factor <= 8.0,
+                "the grid step factor must lie in [1, 8], got " << step_factor);
 }
 
 double FinestAngularStep(const CameraModel& camera) {
@@ -108,7 +110,8 @@ SphericalRectifier::SphericalRectifier(const StereoRig& rig, const SphericalGrid
 
   theta_step_rad_ = options.step_rad > 0.0
                         ? options.step_rad
-                        : std::min(FinestAngularStep(rig.cam0), FinestAngularStep(rig.cam1));
+                        : options.step_factor * std::min(FinestAngularStep(rig.cam0),
+                                                         FinestAngularStep(rig.cam1));
   rows_ = static_cast<int>(std::ceil(2.0 * M_PI / theta_step_rad_));
   const auto [theta_lo, theta_hi] = ThetaRange(rig, pole, theta_step_rad_);
   theta_max_rad_ = theta_hi;
@@ -120,15 +123,14 @@ SphericalRectifier::SphericalRectifier(const StereoRig& rig, const SphericalGrid
     const CameraModel& model = camera == 0 ? rig.cam0 : rig.cam1;
     const Eigen::Matrix3d cam_from_grid =
         camera == 0 ? cam0_from_grid_ : Eigen::Matrix3d(cam1_from_cam0 * cam0_from_grid_);
-    map_x_[camera].create(rows_, cols_, CV_32F);
-    map_y_[camera].create(rows_, cols_, CV_32F);
+    cv::Mat map_x(rows_, cols_, CV_32F), map_y(rows_, cols_, CV_32F);
     valid_[camera] = cv::Mat::zeros(rows_, cols_, CV_8U);
     cv::parallel_for_(cv::Range(0, rows_), [&](const cv::Range& range) {
       for (int r = range.start; r < range.end; ++r) {
         const double phi = Phi(r);
         const double cos_phi = std::cos(phi), sin_phi = std::sin(phi);
-        float* mx = map_x_[camera].ptr<float>(r);
-        float* my = map_y_[camera].ptr<float>(r);
+        float* mx = map_x.ptr<float>(r);
+        float* my = map_y.ptr<float>(r);
         uint8_t* ok = valid_[camera].ptr<uint8_t>(r);
         for (int c = 0; c < cols_; ++c) {
           const double theta = Theta(c);
@@ -144,6 +146,7 @@ SphericalRectifier::SphericalRectifier(const StereoRig& rig, const SphericalGrid
         }
       }
     });
+    cv::convertMaps(map_x, map_y, map_xy_[camera], map_fraction_[camera], CV_16SC2);
   }
 }
 
@@ -164,7 +167,8 @@ Eigen::Vector2d SphericalRectifier::CellOfBearingInCam0(const Eigen::Vector3d& b
 cv::Mat SphericalRectifier::Rectify(const cv::Mat& image, int camera) const {
   OMNIRIG_CHECK(camera == 0 || camera == 1, "camera must be 0 or 1, got " << camera);
   cv::Mat out;
-  cv::remap(image, out, map_x_[camera], map_y_[camera], cv::INTER_LINEAR, cv::BORDER_CONSTANT,
+  cv::remap(image, out, map_xy_[camera], map_fraction_[camera], cv::INTER_LINEAR,
+            cv::BORDER_CONSTANT,
             cv::Scalar::all(0));
   return out;
 }

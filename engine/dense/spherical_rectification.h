@@ -28,6 +28,9 @@ struct SphericalGridOptions {
   // (the angle between neighbouring pixels at the mirror's outer edge, where the image is
   // sharpest in angle), so that no detail of the images is lost.
   double step_rad = 0.0;
+  // With step_rad 0: the automatic step times this factor (>= 1). A dense map fusing at 2 cm
+  // needs less than the images' finest detail (DenseMapOptions::grid_step_factor).
+  double step_factor = 1.0;
 
   void Check() const;
 };
@@ -71,7 +74,9 @@ class SphericalRectifier {
   double theta_max_rad_ = 0.0;
   double baseline_m_ = 0.0;
   Eigen::Matrix3d cam0_from_grid_;
-  cv::Mat map_x_[2], map_y_[2];  // CV_32F: source pixel of each cell
+  // The source pixel of each cell in cv::remap's fixed-point form (CV_16SC2 whole pixels and
+  // CV_16UC1 fractions): remap converts float tables into it on every call otherwise.
+  cv::Mat map_xy_[2], map_fraction_[2];
   cv::Mat valid_[2];
 };
 

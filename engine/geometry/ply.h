@@ -36,4 +36,22 @@ struct PlyCloud {
 // inconsistent cloud and std::runtime_error when the file cannot be written.
 void WritePly(const std::filesystem::path& path, const PlyCloud& cloud);
 
+// Writes a cloud too large to hold at once (e.g. many stereo pairs merged) in parts of the same
+// properties: Append() writes each part's vertices to PATH.part, Finish() writes PATH's header
+// with the total count and moves the vertices behind it. The parts' comment is the first's.
+// Throws as WritePly does, and InvalidArgument for a part whose properties differ.
+class PlyAppender {
+ public:
+  explicit PlyAppender(std::filesystem::path path);
+  void Append(const PlyCloud& part);
+  void Finish();
+  size_t size() const { return count_; }
+
+ private:
+  std::filesystem::path path_;
+  PlyCloud header_;  // properties and comment, no points
+  size_t count_ = 0;
+  bool started_ = false;
+};
+
 }  // namespace omnirig

@@ -3,6 +3,7 @@
 #include "engine/geometry/ply.h"
 
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <sstream>
 
@@ -73,6 +74,41 @@ TEST(Ply, WithoutOptionalPropertiesIs15BytesPerVertex) {
   ASSERT_NE(body, std::string::npos);
   EXPECT_EQ(data.find("confidence"), std::string::npos);
   EXPECT_EQ(data.size() - body - 11, 2u * 15u);
+}
+
+std::string ReadFile(const std::filesystem::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::stringstream buffer;
+  buffer << in.rdbuf();
+  return buffer.str();
+}
+
+TEST(Ply, AppenderWritesWhatOneWriteWould) {
+  PlyCloud whole = TwoPoints();
+  whole.has_confidence = true;
+  whole.confidence = {0.25f, 1.0f};
+  PlyCloud first = whole, second = whole;
+  first.positions.pop_back();
+  first.colours.pop_back();
+  first.confidence.pop_back();
+  second.positions.erase(second.positions.begin());
+  second.colours.erase(second.colours.begin());
+  second.confidence.erase(second.confidence.begin());
+  const std::filesystem::path path = std::filesystem::temp_directory_path() /
+                                     ("omnirig_ply_parts_" + std::to_string(::getpid()) + ".ply");
+  PlyAppender appender(path);
+  appender.Append(first);
+  appender.Append(PlyCloud{whole.comment, {}, {}, true, {}, false, {}});  // an empty part
+  appender.Append(second);
+  EXPECT_EQ(appender.size(), 2u);
+  appender.Finish();
+  EXPECT_FALSE(std::filesystem::exists(path.string() + ".part"));
+  EXPECT_EQ(ReadFile(path), WriteAndRead(whole));
+  std::filesystem::remove(path);
+  PlyAppender other(path);
+  other.Append(first);
+  EXPECT_THROW(other.Append(TwoPoints()), InvalidArgument);  // without confidence
+  std::filesystem::remove(path.string() + ".part");
 }
 
 TEST(Ply, EmptyCloudDeclaresItsProperties) {

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <iomanip>
 #include <optional>
 #include <set>
 #include <sstream>
@@ -186,6 +187,20 @@ void BuildPairCorners(const BoardSpec& board, const StereoBoardPair& pair,
     ++*num_common;
   }
 }
+
+}  // namespace
+
+std::string RelativePoseSummary(const RelativePoseReport& report) {
+  const double angle_deg =
+      Eigen::AngleAxisd(report.rig.cam0_from_cam1.rotation).angle() * 180.0 / M_PI;
+  std::ostringstream os;
+  os << std::fixed << std::setprecision(2) << "baseline " << report.baseline_m * 1e3 << " +- "
+     << report.baseline_std_m * 1e3 << " mm, rotation " << angle_deg << " deg, "
+     << report.num_pairs_used << " of " << report.pairs.size() << " pairs used";
+  return os.str();
+}
+
+namespace {
 
 std::string UsedPairsMessage(const RelativePoseReport& report) {
   std::ostringstream os;
@@ -531,7 +546,7 @@ RelativePoseReport EstimateRelativePose(const CameraModel& cam0, const CameraMod
     report.rotation_std_robust_deg = uncertainty.robust_rotation_std_deg;
   }
   report.success = true;
-  progress.Report(1.0, "done");
+  progress.Report(1.0, "done", RelativePoseSummary(report));
   return report;
 }
 
