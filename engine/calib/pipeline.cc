@@ -139,11 +139,12 @@ std::string DescribeBoardSizeMismatch(const std::filesystem::path& dir,
 
 // The second pass over the views the first one missed (no hint, readable, of the calibration's
 // size), in parallel: with the model of a first calibration, a partial grid grown to the whole
-// board (RedetectWithModel); then the detector's costly variants (try_costly_variants). Returns
-// true when it found any.
+// board (RedetectWithModel); then, with `detect`, the detector with every variant. Returns true
+// when it found any.
 bool DetectMissed(const std::filesystem::path& dir, const BoardSpec& board,
-                  const ImageCalibrationOptions& options, const CameraModel* model, int width,
-                  int height, const ProgressSink& progress, std::vector<CalibrationView>* views) {
+                  const ImageCalibrationOptions& options, const CameraModel* model, bool detect,
+                  int width, int height, const ProgressSink& progress,
+                  std::vector<CalibrationView>* views) {
   std::vector<int> missed;
   for (size_t i = 0; i < views->size(); ++i) {
     const CalibrationView& view = (*views)[i];
@@ -157,8 +158,8 @@ bool DetectMissed(const std::filesystem::path& dir, const BoardSpec& board,
     if (image.empty() || image.cols != width || image.rows != height) return;
     BoardDetection detection;
     if (model) detection = RedetectWithModel(image, board, *model, options.detect);
-    if (!detection.found) detection = DetectBoard(image, board, options.detect);
-    found[k] = std::move(detection);
+    if (!detection.found && detect) detection = DetectBoard(image, board, options.detect);
+    if (model || detect) found[k] = std::move(detection);
   };
   RunTasks(static_cast<int>(missed.size()), options.calibrate.num_threads, progress, detect_one,
            [&](int k) {
@@ -304,9 +305,10 @@ CalibrationReport CalibrateImages(const std::filesystem::path& dir,
   const int num_found = static_cast<int>(std::count_if(
       views.begin(), views.end(), [](const CalibrationView& view) { return view.detection.found; }));
   // Too few views for a first model: the costly variants now, on every view missed.
-  if (first_pass.try_costly_variants != options.detect.try_costly_variants &&
-      num_found < options.calibrate.min_views) {
-    DetectMissed(dir, board, options, nullptr, width, height, progress, &views);
+  bool every_variant_tried = first_pass.try_costly_variants == options.detect.try_costly_variants;
+  if (!every_variant_tried && num_found < options.calibrate.min_views) {
+    DetectMissed(dir, board, options, nullptr, true, width, height, progress, &views);
+    every_variant_tried = true;
   }
   const double detect_s = timer.ElapsedSeconds();
   if (board.type == BoardSpec::Type::kCheckerboard && options.hints.empty() &&
@@ -323,7 +325,8 @@ CalibrationReport CalibrateImages(const std::filesystem::path& dir,
       Calibrate(views, width, height, board, options.calibrate, ScaledSink(progress, 0.5, 0.8));
   timer.Restart();
   if (options.redetect_with_model &&
-      DetectMissed(dir, board, options, &report.camera, width, height, progress, &views)) {
+      DetectMissed(dir, board, options, &report.camera, !every_variant_tried, width, height,
+                   progress, &views)) {
     const double redetect_s = timer.ElapsedSeconds();
     report =
         Calibrate(views, width, height, board, options.calibrate, ScaledSink(progress, 0.85, 0.95));
