@@ -419,18 +419,20 @@ BoardDetection DetectCheckerboard(const cv::Mat& grey, const BoardSpec& board,
   // equalised one. Where the half-size image shrinks the squares too far for the classic
   // detector, the full-size one usually still works.
   const std::vector<DetectorImage> plain = PlainImages(grey);
-  for (const bool sb : {false, true}) {
-    for (const DetectorImage& variant : plain) {
-      if (auto detection = try_one(variant, sb, sb ? kSectorFlags : kClassicFlags)) {
-        return *detection;
-      }
-    }
+  for (const DetectorImage& variant : plain) {
+    if (auto detection = try_one(variant, false, kClassicFlags)) return *detection;
+  }
+  std::optional<DetectorImage> equalised;
+  if (options.try_enhanced) {
+    equalised = EqualisedImage(grey);
+    if (auto detection = try_one(*equalised, true, kSectorFlags)) return *detection;
+  }
+  for (const DetectorImage& variant : plain) {
+    if (auto detection = try_one(variant, true, kSectorFlags)) return *detection;
   }
   if (options.try_enhanced) {
-    const DetectorImage equalised = EqualisedImage(grey);
-    if (auto detection = try_one(equalised, true, kSectorFlags)) return *detection;
     if (options.try_costly_variants) {
-      if (auto detection = TryCostlyVariants(grey, equalised, small, try_one)) return *detection;
+      if (auto detection = TryCostlyVariants(grey, *equalised, small, try_one)) return *detection;
     }
   }
   if (options.allow_exhaustive) {
