@@ -3,12 +3,14 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <optional>
 #include <sstream>
 
 #include <Eigen/Dense>
 #include <Eigen/Geometry>
 #include <opencv2/imgproc.hpp>
 
+#include "engine/geometry/rigid3.h"
 #include "engine/geometry/unified_camera.h"
 #include "engine/util/check.h"
 
@@ -59,15 +61,36 @@ bool PoseJacobian(const UnifiedIntrinsics& intrinsics, const Rigid3d& cam_from_b
   return true;
 }
 
-// Covariance of the free intrinsics (see coverage.h); false when singular.
-bool IntrinsicsCovariance(const CalibrationReport& report, const BoardSpec& board,
-                          const std::vector<int>& free, Eigen::MatrixXd* covariance) {
+// What the covariance of a calibration says about one used view's board pose: how it follows a
+// change of the intrinsics (the Gauss-Newton response -D^-1 B^T dk, the increments of
+// PoseJacobian) and its own covariance given the intrinsics (variance * D^-1).
+struct ViewPoseBlocks {
+  Eigen::Matrix<double, 6, Eigen::Dynamic> response;
+  Eigen::Matrix<double, 6, 6> covariance;
+  Eigen::Vector3d translation;
+};
+
+struct CalibrationCovariance {
+  Eigen::MatrixXd intrinsics;  // of the free intrinsics, board poses eliminated
+  std::vector<ViewPoseBlocks> views;
+  double median_board_distance_m = 0.0;
+};
+
+// The covariance of a calibration's free intrinsics and board poses (see coverage.h) from the
+// Gauss-Newton normal matrix of every used inlier corner, scaled by the residual variance per
+// coordinate; false when singular.
+bool EstimateCovariance(const CalibrationReport& report, const BoardSpec& board,
+                        const std::vector<int>& free, CalibrationCovariance* covariance) {
   const int m = static_cast<int>(free.size());
   const UnifiedIntrinsics& intrinsics = report.camera.intrinsics;
   const std::vector<Eigen::Vector3d> object_points = board.ObjectPoints();
+  Eigen::Vector3d board_centre = Eigen::Vector3d::Zero();
+  for (const Eigen::Vector3d& x : object_points) board_centre += x / object_points.size();
   Eigen::MatrixXd normal = Eigen::MatrixXd::Zero(m, m);
   double squared_error = 0.0;
-  int num_coordinates = 0, num_views = 0;
+  int num_coordinates = 0;
+  std::vector<double> distances;
+  covariance->views.clear();
   for (const CalibrationImageReport& image : report.images) {
     if (!image.used) continue;
     Eigen::MatrixXd a = Eigen::MatrixXd::Zero(m, m);
@@ -93,8 +116,14 @@ bool IntrinsicsCovariance(const CalibrationReport& report, const BoardSpec& boar
     const Eigen::LDLT<Eigen::Matrix<double, 6, 6>> d_ldlt(d);
     if (d_ldlt.info() != Eigen::Success || !(d.determinant() > 0.0)) continue;
     normal += a - b * d_ldlt.solve(b.transpose());
-    ++num_views;
+    ViewPoseBlocks view;
+    view.response = -d_ldlt.solve(b.transpose());
+    view.covariance = d_ldlt.solve(Eigen::Matrix<double, 6, 6>::Identity());
+    view.translation = image.cam_from_board.translation;
+    covariance->views.push_back(view);
+    distances.push_back((image.cam_from_board * board_centre).norm());
   }
+  const int num_views = static_cast<int>(covariance->views.size());
   const int dof = num_coordinates - m - 6 * num_views;
   if (dof <= 0) return false;
   const double variance = squared_error / dof;
@@ -103,9 +132,12 @@ bool IntrinsicsCovariance(const CalibrationReport& report, const BoardSpec& boar
                                           eigen.eigenvalues().maxCoeff())) {
     return false;
   }
-  *covariance = variance * eigen.eigenvectors() *
-                eigen.eigenvalues().cwiseInverse().asDiagonal() *
-                eigen.eigenvectors().transpose();
+  covariance->intrinsics = variance * eigen.eigenvectors() *
+                           eigen.eigenvalues().cwiseInverse().asDiagonal() *
+                           eigen.eigenvectors().transpose();
+  for (ViewPoseBlocks& view : covariance->views) view.covariance *= variance;
+  std::nth_element(distances.begin(), distances.begin() + distances.size() / 2, distances.end());
+  covariance->median_board_distance_m = distances[distances.size() / 2];
   return true;
 }
 
@@ -209,61 +241,77 @@ cv::Mat DrawCoverage(const cv::Mat& background, const cv::Mat& distance,
   return image;
 }
 
-// The uncertainty map (px) on the grid, 0 outside the disk; fills max and median.
+// The standard deviation (px) of the projection of `point` (camera frame) under `covariance`:
+// the point is fixed to the mean of the board frames (mrcal's "mean frames"), so it moves with
+// the board poses as they follow the intrinsics. A perturbation (dk, dp_i) moves the pixel by
+// J_k dk + J_x (1/N) sum_i G_i dp_i, with G_i = [-[point - t_i]x, I] the point's motion under
+// board i's pose increment and dp_i = response_i dk + e_i (e_i independent, covariance_i).
+// `moved_by_intrinsics` = sum_i G_i response_i at this point.
+std::optional<double> ProjectionSigma(const UnifiedIntrinsics& intrinsics,
+                                      const std::vector<int>& free,
+                                      const CalibrationCovariance& covariance,
+                                      const Eigen::Vector3d& point,
+                                      const Eigen::MatrixXd& moved_by_intrinsics) {
+  Matrix2X j_k;
+  if (!IntrinsicsJacobian(intrinsics, free, point, &j_k)) return std::nullopt;
+  Eigen::Matrix<double, 2, 3> j_x;
+  for (int k = 0; k < 3; ++k) {
+    const double step = 1e-6 * std::max(1e-3, point.norm());
+    Eigen::Vector3d plus = point, minus = point;
+    plus[k] += step;
+    minus[k] -= step;
+    const auto a = Project(intrinsics, plus), b = Project(intrinsics, minus);
+    if (!a || !b) return std::nullopt;
+    j_x.col(k) = (*a - *b) / (2.0 * step);
+  }
+  const double n = static_cast<double>(covariance.views.size());
+  const Matrix2X effective = j_k + j_x * moved_by_intrinsics / n;
+  Eigen::Matrix3d frames = Eigen::Matrix3d::Zero();
+  for (const ViewPoseBlocks& view : covariance.views) {
+    Eigen::Matrix<double, 3, 6> g;
+    g << -Skew(point - view.translation), Eigen::Matrix3d::Identity();
+    frames += g * view.covariance * g.transpose();
+  }
+  const Eigen::Matrix2d variance = effective * covariance.intrinsics * effective.transpose() +
+                                   j_x * frames * j_x.transpose() / (n * n);
+  return std::sqrt(std::max(0.0, variance.trace()));
+}
+
+// The uncertainty map (px) on the grid, 0 outside the disk; fills max and median. Each grid
+// pixel's ray carries a point at the median distance of the boards from the camera.
 cv::Mat Uncertainty(const CalibrationReport& report, const BoardSpec& board,
                     const CoverageOptions& options, CoverageReport* coverage) {
   std::vector<int> free;
   for (int i = 0; i < UnifiedIntrinsics::kNumParams; ++i) {
     if (report.intrinsics_std[i] > 0.0) free.push_back(i);
   }
-  Eigen::MatrixXd covariance;
-  if (free.empty() || !IntrinsicsCovariance(report, board, free, &covariance)) return cv::Mat();
+  CalibrationCovariance covariance;
+  if (free.empty() || !EstimateCovariance(report, board, free, &covariance)) return cv::Mat();
+  // sum_i G_i response_i = -[point]x W + V, linear in the point.
+  const int m = static_cast<int>(free.size());
+  Eigen::MatrixXd w = Eigen::MatrixXd::Zero(3, m), v = Eigen::MatrixXd::Zero(3, m);
+  for (const ViewPoseBlocks& view : covariance.views) {
+    w += view.response.topRows<3>();
+    v += Skew(view.translation) * view.response.topRows<3>() + view.response.bottomRows<3>();
+  }
   const int step = std::max(options.grid_step_px, 8);
   const int width = report.camera.width, height = report.camera.height;
   const UnifiedIntrinsics& intrinsics = report.camera.intrinsics;
-  // Per grid pixel inside the disk: d pixel / d intrinsics and d pixel / d rotation of the
-  // bearing. The camera frame's orientation is not observable apart from the board poses (a
-  // change of intrinsics that turns every bearing alike is absorbed by the poses), so the
-  // rotation that best explains each intrinsics perturbation over the disk is taken out, as
-  // mrcal does: J' = J - R M with M = (sum R^T R)^-1 sum R^T J.
-  struct Sample {
-    int row, col;
-    Matrix2X jacobian;
-    Eigen::Matrix<double, 2, 3> rotation;
-  };
-  std::vector<Sample> samples;
-  Eigen::Matrix3d rtr = Eigen::Matrix3d::Zero();
-  Eigen::MatrixXd rtj = Eigen::MatrixXd::Zero(3, static_cast<int>(free.size()));
   cv::Mat sigma((height + step - 1) / step, (width + step - 1) / step, CV_32FC1, cv::Scalar(0));
+  std::vector<double> values;
   for (int row = 0; row < sigma.rows; ++row) {
     for (int col = 0; col < sigma.cols; ++col) {
       const Eigen::Vector2d pixel(col * step, row * step);
       if ((pixel - coverage->disk_centre_px).norm() > coverage->disk_radius_px) continue;
       const auto bearing = Lift(intrinsics, pixel);
-      Sample sample{row, col, Matrix2X(), Eigen::Matrix<double, 2, 3>()};
-      if (!bearing || !IntrinsicsJacobian(intrinsics, free, *bearing, &sample.jacobian)) continue;
-      bool ok = true;
-      for (int k = 0; k < 3 && ok; ++k) {
-        const double angle = 1e-7;
-        const auto a = Project(intrinsics, Eigen::AngleAxisd(angle, Eigen::Vector3d::Unit(k)) * *bearing);
-        const auto b = Project(intrinsics, Eigen::AngleAxisd(-angle, Eigen::Vector3d::Unit(k)) * *bearing);
-        ok = a && b;
-        if (ok) sample.rotation.col(k) = (*a - *b) / (2.0 * angle);
-      }
-      if (!ok) continue;
-      rtr += sample.rotation.transpose() * sample.rotation;
-      rtj += sample.rotation.transpose() * sample.jacobian;
-      samples.push_back(std::move(sample));
+      if (!bearing) continue;
+      const Eigen::Vector3d point = covariance.median_board_distance_m * bearing->normalized();
+      const auto value =
+          ProjectionSigma(intrinsics, free, covariance, point, -Skew(point) * w + v);
+      if (!value) continue;
+      sigma.at<float>(row, col) = static_cast<float>(*value);
+      values.push_back(*value);
     }
-  }
-  if (samples.empty() || !(rtr.determinant() > 0.0)) return cv::Mat();
-  const Eigen::MatrixXd absorbed = rtr.ldlt().solve(rtj);
-  std::vector<double> values;
-  for (const Sample& sample : samples) {
-    const Matrix2X jacobian = sample.jacobian - sample.rotation * absorbed;
-    const double value = std::sqrt((jacobian * covariance * jacobian.transpose()).trace());
-    sigma.at<float>(sample.row, sample.col) = static_cast<float>(value);
-    values.push_back(value);
   }
   if (values.empty()) return cv::Mat();
   std::sort(values.begin(), values.end());

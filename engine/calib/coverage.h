@@ -5,12 +5,13 @@
 // The disk: the rim circle found by the single-viewpoint check when it ran, else the largest
 // circle around the principal point inside the image. Coverage: the fraction of the disk's area
 // within near_px of a used (inlier) corner. Uncertainty: the standard deviation of the projected
-// pixel of a bearing, sqrt(trace(J' C J'^T)), where C is the covariance of the free intrinsics
-// (the Gauss-Newton normal matrix of every used corner's reprojection, the board poses
-// eliminated by the Schur complement, scaled by the residual variance per coordinate) and J' =
-// d pixel / d intrinsics at the bearing the model lifts the pixel to, less the part a common
-// rotation of every bearing explains (the camera frame's orientation is fixed only through the
-// board poses; mrcal's treatment). Advice: every
+// pixel, sqrt(trace(Var)), of a point on each pixel's ray at the median distance of the boards,
+// attached to the mean of the board frames (mrcal's "mean frames"): the joint covariance of the
+// free intrinsics and the board poses (the Gauss-Newton normal matrix of every used corner's
+// reprojection, scaled by the residual variance per coordinate) moves the point with the board
+// poses as they follow the intrinsics (and by their own noise). A point fixed in the camera frame
+// instead gives a flat map: the weakly observable xi / gamma direction, which the boards' poses
+// absorb at the corners, moves it everywhere alike (docs/accuracy.md). Advice: every
 // sector of azimuth_sector_deg and radial band (inner half of the radius, outer half "near the
 // rim") whose coverage is below min_sector_coverage. Azimuth is measured in the image around the
 // disk's centre, 0 deg along +u (right), 90 deg along +v (down).

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <string>
 
 #include <gtest/gtest.h>
@@ -78,9 +79,33 @@ TEST(Coverage, NamesTheMissingSectorsAndPredictsMoreUncertaintyThere) {
   ASSERT_TRUE(lower.uncertainty_valid);
   EXPECT_GT(lower.max_uncertainty_px, everywhere.max_uncertainty_px);
   EXPECT_GT(lower.median_uncertainty_px, everywhere.median_uncertainty_px);
-  // The uncertainty map is dominated by the weakly observable xi / gamma direction (the board
-  // poses absorb it at the corners, a fixed bearing's pixel moves everywhere): it shrinks with
-  // more and better spread views but does not single out the empty sectors; the advice does.
+  // Where the boards were, the uncertainty is lower than where none was: the median over the
+  // empty upper half of the disk against the covered lower half.
+  auto median_over = [](const CoverageReport& report, bool upper) {
+    std::vector<float> values;
+    const cv::Mat& map = report.uncertainty_px;
+    for (int row = 0; row < map.rows; ++row) {
+      const double v = row * report.uncertainty_step_px - report.disk_centre_px.y();
+      if ((v < -0.2 * report.disk_radius_px) != upper) continue;
+      for (int col = 0; col < map.cols; ++col) {
+        if (map.at<float>(row, col) > 0.0f) values.push_back(map.at<float>(row, col));
+      }
+    }
+    std::nth_element(values.begin(), values.begin() + values.size() / 2, values.end());
+    return values[values.size() / 2];
+  };
+  // Measured: 1.63 px over the empty half against 0.78 px over the covered one; 0.79 and 0.78
+  // with every view. (A point fixed in the camera frame instead, not following the boards: 1.94
+  // and 1.80, flat: the xi / gamma direction the board poses absorb at the corners.)
+  EXPECT_GT(median_over(lower, true), 1.5 * median_over(lower, false));
+  EXPECT_LT(median_over(everywhere, true), 1.2 * median_over(everywhere, false));
+  EXPECT_LT(median_over(everywhere, false), 1.2 * median_over(everywhere, true));
+  std::printf("uncertainty: all views median %.3f max %.3f; lower half: median %.3f max %.3f, "
+              "over the upper half %.3f, the lower %.3f; all views upper %.3f lower %.3f\n",
+              everywhere.median_uncertainty_px, everywhere.max_uncertainty_px,
+              lower.median_uncertainty_px, lower.max_uncertainty_px, median_over(lower, true),
+              median_over(lower, false), median_over(everywhere, true),
+              median_over(everywhere, false));
   EXPECT_EQ(lower.uncertainty_px.type(), CV_32FC1);
   EXPECT_GT(lower.uncertainty_step_px, 0);
   EXPECT_EQ(everywhere.coverage_image.size(), cv::Size(1024, 768));

@@ -57,8 +57,15 @@ struct DetectOptions {
   bool check_grid = true;
   GridCheckOptions grid_check;
   double max_dropped_fraction = 0.1;
-  // Also try 2x upsampled and contrast-normalised images when the plain image fails.
+  // Also try a contrast-equalised image, and (with try_costly_variants) 2x upsampled ones, when
+  // the plain image fails.
   bool try_enhanced = true;
+  // The attempts that cost most of a second each on a 640x480 image (the sector-based
+  // detector's ACCURACY upsampling, the classic detector on the equalised image, the 2x
+  // upsampled image), after the cheap ones failed. CalibrateImages turns them off in its first
+  // pass and runs them only on the views that growing a partial grid with the model of the other
+  // views does not find.
+  bool try_costly_variants = true;
   // Allow OpenCV's exhaustive search as the last resort (can take minutes on a large image
   // without the board, hence off by default).
   bool allow_exhaustive = false;

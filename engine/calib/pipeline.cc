@@ -1,6 +1,7 @@
 #include "engine/calib/pipeline.h"
 
 #include <algorithm>
+#include <optional>
 #include <sstream>
 #include <utility>
 
@@ -62,7 +63,8 @@ ProgressSink ScaledSink(const ProgressSink& progress, double from, double to) {
 std::vector<CalibrationView> DetectAll(const std::filesystem::path& dir,
                                        const std::vector<std::string>& names,
                                        const BoardSpec& board,
-                                       const ImageCalibrationOptions& options, int* width,
+                                       const ImageCalibrationOptions& options,
+                                       const DetectOptions& detect_options, int* width,
                                        int* height, const ProgressSink& progress) {
   std::vector<CalibrationView> views(names.size());
   std::vector<cv::Size> sizes(names.size());
@@ -72,7 +74,7 @@ std::vector<CalibrationView> DetectAll(const std::filesystem::path& dir,
     const cv::Mat image = ReadImage(dir / names[i], &views[i].detection.reason);
     if (image.empty()) return;
     sizes[i] = image.size();
-    DetectOptions detect = options.detect;
+    DetectOptions detect = detect_options;
     const auto hint = options.hints.find(names[i]);
     if (hint != options.hints.end()) detect.outer_corners_hint_px = hint->second;
     views[i].detection = DetectBoard(image, board, detect);
@@ -135,29 +137,51 @@ std::string DescribeBoardSizeMismatch(const std::filesystem::path& dir,
   return os.str();
 }
 
-// Re-detects the views the detector missed with the model of a first calibration. Returns true
+// The second pass over the views the first one missed (no hint, readable, of the calibration's
+// size), in parallel: with the model of a first calibration, a partial grid grown to the whole
+// board (RedetectWithModel); then, with `detect`, the detector with every variant. Returns true
 // when it found any.
-bool RedetectMissed(const std::filesystem::path& dir, const BoardSpec& board,
-                    const ImageCalibrationOptions& options, const CameraModel& model,
-                    const ProgressSink& progress, std::vector<CalibrationView>* views) {
-  bool grown = false;
-  for (CalibrationView& view : *views) {
-    progress.ThrowIfCancelled();
-    if (view.detection.found || options.hints.count(view.name)) continue;
-    const cv::Mat image = cv::imread((dir / view.name).string(), cv::IMREAD_COLOR);
-    if (image.empty() || image.cols != model.width || image.rows != model.height) continue;
-    BoardDetection detection = RedetectWithModel(image, board, model, options.detect);
-    progress.Report(0.8, "redetect",
-                    view.name + (detection.found ? ": found by growing a partial grid"
-                                                 : ": " + detection.reason));
-    if (detection.found) {
-      view.detection = std::move(detection);
-      grown = true;
+bool DetectMissed(const std::filesystem::path& dir, const BoardSpec& board,
+                  const ImageCalibrationOptions& options, const CameraModel* model, bool detect,
+                  int width, int height, const ProgressSink& progress,
+                  std::vector<CalibrationView>* views) {
+  std::vector<int> missed;
+  for (size_t i = 0; i < views->size(); ++i) {
+    const CalibrationView& view = (*views)[i];
+    if (!view.detection.found && !options.hints.count(view.name)) missed.push_back(i);
+  }
+  std::vector<std::optional<BoardDetection>> found(missed.size());
+  auto detect_one = [&](int k, const ProgressSink& cancellation) {
+    cancellation.ThrowIfCancelled();
+    const cv::Mat image =
+        cv::imread((dir / (*views)[missed[k]].name).string(), cv::IMREAD_COLOR);
+    if (image.empty() || image.cols != width || image.rows != height) return;
+    BoardDetection detection;
+    if (model) detection = RedetectWithModel(image, board, *model, options.detect);
+    if (!detection.found && detect) detection = DetectBoard(image, board, options.detect);
+    if (model || detect) found[k] = std::move(detection);
+  };
+  RunTasks(static_cast<int>(missed.size()), options.calibrate.num_threads, progress, detect_one,
+           [&](int k) {
+             if (!found[k]) return;
+             progress.Report(0.8, "redetect",
+                             (*views)[missed[k]].name +
+                                 (found[k]->found ? ": found (" + found[k]->method + ")"
+                                                  : ": " + found[k]->reason));
+           });
+  bool any = false;
+  for (size_t k = 0; k < missed.size(); ++k) {
+    if (!found[k]) continue;
+    BoardDetection& view_detection = (*views)[missed[k]].detection;
+    if (found[k]->found) {
+      view_detection = std::move(*found[k]);
+      any = true;
     } else {
-      view.detection.reason = detection.reason;
+      // The detector's own reason: the model-based one says less to a user.
+      view_detection.reason = found[k]->reason;
     }
   }
-  return grown;
+  return any;
 }
 
 // The SVP check on the requested image (or the first used one) with the calibrated model.
@@ -269,10 +293,24 @@ CalibrationReport CalibrateImages(const std::filesystem::path& dir,
   }
   int width = 0, height = 0;
   Timer timer;
+  // The first pass leaves out the detector's costly variants when a second pass with a model
+  // follows: growing a view's partial grid with the model of the other views takes a tenth of
+  // their time (bench_calib profile).
+  DetectOptions first_pass = options.detect;
+  first_pass.try_costly_variants =
+      options.detect.try_costly_variants && !options.redetect_with_model;
   std::vector<CalibrationView> views =
-      DetectAll(dir, names, board, options, &width, &height, progress);
-  const double detect_s = timer.ElapsedSeconds();
+      DetectAll(dir, names, board, options, first_pass, &width, &height, progress);
   OMNIRIG_CHECK(width > 0, "calibration: none of the " << names.size() << " images could be read");
+  const int num_found = static_cast<int>(std::count_if(
+      views.begin(), views.end(), [](const CalibrationView& view) { return view.detection.found; }));
+  // Too few views for a first model: the costly variants now, on every view missed.
+  bool every_variant_tried = first_pass.try_costly_variants == options.detect.try_costly_variants;
+  if (!every_variant_tried && num_found < options.calibrate.min_views) {
+    DetectMissed(dir, board, options, nullptr, true, width, height, progress, &views);
+    every_variant_tried = true;
+  }
+  const double detect_s = timer.ElapsedSeconds();
   if (board.type == BoardSpec::Type::kCheckerboard && options.hints.empty() &&
       std::none_of(views.begin(), views.end(),
                    [](const CalibrationView& view) { return view.detection.found; })) {
@@ -287,7 +325,8 @@ CalibrationReport CalibrateImages(const std::filesystem::path& dir,
       Calibrate(views, width, height, board, options.calibrate, ScaledSink(progress, 0.5, 0.8));
   timer.Restart();
   if (options.redetect_with_model &&
-      RedetectMissed(dir, board, options, report.camera, progress, &views)) {
+      DetectMissed(dir, board, options, &report.camera, !every_variant_tried, width, height,
+                   progress, &views)) {
     const double redetect_s = timer.ElapsedSeconds();
     report =
         Calibrate(views, width, height, board, options.calibrate, ScaledSink(progress, 0.85, 0.95));
