@@ -22,6 +22,7 @@
 // and scored against the room (median distance to the true surfaces <= 0.5 % of range,
 // occupancy agreeing in >= 95 % of the observed cells). --grid-step-factor and
 // --keyframe-spacing set DenseMapOptions' fields of the same names.
+// bench_slam --loop ...: the long closed-loop bench instead (bench/slam_loop_bench.cc).
 //
 // usage: bench_slam [--frames N] [--width W] [--height H] [--threads T] [--street]
 //                   [--max-features N] [--local-window N] [--local-iterations N] [--no-decode]
@@ -45,6 +46,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/videoio.hpp>
 
+#include "bench/slam_loop_bench.h"
 #include "engine/dense/dense_map.h"
 #include "engine/dense/map_accuracy.h"
 #include "engine/slam/evaluation.h"
@@ -395,4 +397,9 @@ int Run(const Args& args) {
 }  // namespace
 }  // namespace omnirig
 
-int main(int argc, char** argv) { return omnirig::Run(omnirig::ParseArgs(argc, argv)); }
+int main(int argc, char** argv) {
+  for (int i = 1; i < argc; ++i) {
+    if (std::strcmp(argv[i], "--loop") == 0) return omnirig::RunLoopBench(argc, argv);
+  }
+  return omnirig::Run(omnirig::ParseArgs(argc, argv));
+}
