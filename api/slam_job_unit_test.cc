@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/videoio.hpp>
 
 #include "api/camera_json.h"
 #include "engine/util/check.h"
@@ -215,6 +216,61 @@ TEST_F(TempDataset, ARefinementThatCannotRunSaysWhy) {
       << refinement["reason"];
   EXPECT_EQ(refinement["before"], refinement["after"]);
   EXPECT_EQ(refinement["after"]["cameras"]["cam0"]["intrinsics"]["gamma_u"], 0.3 * 48);
+}
+
+// frame_step on an image sequence keeps every n-th pair, and its ground-truth pose.
+TEST_F(TempDataset, FrameStepOnImages) {
+  for (const char* name : {"a.png", "b.png", "c.png", "d.png", "e.png"}) {
+    WriteImage(std::string("cam0/") + name, 64, 48);
+    WriteImage(std::string("cam1/") + name, 64, 48);
+  }
+  std::ofstream gt(dir_ / "gt.tum");
+  for (int i = 0; i < 5; ++i) gt << 10 + i << " 0 0 0 0 0 0 1\n";
+  gt.close();
+  slam::VideoFrameOptions frames;
+  frames.frame_step = 2;
+  const json result = RunSlamOnDataset(TinyRig(64, 48), dir_, names_, slam::SlamOptions(),
+                                       dir_ / "gt.tum", dir_ / "out", ProgressSink(), nullptr,
+                                       std::nullopt, frames);
+  ASSERT_EQ(result["num_frames"], 3);
+  EXPECT_EQ(result["frames"][1]["name"], "c.png");
+  EXPECT_EQ(result["input"]["kind"], "images");
+  EXPECT_EQ(result["input"]["num_image_pairs"], 5);
+  std::ifstream file(dir_ / "out" / "trajectory.json");
+  const json trajectory = json::parse(file);
+  EXPECT_EQ(trajectory["frames"][2]["timestamp_s"], 14.0);  // e.png's ground-truth time
+}
+
+// A recording in a dataset: the time range selects frames by container time, and a ground truth
+// is matched to them by timestamp (a missing pose is named).
+TEST_F(TempDataset, VideoFramesByTimeAndGroundTruthByTimestamp) {
+  for (const char* name : {"cam0.mkv", "cam1.mkv"}) {
+    cv::VideoWriter writer((dir_ / name).string(), cv::CAP_FFMPEG,
+                           cv::VideoWriter::fourcc('F', 'F', 'V', '1'), 10.0, cv::Size(64, 48));
+    for (int i = 0; i < 6; ++i) writer.write(cv::Mat(48, 64, CV_8UC3, cv::Scalar::all(0)));
+    names_.push_back(name);
+  }
+  std::ofstream gt(dir_ / "gt.tum");
+  for (int i = 0; i < 6; ++i) gt << 0.1 * i << " " << i << " 0 0 0 0 0 1\n";
+  gt.close();
+  slam::VideoFrameOptions frames;
+  frames.start_s = 0.15;
+  frames.end_s = 0.45;
+  const json result = RunSlamOnDataset(TinyRig(64, 48), dir_, names_, slam::SlamOptions(),
+                                       dir_ / "gt.tum", dir_ / "out", ProgressSink(), nullptr,
+                                       std::nullopt, frames);
+  ASSERT_EQ(result["num_frames"], 3);
+  EXPECT_EQ(result["frames"][0]["name"], "t000000.200");
+  EXPECT_EQ(result["frames"][2]["name"], "t000000.400");
+  EXPECT_EQ(result["input"]["kind"], "video_pair");
+  EXPECT_EQ(result["input"]["codec"], "FFV1");
+  std::ofstream(dir_ / "gt.tum") << "0 0 0 0 0 0 0 1\n0.1 0 0 0 0 0 0 1\n";
+  const std::string message = ExpectInvalid([&] {
+    RunSlamOnDataset(TinyRig(64, 48), dir_, names_, slam::SlamOptions(), dir_ / "gt.tum",
+                     dir_ / "out2", ProgressSink(), nullptr, std::nullopt, frames);
+  });
+  EXPECT_NE(message.find("no pose within 25 ms of the frame at 0.2 s"), std::string::npos)
+      << message;
 }
 
 TEST(SlamJobType, IsRegisteredAndValidates) {

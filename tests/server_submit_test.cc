@@ -106,12 +106,14 @@ std::string Mp4Bytes(size_t payload, unsigned seed) {
          box("moov", std::string(64, 'm'));
 }
 
-// Videos go up in chunks; a run after an interrupted one goes on where the server's part ends.
+// Videos go up in chunks (a .tum beside them whole); a run after an interrupted one goes on where
+// the server's part ends.
 TEST_F(SubmitTest, UploadsVideosInChunksAndResumes) {
   const fs::path folder = dir_.path() / "recording";
   const std::string cam0 = Mp4Bytes(300000, 1), cam1 = Mp4Bytes(300000, 2);
   WriteFile(folder / "cam0.mp4", cam0);
   WriteFile(folder / "cam1.mp4", cam1);
+  WriteFile(folder / "trajectory.tum", "0 0 0 0 0 0 0 1\n");  // a slam job's ground truth
   const std::string dataset =
       JsonOf(client_->Post("/api/v1/datasets", R"({"name": "rec"})", "application/json"))["id"];
   // An earlier run sent the first 100000 bytes of cam0.mp4, then stopped.
@@ -127,10 +129,10 @@ TEST_F(SubmitTest, UploadsVideosInChunksAndResumes) {
             0)
       << stderr_text;
   EXPECT_NE(stderr_text.find("resuming cam0.mp4 at byte 100000"), std::string::npos) << stderr_text;
-  EXPECT_NE(stderr_text.find("2 sent, 0 already"), std::string::npos) << stderr_text;
+  EXPECT_NE(stderr_text.find("3 sent, 0 already"), std::string::npos) << stderr_text;
   const json listed = JsonOf(client_->Get(("/api/v1/datasets/" + dataset).c_str()));
   EXPECT_EQ(listed["video_count"], 2);
-  EXPECT_EQ(listed["image_count"], 0);
+  EXPECT_EQ(listed["image_count"], 1);  // the .tum
   EXPECT_EQ(client_->Get(("/api/v1/datasets/" + dataset + "/images/cam0.mp4").c_str())->body, cam0);
   EXPECT_EQ(client_->Get(("/api/v1/datasets/" + dataset + "/images/cam1.mp4").c_str())->body, cam1);
 }

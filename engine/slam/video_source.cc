@@ -1,5 +1,6 @@
 #include "engine/slam/video_source.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <sstream>
@@ -13,7 +14,13 @@ namespace fs = std::filesystem;
 
 std::string FileName(const fs::path& path) { return path.filename().string(); }
 
-std::string FourCc(double value) {
+// A property as an integer, 0 when the back-end reports none (negative, NaN or out of range).
+int64_t IntegerProperty(const cv::VideoCapture& capture, int property) {
+  const double value = capture.get(property);
+  return std::isfinite(value) && value > 0 && value < 9e15 ? static_cast<int64_t>(value) : 0;
+}
+
+std::string FourCc(int64_t value) {
   const auto code = static_cast<uint32_t>(value);
   std::string text;
   for (int i = 0; i < 4; ++i) {
@@ -65,8 +72,9 @@ std::vector<double> ReadTimestamps(const fs::path& path, double last_s, int64_t 
                       FileName(path) + ": " + std::to_string(stamps.size()) + " frames");
     }
   }
-  OMNIRIG_CHECK(decoded_any, FileName(path) << ": no frame could be decoded (codec "
-                                            << FourCc(capture.get(cv::CAP_PROP_FOURCC)) << ")");
+  OMNIRIG_CHECK(decoded_any, FileName(path)
+                                 << ": no frame could be decoded (codec "
+                                 << FourCc(IntegerProperty(capture, cv::CAP_PROP_FOURCC)) << ")");
   return stamps;
 }
 
@@ -75,11 +83,13 @@ std::vector<double> ReadTimestamps(const fs::path& path, double last_s, int64_t 
 VideoInfo ProbeVideo(const fs::path& path) {
   cv::VideoCapture capture = Open(path);
   VideoInfo info;
-  info.width = static_cast<int>(capture.get(cv::CAP_PROP_FRAME_WIDTH));
-  info.height = static_cast<int>(capture.get(cv::CAP_PROP_FRAME_HEIGHT));
-  info.frame_count = static_cast<int64_t>(capture.get(cv::CAP_PROP_FRAME_COUNT));
+  info.width = static_cast<int>(
+      std::min<int64_t>(IntegerProperty(capture, cv::CAP_PROP_FRAME_WIDTH), 1 << 20));
+  info.height = static_cast<int>(
+      std::min<int64_t>(IntegerProperty(capture, cv::CAP_PROP_FRAME_HEIGHT), 1 << 20));
+  info.frame_count = IntegerProperty(capture, cv::CAP_PROP_FRAME_COUNT);
   info.fps = capture.get(cv::CAP_PROP_FPS);
-  info.codec = FourCc(capture.get(cv::CAP_PROP_FOURCC));
+  info.codec = FourCc(IntegerProperty(capture, cv::CAP_PROP_FOURCC));
   OMNIRIG_CHECK(info.width > 0 && info.height > 0,
                 FileName(path) << " holds no video stream with a frame size");
   OMNIRIG_CHECK(info.frame_count > 0, FileName(path) << " holds no frames");

@@ -39,14 +39,14 @@ bool IsVideoFile(const fs::path& path) {
          ext == ".avi";
 }
 
-bool IsImageFile(const fs::path& path) {
+bool IsUploadFile(const fs::path& path) {
   const std::string ext = Extension(path);
   return ext == ".png" || ext == ".jpg" || ext == ".jpeg" || ext == ".bmp" || ext == ".pgm" ||
-         ext == ".ppm" || IsVideoFile(path);
+         ext == ".ppm" || ext == ".tum" || IsVideoFile(path);
 }
 
-// Image and video files of `folder` and of its direct sub-folders (e.g. cam0/, cam1/), by
-// upload name.
+// Image and video files (and .tum trajectories, a slam job's ground truth) of `folder` and of
+// its direct sub-folders (e.g. cam0/, cam1/), by upload name.
 std::map<std::string, fs::path> CollectImages(const fs::path& folder) {
   if (!fs::is_directory(folder)) throw InvalidArgument(folder.string() + " is not a folder");
   std::map<std::string, fs::path> images;
@@ -58,7 +58,7 @@ std::map<std::string, fs::path> CollectImages(const fs::path& folder) {
       continue;
     }
     if (it->is_directory() && it.depth() >= 1) it.disable_recursion_pending();
-    if (it->is_regular_file() && IsImageFile(it->path())) {
+    if (it->is_regular_file() && IsUploadFile(it->path())) {
       images[fs::relative(it->path(), folder).generic_string()] = it->path();
     }
   }
