@@ -36,9 +36,9 @@ struct DenseMapOptions {
   // Keyframes: a tracked frame is fused when it lies at least this far from the last fused one.
   // With grid_step_factor, the fusion's cost (the keyframes' dense stereo): bench_slam
   // --dense-map on the 40-frame room (6.3 m) chose 1.5 m and 1.25, the setting that meets the
-  // issue's three targets with a margin (fusion 19 % of SLAM's wall time, median 0.37 % of
-  // range, 99.5 % of 8,786 occupancy cells agreeing). 1 m keyframes observe 13,088 cells for
-  // 29-33 % of SLAM's time; the full-resolution grid (factor 1) 14,558 cells for 37-45 %.
+  // issue's three targets (fusion 19-26 % of SLAM's wall time, median 0.37 % of range, 99.5 %
+  // of 8,786 occupancy cells agreeing). 1 m keyframes observe 13,088 cells for 29-40 % of
+  // SLAM's time; the full-resolution grid (factor 1) 14,558 cells for 37-45 %.
   // docs/dense.md has the table.
   double keyframe_spacing_m = 1.5;
   // The keyframes' dense stereo runs on a grid this many times coarser than the images' finest
