@@ -129,9 +129,12 @@ TEST_F(SlamJob, DenseMapFusesKeyframesAndWritesAnOccupancyGrid) {
   RegisterSlamJobType();
   const JobType* type = FindJobType("slam");
   ASSERT_NE(type, nullptr);
-  // Keyframes 0.5 m apart (the default is 1.5 m) on this short sequence.
-  const json params = {{"rig", "rig-job"},
-                       {"dense_map", {{"voxel_m", 0.02}, {"keyframe_spacing_m", 0.5}}}};
+  // Keyframes 0.5 m apart on this short sequence, on the full-resolution grid (the defaults,
+  // 1.5 m and 1.25, are chosen for 1024x768; at 640x480 a coarser grid leaves few points under
+  // the map's 2 % range std: 6,609 instead of 40,569).
+  const json params = {
+      {"rig", "rig-job"},
+      {"dense_map", {{"voxel_m", 0.02}, {"keyframe_spacing_m", 0.5}, {"grid_step_factor", 1}}}};
   type->validate(params);
   EXPECT_THROW(type->validate({{"rig", "rig-job"}, {"dense_map", {{"voxel", 0.02}}}}),
                InvalidArgument);
@@ -143,6 +146,7 @@ TEST_F(SlamJob, DenseMapFusesKeyframesAndWritesAnOccupancyGrid) {
   // ~20 cm steps over 1.65 m with keyframes 0.5 m apart.
   EXPECT_GE(map["keyframes"].size(), 3u);
   EXPECT_EQ(map["keyframe_spacing_m"], 0.5);
+  EXPECT_EQ(map["grid_step_factor"], 1.0);
   EXPECT_GT(map["num_points"].get<int>(), 20000);  // 40,569 measured (640x480)
   // The sensor is 1 m above the floor; the world is the first frame's cam0 frame (z down).
   EXPECT_NEAR(map["floor_height_m"].get<double>(), -1.0, 0.05);

@@ -37,7 +37,8 @@ int RunStereo(const Args& raw_args) {
   args.AddOption("o", "stereo_out", "output folder");
   args.AddOption("options", "", "JSON file with the job's params other than rig and method");
   args.AddOption("threads", "2", "threads for the dense matcher");
-  args.SetPositional("DIR", "folder with cam0/ and cam1/ images, paired by name");
+  args.SetPositional("DIR", "folder with cam0/ and cam1/ images, paired by name (a .tum "
+                            "trajectory in it places the pairs into one merged cloud.ply)");
   if (!args.Parse(raw_args)) return args.exit_code();
   OMNIRIG_CHECK(args.positional().size() == 1, "expected one DIR (see --help)");
   OMNIRIG_CHECK(args.Has("rig"), "--rig is required (a relative_pose result JSON)");
@@ -58,6 +59,11 @@ int RunStereo(const Args& raw_args) {
   context.job_id = "cli";
   context.dataset_dir = args.positional()[0];
   context.image_names = ListPairImages(context.dataset_dir);
+  for (const fs::directory_entry& entry : fs::directory_iterator(context.dataset_dir)) {
+    if (entry.path().extension() == ".tum") {
+      context.image_names.push_back(entry.path().filename().string());
+    }
+  }
   context.output_dir = out_dir;
   context.num_threads = threads;
   context.progress.report = [](double fraction, const std::string& stage, const std::string&) {
@@ -79,7 +85,11 @@ int RunStereo(const Args& raw_args) {
               << (pair.contains("warning") ? " (" + pair["warning"].get<std::string>() + ")" : "")
               << "\n";
   }
-  std::cout << "wrote " << (out_dir / "cloud.ply").string() << ", result.json\n";
+  if (result.contains("artifact")) {
+    std::cout << "wrote " << (out_dir / result["artifact"].get<std::string>()).string()
+              << (result.value("clouds_merged", true) ? "" : " (one of the pairs' clouds)")
+              << ", result.json\n";
+  }
   return 0;
 }
 

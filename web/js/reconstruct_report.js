@@ -26,6 +26,13 @@ export function reconstructPairsCard(job, result, onView) {
     result.warning ? el('div.warning#reconstruct-warning', result.warning) : null,
     pairs.length > 1 && result.clouds_merged === false
       ? el('p.muted', 'Each pair\'s cloud is in that pair\'s own cam0 frame, so the clouds are kept apart: choose one to view it.') : null,
+    result.clouds_merged === true && result.trajectory
+      ? el('p#reconstruct-merged', `${result.trajectory.num_pairs_placed} of ${pairs.length} pairs placed by ` +
+        `${result.trajectory.source} and merged into cloud.ply, in that trajectory's world. `,
+      onView ? el('button.view-cloud', { type: 'button', dataset: { artifact: 'cloud.ply' }, onclick: () => onView('cloud.ply') },
+        'View the merged cloud') : null) : null,
+    result.trajectory && result.trajectory.warning
+      ? el('div.warning#reconstruct-trajectory-warning', result.trajectory.warning) : null,
     pairs.map((pair) => pairBlock(job, datasetId, pair, result, onView)));
 }
 
