@@ -371,18 +371,22 @@ constexpr int kSectorFineFlags = cv::CALIB_CB_NORMALIZE_IMAGE | cv::CALIB_CB_ACC
 // The attempts that take most of a second each on a 640x480 image (bench_calib profile), for
 // views the cheap ones miss: on small images (squares of a few pixels) the sector-based detector
 // with ACCURACY on the plain and equalised images, the classic one on the equalised image, and
-// both on a 2x upsampled copy (on large images upsampling costs seconds). `try_one(image, sb,
-// flags)` runs and validates one.
+// both on a 2x upsampled copy (on large images upsampling costs seconds; there, the sector-based
+// detector on the full-size equalised image when the cheap ones used the half-size one).
+// `try_one(image, sb, flags)` runs and validates one.
 template <typename TryOne>
 std::optional<BoardDetection> TryCostlyVariants(const cv::Mat& grey,
                                                 const DetectorImage& equalised, bool small,
-                                                TryOne& try_one) {
+                                                bool halved, TryOne& try_one) {
   const DetectorImage plain = {grey, 1.0, ""};
   if (small) {
     if (auto detection = try_one(plain, true, kSectorFineFlags)) return detection;
   }
   if (auto detection = try_one(equalised, false, kClassicFlags)) return detection;
-  if (!small) return std::nullopt;
+  if (!small) {
+    // The cheap attempts searched only the half-size equalised image.
+    return halved ? try_one(equalised, true, kSectorFlags) : std::nullopt;
+  }
   if (auto detection = try_one(equalised, true, kSectorFineFlags)) return detection;
   DetectorImage upsampled{cv::Mat(), 2.0, "-upsampled"};
   cv::resize(grey, upsampled.image, cv::Size(), 2.0, 2.0, cv::INTER_CUBIC);
@@ -434,7 +438,8 @@ BoardDetection DetectCheckerboard(const cv::Mat& grey, const BoardSpec& board,
     if (auto detection = try_one(variant, true, kSectorFlags)) return *detection;
   }
   if (options.try_enhanced && options.try_costly_variants) {
-    if (auto detection = TryCostlyVariants(grey, EqualisedImage(grey), small, try_one)) {
+    if (auto detection =
+            TryCostlyVariants(grey, EqualisedImage(grey), small, plain.size() > 1, try_one)) {
       return *detection;
     }
   }
