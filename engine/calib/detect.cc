@@ -434,10 +434,16 @@ BoardDetection DetectCheckerboard(const cv::Mat& grey, const BoardSpec& board,
     equalised.suffix = plain.front().suffix + equalised.suffix;
     if (auto detection = try_one(equalised, true, kSectorFlags)) return *detection;
   }
-  for (const DetectorImage& variant : plain) {
-    if (auto detection = try_one(variant, true, kSectorFlags)) return *detection;
+  if (!options.try_enhanced) {
+    for (const DetectorImage& variant : plain) {
+      if (auto detection = try_one(variant, true, kSectorFlags)) return *detection;
+    }
   }
   if (options.try_enhanced && options.try_costly_variants) {
+    // On the real sets the plain image never gave a board the equalised one did not.
+    for (const DetectorImage& variant : plain) {
+      if (auto detection = try_one(variant, true, kSectorFlags)) return *detection;
+    }
     if (auto detection =
             TryCostlyVariants(grey, EqualisedImage(grey), small, plain.size() > 1, try_one)) {
       return *detection;
