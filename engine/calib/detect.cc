@@ -371,18 +371,22 @@ constexpr int kSectorFineFlags = cv::CALIB_CB_NORMALIZE_IMAGE | cv::CALIB_CB_ACC
 // The attempts that take most of a second each on a 640x480 image (bench_calib profile), for
 // views the cheap ones miss: on small images (squares of a few pixels) the sector-based detector
 // with ACCURACY on the plain and equalised images, the classic one on the equalised image, and
-// both on a 2x upsampled copy (on large images upsampling costs seconds). `try_one(image, sb,
-// flags)` runs and validates one.
+// both on a 2x upsampled copy (on large images upsampling costs seconds; there, the sector-based
+// detector on the full-size equalised image when the cheap ones used the half-size one).
+// `try_one(image, sb, flags)` runs and validates one.
 template <typename TryOne>
 std::optional<BoardDetection> TryCostlyVariants(const cv::Mat& grey,
                                                 const DetectorImage& equalised, bool small,
-                                                TryOne& try_one) {
+                                                bool halved, TryOne& try_one) {
   const DetectorImage plain = {grey, 1.0, ""};
   if (small) {
     if (auto detection = try_one(plain, true, kSectorFineFlags)) return detection;
   }
   if (auto detection = try_one(equalised, false, kClassicFlags)) return detection;
-  if (!small) return std::nullopt;
+  if (!small) {
+    // The cheap attempts searched only the half-size equalised image.
+    return halved ? try_one(equalised, true, kSectorFlags) : std::nullopt;
+  }
   if (auto detection = try_one(equalised, true, kSectorFineFlags)) return detection;
   DetectorImage upsampled{cv::Mat(), 2.0, "-upsampled"};
   cv::resize(grey, upsampled.image, cv::Size(), 2.0, 2.0, cv::INTER_CUBIC);
@@ -415,24 +419,34 @@ BoardDetection DetectCheckerboard(const cv::Mat& grey, const BoardSpec& board,
     return detection;
   };
   // Cheapest first (CPU per 640x480 image, bench_calib profile): the classic detector with its
-  // fast check (~0.01 s), then the sector-based one (~0.1 s) on the plain images, then on the
-  // equalised one. Where the half-size image shrinks the squares too far for the classic
+  // fast check (~0.01 s) on the plain images, then the sector-based one (~0.1 s) on the
+  // equalised image (on KaidanOmni it finds every view the plain image gives and five more),
+  // then on the plain images. Where the half-size image shrinks the squares too far for a
   // detector, the full-size one usually still works.
   const std::vector<DetectorImage> plain = PlainImages(grey);
   for (const DetectorImage& variant : plain) {
     if (auto detection = try_one(variant, false, kClassicFlags)) return *detection;
   }
-  std::optional<DetectorImage> equalised;
+  // The first plain image is the half-size one on large images.
   if (options.try_enhanced) {
-    equalised = EqualisedImage(grey);
-    if (auto detection = try_one(*equalised, true, kSectorFlags)) return *detection;
+    DetectorImage equalised = EqualisedImage(plain.front().image);
+    equalised.scale = plain.front().scale;
+    equalised.suffix = plain.front().suffix + equalised.suffix;
+    if (auto detection = try_one(equalised, true, kSectorFlags)) return *detection;
   }
-  for (const DetectorImage& variant : plain) {
-    if (auto detection = try_one(variant, true, kSectorFlags)) return *detection;
+  if (!options.try_enhanced) {
+    for (const DetectorImage& variant : plain) {
+      if (auto detection = try_one(variant, true, kSectorFlags)) return *detection;
+    }
   }
-  if (options.try_enhanced) {
-    if (options.try_costly_variants) {
-      if (auto detection = TryCostlyVariants(grey, *equalised, small, try_one)) return *detection;
+  if (options.try_enhanced && options.try_costly_variants) {
+    // On the real sets the plain image never gave a board the equalised one did not.
+    for (const DetectorImage& variant : plain) {
+      if (auto detection = try_one(variant, true, kSectorFlags)) return *detection;
+    }
+    if (auto detection =
+            TryCostlyVariants(grey, EqualisedImage(grey), small, plain.size() > 1, try_one)) {
+      return *detection;
     }
   }
   if (options.allow_exhaustive) {

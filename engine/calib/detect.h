@@ -88,10 +88,11 @@ BoardDetection DetectBoard(const cv::Mat& image, const BoardSpec& board,
                            const DetectOptions& options);
 
 // The re-detection pass for views the automatic detector missed, once a model exists from
-// other views: finds a smaller grid inside the board (OpenCV's detectors find partial boards
-// when asked for fewer corners), tries every placement and orientation of it on the board,
-// fits the board pose with the model, predicts every corner and refines it, and keeps the
-// placement that confirms the most corners. Returns found = false with a reason otherwise.
+// other views: takes the grid OpenCV's sector-based detector links around a small seed
+// (CALIB_CB_LARGER; at least 40 % of the board's corners), tries every placement and
+// orientation of it on the board, fits the board pose with the model, predicts every corner and
+// refines it, and keeps the placement that confirms the most corners. Returns found = false with
+// a reason otherwise.
 BoardDetection RedetectWithModel(const cv::Mat& image, const BoardSpec& board,
                                  const CameraModel& model, const DetectOptions& options);
 

@@ -176,12 +176,36 @@ bool DetectMissed(const std::filesystem::path& dir, const BoardSpec& board,
     if (found[k]->found) {
       view_detection = std::move(*found[k]);
       any = true;
-    } else {
-      // The detector's own reason: the model-based one says less to a user.
+    } else if (detect) {
+      // Without a new detector run the first pass's reason stays: it says more to a user than
+      // the model-based search's.
       view_detection.reason = found[k]->reason;
     }
   }
   return any;
+}
+
+// The first pass: every image read and searched, leaving out the detector's costly variants when
+// a second pass with a model follows (growing a view's partial grid with the model of the other
+// views takes a tenth of their time, bench_calib profile); with too few views for a first model,
+// the costly variants then run on every view missed. Returns whether every variant has run.
+bool DetectFirstPass(const std::filesystem::path& dir, const std::vector<std::string>& names,
+                     const BoardSpec& board, const ImageCalibrationOptions& options, int* width,
+                     int* height, const ProgressSink& progress,
+                     std::vector<CalibrationView>* views) {
+  DetectOptions first_pass = options.detect;
+  first_pass.try_costly_variants =
+      options.detect.try_costly_variants && !options.redetect_with_model;
+  *views = DetectAll(dir, names, board, options, first_pass, width, height, progress);
+  OMNIRIG_CHECK(*width > 0,
+                "calibration: none of the " << names.size() << " images could be read");
+  if (first_pass.try_costly_variants == options.detect.try_costly_variants) return true;
+  const int num_found = static_cast<int>(
+      std::count_if(views->begin(), views->end(),
+                    [](const CalibrationView& view) { return view.detection.found; }));
+  if (num_found >= options.calibrate.min_views) return false;
+  DetectMissed(dir, board, options, nullptr, true, *width, *height, progress, views);
+  return true;
 }
 
 // The SVP check on the requested image (or the first used one) with the calibrated model.
@@ -293,23 +317,9 @@ CalibrationReport CalibrateImages(const std::filesystem::path& dir,
   }
   int width = 0, height = 0;
   Timer timer;
-  // The first pass leaves out the detector's costly variants when a second pass with a model
-  // follows: growing a view's partial grid with the model of the other views takes a tenth of
-  // their time (bench_calib profile).
-  DetectOptions first_pass = options.detect;
-  first_pass.try_costly_variants =
-      options.detect.try_costly_variants && !options.redetect_with_model;
-  std::vector<CalibrationView> views =
-      DetectAll(dir, names, board, options, first_pass, &width, &height, progress);
-  OMNIRIG_CHECK(width > 0, "calibration: none of the " << names.size() << " images could be read");
-  const int num_found = static_cast<int>(std::count_if(
-      views.begin(), views.end(), [](const CalibrationView& view) { return view.detection.found; }));
-  // Too few views for a first model: the costly variants now, on every view missed.
-  bool every_variant_tried = first_pass.try_costly_variants == options.detect.try_costly_variants;
-  if (!every_variant_tried && num_found < options.calibrate.min_views) {
-    DetectMissed(dir, board, options, nullptr, true, width, height, progress, &views);
-    every_variant_tried = true;
-  }
+  std::vector<CalibrationView> views;
+  const bool every_variant_tried =
+      DetectFirstPass(dir, names, board, options, &width, &height, progress, &views);
   const double detect_s = timer.ElapsedSeconds();
   if (board.type == BoardSpec::Type::kCheckerboard && options.hints.empty() &&
       std::none_of(views.begin(), views.end(),

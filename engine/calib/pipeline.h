@@ -31,7 +31,10 @@ struct ImageCalibrationOptions {
   // Four outer corners per image name (see DetectOptions::outer_corners_hint_px).
   std::map<std::string, std::array<Eigen::Vector2d, 4>> hints;
   // After a first calibration, views the detector missed are searched again by growing a
-  // partial grid with the model (RedetectWithModel), and the calibration is re-run.
+  // partial grid with the model (RedetectWithModel), and the calibration is re-run. The first
+  // pass then leaves out the detector's costly variants (DetectOptions::try_costly_variants):
+  // they run only on the views growing does not find, or on every missed view when too few
+  // views for a first calibration were found.
   bool redetect_with_model = true;
   // Overlays: error vectors are drawn this many times longer than they are.
   double overlay_error_scale = 20.0;
