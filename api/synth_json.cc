@@ -140,11 +140,20 @@ nlohmann::json StereoBoardSetToJson(const synth::StereoBoardSet& set) {
 
 nlohmann::json StereoSequenceToJson(const synth::StereoSequence& sequence,
                                     const std::string& environment) {
-  nlohmann::json json =
-      Header("stereo-sequence", sequence.rig.cam0.width, sequence.rig.cam0.height);
+  const synth::StereoSequenceOptions& options = sequence.options;
+  const bool loop = options.environment == synth::StereoSequenceOptions::Environment::kCityBlock;
+  nlohmann::json json = Header(loop ? "stereo-loop" : "stereo-sequence", sequence.rig.cam0.width,
+                               sequence.rig.cam0.height);
   json["rig"] = StereoRigToJson(sequence.rig, sequence.cameras);
   json["rig_frame"] = "cam0";
   json["environment"] = environment;
+  if (loop) {
+    json["loop"] = {{"length_m", options.path_length_m},
+                    {"num_laps", options.num_laps},
+                    {"lighting_change", options.lighting_change},
+                    {"motion_blur_exposure_s", options.motion_blur_exposure_s},
+                    {"motion_blur_samples", options.motion_blur_samples}};
+  }
   json["scene"] = SceneToJson(sequence.scene, "world");
   nlohmann::json frames = nlohmann::json::array();
   for (size_t i = 0; i < sequence.names.size(); ++i) {
@@ -154,6 +163,7 @@ nlohmann::json StereoSequenceToJson(const synth::StereoSequence& sequence,
          {"timestamp_s", sequence.timestamps_s[i]},
          {"files", {{"cam0", "cam0/" + PngName(name)}, {"cam1", "cam1/" + PngName(name)}}},
          {"world_from_rig", PoseToJson(sequence.world_from_rig[i])}});
+    if (loop) frames.back()["lap"] = sequence.laps[i];
   }
   json["frames"] = frames;
   json["trajectory_file"] = "trajectory.tum";
@@ -194,18 +204,30 @@ void WriteStereoBoardSet(const synth::StereoBoardSet& set, const std::string& di
   WriteText(StereoBoardSetToJson(set).dump(2) + "\n", root / "ground_truth.json");
 }
 
-void WriteStereoSequence(const synth::StereoSequence& sequence, const std::string& environment,
-                         const std::string& dir) {
+void WriteStereoFrame(const std::string& name, const cv::Mat& cam0_image,
+                      const cv::Mat& cam1_image, const std::string& dir) {
   const std::filesystem::path root(dir);
-  for (int k = 0; k < 2; ++k) {
-    const std::filesystem::path folder = root / (k == 0 ? "cam0" : "cam1");
-    std::filesystem::create_directories(folder);
-    for (size_t i = 0; i < sequence.images[k].size(); ++i) {
-      synth::WritePng(sequence.images[k][i], (folder / PngName(sequence.names[i])).string());
-    }
-  }
+  synth::WritePng(cam0_image, (root / "cam0" / PngName(name)).string());
+  synth::WritePng(cam1_image, (root / "cam1" / PngName(name)).string());
+}
+
+void WriteStereoSequenceGroundTruth(const synth::StereoSequence& sequence,
+                                    const std::string& environment, const std::string& dir) {
+  const std::filesystem::path root(dir);
+  std::filesystem::create_directories(root);
   WriteText(StereoSequenceToJson(sequence, environment).dump(2) + "\n", root / "ground_truth.json");
   WriteText(TrajectoryToTum(sequence), root / "trajectory.tum");
+}
+
+void WriteStereoSequence(const synth::StereoSequence& sequence, const std::string& environment,
+                         const std::string& dir) {
+  for (int k = 0; k < 2; ++k) {
+    std::filesystem::create_directories(std::filesystem::path(dir) / (k == 0 ? "cam0" : "cam1"));
+  }
+  for (size_t i = 0; i < sequence.names.size(); ++i) {
+    WriteStereoFrame(sequence.names[i], sequence.images[0][i], sequence.images[1][i], dir);
+  }
+  WriteStereoSequenceGroundTruth(sequence, environment, dir);
 }
 
 }  // namespace omnirig::api

@@ -4,7 +4,7 @@
 //
 // ground_truth.json, common keys:
 //   "format": "omnirig-synth", "version": 1, "preset": "mono-calib" | "stereo-board" |
-//   "stereo-sequence", "image_size": [w, h],
+//   "stereo-sequence" | "stereo-loop", "image_size": [w, h],
 //   "scene": {"world_frame": ..., "background_rgb": [r, g, b],
 //             "primitives": [{"kind", "name", "world_from_local": pose, "size_m": [x, y, z],
 //                             "texture": {"style", "seed", "color_rgb", "texel_size_m",
@@ -28,6 +28,9 @@
 // stereo-sequence: "rig", "rig_frame": "cam0", "environment": "room" | "street",
 //                  "frames": [{"name", "timestamp_s", "files": {"cam0", "cam1"},
 //                  "world_from_rig"}], "trajectory_file": "trajectory.tum"; z-up world.
+// stereo-loop:     as stereo-sequence with "environment": "city-block", plus "loop":
+//                  {"length_m" (one lap), "num_laps", "lighting_change",
+//                  "motion_blur_exposure_s", "motion_blur_samples"} and per frame "lap".
 // Image files: mono DIR/NAME.png; stereo DIR/cam0/NAME.png and DIR/cam1/NAME.png.
 // trajectory.tum: one line per frame, "timestamp tx ty tz qx qy qz qw" of world_from_rig.
 
@@ -57,6 +60,13 @@ std::string TrajectoryToTum(const synth::StereoSequence& sequence);
 // std::runtime_error when a file cannot be written.
 void WriteMonoCalibrationSet(const synth::MonoCalibrationSet& set, const std::string& dir);
 void WriteStereoBoardSet(const synth::StereoBoardSet& set, const std::string& dir);
+// The parts of WriteStereoSequence, for sequences rendered frame by frame
+// (synth::RenderStereoSequence): one frame's two images, then ground_truth.json and
+// trajectory.tum.
+void WriteStereoFrame(const std::string& name, const cv::Mat& cam0_image,
+                      const cv::Mat& cam1_image, const std::string& dir);
+void WriteStereoSequenceGroundTruth(const synth::StereoSequence& sequence,
+                                    const std::string& environment, const std::string& dir);
 void WriteStereoSequence(const synth::StereoSequence& sequence, const std::string& environment,
                          const std::string& dir);
 

@@ -13,6 +13,8 @@
 // to 0.02 rad for both), without and with the global adjustment's calibration refinement
 // (--no-calibration-runs skips them).
 //
+// bench_slam --loop ...: the long closed-loop bench instead (bench/slam_loop_bench.cc).
+//
 // usage: bench_slam [--frames N] [--width W] [--height H] [--threads T] [--street]
 //                   [--max-features N] [--local-window N] [--local-iterations N] [--no-decode]
 //                   [--black-frame I] [--no-calibration-runs]
@@ -27,6 +29,7 @@
 
 #include <opencv2/imgcodecs.hpp>
 
+#include "bench/slam_loop_bench.h"
 #include "engine/slam/evaluation.h"
 #include "engine/slam/sequence_accuracy.h"
 #include "engine/slam/slam.h"
@@ -239,4 +242,9 @@ int Run(const Args& args) {
 }  // namespace
 }  // namespace omnirig
 
-int main(int argc, char** argv) { return omnirig::Run(omnirig::ParseArgs(argc, argv)); }
+int main(int argc, char** argv) {
+  for (int i = 1; i < argc; ++i) {
+    if (std::strcmp(argv[i], "--loop") == 0) return omnirig::RunLoopBench(argc, argv);
+  }
+  return omnirig::Run(omnirig::ParseArgs(argc, argv));
+}

@@ -5,7 +5,8 @@
 //   MakeMonoCalibrationSet   one camera, a board waved around it (world frame = camera frame)
 //   MakeStereoBoardSet       a vertical stereo rig, boards seen by both cameras
 //                            (world frame = cam0 frame)
-//   MakeStereoSequence       the rig moving through a textured room or along a street front
+//   MakeStereoSequence       the rig moving through a textured room or along a street front,
+//                            or driving laps around a city block (closed loops with revisits)
 //
 // Board views imitate a person waving a board around a catadioptric sensor: azimuths spread all
 // around the mirror, distances 0.35-1.2 m, tilts up to 50 degrees, the board roughly upright;
@@ -14,6 +15,7 @@
 
 #include <array>
 #include <cstdint>
+#include <functional>
 #include <optional>
 #include <string>
 #include <vector>
@@ -146,11 +148,26 @@ StereoBoardSet MakeStereoBoardSet(const StereoBoardOptions& options,
 StereoBoardOptions QuickStereoBoardOptions(int num_pairs, uint64_t seed);
 
 struct StereoSequenceOptions {
-  enum class Environment { kRoom, kStreet };
+  // kRoom, kStreet: a gentle S-curve of path_length_m (<= 20 m) through the scene.
+  // kCityBlock: num_laps laps of a closed loop of path_length_m (40 .. 400 m) along the street
+  // around a block of buildings (engine/synth/city_block.h); num_frames spread evenly over the
+  // laps (frame num_frames would be back at the start). Each lap keeps to a slightly different
+  // line (up to 0.5 m either side of the centreline), so revisits see a place from near, not
+  // identical, positions.
+  enum class Environment { kRoom, kStreet, kCityBlock };
   Environment environment = Environment::kRoom;
   int num_frames = 40;
-  double path_length_m = 6.0;     // along a gently curving path
+  double path_length_m = 6.0;     // the path's length; kCityBlock: one lap's
+  int num_laps = 1;               // kCityBlock only
   double frame_interval_s = 0.1;  // timestamps i * interval
+  // Revisits under other light: lap k is lit by LapLighting(k) (lap 0 as without this option),
+  // changing gradually over the first 5 % of each lap so that tracking across the change holds.
+  bool lighting_change = false;
+  // Motion blur: each image is the mean over motion_blur_samples poses spread evenly over an
+  // exposure of motion_blur_exposure_s centred on the frame's timestamp (0: none). Costs
+  // motion_blur_samples renders per image.
+  double motion_blur_exposure_s = 0.0;
+  int motion_blur_samples = 5;
   double sensor_height_m = 1.0;   // of cam0 above the floor
   int width = 1024;
   int height = 768;
@@ -163,21 +180,41 @@ struct StereoSequenceOptions {
 };
 
 struct StereoSequence {
+  StereoSequenceOptions options;  // what it was made with
   StereoRig rig;
   std::array<SynthCamera, 2> cameras;
   Scene scene;                     // z-up world, floor at z = 0
-  std::vector<std::string> names;  // "frame_000", ...
+  // "frame_000", ...: zero-padded to at least 3 digits and to the digits of the last index, so
+  // that names sort in frame order ("frame_0999" before "frame_1000").
+  std::vector<std::string> names;
   std::vector<double> timestamps_s;
   std::vector<Rigid3d> world_from_rig;  // the rig frame is cam0's frame
+  std::vector<int> laps;                // each frame's lap (0 but for kCityBlock)
   std::array<std::vector<cv::Mat>, 2> images;
 };
+
+// The lighting of lap `lap` with StereoSequenceOptions::lighting_change: lap 0 the default
+// (no change); then in turn a dim, warm light from a low sun, a bright, cool one from a high sun
+// and a grey, overcast one, repeating.
+Lighting LapLighting(int lap);
 
 StereoSequence MakeStereoSequence(const StereoSequenceOptions& options,
                                   const ProgressSink& progress = ProgressSink());
 
+// Receives each frame's index, name and images (cam0, cam1) as they are rendered.
+using StereoFrameSink = std::function<void(int frame, const std::string& name,
+                                           const cv::Mat& cam0_image, const cv::Mat& cam1_image)>;
+
+// As MakeStereoSequence, but hands each frame's images to `sink` instead of keeping them (a long
+// loop at full size does not fit in memory): the returned sequence has no images.
+StereoSequence RenderStereoSequence(const StereoSequenceOptions& options,
+                                    const StereoFrameSink& sink,
+                                    const ProgressSink& progress = ProgressSink());
+
 // The scenes of MakeStereoSequence, for tests that render their own views.
 Scene MakeRoomScene(uint64_t seed);    // 10 m x 7 m x 2.8 m room with furniture and pillars
 Scene MakeStreetScene(uint64_t seed);  // a street between building fronts, with poles and cars
+// kCityBlock: engine/synth/city_block.h (MakeCityBlockScene, CityBlockLoop).
 
 // Writes `image` as a PNG file at `path`, creating missing parent folders. Throws
 // std::runtime_error when the file cannot be written.

@@ -22,6 +22,7 @@ constexpr double kMinHitDistance = 1e-9;
 constexpr double kHalfPixelDiagonal = 0.7072;
 constexpr double kBoardBackLevel = 110.0;
 constexpr int kMaxFaces = 6;
+constexpr int kTilePixels = 16;  // side of the tiles of ray-primitive culling
 
 enum PixelClass : uint8_t { kDark = 0, kInside = 1, kBorder = 2 };
 
@@ -55,6 +56,7 @@ struct Hit {
 struct FaceTexture {
   const cv::Mat* image = nullptr;
   double texels_per_m_u = 0.0, texels_per_m_v = 0.0;
+  Eigen::Vector3f rgb = Eigen::Vector3f::Ones();  // the primitive's tint under the lighting
 };
 
 // A primitive expressed for one frame: rays leave the camera centre, so only the camera's
@@ -64,7 +66,6 @@ struct FramePrimitive {
   Eigen::Matrix3d local_from_cam = Eigen::Matrix3d::Identity();
   Eigen::Vector3d origin_in_local = Eigen::Vector3d::Zero();
   Eigen::Vector3d half_size = Eigen::Vector3d::Zero();  // cylinder: (radius, radius, height)
-  Eigen::Vector3f rgb = Eigen::Vector3f::Ones();
   // Checkerboard only.
   double square_m = 0.0, x_min = 0.0, y_min = 0.0, x_max = 0.0, y_max = 0.0;
   int cols = 0, rows = 0;
@@ -92,7 +93,49 @@ std::pair<Eigen::Vector3d, double> LocalBound(const PrimitiveInfo& info) {
   return {Eigen::Vector3d::Zero(), std::numeric_limits<double>::infinity()};
 }
 
-FramePrimitive MakeFramePrimitive(const Scene& scene, int index, const Rigid3d& cam_from_world) {
+// The lighting's factor for a surface of unit normal `normal` (on the side the camera sees),
+// both in the same frame as `sun`. Exactly 1 for the default lighting.
+double LightFactor(const Lighting& lighting, const Eigen::Vector3d& normal,
+                   const Eigen::Vector3d& sun) {
+  return (1.0 - lighting.sun_share) + 2.0 * lighting.sun_share * std::max(0.0, normal.dot(sun));
+}
+
+// The lit colour of each face of a textured primitive (face order of Scene::textures()).
+std::array<Eigen::Vector3f, kMaxFaces> LitFaceColours(const PrimitiveInfo& info,
+                                                       const Eigen::Vector3d& origin_in_local,
+                                                       const Lighting& lighting) {
+  const Eigen::Vector3d sun_in_local =
+      info.world_from_local.rotation.inverse() * lighting.sun_in_world.normalized();
+  std::array<double, kMaxFaces> factors;
+  factors.fill(1.0);
+  const Eigen::Vector3d half = 0.5 * info.size_m;
+  if (info.kind == PrimitiveInfo::Kind::kBox) {
+    // From inside (a room) the walls' inner sides face the camera.
+    const bool inside = (origin_in_local.cwiseAbs() - half).maxCoeff() < 0.0;
+    for (int face = 0; face < 6; ++face) {
+      Eigen::Vector3d normal = Eigen::Vector3d::Zero();
+      normal[face / 2] = (face % 2 == 0) == !inside ? 1.0 : -1.0;
+      factors[face] = LightFactor(lighting, normal, sun_in_local);
+    }
+  } else if (info.kind == PrimitiveInfo::Kind::kPlane) {
+    factors[0] = LightFactor(lighting, Eigen::Vector3d(0, 0, origin_in_local.z() >= 0 ? 1 : -1),
+                             sun_in_local);
+  } else if (info.kind == PrimitiveInfo::Kind::kCylinder) {
+    const double mean_side = 2.0 * sun_in_local.head<2>().norm() / M_PI;
+    factors[0] = (1.0 - lighting.sun_share) + lighting.sun_share * mean_side;
+    factors[1] = LightFactor(lighting, -Eigen::Vector3d::UnitZ(), sun_in_local);
+    factors[2] = LightFactor(lighting, Eigen::Vector3d::UnitZ(), sun_in_local);
+  }
+  std::array<Eigen::Vector3f, kMaxFaces> colours;
+  const Eigen::Vector3d global = lighting.gain * lighting.tint_rgb;
+  for (int face = 0; face < kMaxFaces; ++face) {
+    colours[face] = info.texture.color_rgb.cwiseProduct(global * factors[face]).cast<float>();
+  }
+  return colours;
+}
+
+FramePrimitive MakeFramePrimitive(const Scene& scene, int index, const Rigid3d& cam_from_world,
+                                  const Lighting& lighting) {
   const PrimitiveInfo& info = scene.primitives()[index];
   FramePrimitive prim;
   prim.kind = info.kind;
@@ -100,7 +143,6 @@ FramePrimitive MakeFramePrimitive(const Scene& scene, int index, const Rigid3d& 
   prim.local_from_cam = local_from_cam.RotationMatrix();
   prim.origin_in_local = local_from_cam.translation;
   prim.half_size = 0.5 * info.size_m;
-  prim.rgb = info.texture.color_rgb.cast<float>();
   const auto [bound_centre, bound_radius] = LocalBound(info);
   prim.bound_centre_in_cam = local_from_cam.Inverse() * bound_centre;
   prim.bound_radius2 = bound_radius * bound_radius * (1.0 + 1e-9);
@@ -119,6 +161,8 @@ FramePrimitive MakeFramePrimitive(const Scene& scene, int index, const Rigid3d& 
   if (info.kind == PrimitiveInfo::Kind::kCylinder) {
     prim.half_size = Eigen::Vector3d(info.size_m.x(), info.size_m.x(), info.size_m.z());
   }
+  const auto colours = LitFaceColours(info, prim.origin_in_local, lighting);
+  for (int face = 0; face < kMaxFaces; ++face) prim.faces[face].rgb = colours[face];
   const auto& textures = scene.textures(index);
   for (size_t face = 0; face < textures.size() && face < kMaxFaces; ++face) {
     double extent_u = info.size_m.x(), extent_v = info.size_m.y();
@@ -254,13 +298,32 @@ inline bool MayHit(const FramePrimitive& prim, const Eigen::Vector3d& d, double 
   return (cd - std::sqrt(prim.bound_radius2 - miss2)) / d2 < best_t;
 }
 
-Hit IntersectAll(const std::vector<FramePrimitive>& prims, const Eigen::Vector3d& bearing) {
+// The nearest hit among `candidates` (indices into prims, in scene order).
+Hit IntersectAll(const std::vector<FramePrimitive>& prims, const std::vector<int>& candidates,
+                 const Eigen::Vector3d& bearing) {
   Hit hit;
-  for (size_t i = 0; i < prims.size(); ++i) {
-    if (MayHit(prims[i], bearing, hit.t))
-      IntersectOne(prims[i], bearing, static_cast<int>(i), &hit);
+  for (const int i : candidates) {
+    if (MayHit(prims[i], bearing, hit.t)) IntersectOne(prims[i], bearing, i, &hit);
   }
   return hit;
+}
+
+// A cone of directions from the camera centre: every bearing of a tile of pixels lies within
+// half_angle_rad of axis (unit).
+struct Cone {
+  Eigen::Vector3d axis = Eigen::Vector3d::UnitZ();
+  double half_angle_rad = M_PI;
+};
+
+// Whether a ray inside `cone` can meet the primitive's bounding sphere. Conservative: when it
+// returns false, MayHit() is false for every bearing in the cone.
+bool ConeMayHit(const FramePrimitive& prim, const Cone& cone) {
+  if (prim.camera_inside_bound || cone.half_angle_rad >= M_PI) return true;
+  const double distance = prim.bound_centre_in_cam.norm();
+  const double angular_radius = std::asin(std::min(1.0, std::sqrt(prim.bound_radius2) / distance));
+  const double angle = std::acos(
+      std::clamp(prim.bound_centre_in_cam.dot(cone.axis) / distance, -1.0, 1.0));
+  return angle <= cone.half_angle_rad + angular_radius + 1e-6;
 }
 
 inline float SampleTexture(const FaceTexture& face, double u, double v) {
@@ -292,8 +355,8 @@ inline Eigen::Vector3f Shade(const std::vector<FramePrimitive>& prims, const Hit
     return Eigen::Vector3f::Constant(static_cast<float>(level));
   }
   const FaceTexture& face = prim.faces[hit.face];
-  if (face.image == nullptr) return prim.rgb * 128.0f;
-  return prim.rgb * SampleTexture(face, hit.u, hit.v);
+  if (face.image == nullptr) return face.rgb * 128.0f;
+  return face.rgb * SampleTexture(face, hit.u, hit.v);
 }
 
 // Exact box filtering of the checker pattern. Over one pixel the map from the image to the
@@ -373,6 +436,17 @@ void RenderOptions::Check() const {
   OMNIRIG_CHECK(std::isfinite(vignetting) && vignetting >= 0.0 && vignetting <= 1.0,
                 "vignetting must be in [0, 1], got " << vignetting);
   OMNIRIG_CHECK(num_threads >= 0, "num_threads must be >= 0");
+  lighting.Check();
+}
+
+void Lighting::Check() const {
+  OMNIRIG_CHECK(std::isfinite(gain) && gain > 0.0, "lighting gain must be positive");
+  OMNIRIG_CHECK(tint_rgb.allFinite() && tint_rgb.minCoeff() > 0.0,
+                "lighting tint components must be positive");
+  OMNIRIG_CHECK(sun_in_world.allFinite() && sun_in_world.norm() > 0.0,
+                "the sun direction must be a non-zero vector");
+  OMNIRIG_CHECK(std::isfinite(sun_share) && sun_share >= 0.0 && sun_share <= 1.0,
+                "sun_share must be in [0, 1]");
 }
 
 // Per-camera precomputation: the undistorted normalised-plane point m of every pixel corner
@@ -387,7 +461,50 @@ struct Renderer::Grid {
   std::vector<std::optional<Eigen::Vector3d>> bearing;
   std::vector<uint8_t> lattice_needed;
   std::vector<uint8_t> pixel_class;
+  // Per tile of kTilePixels x kTilePixels pixels (row-major), the cone of its corners' bearings.
+  int tiles_x = 0, tiles_y = 0;
+  std::vector<Cone> tile_cones;
 };
+
+namespace {
+
+// The cone of the bearings of the lattice points [i0, i1] x [j0, j1] (lattice_cols wide), widened
+// by the largest angle between neighbouring lattice points so that it also holds the bearings of
+// samples inside the pixels between them.
+Cone BearingCone(const std::vector<std::optional<Eigen::Vector3d>>& bearings, int lattice_cols,
+                 int i0, int i1, int j0, int j1) {
+  auto at = [&](int i, int j) -> const std::optional<Eigen::Vector3d>& {
+    return bearings[static_cast<size_t>(j) * lattice_cols + i];
+  };
+  auto angle = [](const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
+    return std::acos(std::clamp(a.dot(b) / (a.norm() * b.norm()), -1.0, 1.0));
+  };
+  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+  double margin = 0.0;
+  int count = 0;
+  for (int j = j0; j <= j1; ++j) {
+    for (int i = i0; i <= i1; ++i) {
+      if (!at(i, j)) continue;
+      sum += at(i, j)->normalized();
+      ++count;
+      if (i < i1 && at(i + 1, j)) margin = std::max(margin, angle(*at(i, j), *at(i + 1, j)));
+      if (j < j1 && at(i, j + 1)) margin = std::max(margin, angle(*at(i, j), *at(i, j + 1)));
+    }
+  }
+  Cone cone;
+  if (count == 0 || sum.norm() < 1e-6 * count) return cone;  // everything
+  cone.axis = sum.normalized();
+  double widest = 0.0;
+  for (int j = j0; j <= j1; ++j) {
+    for (int i = i0; i <= i1; ++i) {
+      if (at(i, j)) widest = std::max(widest, angle(cone.axis, *at(i, j)));
+    }
+  }
+  cone.half_angle_rad = std::min(M_PI, widest + 2.0 * margin);
+  return cone;
+}
+
+}  // namespace
 
 Renderer::Renderer(const SynthCamera& camera, int num_threads) {
   camera.Check();
@@ -437,6 +554,17 @@ Renderer::Renderer(const SynthCamera& camera, int num_threads) {
       g->bearing[index] = Lift(NormalisedPlane(k.xi()), *m);
     }
   });
+  grid->tiles_x = (width + kTilePixels - 1) / kTilePixels;
+  grid->tiles_y = (height + kTilePixels - 1) / kTilePixels;
+  grid->tile_cones.resize(static_cast<size_t>(grid->tiles_x) * grid->tiles_y);
+  for (int ty = 0; ty < grid->tiles_y; ++ty) {
+    for (int tx = 0; tx < grid->tiles_x; ++tx) {
+      grid->tile_cones[static_cast<size_t>(ty) * grid->tiles_x + tx] = BearingCone(
+          grid->bearing, grid->lattice_cols, tx * kTilePixels,
+          std::min((tx + 1) * kTilePixels, width), ty * kTilePixels,
+          std::min((ty + 1) * kTilePixels, height));
+    }
+  }
   grid_ = std::move(grid);
 }
 
@@ -500,6 +628,17 @@ struct FrameContext {
   Eigen::Vector3f background;
   std::vector<SubSample> samples;
   std::vector<int> lattice_hit;  // primitive hit at each pixel corner, -1 for none
+  // Per tile of kTilePixels x kTilePixels pixels: the primitives its rays may hit.
+  int tiles_x = 0;
+  std::vector<std::vector<int>> tile_candidates;
+
+  // The candidates of the tile holding pixel (i, j), or lattice point (i, j) (the last lattice
+  // column and row belong to the last tiles).
+  const std::vector<int>& TileCandidates(int i, int j) const {
+    const int tiles_y = static_cast<int>(tile_candidates.size()) / tiles_x;
+    return tile_candidates[static_cast<size_t>(std::min(j / kTilePixels, tiles_y - 1)) * tiles_x +
+                           std::min(i / kTilePixels, tiles_x - 1)];
+  }
 };
 
 // A pixel's four corners (order 00, 10, 01, 11) on the normalised plane and their bearings, and
@@ -537,7 +676,7 @@ Eigen::Vector3f ShadeSampled(const FrameContext& frame, int i, int j, bool borde
     Hit hit;  // a sample outside lifting's domain sees nothing
     if (bearing &&
         (!corners.uniform || (id >= 0 && !IntersectOne(frame.prims[id], *bearing, id, &hit)))) {
-      hit = IntersectAll(frame.prims, *bearing);
+      hit = IntersectAll(frame.prims, frame.TileCandidates(i, j), *bearing);
     }
     sum += Shade(frame.prims, hit, frame.background);
   }
@@ -578,7 +717,7 @@ std::optional<Eigen::Vector3f> ShadeSurfaceByInterpolation(const FrameContext& f
     texture_sum += SampleTexture(face, u, v);
   }
   const Eigen::Vector3f sum =
-      prim.rgb * texture_sum + Eigen::Vector3f::Constant(static_cast<float>(dark * kDarkLevel));
+      face.rgb * texture_sum + Eigen::Vector3f::Constant(static_cast<float>(dark * kDarkLevel));
   return sum / static_cast<float>(frame.samples.size());
 }
 
@@ -607,17 +746,28 @@ Eigen::Vector3f ShadePixel(const FrameContext& frame, int i, int j, uint8_t cls,
 }
 
 FrameContext MakeFrameContext(const Scene& scene, const SynthCamera& camera,
-                              const Rigid3d& cam_from_world, int supersampling) {
+                              const Rigid3d& cam_from_world, const RenderOptions& options,
+                              const std::vector<Cone>& tile_cones, int tiles_x) {
   FrameContext frame;
   frame.camera = &camera;
   frame.plane = NormalisedPlane(camera.model.intrinsics.xi());
   frame.rim2 = camera.rim_radius_px * camera.rim_radius_px;
   frame.hole2 = camera.hole_radius_px * camera.hole_radius_px;
   for (int i = 0; i < static_cast<int>(scene.primitives().size()); ++i) {
-    frame.prims.push_back(MakeFramePrimitive(scene, i, cam_from_world));
+    frame.prims.push_back(MakeFramePrimitive(scene, i, cam_from_world, options.lighting));
   }
-  frame.background = (scene.background_rgb() * 255.0).cast<float>();
-  frame.samples = RookPattern(supersampling);
+  frame.tiles_x = tiles_x;
+  frame.tile_candidates.resize(tile_cones.size());
+  for (size_t tile = 0; tile < tile_cones.size(); ++tile) {
+    for (int i = 0; i < static_cast<int>(frame.prims.size()); ++i) {
+      if (ConeMayHit(frame.prims[i], tile_cones[tile])) frame.tile_candidates[tile].push_back(i);
+    }
+  }
+  const Lighting& lighting = options.lighting;
+  frame.background = (scene.background_rgb() * 255.0)
+                         .cwiseProduct(lighting.gain * lighting.tint_rgb)
+                         .cast<float>();
+  frame.samples = RookPattern(options.supersampling);
   return frame;
 }
 
@@ -644,12 +794,33 @@ cv::Mat SensorImage(cv::Mat radiance, const RenderOptions& options) {
 cv::Mat Renderer::Render(const Scene& scene, const Rigid3d& cam_from_world,
                          const RenderOptions& options) const {
   options.Check();
+  return SensorImage(Radiance(scene, cam_from_world, options), options);
+}
+
+cv::Mat Renderer::Render(const Scene& scene,
+                         const std::vector<Rigid3d>& cam_from_world_during_exposure,
+                         const RenderOptions& options) const {
+  options.Check();
+  OMNIRIG_CHECK(!cam_from_world_during_exposure.empty(), "an exposure needs at least one pose");
+  cv::Mat sum = Radiance(scene, cam_from_world_during_exposure.front(), options);
+  for (size_t k = 1; k < cam_from_world_during_exposure.size(); ++k) {
+    sum += Radiance(scene, cam_from_world_during_exposure[k], options);
+  }
+  if (cam_from_world_during_exposure.size() > 1) {
+    sum /= static_cast<double>(cam_from_world_during_exposure.size());
+  }
+  return SensorImage(std::move(sum), options);
+}
+
+cv::Mat Renderer::Radiance(const Scene& scene, const Rigid3d& cam_from_world,
+                           const RenderOptions& options) const {
   const Grid& g = *grid_;
   const SynthCamera& camera = g.camera;
   const int width = camera.model.width, height = camera.model.height;
   const int threads = ResolveThreads(options.num_threads, height);
 
-  FrameContext frame = MakeFrameContext(scene, camera, cam_from_world, options.supersampling);
+  FrameContext frame =
+      MakeFrameContext(scene, camera, cam_from_world, options, g.tile_cones, g.tiles_x);
 
   // Pass 1: the primitive hit at every needed pixel corner.
   frame.lattice_hit.assign(g.m.size(), -1);
@@ -657,7 +828,10 @@ cv::Mat Renderer::Render(const Scene& scene, const Rigid3d& cam_from_world,
     for (int i = 0; i < g.lattice_cols; ++i) {
       const size_t index = static_cast<size_t>(j) * g.lattice_cols + i;
       const std::optional<Eigen::Vector3d>& bearing = g.bearing[index];
-      if (bearing) frame.lattice_hit[index] = IntersectAll(frame.prims, *bearing).primitive;
+      if (bearing) {
+        frame.lattice_hit[index] =
+            IntersectAll(frame.prims, frame.TileCandidates(i, j), *bearing).primitive;
+      }
     }
   });
 
@@ -687,7 +861,7 @@ cv::Mat Renderer::Render(const Scene& scene, const Rigid3d& cam_from_world,
     }
   });
 
-  return SensorImage(std::move(radiance), options);
+  return radiance;
 }
 
 cv::Mat Render(const Scene& scene, const SynthCamera& camera, const Rigid3d& cam_from_world,

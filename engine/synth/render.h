@@ -27,12 +27,19 @@
 // (affine over a pixel to within 1e-3 px, as for the board) instead of casting every sample;
 // other pixels (silhouettes, face edges, the board's outline) cast every sample.
 //
+// Which primitives a ray may hit is decided per tile of 16 x 16 pixels: a tile's bearings lie in
+// a cone (precomputed per camera), and only primitives whose bounding sphere meets the cone are
+// tested, in scene order, so the nearest hit is the same as when testing all of them. A scene of
+// a few hundred primitives (a city block) thus costs about what a room costs.
+//
 // Pixel convention: the centre of the top-left pixel is (0, 0), as in unified_camera.h and
 // cv::cornerSubPix.
 
 #include <cstdint>
 #include <memory>
+#include <vector>
 
+#include <Eigen/Core>
 #include <opencv2/core.hpp>
 
 #include "engine/geometry/rigid3.h"
@@ -40,6 +47,22 @@
 #include "engine/synth/synth_camera.h"
 
 namespace omnirig::synth {
+
+// A global illumination term, cheap to evaluate: the colour of every textured face (and of the
+// sky) is scaled by
+//   gain * tint_rgb * ((1 - sun_share) + 2 sun_share max(0, n . sun_in_world))
+// where n is the face's unit normal on the side the camera sees (a cylinder's side takes the
+// mean over its circumference, 2 |sun_xy| / pi for the directional part; the sky takes no
+// directional part). Checkerboards are printed matter lit by the calibration set-up: unchanged.
+// The default changes nothing (the factor is exactly 1).
+struct Lighting {
+  double gain = 1.0;                                       // > 0
+  Eigen::Vector3d tint_rgb{1.0, 1.0, 1.0};                 // components > 0
+  Eigen::Vector3d sun_in_world{0.0, 0.0, 1.0};             // towards the light, non-zero
+  double sun_share = 0.0;                                  // in [0, 1]
+
+  void Check() const;
+};
 
 struct RenderOptions {
   int supersampling = 4;       // s: s x s samples per pixel (1 .. 16)
@@ -49,6 +72,7 @@ struct RenderOptions {
   uint64_t seed = 0;           // of the noise; the same seed gives the same image
   int num_threads = 0;         // 0 = all cores
   bool grayscale = false;      // CV_8UC1 instead of CV_8UC3 (BGR)
+  Lighting lighting;
 
   void Check() const;  // throws InvalidArgument on out-of-range values
 };
@@ -72,10 +96,18 @@ class Renderer {
   cv::Mat Render(const Scene& scene, const Rigid3d& cam_from_world,
                  const RenderOptions& options) const;
 
+  // Motion blur: the mean radiance over the camera poses of one exposure (at least one), then
+  // the sensor (blur, noise, 8 bits) once. One pose gives exactly Render()'s image.
+  cv::Mat Render(const Scene& scene, const std::vector<Rigid3d>& cam_from_world_during_exposure,
+                 const RenderOptions& options) const;
+
   const SynthCamera& camera() const;
 
  private:
   struct Grid;
+  // The radiance (CV_32FC3, BGR, 0-255) before the sensor.
+  cv::Mat Radiance(const Scene& scene, const Rigid3d& cam_from_world,
+                   const RenderOptions& options) const;
   std::unique_ptr<const Grid> grid_;
 };
 

@@ -202,6 +202,73 @@ TEST(Render, BoardEdgesAreExactlyAreaSampled) {
   EXPECT_LT(sum_abs / checked, 0.6);  // 8-bit rounding alone gives 0.25
 }
 
+// A closed box of plain grey around the camera (camera frame = world, +z = the floor side the
+// mirror sees).
+Scene PlainBox() {
+  TextureSpec plain;
+  plain.style = TextureSpec::Style::kPlain;
+  Scene scene;
+  scene.AddBox(Rigid3d(), Eigen::Vector3d(8.0, 8.0, 2.0), plain, "box");
+  return scene;
+}
+
+// The pixel seeing `point_in_cam`, checked to lie well inside the annulus.
+cv::Point PixelOf(const SynthCamera& camera, const Eigen::Vector3d& point_in_cam) {
+  const auto pixel = Project(camera.model.intrinsics, point_in_cam);
+  EXPECT_TRUE(pixel && InAnnulus(camera, *pixel, 3.0));
+  return pixel ? cv::Point(cvRound(pixel->x()), cvRound(pixel->y())) : cv::Point(0, 0);
+}
+
+TEST(Render, LightingScalesFacesByGainTintAndSun) {
+  const SynthCamera camera = DefaultCamera(kWidth, kHeight);
+  const Scene scene = PlainBox();
+  RenderOptions options;
+  options.supersampling = 1;
+  const Renderer renderer(camera);
+  const cv::Mat neutral = renderer.Render(scene, Rigid3d(), options);
+  options.lighting = Lighting();  // the default changes nothing
+  EXPECT_EQ(cv::norm(neutral, renderer.Render(scene, Rigid3d(), options), cv::NORM_INF), 0.0);
+  options.lighting.gain = 0.8;
+  options.lighting.tint_rgb = Eigen::Vector3d(1.0, 0.5, 0.25);
+  options.lighting.sun_in_world = Eigen::Vector3d(0.0, 0.0, -2.0);  // lights the +z face
+  options.lighting.sun_share = 0.5;
+  const cv::Mat lit = renderer.Render(scene, Rigid3d(), options);
+  // The floor faces the sun: factor 0.5 + 2 * 0.5 * 1; walls are side-on: 0.5.
+  const cv::Point floor = PixelOf(camera, Eigen::Vector3d(3.0, 0.5, 1.0));
+  const cv::Point wall = PixelOf(camera, Eigen::Vector3d(4.0, 0.5, 0.3));
+  EXPECT_EQ(neutral.at<cv::Vec3b>(floor), cv::Vec3b(160, 160, 160));
+  const cv::Vec3b floor_bgr = lit.at<cv::Vec3b>(floor), wall_bgr = lit.at<cv::Vec3b>(wall);
+  EXPECT_NEAR(floor_bgr[2], 160 * 0.8 * 1.5, 1.0);
+  EXPECT_NEAR(floor_bgr[1], 160 * 0.8 * 1.5 * 0.5, 1.0);
+  EXPECT_NEAR(floor_bgr[0], 160 * 0.8 * 1.5 * 0.25, 1.0);
+  EXPECT_NEAR(wall_bgr[2], 160 * 0.8 * 0.5, 1.0);
+  options.lighting.gain = 0.0;
+  EXPECT_THROW(renderer.Render(scene, Rigid3d(), options), InvalidArgument);
+}
+
+TEST(Render, MotionBlurAveragesTheExposuresPoses) {
+  const SynthCamera camera = DefaultCamera(kWidth, kHeight);
+  const Scene scene = MakeRoomScene(2);
+  RenderOptions options;
+  options.supersampling = 1;
+  const Renderer renderer(camera);
+  const Rigid3d a = WorldFromUprightCamera(Eigen::Vector3d(0.0, 0.0, 1.0), 0.0).Inverse();
+  const Rigid3d b = WorldFromUprightCamera(Eigen::Vector3d(0.0, 0.0, 1.0), 0.05).Inverse();
+  const cv::Mat image_a = renderer.Render(scene, a, options);
+  const cv::Mat image_b = renderer.Render(scene, b, options);
+  EXPECT_EQ(cv::norm(image_a, renderer.Render(scene, std::vector<Rigid3d>{a}, options),
+                     cv::NORM_INF),
+            0.0);
+  const cv::Mat blurred = renderer.Render(scene, std::vector<Rigid3d>{a, b}, options);
+  cv::Mat mean;
+  cv::addWeighted(image_a, 0.5, image_b, 0.5, 0.0, mean, CV_32F);
+  cv::Mat blurred_f;
+  blurred.convertTo(blurred_f, CV_32F);
+  EXPECT_LE(cv::norm(blurred_f, mean, cv::NORM_INF), 1.0);  // 8-bit rounding of each image
+  EXPECT_GT(cv::norm(blurred, image_a, cv::NORM_L1), 0.0);
+  EXPECT_THROW(renderer.Render(scene, std::vector<Rigid3d>{}, options), InvalidArgument);
+}
+
 TEST(Render, OptionsAreChecked) {
   RenderOptions options;
   options.supersampling = 0;

@@ -1,11 +1,14 @@
 // `omnirig synth`: renders one of the synthetic presets with its ground truth into a folder.
 //
-//   omnirig synth --preset mono-calib|stereo-board|stereo-sequence --out DIR
+//   omnirig synth --preset mono-calib|stereo-board|stereo-sequence|stereo-loop --out DIR
 //       [--width 1024 --height 768 --views 20 --frames 40 --scene room|street --noise 0
 //        --blur 0 --vignetting 0 --seed 0 --supersampling 4 --threads 0 --grayscale ...]
+//       stereo-loop: [--loop-length 100 --laps 2 --frames (10 per metre) --same-lighting
+//                     --motion-blur 0 --motion-blur-samples 5]
 
 #include <unistd.h>
 
+#include <cmath>
 #include <filesystem>
 #include <iostream>
 #include <string>
@@ -23,16 +26,29 @@ namespace {
 void DeclareOptions(ArgParser* parser) {
   parser->AddOption("preset", "",
                     "what to render: mono-calib (one camera, board views), stereo-board (a "
-                    "vertical stereo rig, board views seen by both cameras) or stereo-sequence "
-                    "(the rig moving through a textured scene)");
+                    "vertical stereo rig, board views seen by both cameras), stereo-sequence "
+                    "(the rig moving through a textured scene) or stereo-loop (the rig driving "
+                    "laps around a city block: closed loops with revisits)");
   parser->AddOption("out", "", "output folder (created): PNG images and ground_truth.json");
   parser->AddOption("width", "1024", "image width in pixels");
   parser->AddOption("height", "768", "image height in pixels");
   parser->AddOption("views", "20", "board views (mono-calib) or board pairs (stereo-board)");
-  parser->AddOption("frames", "40", "frames of stereo-sequence");
+  parser->AddOption("frames", "40",
+                    "frames of stereo-sequence; of stereo-loop, 10 per metre of all laps unless "
+                    "given");
   parser->AddOption("scene", "room", "stereo-sequence scene: room or street");
   parser->AddOption("path-length", "6", "stereo-sequence path length in metres");
   parser->AddOption("frame-interval", "0.1", "stereo-sequence seconds between frames");
+  parser->AddOption("loop-length", "100", "stereo-loop: length of one lap in metres (40 .. 400)");
+  parser->AddOption("laps", "2", "stereo-loop: laps driven around the block");
+  parser->AddFlag("same-lighting",
+                  "stereo-loop: every lap under the same light (by default each lap has its own "
+                  "gain, tint and sun)");
+  parser->AddOption("motion-blur", "0",
+                    "stereo-sequence and stereo-loop: exposure in seconds over which the rig's "
+                    "motion blurs each image (0: none)");
+  parser->AddOption("motion-blur-samples", "5",
+                    "poses averaged per image with --motion-blur (each costs one render)");
   parser->AddOption("baseline", "0.1",
                     "stereo rigs: distance in metres of cam1 along cam0's +z axis (vertical rig)");
   parser->AddOption("board-cols", "8", "board inner corners along its width");
@@ -97,6 +113,20 @@ uint64_t SeedFromArgs(const ArgParser& args) {
   throw InvalidArgument("--seed expects a non-negative integer, got '" + text + "'");
 }
 
+// What stereo-sequence and stereo-loop share.
+synth::StereoSequenceOptions SequenceOptionsFromArgs(const ArgParser& args, uint64_t seed) {
+  synth::StereoSequenceOptions options;
+  options.frame_interval_s = args.GetDouble("frame-interval");
+  options.motion_blur_exposure_s = args.GetDouble("motion-blur");
+  options.motion_blur_samples = args.GetInt("motion-blur-samples");
+  options.width = args.GetInt("width");
+  options.height = args.GetInt("height");
+  options.cam0_from_cam1 = Cam0FromCam1FromArgs(args);
+  options.render = RenderOptionsFromArgs(args);
+  options.seed = seed;
+  return options;
+}
+
 // Progress on stderr: rewritten in place (\r) on a terminal; one plain line per step when
 // stderr is a file or a pipe, so that a log reads line by line.
 ProgressSink PrintingProgress(bool terminal) {
@@ -140,21 +170,42 @@ void RunPreset(const ArgParser& args, const std::string& preset, const std::stri
     const std::string scene = args.Get("scene");
     OMNIRIG_CHECK(scene == "room" || scene == "street",
                   "--scene must be room or street, got '" << scene << "'");
-    synth::StereoSequenceOptions options;
+    synth::StereoSequenceOptions options = SequenceOptionsFromArgs(args, seed);
     options.environment = scene == "room" ? synth::StereoSequenceOptions::Environment::kRoom
                                           : synth::StereoSequenceOptions::Environment::kStreet;
     options.num_frames = args.GetInt("frames");
     options.path_length_m = args.GetDouble("path-length");
-    options.frame_interval_s = args.GetDouble("frame-interval");
-    options.width = args.GetInt("width");
-    options.height = args.GetInt("height");
-    options.cam0_from_cam1 = Cam0FromCam1FromArgs(args);
-    options.render = RenderOptionsFromArgs(args);
-    options.seed = seed;
     api::WriteStereoSequence(synth::MakeStereoSequence(options, progress), scene, out);
+  } else if (preset == "stereo-loop") {
+    synth::StereoSequenceOptions options = SequenceOptionsFromArgs(args, seed);
+    options.environment = synth::StereoSequenceOptions::Environment::kCityBlock;
+    options.path_length_m = args.GetDouble("loop-length");
+    options.num_laps = args.GetInt("laps");
+    OMNIRIG_CHECK(options.path_length_m >= 40.0 && options.path_length_m <= 400.0,
+                  "--loop-length must be in [40, 400] metres, got " << options.path_length_m);
+    OMNIRIG_CHECK(options.num_laps >= 1 && options.num_laps <= 100,
+                  "--laps must be in [1, 100], got " << options.num_laps);
+    options.num_frames = args.Has("frames")
+                             ? args.GetInt("frames")
+                             : static_cast<int>(std::lround(10.0 * options.num_laps *
+                                                            options.path_length_m));
+    options.lighting_change = !args.Has("same-lighting");
+    // Frame by frame: 2,000 full-size pairs do not fit in memory.
+    for (const char* camera : {"cam0", "cam1"}) {
+      std::filesystem::create_directories(std::filesystem::path(out) / camera);
+    }
+    const synth::StereoSequence sequence = synth::RenderStereoSequence(
+        options,
+        [&out](int, const std::string& name, const cv::Mat& cam0_image,
+               const cv::Mat& cam1_image) {
+          api::WriteStereoFrame(name, cam0_image, cam1_image, out);
+        },
+        progress);
+    api::WriteStereoSequenceGroundTruth(sequence, "city-block", out);
   } else {
-    throw InvalidArgument("--preset must be mono-calib, stereo-board or stereo-sequence, got '" +
-                          preset + "'");
+    throw InvalidArgument(
+        "--preset must be mono-calib, stereo-board, stereo-sequence or stereo-loop, got '" +
+        preset + "'");
   }
 }
 

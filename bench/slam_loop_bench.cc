@@ -1,0 +1,375 @@
+// bench_slam --loop: SLAM on long closed loops (issue 19's targets). The rig drives laps around
+// the city block of engine/synth/city_block.h (default: a 100 m loop driven twice, 2,000 stereo
+// frames at 1024x768, each lap under its own light, image noise 1 grey level).
+//
+// The sequence is rendered once into a cache folder (the layout of `omnirig synth --preset
+// stereo-loop`: cam0/, cam1/, trajectory.tum) and read from there on later runs; the render time
+// is reported apart. SLAM then runs end to end from the PNG files (decoding inside the timed run).
+//
+// What is measured (ground truth from trajectory.tum; the lap of frame i is laps * i / frames):
+//   revisits   a keyframe of lap >= 1 within --revisit-m metres and --revisit-deg degrees of a
+//              keyframe of an earlier lap. Recall per keyframe: revisits that are the query frame
+//              of a true loop; per 10 m stretch of path: stretches with a revisit in which some
+//              true loop was found.
+//   loops      true when its two keyframes are within those bounds in ground truth; false
+//              loops are the others.
+//   ATE        after the run's closure and global adjustment, SE(3)-aligned, as % of the
+//              distance travelled; end-point drift: the last pose's error with both
+//              trajectories anchored at the first pose, as % of the distance.
+//   per-frame  CPU time of the frame's stages (median over frames 90-110, or around a fifth of a
+//              run shorter than 400 frames, and over the last 21), and wall; memory: the process's resident set at a tenth of the run each, beside
+//              the map's growth (landmarks created so far) and the keyframes so far.
+//
+// usage: bench_slam --loop [--loop-dir DIR] [--frames 2000] [--laps 2] [--loop-length 100]
+//                   [--width 1024] [--height 768] [--threads 2] [--revisit-m 1.5]
+//                   [--revisit-deg 30]
+
+#include "bench/slam_loop_bench.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <ctime>
+#include <filesystem>
+#include <fstream>
+#include <iomanip>
+#include <set>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <opencv2/imgcodecs.hpp>
+
+#include "engine/slam/evaluation.h"
+#include "engine/slam/slam.h"
+#include "engine/synth/presets.h"
+#include "engine/util/timer.h"
+
+namespace omnirig {
+namespace {
+
+namespace fs = std::filesystem;
+
+struct LoopArgs {
+  std::string dir;  // empty: /tmp/omnirig-loop-<parameters>
+  int frames = 2000;
+  int laps = 2;
+  double loop_length_m = 100.0;
+  int width = 1024;
+  int height = 768;
+  int threads = 2;
+  double revisit_m = 1.5;
+  double revisit_deg = 30.0;
+};
+
+LoopArgs ParseLoopArgs(int argc, char** argv) {
+  LoopArgs args;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    auto next = [&]() -> std::string { return i + 1 < argc ? argv[++i] : ""; };
+    if (a == "--loop-dir") args.dir = next();
+    else if (a == "--frames") args.frames = std::atoi(next().c_str());
+    else if (a == "--laps") args.laps = std::atoi(next().c_str());
+    else if (a == "--loop-length") args.loop_length_m = std::atof(next().c_str());
+    else if (a == "--width") args.width = std::atoi(next().c_str());
+    else if (a == "--height") args.height = std::atoi(next().c_str());
+    else if (a == "--threads") args.threads = std::atoi(next().c_str());
+    else if (a == "--revisit-m") args.revisit_m = std::atof(next().c_str());
+    else if (a == "--revisit-deg") args.revisit_deg = std::atof(next().c_str());
+  }
+  if (args.dir.empty()) {
+    std::ostringstream dir;
+    dir << "/tmp/omnirig-loop-" << args.loop_length_m << "m-" << args.laps << "laps-"
+        << args.frames << "f-" << args.width << "x" << args.height;
+    args.dir = dir.str();
+  }
+  return args;
+}
+
+synth::StereoSequenceOptions SequenceOptions(const LoopArgs& args) {
+  synth::StereoSequenceOptions options;
+  options.environment = synth::StereoSequenceOptions::Environment::kCityBlock;
+  options.path_length_m = args.loop_length_m;
+  options.num_laps = args.laps;
+  options.num_frames = args.frames;
+  options.lighting_change = true;
+  options.width = args.width;
+  options.height = args.height;
+  options.render.noise_sigma = 1.0;
+  options.render.num_threads = args.threads;
+  return options;
+}
+
+double ProcessCpuSeconds() {
+  timespec ts;
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+  return ts.tv_sec + 1e-9 * ts.tv_nsec;
+}
+
+double ResidentMegabytes() {
+  std::ifstream status("/proc/self/status");
+  std::string line;
+  while (std::getline(status, line)) {
+    if (line.rfind("VmRSS:", 0) == 0) return std::atof(line.c_str() + 6) / 1024.0;
+  }
+  return 0.0;
+}
+
+// trajectory.tum: "timestamp tx ty tz qx qy qz qw" per frame, world_from_rig.
+void WriteTum(const synth::StereoSequence& sequence, const fs::path& path) {
+  std::ofstream out(path);
+  out << std::setprecision(12);
+  for (size_t i = 0; i < sequence.world_from_rig.size(); ++i) {
+    const Rigid3d& pose = sequence.world_from_rig[i];
+    const Eigen::Quaterniond q = pose.rotation.normalized();
+    out << sequence.timestamps_s[i] << ' ' << pose.translation.x() << ' ' << pose.translation.y()
+        << ' ' << pose.translation.z() << ' ' << q.x() << ' ' << q.y() << ' ' << q.z() << ' '
+        << q.w() << '\n';
+  }
+}
+
+std::vector<Rigid3d> ReadTum(const fs::path& path) {
+  std::ifstream in(path);
+  std::vector<Rigid3d> poses;
+  double t, x, y, z, qx, qy, qz, qw;
+  while (in >> t >> x >> y >> z >> qx >> qy >> qz >> qw) {
+    poses.emplace_back(Eigen::Quaterniond(qw, qx, qy, qz), Eigen::Vector3d(x, y, z));
+  }
+  return poses;
+}
+
+// Renders the sequence into args.dir unless it holds it already; returns the frame names.
+std::vector<std::string> RenderOrLoad(const LoopArgs& args, std::vector<Rigid3d>* truth) {
+  const fs::path dir(args.dir);
+  if (!fs::exists(dir / "trajectory.tum")) {
+    fs::create_directories(dir / "cam0");
+    fs::create_directories(dir / "cam1");
+    const Timer timer;
+    const double cpu_start = ProcessCpuSeconds();
+    const synth::StereoSequence sequence = synth::RenderStereoSequence(
+        SequenceOptions(args),
+        [&dir](int frame, const std::string& name, const cv::Mat& cam0, const cv::Mat& cam1) {
+          synth::WritePng(cam0, (dir / "cam0" / (name + ".png")).string());
+          synth::WritePng(cam1, (dir / "cam1" / (name + ".png")).string());
+          if (frame % 100 == 0) std::fprintf(stderr, "rendered %s\n", name.c_str());
+        });
+    WriteTum(sequence, dir / "trajectory.tum");
+    std::printf("rendered %d stereo frames %dx%d into %s in %.0f s wall, %.0f s CPU (%.2f s CPU "
+                "per stereo frame; not part of the figures below)\n",
+                args.frames, args.width, args.height, args.dir.c_str(), timer.ElapsedSeconds(),
+                ProcessCpuSeconds() - cpu_start, (ProcessCpuSeconds() - cpu_start) / args.frames);
+  } else {
+    std::printf("read the rendered sequence from %s (delete it to render again)\n",
+                args.dir.c_str());
+  }
+  *truth = ReadTum(dir / "trajectory.tum");
+  std::vector<std::string> names;
+  for (const auto& entry : fs::directory_iterator(dir / "cam0")) {
+    if (entry.path().extension() == ".png") names.push_back(entry.path().stem().string());
+  }
+  std::sort(names.begin(), names.end());
+  return names;
+}
+
+// What the SLAM result says about keyframes and loops. Until engine/slam reports them
+// (SlamResult::loops, FrameReport::keyframe: issue 19), every frame enters the map and no loop is
+// found: this function is the one place that reads them.
+struct LoopView {
+  bool reported = false;  // whether this SLAM reports loops at all
+  std::vector<bool> keyframe;
+  std::vector<std::pair<int, int>> loops;  // (frame index, matched frame index)
+};
+
+LoopView ReadLoops(const slam::SlamResult& result) {
+  LoopView view;
+  view.keyframe.assign(result.frames.size(), true);
+  return view;
+}
+
+double AngleDeg(const Rigid3d& a, const Rigid3d& b) {
+  return a.rotation.angularDistance(b.rotation) * 180.0 / M_PI;
+}
+
+struct LoopFigures {
+  int revisit_keyframes = 0, revisit_keyframes_found = 0;
+  int revisit_stretches = 0, revisit_stretches_found = 0;
+  int true_loops = 0, false_loops = 0;
+};
+
+LoopFigures CountLoops(const LoopArgs& args, const LoopView& view,
+                       const std::vector<Rigid3d>& truth) {
+  const int n = static_cast<int>(truth.size());
+  auto lap = [&](int i) { return std::min(args.laps - 1, args.laps * i / n); };
+  auto near = [&](int i, int j) {
+    return (truth[i].translation - truth[j].translation).norm() <= args.revisit_m &&
+           AngleDeg(truth[i], truth[j]) <= args.revisit_deg;
+  };
+  // The 10 m stretch of the loop that frame i is on, per lap.
+  auto stretch = [&](int i) {
+    const double s = args.laps * args.loop_length_m * i / n;
+    return lap(i) * 1000 + static_cast<int>(std::fmod(s, args.loop_length_m) / 10.0);
+  };
+  LoopFigures figures;
+  std::set<int> true_query_frames, stretches_with_revisit, stretches_found;
+  for (const auto& [frame, matched] : view.loops) {
+    if (near(frame, matched)) {
+      ++figures.true_loops;
+      true_query_frames.insert(frame);
+      if (lap(matched) < lap(frame)) stretches_found.insert(stretch(frame));
+    } else {
+      ++figures.false_loops;
+    }
+  }
+  for (int k = 0; k < n; ++k) {
+    if (!view.keyframe[k] || lap(k) == 0) continue;
+    bool revisit = false;
+    for (int j = 0; j < n && !revisit; ++j) {
+      revisit = view.keyframe[j] && lap(j) < lap(k) && near(k, j);
+    }
+    if (!revisit) continue;
+    ++figures.revisit_keyframes;
+    figures.revisit_keyframes_found += true_query_frames.count(k) > 0;
+    stretches_with_revisit.insert(stretch(k));
+  }
+  figures.revisit_stretches = static_cast<int>(stretches_with_revisit.size());
+  for (const int s : stretches_with_revisit) figures.revisit_stretches_found += stretches_found.count(s);
+  return figures;
+}
+
+double MedianOver(const slam::SlamResult& result, int first, int last, bool cpu) {
+  std::vector<double> values;
+  for (int i = std::max(0, first); i <= last && i < static_cast<int>(result.frames.size()); ++i) {
+    const slam::FrameReport& f = result.frames[i];
+    values.push_back(cpu ? f.cpu_times.Total() : f.times.Total());
+  }
+  if (values.empty()) return 0.0;
+  std::nth_element(values.begin(), values.begin() + values.size() / 2, values.end());
+  return values[values.size() / 2];
+}
+
+struct MemorySample {
+  int frame = 0;
+  double rss_mb = 0.0;
+};
+
+void PrintTrajectory(const LoopArgs& args, const slam::SlamResult& result,
+                     const std::vector<Rigid3d>& truth) {
+  std::vector<Rigid3d> estimate, gt;
+  int lap_end = -1;  // the last frame of the first lap with a pose
+  for (size_t i = 0; i < result.frames.size(); ++i) {
+    if (!result.frames[i].world_from_rig) continue;
+    estimate.push_back(*result.frames[i].world_from_rig);
+    gt.push_back(truth[i]);
+    if (static_cast<int>(i) < static_cast<int>(truth.size()) / args.laps) {
+      lap_end = static_cast<int>(estimate.size()) - 1;
+    }
+  }
+  if (estimate.size() < 2) {
+    std::printf("fewer than two poses: no trajectory figures\n");
+    return;
+  }
+  const slam::TrajectoryErrors errors = slam::EvaluateTrajectory(estimate, gt);
+  std::printf("%-52s %12.1f %12s\n", "distance travelled (m)", errors.path_length_m, "");
+  std::printf("%-52s %12.4f %12s\n", "ATE RMSE after closure (m)", errors.ate_rmse_m, "");
+  std::printf("%-52s %12.4f %12s\n", "ATE RMSE after closure (% of distance)",
+              100.0 * errors.ate_rmse_m / errors.path_length_m, "<= 0.1");
+  std::printf("%-52s %12.3f %12s\n", "end-point drift, last pose (% of distance)",
+              errors.final_drift_percent, "reported");
+  if (lap_end >= 1) {
+    const std::vector<Rigid3d> lap_estimate(estimate.begin(), estimate.begin() + lap_end + 1);
+    const std::vector<Rigid3d> lap_gt(gt.begin(), gt.begin() + lap_end + 1);
+    std::printf("%-52s %12.3f %12s\n", "drift at the end of lap 1 (% of distance)",
+                slam::EvaluateTrajectory(lap_estimate, lap_gt).final_drift_percent, "reported");
+  }
+}
+
+}  // namespace
+
+int RunLoopBench(int argc, char** argv) {
+  const LoopArgs args = ParseLoopArgs(argc, argv);
+  std::vector<Rigid3d> truth;
+  const std::vector<std::string> names = RenderOrLoad(args, &truth);
+  if (names.size() != truth.size() || names.empty()) {
+    std::fprintf(stderr, "%s: %zu images but %zu poses\n", args.dir.c_str(), names.size(),
+                 truth.size());
+    return 1;
+  }
+  const int n = static_cast<int>(names.size());
+  StereoRig rig;
+  rig.cam0 = synth::DefaultCamera(args.width, args.height).model;
+  rig.cam1 = synth::DefaultSecondCamera(args.width, args.height).model;
+  rig.cam0_from_cam1 = synth::DefaultCam0FromCam1();
+
+  std::vector<MemorySample> memory;
+  const fs::path dir(args.dir);
+  auto load = [&](int i) {
+    if (i % std::max(1, n / 10) == 0 || i == n - 1) memory.push_back({i, ResidentMegabytes()});
+    return slam::StereoImages{
+        cv::imread((dir / "cam0" / (names[i] + ".png")).string(), cv::IMREAD_COLOR),
+        cv::imread((dir / "cam1" / (names[i] + ".png")).string(), cv::IMREAD_COLOR)};
+  };
+  slam::SlamOptions options;
+  options.num_threads = args.threads;
+  const double rss_before_mb = ResidentMegabytes();
+  const slam::SlamResult result = slam::RunSlam(rig, names, load, options);
+
+  const LoopView view = ReadLoops(result);
+  std::printf("\n%d stereo frames %dx%d, %d laps of %.0f m; %d tracked, %d lost\n", n,
+              args.width, args.height, args.laps, args.loop_length_m, result.num_tracked,
+              result.num_lost);
+  std::printf("\n%-52s %12s %12s\n", "metric", "measured", "target");
+  const LoopFigures loops = CountLoops(args, view, truth);
+  if (!view.reported) std::printf("(this SLAM reports no loops: every frame is a keyframe)\n");
+  std::printf("%-52s %6d / %-5d %12s\n", "revisit keyframes detected", loops.revisit_keyframes_found,
+              loops.revisit_keyframes, "");
+  std::printf("%-52s %12.1f %12s\n", "recall per revisit keyframe (%)",
+              loops.revisit_keyframes ? 100.0 * loops.revisit_keyframes_found / loops.revisit_keyframes : 0.0,
+              ">= 90");
+  std::printf("%-52s %12.1f %12s\n", "recall per revisited 10 m stretch (%)",
+              loops.revisit_stretches ? 100.0 * loops.revisit_stretches_found / loops.revisit_stretches : 0.0,
+              ">= 90");
+  std::printf("%-52s %12d %12s\n", "true loops accepted", loops.true_loops, "");
+  std::printf("%-52s %12d %12s\n", "false loops accepted", loops.false_loops, "0");
+  PrintTrajectory(args, result, truth);
+
+  // Frames 90-110 (on short runs, the 21 frames around a fifth of the run) against the last 21.
+  const int early = n >= 400 ? 100 : n / 5;
+  const double early_cpu = MedianOver(result, early - 10, early + 10, true);
+  const double late_cpu = MedianOver(result, n - 21, n - 1, true);
+  const std::string early_label =
+      "CPU per frame, median of frames " + std::to_string(std::max(0, early - 10)) + "-" +
+      std::to_string(early + 10) + " (s)";
+  std::printf("%-52s %12.3f %12s\n", early_label.c_str(), early_cpu, "");
+  std::printf("%-52s %12.3f %12s\n", "CPU per frame, median of the last 21 frames (s)", late_cpu,
+              "");
+  std::printf("%-52s %12.2f %12s\n", "late / early CPU per frame", late_cpu / early_cpu, "<= 1.2");
+  std::printf("%-52s %12.2f %12s\n", "late / early wall per frame",
+              MedianOver(result, n - 21, n - 1, false) /
+                  MedianOver(result, early - 10, early + 10, false),
+              "");
+  std::printf("%-52s %12.2f %12s\n", "frames per second, end to end", n / result.total_s, ">= 8");
+  std::printf("%-52s %12.3f %12s\n", "CPU per frame, whole run incl. global BA (s)",
+              result.total_cpu_s / n, "");
+  std::printf("%-52s %12.1f %12s\n", "global bundle adjustment (s)", result.global_ba_s, "");
+  std::printf("%-52s %12zu %12s\n", "map points (exported)", result.map.size(), "");
+
+  std::printf("\n%8s %10s %14s %10s\n", "frame", "RSS (MB)", "landmarks made", "keyframes");
+  std::printf("%8s %10.0f %14s %10s\n", "start", rss_before_mb, "", "");
+  for (const MemorySample& sample : memory) {
+    long landmarks = 0, keyframes = 0;
+    for (int i = 0; i <= sample.frame && i < static_cast<int>(result.frames.size()); ++i) {
+      landmarks += result.frames[i].num_new_landmarks;
+      keyframes += view.keyframe[i];
+    }
+    std::printf("%8d %10.0f %14ld %10ld\n", sample.frame, sample.rss_mb, landmarks, keyframes);
+  }
+  if (FILE* f = std::fopen("/proc/loadavg", "r")) {
+    double load1 = 0;
+    if (std::fscanf(f, "%lf", &load1) == 1) std::printf("load average (1 min) at the end: %.2f\n", load1);
+    std::fclose(f);
+  }
+  return 0;
+}
+
+}  // namespace omnirig
