@@ -162,5 +162,45 @@ TEST_F(SlamOnALoop, ACandidateThatFailsVerificationChangesNothing) {
   EXPECT_EQ(open_->map.size(), result.map.size());
 }
 
+TEST_F(SlamOnALoop, AReinitialisedSegmentIsRelinkedIntoTheMap) {
+  // Frame 30 shows another scene (the street): it cannot be tracked. With relocalisation
+  // unable to succeed (P3P needs more inliers than there are features), frame 30 and frame 31
+  // (which cannot be tracked against the street) start new segments; frame 31's segment
+  // tracks on, and its keyframes recognise the room mapped before the break.
+  synth::StereoSequenceOptions street_options = ShortSequenceOptions(1);
+  street_options.environment = synth::StereoSequenceOptions::Environment::kStreet;
+  const synth::StereoSequence street = synth::MakeStereoSequence(street_options);
+  constexpr int kBreak = 30, kRunFrames = 50;
+  const std::vector<std::string> names(sequence_->names.begin(),
+                                       sequence_->names.begin() + kRunFrames);
+  StereoFrameLoader load = [&](int i) {
+    if (i == kBreak) return StereoImages{street.images[0][0], street.images[1][0]};
+    return StereoImages{sequence_->images[0][i], sequence_->images[1][i]};
+  };
+  SlamOptions options = Options();
+  options.absolute_pose.min_inliers = 100000;
+  const SlamResult result = RunSlam(sequence_->rig, names, load, options);
+  ASSERT_EQ(result.num_tracked, kRunFrames);
+  EXPECT_EQ(result.frames[kBreak].state, "reinitialised") << result.frames[kBreak].reason;
+  EXPECT_EQ(result.frames[kBreak + 1].state, "reinitialised") << result.frames[kBreak + 1].reason;
+  int relinked = -1;
+  for (int i = kBreak + 2; i < kRunFrames && relinked < 0; ++i) {
+    if (result.frames[i].state == "relinked") relinked = i;
+  }
+  ASSERT_GE(relinked, 0) << "no keyframe of the new segment relinked it";
+  EXPECT_TRUE(result.frames[relinked].keyframe);
+  // The whole segment from frame 31 on is in the first frame's world, at its true place.
+  const Rigid3d first_from_world = sequence_->world_from_rig[0].Inverse();
+  for (int i = 0; i < kRunFrames; ++i) {
+    if (i == kBreak) {
+      EXPECT_FALSE(result.frames[i].linked);
+      continue;
+    }
+    EXPECT_TRUE(result.frames[i].linked) << i;
+    const Eigen::Vector3d truth = first_from_world * sequence_->world_from_rig[i].translation;
+    EXPECT_LT((result.frames[i].world_from_rig->translation - truth).norm(), 0.05) << i;
+  }
+}
+
 }  // namespace
 }  // namespace omnirig::slam
