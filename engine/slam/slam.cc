@@ -52,6 +52,7 @@ void SlamOptions::Check() const {
   OMNIRIG_CHECK(loop_min_keyframe_gap >= 1 && loop_max_candidates >= 1,
                 "loop_min_keyframe_gap and loop_max_candidates must be at least 1");
   OMNIRIG_CHECK(loop_min_score >= 0 && loop_min_score <= 1, "loop_min_score must be in [0, 1]");
+  OMNIRIG_CHECK(loop_max_distance_m > 0, "loop_max_distance_m must be positive");
   OMNIRIG_CHECK(loop_min_inliers >= 8, "loop_min_inliers must be at least 8");
   OMNIRIG_CHECK(loop_min_correction_m >= 0 && loop_min_correction_deg >= 0,
                 "loop corrections must not be negative");
@@ -780,6 +781,9 @@ bool Tracker::DetectLoop(Frame* frame, const BowVector& bow) {
            bow, accept, options_.loop_min_score, options_.loop_max_candidates)) {
     const std::optional<PlaceMatch> match = VerifyPlace(*frame, candidate.keyframe);
     if (!match) continue;
+    const Rigid3d frame_from_keyframe =
+        match->rig_from_world * map_.rig_from_world[candidate.keyframe].Inverse();
+    if (frame_from_keyframe.translation.norm() > options_.loop_max_distance_m) continue;
     const Rigid3d& before = map_.rig_from_world[frame->index];
     LoopReport loop;
     loop.frame_index = frame->index;
@@ -790,8 +794,7 @@ bool Tracker::DetectLoop(Frame* frame, const BowVector& bow) {
     loop.correction_deg = RotationDeg(before.rotation, match->rig_from_world.rotation);
     loop.pose_graph = loop.correction_m > options_.loop_min_correction_m ||
                       loop.correction_deg > options_.loop_min_correction_deg;
-    loop_edges_.push_back({candidate.keyframe, frame->index,
-                           match->rig_from_world * map_.rig_from_world[candidate.keyframe].Inverse()});
+    loop_edges_.push_back({candidate.keyframe, frame->index, frame_from_keyframe});
     if (loop.pose_graph) CorrectLoop(*frame, *match);
     FuseLandmarks(frame, match->landmark_of_feature);
     if (loop.pose_graph) AdjustLinkedKeyframes();
