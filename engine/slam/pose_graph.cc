@@ -80,7 +80,9 @@ PoseGraphReport OptimisePoseGraph(const std::vector<PoseGraphEdge>& edges,
   solver.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
   ceres::Solver::Summary summary;
   ceres::Solve(solver, &problem, &summary);
-  for (auto& [keyframe, pose] : *rig_from_world) pose = Rigid3d::FromParams(params[keyframe].data());
+  for (auto& [keyframe, pose] : *rig_from_world) {
+    pose = Rigid3d::FromParams(params[keyframe].data());
+  }
   PoseGraphReport report;
   report.num_poses = static_cast<int>(params.size());
   report.num_edges = static_cast<int>(edges.size());

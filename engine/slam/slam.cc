@@ -623,7 +623,8 @@ void Tracker::AddKeyframe(Frame* frame, FrameReport* report) {
   for (int c = 0; c < 2; ++c) {
     for (int f = 0; f < frame->features[c].size(); ++f) {
       const int id = frame->landmark_of[c][f];
-      if (id >= 0) map_.landmarks[id].observations.push_back({index, c, f, frame->features[c].pixels[f]});
+      if (id < 0) continue;
+      map_.landmarks[id].observations.push_back({index, c, f, frame->features[c].pixels[f]});
     }
   }
   AddNewLandmarks(frame, report);

@@ -83,7 +83,9 @@ Vocabulary Vocabulary::Train(const std::vector<cv::Mat>& images, int branching, 
     std::vector<std::pair<int, std::vector<int>>> next;
     for (const auto& [node, rows] : level) {
       cv::Mat samples(static_cast<int>(rows.size()), kDescriptorSize, CV_32F);
-      for (size_t i = 0; i < rows.size(); ++i) all.row(rows[i]).copyTo(samples.row(static_cast<int>(i)));
+      for (size_t i = 0; i < rows.size(); ++i) {
+        all.row(rows[i]).copyTo(samples.row(static_cast<int>(i)));
+      }
       cv::Mat labels, centres;
       const int k = std::min<int>(branching, samples.rows);
       if (k == 0) continue;
