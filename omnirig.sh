@@ -16,7 +16,7 @@ ROOT=$(pwd)
 APT_PACKAGES=(build-essential cmake ninja-build ccache pkg-config git
   libeigen3-dev libopencv-dev libopencv-contrib-dev libceres-dev libcpp-httplib-dev
   nlohmann-json3-dev libsqlite3-dev sqlite3 googletest libgtest-dev libbenchmark-dev
-  libssl-dev libpq-dev nodejs npm curl jq)
+  libssl-dev libpq-dev libopengv-dev nodejs npm curl jq)
 # Only the tests need these: the browser they drive, and a PostgreSQL server they start themselves.
 TEST_APT_PACKAGES=(chromium postgresql)
 JOBS=${OMNIRIG_JOBS:-$(nproc)}

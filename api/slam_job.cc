@@ -126,13 +126,14 @@ json CalibrationRefinementToJson(const slam::CalibrationRefinementReport& r,
 json TimesToJson(const slam::StageTimes& t) {
   return {{"load", t.load_s},   {"detect", t.detect_s}, {"stereo", t.stereo_s},
           {"match", t.match_s}, {"motion", t.motion_s}, {"map", t.map_s},
-          {"local_ba", t.local_ba_s}};
+          {"local_ba", t.local_ba_s}, {"loop", t.loop_s}};
 }
 
 json FrameToJson(const slam::FrameReport& f) {
   return {{"name", f.name},
           {"state", f.state},
           {"linked", f.linked},
+          {"keyframe", f.keyframe},
           {"reason", f.reason},
           {"motion_source", f.motion_source},
           {"num_features", {f.num_features[0], f.num_features[1]}},
@@ -189,6 +190,7 @@ json WriteArtifacts(const StereoRig& rig, const slam::SlamResult& result,
     frames.push_back({{"name", f.name},
                       {"state", f.state},
                       {"linked", f.linked},
+                      {"keyframe", f.keyframe},
                       {"reason", f.reason},
                       {"timestamp_s", stamps[i]},
                       {"world_from_rig",
@@ -732,6 +734,19 @@ json RunSlamOnDataset(const StereoRig& rig, const fs::path& dataset_dir,
   json frames = json::array();
   for (const slam::FrameReport& f : result.frames) frames.push_back(FrameToJson(f));
   report["frames"] = frames;
+  report["num_keyframes"] = result.num_keyframes;
+  json loops = json::array();
+  for (const slam::LoopReport& loop : result.loops) {
+    loops.push_back({{"frame", loop.frame},
+                     {"frame_index", loop.frame_index},
+                     {"matched_frame", loop.matched_frame},
+                     {"matched_frame_index", loop.matched_frame_index},
+                     {"inliers", loop.inliers},
+                     {"correction_m", loop.correction_m},
+                     {"correction_deg", loop.correction_deg},
+                     {"pose_graph", loop.pose_graph}});
+  }
+  report["loops"] = loops;
   if (!gt.empty()) {
     std::vector<Rigid3d> estimate, truth;
     for (size_t i = 0; i < result.frames.size(); ++i) {

@@ -91,9 +91,28 @@ TEST_F(SlamJob, TracksTheSequenceWithSmallDriftAndWritesArtifacts) {
 
   EXPECT_EQ(result["num_frames"], 12);
   EXPECT_EQ(result["num_tracked"], 12);
+  int keyframes = 0;
   for (const json& frame : result["frames"]) {
     EXPECT_NE(frame["state"], "lost") << frame["name"] << ": " << frame["reason"];
+    keyframes += frame["keyframe"].get<bool>() ? 1 : 0;
   }
+  // The first and the last frame are keyframes. The room is in view all along the 2.2 m, so
+  // the last keyframes may recognise the first ones: such loops are right to millimetres.
+  EXPECT_TRUE(result["frames"][0]["keyframe"].get<bool>());
+  EXPECT_TRUE(result["frames"][11]["keyframe"].get<bool>());
+  EXPECT_EQ(result["num_keyframes"].get<int>(), keyframes);
+  ASSERT_TRUE(result["loops"].is_array());
+  for (const json& loop : result["loops"]) {
+    const int i = loop["frame_index"].get<int>(), j = loop["matched_frame_index"].get<int>();
+    EXPECT_LT(j, i);
+    EXPECT_EQ(loop["frame"], result["frames"][i]["name"]);
+    EXPECT_EQ(loop["matched_frame"], result["frames"][j]["name"]);
+    EXPECT_TRUE(result["frames"][i]["keyframe"].get<bool>());
+    EXPECT_GE(loop["inliers"].get<int>(), 40);
+    EXPECT_LT(loop["correction_m"].get<double>(), 0.02) << loop.dump();
+    EXPECT_LT(loop["correction_deg"].get<double>(), 0.5) << loop.dump();
+  }
+  EXPECT_TRUE(result["timings_s"].contains("loop"));
   const json& evaluation = result["evaluation"];
   double gt_length = 0;
   for (size_t i = 1; i < sequence_->world_from_rig.size(); ++i) {

@@ -304,6 +304,8 @@ int Run(const Args& args) {
   }
   std::printf("\n%-44s %12s %12s\n", "metric", "measured", "target");
   std::printf("%-44s %12d %12d\n", "frames tracked", result.num_tracked, args.frames);
+  std::printf("%-44s %12d %12s\n", "keyframes", result.num_keyframes, "");
+  std::printf("%-44s %12zu %12s\n", "loops (verified)", result.loops.size(), "");
   if (estimate.size() >= 2) {
     const slam::TrajectoryErrors errors = slam::EvaluateTrajectory(estimate, truth);
     std::printf("%-44s %12.3f %12s\n", "path length (m)", errors.path_length_m, "~6");
@@ -357,6 +359,7 @@ int Run(const Args& args) {
                 {"motion (E + scale + pose)", t.motion_s, c.motion_s},
                 {"map update", t.map_s, c.map_s},
                 {"local BA", t.local_ba_s, c.local_ba_s},
+                {"place recognition + loops", t.loop_s, c.loop_s},
                 {"global BA", result.global_ba_s, result.global_ba_cpu_s}};
   std::printf("\n%-30s %10s %8s %10s %8s\n", "stage", "wall (s)", "share", "CPU (s)", "share");
   for (const auto& stage : stages) {

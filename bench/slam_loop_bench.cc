@@ -172,9 +172,8 @@ std::vector<std::string> RenderOrLoad(const LoopArgs& args, std::vector<Rigid3d>
   return names;
 }
 
-// What the SLAM result says about keyframes and loops. Until engine/slam reports them
-// (SlamResult::loops, FrameReport::keyframe: issue 19), every frame enters the map and no loop is
-// found: this function is the one place that reads them.
+// What the SLAM result says about keyframes and loops (SlamResult::loops,
+// FrameReport::keyframe); the one place that reads them.
 struct LoopView {
   bool reported = false;  // whether this SLAM reports loops at all
   std::vector<bool> keyframe;
@@ -183,7 +182,11 @@ struct LoopView {
 
 LoopView ReadLoops(const slam::SlamResult& result) {
   LoopView view;
-  view.keyframe.assign(result.frames.size(), true);
+  view.reported = true;
+  for (const slam::FrameReport& frame : result.frames) view.keyframe.push_back(frame.keyframe);
+  for (const slam::LoopReport& loop : result.loops) {
+    view.loops.emplace_back(loop.frame_index, loop.matched_frame_index);
+  }
   return view;
 }
 
@@ -332,6 +335,23 @@ int RunLoopBench(int argc, char** argv) {
   std::printf("%-52s %12d %12s\n", "true loops accepted", loops.true_loops, "");
   std::printf("%-52s %12d %12s\n", "false loops accepted", loops.false_loops, "0");
   PrintTrajectory(args, result, truth);
+  std::printf("%-52s %12d %12s\n", "keyframes", result.num_keyframes, "");
+  std::printf("\n%8s %8s %8s %10s %10s %6s %10s\n", "frame", "matched", "inliers", "corr (m)",
+              "corr (deg)", "graph", "truth (m)");
+  for (const slam::LoopReport& loop : result.loops) {
+    std::printf("%8d %8d %8d %10.3f %10.3f %6s %10.2f\n", loop.frame_index,
+                loop.matched_frame_index, loop.inliers, loop.correction_m, loop.correction_deg,
+                loop.pose_graph ? "yes" : "no",
+                (truth[loop.frame_index].translation - truth[loop.matched_frame_index].translation)
+                    .norm());
+  }
+  for (const slam::FrameReport& f : result.frames) {
+    if (f.state != "tracked") std::printf("frame %s: %s %s\n", f.name.c_str(), f.state.c_str(), f.reason.c_str());
+  }
+  const slam::StageTimes& c = result.cpu_stage_totals;
+  std::printf("CPU s: load %.1f detect %.1f stereo %.1f match %.1f motion %.1f map %.1f local BA %.1f "
+              "loop %.1f global BA %.1f\n", c.load_s, c.detect_s, c.stereo_s, c.match_s, c.motion_s,
+              c.map_s, c.local_ba_s, c.loop_s, result.global_ba_cpu_s);
 
   // Frames 90-110 (on short runs, the 21 frames around a fifth of the run) against the last 21.
   const int early = n >= 400 ? 100 : n / 5;

@@ -319,9 +319,11 @@ bool RefinementPossible(const CalibrationRefinementOptions& refinement,
   return calibration->reason.empty();
 }
 
-// BundleAdjust() and BundleAdjustWithCalibration(): `refinement` null keeps the calibration.
+// BundleAdjust() and BundleAdjustWithCalibration(): `refinement` null keeps the calibration;
+// `landmark_ids` null scans the whole map.
 BundleAdjustmentReport Adjust(const CalibrationRefinementOptions* refinement,
                               const std::vector<int>& free_frames,
+                              const std::vector<int>* landmark_ids,
                               const BundleAdjustmentOptions& options, StereoRig* rig,
                               SlamMap* map, CalibrationRefinementReport* calibration,
                               const ProgressSink& progress) {
@@ -338,7 +340,14 @@ BundleAdjustmentReport Adjust(const CalibrationRefinementOptions* refinement,
   }
   // One scan of the whole map; the solves and prunings below visit only these landmarks.
   std::vector<int> candidates;
-  for (size_t id = 0; any_free && id < map->landmarks.size(); ++id) {
+  if (landmark_ids) {
+    for (int id : *landmark_ids) {
+      OMNIRIG_CHECK(id >= 0 && id < static_cast<int>(map->landmarks.size()),
+                    "bundle adjustment of unknown landmark " << id);
+      if (Adjustable(map->landmarks[id], free_set, *map)) candidates.push_back(id);
+    }
+  }
+  for (size_t id = 0; !landmark_ids && any_free && id < map->landmarks.size(); ++id) {
     if (Adjustable(map->landmarks[id], free_set, *map)) candidates.push_back(static_cast<int>(id));
   }
   if (refinement && refinement->refine != CalibrationRefinement::kNone &&
@@ -408,7 +417,16 @@ BundleAdjustmentReport BundleAdjust(const StereoRig& rig, const std::vector<int>
                                     const BundleAdjustmentOptions& options, SlamMap* map,
                                     const ProgressSink& progress) {
   StereoRig unchanged = rig;
-  return Adjust(nullptr, free_frames, options, &unchanged, map, nullptr, progress);
+  return Adjust(nullptr, free_frames, nullptr, options, &unchanged, map, nullptr, progress);
+}
+
+BundleAdjustmentReport BundleAdjustLandmarks(const StereoRig& rig,
+                                             const std::vector<int>& free_frames,
+                                             const std::vector<int>& landmark_ids,
+                                             const BundleAdjustmentOptions& options, SlamMap* map,
+                                             const ProgressSink& progress) {
+  StereoRig unchanged = rig;
+  return Adjust(nullptr, free_frames, &landmark_ids, options, &unchanged, map, nullptr, progress);
 }
 
 BundleAdjustmentReport BundleAdjustWithCalibration(
@@ -420,7 +438,7 @@ BundleAdjustmentReport BundleAdjustWithCalibration(
   calibration->refine = refinement.refine;
   calibration->before = *rig;
   const BundleAdjustmentReport report =
-      Adjust(&refinement, free_frames, options, rig, map, calibration, progress);
+      Adjust(&refinement, free_frames, nullptr, options, rig, map, calibration, progress);
   calibration->after = *rig;
   return report;
 }

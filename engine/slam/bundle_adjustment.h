@@ -60,6 +60,14 @@ BundleAdjustmentReport BundleAdjust(const StereoRig& rig, const std::vector<int>
                                     const BundleAdjustmentOptions& options, SlamMap* map,
                                     const ProgressSink& progress = ProgressSink());
 
+// BundleAdjust() over `landmark_ids` only (the landmarks the free frames observe, which the
+// caller knows): a local adjustment then costs what its window holds, not what the map holds.
+BundleAdjustmentReport BundleAdjustLandmarks(const StereoRig& rig,
+                                             const std::vector<int>& free_frames,
+                                             const std::vector<int>& landmark_ids,
+                                             const BundleAdjustmentOptions& options, SlamMap* map,
+                                             const ProgressSink& progress = ProgressSink());
+
 // What an adjustment refines of the calibration besides poses and points.
 enum class CalibrationRefinement { kNone, kIntrinsics, kRig, kAll };
 // "none", "intrinsics", "rig", "all".

@@ -3,11 +3,14 @@
 #include <algorithm>
 #include <cmath>
 #include <ctime>
-#include <future>
 #include <exception>
+#include <future>
+#include <map>
 #include <set>
 #include <thread>
 
+#include "engine/slam/pose_graph.h"
+#include "engine/slam/vocabulary.h"
 #include "engine/util/check.h"
 #include "engine/util/timer.h"
 
@@ -42,6 +45,18 @@ void SlamOptions::Check() const {
                 "minimum counts are too small to estimate a pose");
   OMNIRIG_CHECK(num_threads >= 1, "num_threads must be at least 1");
   OMNIRIG_CHECK(min_map_point_frames >= 1, "min_map_point_frames must be at least 1");
+  OMNIRIG_CHECK(keyframe_min_tracked_fraction >= 0 && keyframe_min_tracked_fraction <= 1,
+                "keyframe_min_tracked_fraction must be in [0, 1]");
+  OMNIRIG_CHECK(keyframe_max_distance_m > 0 && keyframe_max_rotation_deg > 0,
+                "keyframe_max_distance_m and keyframe_max_rotation_deg must be positive");
+  OMNIRIG_CHECK(loop_min_keyframe_gap >= 1 && loop_max_candidates >= 1,
+                "loop_min_keyframe_gap and loop_max_candidates must be at least 1");
+  OMNIRIG_CHECK(loop_min_score >= 0 && loop_min_score <= 1, "loop_min_score must be in [0, 1]");
+  OMNIRIG_CHECK(loop_max_distance_m > 0, "loop_max_distance_m must be positive");
+  OMNIRIG_CHECK(loop_min_inliers >= 8, "loop_min_inliers must be at least 8");
+  OMNIRIG_CHECK(loop_min_correction_m >= 0 && loop_min_correction_deg >= 0,
+                "loop corrections must not be negative");
+  absolute_pose.Check();
 }
 
 void StageTimes::Add(const StageTimes& o) {
@@ -52,6 +67,7 @@ void StageTimes::Add(const StageTimes& o) {
   motion_s += o.motion_s;
   map_s += o.map_s;
   local_ba_s += o.local_ba_s;
+  loop_s += o.loop_s;
 }
 
 namespace {
@@ -85,33 +101,74 @@ class StageClock {
   double cpu_start_ = 0;
 };
 
-// Everything kept of the last tracked frame for matching the next one.
-struct KeyFrame {
+// Everything kept of a tracked frame for matching the next one. The map's copy of a keyframe
+// (StoredKeyframe) keeps cam0's features, with the descriptors as bytes, and the stereo points.
+struct Frame {
   int index = -1;
   CameraFeatures features[2];
   std::vector<int> stereo_of_feature0;  // index into `stereo`, -1 when none
   std::vector<StereoPoint> stereo;
   std::vector<int> landmark_of[2];      // per feature, -1 when none
+  // Per cam0 feature, the cam0 feature of keyframe `chain_keyframe` it was tracked from through
+  // the frames since (-1: none): a landmark the next keyframe creates for it gains that
+  // keyframe's observation, so that new landmarks are seen from two rig positions at once.
+  std::vector<int> keyframe_feature_of;
+  int chain_keyframe = -1;
+  bool keyframe = false;
 };
+
+struct StoredKeyframe {
+  Frame frame;
+  BowVector bow;
+  int order = 0;  // position among the keyframes
+  bool linked = false;
+};
+
+// A place recognised and verified: the frame seen from keyframe `keyframe`.
+struct PlaceMatch {
+  int keyframe = -1;
+  Rigid3d rig_from_world;  // the frame's pose in the keyframe's world
+  std::vector<std::pair<int, int>> landmark_of_feature;  // (frame's cam0 feature, landmark)
+  int inliers = 0;  // landmarks confirmed
+};
+
+// SIFT descriptors as floats (the map keeps them as bytes: OpenCV's SIFT rounds them).
+cv::Mat FloatDescriptors(const cv::Mat& descriptors) {
+  if (descriptors.type() == CV_32F) return descriptors;
+  cv::Mat f;
+  descriptors.convertTo(f, CV_32F);
+  return f;
+}
+
+double RotationDeg(const Eigen::Quaterniond& a, const Eigen::Quaterniond& b) {
+  return a.angularDistance(b) * 180.0 / M_PI;
+}
 
 class Tracker {
  public:
-  // `progress` is asked for cancellation only (inside the local bundle adjustment); RunSlam
+  // `progress` is asked for cancellation only (inside the bundle adjustments); RunSlam
   // reports the frames.
   Tracker(const StereoRig& rig, const SlamOptions& options, const ProgressSink& progress)
-      : rig_(rig), options_(options), cancellation_{nullptr, progress.is_cancelled} {}
+      : rig_(rig),
+        options_(options),
+        cancellation_{nullptr, progress.is_cancelled},
+        vocabulary_(DefaultVocabulary()) {}
 
   // The per-frame half that needs no map: load, mask, features, stereo points. Runs one frame
   // ahead of BackEnd() on a worker thread; never two FrontEnd() calls at once.
   struct FrontEndResult {
-    KeyFrame frame;
+    Frame frame;
     FrameReport report;
     bool usable = false;
   };
   FrontEndResult FrontEnd(int index, const std::string& name, const StereoFrameLoader& load,
                           bool parallel_cameras);
-  // Tracking against the map, map update, local bundle adjustment.
-  FrameReport BackEnd(FrontEndResult front);
+  // Tracking, relocalisation or a new segment; for a keyframe the map update, place
+  // recognition and local bundle adjustment. `last_frame` makes the frame a keyframe.
+  FrameReport BackEnd(FrontEndResult front, bool last_frame);
+  // The end of the run: the global adjustment over the keyframes (into `result`), the other
+  // frames placed relative to their keyframes, the loops and per-frame links into `result`.
+  void Finish(const ProgressSink& progress, SlamResult* result);
   SlamMap& map() { return map_; }
 
  private:
@@ -119,43 +176,87 @@ class Tracker {
   // returns false (with report->reason) for a black image.
   bool CheckImages(const StereoImages& images, FrameReport* report);
   // Returns false (with report->reason) when the frame has too little to work with.
-  bool DetectAndMatchStereo(const StereoImages& images, bool parallel_cameras, KeyFrame* frame,
+  bool DetectAndMatchStereo(const StereoImages& images, bool parallel_cameras, Frame* frame,
                             FrameReport* report);
-  // Matches `frame` with `reference` (a tracked keyframe), estimates the motion between them
-  // and refines the pose against the reference's landmarks. `matches` are (reference feature,
-  // frame feature) in cam0; false with report->reason on failure.
-  bool TrackAgainst(const KeyFrame& reference, bool use_motion_prior, KeyFrame* frame,
+  // Matches `frame` with `reference` (the last tracked frame), estimates the motion between
+  // them and refines the pose against the landmarks tracked into the reference. `matches` are
+  // (reference feature, frame feature) in cam0; false with report->reason on failure.
+  bool TrackAgainst(const Frame& reference, Frame* frame,
                     std::vector<std::pair<int, int>>* matches, FrameReport* report);
   // Estimates curr_from_prev with E + scale (or 3D-3D); false with the reason on failure.
-  bool EstimateMotion(const KeyFrame& reference, const KeyFrame& frame,
+  bool EstimateMotion(const Frame& reference, const Frame& frame,
                       const std::vector<std::pair<int, int>>& matches, Rigid3d* curr_from_prev,
                       FrameReport* report);
-  // Refines the new pose against the landmarks of the reference frame; links confirmed ones.
-  bool TrackLandmarks(const KeyFrame& reference, KeyFrame* frame,
+  // Refines the frame's pose (map_.rig_from_world, initialised by the caller) against the
+  // landmarks of the reference's matched features; links the confirmed ones in `frame` (the
+  // map gains the observations only if the frame becomes a keyframe).
+  bool TrackLandmarks(const Frame& reference, Frame* frame,
                       const std::vector<std::pair<int, int>>& matches, FrameReport* report);
-  // `reference` is null for a frame that starts a new segment.
-  void AddNewLandmarks(const KeyFrame* reference, KeyFrame* frame,
-                       const std::vector<std::pair<int, int>>& matches, FrameReport* report);
-  void LocalBundleAdjustment(FrameReport* report);
-  // Tracks `frame` against anchor_ without the motion prior (the motion since then is
-  // unknown); on success replaces `report` and `matches`.
-  bool Relocalise(KeyFrame* frame, std::vector<std::pair<int, int>>* matches, FrameReport* report);
+  // Localises `frame` against the place recognition's candidate keyframes (P3P + RANSAC, then
+  // the candidate's landmarks); on success fills `matches` (with the keyframe) and the report
+  // and returns the keyframe's frame.
+  const Frame* Relocalise(Frame* frame, std::vector<std::pair<int, int>>* matches,
+                          FrameReport* report);
   // Starts a new segment at `frame`: its pose is restart_pose, its landmarks new ones.
-  void Restart(const std::optional<Rigid3d>& restart_pose, KeyFrame* frame,
+  void Restart(const std::optional<Rigid3d>& restart_pose, Frame* frame,
                std::vector<std::pair<int, int>>* matches, FrameReport* report);
+  // Carries the features' keyframe ancestry over the matches with `reference`.
+  static void ChainTo(const Frame* reference, const std::vector<std::pair<int, int>>& matches,
+                      Frame* frame);
+  bool NeedsKeyframe(const Frame& frame, const FrameReport& report) const;
+  // The frame enters the map: observations of its tracked landmarks, new landmarks, place
+  // recognition (loop closure or re-linking), local bundle adjustment.
+  void AddKeyframe(Frame* frame, FrameReport* report);
+  void AddNewLandmarks(Frame* frame, FrameReport* report);
+  void LocalBundleAdjustment(FrameReport* report);
+  // Whether keyframe `keyframe` sees the place `frame` shows: descriptor matches, E on the
+  // bearings with the stereo scale (3D-3D agreement), then the keyframe's landmarks confirmed
+  // in the frame at the pose that gives.
+  std::optional<PlaceMatch> VerifyPlace(const Frame& frame, int keyframe);
+  // Loop closure for a linked keyframe; returns whether the global adjustment ran.
+  bool DetectLoop(Frame* frame, const BowVector& bow);
+  // Re-linking of the open segment for one of its keyframes.
+  void Relink(Frame* frame, const BowVector& bow, FrameReport* report);
+  // Spreads the loop `match` of `frame` over the linked keyframes; moves the landmarks and the
+  // other frames with their keyframes.
+  void CorrectLoop(const Frame& frame, const PlaceMatch& match);
+  // Links the frame's features to the landmarks the place match confirmed (merging landmarks
+  // that were the same point seen twice).
+  void FuseLandmarks(Frame* frame, const std::vector<std::pair<int, int>>& landmark_of_feature);
+  void MergeLandmark(int from, int into);
+  void SetLandmark(int frame_index, int camera, int feature, int landmark);
+  // Global bundle adjustment over the linked keyframes after a loop correction.
+  void AdjustLinkedKeyframes();
+  // Non-keyframes follow their keyframes' poses.
+  void PlaceNonKeyframes();
 
   const StereoRig& rig_;
   const SlamOptions& options_;
   const ProgressSink cancellation_;
+  const Vocabulary& vocabulary_;
   SlamMap map_;
-  std::optional<KeyFrame> last_;
-  bool last_linked_ = false;  // last_ is in the first frame's world through tracked frames
-  // The last linked keyframe once a re-initialisation has replaced it as last_: frames that
-  // cannot be tracked against last_ try it before re-initialising (relocalisation).
-  std::optional<KeyFrame> anchor_;
+  std::optional<Frame> last_;  // the last tracked frame
+  bool last_linked_ = false;
   Rigid3d last_step_;  // curr_from_prev of the last tracked step: the motion prior
   cv::Mat masks_[2];
-  std::vector<int> tracked_frames_;
+  std::map<int, StoredKeyframe> keyframes_;  // by frame index
+  std::vector<int> keyframe_order_;
+  KeyframeDatabase database_;
+  Frame* working_ = nullptr;         // the keyframe being added (SetLandmark updates it too)
+  int last_keyframe_landmarks_ = 0;  // landmarks the last keyframe holds
+  // Per frame: the keyframe a non-keyframe follows (-1: a keyframe or no pose) and its pose
+  // relative to it; whether the frame is linked to the first frame's world.
+  std::vector<int> keyframe_of_frame_;
+  std::vector<Rigid3d> rig_from_keyframe_;
+  std::vector<char> linked_;
+  // The open (not yet linked) segment since the last re-initialisation.
+  struct Segment {
+    int first_frame = -1;
+    int first_landmark = -1;
+  };
+  std::optional<Segment> segment_;
+  std::vector<LoopReport> loops_;
+  std::vector<PoseGraphEdge> loop_edges_;
 };
 
 bool Tracker::CheckImages(const StereoImages& images, FrameReport* report) {
@@ -186,7 +287,7 @@ bool Tracker::CheckImages(const StereoImages& images, FrameReport* report) {
 }
 
 bool Tracker::DetectAndMatchStereo(const StereoImages& images, bool parallel_cameras,
-                                   KeyFrame* frame, FrameReport* report) {
+                                   Frame* frame, FrameReport* report) {
   const cv::Mat* image[2] = {&images.cam0, &images.cam1};
   const CameraModel* camera[2] = {&rig_.cam0, &rig_.cam1};
   StageClock timer;
@@ -244,7 +345,7 @@ bool Tracker::DetectAndMatchStereo(const StereoImages& images, bool parallel_cam
   return true;
 }
 
-bool Tracker::EstimateMotion(const KeyFrame& reference, const KeyFrame& frame,
+bool Tracker::EstimateMotion(const Frame& reference, const Frame& frame,
                              const std::vector<std::pair<int, int>>& matches,
                              Rigid3d* curr_from_prev, FrameReport* report) {
   std::vector<Eigen::Vector3d> bearings_prev, bearings_curr;
@@ -297,7 +398,7 @@ bool Tracker::EstimateMotion(const KeyFrame& reference, const KeyFrame& frame,
   return false;
 }
 
-bool Tracker::TrackLandmarks(const KeyFrame& reference, KeyFrame* frame,
+bool Tracker::TrackLandmarks(const Frame& reference, Frame* frame,
                              const std::vector<std::pair<int, int>>& matches,
                              FrameReport* report) {
   std::vector<Observation> observations;
@@ -328,23 +429,22 @@ bool Tracker::TrackLandmarks(const KeyFrame& reference, KeyFrame* frame,
   if (report->num_tracked_landmarks < options_.min_tracked_landmarks) {
     report->reason = "only " + std::to_string(report->num_tracked_landmarks) +
                      " map points confirmed in the new frame";
-    return false;  // nothing linked: the frame re-initialises
+    return false;  // nothing linked
   }
   for (size_t i = 0; i < observations.size(); ++i) {
     if (!inliers[i]) continue;
     const Observation& o = observations[i];
     if (frame->landmark_of[o.camera][o.feature] >= 0) continue;  // one landmark per feature
     frame->landmark_of[o.camera][o.feature] = landmark_ids[i];
-    map_.landmarks[landmark_ids[i]].observations.push_back(o);
   }
   return true;
 }
 
-void Tracker::AddNewLandmarks(const KeyFrame* reference, KeyFrame* frame,
-                              const std::vector<std::pair<int, int>>& matches,
-                              FrameReport* report) {
-  std::vector<int> prev_of_feature0(frame->features[0].size(), -1);
-  for (const auto& [a, b] : matches) prev_of_feature0[b] = a;
+void Tracker::AddNewLandmarks(Frame* frame, FrameReport* report) {
+  // The keyframe this one's features were tracked from: a new landmark whose feature it
+  // holds without a landmark gains its observation there, when it reprojects.
+  const auto chain = keyframes_.find(frame->chain_keyframe);
+  Frame* previous = chain == keyframes_.end() ? nullptr : &chain->second.frame;
   const Rigid3d world_from_rig = map_.rig_from_world[frame->index].Inverse();
   const double max_sq = options_.bundle_adjustment.max_reprojection_error_px *
                         options_.bundle_adjustment.max_reprojection_error_px;
@@ -355,18 +455,20 @@ void Tracker::AddNewLandmarks(const KeyFrame* reference, KeyFrame* frame,
     Landmark landmark;
     landmark.point_in_world = world_from_rig * sp.point_in_rig;
     landmark.rgb = frame->features[0].rgb[sp.feature0];
-    landmark.observations.push_back({frame->index, 0, sp.feature0, frame->features[0].pixels[sp.feature0]});
-    landmark.observations.push_back({frame->index, 1, sp.feature1, frame->features[1].pixels[sp.feature1]});
+    landmark.observations.push_back(
+        {frame->index, 0, sp.feature0, frame->features[0].pixels[sp.feature0]});
+    landmark.observations.push_back(
+        {frame->index, 1, sp.feature1, frame->features[1].pixels[sp.feature1]});
     const int id = static_cast<int>(map_.landmarks.size());
-    // The same feature in the last frame, if it did not belong to a landmark yet and agrees.
-    const int a = prev_of_feature0[sp.feature0];
-    if (reference && a >= 0 && reference->landmark_of[0][a] < 0) {
-      const Eigen::Vector3d in_prev =
-          map_.rig_from_world[reference->index] * landmark.point_in_world;
-      const auto pixel = Project(rig_.cam0.intrinsics, in_prev);
-      if (pixel && (*pixel - reference->features[0].pixels[a]).squaredNorm() < max_sq) {
+    const int a = previous ? frame->keyframe_feature_of[sp.feature0] : -1;
+    if (a >= 0 && previous->landmark_of[0][a] < 0) {
+      const Eigen::Vector3d in_previous =
+          map_.rig_from_world[previous->index] * landmark.point_in_world;
+      const auto pixel = Project(rig_.cam0.intrinsics, in_previous);
+      if (pixel && (*pixel - previous->features[0].pixels[a]).squaredNorm() < max_sq) {
         landmark.observations.push_back(
-            {reference->index, 0, a, reference->features[0].pixels[a]});
+            {previous->index, 0, a, previous->features[0].pixels[a]});
+        previous->landmark_of[0][a] = id;
       }
     }
     frame->landmark_of[0][sp.feature0] = id;
@@ -377,29 +479,39 @@ void Tracker::AddNewLandmarks(const KeyFrame* reference, KeyFrame* frame,
 }
 
 void Tracker::LocalBundleAdjustment(FrameReport* report) {
-  if (options_.local_window_frames == 0 || tracked_frames_.size() < 2) return;
+  if (options_.local_window_frames == 0 || keyframe_order_.size() < 2) return;
   const StageClock timer;
-  const size_t n = std::min<size_t>(options_.local_window_frames, tracked_frames_.size());
-  std::vector<int> window(tracked_frames_.end() - n, tracked_frames_.end());
+  const size_t n = std::min<size_t>(options_.local_window_frames, keyframe_order_.size());
+  const std::vector<int> window(keyframe_order_.end() - n, keyframe_order_.end());
+  // The window's landmarks, from the keyframes' own lists: no scan of the whole map.
+  std::vector<int> landmarks;
+  for (int keyframe : window) {
+    const Frame& frame = keyframes_.at(keyframe).frame;
+    for (const std::vector<int>& of : frame.landmark_of) {
+      for (int id : of) {
+        if (id >= 0) landmarks.push_back(id);
+      }
+    }
+  }
+  std::sort(landmarks.begin(), landmarks.end());
+  landmarks.erase(std::unique(landmarks.begin(), landmarks.end()), landmarks.end());
   BundleAdjustmentOptions local = options_.bundle_adjustment;
   local.max_iterations = options_.local_max_iterations;
   // The other core runs the next frame's front end meanwhile.
   local.num_threads = 1;
-  report->local_bundle_adjustment = BundleAdjust(rig_, window, local, &map_, cancellation_);
+  report->local_bundle_adjustment =
+      BundleAdjustLandmarks(rig_, window, landmarks, local, &map_, cancellation_);
   timer.ChargeTo(&StageTimes::local_ba_s, report);
 }
 
-bool Tracker::TrackAgainst(const KeyFrame& reference, bool use_motion_prior, KeyFrame* frame,
+bool Tracker::TrackAgainst(const Frame& reference, Frame* frame,
                            std::vector<std::pair<int, int>>* matches, FrameReport* report) {
   for (int c = 0; c < 2; ++c) frame->landmark_of[c].assign(frame->features[c].size(), -1);
   StageClock timer;
-  matches->clear();
-  if (use_motion_prior) {
-    *matches = MatchDescriptorsGated(reference.features[0], frame->features[0],
-                                     last_step_.RotationMatrix(), options_.temporal_gate_rad,
-                                     options_.temporal_max_descriptor_ratio,
-                                     options_.stereo.max_descriptor_distance);
-  }
+  *matches = MatchDescriptorsGated(reference.features[0], frame->features[0],
+                                   last_step_.RotationMatrix(), options_.temporal_gate_rad,
+                                   options_.temporal_max_descriptor_ratio,
+                                   options_.stereo.max_descriptor_distance);
   if (static_cast<int>(matches->size()) < options_.min_matches) {
     *matches = MatchDescriptors(reference.features[0].descriptors, frame->features[0].descriptors,
                                 options_.temporal_max_descriptor_ratio,
@@ -433,11 +545,14 @@ Tracker::FrontEndResult Tracker::FrontEnd(int index, const std::string& name,
   return front;
 }
 
-FrameReport Tracker::BackEnd(FrontEndResult front) {
+FrameReport Tracker::BackEnd(FrontEndResult front, bool last_frame) {
   FrameReport report = std::move(front.report);
-  KeyFrame frame = std::move(front.frame);
+  Frame frame = std::move(front.frame);
   const int index = frame.index;
   map_.AddFrame();
+  keyframe_of_frame_.push_back(-1);
+  rig_from_keyframe_.emplace_back();
+  linked_.push_back(0);
   OMNIRIG_CHECK(map_.has_pose.size() == static_cast<size_t>(index) + 1,
                 "frames must reach the back end in order");
   if (!front.usable) {
@@ -449,64 +564,367 @@ FrameReport Tracker::BackEnd(FrontEndResult front) {
   // Where a re-initialised frame starts: the motion estimate when there is one, else a
   // constant-velocity prediction from the last tracked frame.
   std::optional<Rigid3d> restart_pose;
-  const KeyFrame* reference = nullptr;
+  const Frame* reference = nullptr;
   if (last_) {
     restart_pose = last_step_ * map_.rig_from_world[last_->index];
-    if (TrackAgainst(*last_, /*use_motion_prior=*/true, &frame, &matches, &report)) {
+    if (TrackAgainst(*last_, &frame, &matches, &report)) {
       reference = &*last_;
       report.linked = last_linked_;
+      report.state = "tracked";
+      last_step_ = map_.rig_from_world[index] * map_.rig_from_world[last_->index].Inverse();
     } else if (!report.motion_source.empty()) {
       restart_pose = map_.rig_from_world[index];
     }
   }
-  if (!reference && anchor_ && !last_linked_ && Relocalise(&frame, &matches, &report)) {
-    reference = &*anchor_;
-  }
-  const StageClock map_timer;
-  if (!reference) {
-    Restart(restart_pose, &frame, &matches, &report);
-  } else {
-    last_step_ = map_.rig_from_world[index] * map_.rig_from_world[reference->index].Inverse();
-    report.state = reference == &*last_ ? "tracked" : "relocalised";
-  }
+  if (!reference) reference = Relocalise(&frame, &matches, &report);
+  if (!reference) Restart(restart_pose, &frame, &matches, &report);
   map_.has_pose[index] = true;
-  AddNewLandmarks(reference, &frame, matches, &report);
-  map_timer.ChargeTo(&StageTimes::map_s, &report);
-  tracked_frames_.push_back(index);
-  if (reference) LocalBundleAdjustment(&report);
+  ChainTo(reference, matches, &frame);
+  frame.keyframe = report.state != "tracked" || last_frame || NeedsKeyframe(frame, report);
+  if (frame.keyframe) {
+    AddKeyframe(&frame, &report);
+  } else {
+    keyframe_of_frame_[index] = frame.chain_keyframe;
+    rig_from_keyframe_[index] =
+        map_.rig_from_world[index] * map_.rig_from_world[frame.chain_keyframe].Inverse();
+  }
+  report.keyframe = frame.keyframe;
+  linked_[index] = report.linked;
   last_linked_ = report.linked;
   last_ = std::move(frame);
   return report;
 }
 
-bool Tracker::Relocalise(KeyFrame* frame, std::vector<std::pair<int, int>>* matches,
-                         FrameReport* report) {
-  FrameReport attempt = *report;
-  attempt.reason.clear();
-  attempt.motion_source.clear();
-  std::vector<std::pair<int, int>> anchor_matches;
-  if (!TrackAgainst(*anchor_, /*use_motion_prior=*/false, frame, &anchor_matches, &attempt)) {
-    return false;
+void Tracker::ChainTo(const Frame* reference, const std::vector<std::pair<int, int>>& matches,
+                      Frame* frame) {
+  frame->keyframe_feature_of.assign(frame->features[0].size(), -1);
+  frame->chain_keyframe = -1;
+  if (!reference) return;
+  frame->chain_keyframe = reference->keyframe ? reference->index : reference->chain_keyframe;
+  for (const auto& [a, b] : matches) {
+    frame->keyframe_feature_of[b] = reference->keyframe ? a : reference->keyframe_feature_of[a];
   }
-  attempt.reason =
-      "relocalised against frame " + std::to_string(anchor_->index) + " after: " + report->reason;
-  *report = std::move(attempt);
-  *matches = std::move(anchor_matches);
-  report->linked = true;
-  return true;
 }
 
-void Tracker::Restart(const std::optional<Rigid3d>& restart_pose, KeyFrame* frame,
+bool Tracker::NeedsKeyframe(const Frame& frame, const FrameReport& report) const {
+  if (frame.chain_keyframe < 0) return true;
+  const Rigid3d keyframe_from_frame = map_.rig_from_world[frame.chain_keyframe] *
+                                      map_.rig_from_world[frame.index].Inverse();
+  return keyframe_from_frame.translation.norm() > options_.keyframe_max_distance_m ||
+         RotationDeg(keyframe_from_frame.rotation, Eigen::Quaterniond::Identity()) >
+             options_.keyframe_max_rotation_deg ||
+         report.num_tracked_landmarks <
+             options_.keyframe_min_tracked_fraction * last_keyframe_landmarks_;
+}
+
+void Tracker::AddKeyframe(Frame* frame, FrameReport* report) {
+  const int index = frame->index;
+  const StageClock map_timer;
+  for (int c = 0; c < 2; ++c) {
+    for (int f = 0; f < frame->features[c].size(); ++f) {
+      const int id = frame->landmark_of[c][f];
+      if (id < 0) continue;
+      map_.landmarks[id].observations.push_back({index, c, f, frame->features[c].pixels[f]});
+    }
+  }
+  AddNewLandmarks(frame, report);
+  // The map's copy: cam0's features with byte descriptors, the stereo points, the links.
+  StoredKeyframe& stored = keyframes_[index];
+  stored.order = static_cast<int>(keyframe_order_.size());
+  stored.linked = report->linked;
+  stored.frame.index = index;
+  stored.frame.keyframe = true;
+  stored.frame.features[0] = frame->features[0];
+  frame->features[0].descriptors.convertTo(stored.frame.features[0].descriptors, CV_8U);
+  stored.frame.stereo_of_feature0 = frame->stereo_of_feature0;
+  stored.frame.stereo = frame->stereo;
+  stored.frame.landmark_of[0] = frame->landmark_of[0];
+  stored.frame.landmark_of[1] = frame->landmark_of[1];
+  keyframe_order_.push_back(index);
+  map_timer.ChargeTo(&StageTimes::map_s, report);
+
+  const StageClock loop_timer;
+  stored.bow = vocabulary_.Transform(frame->features[0].descriptors);
+  working_ = frame;
+  bool adjusted_globally = false;
+  if (options_.loop_closure && report->linked) {
+    adjusted_globally = DetectLoop(frame, stored.bow);
+  } else if (options_.loop_closure && segment_ && index != segment_->first_frame) {
+    Relink(frame, stored.bow, report);
+  }
+  working_ = nullptr;
+  database_.Add(index, stored.bow);
+  loop_timer.ChargeTo(&StageTimes::loop_s, report);
+  const bool new_segment = report->state == "initialised" || report->state == "reinitialised";
+  if (!adjusted_globally && !new_segment) LocalBundleAdjustment(report);
+  last_keyframe_landmarks_ = 0;
+  for (int id : frame->landmark_of[0]) last_keyframe_landmarks_ += id >= 0 ? 1 : 0;
+}
+
+const Frame* Tracker::Relocalise(Frame* frame, std::vector<std::pair<int, int>>* matches,
+                                 FrameReport* report) {
+  if (keyframes_.empty()) return nullptr;
+  const StageClock timer;
+  const BowVector bow = vocabulary_.Transform(frame->features[0].descriptors);
+  const std::vector<KeyframeDatabase::Candidate> candidates = database_.Query(
+      bow, [](int) { return true; }, options_.loop_min_score, options_.loop_max_candidates);
+  const Frame* found = nullptr;
+  for (const KeyframeDatabase::Candidate& candidate : candidates) {
+    const StoredKeyframe& keyframe = keyframes_.at(candidate.keyframe);
+    std::vector<std::pair<int, int>> keyframe_matches = MatchDescriptors(
+        FloatDescriptors(keyframe.frame.features[0].descriptors), frame->features[0].descriptors,
+        options_.temporal_max_descriptor_ratio, options_.stereo.max_descriptor_distance);
+    std::vector<Eigen::Vector3d> bearings, points;
+    for (const auto& [a, b] : keyframe_matches) {
+      const int id = keyframe.frame.landmark_of[0][a];
+      if (id < 0 || !map_.landmarks[id].valid) continue;
+      bearings.push_back(frame->features[0].bearings[b]);
+      points.push_back(map_.landmarks[id].point_in_world);
+    }
+    AbsolutePoseOptions absolute = options_.absolute_pose;
+    absolute.seed += static_cast<std::uint64_t>(frame->index);
+    const AbsolutePoseReport pose = EstimateAbsolutePose(bearings, points, absolute);
+    if (!pose.success) continue;
+    for (int c = 0; c < 2; ++c) frame->landmark_of[c].assign(frame->features[c].size(), -1);
+    map_.rig_from_world[frame->index] = pose.rig_from_world;
+    FrameReport attempt = *report;
+    if (!TrackLandmarks(keyframe.frame, frame, keyframe_matches, &attempt)) continue;
+    attempt.reason = "relocalised against frame " + std::to_string(candidate.keyframe) +
+                     " (P3P, " + std::to_string(pose.num_inliers) + " inliers) after: " +
+                     report->reason;
+    attempt.state = "relocalised";
+    attempt.motion_source = "p3p";
+    attempt.num_matches = static_cast<int>(keyframe_matches.size());
+    attempt.linked = keyframe.linked;
+    *report = std::move(attempt);
+    *matches = std::move(keyframe_matches);
+    last_step_ = Rigid3d();  // the motion since the keyframe says nothing of the next step
+    if (report->linked) segment_.reset();
+    found = &keyframe.frame;
+    break;
+  }
+  timer.ChargeTo(&StageTimes::loop_s, report);
+  return found;
+}
+
+void Tracker::Restart(const std::optional<Rigid3d>& restart_pose, Frame* frame,
                       std::vector<std::pair<int, int>>* matches, FrameReport* report) {
   // The trajectory continues from the restart pose; the new landmarks are not tied to the old
-  // ones.
+  // ones until the segment recognises a mapped place.
   for (int c = 0; c < 2; ++c) frame->landmark_of[c].assign(frame->features[c].size(), -1);
   map_.rig_from_world[frame->index] = restart_pose.value_or(Rigid3d());
   matches->clear();
   last_step_ = Rigid3d();
   report->state = last_ ? "reinitialised" : "initialised";
   report->linked = !last_;
-  if (last_ && last_linked_) anchor_ = std::move(last_);
+  if (last_) segment_ = Segment{frame->index, static_cast<int>(map_.landmarks.size())};
+}
+std::optional<PlaceMatch> Tracker::VerifyPlace(const Frame& frame, int keyframe) {
+  const Frame& candidate = keyframes_.at(keyframe).frame;
+  Frame matchable = candidate;  // float descriptors for the matcher and EstimateMotion
+  matchable.features[0].descriptors = FloatDescriptors(candidate.features[0].descriptors);
+  const std::vector<std::pair<int, int>> matches = MatchDescriptors(
+      matchable.features[0].descriptors, frame.features[0].descriptors,
+      options_.temporal_max_descriptor_ratio, options_.stereo.max_descriptor_distance);
+  if (static_cast<int>(matches.size()) < options_.loop_min_inliers) return std::nullopt;
+  // On the sphere with the stereo scale: E's inliers must agree with the stereo points of both
+  // frames in 3D (EstimateScale's consensus), not only on bearings.
+  FrameReport scratch;
+  Rigid3d frame_from_keyframe;
+  if (!EstimateMotion(matchable, frame, matches, &frame_from_keyframe, &scratch) ||
+      scratch.motion_source != "essential+scale" ||
+      scratch.num_essential_inliers < options_.loop_min_inliers) {
+    return std::nullopt;
+  }
+  // The keyframe's landmarks must then appear where that pose puts them, in both cameras.
+  std::vector<Observation> observations;
+  std::vector<Eigen::Vector3d> points;
+  std::vector<int> landmark_ids;
+  for (const auto& [a, b] : matches) {
+    const int id = candidate.landmark_of[0][a];
+    if (id < 0 || !map_.landmarks[id].valid) continue;
+    observations.push_back({frame.index, 0, b, frame.features[0].pixels[b]});
+    points.push_back(map_.landmarks[id].point_in_world);
+    landmark_ids.push_back(id);
+    const int s = frame.stereo_of_feature0[b];
+    if (s < 0) continue;
+    const int f1 = frame.stereo[s].feature1;
+    observations.push_back({frame.index, 1, f1, frame.features[1].pixels[f1]});
+    points.push_back(map_.landmarks[id].point_in_world);
+    landmark_ids.push_back(id);
+  }
+  PlaceMatch match;
+  match.keyframe = keyframe;
+  std::vector<bool> inliers;
+  match.rig_from_world =
+      RefineRigPose(rig_, frame_from_keyframe * map_.rig_from_world[keyframe], observations,
+                    points, options_.bundle_adjustment, &inliers);
+  std::set<int> confirmed;
+  for (size_t i = 0; i < observations.size(); ++i) {
+    if (!inliers[i]) continue;
+    confirmed.insert(landmark_ids[i]);
+    if (observations[i].camera == 0) {
+      match.landmark_of_feature.emplace_back(observations[i].feature, landmark_ids[i]);
+    }
+  }
+  match.inliers = static_cast<int>(confirmed.size());
+  if (match.inliers < options_.loop_min_inliers) return std::nullopt;
+  return match;
+}
+
+bool Tracker::DetectLoop(Frame* frame, const BowVector& bow) {
+  const int order = keyframes_.at(frame->index).order;
+  auto accept = [&](int keyframe) {
+    const StoredKeyframe& stored = keyframes_.at(keyframe);
+    return stored.linked && stored.order + options_.loop_min_keyframe_gap < order;
+  };
+  for (const KeyframeDatabase::Candidate& candidate : database_.Query(
+           bow, accept, options_.loop_min_score, options_.loop_max_candidates)) {
+    const std::optional<PlaceMatch> match = VerifyPlace(*frame, candidate.keyframe);
+    if (!match) continue;
+    const Rigid3d frame_from_keyframe =
+        match->rig_from_world * map_.rig_from_world[candidate.keyframe].Inverse();
+    if (frame_from_keyframe.translation.norm() > options_.loop_max_distance_m) continue;
+    const Rigid3d& before = map_.rig_from_world[frame->index];
+    LoopReport loop;
+    loop.frame_index = frame->index;
+    loop.matched_frame_index = candidate.keyframe;
+    loop.inliers = match->inliers;
+    loop.correction_m = (before.Inverse().translation -
+                         match->rig_from_world.Inverse().translation).norm();
+    loop.correction_deg = RotationDeg(before.rotation, match->rig_from_world.rotation);
+    loop.pose_graph = loop.correction_m > options_.loop_min_correction_m ||
+                      loop.correction_deg > options_.loop_min_correction_deg;
+    loop_edges_.push_back({candidate.keyframe, frame->index, frame_from_keyframe});
+    if (loop.pose_graph) CorrectLoop(*frame, *match);
+    FuseLandmarks(frame, match->landmark_of_feature);
+    if (loop.pose_graph) AdjustLinkedKeyframes();
+    loops_.push_back(loop);
+    return loop.pose_graph;
+  }
+  return false;
+}
+
+void Tracker::Relink(Frame* frame, const BowVector& bow, FrameReport* report) {
+  auto accept = [&](int keyframe) { return keyframes_.at(keyframe).linked; };
+  for (const KeyframeDatabase::Candidate& candidate : database_.Query(
+           bow, accept, options_.loop_min_score, options_.loop_max_candidates)) {
+    const std::optional<PlaceMatch> match = VerifyPlace(*frame, candidate.keyframe);
+    if (!match) continue;
+    // world_from_segment_world: the segment's poses and landmarks into the map's world.
+    const Rigid3d map_from_segment =
+        match->rig_from_world.Inverse() * map_.rig_from_world[frame->index];
+    const Rigid3d segment_from_map = map_from_segment.Inverse();
+    for (int f = segment_->first_frame; f <= frame->index; ++f) {
+      if (!map_.has_pose[f]) continue;
+      map_.rig_from_world[f] = map_.rig_from_world[f] * segment_from_map;
+      linked_[f] = 1;
+      const auto stored = keyframes_.find(f);
+      if (stored != keyframes_.end()) stored->second.linked = true;
+    }
+    for (size_t id = segment_->first_landmark; id < map_.landmarks.size(); ++id) {
+      map_.landmarks[id].point_in_world = map_from_segment * map_.landmarks[id].point_in_world;
+    }
+    FuseLandmarks(frame, match->landmark_of_feature);
+    report->reason = "segment from frame " + std::to_string(segment_->first_frame) +
+                     " relinked through frame " + std::to_string(candidate.keyframe) + " (" +
+                     std::to_string(match->inliers) + " landmarks)";
+    report->state = "relinked";
+    report->linked = true;
+    segment_.reset();
+    return;
+  }
+}
+
+void Tracker::CorrectLoop(const Frame& frame, const PlaceMatch& match) {
+  std::map<int, Rigid3d> poses;
+  std::vector<PoseGraphEdge> edges = loop_edges_;
+  int previous = -1;
+  for (int keyframe : keyframe_order_) {
+    if (!keyframes_.at(keyframe).linked) continue;
+    poses[keyframe] = map_.rig_from_world[keyframe];
+    if (previous >= 0) {
+      edges.push_back({previous, keyframe,
+                       map_.rig_from_world[keyframe] * map_.rig_from_world[previous].Inverse()});
+    }
+    previous = keyframe;
+  }
+  OMNIRIG_CHECK(poses.count(frame.index) && poses.count(match.keyframe),
+                "loop between keyframes outside the map");
+  const std::map<int, Rigid3d> before = poses;
+  OptimisePoseGraph(edges, {poses.begin()->first}, options_.num_threads, &poses);
+  for (const auto& [keyframe, pose] : poses) map_.rig_from_world[keyframe] = pose;
+  // Each landmark moves with the keyframe that first observed it.
+  for (Landmark& landmark : map_.landmarks) {
+    if (!landmark.valid || landmark.observations.empty()) continue;
+    const auto it = before.find(landmark.observations.front().frame);
+    if (it == before.end()) continue;
+    landmark.point_in_world =
+        poses.at(it->first).Inverse() * (it->second * landmark.point_in_world);
+  }
+  PlaceNonKeyframes();
+}
+
+void Tracker::FuseLandmarks(Frame* frame,
+                            const std::vector<std::pair<int, int>>& landmark_of_feature) {
+  for (const auto& [feature, landmark] : landmark_of_feature) {
+    if (!map_.landmarks[landmark].valid) continue;
+    const int current = frame->landmark_of[0][feature];
+    if (current == landmark) continue;
+    if (current >= 0) {
+      MergeLandmark(current, landmark);
+      continue;
+    }
+    map_.landmarks[landmark].observations.push_back(
+        {frame->index, 0, feature, frame->features[0].pixels[feature]});
+    SetLandmark(frame->index, 0, feature, landmark);
+    const int s = frame->stereo_of_feature0[feature];
+    if (s < 0 || frame->landmark_of[1][frame->stereo[s].feature1] >= 0) continue;
+    const int f1 = frame->stereo[s].feature1;
+    map_.landmarks[landmark].observations.push_back(
+        {frame->index, 1, f1, frame->features[1].pixels[f1]});
+    SetLandmark(frame->index, 1, f1, landmark);
+  }
+}
+
+void Tracker::MergeLandmark(int from, int into) {
+  Landmark& source = map_.landmarks[from];
+  Landmark& target = map_.landmarks[into];
+  for (const Observation& o : source.observations) {
+    const bool seen = std::any_of(
+        target.observations.begin(), target.observations.end(),
+        [&](const Observation& t) { return t.frame == o.frame && t.camera == o.camera; });
+    if (seen) continue;
+    target.observations.push_back(o);
+    SetLandmark(o.frame, o.camera, o.feature, into);
+  }
+  source.observations.clear();
+  source.valid = false;
+}
+
+void Tracker::SetLandmark(int frame_index, int camera, int feature, int landmark) {
+  if (working_ && working_->index == frame_index) working_->landmark_of[camera][feature] = landmark;
+  const auto stored = keyframes_.find(frame_index);
+  if (stored != keyframes_.end()) stored->second.frame.landmark_of[camera][feature] = landmark;
+}
+
+void Tracker::AdjustLinkedKeyframes() {
+  std::vector<int> linked;
+  for (int keyframe : keyframe_order_) {
+    if (keyframes_.at(keyframe).linked) linked.push_back(keyframe);
+  }
+  BundleAdjustmentOptions global = options_.bundle_adjustment;
+  global.num_threads = options_.num_threads;
+  BundleAdjust(rig_, linked, global, &map_, cancellation_);
+  PlaceNonKeyframes();
+}
+
+void Tracker::PlaceNonKeyframes() {
+  for (size_t f = 0; f < keyframe_of_frame_.size(); ++f) {
+    const int keyframe = keyframe_of_frame_[f];
+    if (keyframe < 0 || !map_.has_pose[f]) continue;
+    map_.rig_from_world[f] = rig_from_keyframe_[f] * map_.rig_from_world[keyframe];
+  }
 }
 
 std::vector<MapPoint> ExportMap(const SlamMap& map, int min_frames) {
@@ -522,15 +940,12 @@ std::vector<MapPoint> ExportMap(const SlamMap& map, int min_frames) {
   return points;
 }
 
-// The global bundle adjustment over every tracked frame (with the calibration refinement when
-// options ask for it), into result's global_bundle_adjustment, calibration_refinement and times.
+// The global bundle adjustment over `keyframes` (with the calibration refinement when options
+// ask for it), into result's global_bundle_adjustment, calibration_refinement and times.
 void GlobalBundleAdjustment(const StereoRig& rig, const SlamOptions& options,
-                            const ProgressSink& progress, SlamMap* map, SlamResult* result) {
-  std::vector<int> all_frames;
-  for (int i = 0; i < static_cast<int>(map->has_pose.size()); ++i) {
-    if (map->has_pose[i]) all_frames.push_back(i);
-  }
-  if (options.global_bundle_adjustment && all_frames.size() >= 2) {
+                            const std::vector<int>& keyframes, const ProgressSink& progress,
+                            SlamMap* map, SlamResult* result) {
+  if (options.global_bundle_adjustment && keyframes.size() >= 2) {
     progress.ThrowIfCancelled();
     progress.Report(0.95, "global_ba", "global bundle adjustment");
     BundleAdjustmentOptions global = options.bundle_adjustment;
@@ -543,12 +958,12 @@ void GlobalBundleAdjustment(const StereoRig& rig, const SlamOptions& options,
         progress.is_cancelled};
     const StageClock ba_timer(CLOCK_PROCESS_CPUTIME_ID);
     if (options.calibration_refinement.refine == CalibrationRefinement::kNone) {
-      result->global_bundle_adjustment = BundleAdjust(rig, all_frames, global, map, ba_progress);
+      result->global_bundle_adjustment = BundleAdjust(rig, keyframes, global, map, ba_progress);
     } else {
       StereoRig refined = rig;
       result->calibration_refinement.emplace();
       result->global_bundle_adjustment =
-          BundleAdjustWithCalibration(options.calibration_refinement, all_frames, global,
+          BundleAdjustWithCalibration(options.calibration_refinement, keyframes, global,
                                       &refined, map, &*result->calibration_refinement,
                                       ba_progress);
     }
@@ -560,10 +975,32 @@ void GlobalBundleAdjustment(const StereoRig& rig, const SlamOptions& options,
     CalibrationRefinementReport& refusal = result->calibration_refinement.emplace();
     refusal.refine = options.calibration_refinement.refine;
     refusal.before = refusal.after = rig;
-    refusal.num_frames = static_cast<int>(all_frames.size());
-    refusal.reason = "no global bundle adjustment: " + std::to_string(all_frames.size()) +
-                     " tracked frame(s)";
+    refusal.num_frames = static_cast<int>(keyframes.size());
+    refusal.reason = "no global bundle adjustment: " + std::to_string(keyframes.size()) +
+                     " tracked frame(s) in the map";
   }
+}
+
+void Tracker::Finish(const ProgressSink& progress, SlamResult* result) {
+  GlobalBundleAdjustment(rig_, options_, keyframe_order_, progress, &map_, result);
+  PlaceNonKeyframes();
+  result->num_keyframes = static_cast<int>(keyframe_order_.size());
+  for (size_t i = 0; i < result->frames.size(); ++i) {
+    FrameReport& frame = result->frames[i];
+    frame.linked = linked_[i] != 0;
+    if (!map_.has_pose[i]) {
+      ++result->num_lost;
+      continue;
+    }
+    ++result->num_tracked;
+    frame.world_from_rig = map_.rig_from_world[i].Inverse();
+  }
+  result->loops = loops_;
+  for (LoopReport& loop : result->loops) {
+    loop.frame = result->frames[loop.frame_index].name;
+    loop.matched_frame = result->frames[loop.matched_frame_index].name;
+  }
+  result->map = ExportMap(map_, options_.min_map_point_frames);
 }
 
 }  // namespace
@@ -589,7 +1026,7 @@ SlamResult RunSlam(const StereoRig& rig, const std::vector<std::string>& frame_n
     progress.ThrowIfCancelled();
     Tracker::FrontEndResult front = pipelined ? next.get() : front_end(i);
     if (pipelined && i + 1 < n) next = std::async(std::launch::async, front_end, i + 1);
-    FrameReport report = tracker.BackEnd(std::move(front));
+    FrameReport report = tracker.BackEnd(std::move(front), /*last_frame=*/i + 1 == n);
     result.stage_totals.Add(report.times);
     result.cpu_stage_totals.Add(report.cpu_times);
     progress.Report(0.95 * (i + 1) / n, "track",
@@ -598,17 +1035,7 @@ SlamResult RunSlam(const StereoRig& rig, const std::vector<std::string>& frame_n
                         (report.reason.empty() ? "" : " (" + report.reason + ")"));
     result.frames.push_back(std::move(report));
   }
-  SlamMap& map = tracker.map();
-  GlobalBundleAdjustment(rig, options, progress, &map, &result);
-  for (int i = 0; i < n; ++i) {
-    if (!map.has_pose[i]) {
-      ++result.num_lost;
-      continue;
-    }
-    ++result.num_tracked;
-    result.frames[i].world_from_rig = map.rig_from_world[i].Inverse();
-  }
-  result.map = ExportMap(map, options.min_map_point_frames);
+  tracker.Finish(progress, &result);
   result.total_s = total.WallSeconds();
   result.total_cpu_s = total.CpuSeconds();
   progress.Report(1.0, "done", std::to_string(result.num_tracked) + " of " + std::to_string(n) +

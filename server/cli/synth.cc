@@ -195,6 +195,10 @@ void RunPreset(const ArgParser& args, const std::string& preset, const std::stri
     options.environment = synth::StereoSequenceOptions::Environment::kCityBlock;
     options.path_length_m = args.GetDouble("loop-length");
     options.num_laps = args.GetInt("laps");
+    OMNIRIG_CHECK(options.path_length_m >= 40.0 && options.path_length_m <= 400.0,
+                  "--loop-length must be in [40, 400] metres, got " << options.path_length_m);
+    OMNIRIG_CHECK(options.num_laps >= 1 && options.num_laps <= 100,
+                  "--laps must be in [1, 100], got " << options.num_laps);
     options.num_frames = args.Has("frames")
                              ? args.GetInt("frames")
                              : static_cast<int>(std::lround(10.0 * options.num_laps *

@@ -6,7 +6,8 @@ import { fileURLToPath } from 'node:url';
 
 const WEB_JS = path.resolve(path.dirname(fileURLToPath(import.meta.url)), '../../web/js');
 const { parsePly } = await import(path.join(WEB_JS, 'ply.js'));
-const { inversePose, parseTum, trajectoryFromJson, transformTrajectory } = await import(path.join(WEB_JS, 'topview.js'));
+const { inversePose, loopSegments, parseTum, stateColour, STATE_COLOURS, trajectoryFromJson, transformTrajectory } =
+  await import(path.join(WEB_JS, 'topview.js'));
 
 // A binary little-endian PLY as omnirig's SLAM writes it, preceded by an element the reader skips.
 function binaryPly(points) {
@@ -55,6 +56,26 @@ const tests = {
       { name: 'b', state: 'tracked', world_from_rig: { rotation_wxyz: [1, 0, 0, 0], translation_m: [1, 2, 3] } }] });
     assert.deepEqual(poses.map((p) => p.name), ['b']);
     assert.deepEqual(poses[0].t, [1, 2, 3]);
+  },
+  'lost frames leave a gap before the next pose, states are kept'() {
+    const at = (x) => ({ rotation_wxyz: [1, 0, 0, 0], translation_m: [x, 0, 0] });
+    const poses = trajectoryFromJson({ frames: [
+      { name: 'f0', state: 'initialised', world_from_rig: at(0) }, { name: 'f1', state: 'tracked', world_from_rig: at(1) },
+      { name: 'f2', state: 'lost', world_from_rig: null }, { name: 'f3', state: 'reinitialised', world_from_rig: at(3) },
+      { name: 'f4', state: 'relinked', world_from_rig: at(4) }] });
+    assert.deepEqual(poses.map((p) => [p.name, p.index, p.gap]), [['f0', 0, false], ['f1', 1, false], ['f3', 3, true], ['f4', 4, false]]);
+    assert.equal(stateColour(poses[3].state), STATE_COLOURS.relinked);
+    assert.equal(stateColour('initialised'), STATE_COLOURS.tracked);
+    assert.equal(stateColour(undefined), STATE_COLOURS.tracked);  // results from before states
+  },
+  'loops join their frames by name, else by index; missing ones are left out'() {
+    const poses = trajectoryFromJson([0, 1, 2].map((i) => ({ name: `f${i}`, world_from_rig: { rotation_wxyz: [1, 0, 0, 0], translation_m: [i, 0, 0] } })));
+    const segments = loopSegments(poses, [
+      { frame: 'f2', frame_index: 2, matched_frame: 'f0', matched_frame_index: 0 },
+      { frame: 'renamed', frame_index: 1, matched_frame: 'f0', matched_frame_index: 0 },
+      { frame: 'f9', frame_index: 9, matched_frame: 'f0', matched_frame_index: 0 }]);
+    assert.deepEqual(segments.map(([a, b]) => [a.name, b.name]), [['f2', 'f0'], ['f1', 'f0']]);
+    assert.deepEqual(loopSegments(poses, undefined), []);  // results from before loops
   },
   'TUM lines become poses with (w, x, y, z) quaternions'() {
     const poses = parseTum('# t tx ty tz qx qy qz qw\n0.5 1 2 3 0 0 0.6 0.8\n\n');

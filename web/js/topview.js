@@ -1,19 +1,51 @@
 // Trajectories in 2D: reading them (trajectory.json, TUM) and drawing a top view of the estimate
-// against the ground truth.
+// against the ground truth, coloured by the SLAM state of each frame, with its loop closures.
 
-// A trajectory is [{name, state, t: [x, y, z], q: [w, x, y, z]}] with world_from_rig poses.
+// A trajectory is [{name, index, state, gap, t: [x, y, z], q: [w, x, y, z]}] with world_from_rig
+// poses; index is the frame's position in the run and gap is true when frames without a pose
+// (lost) come just before this one.
 export function trajectoryFromJson(json) {
   const frames = Array.isArray(json) ? json : json.frames || json.trajectory || json.poses || [];
-  return frames.map((f, i) => {
+  const poses = [];
+  let gap = false;
+  frames.forEach((f, i) => {
     const pose = 'world_from_rig' in f ? f.world_from_rig : f.pose || f;
-    if (!pose) return null;  // a frame that could not be tracked has no pose
-    return {
-      name: f.name ?? String(i),
-      state: f.state,
-      t: pose.translation_m || pose.t || [0, 0, 0],
-      q: pose.rotation_wxyz || pose.q || [1, 0, 0, 0],
-    };
-  }).filter((p) => p && p.t.every(Number.isFinite));
+    const t = pose && (pose.translation_m || pose.t || [0, 0, 0]);
+    if (!pose || !t.every(Number.isFinite)) {  // a frame that could not be tracked has no pose
+      gap = true;
+      return;
+    }
+    poses.push({ name: f.name ?? String(i), index: i, state: f.state, gap: gap && poses.length > 0, t, q: pose.rotation_wxyz || pose.q || [1, 0, 0, 0] });
+    gap = false;
+  });
+  return poses;
+}
+
+// The colours of the top view: the estimate by state (older results without states draw as
+// tracked), the ground truth, and the loop closures.
+export const STATE_COLOURS = {
+  tracked: '#2563eb',
+  relocalised: '#9333ea',
+  relinked: '#059669',
+  reinitialised: '#dc2626',
+};
+export const GROUND_TRUTH_COLOUR = '#f59e0b';
+export const LOOP_COLOUR = '#db2777';
+
+export function stateColour(state) {
+  return STATE_COLOURS[state] || STATE_COLOURS.tracked;  // "initialised" and unknown: tracked
+}
+
+// The two poses each loop of a result joins ([{frame, frame_index, matched_frame,
+// matched_frame_index, ...}]), found by frame name, else by frame index; loops whose frames have
+// no pose are left out. A result without loops (older ones) gives none.
+export function loopSegments(estimate, loops) {
+  if (!Array.isArray(loops)) return [];
+  const byName = new Map(estimate.map((p) => [p.name, p]));
+  const byIndex = new Map(estimate.filter((p) => Number.isInteger(p.index)).map((p) => [p.index, p]));
+  const find = (name, index) => byName.get(name) || byIndex.get(index);
+  return loops.map((loop) => [find(loop.frame, loop.frame_index), find(loop.matched_frame, loop.matched_frame_index)])
+    .filter(([a, b]) => a && b);
 }
 
 // Quaternion helpers for world_from_rig poses {t, q (w, x, y, z)}.
@@ -63,7 +95,7 @@ function planeAxes(poses) {
   return [0, 1, 2].sort((a, b) => spread[b] - spread[a]).slice(0, 2).sort((a, b) => a - b);
 }
 
-export function drawTopView(canvas, estimate, groundTruth) {
+export function drawTopView(canvas, estimate, groundTruth, loops = []) {
   const ctx = canvas.getContext('2d');
   const w = canvas.width;
   const h = canvas.height;
@@ -94,8 +126,45 @@ export function drawTopView(canvas, estimate, groundTruth) {
       ctx.fillRect(x - 3, y - 3, 6, 6);
     }
   };
-  if (groundTruth && groundTruth.length) line(groundTruth, '#f59e0b', 3);
-  line(estimate, '#2563eb', 2);
+  if (groundTruth && groundTruth.length) line(groundTruth, GROUND_TRUTH_COLOUR, 3);
+  drawEstimate(ctx, estimate, toCanvas);
+  ctx.strokeStyle = LOOP_COLOUR;
+  ctx.lineWidth = 2;
+  for (const [a, b] of loopSegments(estimate, loops)) {
+    const [ax, ay] = toCanvas(a);
+    const [bx, by] = toCanvas(b);
+    ctx.beginPath();
+    ctx.moveTo(ax, ay);
+    ctx.lineTo(bx, by);
+    ctx.stroke();
+    ctx.fillStyle = LOOP_COLOUR;
+    for (const [x, y] of [[ax, ay], [bx, by]]) {
+      ctx.beginPath();
+      ctx.arc(x, y, 3.5, 0, 2 * Math.PI);
+      ctx.fill();
+    }
+  }
+}
+
+// The estimate segment by segment, each in the colour of the state of the frame it leads to;
+// no segment across frames without a pose.
+function drawEstimate(ctx, estimate, toCanvas) {
+  ctx.lineWidth = 2;
+  for (let i = 1; i < estimate.length; i += 1) {
+    if (estimate[i].gap) continue;
+    const [x0, y0] = toCanvas(estimate[i - 1]);
+    const [x1, y1] = toCanvas(estimate[i]);
+    ctx.strokeStyle = stateColour(estimate[i].state);
+    ctx.beginPath();
+    ctx.moveTo(x0, y0);
+    ctx.lineTo(x1, y1);
+    ctx.stroke();
+  }
+  if (estimate.length) {
+    const [x, y] = toCanvas(estimate[0]);
+    ctx.fillStyle = stateColour(estimate[0].state);
+    ctx.fillRect(x - 3, y - 3, 6, 6);
+  }
 }
 
 function drawScaleBar(ctx, w, h, scale, axisU, axisV) {

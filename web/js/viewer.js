@@ -12,7 +12,10 @@ import { fetchArtifactBytes, fetchArtifactJson, fetchArtifactText, fetchWithAuth
 import { listArtifacts, renderArtifacts } from './artifacts.js';
 import { parsePly } from './ply.js';
 import { reconstructPairsCard } from './reconstruct_report.js';
-import { drawTopView, inversePose, parseTum, trajectoryFromJson, transformTrajectory } from './topview.js';
+import {
+  drawTopView, GROUND_TRUTH_COLOUR, inversePose, LOOP_COLOUR, loopSegments, parseTum, STATE_COLOURS,
+  trajectoryFromJson, transformTrajectory,
+} from './topview.js';
 import { clear, el, errorBox, formatBytes, formatNumber, progressBar } from './ui.js';
 
 export async function render(view, id) {
@@ -107,7 +110,7 @@ export async function renderJobReport(container, job) {
   };
   clear(below,
     job.type === 'stereo_reconstruct' ? reconstructPairsCard(job, result, viewCloud) : null,
-    trajectory && job.type === 'slam' ? el('div.card#top-view-card', el('h2', 'Top view of the trajectory'), topView(trajectory, groundTruth)) : null,
+    trajectory && job.type === 'slam' ? el('div.card#top-view-card', el('h2', 'Top view of the trajectory'), topView(trajectory, groundTruth, result)) : null,
     summaryCard(result),
     await report ? statsCard(await report) : null);
   return () => scene && scene.dispose();
@@ -185,12 +188,27 @@ async function loadReport(jobId, artifacts, result) {
   }
 }
 
-function topView(trajectory, groundTruth) {
+// The top view with its legend: the estimate coloured by each frame's state (lost frames leave a
+// gap), a line per loop closure between its two keyframes, the ground truth when given. Results
+// from before loops and states were reported draw as one tracked line.
+function topView(trajectory, groundTruth, result) {
   const canvas = el('canvas.topview#top-view', { width: 560, height: 560 });
-  requestAnimationFrame(() => drawTopView(canvas, trajectory, groundTruth));
-  return el('div', canvas, el('p.muted', groundTruth
-    ? 'Blue: estimated trajectory; orange: ground truth (brought into the estimate\'s frame by the evaluation\'s alignment when there is one).'
-    : 'Blue: estimated trajectory (no ground truth was given).'));
+  requestAnimationFrame(() => drawTopView(canvas, trajectory, groundTruth, result.loops));
+  const frames = (n) => `${n} frame${n === 1 ? '' : 's'}`;
+  const count = (state) => trajectory.filter((p) => (p.state === 'initialised' ? 'tracked' : p.state || 'tracked') === state).length;
+  // Frames without a pose: those the trajectory skips, and any after its last pose.
+  const last = trajectory.length ? trajectory[trajectory.length - 1].index ?? trajectory.length - 1 : -1;
+  const lost = Math.max(Array.isArray(result.frames) ? result.frames.length : 0, last + 1) - trajectory.length;
+  const item = (key, colour, text, line = true) => el('li.legend-item', { dataset: { key } },
+    el(line ? 'span.swatch' : 'span.swatch.gap', { style: line ? `background: ${colour}` : undefined }), text);
+  const loops = Array.isArray(result.loops) ? loopSegments(trajectory, result.loops).length : null;
+  return el('div', canvas, el('ul.legend#top-view-legend',
+    Object.entries(STATE_COLOURS).map(([state, colour]) => item(state, colour, `${state} (${frames(count(state))})`)),
+    item('lost', '', `lost: a gap in the line (${frames(lost)})`, false),
+    loops === null ? null : item('loop', LOOP_COLOUR, `loop closure: joins its two keyframes (${loops})`),
+    groundTruth ? item('ground-truth', GROUND_TRUTH_COLOUR, 'ground truth') : null),
+  groundTruth ? el('p.muted', 'The ground truth is brought into the estimate\'s frame by the evaluation\'s alignment when there is one.')
+    : el('p.muted', 'No ground truth was given.'));
 }
 
 // The scalar metrics of the result (ATE, RPE, drift, counts) as a list.

@@ -1,0 +1,87 @@
+#pragma once
+// A bag of visual words over SIFT descriptors for place recognition (Nister and Stewenius's
+// vocabulary tree, scored as DBoW2 does): hierarchical k-means with `branching` children per
+// node and `depth` levels, so a descriptor finds its word in branching * depth distances instead
+// of branching^depth. Words are weighted by tf-idf and an image's vector is L1-normalised; two
+// images score sum_w min(v_w, u_w) in [0, 1] (DBoW2's L1 score, 1 - |v - u|_1 / 2).
+//
+// The shipped vocabulary (DefaultVocabulary) is trained once by bench/train_vocabulary.cc on
+// renders of scenes and seeds that no test or benchmark uses, and compiled into the library from
+// engine/slam/data/vocabulary.bin: nothing is downloaded or read from disk at run time.
+
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <unordered_map>
+#include <utility>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+namespace omnirig::slam {
+
+// Sparse tf-idf vector: (word, weight) sorted by word, weights summing to 1.
+using BowVector = std::vector<std::pair<int, float>>;
+
+// DBoW2's L1 score of two L1-normalised vectors: 1 for identical word histograms, 0 for disjoint.
+double BowScore(const BowVector& a, const BowVector& b);
+
+class Vocabulary {
+ public:
+  static constexpr int kDescriptorSize = 128;  // SIFT
+
+  Vocabulary() = default;
+  // Hierarchical k-means (cv::kmeans, k-means++ seeding, `seed`) over every descriptor of
+  // `images` (CV_32F, kDescriptorSize columns, one matrix per image); the idf of a word is
+  // log(N / n_w) with N images, n_w of them holding the word.
+  static Vocabulary Train(const std::vector<cv::Mat>& images, int branching, int depth,
+                          std::uint64_t seed);
+  // The binary form (a header, then the centres as bytes: SIFT's components are integers in
+  // [0, 255]; then the idf as float32). Throws InvalidArgument on a malformed blob.
+  std::vector<std::uint8_t> Serialize() const;
+  static Vocabulary Deserialize(const std::uint8_t* data, std::size_t size);
+
+  bool empty() const { return num_words() == 0; }
+  int num_words() const { return idf_.empty() ? 0 : static_cast<int>(idf_.size()); }
+  // The word of one descriptor (kDescriptorSize floats).
+  int Word(const float* descriptor) const;
+  // The tf-idf vector of an image's descriptors (CV_32F or CV_8U rows).
+  BowVector Transform(const cv::Mat& descriptors) const;
+
+ private:
+  int NumNodes() const;
+  int FirstLeaf() const;
+
+  int branching_ = 0;
+  int depth_ = 0;
+  // Nodes of the complete tree in breadth-first order without the root: node n's children are
+  // n * branching + 1 .. n * branching + branching (the root is node 0). Empty nodes (a cluster
+  // with fewer descriptors than children) are marked in valid_.
+  std::vector<std::uint8_t> centres_;  // (NumNodes()) x kDescriptorSize, node 0's unused
+  std::vector<char> valid_;
+  std::vector<float> idf_;  // per word (leaf)
+};
+
+// Place recognition's index over keyframes: an inverted file from word to the keyframes holding
+// it, so a query visits only keyframes that share words with it.
+class KeyframeDatabase {
+ public:
+  struct Candidate {
+    int keyframe = -1;
+    double score = 0.0;  // BowScore
+  };
+  void Add(int keyframe, const BowVector& bow);
+  // The keyframes `accept` lets through, scoring at least min_score, best first, at most
+  // max_results.
+  std::vector<Candidate> Query(const BowVector& bow, const std::function<bool(int)>& accept,
+                               double min_score, int max_results) const;
+
+ private:
+  std::unordered_map<int, std::vector<std::pair<int, float>>> keyframes_of_word_;
+};
+
+// The vocabulary compiled into the library (engine/slam/data/vocabulary.bin), parsed once on
+// first use (~1 ms).
+const Vocabulary& DefaultVocabulary();
+
+}  // namespace omnirig::slam
