@@ -15,14 +15,16 @@
 //              loops are the others.
 //   ATE        after the run's closure and global adjustment, SE(3)-aligned, as % of the
 //              distance travelled; end-point drift: the last pose's error with both
-//              trajectories anchored at the first pose, as % of the distance.
+//              trajectories anchored at the first pose, as % of the distance. Before closure:
+//              the first loop's correction (the drift tracking had gathered), and the same
+//              figures of a run with --no-loop-closure.
 //   per-frame  CPU time of the frame's stages (median over frames 90-110, or around a fifth of a
 //              run shorter than 400 frames, and over the last 21), and wall; memory: the process's resident set at a tenth of the run each, beside
 //              the map's growth (landmarks created so far) and the keyframes so far.
 //
 // usage: bench_slam --loop [--loop-dir DIR] [--frames 2000] [--laps 2] [--loop-length 100]
 //                   [--width 1024] [--height 768] [--threads 2] [--revisit-m 1.5]
-//                   [--revisit-deg 30]
+//                   [--revisit-deg 30] [--no-loop-closure] [--supersampling 4] [--blur 0]
 
 #include "bench/slam_loop_bench.h"
 
@@ -34,6 +36,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iomanip>
+#include <map>
 #include <set>
 #include <sstream>
 #include <string>
@@ -61,6 +64,9 @@ struct LoopArgs {
   int threads = 2;
   double revisit_m = 1.5;
   double revisit_deg = 30.0;
+  bool loop_closure = true;
+  int supersampling = 4;  // of the render
+  double blur_px = 0.0;
 };
 
 LoopArgs ParseLoopArgs(int argc, char** argv) {
@@ -77,11 +83,15 @@ LoopArgs ParseLoopArgs(int argc, char** argv) {
     else if (a == "--threads") args.threads = std::atoi(next().c_str());
     else if (a == "--revisit-m") args.revisit_m = std::atof(next().c_str());
     else if (a == "--revisit-deg") args.revisit_deg = std::atof(next().c_str());
+    else if (a == "--no-loop-closure") args.loop_closure = false;
+    else if (a == "--supersampling") args.supersampling = std::atoi(next().c_str());
+    else if (a == "--blur") args.blur_px = std::atof(next().c_str());
   }
   if (args.dir.empty()) {
     std::ostringstream dir;
     dir << "/tmp/omnirig-loop-" << args.loop_length_m << "m-" << args.laps << "laps-"
-        << args.frames << "f-" << args.width << "x" << args.height;
+        << args.frames << "f-" << args.width << "x" << args.height << "-ss"
+        << args.supersampling << "-blur" << args.blur_px;
     args.dir = dir.str();
   }
   return args;
@@ -97,6 +107,8 @@ synth::StereoSequenceOptions SequenceOptions(const LoopArgs& args) {
   options.width = args.width;
   options.height = args.height;
   options.render.noise_sigma = 1.0;
+  options.render.supersampling = args.supersampling;
+  options.render.blur_sigma_px = args.blur_px;
   options.render.num_threads = args.threads;
   return options;
 }
@@ -173,16 +185,14 @@ std::vector<std::string> RenderOrLoad(const LoopArgs& args, std::vector<Rigid3d>
 }
 
 // What the SLAM result says about keyframes and loops (SlamResult::loops,
-// FrameReport::keyframe); the one place that reads them.
+// FrameReport::keyframe): the one place that reads them.
 struct LoopView {
-  bool reported = false;  // whether this SLAM reports loops at all
   std::vector<bool> keyframe;
   std::vector<std::pair<int, int>> loops;  // (frame index, matched frame index)
 };
 
 LoopView ReadLoops(const slam::SlamResult& result) {
   LoopView view;
-  view.reported = true;
   for (const slam::FrameReport& frame : result.frames) view.keyframe.push_back(frame.keyframe);
   for (const slam::LoopReport& loop : result.loops) {
     view.loops.emplace_back(loop.frame_index, loop.matched_frame_index);
@@ -198,6 +208,11 @@ struct LoopFigures {
   int revisit_keyframes = 0, revisit_keyframes_found = 0;
   int revisit_stretches = 0, revisit_stretches_found = 0;
   int true_loops = 0, false_loops = 0;
+  // The false ones: matched to a keyframe of the same lap or of an earlier one, and the largest
+  // ground-truth distance between a false loop's keyframes.
+  int false_same_lap = 0, false_earlier_lap = 0;
+  double false_max_distance_m = 0.0;
+  int first_revisit_loop = -1;  // index into the loops of the first true loop to an earlier lap
 };
 
 LoopFigures CountLoops(const LoopArgs& args, const LoopView& view,
@@ -215,13 +230,20 @@ LoopFigures CountLoops(const LoopArgs& args, const LoopView& view,
   };
   LoopFigures figures;
   std::set<int> true_query_frames, stretches_with_revisit, stretches_found;
-  for (const auto& [frame, matched] : view.loops) {
+  for (size_t l = 0; l < view.loops.size(); ++l) {
+    const auto& [frame, matched] = view.loops[l];
     if (near(frame, matched)) {
       ++figures.true_loops;
       true_query_frames.insert(frame);
-      if (lap(matched) < lap(frame)) stretches_found.insert(stretch(frame));
+      if (lap(matched) < lap(frame)) {
+        stretches_found.insert(stretch(frame));
+        if (figures.first_revisit_loop < 0) figures.first_revisit_loop = static_cast<int>(l);
+      }
     } else {
       ++figures.false_loops;
+      ++(lap(matched) < lap(frame) ? figures.false_earlier_lap : figures.false_same_lap);
+      figures.false_max_distance_m = std::max(
+          figures.false_max_distance_m, (truth[frame].translation - truth[matched].translation).norm());
     }
   }
   for (int k = 0; k < n; ++k) {
@@ -314,16 +336,20 @@ int RunLoopBench(int argc, char** argv) {
   };
   slam::SlamOptions options;
   options.num_threads = args.threads;
+  options.loop_closure = args.loop_closure;
   const double rss_before_mb = ResidentMegabytes();
   const slam::SlamResult result = slam::RunSlam(rig, names, load, options);
 
   const LoopView view = ReadLoops(result);
-  std::printf("\n%d stereo frames %dx%d, %d laps of %.0f m; %d tracked, %d lost\n", n,
-              args.width, args.height, args.laps, args.loop_length_m, result.num_tracked,
-              result.num_lost);
+  std::printf("\n%d stereo frames %dx%d, %d laps of %.0f m; %d tracked, %d lost, %d keyframes\n",
+              n, args.width, args.height, args.laps, args.loop_length_m, result.num_tracked,
+              result.num_lost, result.num_keyframes);
+  std::map<std::string, int> states;
+  for (const slam::FrameReport& frame : result.frames) ++states[frame.state];
+  for (const auto& [state, count] : states) std::printf("  %s: %d\n", state.c_str(), count);
   std::printf("\n%-52s %12s %12s\n", "metric", "measured", "target");
   const LoopFigures loops = CountLoops(args, view, truth);
-  if (!view.reported) std::printf("(this SLAM reports no loops: every frame is a keyframe)\n");
+  if (!options.loop_closure) std::printf("(loop closure off: --no-loop-closure)\n");
   std::printf("%-52s %6d / %-5d %12s\n", "revisit keyframes detected", loops.revisit_keyframes_found,
               loops.revisit_keyframes, "");
   std::printf("%-52s %12.1f %12s\n", "recall per revisit keyframe (%)",
@@ -334,6 +360,21 @@ int RunLoopBench(int argc, char** argv) {
               ">= 90");
   std::printf("%-52s %12d %12s\n", "true loops accepted", loops.true_loops, "");
   std::printf("%-52s %12d %12s\n", "false loops accepted", loops.false_loops, "0");
+  std::printf("%-52s %5d / %-6d %12s\n", "  of which to the same lap / an earlier lap",
+              loops.false_same_lap, loops.false_earlier_lap, "");
+  std::printf("%-52s %12.2f %12s\n", "  largest distance between their keyframes (m)",
+              loops.false_max_distance_m, "");
+  if (loops.first_revisit_loop >= 0) {
+    // The correction of the first loop to an earlier lap is the drift tracking had gathered
+    // until it closed.
+    const slam::LoopReport& first = result.loops[loops.first_revisit_loop];
+    const double travelled_m = args.laps * args.loop_length_m * first.frame_index / n;
+    std::printf("%-52s %12.3f %12s\n", "first revisit loop's correction (% of distance)",
+                100.0 * first.correction_m / travelled_m, "reported");
+    std::printf("  first loop: %s -> %s, %d inliers, %.3f m, %.3f deg, after %.1f m\n",
+                first.frame.c_str(), first.matched_frame.c_str(), first.inliers,
+                first.correction_m, first.correction_deg, travelled_m);
+  }
   PrintTrajectory(args, result, truth);
   std::printf("%-52s %12d %12s\n", "keyframes", result.num_keyframes, "");
   std::printf("\n%8s %8s %8s %10s %10s %6s %10s\n", "frame", "matched", "inliers", "corr (m)",
