@@ -348,7 +348,9 @@ std::string UnsynchronisedReason(const PairSyncStatistic& pair, const SyncTestRe
   os.precision(3);
   os << "the cameras disagree on the board's pose by " << pair.board_offset_m * 1e3 << " mm and "
      << pair.board_rotation_deg << " deg at its centre, beyond what corner noise of "
-     << test.corner_noise_px[0] << " / " << test.corner_noise_px[1] << " px";
+     << std::sqrt(pair.own_variance_px2[0]) << " / " << std::sqrt(pair.own_variance_px2[1])
+     << " px (this pair's own fits; " << test.corner_noise_px[0] << " / "
+     << test.corner_noise_px[1] << " px over all pairs)";
   if (test.dispersion > 1.0) {
     os << " and the spread common to all pairs (dispersion " << test.dispersion << ")";
   }

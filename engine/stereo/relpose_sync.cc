@@ -180,35 +180,53 @@ double OnChiSquareScale(double x, int dof) {
   return ChiSquareUpperQuantile(std::min(p, 1.0 - 1e-16), kPoseDof);
 }
 
+// Step 3's common extra variance beta (in units of the corner noise): the smallest beta >= 0
+// with median T_i / (w_i + beta) at most `median_null`, the median of 6 F(6, dof).
+double CommonExtraVariance(const std::vector<double>& raw, const std::vector<double>& scale,
+                           double median_null) {
+  const auto excess = [&](double beta) {
+    std::vector<double> ratios;
+    for (size_t i = 0; i < raw.size(); ++i) ratios.push_back(raw[i] / (scale[i] + beta));
+    return Median(ratios) - median_null;
+  };
+  if (excess(0.0) <= 0.0) return 0.0;
+  double low = 0.0, high = 1.0;
+  while (excess(high) > 0.0) high *= 2.0;
+  for (int i = 0; i < 100 && high - low > 1e-9 * high; ++i) {
+    const double mid = 0.5 * (low + high);
+    (excess(mid) > 0.0 ? low : high) = mid;
+  }
+  return 0.5 * (low + high);
+}
+
 // Steps 3 and 4 (the dispersion and the decision) from each valid pair's T (`raw`) and its
 // separate fits.
 void Decide(const std::vector<double>& raw, const std::vector<SeparateFit>& separate,
             const SyncTestOptions& options, SyncTestReport* report) {
-  // Step 3 on the F scale: each pair's T over its own noise (the Chow test's F, times 6).
-  const size_t n = raw.size();
-  std::vector<double> whitened(n, 0.0), valid_whitened, dofs;
-  for (size_t i = 0; i < n; ++i) {
+  std::vector<size_t> valid;
+  std::vector<double> valid_raw, scale, whitened, dofs;
+  for (size_t i = 0; i < raw.size(); ++i) {
     if (!report->pairs[i].valid) continue;
-    whitened[i] =
-        raw[i] / OwnNoiseRatio(separate[i], report->corner_noise_px, options.min_corner_noise_px);
-    valid_whitened.push_back(whitened[i]);
+    valid.push_back(i);
+    valid_raw.push_back(raw[i]);
+    scale.push_back(
+        OwnNoiseRatio(separate[i], report->corner_noise_px, options.min_corner_noise_px));
+    whitened.push_back(raw[i] / scale.back());
     dofs.push_back(separate[i].dof[0] + separate[i].dof[1]);
   }
-  report->median_statistic = Median(valid_whitened);
-  report->dispersion =
-      std::max(1.0, report->median_statistic / ScaledFUpperQuantile(0.5, kPoseDof, Median(dofs)));
-  report->limit =
-      ChiSquareUpperQuantile(options.false_alarm_rate / valid_whitened.size(), kPoseDof);
-  for (size_t i = 0; i < n; ++i) {
-    PairSyncStatistic& pair = report->pairs[i];
-    if (!pair.valid) continue;
-    pair.statistic =
-        OnChiSquareScale(whitened[i] / report->dispersion, separate[i].dof[0] + separate[i].dof[1]);
+  report->median_statistic = Median(whitened);
+  const double beta =
+      CommonExtraVariance(valid_raw, scale, ScaledFUpperQuantile(0.5, kPoseDof, Median(dofs)));
+  report->dispersion = 1.0 + beta;
+  report->limit = ChiSquareUpperQuantile(options.false_alarm_rate / valid.size(), kPoseDof);
+  for (size_t k = 0; k < valid.size(); ++k) {
+    PairSyncStatistic& pair = report->pairs[valid[k]];
+    pair.statistic = OnChiSquareScale(valid_raw[k] / (scale[k] + beta), static_cast<int>(dofs[k]));
     pair.flagged = pair.statistic > report->limit;
     if (!pair.flagged) continue;
     ++report->num_flagged;
     if (report->worst < 0 || pair.statistic > report->pairs[report->worst].statistic) {
-      report->worst = static_cast<int>(i);
+      report->worst = static_cast<int>(valid[k]);
     }
   }
 }

@@ -26,13 +26,18 @@
 //      with the pair's own noise (the reference rig's error at the pair, detector errors
 //      common to all pairs), and with w alone the cleanest pairs were flagged instead.
 //   3. Dispersion. Corner errors that are not independent (correlated along a board's edges,
-//      a model error every view shares) inflate every pair's T alike; an unsynchronised pair
-//      stands out from the others. kappa = max(1, median (T / w) / median of 6 F(6, dof)).
-//      So at most half the pairs can be flagged, whatever the noise. (On the real fisheye
-//      pairs of bench_relpose kappa is about 25: even the pairs kept disagree far more than
-//      independent corner noise of the mono fits' 0.12 px would explain.) Each pair's
-//      statistic is T / (w kappa) expressed on the chi^2_6 scale (the chi^2_6 value of the same
-//      tail probability under 6 F(6, dof)), so that one limit serves every pair.
+//      a model error every view shares, the reference rig's own error) add to every pair's T
+//      a part that does not scale with the pair's own noise; an unsynchronised pair stands
+//      out from the others. As in a random-effects model, each pair's T is judged against
+//      w + beta, beta >= 0 the smallest common extra variance (in units of the corner noise)
+//      that brings the median of T / (w + beta) down to the median of 6 F(6, dof); the report's
+//      dispersion is 1 + beta (kappa: with every w = 1, T / kappa). So at most half the pairs
+//      can be flagged, whatever the noise. On renders beta is about 0 and w decides; on the real
+//      fisheye pairs of bench_relpose kappa is about 25 (even the pairs kept disagree far more
+//      than independent corner noise of the mono fits' 0.12 px would explain) and beta
+//      decides. Each pair's statistic is T / (w + beta) expressed on the chi^2_6 scale (the
+//      chi^2_6 value of the same tail probability under 6 F(6, dof)), so that one limit serves
+//      every pair.
 //   4. Decision, one pair at a time. The pair with the largest statistic is unsynchronised
 //      when that exceeds the chi^2_6 quantile at 1 - alpha / N (N pairs tested, alpha the
 //      family-wise false-alarm rate, 1 % by default). The caller (EstimateRelativePose) leaves
@@ -90,7 +95,7 @@ struct SyncTestOptions {
 
 struct PairSyncStatistic {
   bool valid = false;  // false when a camera's own board pose or the rig fit failed
-  // T / (w kappa) on the chi^2_6 scale (the rule's step 3), compared with the limit.
+  // T / (w + beta) on the chi^2_6 scale (the rule's step 3), compared with the limit.
   double statistic = 0.0;
   double raw_statistic = 0.0;  // T, before the pair's own noise and the dispersion
   // Each camera's own fit of the board: sum of squares / degrees of freedom (px^2), and dof.
@@ -105,7 +110,7 @@ struct PairSyncStatistic {
 struct SyncTestReport {
   bool run = false;                         // false with fewer than 3 pairs
   std::array<double, 2> corner_noise_px{};  // sigma per coordinate, cam0 and cam1
-  double dispersion = 1.0;                  // kappa
+  double dispersion = 1.0;                  // kappa = 1 + beta
   double limit = 0.0;                       // chi^2_6 quantile at 1 - alpha / N
   double median_statistic = 0.0;            // median T / w (before the dispersion)
   int num_flagged = 0;
