@@ -34,15 +34,21 @@
 //
 //   6. Issue 16's camera chain (--only chain): rigs with given calibrations, kept or refined
 //      with the calibrations' own views, against cv::omnidir::stereoCalibrate, 5 seeds.
-// Usage: bench_relpose [--quick] [--data DIR] [--only synthetic|floor|preset|real|chain]
+//   7. (--only sync; not in a full run) The synchronisation test's false-alarm rate on the
+//      renderer's synchronised pairs, with its 95 % interval, and its power on pairs whose
+//      board moved between the exposures (RunSyncFalseAlarms).
+// Usage: bench_relpose [--quick] [--data DIR] [--only synthetic|floor|preset|real|chain|sync]
+//   [--seeds N] [--first-seed K] [--cache DIR] [--csv FILE]
 //   (DIR: the folder holding the real data sets; --only runs one part, "synthetic" includes
-//   the floor)
+//   the floor; the rest are for "sync": N rendered rigs from seed 3000 + K, kept in the cache
+//   folder for reruns, first-round per-pair statistics to FILE)
 
 #include <algorithm>
 #include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <ctime>
 #include <filesystem>
@@ -1183,6 +1189,287 @@ void RunRealFisheye(const std::filesystem::path& data_dir) {
   PrintPairSubsets(cam0, cam1, board, pairs, joint_report, joint);
 }
 
+
+// The probability of at most k successes in n trials of probability p.
+double BinomialCdf(int k, int n, double p) {
+  if (k < 0) return 0.0;
+  if (k >= n) return 1.0;
+  double sum = 0.0;
+  for (int i = 0; i <= k; ++i) {
+    sum += std::exp(std::lgamma(n + 1.0) - std::lgamma(i + 1.0) - std::lgamma(n - i + 1.0) +
+                    i * std::log(p) + (n - i) * std::log1p(-p));
+  }
+  return std::min(1.0, sum);
+}
+
+// Clopper-Pearson 95 % interval of a rate from k of n.
+std::pair<double, double> RateInterval(int k, int n) {
+  const auto solve = [&](bool lower) {
+    if ((lower && k == 0) || (!lower && k == n)) return lower ? 0.0 : 1.0;
+    double low = 0.0, high = 1.0;
+    for (int i = 0; i < 60; ++i) {
+      const double mid = 0.5 * (low + high);
+      // lower: P(X >= k | mid) = 0.025; upper: P(X <= k | mid) = 0.025.
+      const bool too_high = lower ? 1.0 - BinomialCdf(k - 1, n, mid) > 0.025
+                                  : BinomialCdf(k, n, mid) < 0.025;
+      (too_high ? high : low) = mid;
+    }
+    return 0.5 * (low + high);
+  };
+  return {solve(true), solve(false)};
+}
+
+std::string RateText(int k, int n) {
+  const auto [low, high] = RateInterval(k, n);
+  char text[120];
+  std::snprintf(text, sizeof(text), "%d/%d = %.1f %% (95 %% CI %.1f-%.1f %%)", k, n,
+                100.0 * k / std::max(1, n), 100.0 * low, 100.0 * high);
+  return text;
+}
+
+// The rendered rigs of RunSyncFalseAlarms, kept in a folder (--cache DIR) so that a rerun
+// measures the test alone: per seed, both cameras' calibrations, the synchronised pairs and
+// the same pairs with three boards moved.
+struct SyncRenderedRig {
+  CameraModel cam0, cam1;
+  std::vector<StereoBoardPair> pairs, moved_pairs;
+};
+
+void WriteDetections(std::ostream& out, const std::vector<StereoBoardPair>& pairs) {
+  out << pairs.size() << "\n";
+  for (const StereoBoardPair& pair : pairs) {
+    for (const BoardDetection* detection : {&pair.cam0, &pair.cam1}) {
+      out << detection->found << " " << detection->corners_px.size();
+      for (size_t c = 0; c < detection->corners_px.size(); ++c) {
+        out << " " << detection->corner_ids[c] << " " << detection->corners_px[c].x() << " "
+            << detection->corners_px[c].y();
+      }
+      out << "\n";
+    }
+  }
+}
+
+std::vector<StereoBoardPair> ReadDetections(std::istream& in) {
+  size_t num_pairs = 0;
+  in >> num_pairs;
+  std::vector<StereoBoardPair> pairs(num_pairs);
+  for (size_t i = 0; i < num_pairs; ++i) {
+    pairs[i].name = "pair_" + std::to_string(i);
+    for (BoardDetection* detection : {&pairs[i].cam0, &pairs[i].cam1}) {
+      size_t n = 0;
+      in >> detection->found >> n;
+      detection->corners_px.resize(n);
+      detection->corner_ids.resize(n);
+      for (size_t c = 0; c < n; ++c) {
+        in >> detection->corner_ids[c] >> detection->corners_px[c].x() >>
+            detection->corners_px[c].y();
+      }
+      if (!detection->found) detection->reason = "not found";
+    }
+  }
+  return pairs;
+}
+
+void WriteCamera(std::ostream& out, const CameraModel& camera) {
+  out << camera.width << " " << camera.height;
+  for (double p : camera.intrinsics.params) out << " " << p;
+  out << "\n";
+}
+
+CameraModel ReadCamera(std::istream& in) {
+  CameraModel camera;
+  in >> camera.width >> camera.height;
+  for (double& p : camera.intrinsics.params) in >> p;
+  return camera;
+}
+
+// Tallies of the synchronisation test over rendered rigs, per intrinsics setting.
+struct SyncTally {
+  int rigs = 0, rigs_losing = 0;
+  int pairs = 0, pairs_over_5 = 0, pairs_over_1 = 0, pairs_over_01 = 0;
+  std::array<int, 3> moved_found{}, moved_tried{};
+  int moved_rigs = 0, others_flagged = 0, others = 0;
+  double max_ratio = 0.0;
+};
+
+// How many pairs the test left out as unsynchronised.
+int NumLeftOutAsUnsynchronised(const RelativePoseReport& report) {
+  int count = 0;
+  for (const RelativePosePairReport& pair : report.pairs) {
+    count += pair.reason.find("exposures not simultaneous?") != std::string::npos ? 1 : 0;
+  }
+  return count;
+}
+
+
+// Pairs 3, 9 and 15 of the moved copy: boards moved by 1, 2 and 3 mm.
+SyncRenderedRig RenderSyncRig(uint64_t seed, const std::string& cache_dir) {
+  const std::string file = "sync_" + std::to_string(seed) + ".txt";
+  const std::filesystem::path path =
+      cache_dir.empty() ? std::filesystem::path() : std::filesystem::path(cache_dir) / file;
+  SyncRenderedRig rig;
+  if (!path.empty() && std::filesystem::exists(path)) {
+    std::ifstream in(path);
+    rig.cam0 = ReadCamera(in);
+    rig.cam1 = ReadCamera(in);
+    rig.pairs = ReadDetections(in);
+    rig.moved_pairs = ReadDetections(in);
+    return rig;
+  }
+  const synth::StereoBoardSet set =
+      synth::MakeStereoBoardSet(synth::QuickStereoBoardOptions(20, seed));
+  const BoardSpec board = ToBoardSpec(set.board);
+  double max_error = 0.0, rms0 = 0.0, rms1 = 0.0;
+  rig.pairs = DetectPairs(set, board, 0.0, false, &max_error);
+  rig.cam0 = CalibrateCamera(rig.pairs, 0, set.rig.cam0.width, set.rig.cam0.height, board, &rms0);
+  rig.cam1 = CalibrateCamera(rig.pairs, 1, set.rig.cam1.width, set.rig.cam1.height, board, &rms1);
+  std::mt19937 rng(static_cast<uint32_t>(seed));
+  std::normal_distribution<double> normal(0.0, 1.0);
+  rig.moved_pairs = rig.pairs;
+  const size_t moved[3] = {3, 9, 15};
+  for (int k = 0; k < 3; ++k) {
+    const Eigen::Vector3d direction =
+        Eigen::Vector3d(normal(rng), normal(rng), normal(rng)).normalized();
+    if (!rig.moved_pairs[moved[k]].cam1.found) continue;
+    MoveBoardBeforeCam1(set, moved[k], 0.001 * (k + 1) * direction,
+                        &rig.moved_pairs[moved[k]].cam1);
+  }
+  if (!path.empty()) {
+    std::ofstream out(path);
+    out.precision(17);
+    WriteCamera(out, rig.cam0);
+    WriteCamera(out, rig.cam1);
+    WriteDetections(out, rig.pairs);
+    WriteDetections(out, rig.moved_pairs);
+  }
+  return rig;
+}
+
+// The first round of the synchronisation test on a rig's pairs, nothing left out: each pair's
+// statistic and p-value (the limit set out of reach; the statistics do not depend on it).
+SyncTestReport FirstRoundSyncTest(const SyncRenderedRig& rig, const BoardSpec& board,
+                                  RelativePoseOptions options) {
+  options.sync_test.false_alarm_rate = 1e-12;
+  const RelativePoseReport report =
+      EstimateRelativePose(rig.cam0, rig.cam1, board, rig.pairs, options);
+  return report.success ? report.sync_test : SyncTestReport();
+}
+
+// One rig with one intrinsics setting into `tally`: its first round (per-pair p-values), the
+// test as the job runs it (did it lose a pair?), and the copy with three boards moved.
+void TallySyncRig(const SyncRenderedRig& rig, const BoardSpec& board,
+                  const RelativePoseOptions& options, const std::string& label, std::FILE* csv,
+                  SyncTally* tally) {
+  const SyncTestReport first = FirstRoundSyncTest(rig, board, options);
+  const RelativePoseReport report =
+      EstimateRelativePose(rig.cam0, rig.cam1, board, rig.pairs, options);
+  if (!report.success || !first.run) return;
+  ++tally->rigs;
+  const int lost = NumLeftOutAsUnsynchronised(report);
+  tally->rigs_losing += lost > 0 ? 1 : 0;
+  double largest = 0.0;
+  for (size_t k = 0; k < first.pairs.size(); ++k) {
+    const PairSyncStatistic& pair = first.pairs[k];
+    if (!pair.valid) continue;
+    const double p = SyncStatisticSurvival(pair.statistic, first);
+    ++tally->pairs;
+    tally->pairs_over_5 += p < 0.05 ? 1 : 0;
+    tally->pairs_over_1 += p < 0.01 ? 1 : 0;
+    tally->pairs_over_01 += p < 0.001 ? 1 : 0;
+    largest = std::max(largest, pair.statistic);
+    if (csv == nullptr) continue;
+    std::fprintf(csv, "%s,%zu,%.4f,%.4f,%.4f,%.4f,%.5f,%.5f,%.4e,%.4e,%d,%d,%d\n", label.c_str(),
+                 k, pair.statistic, pair.raw_statistic, first.limit, first.dispersion,
+                 first.corner_noise_px[0], first.corner_noise_px[1], pair.own_variance_px2[0],
+                 pair.own_variance_px2[1], pair.own_dof[0], pair.own_dof[1], lost);
+  }
+  tally->max_ratio = std::max(tally->max_ratio, largest / report.sync_test.limit);
+  std::printf("%s: %zu pairs tested, %d left out (largest first-round statistic %.1f, limit %.1f, "
+              "dispersion %.2f, noise %.4f / %.4f px)\n",
+              label.c_str(), first.pairs.size(), lost, largest, report.sync_test.limit,
+              first.dispersion, first.corner_noise_px[0], first.corner_noise_px[1]);
+  const RelativePoseReport moved =
+      EstimateRelativePose(rig.cam0, rig.cam1, board, rig.moved_pairs, options);
+  if (!moved.success) return;
+  ++tally->moved_rigs;
+  for (size_t i = 0; i < rig.moved_pairs.size(); ++i) {
+    const int k = i == 3 ? 0 : i == 9 ? 1 : i == 15 ? 2 : -1;
+    const bool left_out =
+        moved.pairs[i].reason.find("exposures not simultaneous?") != std::string::npos;
+    if (k >= 0 && rig.moved_pairs[i].cam0.found && rig.moved_pairs[i].cam1.found) {
+      ++tally->moved_tried[k];
+      tally->moved_found[k] += left_out ? 1 : 0;
+    } else if (k < 0 && moved.pairs[i].sync_statistic >= 0.0) {
+      ++tally->others;
+      tally->others_flagged += left_out ? 1 : 0;
+    }
+  }
+}
+
+void PrintSyncTallies(const std::array<SyncTally, 2>& tally) {
+  std::printf("| intrinsics | rigs losing a pair (target 1 %%) | pairs with p < 5 %% | < 1 %% | "
+              "< 0.1 %% | largest statistic / limit |\n|---|---|---|---|---|---|\n");
+  for (int refine = 0; refine < 2; ++refine) {
+    const SyncTally& t = tally[refine];
+    std::printf("| %s | %s | %s | %s | %s | %.2f |\n",
+                refine ? "refined with the rig" : "kept (fixed)",
+                RateText(t.rigs_losing, t.rigs).c_str(), RateText(t.pairs_over_5, t.pairs).c_str(),
+                RateText(t.pairs_over_1, t.pairs).c_str(),
+                RateText(t.pairs_over_01, t.pairs).c_str(), t.max_ratio);
+  }
+  std::printf("\nPower: the same rigs with 3 pairs whose board moved between the exposures\n"
+              "| intrinsics | 1 mm found | 2 mm found | 3 mm found | other pairs left out |\n"
+              "|---|---|---|---|---|\n");
+  for (int refine = 0; refine < 2; ++refine) {
+    const SyncTally& t = tally[refine];
+    std::printf("| %s | %s | %s | %s | %s |\n", refine ? "refined with the rig" : "kept (fixed)",
+                RateText(t.moved_found[0], t.moved_tried[0]).c_str(),
+                RateText(t.moved_found[1], t.moved_tried[1]).c_str(),
+                RateText(t.moved_found[2], t.moved_tried[2]).c_str(),
+                RateText(t.others_flagged, t.others).c_str());
+  }
+}
+
+// 7. The synchronisation test (engine/stereo/relpose_sync.h) on the renderer's synchronised
+// pairs: QuickStereoBoardOptions(20, 3000 + seed), each camera calibrated from its own 20
+// images, the rig with the cameras kept at those calibrations ("fixed") and with the
+// intrinsics refined. The false-alarm rate (rigs losing a pair; the option promises at most
+// sync_false_alarm_rate) with its 95 % interval, each tested pair's p-value against the
+// nominal levels (first round), and the power: three pairs per rig whose board moved by 1, 2
+// and 3 mm (random directions) between the two exposures. --csv writes the first round's
+// per-pair statistics.
+void RunSyncFalseAlarms(bool quick, int first_seed, int num_seeds, const std::string& csv_path,
+                        const std::string& cache_dir) {
+  if (num_seeds <= 0) num_seeds = quick ? 3 : 40;
+  const auto start = std::chrono::steady_clock::now();
+  const auto cpu_start = std::clock();
+  std::array<SyncTally, 2> tally;
+  std::FILE* csv = csv_path.empty() ? nullptr : std::fopen(csv_path.c_str(), "w");
+  if (csv != nullptr) {
+    std::fprintf(csv, "seed,refine,pair,statistic,raw,limit,dispersion,noise0,noise1,var0,var1,"
+                      "dof0,dof1,lost\n");
+  }
+  for (int s = first_seed; s < first_seed + num_seeds; ++s) {
+    const uint64_t seed = 3000 + s;
+    const SyncRenderedRig rig = RenderSyncRig(seed, cache_dir);
+    const BoardSpec board = ToBoardSpec(synth::QuickStereoBoardOptions(20, seed).board);
+    for (int refine = 0; refine < 2; ++refine) {
+      RelativePoseOptions options;
+      options.refine_intrinsics = refine == 1;
+      TallySyncRig(rig, board, options, std::to_string(seed) + "," + std::to_string(refine), csv,
+                   &tally[refine]);
+    }
+  }
+  if (csv != nullptr) std::fclose(csv);
+  std::printf(
+      "\nSynchronisation test on synchronised renders (QuickStereoBoardOptions(20, 3000 + seed), "
+      "seeds %d-%d, each camera calibrated from its 20 images; %.0f s CPU, %.0f s wall); "
+      "sync_false_alarm_rate 0.01\n",
+      3000 + first_seed, 3000 + first_seed + num_seeds - 1,
+      static_cast<double>(std::clock() - cpu_start) / CLOCKS_PER_SEC, Seconds(start));
+  PrintSyncTallies(tally);
+}
+
 }  // namespace
 }  // namespace omnirig
 
@@ -1190,12 +1477,22 @@ int main(int argc, char** argv) {
   std::setvbuf(stdout, nullptr, _IOLBF, 0);  // tables appear as they are measured
   bool quick = false;
   std::string only;  // "synthetic" or "real": one part alone
+  int num_seeds = 0;     // --only sync: rendered rigs (0: the part's default)
+  int first_seed = 0;    // --only sync: the first (seed 3000 + it)
+  std::string csv_path;  // --only sync: per-pair statistics to this file
+  std::string cache_dir;  // --only sync: rendered rigs kept here for reruns
   std::filesystem::path data_dir =
       std::filesystem::path(OMNIRIG_SOURCE_DIR) / ".." / "shared" / "data" / "real";
   for (int i = 1; i < argc; ++i) {
     if (std::strcmp(argv[i], "--quick") == 0) quick = true;
     if (std::strcmp(argv[i], "--data") == 0 && i + 1 < argc) data_dir = argv[++i];
     if (std::strcmp(argv[i], "--only") == 0 && i + 1 < argc) only = argv[++i];
+    if (std::strcmp(argv[i], "--seeds") == 0 && i + 1 < argc) num_seeds = std::atoi(argv[++i]);
+    if (std::strcmp(argv[i], "--first-seed") == 0 && i + 1 < argc) {
+      first_seed = std::atoi(argv[++i]);
+    }
+    if (std::strcmp(argv[i], "--csv") == 0 && i + 1 < argc) csv_path = argv[++i];
+    if (std::strcmp(argv[i], "--cache") == 0 && i + 1 < argc) cache_dir = argv[++i];
   }
   try {
     if (only.empty() || only == "synthetic") omnirig::RunSynthetic(quick);
@@ -1205,6 +1502,9 @@ int main(int argc, char** argv) {
     if (only == "preset") omnirig::RunSyntheticPreset(quick);  // long: on request only
     if (only.empty() || only == "chain") omnirig::RunCameraChain(quick);
     if (only.empty() || only == "real") omnirig::RunRealFisheye(data_dir);
+    if (only == "sync") {
+      omnirig::RunSyncFalseAlarms(quick, first_seed, num_seeds, csv_path, cache_dir);
+    }
   } catch (const std::exception& e) {
     std::fprintf(stderr, "bench_relpose: %s\n", e.what());
     return 1;

@@ -19,9 +19,9 @@ namespace omnirig {
 void RelativePoseOptions::Check() const {
   OMNIRIG_CHECK(consensus_rotation_deg > 0.0 && consensus_rotation_deg < 90.0,
                 "consensus_rotation_deg must be in (0, 90), got " << consensus_rotation_deg);
-  OMNIRIG_CHECK(consensus_translation_fraction > 0.0 && consensus_translation_fraction < 1.0,
-                "consensus_translation_fraction must be in (0, 1), got "
-                    << consensus_translation_fraction);
+  OMNIRIG_CHECK(
+      consensus_translation_fraction > 0.0 && consensus_translation_fraction < 1.0,
+      "consensus_translation_fraction must be in (0, 1), got " << consensus_translation_fraction);
   OMNIRIG_CHECK(max_board_pose_rms_px > 0.0,
                 "max_board_pose_rms_px must be positive, got " << max_board_pose_rms_px);
   sync_test.Check();
@@ -214,13 +214,13 @@ std::string UsedPairsMessage(const RelativePoseReport& report) {
 // The pairs (and single-camera views) that enter the estimate, with what steps 3 and 4 need of
 // each.
 struct UsedPairs {
-  std::vector<size_t> index;  // into the input pairs
+  std::vector<size_t> index;       // into the input pairs
   std::vector<int> single_camera;  // per entry: -1 for a pair, the camera of a single view
   // cam1's own board pose of each cam1 view (entry, pose): its cam0_from_board needs the rig.
   std::vector<std::pair<size_t, Rigid3d>> cam1_views;
   std::vector<RigPairCorners> corners;
   std::vector<Rigid3d> cam0_from_board;
-  std::vector<Rigid3d> per_pair_rigs;  // cam0_from_cam1 of each pair alone
+  std::vector<Rigid3d> per_pair_rigs;                           // cam0_from_cam1 of each pair alone
   std::vector<Eigen::Vector3d> points_in_cam0, points_in_cam1;  // common corners, eq. (9)
 };
 
@@ -258,10 +258,10 @@ UsedPairs CollectUsedPairs(const BoardSpec& board, const std::vector<StereoBoard
       }
       const int camera = pairs[i].cam0.found ? 0 : 1;
       pair_report.used = true;
-      pair_report.num_corners = static_cast<int>(
-          (camera == 0 ? pairs[i].cam0 : pairs[i].cam1).corners_px.size());
-      if (camera == 1) used.cam1_views.emplace_back(used.index.size(),
-                                                    poses[i].cam1_from_board_as_detected);
+      pair_report.num_corners =
+          static_cast<int>((camera == 0 ? pairs[i].cam0 : pairs[i].cam1).corners_px.size());
+      if (camera == 1)
+        used.cam1_views.emplace_back(used.index.size(), poses[i].cam1_from_board_as_detected);
       used.index.push_back(i);
       used.single_camera.push_back(camera);
       used.corners.push_back(SingleViewCorners(board, pairs[i]));
@@ -270,8 +270,9 @@ UsedPairs CollectUsedPairs(const BoardSpec& board, const std::vector<StereoBoard
       continue;
     }
     if (chosen[i] < 0) {
-      pair_report.reason = "disagrees with the other pairs on the rig pose (board moved between "
-                           "the two exposures, or wrong corners)";
+      pair_report.reason =
+          "disagrees with the other pairs on the rig pose (board moved between "
+          "the two exposures, or wrong corners)";
       continue;
     }
     RigPairCorners corners;
@@ -362,7 +363,9 @@ std::string UnsynchronisedReason(const PairSyncStatistic& pair, const SyncTestRe
   os.precision(3);
   os << "the cameras disagree on the board's pose by " << pair.board_offset_m * 1e3 << " mm and "
      << pair.board_rotation_deg << " deg at its centre, beyond what corner noise of "
-     << test.corner_noise_px[0] << " / " << test.corner_noise_px[1] << " px";
+     << std::sqrt(pair.own_variance_px2[0]) << " / " << std::sqrt(pair.own_variance_px2[1])
+     << " px (this pair's own fits; " << test.corner_noise_px[0] << " / "
+     << test.corner_noise_px[1] << " px over all pairs)";
   if (test.dispersion > 1.0) {
     os << " and the spread common to all pairs (dispersion " << test.dispersion << ")";
   }
@@ -377,8 +380,8 @@ std::string UnsynchronisedReason(const PairSyncStatistic& pair, const SyncTestRe
 // calibrations' errors (systematic, different at every board position, and large against
 // corner noise of a few hundredths of a pixel) would count as the pairs' disagreement: on
 // synchronised renders of 20 pairs the test then lost 1 to 5 pairs per rig (statistics up to
-// 64 against a limit of 24 over 4 seeds of QuickStereoBoardOptions). So each pair is also judged by the
-// rig refitted without it, the intrinsics refined (options.fixed_intrinsics held): a camera
+// 64 against a limit of 24 over 4 seeds of QuickStereoBoardOptions). So each pair is also judged by
+// the rig refitted without it, the intrinsics refined (options.fixed_intrinsics held): a camera
 // model near the given one that the other pairs support; the test keeps the reference with
 // the smaller median statistic. Without the pair, so that its own
 // disagreement cannot be absorbed by the intrinsics (refitting with it, a 1 mm move was found
@@ -436,8 +439,8 @@ bool TestSynchronisation(const UsedPairs& used, const RelativePoseOptions& optio
     // Whichever explains the bulk of the pairs better (the smaller median statistic): the
     // given cameras when they are right (with few pairs the refitted intrinsics are the
     // noisier reference), the refitted ones when the calibrations are off.
-    SyncTestReport refitted = TestPairSynchronisation(report->rig, corners, cam0_from_board,
-                                                      options.sync_test, rigs);
+    SyncTestReport refitted =
+        TestPairSynchronisation(report->rig, corners, cam0_from_board, options.sync_test, rigs);
     if (refitted.run && (!report->sync_test.run ||
                          refitted.median_statistic < report->sync_test.median_statistic)) {
       report->sync_test = std::move(refitted);
@@ -474,6 +477,57 @@ ProgressSink RoundProgress(const ProgressSink& progress, int round) {
                       progress.is_cancelled};
 }
 
+// Steps 1 and 2 for every pair: the board's pose in each camera, the rig candidates per
+// corner order, and the order of each pair that makes the pairs agree (-1: none does).
+struct PairsWithOrder {
+  std::vector<BoardSymmetry> symmetries;
+  std::vector<PairPoses> poses;
+  std::vector<int> chosen;
+};
+
+PairsWithOrder EstimateOrderedPairPoses(const CameraModel& cam0, const CameraModel& cam1,
+                                        const BoardSpec& board,
+                                        const std::vector<StereoBoardPair>& pairs,
+                                        const RelativePoseOptions& options,
+                                        const ProgressSink& progress, RelativePoseReport* report) {
+  PairsWithOrder ordered;
+  ordered.symmetries = BoardGridSymmetries(board);
+  if (!options.resolve_corner_order || board.type == BoardSpec::Type::kCharuco) {
+    ordered.symmetries.resize(1);
+  }
+  ordered.poses.resize(pairs.size());
+  std::vector<std::vector<Rigid3d>> candidates(pairs.size());
+  std::vector<double> scales(pairs.size(), 1.0);
+  report->pairs.resize(pairs.size());
+  for (size_t i = 0; i < pairs.size(); ++i) {
+    progress.ThrowIfCancelled();
+    report->pairs[i].name = pairs[i].name;
+    if (pairs[i].single_camera_view) report->pairs[i].single_camera = pairs[i].cam0.found ? 0 : 1;
+    ordered.poses[i] = EstimatePairPoses(cam0, cam1, board, ordered.symmetries, pairs[i], options,
+                                         &report->pairs[i]);
+    candidates[i] = ordered.poses[i].candidates;
+    scales[i] = ordered.poses[i].board_distance_m;
+    progress.Report(0.5 * (i + 1.0) / pairs.size(), "board_pose", pairs[i].name);
+  }
+  ordered.chosen = ChooseConsistentCandidates(candidates, scales, options.consensus_rotation_deg,
+                                              options.consensus_translation_fraction);
+  return ordered;
+}
+
+// The covariance of cam0_from_cam1 in the final fit, into the report.
+void SetRigUncertainty(const UsedPairs& used, const RelativePoseOptions& options,
+                       RelativePoseReport* report) {
+  const RigUncertainty uncertainty = EstimateRigUncertainty(
+      used.corners, options.RefinementOptions(), report->rig, used.cam0_from_board);
+  report->baseline_std_m = uncertainty.baseline_std_m;
+  report->translation_std_m = uncertainty.translation_std_m;
+  report->rotation_std_deg = uncertainty.rotation_std_deg;
+  if (uncertainty.robust_valid) {
+    report->baseline_std_robust_m = uncertainty.robust_baseline_std_m;
+    report->rotation_std_robust_deg = uncertainty.robust_rotation_std_deg;
+  }
+}
+
 }  // namespace
 
 RelativePoseReport EstimateRelativePose(const CameraModel& cam0, const CameraModel& cam1,
@@ -489,36 +543,16 @@ RelativePoseReport EstimateRelativePose(const CameraModel& cam0, const CameraMod
   report.rig.cam0 = cam0;
   report.rig.cam1 = cam1;
 
-  // Step 1: board poses per camera, rig candidates per corner order.
-  std::vector<BoardSymmetry> symmetries = BoardGridSymmetries(board);
-  if (!options.resolve_corner_order || board.type == BoardSpec::Type::kCharuco) {
-    symmetries.resize(1);
-  }
-  std::vector<PairPoses> poses(pairs.size());
-  std::vector<std::vector<Rigid3d>> candidates(pairs.size());
-  std::vector<double> scales(pairs.size(), 1.0);
-  report.pairs.resize(pairs.size());
-  for (size_t i = 0; i < pairs.size(); ++i) {
-    progress.ThrowIfCancelled();
-    report.pairs[i].name = pairs[i].name;
-    if (pairs[i].single_camera_view) report.pairs[i].single_camera = pairs[i].cam0.found ? 0 : 1;
-    poses[i] = EstimatePairPoses(cam0, cam1, board, symmetries, pairs[i], options,
-                                 &report.pairs[i]);
-    candidates[i] = poses[i].candidates;
-    scales[i] = poses[i].board_distance_m;
-    progress.Report(0.5 * (i + 1.0) / pairs.size(), "board_pose", pairs[i].name);
-  }
-  // Step 2: one corner order per pair, consistent across pairs.
-  const std::vector<int> chosen =
-      ChooseConsistentCandidates(candidates, scales, options.consensus_rotation_deg,
-                                 options.consensus_translation_fraction);
+  // Steps 1 and 2: board poses per camera, one corner order per pair.
+  const PairsWithOrder ordered =
+      EstimateOrderedPairPoses(cam0, cam1, board, pairs, options, progress, &report);
   // Steps 3 and 4, again without the pair that step 5 finds least synchronised, until it finds
   // none (at most max_rounds times, and at most half the pairs first used).
   int min_kept = 0;
   UsedPairs used;
   for (int round = 0;; ++round) {
-    used = CollectUsedPairs(board, pairs, symmetries, poses, chosen, options.refine_intrinsics,
-                            &report);
+    used = CollectUsedPairs(board, pairs, ordered.symmetries, ordered.poses, ordered.chosen,
+                            options.refine_intrinsics, &report);
     if (report.num_pairs_used < options.min_num_pairs) {
       report.message = "too few usable pairs (need " + std::to_string(options.min_num_pairs) +
                        "): " + UsedPairsMessage(report);
@@ -535,16 +569,7 @@ RelativePoseReport EstimateRelativePose(const CameraModel& cam0, const CameraMod
     if (!TestSynchronisation(used, options, may_reject, min_kept, &report)) break;
     report.sync_rounds = round + 1;
   }
-  // The covariance of cam0_from_cam1 in the final fit.
-  const RigUncertainty uncertainty = EstimateRigUncertainty(
-      used.corners, options.RefinementOptions(), report.rig, used.cam0_from_board);
-  report.baseline_std_m = uncertainty.baseline_std_m;
-  report.translation_std_m = uncertainty.translation_std_m;
-  report.rotation_std_deg = uncertainty.rotation_std_deg;
-  if (uncertainty.robust_valid) {
-    report.baseline_std_robust_m = uncertainty.robust_baseline_std_m;
-    report.rotation_std_robust_deg = uncertainty.robust_rotation_std_deg;
-  }
+  SetRigUncertainty(used, options, &report);
   report.success = true;
   progress.Report(1.0, "done", RelativePoseSummary(report));
   return report;

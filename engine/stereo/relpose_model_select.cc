@@ -233,6 +233,67 @@ std::vector<size_t> CommonPairs(const RigModelSelection& selection,
   return held_out;
 }
 
+// Every (candidate, fold) as one task: the held-out pair's sum of squares and corner count
+// (FoldError), each fold refitting the candidate as its all-pairs fit was made. Rows of
+// candidates that failed, and every row with fewer than 3 folds, stay zero.
+std::vector<std::vector<std::pair<double, int>>> CrossValidate(
+    const BoardSpec& board, const std::vector<StereoBoardPair>& pairs,
+    const std::vector<size_t>& held_out, const std::vector<RelativePoseOptions>& candidate_options,
+    const RigModelSelection& selection, int num_threads, const ProgressSink& progress) {
+  const size_t num_candidates = candidate_options.size();
+  const std::vector<BoardSymmetry> symmetries = BoardGridSymmetries(board);
+  std::vector<std::pair<size_t, size_t>> tasks;  // (candidate, fold)
+  for (size_t k = 0; k < num_candidates; ++k) {
+    if (!selection.candidates[k].fit.success || held_out.size() < 3) continue;
+    for (size_t f = 0; f < held_out.size(); ++f) tasks.emplace_back(k, f);
+  }
+  std::vector<std::vector<std::pair<double, int>>> folds(
+      num_candidates, std::vector<std::pair<double, int>>(held_out.size()));
+  std::vector<RigRefinementOptions> fold_refine;
+  for (const RelativePoseOptions& candidate : candidate_options) {
+    fold_refine.push_back(candidate.RefinementOptions());
+  }
+  int num_done = 0;
+  RunTasks(
+      static_cast<int>(tasks.size()), num_threads, progress,
+      [&](int t, const ProgressSink& cancellation) {
+        cancellation.ThrowIfCancelled();
+        const auto [k, f] = tasks[t];
+        folds[k][f] = FoldError(board, symmetries, pairs, selection.candidates[k].fit,
+                                fold_refine[k], held_out[f]);
+      },
+      [&](int t) {
+        const auto [k, f] = tasks[t];
+        progress.Report(0.2 + 0.8 * ++num_done / tasks.size(), "cross_validation",
+                        selection.candidates[k].name + " without " + pairs[held_out[f]].name);
+      });
+  return folds;
+}
+
+// Each cross-validated candidate's pooled and per-fold held-out RMS from its folds, and its
+// per-fold sums of squares (`fold_sums`, for the one-standard-error rule). Returns the number
+// of held-out corners (the same for every candidate: the folds hold out the same pairs).
+double ScoreFolds(const std::vector<std::vector<std::pair<double, int>>>& folds,
+                  bool cross_validated, std::vector<std::vector<double>>* fold_sums,
+                  RigModelSelection* selection) {
+  fold_sums->assign(folds.size(), {});
+  double total_count = 0.0;
+  for (size_t k = 0; k < folds.size(); ++k) {
+    RigModelScore& score = selection->candidates[k];
+    if (!score.fit.success || !cross_validated) continue;
+    double sum = 0.0, count = 0.0;
+    for (const auto& [fold_sum, fold_count] : folds[k]) {
+      (*fold_sums)[k].push_back(fold_sum);
+      score.fold_rms_px.push_back(std::sqrt(fold_sum / fold_count));
+      sum += fold_sum;
+      count += fold_count;
+    }
+    score.cv_rms_px = std::sqrt(sum / count);
+    total_count = count;
+  }
+  return total_count;
+}
+
 }  // namespace
 
 RigModelSelection SelectRigIntrinsicsModel(const BoardSpec& board,
@@ -246,49 +307,10 @@ RigModelSelection SelectRigIntrinsicsModel(const BoardSpec& board,
   FitCandidates(board, pairs, candidates, options, progress, &candidate_options, &selection);
   const std::vector<size_t> held_out = CommonPairs(selection, pairs);
   for (size_t i : held_out) selection.held_out.push_back(pairs[i].name);
-  const std::vector<BoardSymmetry> symmetries = BoardGridSymmetries(board);
-  // Every (candidate, fold) pair is one task; the sums are taken in fold order afterwards.
-  std::vector<std::pair<size_t, size_t>> tasks;  // (candidate, fold)
-  for (size_t k = 0; k < candidates.size(); ++k) {
-    if (!selection.candidates[k].fit.success || held_out.size() < 3) continue;
-    for (size_t f = 0; f < held_out.size(); ++f) tasks.emplace_back(k, f);
-  }
-  std::vector<std::vector<std::pair<double, int>>> folds(
-      candidates.size(), std::vector<std::pair<double, int>>(held_out.size()));
-  // Each fold refits the candidate as its all-pairs fit was made.
-  std::vector<RigRefinementOptions> fold_refine;
-  for (size_t k = 0; k < candidates.size(); ++k) {
-    fold_refine.push_back(candidate_options[k].RefinementOptions());
-  }
-  int num_done = 0;
-  RunTasks(
-      static_cast<int>(tasks.size()), options.num_threads, progress,
-      [&](int t, const ProgressSink& cancellation) {
-        cancellation.ThrowIfCancelled();
-        const auto [k, f] = tasks[t];
-        folds[k][f] = FoldError(board, symmetries, pairs, selection.candidates[k].fit,
-                                fold_refine[k], held_out[f]);
-      },
-      [&](int t) {
-        const auto [k, f] = tasks[t];
-        progress.Report(0.2 + 0.8 * ++num_done / tasks.size(), "cross_validation",
-                        selection.candidates[k].name + " without " + pairs[held_out[f]].name);
-      });
-  std::vector<std::vector<double>> fold_sums(candidates.size());
-  double total_count = 0.0;
-  for (size_t k = 0; k < candidates.size(); ++k) {
-    RigModelScore& score = selection.candidates[k];
-    if (!score.fit.success || held_out.size() < 3) continue;
-    double sum = 0.0, count = 0.0;
-    for (const auto& [fold_sum, fold_count] : folds[k]) {
-      fold_sums[k].push_back(fold_sum);
-      score.fold_rms_px.push_back(std::sqrt(fold_sum / fold_count));
-      sum += fold_sum;
-      count += fold_count;
-    }
-    score.cv_rms_px = std::sqrt(sum / count);
-    total_count = count;
-  }
+  const auto folds = CrossValidate(board, pairs, held_out, candidate_options, selection,
+                                   options.num_threads, progress);
+  std::vector<std::vector<double>> fold_sums;
+  const double total_count = ScoreFolds(folds, held_out.size() >= 3, &fold_sums, &selection);
   ApplyOneStandardErrorRule(fold_sums, total_count, &selection);
   if (selection.chosen < 0) {
     // Too few common pairs to cross-validate: the simplest candidate that could be fitted.

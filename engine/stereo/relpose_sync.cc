@@ -34,6 +34,33 @@ double ChiSquareUpperQuantile(double p, int dof) {
   return 0.5 * (low + high);
 }
 
+double ScaledFSurvival(double x, int dof, double denominator_dof) {
+  OMNIRIG_CHECK(dof > 0 && dof % 2 == 0, "F survival needs an even numerator dof, got " << dof);
+  OMNIRIG_CHECK(denominator_dof > 0.0, "F survival needs a positive denominator dof");
+  if (x <= 0.0) return 1.0;
+  // P(m F(m, n) > x) = I_z(n/2, m/2), z = n / (n + x), for even m a finite sum:
+  // z^(n/2) sum_{j < m/2} Gamma(n/2 + j) / (Gamma(n/2) j!) (1 - z)^j.
+  const double half_n = 0.5 * denominator_dof;
+  const double z = denominator_dof / (denominator_dof + x);
+  double term = 1.0, sum = 1.0;
+  for (int j = 1; j < dof / 2; ++j) {
+    term *= (half_n + j - 1.0) / j * (1.0 - z);
+    sum += term;
+  }
+  return std::min(1.0, std::exp(half_n * std::log(z)) * sum);
+}
+
+double ScaledFUpperQuantile(double p, int dof, double denominator_dof) {
+  OMNIRIG_CHECK(p > 0.0 && p < 1.0, "probability must be in (0, 1), got " << p);
+  double low = 0.0, high = dof + 10.0;
+  while (ScaledFSurvival(high, dof, denominator_dof) > p) high *= 2.0;
+  for (int i = 0; i < 200 && high - low > 1e-12 * high; ++i) {
+    const double mid = 0.5 * (low + high);
+    (ScaledFSurvival(mid, dof, denominator_dof) > p ? low : high) = mid;
+  }
+  return 0.5 * (low + high);
+}
+
 void SyncTestOptions::Check() const {
   OMNIRIG_CHECK(false_alarm_rate >= 0.0 && false_alarm_rate < 1.0,
                 "sync_test.false_alarm_rate must be in [0, 1), got " << false_alarm_rate);
@@ -112,6 +139,11 @@ PairSyncStatistic PairStatistic(const StereoRig& rig, const RigPairCorners& pair
                        separate.sum_squares[1] / (noise[1] * noise[1]);
   // The separate fits are the unconstrained optimum: a negative difference is round-off.
   *raw_statistic = std::max(0.0, joint - apart);
+  statistic.raw_statistic = *raw_statistic;
+  for (int c = 0; c < 2; ++c) {
+    statistic.own_dof[c] = separate.dof[c];
+    statistic.own_variance_px2[c] = separate.sum_squares[c] / separate.dof[c];
+  }
   const Rigid3d& own0 = *separate.cam_from_board[0];
   const Rigid3d via_cam1 = rig.cam0_from_cam1 * *separate.cam_from_board[1];
   const Eigen::Vector3d centre = RigPairBoardCentre(pair);
@@ -122,7 +154,88 @@ PairSyncStatistic PairStatistic(const StereoRig& rig, const RigPairCorners& pair
   return statistic;
 }
 
+// The noise a pair's T is judged by, against the rig's (sigma0, sigma1 per camera): its
+// separate fits' whitened sum of squares per degree of freedom when that is above 1 (a pair
+// noisier than most: farther, more oblique or more blurred on renders), else 1. Never below
+// 1, because part of T does not shrink with the pair's own noise: the reference rig's error
+// at the pair and the detector's errors common to all pairs (with w alone, clean pairs were
+// flagged: bench_relpose --only sync, docs/relpose.md). Each camera's own variance is taken
+// as at least min_noise_px^2 (exact synthetic corners).
+double OwnNoiseRatio(const SeparateFit& fit, const std::array<double, 2>& noise,
+                     double min_noise_px) {
+  double whitened = 0.0;
+  for (int c = 0; c < 2; ++c) {
+    const double variance = std::max(fit.sum_squares[c] / fit.dof[c], min_noise_px * min_noise_px);
+    whitened += variance * fit.dof[c] / (noise[c] * noise[c]);
+  }
+  return std::max(1.0, whitened / (fit.dof[0] + fit.dof[1]));
+}
+
+// x, a value of 6 F(6, dof), as the chi^2_6 value of the same tail probability: every
+// pair's statistic on one scale, against one limit.
+double OnChiSquareScale(double x, int dof) {
+  constexpr double kSmallest = 1e-290;  // below it the order is kept by x itself
+  const double p = ScaledFSurvival(x, kPoseDof, dof);
+  if (p < kSmallest) return std::max(x, ChiSquareUpperQuantile(kSmallest, kPoseDof));
+  return ChiSquareUpperQuantile(std::min(p, 1.0 - 1e-16), kPoseDof);
+}
+
+// Step 3's common extra variance beta (in units of the corner noise): the smallest beta >= 0
+// with median T_i / (w_i + beta) at most `median_null`, the median of 6 F(6, dof).
+double CommonExtraVariance(const std::vector<double>& raw, const std::vector<double>& scale,
+                           double median_null) {
+  const auto excess = [&](double beta) {
+    std::vector<double> ratios;
+    for (size_t i = 0; i < raw.size(); ++i) ratios.push_back(raw[i] / (scale[i] + beta));
+    return Median(ratios) - median_null;
+  };
+  if (excess(0.0) <= 0.0) return 0.0;
+  double low = 0.0, high = 1.0;
+  while (excess(high) > 0.0) high *= 2.0;
+  for (int i = 0; i < 100 && high - low > 1e-9 * high; ++i) {
+    const double mid = 0.5 * (low + high);
+    (excess(mid) > 0.0 ? low : high) = mid;
+  }
+  return 0.5 * (low + high);
+}
+
+// Steps 3 and 4 (the dispersion and the decision) from each valid pair's T (`raw`) and its
+// separate fits.
+void Decide(const std::vector<double>& raw, const std::vector<SeparateFit>& separate,
+            const SyncTestOptions& options, SyncTestReport* report) {
+  std::vector<size_t> valid;
+  std::vector<double> valid_raw, scale, whitened, dofs;
+  for (size_t i = 0; i < raw.size(); ++i) {
+    if (!report->pairs[i].valid) continue;
+    valid.push_back(i);
+    valid_raw.push_back(raw[i]);
+    scale.push_back(
+        OwnNoiseRatio(separate[i], report->corner_noise_px, options.min_corner_noise_px));
+    whitened.push_back(raw[i] / scale.back());
+    dofs.push_back(separate[i].dof[0] + separate[i].dof[1]);
+  }
+  report->median_statistic = Median(whitened);
+  const double beta =
+      CommonExtraVariance(valid_raw, scale, ScaledFUpperQuantile(0.5, kPoseDof, Median(dofs)));
+  report->dispersion = 1.0 + beta;
+  report->limit = ChiSquareUpperQuantile(options.false_alarm_rate / valid.size(), kPoseDof);
+  for (size_t k = 0; k < valid.size(); ++k) {
+    PairSyncStatistic& pair = report->pairs[valid[k]];
+    pair.statistic = OnChiSquareScale(valid_raw[k] / (scale[k] + beta), static_cast<int>(dofs[k]));
+    pair.flagged = pair.statistic > report->limit;
+    if (!pair.flagged) continue;
+    ++report->num_flagged;
+    if (report->worst < 0 || pair.statistic > report->pairs[report->worst].statistic) {
+      report->worst = static_cast<int>(valid[k]);
+    }
+  }
+}
+
 }  // namespace
+
+double SyncStatisticSurvival(double x, const SyncTestReport& /*report*/) {
+  return ChiSquareSurvival(x, kPoseDof);
+}
 
 std::array<double, 2> EstimatePairCornerNoise(const StereoRig& rig,
                                               const std::vector<RigPairCorners>& pairs,
@@ -147,36 +260,23 @@ SyncTestReport TestPairSynchronisation(const StereoRig& rig,
   std::vector<SeparateFit> separate;
   for (const RigPairCorners& pair : pairs) separate.push_back(FitSeparately(rig, pair));
   report.corner_noise_px = CornerNoise(separate, options);
-  std::vector<double> raw(pairs.size(), 0.0), valid_raw;
+  std::vector<double> raw(pairs.size(), 0.0);
+  size_t num_valid = 0;
   for (size_t i = 0; i < pairs.size(); ++i) {
     if (!rig_of_pair.empty()) {
       separate[i] = FitSeparately(rig_of_pair[i], pairs[i]);
-      report.pairs[i] = PairStatistic(rig_of_pair[i], pairs[i], separate[i],
-                                      report.corner_noise_px, cam0_from_board[i], &raw[i]);
-      if (report.pairs[i].valid) valid_raw.push_back(raw[i]);
+      report.pairs[i] = PairStatistic(rig_of_pair[i], pairs[i], separate[i], report.corner_noise_px,
+                                      cam0_from_board[i], &raw[i]);
+      num_valid += report.pairs[i].valid ? 1 : 0;
       continue;
     }
     report.pairs[i] = PairStatistic(rig, pairs[i], separate[i], report.corner_noise_px,
                                     cam0_from_board[i], &raw[i]);
-    if (report.pairs[i].valid) valid_raw.push_back(raw[i]);
+    num_valid += report.pairs[i].valid ? 1 : 0;
   }
-  if (valid_raw.size() < 3) return report;
+  if (num_valid < 3) return report;
   report.run = true;
-  report.median_statistic = Median(valid_raw);
-  report.dispersion =
-      std::max(1.0, report.median_statistic / ChiSquareUpperQuantile(0.5, kPoseDof));
-  report.limit = ChiSquareUpperQuantile(options.false_alarm_rate / valid_raw.size(), kPoseDof);
-  for (size_t i = 0; i < pairs.size(); ++i) {
-    PairSyncStatistic& pair = report.pairs[i];
-    if (!pair.valid) continue;
-    pair.statistic = raw[i] / report.dispersion;
-    pair.flagged = pair.statistic > report.limit;
-    if (!pair.flagged) continue;
-    ++report.num_flagged;
-    if (report.worst < 0 || pair.statistic > report.pairs[report.worst].statistic) {
-      report.worst = static_cast<int>(i);
-    }
-  }
+  Decide(raw, separate, options, &report);
   return report;
 }
 

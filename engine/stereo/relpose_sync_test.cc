@@ -31,6 +31,19 @@ TEST(ChiSquare, SurvivalAndQuantilesMatchTables) {
   EXPECT_THROW(ChiSquareUpperQuantile(0.0, 6), InvalidArgument);
 }
 
+// 6 F(6, n) against F tables (F_0.05(6, 20) = 2.599, F_0.01(6, 20) = 3.871, F_0.05(6, 120) =
+// 2.175), and its limit chi^2_6 for large n.
+TEST(ScaledF, SurvivalAndQuantilesMatchTables) {
+  EXPECT_NEAR(ScaledFSurvival(6 * 2.599, 6, 20), 0.05, 1e-4);
+  EXPECT_NEAR(ScaledFSurvival(6 * 3.871, 6, 20), 0.01, 1e-5);
+  EXPECT_NEAR(ScaledFSurvival(6 * 2.175, 6, 120), 0.05, 1e-4);
+  EXPECT_NEAR(ScaledFSurvival(16.8119, 6, 1e7), 0.01, 1e-6);
+  EXPECT_NEAR(ScaledFUpperQuantile(0.01, 6, 20), 6 * 3.871, 1e-2);
+  EXPECT_DOUBLE_EQ(ScaledFSurvival(0.0, 6, 90), 1.0);
+  EXPECT_THROW(ScaledFSurvival(1.0, 5, 90), InvalidArgument);
+  EXPECT_THROW(ScaledFSurvival(1.0, 6, 0.0), InvalidArgument);
+}
+
 TEST(SyncTestOptions, InvalidValuesThrow) {
   SyncTestOptions options;
   options.Check();

@@ -10,6 +10,8 @@
 
 #include "engine/calib/board.h"
 #include "engine/calib/detect.h"
+#include "engine/geometry/unified_camera.h"
+#include "engine/synth/presets.h"
 #include "engine/synth/scene.h"
 
 namespace omnirig {
@@ -35,6 +37,30 @@ inline double MeanCornerError(const BoardDetection& detection,
     turned += (detection.corners_px[i] - truth[n - 1 - id]).norm();
   }
   return std::min(direct, turned) / std::max<size_t>(1, detection.corners_px.size());
+}
+
+// cam1's detection of rendered pair `pair` of `set` as if the board had moved by
+// `shift_in_cam0_m` (cam0's frame) between the two exposures: each detected corner displaced
+// by the exact change of its projection in the true camera (the corner it is: the nearest
+// rendered one), so that the detector's own error stays as rendered. Unsynchronised pairs for
+// the synchronisation test's power, without rendering again.
+inline void MoveBoardBeforeCam1(const synth::StereoBoardSet& set, size_t pair,
+                                const Eigen::Vector3d& shift_in_cam0_m, BoardDetection* cam1) {
+  const Rigid3d& cam0_from_board = set.cam0_from_board[pair];
+  const Rigid3d moved(cam0_from_board.rotation, cam0_from_board.translation + shift_in_cam0_m);
+  const Rigid3d cam1_from_cam0 = set.rig.cam0_from_cam1.Inverse();
+  const std::vector<Eigen::Vector3d> object = ToBoardSpec(set.board).ObjectPoints();
+  const std::vector<Eigen::Vector2d>& truth = set.corners_px[1][pair];
+  for (Eigen::Vector2d& corner : cam1->corners_px) {
+    size_t id = 0;
+    for (size_t k = 1; k < truth.size(); ++k) {
+      if ((truth[k] - corner).squaredNorm() < (truth[id] - corner).squaredNorm()) id = k;
+    }
+    const auto before =
+        Project(set.rig.cam1.intrinsics, cam1_from_cam0 * cam0_from_board * object[id]);
+    const auto after = Project(set.rig.cam1.intrinsics, cam1_from_cam0 * moved * object[id]);
+    if (before && after) corner += *after - *before;
+  }
 }
 
 }  // namespace omnirig
