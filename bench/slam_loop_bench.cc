@@ -45,6 +45,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "engine/slam/evaluation.h"
+#include "engine/slam/map_io.h"
 #include "engine/slam/slam.h"
 #include "engine/synth/presets.h"
 #include "engine/util/timer.h"
@@ -130,15 +131,11 @@ double ResidentMegabytes() {
 
 // trajectory.tum: "timestamp tx ty tz qx qy qz qw" per frame, world_from_rig.
 void WriteTum(const synth::StereoSequence& sequence, const fs::path& path) {
-  std::ofstream out(path);
-  out << std::setprecision(12);
+  std::vector<slam::StampedPose> poses;
   for (size_t i = 0; i < sequence.world_from_rig.size(); ++i) {
-    const Rigid3d& pose = sequence.world_from_rig[i];
-    const Eigen::Quaterniond q = pose.rotation.normalized();
-    out << sequence.timestamps_s[i] << ' ' << pose.translation.x() << ' ' << pose.translation.y()
-        << ' ' << pose.translation.z() << ' ' << q.x() << ' ' << q.y() << ' ' << q.z() << ' '
-        << q.w() << '\n';
+    poses.push_back({sequence.timestamps_s[i], sequence.world_from_rig[i]});
   }
+  slam::WriteTum(path, poses);
 }
 
 std::vector<Rigid3d> ReadTum(const fs::path& path) {
