@@ -109,9 +109,12 @@ TEST_F(RelativePoseReal, FisheyePairsGiveTheReferenceBaseline) {
   EXPECT_LT(report.rms_px, 0.5);
   // Left camera = cam0: the right camera sits ~110 mm along cam0's +x.
   EXPECT_GT(report.rig.cam0_from_cam1.translation.x(), 0.1);
-  // The README's figure for this configuration ("free"): 109.740 mm (-0.20 % of the
-  // reference), to the stated precision.
-  EXPECT_NEAR(report.baseline_m, 0.109740, 0.0005e-3);
+  // The README's figure for this configuration ("free"): 109.74 mm (-0.20 % of the
+  // reference), to the stated precision. The figures are stated to 0.01 mm, not 0.001: the
+  // solver's stopping rule and another CPU's rounding move them by about 0.5 micrometre (session 8
+  // measured 109.7400, the next CI run 109.7395), still 100 times below the covariance's
+  // std (0.059 mm).
+  EXPECT_NEAR(report.baseline_m, 0.10974, 0.005e-3);
   EXPECT_LT(RotationDistanceRad(report.rig.cam0_from_cam1.rotation, Eigen::Quaterniond::Identity()),
             3.0 * M_PI / 180.0);
 }
@@ -134,8 +137,8 @@ TEST_F(RelativePoseReal, TangentialTermsMoveTheBaselineByMoreThanItsStd) {
   EXPECT_EQ(without.rig.cam0.intrinsics.params[UnifiedIntrinsics::kK3], 0.0);
   EXPECT_LT(without.rms_px, with_tangential.rms_px + 0.02);
   EXPECT_GT(without.baseline_m - with_tangential.baseline_m, 3.0 * with_tangential.baseline_std_m);
-  // The README's figure for "tangential_fixed": 110.003 mm (+0.038 %), 0.232 px.
-  EXPECT_NEAR(without.baseline_m, 0.110003, 0.0005e-3);
+  // The README's figure for "tangential_fixed": 110.00 mm (+0.04 %), 0.232 px.
+  EXPECT_NEAR(without.baseline_m, 0.11000, 0.005e-3);
   EXPECT_NEAR(without.rms_px, 0.232, 0.0005);
 }
 
@@ -215,13 +218,13 @@ TEST_F(RelativePoseReal, CrossValidationScoresEveryModelAndFollowsItsRule) {
   for (int k = 0; k < selection.chosen; ++k) {  // every simpler model is more than 1 SE worse
     EXPECT_GT(selection.candidates[k].cv_excess_mse_px2, selection.candidates[k].cv_excess_se_px2);
   }
-  // The job's default: "tangential_fixed", 110.003 mm (+0.038 %), 0.232 px, 21 of 29 pairs
+  // The job's default: "tangential_fixed", 110.00 mm (+0.04 %), 0.232 px, 21 of 29 pairs
   // (docs/relpose.md). Before the synchronisation test judged the "fixed" candidate's pairs by
   // rigs with refined intrinsics (relative_pose.cc, SyncTestRigs), that candidate lost pairs
   // to its cameras' calibration error, the folds (the pairs every candidate kept) were others,
   // and the rule chose "tangential_free_cam0" (109.736 mm, -0.205 %, 0.225 px).
   EXPECT_EQ(chosen.name, "tangential_fixed");
-  EXPECT_NEAR(chosen.fit.baseline_m, 0.110003, 0.0005e-3);
+  EXPECT_NEAR(chosen.fit.baseline_m, 0.11000, 0.005e-3);
   EXPECT_NEAR(chosen.fit.rms_px, 0.232, 0.0005);
   EXPECT_EQ(chosen.fit.num_pairs_used, 21);
 }
