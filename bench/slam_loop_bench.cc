@@ -138,16 +138,6 @@ void WriteTum(const synth::StereoSequence& sequence, const fs::path& path) {
   slam::WriteTum(path, poses);
 }
 
-std::vector<Rigid3d> ReadTum(const fs::path& path) {
-  std::ifstream in(path);
-  std::vector<Rigid3d> poses;
-  double t, x, y, z, qx, qy, qz, qw;
-  while (in >> t >> x >> y >> z >> qx >> qy >> qz >> qw) {
-    poses.emplace_back(Eigen::Quaterniond(qw, qx, qy, qz), Eigen::Vector3d(x, y, z));
-  }
-  return poses;
-}
-
 // Renders the sequence into args.dir unless it holds it already; returns the frame names.
 std::vector<std::string> RenderOrLoad(const LoopArgs& args, std::vector<Rigid3d>* truth) {
   const fs::path dir(args.dir);
@@ -172,7 +162,10 @@ std::vector<std::string> RenderOrLoad(const LoopArgs& args, std::vector<Rigid3d>
     std::printf("read the rendered sequence from %s (delete it to render again)\n",
                 args.dir.c_str());
   }
-  *truth = ReadTum(dir / "trajectory.tum");
+  truth->clear();
+  for (const slam::StampedPose& pose : slam::ReadTum(dir / "trajectory.tum")) {
+    truth->push_back(pose.world_from_rig);
+  }
   std::vector<std::string> names;
   for (const auto& entry : fs::directory_iterator(dir / "cam0")) {
     if (entry.path().extension() == ".png") names.push_back(entry.path().stem().string());
