@@ -242,8 +242,10 @@ const StereoRig& CheckedRig(const StereoRig& rig, const DenseStereoOptions& opti
 }  // namespace
 
 DenseStereo::DenseStereo(const StereoRig& rig, const DenseStereoOptions& options)
-    : rig_(rig), options_(options), rectifier_(CheckedRig(rig, options), options.grid) {
-  const double step = rectifier_.theta_step_rad(), baseline = rectifier_.baseline_m();
+    : rig_(rig),
+      options_(options),
+      rectifier_(SharedRectifier(CheckedRig(rig, options), options.grid)) {
+  const double step = rectifier_->theta_step_rad(), baseline = rectifier_->baseline_m();
   const double max_parallax_rad = options_.max_parallax_deg * M_PI / 180.0;
   const int cells = static_cast<int>(std::ceil(max_parallax_rad / step));
   num_disparities_ = std::max(16, (cells + 15) / 16 * 16);
@@ -255,9 +257,9 @@ DenseStereo::DenseStereo(const StereoRig& rig, const DenseStereoOptions& options
     cot_parallax_[k] = std::cos(parallax) / sin_p;
     range_std_per_sin_theta_[k] = baseline / (sin_p * sin_p) * options_.disparity_std_cells * step;
   }
-  for (int c = 0; c < rectifier_.cols(); ++c) {
-    sin_theta_.push_back(std::sin(rectifier_.Theta(c)));
-    cos_theta_.push_back(std::cos(rectifier_.Theta(c)));
+  for (int c = 0; c < rectifier_->cols(); ++c) {
+    sin_theta_.push_back(std::sin(rectifier_->Theta(c)));
+    cos_theta_.push_back(std::cos(rectifier_->Theta(c)));
   }
 }
 
@@ -271,12 +273,12 @@ DenseStereo::RectifiedPair DenseStereo::RectifyPair(const cv::Mat& image0,
       [&](const cv::Range& cameras) {
         for (int camera = cameras.start; camera < cameras.end; ++camera) {
           if (camera == 0) {
-            pair.colour0 = rectifier_.Rectify(image0, 0);
+            pair.colour0 = rectifier_->Rectify(image0, 0);
             pair.grey0 = Grey(pair.colour0);
-            pair.mask0 = GridMirrorMask(pair.grey0, rectifier_.ValidMask(0), options_);
+            pair.mask0 = GridMirrorMask(pair.grey0, rectifier_->ValidMask(0), options_);
           } else {
-            pair.grey1 = rectifier_.Rectify(Grey(image1), 1);
-            pair.mask1 = GridMirrorMask(pair.grey1, rectifier_.ValidMask(1), options_);
+            pair.grey1 = rectifier_->Rectify(Grey(image1), 1);
+            pair.mask1 = GridMirrorMask(pair.grey1, rectifier_->ValidMask(1), options_);
           }
         }
       },
@@ -289,7 +291,7 @@ void DenseStereo::TriangulateCells(const cv::Mat& disparity16, const cv::Mat& co
                                    DensePairResult* result) const {
   const int rows = disparity16.rows, width = disparity16.cols;
   const int num_values = static_cast<int>(cot_parallax_.size());
-  const double baseline = rectifier_.baseline_m();
+  const double baseline = rectifier_->baseline_m();
   const float scale = static_cast<float>(result->confidence_scale);
   std::vector<int> row_mirror(rows, 0), row_matched(rows, 0);
   std::vector<double> row_confidence(rows, 0.0);
@@ -344,12 +346,12 @@ void DenseStereo::CollectPoints(const GridCells& cells, const cv::Mat& colour0,
     row_start[r + 1] = row_start[r] + cv::countNonZero(cells.range.row(r));
   }
   result->points.resize(row_start[rows]);
-  const Eigen::Matrix3d& cam0_from_grid = rectifier_.cam0_from_grid();
+  const Eigen::Matrix3d& cam0_from_grid = rectifier_->cam0_from_grid();
   cv::parallel_for_(cv::Range(0, rows), [&](const cv::Range& range_of_rows) {
     for (int r = range_of_rows.start; r < range_of_rows.end; ++r) {
       // A cell's direction is sin(theta) (cos phi, sin phi, 0) + cos(theta) (0, 0, 1) in the
       // grid's frame.
-      const double phi = rectifier_.Phi(r);
+      const double phi = rectifier_->Phi(r);
       const Eigen::Vector3d across =
           cam0_from_grid * Eigen::Vector3d(std::cos(phi), std::sin(phi), 0.0);
       const Eigen::Vector3d along = cam0_from_grid.col(2);
@@ -385,7 +387,7 @@ DensePairResult DenseStereo::Reconstruct(const cv::Mat& image0, const cv::Mat& i
   progress.ThrowIfCancelled();
   DensePairResult result;
   result.seconds.rectify = timer.ElapsedSeconds();
-  const int rows = rectifier_.rows(), cols = rectifier_.cols();
+  const int rows = rectifier_->rows(), cols = rectifier_->cols();
   GridCells cells{cv::Mat::zeros(rows, cols, CV_32F), cv::Mat::zeros(rows, cols, CV_32F),
                   cv::Mat::zeros(rows, cols, CV_32F)};
   const auto [first, last] = UsedColumns(pair.mask0, pair.mask1);

@@ -10,6 +10,7 @@
 
 #include <array>
 #include <cstdint>
+#include <memory>
 #include <utility>
 #include <vector>
 
@@ -100,7 +101,8 @@ struct DensePairResult {
   } seconds;
 };
 
-// Built once per rig (the rectification tables); Reconstruct() is const.
+// Holds the rig's rectification tables (SharedRectifier: built once per rig in the process);
+// Reconstruct() is const.
 class DenseStereo {
  public:
   // Throws InvalidArgument for invalid options or rig.
@@ -110,7 +112,7 @@ class DenseStereo {
   DensePairResult Reconstruct(const cv::Mat& image0, const cv::Mat& image1,
                               const ProgressSink& progress = ProgressSink()) const;
 
-  const SphericalRectifier& rectifier() const { return rectifier_; }
+  const SphericalRectifier& rectifier() const { return *rectifier_; }
   int num_disparities() const { return num_disparities_; }
 
  private:
@@ -139,7 +141,7 @@ class DenseStereo {
 
   StereoRig rig_;
   DenseStereoOptions options_;
-  SphericalRectifier rectifier_;
+  std::shared_ptr<const SphericalRectifier> rectifier_;  // SharedRectifier: built once per rig
   int num_disparities_ = 0;
   // Per SGBM disparity value k (k / 16 cells of parallax p, k in [1, 16 num_disparities)): the
   // law of sines as range = baseline (sin(theta0) cot(p) + cos(theta0)) and its std
