@@ -397,6 +397,20 @@ std::optional<BoardDetection> TryCostlyVariants(const cv::Mat& grey,
   return try_one(upsampled, true, kSectorFlags);
 }
 
+// No checkerboard found: why, in words a user can act on (what a detectable view needs, or
+// why the last candidate was rejected).
+BoardDetection NotFound(const BoardSpec& board, const std::string& last_reason) {
+  BoardDetection detection;
+  detection.reason = last_reason.empty()
+                         ? "no " + board.Describe() +
+                               " found: the whole board must be in view (every inner corner, "
+                               "clear of the mirror's rim, the camera's reflection and hands), "
+                               "sharp, and not washed out by glare; cols and rows count inner "
+                               "corners"
+                         : "rejected candidate: " + last_reason;
+  return detection;
+}
+
 BoardDetection DetectCheckerboard(const cv::Mat& grey, const BoardSpec& board,
                                   const DetectOptions& options) {
   const bool small = std::max(grey.cols, grey.rows) <= 800;
@@ -434,16 +448,14 @@ BoardDetection DetectCheckerboard(const cv::Mat& grey, const BoardSpec& board,
     equalised.suffix = plain.front().suffix + equalised.suffix;
     if (auto detection = try_one(equalised, true, kSectorFlags)) return *detection;
   }
-  if (!options.try_enhanced) {
+  // With the equalised image tried, the plain ones join the costly variants: on the real sets
+  // the plain image never gave a board the equalised one did not.
+  if (!options.try_enhanced || options.try_costly_variants) {
     for (const DetectorImage& variant : plain) {
       if (auto detection = try_one(variant, true, kSectorFlags)) return *detection;
     }
   }
   if (options.try_enhanced && options.try_costly_variants) {
-    // On the real sets the plain image never gave a board the equalised one did not.
-    for (const DetectorImage& variant : plain) {
-      if (auto detection = try_one(variant, true, kSectorFlags)) return *detection;
-    }
     if (auto detection =
             TryCostlyVariants(grey, EqualisedImage(grey), small, plain.size() > 1, try_one)) {
       return *detection;
@@ -456,16 +468,7 @@ BoardDetection DetectCheckerboard(const cv::Mat& grey, const BoardSpec& board,
       return *detection;
     }
   }
-  BoardDetection detection;
-  // In words a user can act on: what a detectable view needs.
-  detection.reason = last_reason.empty()
-                         ? "no " + board.Describe() +
-                               " found: the whole board must be in view (every inner corner, "
-                               "clear of the mirror's rim, the camera's reflection and hands), "
-                               "sharp, and not washed out by glare; cols and rows count inner "
-                               "corners"
-                         : "rejected candidate: " + last_reason;
-  return detection;
+  return NotFound(board, last_reason);
 }
 
 BoardDetection DetectCharuco(const cv::Mat& grey, const BoardSpec& board,
