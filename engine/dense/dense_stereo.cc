@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
 #include <tuple>
 #include <vector>
 
@@ -160,43 +161,65 @@ cv::Mat GridMirrorMask(const cv::Mat& grey_on_grid, const cv::Mat& valid,
   return mask;
 }
 
+namespace {
+constexpr int kEpipolarHalfWindow = 5;  // 11 x 11 windows
+
+// EpipolarOffset's sample at cam0's cell (r, c), inside the images by the search's margin: the
+// distance (cells) of its best match in cam1, over the disparity range and `search` rows either
+// side, from row r; none when the window is textureless or the best match is not clear.
+std::optional<double> RowOffset(const cv::Mat& grey0, const cv::Mat& grey1, int r, int c,
+                                int num_disparities, int search) {
+  constexpr int kHalf = kEpipolarHalfWindow;
+  constexpr double kMinCorrelation = 0.8;  // a clear match
+  constexpr double kMinTextureGrey = 8.0;  // window standard deviation
+  const cv::Rect window(c - kHalf, r - kHalf, 2 * kHalf + 1, 2 * kHalf + 1);
+  cv::Scalar mean, deviation;
+  cv::meanStdDev(grey0(window), mean, deviation);
+  if (deviation[0] < kMinTextureGrey) return std::nullopt;
+  // cam1's match of column c lies at c - d, d in [0, num_disparities).
+  const int left = std::max(0, c - num_disparities - kHalf);
+  const cv::Rect area(left, r - search - kHalf, c + kHalf + 1 - left, 2 * (search + kHalf) + 1);
+  cv::Mat scores;
+  cv::matchTemplate(grey1(area), grey0(window), scores, cv::TM_CCOEFF_NORMED);
+  double best = 0.0;
+  cv::Point at;
+  cv::minMaxLoc(scores, nullptr, &best, nullptr, &at);
+  if (!(best >= kMinCorrelation)) return std::nullopt;
+  double offset = at.y - search;
+  if (at.y > 0 && at.y + 1 < scores.rows) {  // parabola through the best and its neighbours
+    const double a = scores.at<float>(at.y - 1, at.x), b = scores.at<float>(at.y + 1, at.x);
+    const double curvature = a + b - 2.0 * best;
+    if (curvature < 0.0) offset += 0.5 * (a - b) / curvature;
+  }
+  return std::abs(offset);
+}
+}  // namespace
+
 std::pair<double, int> EpipolarOffset(const cv::Mat& grey0, const cv::Mat& grey1,
                                       const cv::Mat& mask0, int num_disparities,
                                       const DenseStereoOptions& options) {
-  constexpr int kHalf = 5;                 // 11 x 11 windows
-  constexpr double kMinCorrelation = 0.8;  // a clear match
-  constexpr double kMinTextureGrey = 8.0;  // window standard deviation
+  constexpr int kHalf = kEpipolarHalfWindow;
   const int search = options.epipolar_search_rows;
   const int margin = kHalf + search + 1;
   const int lattice_rows = std::max(1, static_cast<int>(std::sqrt(options.epipolar_samples * 5.0)));
   const int lattice_cols = std::max(1, options.epipolar_samples / lattice_rows);
-  std::vector<double> offsets;
-  for (int i = 0; i < lattice_rows; ++i) {
-    const int r = margin + (grey0.rows - 2 * margin) * (2 * i + 1) / (2 * lattice_rows);
-    for (int j = 0; j < lattice_cols; ++j) {
-      const int c = kHalf + 1 + (grey0.cols - 2 * kHalf - 2) * (2 * j + 1) / (2 * lattice_cols);
-      if (r < margin || r >= grey0.rows - margin || !mask0.at<uint8_t>(r, c)) continue;
-      const cv::Rect window(c - kHalf, r - kHalf, 2 * kHalf + 1, 2 * kHalf + 1);
-      cv::Scalar mean, deviation;
-      cv::meanStdDev(grey0(window), mean, deviation);
-      if (deviation[0] < kMinTextureGrey) continue;
-      // cam1's match of column c lies at c - d, d in [0, num_disparities).
-      const int left = std::max(0, c - num_disparities - kHalf);
-      const cv::Rect area(left, r - search - kHalf, c + kHalf + 1 - left, 2 * (search + kHalf) + 1);
-      cv::Mat scores;
-      cv::matchTemplate(grey1(area), grey0(window), scores, cv::TM_CCOEFF_NORMED);
-      double best = 0.0;
-      cv::Point at;
-      cv::minMaxLoc(scores, nullptr, &best, nullptr, &at);
-      if (!(best >= kMinCorrelation)) continue;
-      double offset = at.y - search;
-      if (at.y > 0 && at.y + 1 < scores.rows) {  // parabola through the best and its neighbours
-        const double a = scores.at<float>(at.y - 1, at.x), b = scores.at<float>(at.y + 1, at.x);
-        const double curvature = a + b - 2.0 * best;
-        if (curvature < 0.0) offset += 0.5 * (a - b) / curvature;
+  // Lattice rows in parallel, each into its own list (the order of the matches does not matter
+  // to the median).
+  std::vector<std::vector<double>> row_offsets(lattice_rows);
+  cv::parallel_for_(cv::Range(0, lattice_rows), [&](const cv::Range& lattice_range) {
+    for (int i = lattice_range.start; i < lattice_range.end; ++i) {
+      const int r = margin + (grey0.rows - 2 * margin) * (2 * i + 1) / (2 * lattice_rows);
+      for (int j = 0; j < lattice_cols; ++j) {
+        const int c = kHalf + 1 + (grey0.cols - 2 * kHalf - 2) * (2 * j + 1) / (2 * lattice_cols);
+        if (r < margin || r >= grey0.rows - margin || !mask0.at<uint8_t>(r, c)) continue;
+        const std::optional<double> offset = RowOffset(grey0, grey1, r, c, num_disparities, search);
+        if (offset) row_offsets[i].push_back(*offset);
       }
-      offsets.push_back(std::abs(offset));
     }
+  });
+  std::vector<double> offsets;
+  for (const std::vector<double>& row : row_offsets) {
+    offsets.insert(offsets.end(), row.begin(), row.end());
   }
   const int num = static_cast<int>(offsets.size());
   if (num < 30) return {-1.0, num};

@@ -24,7 +24,11 @@
 namespace omnirig::dense {
 
 struct DenseStereoOptions {
-  SphericalGridOptions grid;
+  // The grid: by default 1.25 times the images' finest angular step (bench_dense: on the room
+  // renders the same accuracy as the finest step with a 5-cell window, 2/3 of the points, about
+  // 0.6 of the CPU; the 0.4 s per pair). grid.step_factor 1 (or grid.step_rad) keeps
+  // every detail of the images.
+  SphericalGridOptions grid{0.0, 1.25};
   // The largest parallax searched (the angle at the point between the two rays). A point at
   // angle theta from the baseline and range r has parallax ~ baseline * sin(theta) / r: 8 degrees
   // reaches 0.7 m for a 0.1 m baseline.
@@ -32,8 +36,10 @@ struct DenseStereoOptions {
   // cv::StereoSGBM: matching window (odd), smoothness P1 = 8 w^2 and P2 = 32 w^2 (grey levels),
   // uniqueness margin in percent, speckle filter (regions smaller than speckle_window_cells whose
   // disparity varies by at most speckle_range_cells are removed), and the left-right
-  // consistency check's largest disagreement in cells.
-  int block_size = 5;
+  // consistency check's largest disagreement in cells. A 7-cell window costs SGBM no more than
+  // a 5-cell one (the path aggregation dominates) and matches more of the room's surfaces within
+  // 1 % of range (bench_dense).
+  int block_size = 7;
   int uniqueness_ratio = 10;
   int speckle_window_cells = 100;
   int speckle_range_cells = 2;
