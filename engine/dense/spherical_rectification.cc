@@ -199,8 +199,8 @@ std::shared_ptr<const SphericalRectifier> SharedRectifier(const StereoRig& rig,
   static std::mutex mutex;
   static std::list<Entry> cache;  // most recently used first
   const std::vector<double> key = RectifierKey(rig, options);
-  // Held while building: a second job of the same rig waits for the tables instead of building
-  // them again.
+  // Held while building (up to a second): a second job of the same rig waits for the tables
+  // instead of building them again; one of another rig waits too, which is rare and short.
   std::lock_guard<std::mutex> lock(mutex);
   for (auto it = cache.begin(); it != cache.end(); ++it) {
     if (it->first != key) continue;
