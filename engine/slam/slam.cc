@@ -53,6 +53,7 @@ void SlamOptions::Check() const {
                 "loop_min_keyframe_gap and loop_max_candidates must be at least 1");
   OMNIRIG_CHECK(loop_min_score >= 0 && loop_min_score <= 1, "loop_min_score must be in [0, 1]");
   OMNIRIG_CHECK(loop_max_distance_m > 0, "loop_max_distance_m must be positive");
+  OMNIRIG_CHECK(loop_max_drift_fraction >= 0, "loop_max_drift_fraction must not be negative");
   OMNIRIG_CHECK(loop_min_inliers >= 8, "loop_min_inliers must be at least 8");
   OMNIRIG_CHECK(loop_min_correction_m >= 0 && loop_min_correction_deg >= 0,
                 "loop corrections must not be negative");
@@ -121,6 +122,7 @@ struct StoredKeyframe {
   Frame frame;
   BowVector bow;
   int order = 0;  // position among the keyframes
+  double path_m = 0;  // the path travelled from the first keyframe, along the keyframes
   bool linked = false;
 };
 
@@ -632,6 +634,13 @@ void Tracker::AddKeyframe(Frame* frame, FrameReport* report) {
   StoredKeyframe& stored = keyframes_[index];
   stored.order = static_cast<int>(keyframe_order_.size());
   stored.linked = report->linked;
+  if (!keyframe_order_.empty()) {
+    const int previous = keyframe_order_.back();
+    stored.path_m = keyframes_.at(previous).path_m +
+                    (map_.rig_from_world[index].Inverse().translation -
+                     map_.rig_from_world[previous].Inverse().translation)
+                        .norm();
+  }
   stored.frame.index = index;
   stored.frame.keyframe = true;
   stored.frame.features[0] = frame->features[0];
@@ -721,17 +730,15 @@ void Tracker::Restart(const std::optional<Rigid3d>& restart_pose, Frame* frame,
 }
 std::optional<PlaceMatch> Tracker::VerifyPlace(const Frame& frame, int keyframe) {
   const Frame& candidate = keyframes_.at(keyframe).frame;
-  Frame matchable = candidate;  // float descriptors for the matcher and EstimateMotion
-  matchable.features[0].descriptors = FloatDescriptors(candidate.features[0].descriptors);
   const std::vector<std::pair<int, int>> matches = MatchDescriptors(
-      matchable.features[0].descriptors, frame.features[0].descriptors,
+      FloatDescriptors(candidate.features[0].descriptors), frame.features[0].descriptors,
       options_.temporal_max_descriptor_ratio, options_.stereo.max_descriptor_distance);
   if (static_cast<int>(matches.size()) < options_.loop_min_inliers) return std::nullopt;
   // On the sphere with the stereo scale: E's inliers must agree with the stereo points of both
   // frames in 3D (EstimateScale's consensus), not only on bearings.
   FrameReport scratch;
   Rigid3d frame_from_keyframe;
-  if (!EstimateMotion(matchable, frame, matches, &frame_from_keyframe, &scratch) ||
+  if (!EstimateMotion(candidate, frame, matches, &frame_from_keyframe, &scratch) ||
       scratch.motion_source != "essential+scale" ||
       scratch.num_essential_inliers < options_.loop_min_inliers) {
     return std::nullopt;
@@ -773,10 +780,18 @@ std::optional<PlaceMatch> Tracker::VerifyPlace(const Frame& frame, int keyframe)
 }
 
 bool Tracker::DetectLoop(Frame* frame, const BowVector& bow) {
-  const int order = keyframes_.at(frame->index).order;
+  const StoredKeyframe& current = keyframes_.at(frame->index);
+  const Eigen::Vector3d position = map_.rig_from_world[frame->index].Inverse().translation;
+  // Only keyframes that tracking's estimate, drift allowed for, puts near enough to pass the
+  // distance rule after verification.
   auto accept = [&](int keyframe) {
     const StoredKeyframe& stored = keyframes_.at(keyframe);
-    return stored.linked && stored.order + options_.loop_min_keyframe_gap < order;
+    if (!stored.linked || stored.order + options_.loop_min_keyframe_gap >= current.order) {
+      return false;
+    }
+    const double reach = options_.loop_max_distance_m +
+                         options_.loop_max_drift_fraction * (current.path_m - stored.path_m);
+    return (map_.rig_from_world[keyframe].Inverse().translation - position).norm() <= reach;
   };
   for (const KeyframeDatabase::Candidate& candidate : database_.Query(
            bow, accept, options_.loop_min_score, options_.loop_max_candidates)) {

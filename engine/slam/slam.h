@@ -82,6 +82,11 @@ struct SlamOptions {
   // recognised from further away give weaker relative poses (on the 100 m city block, a match
   // 7.8 m away moved a pose by 28 cm where the drift was millimetres) and are not revisits.
   double loop_max_distance_m = 1.5;
+  // Candidates are verified only when tracking's estimate puts them within loop_max_distance_m
+  // plus this fraction of the path travelled since them (the drift tracking may have gathered;
+  // it measures 0.1-0.5 % on the renders, so 5 % is a wide margin): verification matches every
+  // descriptor of both keyframes and is the costly part of place recognition.
+  double loop_max_drift_fraction = 0.05;
   // A loop whose correction is below both only fuses the landmarks seen again (the local
   // adjustment absorbs it); above either, the pose graph and the global adjustment run.
   double loop_min_correction_m = 0.05;
