@@ -9,7 +9,7 @@ const Frame* Tracker::Relocalise(Frame* frame, std::vector<std::pair<int, int>>*
                                  FrameReport* report) {
   if (keyframes_.empty()) return nullptr;
   const StageClock timer;
-  frame->bow = vocabulary_.Transform(frame->features[0].descriptors);
+  frame->bow = vocabulary_.Transform(frame->features[0].descriptors, &frame->words);
   const std::vector<KeyframeDatabase::Candidate> candidates = database_.Query(
       *frame->bow, [](int) { return true; }, options_.loop_min_score, options_.loop_max_candidates);
   const Frame* found = nullptr;

@@ -420,9 +420,13 @@ void Tracker::AddKeyframe(Frame* frame, FrameReport* report) {
   map_timer.ChargeTo(&StageTimes::map_s, report);
 
   const StageClock loop_timer;
-  stored.bow = frame->bow ? std::move(*frame->bow)
-                         : vocabulary_.Transform(frame->features[0].descriptors);
-  frame->bow.reset();
+  if (frame->bow) {
+    stored.bow = std::move(*frame->bow);
+    stored.words = std::move(frame->words);
+    frame->bow.reset();
+  } else {
+    stored.bow = vocabulary_.Transform(frame->features[0].descriptors, &stored.words);
+  }
   working_ = frame;
   bool adjusted_globally = false;
   if (options_.loop_closure && report->linked) {

@@ -60,14 +60,16 @@ struct Frame {
   std::vector<int> keyframe_feature_of;
   int chain_keyframe = -1;
   bool keyframe = false;
-  // cam0's bag of words once computed (relocalisation needs it before the frame becomes a
-  // keyframe, which needs it again).
+  // cam0's bag of words and each cam0 feature's word, once computed (relocalisation needs
+  // them before the frame becomes a keyframe, which needs them again).
   std::optional<BowVector> bow;
+  std::vector<int> words;
 };
 
 struct StoredKeyframe {
   Frame frame;
   BowVector bow;
+  std::vector<int> words;  // per cam0 feature, its vocabulary word
   int order = 0;  // position among the keyframes
   double path_m = 0;  // the path travelled from the first keyframe, along the keyframes
   bool linked = false;
@@ -151,9 +153,9 @@ class Tracker {
   void AddKeyframe(Frame* frame, FrameReport* report);
   void AddNewLandmarks(Frame* frame, FrameReport* report);
   void LocalBundleAdjustment(FrameReport* report);
-  // Whether keyframe `keyframe` sees the place `frame` shows: descriptor matches, E on the
-  // bearings with the stereo scale (3D-3D agreement), then the keyframe's landmarks confirmed
-  // in the frame at the pose that gives.
+  // Whether keyframe `keyframe` sees the place `frame` (a keyframe already stored) shows:
+  // descriptor matches within vocabulary nodes, E on the bearings with the stereo scale (3D-3D
+  // agreement), then the keyframe's landmarks confirmed in the frame at the pose that gives.
   std::optional<PlaceMatch> VerifyPlace(const Frame& frame, int keyframe);
   // Loop closure for a linked keyframe; returns whether the global adjustment ran.
   bool DetectLoop(Frame* frame, const BowVector& bow);
