@@ -14,8 +14,10 @@
 // keyframes; the other frames follow their keyframes.
 //
 // Place recognition: every keyframe's bag of words (vocabulary.h) is queried against the older
-// keyframes; a candidate is verified on the sphere (essential matrix on bearings, the stereo
-// scale's 3D-3D agreement, then the candidate's landmarks in the keyframe). A verified loop
+// keyframes that tracking's estimate puts near enough (loop_max_distance_m plus a drift
+// allowance); a candidate is verified on the sphere (descriptors matched within vocabulary
+// nodes, essential matrix on bearings, the stereo scale's 3D-3D agreement, then the candidate's
+// landmarks in the keyframe). A verified loop
 // fuses the landmarks seen again; when the correction it implies is larger than the noise, a
 // pose graph (pose_graph.h) spreads it over the keyframes and the global bundle adjustment
 // follows. A candidate that fails verification changes nothing.
