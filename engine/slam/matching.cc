@@ -2,7 +2,9 @@
 
 #include <cmath>
 #include <limits>
+#include <unordered_map>
 
+#include <opencv2/core/hal/hal.hpp>
 #include <opencv2/features2d.hpp>
 
 #include "engine/stereo/epipolar.h"
@@ -33,13 +35,9 @@ struct Best {
   }
 };
 
+// OpenCV's vectorised kernel: the compiler may not reorder a float sum into SIMD lanes.
 float SquaredDistance(const float* a, const float* b, int n) {
-  float sum = 0;
-  for (int i = 0; i < n; ++i) {
-    const float d = a[i] - b[i];
-    sum += d * d;
-  }
-  return sum;
+  return cv::hal::normL2Sqr_(a, b, n);
 }
 
 }  // namespace
@@ -159,6 +157,42 @@ std::vector<std::pair<int, int>> MatchDescriptorsGated(const CameraFeatures& a,
     }
   }
   for (int i = 0; i < na; ++i) {
+    const int j = best_a[i].index;
+    if (best_a[i].Passes(max_ratio, max_distance) && best_b[j].index == i &&
+        best_b[j].Passes(max_ratio, max_distance)) {
+      matches.emplace_back(i, j);
+    }
+  }
+  return matches;
+}
+
+std::vector<std::pair<int, int>> MatchDescriptorsInGroups(const cv::Mat& descriptors_a,
+                                                          const std::vector<int>& group_a,
+                                                          const cv::Mat& descriptors_b,
+                                                          const std::vector<int>& group_b,
+                                                          double max_ratio, double max_distance) {
+  OMNIRIG_CHECK(descriptors_a.type() == CV_32F && descriptors_b.type() == CV_32F &&
+                    descriptors_a.cols == descriptors_b.cols,
+                "descriptors must be float rows of one size");
+  OMNIRIG_CHECK(group_a.size() == static_cast<size_t>(descriptors_a.rows) &&
+                    group_b.size() == static_cast<size_t>(descriptors_b.rows),
+                "one group per descriptor");
+  std::unordered_map<int, std::vector<int>> members_b;
+  for (int j = 0; j < descriptors_b.rows; ++j) members_b[group_b[j]].push_back(j);
+  const int dims = descriptors_a.cols;
+  std::vector<Best> best_a(descriptors_a.rows), best_b(descriptors_b.rows);
+  for (int i = 0; i < descriptors_a.rows; ++i) {
+    const auto group = members_b.find(group_a[i]);
+    if (group == members_b.end()) continue;
+    const float* da = descriptors_a.ptr<float>(i);
+    for (int j : group->second) {
+      const float d = SquaredDistance(da, descriptors_b.ptr<float>(j), dims);
+      best_a[i].Offer(d, j);
+      best_b[j].Offer(d, i);
+    }
+  }
+  std::vector<std::pair<int, int>> matches;
+  for (int i = 0; i < descriptors_a.rows; ++i) {
     const int j = best_a[i].index;
     if (best_a[i].Passes(max_ratio, max_distance) && best_b[j].index == i &&
         best_b[j].Passes(max_ratio, max_distance)) {
