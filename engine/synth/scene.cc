@@ -88,6 +88,17 @@ uint64_t DeriveSeed(uint64_t seed, uint64_t salt) {
   return z ^ (z >> 31);
 }
 
+TextureSpec RichTexture(uint64_t seed, uint64_t salt, const Eigen::Vector3d& rgb,
+                        double shapes_per_m2, double texel_size_m) {
+  TextureSpec spec;
+  spec.texel_size_m = texel_size_m;
+  spec.style = TextureSpec::Style::kRich;
+  spec.seed = DeriveSeed(seed, salt);
+  spec.color_rgb = rgb;
+  spec.shapes_per_m2 = shapes_per_m2;
+  return spec;
+}
+
 void CheckerboardSpec::Check() const {
   OMNIRIG_CHECK(cols >= 2 && rows >= 2,
                 "a board needs at least 2 x 2 inner corners, got " << cols << " x " << rows);

@@ -123,6 +123,11 @@ inline std::array<int, 2> BoxFaceAxes(int axis) {
 // Derives an independent seed from (seed, salt) (SplitMix64): for faces, views and layers.
 uint64_t DeriveSeed(uint64_t seed, uint64_t salt);
 
+// The presets' textures: kRich, its seed derived from (seed, salt), tinted by `rgb`; the
+// defaults are TextureSpec's.
+TextureSpec RichTexture(uint64_t seed, uint64_t salt, const Eigen::Vector3d& rgb,
+                        double shapes_per_m2 = 40.0, double texel_size_m = 0.005);
+
 // A texture of the given spec covering extent_x_m x extent_y_m (CV_8UC1).
 cv::Mat MakeTexture(const TextureSpec& spec, double extent_x_m, double extent_y_m);
 
