@@ -8,6 +8,7 @@
 #include <opencv2/videoio.hpp>
 
 #include "api/camera_json.h"
+#include "engine/geometry/test_rig.h"
 #include "engine/util/check.h"
 
 namespace omnirig::api {
@@ -15,18 +16,6 @@ namespace {
 
 namespace fs = std::filesystem;
 using nlohmann::json;
-
-StereoRig TinyRig(int width, int height) {
-  StereoRig rig;
-  for (CameraModel* camera : {&rig.cam0, &rig.cam1}) {
-    camera->width = width;
-    camera->height = height;
-    camera->intrinsics.params = {0.9, 0.3 * height, 0.3 * height, width / 2.0, height / 2.0, 0,
-                                 0, 0, 0, 0, 0};
-  }
-  rig.cam0_from_cam1 = Rigid3d(Eigen::Quaterniond::Identity(), Eigen::Vector3d(0, 0, 0.1));
-  return rig;
-}
 
 class TempDataset : public ::testing::Test {
  protected:
@@ -128,36 +117,36 @@ TEST_F(TempDataset, PairsFramesByName) {
   WriteImage("cam0/a.png", 64, 48);
   WriteImage("cam1/a.png", 64, 48);
   names_.push_back("gt.tum");  // other files are ignored
-  const SlamSequence sequence = PrepareSlamSequence(TinyRig(64, 48), dir_, names_);
+  const SlamSequence sequence = PrepareSlamSequence(TinyTestRig(64, 48), dir_, names_);
   EXPECT_EQ(sequence.names, (std::vector<std::string>{"a.png", "b.png"}));
   EXPECT_EQ(sequence.cam1[1], "cam1/b.png");
 }
 
-TEST_F(TempDataset, RefusesMissingPartners) {
-  WriteImage("cam0/a.png", 64, 48);
-  WriteImage("cam1/a.png", 64, 48);
-  WriteImage("cam0/b.png", 64, 48);
-  const std::string message =
-      ExpectInvalid([&] { PrepareSlamSequence(TinyRig(64, 48), dir_, names_); });
-  EXPECT_NE(message.find("cam0/b.png has no cam1/b.png"), std::string::npos) << message;
-}
-
-TEST_F(TempDataset, RefusesMismatchedImageSizes) {
-  WriteImage("cam0/a.png", 64, 48);
-  WriteImage("cam1/a.png", 64, 48);
-  WriteImage("cam0/b.jpg", 64, 48);
-  WriteImage("cam1/b.jpg", 80, 48);
-  const std::string message =
-      ExpectInvalid([&] { PrepareSlamSequence(TinyRig(64, 48), dir_, names_); });
-  EXPECT_NE(message.find("cam1/b.jpg is 80x48"), std::string::npos) << message;
-}
-
-TEST_F(TempDataset, RefusesARigCalibratedForAnotherSize) {
-  WriteImage("cam0/a.png", 64, 48);
-  WriteImage("cam1/a.png", 64, 48);
-  const std::string message =
-      ExpectInvalid([&] { PrepareSlamSequence(TinyRig(1024, 768), dir_, names_); });
-  EXPECT_NE(message.find("calibrated for 1024x768"), std::string::npos) << message;
+// Each bad dataset is refused with the reason: a frame without its partner, a pair of other
+// sizes, a rig calibrated for other images.
+TEST_F(TempDataset, RefusesBadPairsAndARigOfAnotherSize) {
+  const struct {
+    std::vector<std::pair<std::string, int>> images;  // name, width (all 48 px high)
+    int rig_width, rig_height;
+    std::string reason;
+  } cases[] = {
+      {{{"cam0/a.png", 64}, {"cam1/a.png", 64}, {"cam0/b.png", 64}},
+       64,
+       48,
+       "cam0/b.png has no cam1/b.png"},
+      {{{"cam0/a.png", 64}, {"cam1/a.png", 64}, {"cam0/b.jpg", 64}, {"cam1/b.jpg", 80}},
+       64,
+       48,
+       "cam1/b.jpg is 80x48"},
+      {{{"cam0/a.png", 64}, {"cam1/a.png", 64}}, 1024, 768, "calibrated for 1024x768"},
+  };
+  for (const auto& c : cases) {
+    names_.clear();
+    for (const auto& [name, width] : c.images) WriteImage(name, width, 48);
+    const std::string message = ExpectInvalid(
+        [&] { PrepareSlamSequence(TinyTestRig(c.rig_width, c.rig_height), dir_, names_); });
+    EXPECT_NE(message.find(c.reason), std::string::npos) << message;
+  }
 }
 
 TEST_F(TempDataset, RefusesAGroundTruthOfTheWrongLengthBeforeWork) {
@@ -165,7 +154,7 @@ TEST_F(TempDataset, RefusesAGroundTruthOfTheWrongLengthBeforeWork) {
   WriteImage("cam1/a.png", 64, 48);
   std::ofstream(dir_ / "gt.tum") << "0 0 0 0 0 0 0 1\n1 0 0 0 0 0 0 1\n";
   const std::string message = ExpectInvalid([&] {
-    RunSlamOnDataset(TinyRig(64, 48), dir_, names_, slam::SlamOptions(), dir_ / "gt.tum",
+    RunSlamOnDataset(TinyTestRig(64, 48), dir_, names_, slam::SlamOptions(), dir_ / "gt.tum",
                      dir_ / "out", ProgressSink(), nullptr);
   });
   EXPECT_NE(message.find("2 poses but the sequence has 1"), std::string::npos) << message;
@@ -182,7 +171,7 @@ TEST_F(TempDataset, BlackFramesAreReportedLostNotFatal) {
                                 fractions.push_back(f);
                               },
                               nullptr};
-  const json result = RunSlamOnDataset(TinyRig(64, 48), dir_, names_, slam::SlamOptions(),
+  const json result = RunSlamOnDataset(TinyTestRig(64, 48), dir_, names_, slam::SlamOptions(),
                                        std::nullopt, dir_ / "out", progress, nullptr);
   EXPECT_EQ(result["num_frames"], 3);
   EXPECT_EQ(result["num_tracked"], 0);
@@ -206,7 +195,7 @@ TEST_F(TempDataset, ARefinementThatCannotRunSaysWhy) {
   }
   slam::SlamOptions options;
   options.calibration_refinement.refine = slam::CalibrationRefinement::kIntrinsics;
-  const json result = RunSlamOnDataset(TinyRig(64, 48), dir_, names_, options, std::nullopt,
+  const json result = RunSlamOnDataset(TinyTestRig(64, 48), dir_, names_, options, std::nullopt,
                                        dir_ / "out", ProgressSink(), nullptr);
   const json& refinement = result["calibration_refinement"];
   ASSERT_TRUE(refinement.is_object());
@@ -229,9 +218,9 @@ TEST_F(TempDataset, FrameStepOnImages) {
   gt.close();
   slam::VideoFrameOptions frames;
   frames.frame_step = 2;
-  const json result = RunSlamOnDataset(TinyRig(64, 48), dir_, names_, slam::SlamOptions(),
-                                       dir_ / "gt.tum", dir_ / "out", ProgressSink(), nullptr,
-                                       std::nullopt, frames);
+  const json result =
+      RunSlamOnDataset(TinyTestRig(64, 48), dir_, names_, slam::SlamOptions(), dir_ / "gt.tum",
+                       dir_ / "out", ProgressSink(), nullptr, std::nullopt, frames);
   ASSERT_EQ(result["num_frames"], 3);
   EXPECT_EQ(result["frames"][1]["name"], "c.png");
   EXPECT_EQ(result["input"]["kind"], "images");
@@ -256,9 +245,9 @@ TEST_F(TempDataset, VideoFramesByTimeAndGroundTruthByTimestamp) {
   slam::VideoFrameOptions frames;
   frames.start_s = 0.15;
   frames.end_s = 0.45;
-  const json result = RunSlamOnDataset(TinyRig(64, 48), dir_, names_, slam::SlamOptions(),
-                                       dir_ / "gt.tum", dir_ / "out", ProgressSink(), nullptr,
-                                       std::nullopt, frames);
+  const json result =
+      RunSlamOnDataset(TinyTestRig(64, 48), dir_, names_, slam::SlamOptions(), dir_ / "gt.tum",
+                       dir_ / "out", ProgressSink(), nullptr, std::nullopt, frames);
   ASSERT_EQ(result["num_frames"], 3);
   EXPECT_EQ(result["frames"][0]["name"], "t000000.200");
   EXPECT_EQ(result["frames"][2]["name"], "t000000.400");
@@ -266,7 +255,7 @@ TEST_F(TempDataset, VideoFramesByTimeAndGroundTruthByTimestamp) {
   EXPECT_EQ(result["input"]["codec"], "FFV1");
   std::ofstream(dir_ / "gt.tum") << "0 0 0 0 0 0 0 1\n0.1 0 0 0 0 0 0 1\n";
   const std::string message = ExpectInvalid([&] {
-    RunSlamOnDataset(TinyRig(64, 48), dir_, names_, slam::SlamOptions(), dir_ / "gt.tum",
+    RunSlamOnDataset(TinyTestRig(64, 48), dir_, names_, slam::SlamOptions(), dir_ / "gt.tum",
                      dir_ / "out2", ProgressSink(), nullptr, std::nullopt, frames);
   });
   EXPECT_NE(message.find("no pose within 25 ms of the frame at 0.2 s"), std::string::npos)
