@@ -108,6 +108,11 @@ class Scene {
   }
 
  private:
+  using Textures = std::vector<std::shared_ptr<const cv::Mat>>;
+  // Appends a primitive with its textures (none for a checkerboard); returns its index.
+  int Add(PrimitiveInfo::Kind kind, const std::string& name, const Rigid3d& world_from_local,
+          const Eigen::Vector3d& size_m, const TextureSpec& texture, Textures textures);
+
   std::vector<PrimitiveInfo> primitives_;
   std::vector<std::vector<std::shared_ptr<const cv::Mat>>> textures_;
   Eigen::Vector3d background_rgb_{0.55, 0.65, 0.8};
