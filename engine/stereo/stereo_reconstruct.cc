@@ -10,6 +10,7 @@
 #include "engine/calib/detect.h"
 #include "engine/geometry/ply.h"
 #include "engine/geometry/unified_camera.h"
+#include "engine/stereo/best_two.h"
 #include "engine/stereo/essential.h"
 #include "engine/stereo/sift_bias.h"
 #include "engine/stereo/triangulation.h"
@@ -43,24 +44,6 @@ struct Candidate {
   int i, j;
   float squared_distance;
   double epipolar_error_rad;
-};
-
-// Best and second-best squared distances per feature, over the candidates.
-struct BestTwo {
-  int best = -1;
-  float d1 = std::numeric_limits<float>::infinity();
-  float d2 = std::numeric_limits<float>::infinity();
-  void Add(int index, float d) {
-    if (d < d1) {
-      d2 = d1;
-      d1 = d;
-      best = index;
-    } else if (d < d2) {
-      d2 = d;
-    }
-  }
-  // Lowe's ratio on distances (squared distances compare with ratio^2).
-  bool PassesRatio(double ratio) const { return d1 < ratio * ratio * d2; }
 };
 
 std::array<uint8_t, 3> ColourAt(const cv::Mat& image, const cv::Point2f& pt) {
