@@ -200,7 +200,7 @@ std::vector<StereoMatch> MatchAlongEpipolarCurves(const LiftedFeatures& features
         (best1[c.j].best != c.i || !best1[c.j].PassesRatio(options.ratio_test))) {
       continue;
     }
-    matches.push_back({c.i, c.j, std::sqrt(c.squared_distance), c.epipolar_error_rad});
+    matches.push_back({c.i, c.j, c.epipolar_error_rad});
   }
   return matches;
 }

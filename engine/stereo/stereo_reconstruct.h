@@ -59,7 +59,6 @@ struct LiftedFeatures {
 struct StereoMatch {
   int index0 = -1;  // into cam0's LiftedFeatures
   int index1 = -1;  // into cam1's
-  float descriptor_distance = 0.f;
   double epipolar_error_rad = 0.0;  // the larger of the two cameras' eq. (16) angles
 };
 
