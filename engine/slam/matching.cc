@@ -5,7 +5,7 @@
 
 #include <opencv2/features2d.hpp>
 
-#include "engine/stereo/best_two.h"
+#include "engine/stereo/descriptor_match.h"
 #include "engine/stereo/epipolar.h"
 #include "engine/stereo/essential.h"
 #include "engine/stereo/triangulation.h"
@@ -17,15 +17,6 @@ namespace {
 // Distances are squared: the bound is squared too.
 bool Passes(const BestTwo& best, double ratio, double max_distance) {
   return best.best >= 0 && best.d1 <= max_distance * max_distance && best.PassesRatio(ratio);
-}
-
-float SquaredDistance(const float* a, const float* b, int n) {
-  float sum = 0;
-  for (int i = 0; i < n; ++i) {
-    const float d = a[i] - b[i];
-    sum += d * d;
-  }
-  return sum;
 }
 
 }  // namespace
@@ -67,7 +58,7 @@ std::vector<StereoPoint> MatchStereo(const StereoRig& rig, const CameraFeatures&
           b0.cross(b1_in_cam0).norm() > 1e-3) {
         continue;
       }
-      const float d = SquaredDistance(d0, features1.descriptors.ptr<float>(j), dims);
+      const float d = SquaredDescriptorDistance(d0, features1.descriptors.ptr<float>(j), dims);
       best0[i].Add(j, d);
       best1[j].Add(i, d);
     }
@@ -139,7 +130,7 @@ std::vector<std::pair<int, int>> MatchDescriptorsGated(const CameraFeatures& a,
     for (int j = 0; j < nb; ++j) {
       const float* bj = &bearings_b[3 * j];
       if (r.x() * bj[0] + r.y() * bj[1] + r.z() * bj[2] < min_cos) continue;
-      const float d = SquaredDistance(da, b.descriptors.ptr<float>(j), dims);
+      const float d = SquaredDescriptorDistance(da, b.descriptors.ptr<float>(j), dims);
       best_a[i].Add(j, d);
       best_b[j].Add(i, d);
     }

@@ -10,7 +10,7 @@
 #include "engine/calib/detect.h"
 #include "engine/geometry/ply.h"
 #include "engine/geometry/unified_camera.h"
-#include "engine/stereo/best_two.h"
+#include "engine/stereo/descriptor_match.h"
 #include "engine/stereo/essential.h"
 #include "engine/stereo/sift_bias.h"
 #include "engine/stereo/triangulation.h"
@@ -18,15 +18,6 @@
 
 namespace omnirig {
 namespace {
-
-float SquaredDistance(const float* a, const float* b, int n) {
-  float sum = 0.f;
-  for (int k = 0; k < n; ++k) {
-    const float d = a[k] - b[k];
-    sum += d * d;
-  }
-  return sum;
-}
 
 // True when the rays from cam0's centre along d0 and from c1 along d1 (cam0 frame) meet in
 // front of both cameras; nearly parallel rays (a point at infinity) count as meeting in front
@@ -187,7 +178,7 @@ std::vector<StereoMatch> MatchAlongEpipolarCurves(const LiftedFeatures& features
       const double s0 = std::abs(normals_in0[j].dot(features0.bearings[i]));
       if (s0 > sin_max || normals_in0[j].isZero()) continue;
       if (!MeetInFront(c1_in0, features0.bearings[i], rays1_in0[j])) continue;
-      const float d = SquaredDistance(desc0, features1.descriptors.ptr<float>(j), dims);
+      const float d = SquaredDescriptorDistance(desc0, features1.descriptors.ptr<float>(j), dims);
       candidates.push_back({i, j, d, std::asin(std::max(s0, s1))});
       best0[i].Add(j, d);
       best1[j].Add(i, d);
@@ -283,14 +274,14 @@ StereoPairReport ReconstructStereoPair(const StereoRig& rig, const cv::Mat& imag
   return report;
 }
 
-void WriteColoredPly(const std::filesystem::path& path, const std::vector<StereoPoint>& points) {
+PlyCloud SparseCloud(const std::vector<StereoPoint>& points) {
   PlyCloud cloud;
   cloud.comment = "omnirig stereo_reconstruct: points in cam0's frame, metres";
   for (const StereoPoint& p : points) {
     cloud.positions.push_back(p.point_in_cam0.cast<float>());
     cloud.colours.push_back(p.rgb);
   }
-  WritePly(path, cloud);
+  return cloud;
 }
 
 }  // namespace omnirig

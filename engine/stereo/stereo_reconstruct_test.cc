@@ -181,7 +181,7 @@ TEST(StereoReconstruct, WritesBinaryLittleEndianPly) {
   points[1].rgb = {255, 0, 128};
   const std::filesystem::path path = std::filesystem::temp_directory_path() /
                                      ("omnirig_ply_test_" + std::to_string(::getpid()) + ".ply");
-  WriteColoredPly(path, points);
+  WritePly(path, SparseCloud(points));
   std::ifstream in(path, std::ios::binary);
   std::stringstream buffer;
   buffer << in.rdbuf();
