@@ -21,14 +21,6 @@ CameraModel Camera() {
   return camera;
 }
 
-BoardSpec Board() {
-  BoardSpec board;
-  board.cols = 8;
-  board.rows = 6;
-  board.square_size_m = 0.04;
-  return board;
-}
-
 // Calibrates the views whose corners' mean azimuth around the principal point lies in
 // [from_deg, to_deg).
 CalibrationReport CalibrateSector(const SyntheticCornerSet& set, double from_deg, double to_deg) {
@@ -44,7 +36,7 @@ CalibrationReport CalibrateSector(const SyntheticCornerSet& set, double from_deg
     if (azimuth >= from_deg && azimuth < to_deg) views.push_back(view);
   }
   EXPECT_GE(views.size(), 5u);
-  return Calibrate(views, camera.width, camera.height, Board(), CalibrationOptions(),
+  return Calibrate(views, camera.width, camera.height, SyntheticBoard(), CalibrationOptions(),
                    ProgressSink());
 }
 
@@ -77,12 +69,13 @@ TEST(Coverage, NamesTheMissingSectorsAndPredictsMoreUncertaintyThere) {
   options.num_views = 40;
   options.noise_px = 0.3;
   options.seed = 5;
-  const SyntheticCornerSet set = MakeSyntheticCornerSet(Camera(), Board(), options);
+  const SyntheticCornerSet set = MakeSyntheticCornerSet(Camera(), SyntheticBoard(), options);
   const CalibrationReport all = CalibrateSector(set, 0.0, 360.0);
   const CalibrationReport half = CalibrateSector(set, 0.0, 180.0);
   const CoverageReport everywhere =
-      AnalyseCoverage(all, Board(), cv::Mat(), nullptr, CoverageOptions());
-  const CoverageReport lower = AnalyseCoverage(half, Board(), cv::Mat(), nullptr, CoverageOptions());
+      AnalyseCoverage(all, SyntheticBoard(), cv::Mat(), nullptr, CoverageOptions());
+  const CoverageReport lower =
+      AnalyseCoverage(half, SyntheticBoard(), cv::Mat(), nullptr, CoverageOptions());
 
   EXPECT_GT(everywhere.covered_fraction, lower.covered_fraction + 0.1);
   EXPECT_GT(lower.covered_fraction, 0.05);
