@@ -207,59 +207,68 @@ TEST_F(TempDataset, ARefinementThatCannotRunSaysWhy) {
   EXPECT_EQ(refinement["after"]["cameras"]["cam0"]["intrinsics"]["gamma_u"], 0.3 * 48);
 }
 
-// frame_step on an image sequence keeps every n-th pair, and its ground-truth pose.
-TEST_F(TempDataset, FrameStepOnImages) {
-  for (const char* name : {"a.png", "b.png", "c.png", "d.png", "e.png"}) {
-    WriteImage(std::string("cam0/") + name, 64, 48);
-    WriteImage(std::string("cam1/") + name, 64, 48);
-  }
-  std::ofstream gt(dir_ / "gt.tum");
-  for (int i = 0; i < 5; ++i) gt << 10 + i << " 0 0 0 0 0 0 1\n";
-  gt.close();
-  slam::VideoFrameOptions frames;
-  frames.frame_step = 2;
-  const json result =
+// Frame selection: frame_step on an image sequence keeps every n-th pair and its ground-truth
+// pose; on a recording, the time range selects frames by container time and the ground truth is
+// matched to them by timestamp (a missing pose is named).
+TEST_F(TempDataset, FrameSelectionOnImagesAndVideos) {
+  slam::VideoFrameOptions every_second, time_range;
+  every_second.frame_step = 2;
+  time_range.start_s = 0.15;
+  time_range.end_s = 0.45;
+  const struct {
+    const char* kind;
+    slam::VideoFrameOptions frames;
+    double gt_first_s, gt_step_s;    // the ground truth's timestamps, one per pair
+    std::vector<std::string> names;  // of the frames kept
+    double last_timestamp_s;         // the last kept frame's, in trajectory.json
+  } cases[] = {
+      {"images", every_second, 10.0, 1.0, {"a.png", "c.png", "e.png"}, 14.0},
+      {"video_pair", time_range, 0.0, 0.1, {"t000000.200", "t000000.300", "t000000.400"}, 0.4},
+  };
+  for (const auto& c : cases) {
+    SCOPED_TRACE(c.kind);
+    names_.clear();
+    const bool video = std::string(c.kind) == "video_pair";
+    if (video) {
+      for (const char* name : {"cam0.mkv", "cam1.mkv"}) {
+        cv::VideoWriter writer((dir_ / name).string(), cv::CAP_FFMPEG,
+                               cv::VideoWriter::fourcc('F', 'F', 'V', '1'), 10.0, cv::Size(64, 48));
+        for (int i = 0; i < 6; ++i) writer.write(cv::Mat(48, 64, CV_8UC3, cv::Scalar::all(0)));
+        names_.push_back(name);
+      }
+    } else {
+      for (const char* name : {"a.png", "b.png", "c.png", "d.png", "e.png", "f.png"}) {
+        WriteImage(std::string("cam0/") + name, 64, 48);
+        WriteImage(std::string("cam1/") + name, 64, 48);
+      }
+    }
+    std::ofstream gt(dir_ / "gt.tum");
+    for (int i = 0; i < 6; ++i)
+      gt << c.gt_first_s + c.gt_step_s * i << " " << i << " 0 0 0 0 0 1\n";
+    gt.close();
+    const fs::path out = dir_ / c.kind;
+    const json result =
+        RunSlamOnDataset(TinyTestRig(64, 48), dir_, names_, slam::SlamOptions(), dir_ / "gt.tum",
+                         out, ProgressSink(), nullptr, std::nullopt, c.frames);
+    ASSERT_EQ(result["num_frames"], 3);
+    for (int k = 0; k < 3; ++k) EXPECT_EQ(result["frames"][k]["name"], c.names[k]);
+    EXPECT_EQ(result["input"]["kind"], c.kind);
+    std::ifstream file(out / "trajectory.json");
+    EXPECT_NEAR(json::parse(file)["frames"][2]["timestamp_s"].get<double>(), c.last_timestamp_s,
+                1e-9);
+    if (!video) {
+      EXPECT_EQ(result["input"]["num_image_pairs"], 6);
+      continue;
+    }
+    EXPECT_EQ(result["input"]["codec"], "FFV1");
+    std::ofstream(dir_ / "gt.tum") << "0 0 0 0 0 0 0 1\n0.1 0 0 0 0 0 0 1\n";
+    const std::string message = ExpectInvalid([&] {
       RunSlamOnDataset(TinyTestRig(64, 48), dir_, names_, slam::SlamOptions(), dir_ / "gt.tum",
-                       dir_ / "out", ProgressSink(), nullptr, std::nullopt, frames);
-  ASSERT_EQ(result["num_frames"], 3);
-  EXPECT_EQ(result["frames"][1]["name"], "c.png");
-  EXPECT_EQ(result["input"]["kind"], "images");
-  EXPECT_EQ(result["input"]["num_image_pairs"], 5);
-  std::ifstream file(dir_ / "out" / "trajectory.json");
-  const json trajectory = json::parse(file);
-  EXPECT_EQ(trajectory["frames"][2]["timestamp_s"], 14.0);  // e.png's ground-truth time
-}
-
-// A recording in a dataset: the time range selects frames by container time, and a ground truth
-// is matched to them by timestamp (a missing pose is named).
-TEST_F(TempDataset, VideoFramesByTimeAndGroundTruthByTimestamp) {
-  for (const char* name : {"cam0.mkv", "cam1.mkv"}) {
-    cv::VideoWriter writer((dir_ / name).string(), cv::CAP_FFMPEG,
-                           cv::VideoWriter::fourcc('F', 'F', 'V', '1'), 10.0, cv::Size(64, 48));
-    for (int i = 0; i < 6; ++i) writer.write(cv::Mat(48, 64, CV_8UC3, cv::Scalar::all(0)));
-    names_.push_back(name);
+                       dir_ / "out2", ProgressSink(), nullptr, std::nullopt, c.frames);
+    });
+    EXPECT_NE(message.find("no pose within 25 ms of the frame at 0.2 s"), std::string::npos)
+        << message;
   }
-  std::ofstream gt(dir_ / "gt.tum");
-  for (int i = 0; i < 6; ++i) gt << 0.1 * i << " " << i << " 0 0 0 0 0 1\n";
-  gt.close();
-  slam::VideoFrameOptions frames;
-  frames.start_s = 0.15;
-  frames.end_s = 0.45;
-  const json result =
-      RunSlamOnDataset(TinyTestRig(64, 48), dir_, names_, slam::SlamOptions(), dir_ / "gt.tum",
-                       dir_ / "out", ProgressSink(), nullptr, std::nullopt, frames);
-  ASSERT_EQ(result["num_frames"], 3);
-  EXPECT_EQ(result["frames"][0]["name"], "t000000.200");
-  EXPECT_EQ(result["frames"][2]["name"], "t000000.400");
-  EXPECT_EQ(result["input"]["kind"], "video_pair");
-  EXPECT_EQ(result["input"]["codec"], "FFV1");
-  std::ofstream(dir_ / "gt.tum") << "0 0 0 0 0 0 0 1\n0.1 0 0 0 0 0 0 1\n";
-  const std::string message = ExpectInvalid([&] {
-    RunSlamOnDataset(TinyTestRig(64, 48), dir_, names_, slam::SlamOptions(), dir_ / "gt.tum",
-                     dir_ / "out2", ProgressSink(), nullptr, std::nullopt, frames);
-  });
-  EXPECT_NE(message.find("no pose within 25 ms of the frame at 0.2 s"), std::string::npos)
-      << message;
 }
 
 TEST(SlamJobType, IsRegisteredAndValidates) {
