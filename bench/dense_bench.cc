@@ -10,9 +10,18 @@
 // (default 2), after the per-rig set-up (omnirig's rectification tables, timed separately; the
 // peer has no such split and rebuilds its maps per call).
 //
+// Per stage: process CPU seconds, taken at the engine's progress reports (rectify + masks, SGBM,
+// confidence, then the pair-level fit check + triangulation + panoramas), and the writing of the
+// job's artifacts (NAME_range.tiff, NAME_range.png, the pair's PLY, into a temporary folder) as
+// api/stereo_job.cc does it.
+//
 // --no-peer runs omnirig only (for profiling).
 //
-// Usage: bench_dense [--frames N] [--threads N] [--no-peer]
+// --block-size, --step-factor and --max-parallax-deg set DenseStereoOptions' block_size,
+// grid.step_factor and max_parallax_deg (to measure what they cost and give).
+//
+// Usage: bench_dense [--frames N] [--threads N] [--no-peer] [--block-size N] [--step-factor F]
+//                    [--max-parallax-deg D]
 
 #include <algorithm>
 #include <chrono>
@@ -20,6 +29,8 @@
 #include <cstdio>
 #include <cstring>
 #include <ctime>
+#include <filesystem>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -27,6 +38,8 @@
 #include <opencv2/core.hpp>
 
 #include "engine/dense/dense_stereo.h"
+#include "engine/dense/range_io.h"
+#include "engine/geometry/ply.h"
 #include "engine/slam/surface_distance.h"
 #include "engine/synth/presets.h"
 
@@ -71,11 +84,11 @@ struct Score {
     std::sort(relative.begin(), relative.end());
     const double median = relative.empty() ? NAN : relative[relative.size() / 2];
     const double within =
-        relative.empty() ? 0.0
-                         : static_cast<double>(std::upper_bound(relative.begin(), relative.end(),
-                                                                0.01) -
-                                               relative.begin()) /
-                               relative.size();
+        relative.empty()
+            ? 0.0
+            : static_cast<double>(std::upper_bound(relative.begin(), relative.end(), 0.01) -
+                                  relative.begin()) /
+                  relative.size();
     std::printf("| %-48s | %11.0f | %6.1f %% | %7.3f %% | %7.1f %% | %6.3f | %6.3f |\n", name,
                 points / pairs, 100.0 * coverage / pairs, 100.0 * median, 100.0 * within,
                 seconds / pairs, cpu_seconds / pairs);
@@ -132,7 +145,8 @@ std::vector<Eigen::Vector3d> PeerReconstruct(const PeerRig& peer, const cv::Mat&
   return points;
 }
 
-int Run(int num_frames, int threads, bool with_peer) {
+int Run(int num_frames, int threads, bool with_peer,
+        const dense::DenseStereoOptions& dense_options) {
   cv::setNumThreads(threads);
   synth::StereoSequenceOptions options;
   options.num_frames = num_frames;
@@ -143,15 +157,54 @@ int Run(int num_frames, int threads, bool with_peer) {
   std::printf("threads: %d (cv::setNumThreads)\n\n", threads);
 
   auto start = std::chrono::steady_clock::now();
-  const dense::DenseStereo dense(sequence.rig, dense::DenseStereoOptions());
+  const dense::DenseStereo dense(sequence.rig, dense_options);
   const double setup_s = Seconds(start);
+  // A second job of the same rig finds the tables built (SharedRectifier).
+  start = std::chrono::steady_clock::now();
+  const double again_s = (dense::DenseStereo(sequence.rig, dense_options), Seconds(start));
   Score ours;
   dense::DensePairResult::Seconds stages;
+  // CPU seconds per stage, summed over the pairs, keyed by the engine's progress stage (the
+  // stage that ends at the next report) and the artifact written.
+  std::map<std::string, double> stage_cpu;
+  const std::filesystem::path out_dir =
+      std::filesystem::temp_directory_path() / "omnirig_bench_dense";
+  std::filesystem::create_directories(out_dir);
   for (int f = 0; f < num_frames; ++f) {
     start = std::chrono::steady_clock::now();
     const double cpu = CpuSeconds();
+    double stage_start = cpu;
+    std::string stage;
+    ProgressSink progress;
+    progress.report = [&](double, const std::string& next, const std::string&) {
+      const double now = CpuSeconds();
+      if (!stage.empty()) stage_cpu[stage] += now - stage_start;
+      stage = next;
+      stage_start = now;
+    };
     const dense::DensePairResult result =
-        dense.Reconstruct(sequence.images[0][f], sequence.images[1][f]);
+        dense.Reconstruct(sequence.images[0][f], sequence.images[1][f], progress);
+    const auto timed = [&](const std::string& name, const auto& write) {
+      const double before = CpuSeconds();
+      write();
+      stage_cpu[name] += CpuSeconds() - before;
+    };
+    timed("write tiff",
+          [&] { dense::WriteRangeTiff(out_dir / "pair_range.tiff", result.range_m); });
+    timed("write png", [&] { dense::WriteRangePng(out_dir / "pair_range.png", result.range_m); });
+    timed("write ply", [&] {
+      PlyCloud cloud;
+      cloud.has_confidence = true;
+      cloud.positions.reserve(result.points.size());
+      cloud.colours.reserve(result.points.size());
+      cloud.confidence.reserve(result.points.size());
+      for (const dense::DensePoint& p : result.points) {
+        cloud.positions.push_back(p.point_in_cam0);
+        cloud.colours.push_back(p.rgb);
+        cloud.confidence.push_back(p.confidence);
+      }
+      WritePly(out_dir / "cloud.ply", cloud);
+    });
     const double s = Seconds(start), cpu_s = CpuSeconds() - cpu;
     stages.rectify += result.seconds.rectify / num_frames;
     stages.match += result.seconds.match / num_frames;
@@ -160,9 +213,11 @@ int Run(int num_frames, int threads, bool with_peer) {
     stages.triangulate += result.seconds.triangulate / num_frames;
     std::vector<Eigen::Vector3d> points;
     points.reserve(result.points.size());
-    for (const dense::DensePoint& p : result.points) points.push_back(p.point_in_cam0.cast<double>());
+    for (const dense::DensePoint& p : result.points)
+      points.push_back(p.point_in_cam0.cast<double>());
     ours.Add(points, sequence.scene, sequence.world_from_rig[f], s, cpu_s);
   }
+  std::filesystem::remove_all(out_dir);
 
   const PeerRig peer = ToPeer(sequence.rig);
   struct PeerSetting {
@@ -181,8 +236,8 @@ int Run(int num_frames, int threads, bool with_peer) {
       {"cv::omnidir LONGLATI + SGBM (2048x768, 80, 5)", cv::omnidir::RECTIFY_LONGLATI, longlati,
        (cv::Mat_<double>(3, 3) << 2048 / M_PI, 0, 0, 0, 768 / M_PI, 0, 0, 0, 1), 80, 5},
       {"cv::omnidir LONGLATI + SGBM (2048x768, 360, 80, 5)", cv::omnidir::RECTIFY_LONGLATI,
-       longlati, (cv::Mat_<double>(3, 3) << 2048 / M_PI, 0, 0, 0, 768 / (2 * M_PI), 0, 0, 0, 1),
-       80, 5},
+       longlati, (cv::Mat_<double>(3, 3) << 2048 / M_PI, 0, 0, 0, 768 / (2 * M_PI), 0, 0, 0, 1), 80,
+       5},
   };
   std::printf("| %-48s | %11s | %8s | %9s | %9s | %6s | %6s |\n", "method", "points/pair",
               "azimuth", "median/r", "within 1%", "s/pair", "CPU s");
@@ -204,14 +259,18 @@ int Run(int num_frames, int threads, bool with_peer) {
     }
     score.Print(setting.name);
   }
-  std::printf("\nomnirig per pair, wall s by stage: rectify + masks %.3f, SGBM %.3f, confidence "
-              "%.3f, epipolar fit check %.3f, triangulate + panoramas %.3f\n",
-              stages.rectify, stages.match, stages.confidence, stages.epipolar,
-              stages.triangulate);
-  std::printf("omnirig: grid %d x %d cells (step %.5f rad), %d disparities; rectification "
-              "tables built once per rig in %.3f s\n",
-              dense.rectifier().rows(), dense.rectifier().cols(),
-              dense.rectifier().theta_step_rad(), dense.num_disparities(), setup_s);
+  std::printf("\nomnirig per pair, CPU s by stage (end to end, artifacts written):");
+  for (const auto& [name, seconds] : stage_cpu)
+    std::printf(" %s %.3f,", name.c_str(), seconds / num_frames);
+  std::printf(
+      "\nomnirig per pair, wall s by stage: rectify + masks %.3f, SGBM %.3f, confidence "
+      "%.3f, epipolar fit check %.3f, triangulate + panoramas %.3f\n",
+      stages.rectify, stages.match, stages.confidence, stages.epipolar, stages.triangulate);
+  std::printf(
+      "omnirig: grid %d x %d cells (step %.5f rad), %d disparities; rectification "
+      "tables built once per rig in %.3f s (wall; %.4f s for the next job of the rig)\n",
+      dense.rectifier().rows(), dense.rectifier().cols(), dense.rectifier().theta_step_rad(),
+      dense.num_disparities(), setup_s, again_s);
   return 0;
 }
 
@@ -221,11 +280,21 @@ int Run(int num_frames, int threads, bool with_peer) {
 int main(int argc, char** argv) {
   int frames = 4, threads = 2;
   bool with_peer = true;
+  omnirig::dense::DenseStereoOptions options;
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--no-peer")) with_peer = false;
     if (i + 1 >= argc) continue;
-    if (!std::strcmp(argv[i], "--frames")) frames = std::max(1, std::atoi(argv[++i]));
-    else if (!std::strcmp(argv[i], "--threads")) threads = std::max(1, std::atoi(argv[++i]));
+    if (!std::strcmp(argv[i], "--frames"))
+      frames = std::max(1, std::atoi(argv[++i]));
+    else if (!std::strcmp(argv[i], "--threads"))
+      threads = std::max(1, std::atoi(argv[++i]));
+    else if (!std::strcmp(argv[i], "--block-size"))
+      options.block_size = std::atoi(argv[++i]);
+    else if (!std::strcmp(argv[i], "--step-factor"))
+      options.grid.step_factor = std::atof(argv[++i]);
+    else if (!std::strcmp(argv[i], "--max-parallax-deg"))
+      options.max_parallax_deg = std::atof(argv[++i]);
   }
-  return omnirig::Run(frames, threads, with_peer);
+  options.Check();
+  return omnirig::Run(frames, threads, with_peer, options);
 }

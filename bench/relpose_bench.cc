@@ -1378,10 +1378,11 @@ void TallySyncRig(const SyncRenderedRig& rig, const BoardSpec& board,
     tally->pairs_over_01 += p < 0.001 ? 1 : 0;
     largest = std::max(largest, pair.statistic);
     if (csv == nullptr) continue;
-    std::fprintf(csv, "%s,%zu,%.4f,%.4f,%.4f,%.4f,%.5f,%.5f,%.4e,%.4e,%d,%d,%d\n", label.c_str(),
-                 k, pair.statistic, pair.raw_statistic, first.limit, first.dispersion,
-                 first.corner_noise_px[0], first.corner_noise_px[1], pair.own_variance_px2[0],
-                 pair.own_variance_px2[1], pair.own_dof[0], pair.own_dof[1], lost);
+    std::fprintf(csv, "%s,%zu,%.4f,%.4f,%.4f,%.4f,%.5f,%.5f,%.4e,%.4e,%d,%d,%.4f,%d\n",
+                 label.c_str(), k, pair.statistic, pair.raw_statistic, first.limit,
+                 first.dispersion, first.corner_noise_px[0], first.corner_noise_px[1],
+                 pair.own_variance_px2[0], pair.own_variance_px2[1], pair.own_dof[0],
+                 pair.own_dof[1], pair.reference_variance, lost);
   }
   tally->max_ratio = std::max(tally->max_ratio, largest / report.sync_test.limit);
   std::printf("%s: %zu pairs tested, %d left out (largest first-round statistic %.1f, limit %.1f, "
@@ -1447,7 +1448,7 @@ void RunSyncFalseAlarms(bool quick, int first_seed, int num_seeds, const std::st
   std::FILE* csv = csv_path.empty() ? nullptr : std::fopen(csv_path.c_str(), "w");
   if (csv != nullptr) {
     std::fprintf(csv, "seed,refine,pair,statistic,raw,limit,dispersion,noise0,noise1,var0,var1,"
-                      "dof0,dof1,lost\n");
+                      "dof0,dof1,reference_variance,lost\n");
   }
   for (int s = first_seed; s < first_seed + num_seeds; ++s) {
     const uint64_t seed = 3000 + s;

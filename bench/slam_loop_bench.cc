@@ -25,6 +25,7 @@
 // usage: bench_slam --loop [--loop-dir DIR] [--frames 2000] [--laps 2] [--loop-length 100]
 //                   [--width 1024] [--height 768] [--threads 2] [--revisit-m 1.5]
 //                   [--revisit-deg 30] [--no-loop-closure] [--supersampling 4] [--blur 0]
+//                   [--max-features N] [--local-iterations N]
 
 #include "bench/slam_loop_bench.h"
 
@@ -68,6 +69,8 @@ struct LoopArgs {
   bool loop_closure = true;
   int supersampling = 4;  // of the render
   double blur_px = 0.0;
+  int max_features = -1;      // -1: the library defaults
+  int local_iterations = -1;
 };
 
 LoopArgs ParseLoopArgs(int argc, char** argv) {
@@ -87,6 +90,8 @@ LoopArgs ParseLoopArgs(int argc, char** argv) {
     else if (a == "--no-loop-closure") args.loop_closure = false;
     else if (a == "--supersampling") args.supersampling = std::atoi(next().c_str());
     else if (a == "--blur") args.blur_px = std::atof(next().c_str());
+    else if (a == "--max-features") args.max_features = std::atoi(next().c_str());
+    else if (a == "--local-iterations") args.local_iterations = std::atoi(next().c_str());
   }
   if (args.dir.empty()) {
     std::ostringstream dir;
@@ -138,16 +143,6 @@ void WriteTum(const synth::StereoSequence& sequence, const fs::path& path) {
   slam::WriteTum(path, poses);
 }
 
-std::vector<Rigid3d> ReadTum(const fs::path& path) {
-  std::ifstream in(path);
-  std::vector<Rigid3d> poses;
-  double t, x, y, z, qx, qy, qz, qw;
-  while (in >> t >> x >> y >> z >> qx >> qy >> qz >> qw) {
-    poses.emplace_back(Eigen::Quaterniond(qw, qx, qy, qz), Eigen::Vector3d(x, y, z));
-  }
-  return poses;
-}
-
 // Renders the sequence into args.dir unless it holds it already; returns the frame names.
 std::vector<std::string> RenderOrLoad(const LoopArgs& args, std::vector<Rigid3d>* truth) {
   const fs::path dir(args.dir);
@@ -172,7 +167,10 @@ std::vector<std::string> RenderOrLoad(const LoopArgs& args, std::vector<Rigid3d>
     std::printf("read the rendered sequence from %s (delete it to render again)\n",
                 args.dir.c_str());
   }
-  *truth = ReadTum(dir / "trajectory.tum");
+  truth->clear();
+  for (const slam::StampedPose& pose : slam::ReadTum(dir / "trajectory.tum")) {
+    truth->push_back(pose.world_from_rig);
+  }
   std::vector<std::string> names;
   for (const auto& entry : fs::directory_iterator(dir / "cam0")) {
     if (entry.path().extension() == ".png") names.push_back(entry.path().stem().string());
@@ -334,6 +332,8 @@ int RunLoopBench(int argc, char** argv) {
   slam::SlamOptions options;
   options.num_threads = args.threads;
   options.loop_closure = args.loop_closure;
+  if (args.max_features >= 0) options.features.max_features = args.max_features;
+  if (args.local_iterations > 0) options.local_max_iterations = args.local_iterations;
   const double rss_before_mb = ResidentMegabytes();
   const slam::SlamResult result = slam::RunSlam(rig, names, load, options);
 
@@ -390,6 +390,10 @@ int RunLoopBench(int argc, char** argv) {
   std::printf("CPU s: load %.1f detect %.1f stereo %.1f match %.1f motion %.1f map %.1f local BA %.1f "
               "loop %.1f global BA %.1f\n", c.load_s, c.detect_s, c.stereo_s, c.match_s, c.motion_s,
               c.map_s, c.local_ba_s, c.loop_s, result.global_ba_cpu_s);
+  std::printf("CPU ms per frame: load %.1f detect %.1f stereo %.1f match %.1f motion %.1f map %.1f "
+              "local BA %.1f loop %.1f global BA %.1f\n", 1e3 * c.load_s / n, 1e3 * c.detect_s / n,
+              1e3 * c.stereo_s / n, 1e3 * c.match_s / n, 1e3 * c.motion_s / n, 1e3 * c.map_s / n,
+              1e3 * c.local_ba_s / n, 1e3 * c.loop_s / n, 1e3 * result.global_ba_cpu_s / n);
 
   // Frames 90-110 (on short runs, the 21 frames around a fifth of the run) against the last 21.
   const int early = n >= 400 ? 100 : n / 5;

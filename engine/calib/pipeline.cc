@@ -299,11 +299,10 @@ cv::Mat DrawCalibrationOverlay(const cv::Mat& image, const CalibrationImageRepor
   return overlay;
 }
 
-CalibrationReport CalibrateImages(const std::filesystem::path& dir,
-                                  const std::vector<std::string>& names, const BoardSpec& board,
-                                  const ImageCalibrationOptions& options,
-                                  const std::filesystem::path& overlay_dir,
-                                  const ProgressSink& progress) {
+namespace {
+
+void CheckArguments(const std::vector<std::string>& names, const BoardSpec& board,
+                    const ImageCalibrationOptions& options) {
   board.Check();
   options.Check();
   OMNIRIG_CHECK(!names.empty(), "calibration: no images");
@@ -315,6 +314,29 @@ CalibrationReport CalibrateImages(const std::filesystem::path& dir,
     OMNIRIG_CHECK(std::find(names.begin(), names.end(), options.svp->image) != names.end(),
                   "svp: no image named '" << options.svp->image << "'");
   }
+}
+
+// One overlay per image of the report (OverlayFileName), in overlay_dir.
+void WriteOverlays(const std::filesystem::path& dir, const CalibrationReport& report,
+                   const ImageCalibrationOptions& options,
+                   const std::filesystem::path& overlay_dir) {
+  std::filesystem::create_directories(overlay_dir);
+  for (const CalibrationImageReport& image_report : report.images) {
+    const cv::Mat image = cv::imread((dir / image_report.name).string(), cv::IMREAD_COLOR);
+    if (image.empty()) continue;
+    cv::imwrite((overlay_dir / OverlayFileName(image_report.name)).string(),
+                DrawCalibrationOverlay(image, image_report, options.overlay_error_scale));
+  }
+}
+
+}  // namespace
+
+CalibrationReport CalibrateImages(const std::filesystem::path& dir,
+                                  const std::vector<std::string>& names, const BoardSpec& board,
+                                  const ImageCalibrationOptions& options,
+                                  const std::filesystem::path& overlay_dir,
+                                  const ProgressSink& progress) {
+  CheckArguments(names, board, options);
   int width = 0, height = 0;
   Timer timer;
   std::vector<CalibrationView> views;
@@ -345,15 +367,7 @@ CalibrationReport CalibrateImages(const std::filesystem::path& dir,
     report.timings.redetect_s = timer.ElapsedSeconds();
   }
   report.timings.detect_s = detect_s;
-  if (!overlay_dir.empty()) {
-    std::filesystem::create_directories(overlay_dir);
-    for (const CalibrationImageReport& image_report : report.images) {
-      const cv::Mat image = cv::imread((dir / image_report.name).string(), cv::IMREAD_COLOR);
-      if (image.empty()) continue;
-      cv::imwrite((overlay_dir / OverlayFileName(image_report.name)).string(),
-                  DrawCalibrationOverlay(image, image_report, options.overlay_error_scale));
-    }
-  }
+  if (!overlay_dir.empty()) WriteOverlays(dir, report, options, overlay_dir);
   if (options.svp) {
     progress.Report(0.97, "svp", "single-viewpoint check");
     RunSvpCheck(dir, *options.svp, overlay_dir, &report);

@@ -86,19 +86,11 @@ PlyCloud DenseMap::Cloud() const {
   return cloud;
 }
 
-OccupancyGrid DenseMap::Occupancy() const {
-  OccupancyGrid grid;
-  grid.cell_m = options_.occupancy_cell_m;
-  std::vector<Eigen::Vector3d> kept;
-  for (const auto& [key, voxel] : voxels_) {
-    if (Kept(voxel) && voxel.weight > 0.0) kept.push_back(voxel.weighted_position / voxel.weight);
-  }
-  if (kept.empty()) {
-    grid.cells = cv::Mat::zeros(1, 1, CV_8U);
-    return grid;
-  }
-  // The floor: the most populated 2 cm height bin below the sensor (height = -z in the world,
-  // the first frame's sensor at 0).
+namespace {
+
+// The floor: the most populated 2 cm height bin below the sensor (height = -z in the world, the
+// first frame's sensor at 0); 0 when no point lies 0.2 m below the sensor.
+double FloorHeight(const std::vector<Eigen::Vector3d>& kept) {
   std::map<int, int> histogram;
   for (const Eigen::Vector3d& p : kept) {
     if (-p.z() < -0.2) ++histogram[static_cast<int>(std::floor(-p.z() / 0.02))];
@@ -110,7 +102,56 @@ OccupancyGrid DenseMap::Occupancy() const {
       floor_bin = bin;
     }
   }
-  grid.floor_height_m = best > 0 ? (floor_bin + 0.5) * 0.02 : 0.0;
+  return best > 0 ? (floor_bin + 0.5) * 0.02 : 0.0;
+}
+
+// Marks grid->cells (sized and placed, all unknown): occupied where at least
+// min_obstacle_voxels kept voxels lie in the obstacle band above the floor (a few stray points of
+// a far floor or a wall seen at a grazing angle do not make an obstacle), then free where the
+// floor was seen and nothing stands.
+void MarkCells(const std::vector<Eigen::Vector3d>& kept, const DenseMapOptions& options,
+               OccupancyGrid* grid) {
+  const int rows = grid->cells.rows, cols = grid->cells.cols;
+  const auto cell = [&](const Eigen::Vector3d& p) -> uint8_t& {
+    const int c =
+        std::clamp(static_cast<int>((p.x() - grid->origin_m.x()) / grid->cell_m), 0, cols - 1);
+    const int r =
+        std::clamp(static_cast<int>((p.y() - grid->origin_m.y()) / grid->cell_m), 0, rows - 1);
+    return grid->cells.at<uint8_t>(rows - 1 - r, c);  // row 0 is the largest y
+  };
+  cv::Mat obstacle_voxels = cv::Mat::zeros(rows, cols, CV_32S);
+  for (const Eigen::Vector3d& p : kept) {
+    const double above_floor = -p.z() - grid->floor_height_m;
+    if (above_floor >= options.obstacle_min_height_m &&
+        above_floor <= options.obstacle_max_height_m) {
+      uint8_t& c = cell(p);
+      const int offset = static_cast<int>(&c - grid->cells.data);
+      if (++reinterpret_cast<int*>(obstacle_voxels.data)[offset] >= options.min_obstacle_voxels) {
+        c = OccupancyGrid::kOccupied;
+      }
+    }
+  }
+  for (const Eigen::Vector3d& p : kept) {
+    const double above_floor = -p.z() - grid->floor_height_m;
+    uint8_t& c = cell(p);
+    if (std::abs(above_floor) < 0.05 && c == OccupancyGrid::kUnknown) c = OccupancyGrid::kFree;
+  }
+}
+
+}  // namespace
+
+OccupancyGrid DenseMap::Occupancy() const {
+  OccupancyGrid grid;
+  grid.cell_m = options_.occupancy_cell_m;
+  std::vector<Eigen::Vector3d> kept;
+  for (const auto& [key, voxel] : voxels_) {
+    if (Kept(voxel) && voxel.weight > 0.0) kept.push_back(voxel.weighted_position / voxel.weight);
+  }
+  if (kept.empty()) {
+    grid.cells = cv::Mat::zeros(1, 1, CV_8U);
+    return grid;
+  }
+  grid.floor_height_m = FloorHeight(kept);
   Eigen::Vector2d lo(kept[0].x(), kept[0].y()), hi = lo;
   for (const Eigen::Vector3d& p : kept) {
     lo = lo.cwiseMin(p.head<2>());
@@ -120,31 +161,7 @@ OccupancyGrid DenseMap::Occupancy() const {
   const int cols = static_cast<int>(std::floor((hi.x() - lo.x()) / grid.cell_m)) + 1;
   const int rows = static_cast<int>(std::floor((hi.y() - lo.y()) / grid.cell_m)) + 1;
   grid.cells = cv::Mat::zeros(rows, cols, CV_8U);
-  const auto cell = [&](const Eigen::Vector3d& p) -> uint8_t& {
-    const int c = std::clamp(static_cast<int>((p.x() - lo.x()) / grid.cell_m), 0, cols - 1);
-    const int r = std::clamp(static_cast<int>((p.y() - lo.y()) / grid.cell_m), 0, rows - 1);
-    return grid.cells.at<uint8_t>(rows - 1 - r, c);  // row 0 is the largest y
-  };
-  // Obstacles stand: a cell is occupied when enough kept voxels lie in its band (a few stray
-  // points of a far floor or a wall seen at a grazing angle do not make an obstacle).
-  cv::Mat obstacle_voxels = cv::Mat::zeros(rows, cols, CV_32S);
-  for (const Eigen::Vector3d& p : kept) {
-    const double above_floor = -p.z() - grid.floor_height_m;
-    if (above_floor >= options_.obstacle_min_height_m &&
-        above_floor <= options_.obstacle_max_height_m) {
-      uint8_t& c = cell(p);
-      const int offset = static_cast<int>(&c - grid.cells.data);
-      if (++reinterpret_cast<int*>(obstacle_voxels.data)[offset] >=
-          options_.min_obstacle_voxels) {
-        c = OccupancyGrid::kOccupied;
-      }
-    }
-  }
-  for (const Eigen::Vector3d& p : kept) {
-    const double above_floor = -p.z() - grid.floor_height_m;
-    uint8_t& c = cell(p);
-    if (std::abs(above_floor) < 0.05 && c == OccupancyGrid::kUnknown) c = OccupancyGrid::kFree;
-  }
+  MarkCells(kept, options_, &grid);
   return grid;
 }
 

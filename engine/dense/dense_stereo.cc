@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
 #include <tuple>
 #include <vector>
 
@@ -40,8 +41,8 @@ std::pair<int, int> UsedColumns(const cv::Mat& mask0, const cv::Mat& mask1) {
 // Semi-global matching of the grid rows: cam0 is the left image (see spherical_rectification.h).
 // The images are padded with wrapped rows above and below (the azimuth is periodic, so the
 // matcher's vertical paths see across the 0/360 degree seam) and with num_disparities blank
-// columns on the left (the matcher leaves its left border undecided). Returns the disparity in
-// cells (CV_32F, negative where none) over the input's size.
+// columns on the left (the matcher leaves its left border undecided). Returns SGBM's disparity
+// (CV_16S in 1/16 cells, negative where none) over the input's size.
 cv::Mat MatchRows(const cv::Mat& left, const cv::Mat& right, int num_disparities,
                   const DenseStereoOptions& o) {
   const int wrap = std::min(32, left.rows / 2);
@@ -57,10 +58,46 @@ cv::Mat MatchRows(const cv::Mat& left, const cv::Mat& right, int num_disparities
       cv::StereoSGBM::MODE_SGBM_3WAY);
   cv::Mat disparity16;
   sgbm->compute(l, r, disparity16);
-  cv::Mat disparity;
-  disparity16(cv::Rect(num_disparities, wrap, left.cols, left.rows))
-      .convertTo(disparity, CV_32F, 1.0 / 16.0);
-  return disparity;
+  return disparity16(cv::Rect(num_disparities, wrap, left.cols, left.rows));
+}
+
+// cam1's grey level at each cell's match (linear between the two cells around it, as SGBM's
+// sub-pixel disparity has 1/16 cells; 0 where there is none), for the correlation of the
+// matched windows. `right` is CV_8U, disparity16 MatchRows' output of the same size.
+cv::Mat MatchedGrey(const cv::Mat& right, const cv::Mat& disparity16) {
+  cv::Mat matched(disparity16.size(), CV_32F);
+  cv::parallel_for_(cv::Range(0, matched.rows), [&](const cv::Range& rows) {
+    for (int r = rows.start; r < rows.end; ++r) {
+      const int16_t* d = disparity16.ptr<int16_t>(r);
+      const uint8_t* grey = right.ptr<uint8_t>(r);
+      float* out = matched.ptr<float>(r);
+      for (int c = 0; c < matched.cols; ++c) {
+        const int x16 = 16 * c - d[c];  // the match's column, 1/16 cells
+        if (d[c] < 0 || x16 < 0) {
+          out[c] = 0.f;
+          continue;
+        }
+        const int x = x16 >> 4;
+        const float t = static_cast<float>(x16 & 15) * (1.f / 16.f);
+        const float next = x + 1 < matched.cols ? grey[x + 1] : 0.f;
+        out[c] = (1.f - t) * grey[x] + t * next;
+      }
+    }
+  });
+  return matched;
+}
+
+void CheckPairImages(const StereoRig& rig, const cv::Mat& image0, const cv::Mat& image1) {
+  OMNIRIG_CHECK(image0.cols == rig.cam0.width && image0.rows == rig.cam0.height,
+                "cam0 image is " << image0.cols << "x" << image0.rows << " but the rig's cam0 is "
+                                 << rig.cam0.width << "x" << rig.cam0.height);
+  OMNIRIG_CHECK(image1.cols == rig.cam1.width && image1.rows == rig.cam1.height,
+                "cam1 image is " << image1.cols << "x" << image1.rows << " but the rig's cam1 is "
+                                 << rig.cam1.width << "x" << rig.cam1.height);
+  OMNIRIG_CHECK(image0.depth() == CV_8U && image1.depth() == CV_8U &&
+                    (image0.channels() == 1 || image0.channels() == 3) &&
+                    (image1.channels() == 1 || image1.channels() == 3),
+                "images must be 8-bit grey or BGR");
 }
 
 }  // namespace
@@ -73,17 +110,16 @@ void DenseStereoOptions::Check() const {
                 "block_size must be odd and in [1, 11], got " << block_size);
   OMNIRIG_CHECK(uniqueness_ratio >= 0 && uniqueness_ratio <= 100,
                 "uniqueness_ratio must lie in [0, 100], got " << uniqueness_ratio);
-  OMNIRIG_CHECK(speckle_window_cells >= 0, "speckle_window_cells must be non-negative, got "
-                                               << speckle_window_cells);
+  OMNIRIG_CHECK(speckle_window_cells >= 0,
+                "speckle_window_cells must be non-negative, got " << speckle_window_cells);
   OMNIRIG_CHECK(speckle_range_cells >= 1 && speckle_range_cells <= 16,
                 "speckle_range_cells must lie in [1, 16], got " << speckle_range_cells);
   OMNIRIG_CHECK(left_right_max_diff_cells >= 0 && left_right_max_diff_cells <= 16,
-                "left_right_max_diff_cells must lie in [0, 16], got "
-                    << left_right_max_diff_cells);
-  OMNIRIG_CHECK(confidence_window_cells >= 3 && confidence_window_cells <= 31 &&
-                    confidence_window_cells % 2 == 1,
-                "confidence_window_cells must be odd and in [3, 31], got "
-                    << confidence_window_cells);
+                "left_right_max_diff_cells must lie in [0, 16], got " << left_right_max_diff_cells);
+  OMNIRIG_CHECK(
+      confidence_window_cells >= 3 && confidence_window_cells <= 31 &&
+          confidence_window_cells % 2 == 1,
+      "confidence_window_cells must be odd and in [3, 31], got " << confidence_window_cells);
   OMNIRIG_CHECK(image_noise_grey >= 0.0 && image_noise_grey <= 50.0,
                 "image_noise_grey must lie in [0, 50], got " << image_noise_grey);
   OMNIRIG_CHECK(min_confidence >= 0.0 && min_confidence < 1.0,
@@ -96,8 +132,8 @@ void DenseStereoOptions::Check() const {
                 "dark_level must lie in [0, 255), got " << dark_level);
   OMNIRIG_CHECK(mask_margin_cells >= 0 && mask_margin_cells <= 100,
                 "mask_margin_cells must lie in [0, 100], got " << mask_margin_cells);
-  OMNIRIG_CHECK(epipolar_samples >= 0, "epipolar_samples must be non-negative, got "
-                                           << epipolar_samples);
+  OMNIRIG_CHECK(epipolar_samples >= 0,
+                "epipolar_samples must be non-negative, got " << epipolar_samples);
   OMNIRIG_CHECK(epipolar_search_rows >= 1 && epipolar_search_rows <= 16,
                 "epipolar_search_rows must lie in [1, 16], got " << epipolar_search_rows);
   OMNIRIG_CHECK(max_epipolar_offset_cells > 0.0,
@@ -125,44 +161,65 @@ cv::Mat GridMirrorMask(const cv::Mat& grey_on_grid, const cv::Mat& valid,
   return mask;
 }
 
+namespace {
+constexpr int kEpipolarHalfWindow = 5;  // 11 x 11 windows
+
+// EpipolarOffset's sample at cam0's cell (r, c), inside the images by the search's margin: the
+// distance (cells) of its best match in cam1, over the disparity range and `search` rows either
+// side, from row r; none when the window is textureless or the best match is not clear.
+std::optional<double> RowOffset(const cv::Mat& grey0, const cv::Mat& grey1, int r, int c,
+                                int num_disparities, int search) {
+  constexpr int kHalf = kEpipolarHalfWindow;
+  constexpr double kMinCorrelation = 0.8;  // a clear match
+  constexpr double kMinTextureGrey = 8.0;  // window standard deviation
+  const cv::Rect window(c - kHalf, r - kHalf, 2 * kHalf + 1, 2 * kHalf + 1);
+  cv::Scalar mean, deviation;
+  cv::meanStdDev(grey0(window), mean, deviation);
+  if (deviation[0] < kMinTextureGrey) return std::nullopt;
+  // cam1's match of column c lies at c - d, d in [0, num_disparities).
+  const int left = std::max(0, c - num_disparities - kHalf);
+  const cv::Rect area(left, r - search - kHalf, c + kHalf + 1 - left, 2 * (search + kHalf) + 1);
+  cv::Mat scores;
+  cv::matchTemplate(grey1(area), grey0(window), scores, cv::TM_CCOEFF_NORMED);
+  double best = 0.0;
+  cv::Point at;
+  cv::minMaxLoc(scores, nullptr, &best, nullptr, &at);
+  if (!(best >= kMinCorrelation)) return std::nullopt;
+  double offset = at.y - search;
+  if (at.y > 0 && at.y + 1 < scores.rows) {  // parabola through the best and its neighbours
+    const double a = scores.at<float>(at.y - 1, at.x), b = scores.at<float>(at.y + 1, at.x);
+    const double curvature = a + b - 2.0 * best;
+    if (curvature < 0.0) offset += 0.5 * (a - b) / curvature;
+  }
+  return std::abs(offset);
+}
+}  // namespace
+
 std::pair<double, int> EpipolarOffset(const cv::Mat& grey0, const cv::Mat& grey1,
                                       const cv::Mat& mask0, int num_disparities,
                                       const DenseStereoOptions& options) {
-  constexpr int kHalf = 5;                 // 11 x 11 windows
-  constexpr double kMinCorrelation = 0.8;  // a clear match
-  constexpr double kMinTextureGrey = 8.0;  // window standard deviation
+  constexpr int kHalf = kEpipolarHalfWindow;
   const int search = options.epipolar_search_rows;
   const int margin = kHalf + search + 1;
   const int lattice_rows = std::max(1, static_cast<int>(std::sqrt(options.epipolar_samples * 5.0)));
   const int lattice_cols = std::max(1, options.epipolar_samples / lattice_rows);
-  std::vector<double> offsets;
-  for (int i = 0; i < lattice_rows; ++i) {
-    const int r = margin + (grey0.rows - 2 * margin) * (2 * i + 1) / (2 * lattice_rows);
-    for (int j = 0; j < lattice_cols; ++j) {
-      const int c = kHalf + 1 + (grey0.cols - 2 * kHalf - 2) * (2 * j + 1) / (2 * lattice_cols);
-      if (r < margin || r >= grey0.rows - margin || !mask0.at<uint8_t>(r, c)) continue;
-      const cv::Rect window(c - kHalf, r - kHalf, 2 * kHalf + 1, 2 * kHalf + 1);
-      cv::Scalar mean, deviation;
-      cv::meanStdDev(grey0(window), mean, deviation);
-      if (deviation[0] < kMinTextureGrey) continue;
-      // cam1's match of column c lies at c - d, d in [0, num_disparities).
-      const int left = std::max(0, c - num_disparities - kHalf);
-      const cv::Rect area(left, r - search - kHalf, c + kHalf + 1 - left,
-                          2 * (search + kHalf) + 1);
-      cv::Mat scores;
-      cv::matchTemplate(grey1(area), grey0(window), scores, cv::TM_CCOEFF_NORMED);
-      double best = 0.0;
-      cv::Point at;
-      cv::minMaxLoc(scores, nullptr, &best, nullptr, &at);
-      if (!(best >= kMinCorrelation)) continue;
-      double offset = at.y - search;
-      if (at.y > 0 && at.y + 1 < scores.rows) {  // parabola through the best and its neighbours
-        const double a = scores.at<float>(at.y - 1, at.x), b = scores.at<float>(at.y + 1, at.x);
-        const double curvature = a + b - 2.0 * best;
-        if (curvature < 0.0) offset += 0.5 * (a - b) / curvature;
+  // Lattice rows in parallel, each into its own list (the order of the matches does not matter
+  // to the median).
+  std::vector<std::vector<double>> row_offsets(lattice_rows);
+  cv::parallel_for_(cv::Range(0, lattice_rows), [&](const cv::Range& lattice_range) {
+    for (int i = lattice_range.start; i < lattice_range.end; ++i) {
+      const int r = margin + (grey0.rows - 2 * margin) * (2 * i + 1) / (2 * lattice_rows);
+      for (int j = 0; j < lattice_cols; ++j) {
+        const int c = kHalf + 1 + (grey0.cols - 2 * kHalf - 2) * (2 * j + 1) / (2 * lattice_cols);
+        if (r < margin || r >= grey0.rows - margin || !mask0.at<uint8_t>(r, c)) continue;
+        const std::optional<double> offset = RowOffset(grey0, grey1, r, c, num_disparities, search);
+        if (offset) row_offsets[i].push_back(*offset);
       }
-      offsets.push_back(std::abs(offset));
     }
+  });
+  std::vector<double> offsets;
+  for (const std::vector<double>& row : row_offsets) {
+    offsets.insert(offsets.end(), row.begin(), row.end());
   }
   const int num = static_cast<int>(offsets.size());
   if (num < 30) return {-1.0, num};
@@ -208,173 +265,188 @@ const StereoRig& CheckedRig(const StereoRig& rig, const DenseStereoOptions& opti
 }  // namespace
 
 DenseStereo::DenseStereo(const StereoRig& rig, const DenseStereoOptions& options)
-    : rig_(rig), options_(options), rectifier_(CheckedRig(rig, options), options.grid) {
+    : rig_(rig),
+      options_(options),
+      rectifier_(SharedRectifier(CheckedRig(rig, options), options.grid)) {
+  const double step = rectifier_->theta_step_rad(), baseline = rectifier_->baseline_m();
   const double max_parallax_rad = options_.max_parallax_deg * M_PI / 180.0;
-  const int cells = static_cast<int>(std::ceil(max_parallax_rad / rectifier_.theta_step_rad()));
+  const int cells = static_cast<int>(std::ceil(max_parallax_rad / step));
   num_disparities_ = std::max(16, (cells + 15) / 16 * 16);
+  cot_parallax_.assign(16 * num_disparities_, 0.0);
+  range_std_per_sin_theta_.assign(16 * num_disparities_, 0.0);
+  for (int k = 1; k < 16 * num_disparities_; ++k) {
+    const double parallax = k / 16.0 * step;
+    const double sin_p = std::sin(parallax);
+    cot_parallax_[k] = std::cos(parallax) / sin_p;
+    range_std_per_sin_theta_[k] = baseline / (sin_p * sin_p) * options_.disparity_std_cells * step;
+  }
+  for (int c = 0; c < rectifier_->cols(); ++c) {
+    sin_theta_.push_back(std::sin(rectifier_->Theta(c)));
+    cos_theta_.push_back(std::cos(rectifier_->Theta(c)));
+  }
 }
 
-void DenseStereo::Triangulate(const cv::Mat& disparity, const cv::Mat& correlation, int first,
-                              const cv::Mat& mask0, const cv::Mat& mask1, const cv::Mat& colour0,
-                              cv::Mat* range, cv::Mat* range_std, cv::Mat* confidence,
-                              DensePairResult* result) const {
-  const int rows = disparity.rows, width = disparity.cols;
-  const double step = rectifier_.theta_step_rad(), baseline = rectifier_.baseline_m();
-  // Per column: the angle from the baseline; per row: the azimuth's cosine and sine.
-  std::vector<double> theta(width), sin_theta(width), cos_theta(width);
-  for (int c = 0; c < width; ++c) {
-    theta[c] = rectifier_.Theta(first + c);
-    sin_theta[c] = std::sin(theta[c]);
-    cos_theta[c] = std::cos(theta[c]);
-  }
-  const Eigen::Matrix3d& cam0_from_grid = rectifier_.cam0_from_grid();
+DenseStereo::RectifiedPair DenseStereo::RectifyPair(const cv::Mat& image0,
+                                                    const cv::Mat& image1) const {
+  RectifiedPair pair;
+  // The cameras are independent: one on each thread (OpenCV runs the remaps, blurs and
+  // erosions nested in this loop serially; the masks' row scans are serial anyway).
+  cv::parallel_for_(
+      cv::Range(0, 2),
+      [&](const cv::Range& cameras) {
+        for (int camera = cameras.start; camera < cameras.end; ++camera) {
+          if (camera == 0) {
+            pair.colour0 = rectifier_->Rectify(image0, 0);
+            pair.grey0 = Grey(pair.colour0);
+            pair.mask0 = GridMirrorMask(pair.grey0, rectifier_->ValidMask(0), options_);
+          } else {
+            pair.grey1 = rectifier_->Rectify(Grey(image1), 1);
+            pair.mask1 = GridMirrorMask(pair.grey1, rectifier_->ValidMask(1), options_);
+          }
+        }
+      },
+      2);
+  return pair;
+}
+
+void DenseStereo::TriangulateCells(const cv::Mat& disparity16, const cv::Mat& correlation,
+                                   int first, const RectifiedPair& pair, GridCells* cells,
+                                   DensePairResult* result) const {
+  const int rows = disparity16.rows, width = disparity16.cols;
+  const int num_values = static_cast<int>(cot_parallax_.size());
+  const double baseline = rectifier_->baseline_m();
   const float scale = static_cast<float>(result->confidence_scale);
-  std::vector<std::vector<DensePoint>> row_points(rows);
   std::vector<int> row_mirror(rows, 0), row_matched(rows, 0);
   std::vector<double> row_confidence(rows, 0.0);
   cv::parallel_for_(cv::Range(0, rows), [&](const cv::Range& range_of_rows) {
     for (int r = range_of_rows.start; r < range_of_rows.end; ++r) {
-      const double phi = rectifier_.Phi(r);
-      const double cos_phi = std::cos(phi), sin_phi = std::sin(phi);
-      const float* d = disparity.ptr<float>(r);
-      const uint8_t* m0 = mask0.ptr<uint8_t>(r) + first;
-      const uint8_t* m1 = mask1.ptr<uint8_t>(r) + first;
+      const int16_t* d = disparity16.ptr<int16_t>(r);
+      const uint8_t* m0 = pair.mask0.ptr<uint8_t>(r) + first;
+      const uint8_t* m1 = pair.mask1.ptr<uint8_t>(r) + first;
       const float* corr = correlation.ptr<float>(r);
-      float* range_row = range->ptr<float>(r) + first;
-      float* std_row = range_std->ptr<float>(r) + first;
-      float* conf_row = confidence->ptr<float>(r) + first;
+      float* range_row = cells->range.ptr<float>(r) + first;
+      float* std_row = cells->range_std.ptr<float>(r) + first;
+      float* conf_row = cells->confidence.ptr<float>(r) + first;
       for (int c = 0; c < width; ++c) {
         if (!m0[c]) continue;
         ++row_mirror[r];
-        if (!(d[c] > 0.f)) continue;
-        const int c1 = static_cast<int>(std::lround(c - d[c]));
+        const int k = d[c];  // 1/16 cells
+        if (k <= 0 || k >= num_values) continue;
+        const int c1 = static_cast<int>(std::lround(c - k / 16.0));
         if (c1 < 0 || !m1[c1]) continue;
         ++row_matched[r];
         const float conf = std::clamp(corr[c], 0.f, 1.f) * scale;
         row_confidence[r] += conf;
         conf_row[c] = conf;
-        // RangeFromAngles and RangeDerivative with theta1 = theta0 + parallax, expanded so
-        // that one sincos of the parallax serves both (the per-cell cost is trigonometry).
-        const double parallax = d[c] * step;
-        const double sin_p = std::sin(parallax), cos_p = std::cos(parallax);
-        const double range_m =
-            baseline * (sin_theta[c] * cos_p + cos_theta[c] * sin_p) / sin_p;
-        const double std_m =
-            baseline * sin_theta[c] / (sin_p * sin_p) * options_.disparity_std_cells * step;
+        const double sin_theta = sin_theta_[first + c];
+        const double range_m = baseline * (sin_theta * cot_parallax_[k] + cos_theta_[first + c]);
+        const double std_m = sin_theta * range_std_per_sin_theta_[k];
         if (conf < options_.min_confidence || !(range_m > 0.0) ||
             std_m > options_.max_relative_range_std * range_m) {
           continue;
         }
         range_row[c] = static_cast<float>(range_m);
         std_row[c] = static_cast<float>(std_m);
-        DensePoint point;
-        const Eigen::Vector3d in_grid(sin_theta[c] * cos_phi, sin_theta[c] * sin_phi,
-                                      cos_theta[c]);
-        point.point_in_cam0 = (range_m * (cam0_from_grid * in_grid)).cast<float>();
-        if (colour0.channels() == 3) {
-          const cv::Vec3b bgr = colour0.at<cv::Vec3b>(r, first + c);
-          point.rgb = {bgr[2], bgr[1], bgr[0]};
-        } else {
-          const uint8_t g = colour0.at<uint8_t>(r, first + c);
-          point.rgb = {g, g, g};
-        }
-        point.confidence = conf;
-        point.range_std_m = static_cast<float>(std_m);
-        row_points[r].push_back(point);
       }
     }
   });
-  size_t total = 0;
   double confidence_sum = 0.0;
   for (int r = 0; r < rows; ++r) {
-    total += row_points[r].size();
     result->num_mirror_cells += row_mirror[r];
     result->num_matched_cells += row_matched[r];
     confidence_sum += row_confidence[r];
-  }
-  result->points.reserve(total);
-  for (const std::vector<DensePoint>& points : row_points) {
-    result->points.insert(result->points.end(), points.begin(), points.end());
   }
   if (result->num_matched_cells > 0) {
     result->mean_confidence = confidence_sum / result->num_matched_cells;
   }
 }
 
+void DenseStereo::CollectPoints(const GridCells& cells, const cv::Mat& colour0,
+                                DensePairResult* result) const {
+  const int rows = cells.range.rows, cols = cells.range.cols;
+  std::vector<size_t> row_start(rows + 1, 0);
+  for (int r = 0; r < rows; ++r) {
+    row_start[r + 1] = row_start[r] + cv::countNonZero(cells.range.row(r));
+  }
+  result->points.resize(row_start[rows]);
+  const Eigen::Matrix3d& cam0_from_grid = rectifier_->cam0_from_grid();
+  cv::parallel_for_(cv::Range(0, rows), [&](const cv::Range& range_of_rows) {
+    for (int r = range_of_rows.start; r < range_of_rows.end; ++r) {
+      // A cell's direction is sin(theta) (cos phi, sin phi, 0) + cos(theta) (0, 0, 1) in the
+      // grid's frame.
+      const double phi = rectifier_->Phi(r);
+      const Eigen::Vector3d across =
+          cam0_from_grid * Eigen::Vector3d(std::cos(phi), std::sin(phi), 0.0);
+      const Eigen::Vector3d along = cam0_from_grid.col(2);
+      const float* range_row = cells.range.ptr<float>(r);
+      const float* std_row = cells.range_std.ptr<float>(r);
+      const float* conf_row = cells.confidence.ptr<float>(r);
+      DensePoint* point = result->points.data() + row_start[r];
+      for (int c = 0; c < cols; ++c) {
+        if (!(range_row[c] > 0.f)) continue;
+        point->point_in_cam0 =
+            (range_row[c] * (sin_theta_[c] * across + cos_theta_[c] * along)).cast<float>();
+        if (colour0.channels() == 3) {
+          const cv::Vec3b bgr = colour0.at<cv::Vec3b>(r, c);
+          point->rgb = {bgr[2], bgr[1], bgr[0]};
+        } else {
+          const uint8_t g = colour0.at<uint8_t>(r, c);
+          point->rgb = {g, g, g};
+        }
+        point->confidence = conf_row[c];
+        point->range_std_m = std_row[c];
+        ++point;
+      }
+    }
+  });
+}
+
 DensePairResult DenseStereo::Reconstruct(const cv::Mat& image0, const cv::Mat& image1,
                                          const ProgressSink& progress) const {
-  OMNIRIG_CHECK(image0.cols == rig_.cam0.width && image0.rows == rig_.cam0.height,
-                "cam0 image is " << image0.cols << "x" << image0.rows << " but the rig's cam0 is "
-                                 << rig_.cam0.width << "x" << rig_.cam0.height);
-  OMNIRIG_CHECK(image1.cols == rig_.cam1.width && image1.rows == rig_.cam1.height,
-                "cam1 image is " << image1.cols << "x" << image1.rows << " but the rig's cam1 is "
-                                 << rig_.cam1.width << "x" << rig_.cam1.height);
-  OMNIRIG_CHECK(image0.depth() == CV_8U && image1.depth() == CV_8U &&
-                    (image0.channels() == 1 || image0.channels() == 3) &&
-                    (image1.channels() == 1 || image1.channels() == 3),
-                "images must be 8-bit grey or BGR");
+  CheckPairImages(rig_, image0, image1);
   progress.Report(0.0, "rectify");
   Timer timer;
-  const cv::Mat colour0 = rectifier_.Rectify(image0, 0);
-  const cv::Mat grey0 = Grey(colour0);
-  const cv::Mat grey1 = rectifier_.Rectify(Grey(image1), 1);
-  const cv::Mat mask0 = GridMirrorMask(grey0, rectifier_.ValidMask(0), options_);
-  const cv::Mat mask1 = GridMirrorMask(grey1, rectifier_.ValidMask(1), options_);
+  const RectifiedPair pair = RectifyPair(image0, image1);
   progress.ThrowIfCancelled();
-
-  const int rows = rectifier_.rows(), cols = rectifier_.cols();
   DensePairResult result;
   result.seconds.rectify = timer.ElapsedSeconds();
-  cv::Mat range(rows, cols, CV_32F, cv::Scalar(0)), range_std(rows, cols, CV_32F, cv::Scalar(0)),
-      confidence(rows, cols, CV_32F, cv::Scalar(0));
-  const auto [first, last] = UsedColumns(mask0, mask1);
+  const int rows = rectifier_->rows(), cols = rectifier_->cols();
+  GridCells cells{cv::Mat::zeros(rows, cols, CV_32F), cv::Mat::zeros(rows, cols, CV_32F),
+                  cv::Mat::zeros(rows, cols, CV_32F)};
+  const auto [first, last] = UsedColumns(pair.mask0, pair.mask1);
   if (first <= last) {
     progress.Report(0.1, "match");
     timer.Restart();
     const cv::Rect roi(first, 0, last - first + 1, rows);
-    const cv::Mat disparity = MatchRows(grey0(roi), grey1(roi), num_disparities_, options_);
+    const cv::Mat disparity16 =
+        MatchRows(pair.grey0(roi), pair.grey1(roi), num_disparities_, options_);
     progress.ThrowIfCancelled();
     progress.Report(0.8, "confidence");
     result.seconds.match = timer.ElapsedSeconds();
     timer.Restart();
-
-    // cam1's grey level at each cell's match, for the correlation of the matched windows.
-    cv::Mat map_x(disparity.size(), CV_32F), map_y(disparity.size(), CV_32F);
-    for (int r = 0; r < rows; ++r) {
-      const float* d = disparity.ptr<float>(r);
-      float* mx = map_x.ptr<float>(r);
-      float* my = map_y.ptr<float>(r);
-      for (int c = 0; c < roi.width; ++c) {
-        mx[c] = d[c] >= 0.f ? static_cast<float>(c) - d[c] : -1.f;
-        my[c] = static_cast<float>(r);
-      }
-    }
-    cv::Mat left, right_matched;
-    grey0(roi).convertTo(left, CV_32F);
-    cv::Mat right;
-    grey1(roi).convertTo(right, CV_32F);
-    cv::remap(right, right_matched, map_x, map_y, cv::INTER_LINEAR, cv::BORDER_CONSTANT);
-    const cv::Mat correlation = WindowCorrelation(left, right_matched,
-                                                  options_.confidence_window_cells,
-                                                  options_.image_noise_grey);
-    progress.Report(0.9, "triangulate");
+    cv::Mat left;
+    pair.grey0(roi).convertTo(left, CV_32F);
+    const cv::Mat correlation =
+        WindowCorrelation(left, MatchedGrey(pair.grey1(roi), disparity16),
+                          options_.confidence_window_cells, options_.image_noise_grey);
     result.seconds.confidence = timer.ElapsedSeconds();
+    progress.Report(0.85, "epipolar");
     timer.Restart();
     std::tie(result.epipolar_offset_cells, result.num_epipolar_samples) =
-        EpipolarOffset(grey0, grey1, mask0, num_disparities_, options_);
+        EpipolarOffset(pair.grey0, pair.grey1, pair.mask0, num_disparities_, options_);
     if (result.epipolar_offset_cells > options_.max_epipolar_offset_cells) {
       result.confidence_scale = options_.max_epipolar_offset_cells / result.epipolar_offset_cells;
     }
-
     result.seconds.epipolar = timer.ElapsedSeconds();
+    progress.Report(0.9, "triangulate");
     timer.Restart();
-    Triangulate(disparity, correlation, first, mask0, mask1, colour0, &range, &range_std,
-                &confidence, &result);
+    TriangulateCells(disparity16, correlation, first, pair, &cells, &result);
   }
+  CollectPoints(cells, pair.colour0, &result);
   result.num_points = static_cast<int>(result.points.size());
-  cv::transpose(range, result.range_m);
-  cv::transpose(range_std, result.range_std_m);
-  cv::transpose(confidence, result.confidence);
+  cv::transpose(cells.range, result.range_m);
+  cv::transpose(cells.range_std, result.range_std_m);
+  cv::transpose(cells.confidence, result.confidence);
   result.seconds.triangulate = timer.ElapsedSeconds();
   progress.Report(1.0, "triangulate");
   return result;

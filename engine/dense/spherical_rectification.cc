@@ -2,7 +2,11 @@
 
 #include <algorithm>
 #include <cmath>
+#include <list>
+#include <mutex>
 #include <optional>
+#include <utility>
+#include <vector>
 
 #include <opencv2/imgproc.hpp>
 
@@ -53,7 +57,8 @@ std::pair<double, double> ThetaRange(const StereoRig& rig, const Eigen::Vector3d
         const std::optional<Eigen::Vector3d> bearing =
             Lift(model.intrinsics, Eigen::Vector2d(u0 + du, v0 + dv));
         if (!bearing) continue;
-        const Eigen::Vector3d in_cam0 = camera == 0 ? *bearing : Eigen::Vector3d(cam0_from_cam1 * *bearing);
+        const Eigen::Vector3d in_cam0 =
+            camera == 0 ? *bearing : Eigen::Vector3d(cam0_from_cam1 * *bearing);
         const double theta = AngleBetween(pole, in_cam0);
         lo = std::min(lo, theta);
         hi = std::max(hi, theta);
@@ -68,8 +73,7 @@ std::pair<double, double> ThetaRange(const StereoRig& rig, const Eigen::Vector3d
 
 void SphericalGridOptions::Check() const {
   OMNIRIG_CHECK(step_rad == 0.0 || (step_rad >= 1e-4 && step_rad <= 0.05),
-                "the grid step must be 0 (automatic) or lie in [1e-4, 0.05] rad, got "
-                    << step_rad);
+                "the grid step must be 0 (automatic) or lie in [1e-4, 0.05] rad, got " << step_rad);
   OMNIRIG_CHECK(step_factor >= 1.0 && step_factor <= 8.0,
                 "the grid step factor must lie in [1, 8], got " << step_factor);
 }
@@ -110,15 +114,14 @@ SphericalRectifier::SphericalRectifier(const StereoRig& rig, const SphericalGrid
 
   theta_step_rad_ = options.step_rad > 0.0
                         ? options.step_rad
-                        : options.step_factor * std::min(FinestAngularStep(rig.cam0),
-                                                         FinestAngularStep(rig.cam1));
+                        : options.step_factor *
+                              std::min(FinestAngularStep(rig.cam0), FinestAngularStep(rig.cam1));
   rows_ = static_cast<int>(std::ceil(2.0 * M_PI / theta_step_rad_));
   const auto [theta_lo, theta_hi] = ThetaRange(rig, pole, theta_step_rad_);
   theta_max_rad_ = theta_hi;
   cols_ = static_cast<int>(std::ceil((theta_hi - theta_lo) / theta_step_rad_)) + 1;
 
-  const Eigen::Matrix3d cam1_from_cam0 =
-      rig.cam0_from_cam1.rotation.conjugate().toRotationMatrix();
+  const Eigen::Matrix3d cam1_from_cam0 = rig.cam0_from_cam1.rotation.conjugate().toRotationMatrix();
   for (int camera = 0; camera < 2; ++camera) {
     const CameraModel& model = camera == 0 ? rig.cam0 : rig.cam1;
     const Eigen::Matrix3d cam_from_grid =
@@ -168,9 +171,46 @@ cv::Mat SphericalRectifier::Rectify(const cv::Mat& image, int camera) const {
   OMNIRIG_CHECK(camera == 0 || camera == 1, "camera must be 0 or 1, got " << camera);
   cv::Mat out;
   cv::remap(image, out, map_xy_[camera], map_fraction_[camera], cv::INTER_LINEAR,
-            cv::BORDER_CONSTANT,
-            cv::Scalar::all(0));
+            cv::BORDER_CONSTANT, cv::Scalar::all(0));
   return out;
+}
+
+namespace {
+// Every number the tables depend on.
+std::vector<double> RectifierKey(const StereoRig& rig, const SphericalGridOptions& options) {
+  std::vector<double> key;
+  for (const CameraModel* camera : {&rig.cam0, &rig.cam1}) {
+    key.insert(key.end(), camera->intrinsics.params.begin(), camera->intrinsics.params.end());
+    key.push_back(camera->width);
+    key.push_back(camera->height);
+  }
+  const Eigen::Quaterniond& q = rig.cam0_from_cam1.rotation;
+  const Eigen::Vector3d& t = rig.cam0_from_cam1.translation;
+  key.insert(key.end(), {q.w(), q.x(), q.y(), q.z(), t.x(), t.y(), t.z()});
+  key.insert(key.end(), {options.step_rad, options.step_factor});
+  return key;
+}
+}  // namespace
+
+std::shared_ptr<const SphericalRectifier> SharedRectifier(const StereoRig& rig,
+                                                          const SphericalGridOptions& options) {
+  constexpr size_t kKept = 2;
+  using Entry = std::pair<std::vector<double>, std::shared_ptr<const SphericalRectifier>>;
+  static std::mutex mutex;
+  static std::list<Entry> cache;  // most recently used first
+  const std::vector<double> key = RectifierKey(rig, options);
+  // Held while building (up to a second): a second job of the same rig waits for the tables
+  // instead of building them again; one of another rig waits too, which is rare and short.
+  std::lock_guard<std::mutex> lock(mutex);
+  for (auto it = cache.begin(); it != cache.end(); ++it) {
+    if (it->first != key) continue;
+    cache.splice(cache.begin(), cache, it);
+    return cache.front().second;
+  }
+  auto rectifier = std::make_shared<const SphericalRectifier>(rig, options);
+  cache.emplace_front(key, rectifier);
+  if (cache.size() > kKept) cache.pop_back();
+  return rectifier;
 }
 
 double RangeFromAngles(double theta0_rad, double theta1_rad, double baseline_m) {

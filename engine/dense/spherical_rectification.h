@@ -15,6 +15,8 @@
 // the paper for the lifting); the grid's directions are projected into each camera once per rig
 // and stored as cv::remap tables.
 
+#include <memory>
+
 #include <opencv2/core.hpp>
 
 #include <Eigen/Core>
@@ -79,6 +81,14 @@ class SphericalRectifier {
   cv::Mat map_xy_[2], map_fraction_[2];
   cv::Mat valid_[2];
 };
+
+// The rectifier of `rig` with `options`, shared: the last two built in the process are kept
+// (keyed by every number of the rig and the options), so that the jobs of one rig (stereo
+// pairs, a SLAM job's dense map) build the tables once; they take about as long as one pair's
+// reconstruction (bench_dense) and some 40 MB at 1024x768. Thread-safe. Throws as the
+// constructor does.
+std::shared_ptr<const SphericalRectifier> SharedRectifier(const StereoRig& rig,
+                                                          const SphericalGridOptions& options);
 
 // The finest angle between the bearings of neighbouring pixels (radially and tangentially) on
 // the largest circle around the principal point that fits in the image; the grid's default step.

@@ -74,6 +74,28 @@ TEST(SphericalRectification, GridCoversTheImagesAtTheirFinestResolution) {
   EXPECT_THROW(SphericalRectifier(rig, coarse), InvalidArgument);
 }
 
+TEST(SphericalRectification, SharedRectifierBuildsOncePerRigAndKeepsTwo) {
+  const StereoRig rig = DefaultRig();
+  SphericalGridOptions coarse;
+  coarse.step_rad = 0.01;  // small tables: the test is about the cache
+  const auto first = SharedRectifier(rig, coarse);
+  EXPECT_EQ(SharedRectifier(rig, coarse), first);  // the same tables, not a copy
+  EXPECT_EQ(first->theta_step_rad(), 0.01);
+  StereoRig moved = rig;
+  moved.cam0_from_cam1.translation.z() += 0.01;
+  const auto other_rig = SharedRectifier(moved, coarse);
+  EXPECT_NE(other_rig, first);
+  EXPECT_NEAR(other_rig->baseline_m(), first->baseline_m() + 0.01, 1e-12);
+  SphericalGridOptions finer = coarse;
+  finer.step_rad = 0.008;
+  const auto other_step = SharedRectifier(rig, finer);  // a third entry: `first` is dropped
+  EXPECT_NE(other_step, first);
+  EXPECT_EQ(SharedRectifier(moved, coarse), other_rig);
+  EXPECT_NE(SharedRectifier(rig, coarse), first);  // built again, held by `first` still
+  coarse.step_rad = -1.0;
+  EXPECT_THROW(SharedRectifier(rig, coarse), InvalidArgument);
+}
+
 TEST(SphericalRectification, RemapTablesAreTheModelsProjection) {
   const StereoRig rig = DefaultRig();
   const SphericalRectifier rectifier(rig, SphericalGridOptions());

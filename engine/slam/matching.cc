@@ -2,7 +2,9 @@
 
 #include <cmath>
 #include <limits>
+#include <unordered_map>
 
+#include <opencv2/core/hal/hal.hpp>
 #include <opencv2/features2d.hpp>
 
 #include "engine/stereo/descriptor_match.h"
@@ -17,6 +19,11 @@ namespace {
 // Distances are squared: the bound is squared too.
 bool Passes(const BestTwo& best, double ratio, double max_distance) {
   return best.best >= 0 && best.d1 <= max_distance * max_distance && best.PassesRatio(ratio);
+}
+
+// OpenCV's vectorised kernel: the compiler may not reorder a float sum into SIMD lanes.
+float SquaredDistance(const float* a, const float* b, int n) {
+  return cv::hal::normL2Sqr_(a, b, n);
 }
 
 }  // namespace
@@ -58,7 +65,7 @@ std::vector<StereoPoint> MatchStereo(const StereoRig& rig, const CameraFeatures&
           b0.cross(b1_in_cam0).norm() > 1e-3) {
         continue;
       }
-      const float d = SquaredDescriptorDistance(d0, features1.descriptors.ptr<float>(j), dims);
+      const float d = SquaredDistance(d0, features1.descriptors.ptr<float>(j), dims);
       best0[i].Add(j, d);
       best1[j].Add(i, d);
     }
@@ -130,12 +137,48 @@ std::vector<std::pair<int, int>> MatchDescriptorsGated(const CameraFeatures& a,
     for (int j = 0; j < nb; ++j) {
       const float* bj = &bearings_b[3 * j];
       if (r.x() * bj[0] + r.y() * bj[1] + r.z() * bj[2] < min_cos) continue;
-      const float d = SquaredDescriptorDistance(da, b.descriptors.ptr<float>(j), dims);
+      const float d = SquaredDistance(da, b.descriptors.ptr<float>(j), dims);
       best_a[i].Add(j, d);
       best_b[j].Add(i, d);
     }
   }
   for (int i = 0; i < na; ++i) {
+    const int j = best_a[i].best;
+    if (Passes(best_a[i], max_ratio, max_distance) && best_b[j].best == i &&
+        Passes(best_b[j], max_ratio, max_distance)) {
+      matches.emplace_back(i, j);
+    }
+  }
+  return matches;
+}
+
+std::vector<std::pair<int, int>> MatchDescriptorsInGroups(const cv::Mat& descriptors_a,
+                                                          const std::vector<int>& group_a,
+                                                          const cv::Mat& descriptors_b,
+                                                          const std::vector<int>& group_b,
+                                                          double max_ratio, double max_distance) {
+  OMNIRIG_CHECK(descriptors_a.type() == CV_32F && descriptors_b.type() == CV_32F &&
+                    descriptors_a.cols == descriptors_b.cols,
+                "descriptors must be float rows of one size");
+  OMNIRIG_CHECK(group_a.size() == static_cast<size_t>(descriptors_a.rows) &&
+                    group_b.size() == static_cast<size_t>(descriptors_b.rows),
+                "one group per descriptor");
+  std::unordered_map<int, std::vector<int>> members_b;
+  for (int j = 0; j < descriptors_b.rows; ++j) members_b[group_b[j]].push_back(j);
+  const int dims = descriptors_a.cols;
+  std::vector<BestTwo> best_a(descriptors_a.rows), best_b(descriptors_b.rows);
+  for (int i = 0; i < descriptors_a.rows; ++i) {
+    const auto group = members_b.find(group_a[i]);
+    if (group == members_b.end()) continue;
+    const float* da = descriptors_a.ptr<float>(i);
+    for (int j : group->second) {
+      const float d = SquaredDistance(da, descriptors_b.ptr<float>(j), dims);
+      best_a[i].Add(j, d);
+      best_b[j].Add(i, d);
+    }
+  }
+  std::vector<std::pair<int, int>> matches;
+  for (int i = 0; i < descriptors_a.rows; ++i) {
     const int j = best_a[i].best;
     if (Passes(best_a[i], max_ratio, max_distance) && best_b[j].best == i &&
         Passes(best_b[j], max_ratio, max_distance)) {

@@ -58,4 +58,13 @@ std::vector<std::pair<int, int>> MatchDescriptorsGated(const CameraFeatures& a,
                                                        double max_angle_rad, double max_ratio,
                                                        double max_distance);
 
+// MatchDescriptors restricted to pairs in the same group (group_a[i] == group_b[j], e.g. the
+// vocabulary node of each descriptor): the ratio test compares a group's members only. Costs
+// the exhaustive search divided by about the number of groups.
+std::vector<std::pair<int, int>> MatchDescriptorsInGroups(const cv::Mat& descriptors_a,
+                                                          const std::vector<int>& group_a,
+                                                          const cv::Mat& descriptors_b,
+                                                          const std::vector<int>& group_b,
+                                                          double max_ratio, double max_distance);
+
 }  // namespace omnirig::slam

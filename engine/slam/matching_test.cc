@@ -93,5 +93,31 @@ TEST(MatchDescriptors, MutualRatioMatchesAndGatedAgree) {
   for (const auto& [a, b] : gated) EXPECT_EQ(b, cam1_of_point[a]);
 }
 
+TEST(MatchDescriptors, InGroupsMatchesWithinAGroupOnly) {
+  const StereoRig rig = VerticalRig();
+  CameraFeatures f0, f1;
+  std::vector<Eigen::Vector3d> points;
+  std::vector<int> cam1_of_point;
+  MakeFeatures(rig, 300, &f0, &f1, &points, &cam1_of_point);
+  // Five groups; every tenth point of cam1 put into another group than its twin's.
+  std::vector<int> group0(300), group1(300);
+  for (int i = 0; i < 300; ++i) {
+    group0[i] = i % 5;
+    group1[cam1_of_point[i]] = i % 10 == 0 ? (i + 1) % 5 : i % 5;
+  }
+  const auto matches = MatchDescriptorsInGroups(f0.descriptors, group0, f1.descriptors, group1,
+                                                0.8, 250);
+  EXPECT_GT(matches.size(), 260u);
+  EXPECT_LE(matches.size(), 270u);  // the 30 separated twins are not matched
+  for (const auto& [a, b] : matches) {
+    EXPECT_EQ(b, cam1_of_point[a]);
+    EXPECT_EQ(group0[a], group1[b]);
+  }
+  // One group for all: the exhaustive search's matches.
+  const auto one = MatchDescriptorsInGroups(f0.descriptors, std::vector<int>(300, 0),
+                                            f1.descriptors, std::vector<int>(300, 0), 0.8, 250);
+  EXPECT_EQ(one, MatchDescriptors(f0.descriptors, f1.descriptors, 0.8, 250));
+}
+
 }  // namespace
 }  // namespace omnirig::slam

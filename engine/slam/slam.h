@@ -14,8 +14,10 @@
 // keyframes; the other frames follow their keyframes.
 //
 // Place recognition: every keyframe's bag of words (vocabulary.h) is queried against the older
-// keyframes; a candidate is verified on the sphere (essential matrix on bearings, the stereo
-// scale's 3D-3D agreement, then the candidate's landmarks in the keyframe). A verified loop
+// keyframes that tracking's estimate puts near enough (loop_max_distance_m plus a drift
+// allowance); a candidate is verified on the sphere (descriptors matched within vocabulary
+// nodes, essential matrix on bearings, the stereo scale's 3D-3D agreement, then the candidate's
+// landmarks in the keyframe). A verified loop
 // fuses the landmarks seen again; when the correction it implies is larger than the noise, a
 // pose graph (pose_graph.h) spreads it over the keyframes and the global bundle adjustment
 // follows. A candidate that fails verification changes nothing.
@@ -82,6 +84,11 @@ struct SlamOptions {
   // recognised from further away give weaker relative poses (on the 100 m city block, a match
   // 7.8 m away moved a pose by 28 cm where the drift was millimetres) and are not revisits.
   double loop_max_distance_m = 1.5;
+  // Candidates are verified only when tracking's estimate puts them within loop_max_distance_m
+  // plus this fraction of the path travelled since them (the drift tracking may have gathered;
+  // it measures 0.1-0.5 % on the renders, so 5 % is a wide margin): verification matches every
+  // descriptor of both keyframes and is the costly part of place recognition.
+  double loop_max_drift_fraction = 0.05;
   // A loop whose correction is below both only fuses the landmarks seen again (the local
   // adjustment absorbs it); above either, the pose graph and the global adjustment run.
   double loop_min_correction_m = 0.05;

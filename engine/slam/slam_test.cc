@@ -126,6 +126,9 @@ TEST(SlamOptions, InvalidOptionsAreRefused) {
   options.global_bundle_adjustment = false;
   options.calibration_refinement.refine = CalibrationRefinement::kAll;
   EXPECT_THROW(options.Check(), InvalidArgument);
+  options = SlamOptions();
+  options.loop_max_drift_fraction = -0.01;
+  EXPECT_THROW(options.Check(), InvalidArgument);
 }
 
 }  // namespace

@@ -163,8 +163,9 @@ int Vocabulary::Word(const float* descriptor) const {
   return node - FirstLeaf();
 }
 
-BowVector Vocabulary::Transform(const cv::Mat& descriptors) const {
+BowVector Vocabulary::Transform(const cv::Mat& descriptors, std::vector<int>* words) const {
   BowVector vector;
+  if (words) words->clear();
   if (descriptors.empty()) return vector;
   OMNIRIG_CHECK(descriptors.cols == kDescriptorSize, "a bag of words needs SIFT descriptors");
   cv::Mat f;
@@ -173,6 +174,7 @@ BowVector Vocabulary::Transform(const cv::Mat& descriptors) const {
   for (int r = 0; r < f.rows; ++r) {
     const int word = Word(f.ptr<float>(r));
     weights[word] += idf_[word];
+    if (words) words->push_back(word);
   }
   double sum = 0;
   for (const auto& [word, weight] : weights) sum += weight;
@@ -182,6 +184,13 @@ BowVector Vocabulary::Transform(const cv::Mat& descriptors) const {
     if (weight > 0) vector.emplace_back(word, static_cast<float>(weight / sum));
   }
   return vector;
+}
+
+int Vocabulary::NodeOf(int word, int level) const {
+  OMNIRIG_CHECK(level >= 1 && level <= depth_, "vocabulary level out of range");
+  // Leaves are numbered in breadth-first order of a complete tree: the word's digits in base
+  // `branching` are its path from the root.
+  return word / Power(branching_, depth_ - level);
 }
 
 std::vector<std::uint8_t> Vocabulary::Serialize() const {

@@ -45,8 +45,14 @@ class Vocabulary {
   int num_words() const { return idf_.empty() ? 0 : static_cast<int>(idf_.size()); }
   // The word of one descriptor (kDescriptorSize floats).
   int Word(const float* descriptor) const;
-  // The tf-idf vector of an image's descriptors (CV_32F or CV_8U rows).
-  BowVector Transform(const cv::Mat& descriptors) const;
+  // The tf-idf vector of an image's descriptors (CV_32F or CV_8U rows); with `words`, also
+  // each row's word.
+  BowVector Transform(const cv::Mat& descriptors, std::vector<int>* words = nullptr) const;
+  // The node of the tree at `level` (1 = the root's children, depth() = the word itself) that
+  // holds `word`, numbered 0 .. branching^level - 1: descriptors under different nodes are
+  // unlikely matches, so matching can stay within one node (DBoW2's direct index).
+  int NodeOf(int word, int level) const;
+  int depth() const { return depth_; }
 
  private:
   // The descriptors of a node of the tree being trained (rows of the training matrix).

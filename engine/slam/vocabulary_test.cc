@@ -69,5 +69,25 @@ TEST(DefaultVocabulary, IsCompiledInWithAThousandWords) {
   EXPECT_EQ(DefaultVocabulary().num_words(), 1000);
 }
 
+TEST(Vocabulary, NodesHoldTheirWordsAndTransformReportsEachRowsWord) {
+  std::mt19937 rng(4);
+  std::vector<cv::Mat> images;
+  for (int k = 0; k < 6; ++k) images.push_back(Descriptors(200, k, &rng));
+  const Vocabulary vocabulary = Vocabulary::Train(images, 4, 2, 1);
+  // 16 words under 4 nodes of level 1: word w's path from the root is its base-4 digits.
+  EXPECT_EQ(vocabulary.NodeOf(0, 1), 0);
+  EXPECT_EQ(vocabulary.NodeOf(7, 1), 1);
+  EXPECT_EQ(vocabulary.NodeOf(15, 1), 3);
+  EXPECT_EQ(vocabulary.NodeOf(13, 2), 13);
+  EXPECT_THROW(vocabulary.NodeOf(3, 3), InvalidArgument);
+  std::vector<int> words;
+  const BowVector bow = vocabulary.Transform(images[1], &words);
+  ASSERT_EQ(words.size(), static_cast<size_t>(images[1].rows));
+  for (int r = 0; r < images[1].rows; ++r) {
+    EXPECT_EQ(words[r], vocabulary.Word(images[1].ptr<float>(r)));
+  }
+  EXPECT_EQ(bow, vocabulary.Transform(images[1]));
+}
+
 }  // namespace
 }  // namespace omnirig::slam

@@ -1,22 +1,11 @@
 #pragma once
-// Descriptor matching of sparse stereo and SLAM: squared distances and Lowe's ratio test.
+// Descriptor matching of sparse stereo and SLAM: Lowe's ratio test.
 
 #include <limits>
 
 namespace omnirig {
 
-// Squared Euclidean distance of two float descriptors of n entries.
-inline float SquaredDescriptorDistance(const float* a, const float* b, int n) {
-  float sum = 0.f;
-  for (int k = 0; k < n; ++k) {
-    const float d = a[k] - b[k];
-    sum += d * d;
-  }
-  return sum;
-}
-
 // The best and second-best squared descriptor distances among one feature's candidates.
-
 struct BestTwo {
   int best = -1;  // the best candidate's index; -1 while none
   float d1 = std::numeric_limits<float>::infinity();

@@ -385,16 +385,20 @@ std::string UnsynchronisedReason(const PairSyncStatistic& pair, const SyncTestRe
 // model near the given one that the other pairs support; the test keeps the reference with
 // the smaller median statistic. Without the pair, so that its own
 // disagreement cannot be absorbed by the intrinsics (refitting with it, a 1 mm move was found
-// in 15 of 20 synthetic rigs instead of 19; relpose_sync_power_test.cc).
-std::vector<StereoRig> SyncTestRigs(const std::vector<RigPairCorners>& corners,
-                                    const RelativePoseOptions& options, const StereoRig& rig,
-                                    const std::vector<Rigid3d>& cam0_from_board) {
+// in 15 of 20 synthetic rigs instead of 19; relpose_sync_power_test.cc); the test expects each
+// refit's own error at its pair (TestPairSynchronisation).
+HeldOutRigs SyncTestRigs(const std::vector<RigPairCorners>& corners,
+                         const RelativePoseOptions& options, const StereoRig& rig,
+                         const std::vector<Rigid3d>& cam0_from_board) {
   if (options.refine_intrinsics || options.sync_test.false_alarm_rate == 0.0 ||
       corners.size() < 3) {
     return {};
   }
   RigRefinementOptions refine = options.RefinementOptions();
   refine.refine_intrinsics = true;
+  HeldOutRigs held_out;
+  held_out.fixed_intrinsics = {refine.fixed_intrinsics,
+                               refine.cam1_fixed_intrinsics.value_or(refine.fixed_intrinsics)};
   // Every refit without one pair starts from the fit with all: a few iterations each.
   StereoRig all = rig;
   std::vector<Rigid3d> all_poses = cam0_from_board;
@@ -402,7 +406,8 @@ std::vector<StereoRig> SyncTestRigs(const std::vector<RigPairCorners>& corners,
     all = rig;
     all_poses = cam0_from_board;
   }
-  std::vector<StereoRig> rigs(corners.size(), rig);
+  std::vector<StereoRig>& rigs = held_out.rig_of_pair;
+  rigs.assign(corners.size(), rig);
   for (size_t i = 0; i < corners.size(); ++i) {
     std::vector<RigPairCorners> others;
     std::vector<Rigid3d> poses;
@@ -414,7 +419,7 @@ std::vector<StereoRig> SyncTestRigs(const std::vector<RigPairCorners>& corners,
     StereoRig refined = all;
     if (RefineRig(others, refine, &refined, &poses, nullptr).usable) rigs[i] = refined;
   }
-  return rigs;
+  return held_out;
 }
 
 // Step 5: the synchronisation test on the used pairs of the current rig (relpose_sync.h); the
@@ -434,8 +439,8 @@ bool TestSynchronisation(const UsedPairs& used, const RelativePoseOptions& optio
   }
   report->sync_test =
       TestPairSynchronisation(report->rig, corners, cam0_from_board, options.sync_test);
-  const std::vector<StereoRig> rigs = SyncTestRigs(corners, options, report->rig, cam0_from_board);
-  if (!rigs.empty()) {
+  const HeldOutRigs rigs = SyncTestRigs(corners, options, report->rig, cam0_from_board);
+  if (!rigs.rig_of_pair.empty()) {
     // Whichever explains the bulk of the pairs better (the smaller median statistic): the
     // given cameras when they are right (with few pairs the refitted intrinsics are the
     // noisier reference), the refitted ones when the calibrations are off.

@@ -25,6 +25,13 @@
 //      same pair's fits, independent of T). w is taken as at least 1: part of T does not shrink
 //      with the pair's own noise (the reference rig's error at the pair, detector errors
 //      common to all pairs), and with w alone the cleanest pairs were flagged instead.
+//      When the reference is a rig fitted without the pair (HeldOutRigs: the cameras kept at
+//      their own calibrations), that rig's error at the pair is predicted too: the other
+//      pairs' Gauss-Newton covariance of its parameters carried to the pair's 6 directions of
+//      disagreement (S Sigma S^T, in units of the corner noise), added along its eigenvectors.
+//      A pair alone in its part of the mirror is predicted worst by the others: on synchronised
+//      renders the two pairs the test lost had 2.8 and 6.5 times the corner noise's variance
+//      there, against a median of 0.16 (bench_relpose --only sync, docs/relpose.md).
 //   3. Dispersion. Corner errors that are not independent (correlated along a board's edges,
 //      a model error every view shares, the reference rig's own error) add to every pair's T
 //      a part that does not scale with the pair's own noise; an unsynchronised pair stands
@@ -101,6 +108,9 @@ struct PairSyncStatistic {
   // Each camera's own fit of the board: sum of squares / degrees of freedom (px^2), and dof.
   std::array<double, 2> own_variance_px2{};
   std::array<int, 2> own_dof{};
+  // With held-out rigs: that rig's prediction error at the pair, the variance it adds to the
+  // pair's disagreement (mean over its 6 directions, in units of the corner noise's); else 0.
+  double reference_variance = 0.0;
   bool flagged = false;  // statistic over the limit (only the worst is left out per round)
   // cam0's own board pose against cam1's own through the rig, at the board's centre.
   double board_offset_m = 0.0;
@@ -128,14 +138,24 @@ std::array<double, 2> EstimatePairCornerNoise(const StereoRig& rig,
                                               const std::vector<RigPairCorners>& pairs,
                                               const SyncTestOptions& options);
 
+// The rigs the pairs are judged by when each was refitted without its pair (relative_pose.cc,
+// SyncTestRigs): cam0_from_cam1 and the intrinsics but `fixed_intrinsics` (per camera,
+// UnifiedIntrinsics order) fitted to the other pairs.
+struct HeldOutRigs {
+  std::vector<StereoRig> rig_of_pair;  // one per pair
+  std::array<std::array<bool, UnifiedIntrinsics::kNumParams>, 2> fixed_intrinsics{};
+};
+
 // Tests every pair of a fitted rig. `cam0_from_board`: the joint fit's board poses (starting
-// points of the fits through the rig). With `rig_of_pair` (one per pair), pair i is judged by
-// its own rig instead (its separate fits and the fit through the rig use that rig's cameras);
-// the corner noise still comes from `rig`'s. Needs at least 3 pairs (else report.run is false).
+// points of the fits through the rig). With `held_out` rigs, pair i is judged by its own rig
+// instead (its separate fits and the fit through the rig use that rig's cameras), and its
+// disagreement is expected to include that rig's prediction error at the pair (the rig fitted
+// to the other pairs, their Gauss-Newton covariance carried to the pair: J Sigma J^T); the
+// corner noise still comes from `rig`'s. Needs at least 3 pairs (else report.run is false).
 SyncTestReport TestPairSynchronisation(const StereoRig& rig,
                                        const std::vector<RigPairCorners>& pairs,
                                        const std::vector<Rigid3d>& cam0_from_board,
                                        const SyncTestOptions& options,
-                                       const std::vector<StereoRig>& rig_of_pair = {});
+                                       const HeldOutRigs& held_out = {});
 
 }  // namespace omnirig

@@ -111,10 +111,10 @@ void RunSeed(uint64_t seed, std::array<Counts, 2>* counts_by_setting) {
 // losing a pair has probability 0.15 %; at the limit's per-pair level (0.05 %), two or more of
 // 120 pairs over it 0.2 %. Both settings, 240 pairs: eight or more with p < 1 % has probability
 // 0.3 % (the rule before this test lost a pair in 7 of 31 such rig tests, 4.5 % and 2.5 % of
-// the pairs under 1 %). With the cameras kept at their own calibrations the rigs still lose a
-// pair more often than promised (2 of 16 in bench_relpose --only sync: docs/relpose.md); the
-// count is printed, not asserted. Boards moved by 2 mm between the exposures are found in
-// every rig.
+// the pairs under 1 %). The same for the cameras kept at their own calibrations since the test
+// expects the held-out rigs' error at each pair (before, 2 of 16 rigs lost a pair in
+// bench_relpose --only sync: docs/relpose.md). Boards moved by 2 mm between the exposures are
+// found in every rig.
 TEST(PairSynchronisationRenders, FalseAlarmsMatchTheStatedRate) {
   std::array<Counts, 2> counts;  // cameras kept, intrinsics refined
   for (int s = 0; s < kNumSeeds; ++s) {
@@ -133,8 +133,10 @@ TEST(PairSynchronisationRenders, FalseAlarmsMatchTheStatedRate) {
     EXPECT_EQ(c.moved_found, c.moved);
     EXPECT_GE(c.moved, 10);
   }
-  EXPECT_LE(counts[1].rigs_losing, 1);
-  EXPECT_LE(counts[1].over_limit, 1);
+  for (const Counts& c : counts) {
+    EXPECT_LE(c.rigs_losing, 1);
+    EXPECT_LE(c.over_limit, 1);
+  }
   EXPECT_LE(counts[0].p_under_1 + counts[1].p_under_1, 7);
 }
 

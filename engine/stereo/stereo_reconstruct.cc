@@ -19,6 +19,15 @@
 namespace omnirig {
 namespace {
 
+float SquaredDistance(const float* a, const float* b, int n) {
+  float sum = 0.f;
+  for (int k = 0; k < n; ++k) {
+    const float d = a[k] - b[k];
+    sum += d * d;
+  }
+  return sum;
+}
+
 // True when the rays from cam0's centre along d0 and from c1 along d1 (cam0 frame) meet in
 // front of both cameras; nearly parallel rays (a point at infinity) count as meeting in front
 // when they point the same way.
@@ -178,7 +187,7 @@ std::vector<StereoMatch> MatchAlongEpipolarCurves(const LiftedFeatures& features
       const double s0 = std::abs(normals_in0[j].dot(features0.bearings[i]));
       if (s0 > sin_max || normals_in0[j].isZero()) continue;
       if (!MeetInFront(c1_in0, features0.bearings[i], rays1_in0[j])) continue;
-      const float d = SquaredDescriptorDistance(desc0, features1.descriptors.ptr<float>(j), dims);
+      const float d = SquaredDistance(desc0, features1.descriptors.ptr<float>(j), dims);
       candidates.push_back({i, j, d, std::asin(std::max(s0, s1))});
       best0[i].Add(j, d);
       best1[j].Add(i, d);
