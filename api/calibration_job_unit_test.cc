@@ -126,10 +126,7 @@ TEST(CalibrationJson, ResultHasTheIssuesKeys) {
   camera.width = 1024;
   camera.height = 768;
   camera.intrinsics.params = {0.9, 300, 300, 512, 384, 0, -0.1, 0.02, 0, 0, 0};
-  BoardSpec board;
-  board.cols = 8;
-  board.rows = 6;
-  board.square_size_m = 0.04;
+  const BoardSpec board = SyntheticBoard();
   SyntheticCornerOptions synth;
   synth.num_views = 6;
   synth.noise_px = 0.1;

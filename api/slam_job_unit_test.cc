@@ -8,6 +8,7 @@
 #include <opencv2/videoio.hpp>
 
 #include "api/camera_json.h"
+#include "engine/geometry/test_rig.h"
 #include "engine/util/check.h"
 
 namespace omnirig::api {
@@ -15,18 +16,6 @@ namespace {
 
 namespace fs = std::filesystem;
 using nlohmann::json;
-
-StereoRig TinyRig(int width, int height) {
-  StereoRig rig;
-  for (CameraModel* camera : {&rig.cam0, &rig.cam1}) {
-    camera->width = width;
-    camera->height = height;
-    camera->intrinsics.params = {0.9, 0.3 * height, 0.3 * height, width / 2.0, height / 2.0, 0,
-                                 0, 0, 0, 0, 0};
-  }
-  rig.cam0_from_cam1 = Rigid3d(Eigen::Quaterniond::Identity(), Eigen::Vector3d(0, 0, 0.1));
-  return rig;
-}
 
 class TempDataset : public ::testing::Test {
  protected:
@@ -128,36 +117,36 @@ TEST_F(TempDataset, PairsFramesByName) {
   WriteImage("cam0/a.png", 64, 48);
   WriteImage("cam1/a.png", 64, 48);
   names_.push_back("gt.tum");  // other files are ignored
-  const SlamSequence sequence = PrepareSlamSequence(TinyRig(64, 48), dir_, names_);
+  const SlamSequence sequence = PrepareSlamSequence(TinyTestRig(64, 48), dir_, names_);
   EXPECT_EQ(sequence.names, (std::vector<std::string>{"a.png", "b.png"}));
   EXPECT_EQ(sequence.cam1[1], "cam1/b.png");
 }
 
-TEST_F(TempDataset, RefusesMissingPartners) {
-  WriteImage("cam0/a.png", 64, 48);
-  WriteImage("cam1/a.png", 64, 48);
-  WriteImage("cam0/b.png", 64, 48);
-  const std::string message =
-      ExpectInvalid([&] { PrepareSlamSequence(TinyRig(64, 48), dir_, names_); });
-  EXPECT_NE(message.find("cam0/b.png has no cam1/b.png"), std::string::npos) << message;
-}
-
-TEST_F(TempDataset, RefusesMismatchedImageSizes) {
-  WriteImage("cam0/a.png", 64, 48);
-  WriteImage("cam1/a.png", 64, 48);
-  WriteImage("cam0/b.jpg", 64, 48);
-  WriteImage("cam1/b.jpg", 80, 48);
-  const std::string message =
-      ExpectInvalid([&] { PrepareSlamSequence(TinyRig(64, 48), dir_, names_); });
-  EXPECT_NE(message.find("cam1/b.jpg is 80x48"), std::string::npos) << message;
-}
-
-TEST_F(TempDataset, RefusesARigCalibratedForAnotherSize) {
-  WriteImage("cam0/a.png", 64, 48);
-  WriteImage("cam1/a.png", 64, 48);
-  const std::string message =
-      ExpectInvalid([&] { PrepareSlamSequence(TinyRig(1024, 768), dir_, names_); });
-  EXPECT_NE(message.find("calibrated for 1024x768"), std::string::npos) << message;
+// Each bad dataset is refused with the reason: a frame without its partner, a pair of other
+// sizes, a rig calibrated for other images.
+TEST_F(TempDataset, RefusesBadPairsAndARigOfAnotherSize) {
+  const struct {
+    std::vector<std::pair<std::string, int>> images;  // name, width (all 48 px high)
+    int rig_width, rig_height;
+    std::string reason;
+  } cases[] = {
+      {{{"cam0/a.png", 64}, {"cam1/a.png", 64}, {"cam0/b.png", 64}},
+       64,
+       48,
+       "cam0/b.png has no cam1/b.png"},
+      {{{"cam0/a.png", 64}, {"cam1/a.png", 64}, {"cam0/b.jpg", 64}, {"cam1/b.jpg", 80}},
+       64,
+       48,
+       "cam1/b.jpg is 80x48"},
+      {{{"cam0/a.png", 64}, {"cam1/a.png", 64}}, 1024, 768, "calibrated for 1024x768"},
+  };
+  for (const auto& c : cases) {
+    names_.clear();
+    for (const auto& [name, width] : c.images) WriteImage(name, width, 48);
+    const std::string message = ExpectInvalid(
+        [&] { PrepareSlamSequence(TinyTestRig(c.rig_width, c.rig_height), dir_, names_); });
+    EXPECT_NE(message.find(c.reason), std::string::npos) << message;
+  }
 }
 
 TEST_F(TempDataset, RefusesAGroundTruthOfTheWrongLengthBeforeWork) {
@@ -165,7 +154,7 @@ TEST_F(TempDataset, RefusesAGroundTruthOfTheWrongLengthBeforeWork) {
   WriteImage("cam1/a.png", 64, 48);
   std::ofstream(dir_ / "gt.tum") << "0 0 0 0 0 0 0 1\n1 0 0 0 0 0 0 1\n";
   const std::string message = ExpectInvalid([&] {
-    RunSlamOnDataset(TinyRig(64, 48), dir_, names_, slam::SlamOptions(), dir_ / "gt.tum",
+    RunSlamOnDataset(TinyTestRig(64, 48), dir_, names_, slam::SlamOptions(), dir_ / "gt.tum",
                      dir_ / "out", ProgressSink(), nullptr);
   });
   EXPECT_NE(message.find("2 poses but the sequence has 1"), std::string::npos) << message;
@@ -182,7 +171,7 @@ TEST_F(TempDataset, BlackFramesAreReportedLostNotFatal) {
                                 fractions.push_back(f);
                               },
                               nullptr};
-  const json result = RunSlamOnDataset(TinyRig(64, 48), dir_, names_, slam::SlamOptions(),
+  const json result = RunSlamOnDataset(TinyTestRig(64, 48), dir_, names_, slam::SlamOptions(),
                                        std::nullopt, dir_ / "out", progress, nullptr);
   EXPECT_EQ(result["num_frames"], 3);
   EXPECT_EQ(result["num_tracked"], 0);
@@ -206,7 +195,7 @@ TEST_F(TempDataset, ARefinementThatCannotRunSaysWhy) {
   }
   slam::SlamOptions options;
   options.calibration_refinement.refine = slam::CalibrationRefinement::kIntrinsics;
-  const json result = RunSlamOnDataset(TinyRig(64, 48), dir_, names_, options, std::nullopt,
+  const json result = RunSlamOnDataset(TinyTestRig(64, 48), dir_, names_, options, std::nullopt,
                                        dir_ / "out", ProgressSink(), nullptr);
   const json& refinement = result["calibration_refinement"];
   ASSERT_TRUE(refinement.is_object());
@@ -218,59 +207,68 @@ TEST_F(TempDataset, ARefinementThatCannotRunSaysWhy) {
   EXPECT_EQ(refinement["after"]["cameras"]["cam0"]["intrinsics"]["gamma_u"], 0.3 * 48);
 }
 
-// frame_step on an image sequence keeps every n-th pair, and its ground-truth pose.
-TEST_F(TempDataset, FrameStepOnImages) {
-  for (const char* name : {"a.png", "b.png", "c.png", "d.png", "e.png"}) {
-    WriteImage(std::string("cam0/") + name, 64, 48);
-    WriteImage(std::string("cam1/") + name, 64, 48);
+// Frame selection: frame_step on an image sequence keeps every n-th pair and its ground-truth
+// pose; on a recording, the time range selects frames by container time and the ground truth is
+// matched to them by timestamp (a missing pose is named).
+TEST_F(TempDataset, FrameSelectionOnImagesAndVideos) {
+  slam::VideoFrameOptions every_second, time_range;
+  every_second.frame_step = 2;
+  time_range.start_s = 0.15;
+  time_range.end_s = 0.45;
+  const struct {
+    const char* kind;
+    slam::VideoFrameOptions frames;
+    double gt_first_s, gt_step_s;    // the ground truth's timestamps, one per pair
+    std::vector<std::string> names;  // of the frames kept
+    double last_timestamp_s;         // the last kept frame's, in trajectory.json
+  } cases[] = {
+      {"images", every_second, 10.0, 1.0, {"a.png", "c.png", "e.png"}, 14.0},
+      {"video_pair", time_range, 0.0, 0.1, {"t000000.200", "t000000.300", "t000000.400"}, 0.4},
+  };
+  for (const auto& c : cases) {
+    SCOPED_TRACE(c.kind);
+    names_.clear();
+    const bool video = std::string(c.kind) == "video_pair";
+    if (video) {
+      for (const char* name : {"cam0.mkv", "cam1.mkv"}) {
+        cv::VideoWriter writer((dir_ / name).string(), cv::CAP_FFMPEG,
+                               cv::VideoWriter::fourcc('F', 'F', 'V', '1'), 10.0, cv::Size(64, 48));
+        for (int i = 0; i < 6; ++i) writer.write(cv::Mat(48, 64, CV_8UC3, cv::Scalar::all(0)));
+        names_.push_back(name);
+      }
+    } else {
+      for (const char* name : {"a.png", "b.png", "c.png", "d.png", "e.png", "f.png"}) {
+        WriteImage(std::string("cam0/") + name, 64, 48);
+        WriteImage(std::string("cam1/") + name, 64, 48);
+      }
+    }
+    std::ofstream gt(dir_ / "gt.tum");
+    for (int i = 0; i < 6; ++i)
+      gt << c.gt_first_s + c.gt_step_s * i << " " << i << " 0 0 0 0 0 1\n";
+    gt.close();
+    const fs::path out = dir_ / c.kind;
+    const json result =
+        RunSlamOnDataset(TinyTestRig(64, 48), dir_, names_, slam::SlamOptions(), dir_ / "gt.tum",
+                         out, ProgressSink(), nullptr, std::nullopt, c.frames);
+    ASSERT_EQ(result["num_frames"], 3);
+    for (int k = 0; k < 3; ++k) EXPECT_EQ(result["frames"][k]["name"], c.names[k]);
+    EXPECT_EQ(result["input"]["kind"], c.kind);
+    std::ifstream file(out / "trajectory.json");
+    EXPECT_NEAR(json::parse(file)["frames"][2]["timestamp_s"].get<double>(), c.last_timestamp_s,
+                1e-9);
+    if (!video) {
+      EXPECT_EQ(result["input"]["num_image_pairs"], 6);
+      continue;
+    }
+    EXPECT_EQ(result["input"]["codec"], "FFV1");
+    std::ofstream(dir_ / "gt.tum") << "0 0 0 0 0 0 0 1\n0.1 0 0 0 0 0 0 1\n";
+    const std::string message = ExpectInvalid([&] {
+      RunSlamOnDataset(TinyTestRig(64, 48), dir_, names_, slam::SlamOptions(), dir_ / "gt.tum",
+                       dir_ / "out2", ProgressSink(), nullptr, std::nullopt, c.frames);
+    });
+    EXPECT_NE(message.find("no pose within 25 ms of the frame at 0.2 s"), std::string::npos)
+        << message;
   }
-  std::ofstream gt(dir_ / "gt.tum");
-  for (int i = 0; i < 5; ++i) gt << 10 + i << " 0 0 0 0 0 0 1\n";
-  gt.close();
-  slam::VideoFrameOptions frames;
-  frames.frame_step = 2;
-  const json result = RunSlamOnDataset(TinyRig(64, 48), dir_, names_, slam::SlamOptions(),
-                                       dir_ / "gt.tum", dir_ / "out", ProgressSink(), nullptr,
-                                       std::nullopt, frames);
-  ASSERT_EQ(result["num_frames"], 3);
-  EXPECT_EQ(result["frames"][1]["name"], "c.png");
-  EXPECT_EQ(result["input"]["kind"], "images");
-  EXPECT_EQ(result["input"]["num_image_pairs"], 5);
-  std::ifstream file(dir_ / "out" / "trajectory.json");
-  const json trajectory = json::parse(file);
-  EXPECT_EQ(trajectory["frames"][2]["timestamp_s"], 14.0);  // e.png's ground-truth time
-}
-
-// A recording in a dataset: the time range selects frames by container time, and a ground truth
-// is matched to them by timestamp (a missing pose is named).
-TEST_F(TempDataset, VideoFramesByTimeAndGroundTruthByTimestamp) {
-  for (const char* name : {"cam0.mkv", "cam1.mkv"}) {
-    cv::VideoWriter writer((dir_ / name).string(), cv::CAP_FFMPEG,
-                           cv::VideoWriter::fourcc('F', 'F', 'V', '1'), 10.0, cv::Size(64, 48));
-    for (int i = 0; i < 6; ++i) writer.write(cv::Mat(48, 64, CV_8UC3, cv::Scalar::all(0)));
-    names_.push_back(name);
-  }
-  std::ofstream gt(dir_ / "gt.tum");
-  for (int i = 0; i < 6; ++i) gt << 0.1 * i << " " << i << " 0 0 0 0 0 1\n";
-  gt.close();
-  slam::VideoFrameOptions frames;
-  frames.start_s = 0.15;
-  frames.end_s = 0.45;
-  const json result = RunSlamOnDataset(TinyRig(64, 48), dir_, names_, slam::SlamOptions(),
-                                       dir_ / "gt.tum", dir_ / "out", ProgressSink(), nullptr,
-                                       std::nullopt, frames);
-  ASSERT_EQ(result["num_frames"], 3);
-  EXPECT_EQ(result["frames"][0]["name"], "t000000.200");
-  EXPECT_EQ(result["frames"][2]["name"], "t000000.400");
-  EXPECT_EQ(result["input"]["kind"], "video_pair");
-  EXPECT_EQ(result["input"]["codec"], "FFV1");
-  std::ofstream(dir_ / "gt.tum") << "0 0 0 0 0 0 0 1\n0.1 0 0 0 0 0 0 1\n";
-  const std::string message = ExpectInvalid([&] {
-    RunSlamOnDataset(TinyRig(64, 48), dir_, names_, slam::SlamOptions(), dir_ / "gt.tum",
-                     dir_ / "out2", ProgressSink(), nullptr, std::nullopt, frames);
-  });
-  EXPECT_NE(message.find("no pose within 25 ms of the frame at 0.2 s"), std::string::npos)
-      << message;
 }
 
 TEST(SlamJobType, IsRegisteredAndValidates) {

@@ -404,16 +404,6 @@ class CloudOutputs {
   int num_placed_ = 0;
 };
 
-PlyCloud SparseCloud(const std::vector<StereoPoint>& points) {
-  PlyCloud cloud;
-  cloud.comment = "omnirig stereo_reconstruct: points in cam0's frame, metres";
-  for (const StereoPoint& p : points) {
-    cloud.positions.push_back(p.point_in_cam0.cast<float>());
-    cloud.colours.push_back(p.rgb);
-  }
-  return cloud;
-}
-
 size_t RunSparse(const StereoReconstructParams& parsed, const StereoRig& rig,
                  const std::vector<ImagePairNames>& pairs, const JobContext& context,
                  CloudOutputs* outputs, json* result) {

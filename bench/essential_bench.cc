@@ -9,21 +9,12 @@
 #include <random>
 #include <vector>
 
+#include "engine/geometry/random_bearing.h"
 #include "engine/stereo/essential.h"
 #include "engine/util/timer.h"
 
 namespace omnirig {
 namespace {
-
-Eigen::Vector3d RandomUnit(std::mt19937_64& rng) {
-  std::normal_distribution<double> n(0.0, 1.0);
-  return Eigen::Vector3d(n(rng), n(rng), n(rng)).normalized();
-}
-
-Eigen::Vector3d Perturb(const Eigen::Vector3d& b, double sigma, std::mt19937_64& rng) {
-  std::normal_distribution<double> n(0.0, sigma);
-  return Eigen::AngleAxisd(n(rng), b.cross(RandomUnit(rng)).normalized()) * b;
-}
 
 struct Problem {
   Rigid3d truth;
@@ -35,15 +26,15 @@ Problem MakeProblem(int n, double outlier_ratio, uint64_t seed) {
   std::mt19937_64 rng(seed);
   std::uniform_real_distribution<double> range(1.0, 10.0), unit(0.0, 1.0), angle(-0.5, 0.5);
   Problem p;
-  p.truth =
-      Rigid3d(Eigen::Quaterniond(Eigen::AngleAxisd(angle(rng), RandomUnit(rng))), RandomUnit(rng));
+  p.truth = Rigid3d(Eigen::Quaterniond(Eigen::AngleAxisd(angle(rng), RandomUnitVector(rng))),
+                    RandomUnitVector(rng));
   while (static_cast<int>(p.bearings1.size()) < n) {
-    const Eigen::Vector3d point = range(rng) * RandomUnit(rng);
+    const Eigen::Vector3d point = range(rng) * RandomUnitVector(rng);
     const Eigen::Vector3d in2 = p.truth * point;
     if (in2.norm() < 0.3) continue;
-    p.bearings1.push_back(Perturb(point.normalized(), 2e-4, rng));
-    p.bearings2.push_back(unit(rng) < outlier_ratio ? RandomUnit(rng)
-                                                    : Perturb(in2.normalized(), 2e-4, rng));
+    p.bearings1.push_back(PerturbBearing(point.normalized(), 2e-4, rng));
+    p.bearings2.push_back(unit(rng) < outlier_ratio ? RandomUnitVector(rng)
+                                                    : PerturbBearing(in2.normalized(), 2e-4, rng));
   }
   return p;
 }

@@ -291,6 +291,59 @@ void ShutDownConnectionReads(int port) {
   ::closedir(fds);
 }
 
+// What `handle` answers; each exception becomes a JSON error instead: an HttpError as it says,
+// an InvalidArgument 400 (its check's location to the log only), anything else a logged 500.
+HttpResponse AnswerOrError(const std::string& route_label,
+                           const std::function<void(HttpResponse&)>& handle) {
+  HttpResponse response;
+  try {
+    handle(response);
+  } catch (const HttpError& e) {
+    response = HttpResponse{};
+    response.headers = e.headers;
+    response.Json(e.status, api::ErrorJson(e.code, e.what(), e.details));
+  } catch (const InvalidArgument& e) {
+    if (!e.where().empty()) {
+      std::cerr << "omnirig: " << route_label << ": 400: " << e.what() << " (check at " << e.where()
+                << ")" << std::endl;
+    }
+    response = HttpResponse{};
+    response.Json(400, api::ErrorJson("invalid_argument", e.what()));
+  } catch (const std::exception& e) {
+    std::cerr << "omnirig: " << route_label << ": 500: " << e.what() << std::endl;
+    response = HttpResponse{};
+    response.Json(500, api::ErrorJson("internal", e.what()));
+  } catch (...) {
+    std::cerr << "omnirig: " << route_label << ": 500: unknown exception" << std::endl;
+    response = HttpResponse{};
+    response.Json(500, api::ErrorJson("internal", "unknown error"));
+  }
+  return response;
+}
+
+// Hands `response` to httplib: a file (its ranges), a stream, or a body (then the connection
+// closes when `close`).
+void WriteResponse(const httplib::Request& req, HttpResponse response, bool close,
+                   httplib::Response& res) {
+  res.status = response.status;
+  for (const auto& [name, value] : response.headers) res.set_header(name, value);
+  if (response.file && response.status == 200) {
+    SetFile(req, response, res);
+  } else if (response.stream) {
+    res.set_chunked_content_provider(response.content_type, [stream = std::move(response.stream)](
+                                                                size_t, httplib::DataSink& sink) {
+      std::string chunk;
+      if (!stream(chunk)) {
+        sink.done();
+        return true;
+      }
+      return chunk.empty() || sink.write(chunk.data(), chunk.size());
+    });
+  } else {
+    SetBody(req, res, std::move(response.body), response.content_type, close);
+  }
+}
+
 }  // namespace
 
 std::optional<std::string> HttpRequest::Query(const std::string& name) const {
@@ -422,52 +475,16 @@ void HttpServer::Impl::Dispatch(const RouteInfo& route, std::map<std::string, st
       return body_read;
     };
   }
-  HttpResponse response;
-  try {
+  HttpResponse response = AnswerOrError(route.label, [&](HttpResponse& answer) {
     if (reader != nullptr && !route.streaming) {
       reader_called = true;
       body_read = ReadWholeBody(req, res, *reader, request.body);
     }
-    route.handler(request, response);
-  } catch (const HttpError& e) {
-    response = HttpResponse{};
-    response.headers = e.headers;
-    response.Json(e.status, api::ErrorJson(e.code, e.what(), e.details));
-  } catch (const InvalidArgument& e) {
-    if (!e.where().empty()) {
-      std::cerr << "omnirig: " << route.label << ": 400: " << e.what() << " (check at " << e.where()
-                << ")" << std::endl;
-    }
-    response = HttpResponse{};
-    response.Json(400, api::ErrorJson("invalid_argument", e.what()));
-  } catch (const std::exception& e) {
-    std::cerr << "omnirig: " << route.label << ": 500: " << e.what() << std::endl;
-    response = HttpResponse{};
-    response.Json(500, api::ErrorJson("internal", e.what()));
-  } catch (...) {
-    std::cerr << "omnirig: " << route.label << ": 500: unknown exception" << std::endl;
-    response = HttpResponse{};
-    response.Json(500, api::ErrorJson("internal", "unknown error"));
-  }
+    route.handler(request, answer);
+  });
   // The rest of an unread body would be parsed as the next request.
   if (!body_read && !reader_called) body_read = DiscardBody(req, *reader);
-  res.status = response.status;
-  for (const auto& [name, value] : response.headers) res.set_header(name, value);
-  if (response.file && response.status == 200) {
-    SetFile(req, response, res);
-  } else if (response.stream) {
-    res.set_chunked_content_provider(response.content_type, [stream = std::move(response.stream)](
-                                                                size_t, httplib::DataSink& sink) {
-      std::string chunk;
-      if (!stream(chunk)) {
-        sink.done();
-        return true;
-      }
-      return chunk.empty() || sink.write(chunk.data(), chunk.size());
-    });
-  } else {
-    SetBody(req, res, std::move(response.body), response.content_type, !body_read);
-  }
+  WriteResponse(req, std::move(response), !body_read, res);
 }
 
 void HttpServer::Impl::DispatchOrNotFound(const httplib::Request& req, httplib::Response& res,

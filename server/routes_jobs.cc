@@ -24,6 +24,18 @@ storage::JobRecord RequireJob(ServiceState& state, const std::string& id) {
   return std::move(*job);
 }
 
+// The result of a succeeded job; 409 for a job in any other state.
+std::string RequireResult(ServiceState& state, const storage::JobRecord& job) {
+  auto result =
+      job.state == storage::JobState::kSucceeded ? state.store->GetResult(job.id) : std::nullopt;
+  if (!result) {
+    throw HttpError(409, "job_not_succeeded",
+                    "job " + job.id + " has no result: it is " + storage::JobStateName(job.state),
+                    {{"state", storage::JobStateName(job.state)}});
+  }
+  return std::move(*result);
+}
+
 // A job that reads an earlier job's result is refused at submission (422, with the reason)
 // unless that job exists, is of the type it reads and has succeeded: queued, it could only fail.
 void CheckReferencedJobs(ServiceState& state, const api::JobType& type,
@@ -202,16 +214,9 @@ void RetryJob(ServiceState& state, const HttpRequest& request, HttpResponse& res
 
 void GetResult(ServiceState& state, const HttpRequest& request, HttpResponse& response) {
   const std::string& id = request.Param("id");
-  const storage::JobRecord job = RequireJob(state, id);
-  const auto result =
-      job.state == storage::JobState::kSucceeded ? state.store->GetResult(id) : std::nullopt;
-  if (!result) {
-    throw HttpError(409, "job_not_succeeded",
-                    "job " + id + " has no result: it is " + storage::JobStateName(job.state),
-                    {{"state", storage::JobStateName(job.state)}});
-  }
+  const std::string result = RequireResult(state, RequireJob(state, id));
   response.content_type = "application/json";
-  response.body = *result;
+  response.body = result;
 }
 
 // The log of a job that has not ended yet: the running attempt's log.txt as written so far
@@ -271,13 +276,7 @@ void GetEpipolar(ServiceState& state, const HttpRequest& request, HttpResponse& 
     throw HttpError(400, "invalid_argument",
                     "epipolar curves need a relative_pose job; job " + id + " is " + job.type);
   }
-  const auto result =
-      job.state == storage::JobState::kSucceeded ? state.store->GetResult(id) : std::nullopt;
-  if (!result) {
-    throw HttpError(409, "job_not_succeeded",
-                    "job " + id + " has no result: it is " + storage::JobStateName(job.state),
-                    {{"state", storage::JobStateName(job.state)}});
-  }
+  const std::string result = RequireResult(state, job);
   const std::string from = request.Query("from").value_or("cam0");
   if (from != "cam0" && from != "cam1") {
     throw HttpError(400, "invalid_argument", "query parameter 'from' must be cam0 or cam1");
@@ -286,7 +285,7 @@ void GetEpipolar(ServiceState& state, const HttpRequest& request, HttpResponse& 
   const double v = RequiredNumber(request, "v");
   try {
     response.Json(
-        200, api::EpipolarCurveJson(nlohmann::json::parse(*result), from == "cam0" ? 0 : 1, u, v));
+        200, api::EpipolarCurveJson(nlohmann::json::parse(result), from == "cam0" ? 0 : 1, u, v));
   } catch (const InvalidArgument& e) {
     // The request was checked above: what is left is the stored result, a broken invariant.
     throw std::runtime_error("the result of job " + id + " holds no usable rig: " + e.what());

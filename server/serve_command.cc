@@ -38,9 +38,6 @@ void DeclareOptions(cli::ArgParser& parser) {
   parser.AddOption("http-threads", "256",
                    "HTTP threads: one per open connection (keep-alive clients and event streams "
                    "each hold one); connections beyond wait for a thread");
-  parser.AddOption("http-loop", "threads",
-                   "deprecated and ignored: connections are always served by --http-threads "
-                   "(one thread each)");
   parser.AddOption("max-connections", "",
                    "open HTTP connections at most; beyond, a new one gets 503 and is closed "
                    "(default: the open-file limit, raised to its hard limit at start, less a "
@@ -96,7 +93,6 @@ ServiceOptions ToOptions(const cli::ArgParser& parser) {
                                 ? DefaultThreadsPerJob(options.num_workers)
                                 : parser.GetInt("threads-per-job");
   options.http_threads = parser.GetInt("http-threads");
-  OneOf(parser, "http-loop", "epoll", "threads");  // deprecated: accepted, no effect
   // Raised here, before anything opens files: the default cap is what the raised limit allows.
   const int64_t open_file_limit = RaiseOpenFileLimit();
   options.max_connections = parser.Get("max-connections").empty()

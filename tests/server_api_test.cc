@@ -21,6 +21,7 @@
 
 #include "api/camera_json.h"
 #include "api/job_types.h"
+#include "engine/geometry/test_rig.h"
 #include "engine/util/check.h"
 #include "server/service.h"
 #include "storage/sha256.h"
@@ -810,33 +811,13 @@ TEST_F(ServerApiTest, EpipolarRouteRefusesWrongJobs) {
               "invalid_argument");
 }
 
-// The epipolar route on a relative_pose result. The test stands in a relative_pose job type that
-// returns a known rig (registered after the service started, so it replaces the real one in
-// this test binary only), because the route's contract is the result JSON, not the solver.
+// The epipolar route on a relative_pose result, of a stand-in relative_pose job (the route's
+// contract is the result JSON, not the solver).
 TEST_F(ServerApiTest, EpipolarCurveOfARelativePoseResult) {
   auto& client = Start();
-  api::JobType fake;
-  fake.name = "relative_pose";
-  fake.validate = [](const json&) {};
-  fake.reads_images = false;
-  fake.run = [](const json&, const api::JobContext&) {
-    StereoRig rig;
-    for (CameraModel* camera : {&rig.cam0, &rig.cam1}) {
-      camera->intrinsics.params = {1.0, 300, 300, 320, 240, 0, 0, 0, 0, 0, 0};
-      camera->width = 640;
-      camera->height = 480;
-    }
-    rig.cam0_from_cam1 = Rigid3d(Eigen::Quaterniond::Identity(), Eigen::Vector3d(0, 0.1, 0));
-    return api::RigToJson(rig);
-  };
-  api::RegisterJobType(fake);
   const std::string dataset = CreateDataset(client);
-  const auto created =
-      client.Post("/api/v1/jobs", json{{"type", "relative_pose"}, {"dataset", dataset}}.dump(),
-                  "application/json");
-  ASSERT_EQ(created->status, 202) << created->body;
-  const std::string id = JsonOf(created)["id"];
-  ASSERT_EQ(WaitForJob(port_, id, 10)["state"], "succeeded");
+  const std::string id =
+      SubmitFakeRelativePose(client, port_, dataset, api::RigToJson(TinyTestRig(640, 480)));
   const std::string url = "/api/v1/jobs/" + id + "/epipolar";
   const auto curve = client.Get((url + "?from=cam0&u=400&v=250").c_str());
   ASSERT_EQ(curve->status, 200) << curve->body;

@@ -198,6 +198,28 @@ nlohmann::json WaitForJob(int port, const std::string& id, double timeout_s,
   return job.value("state", "") == "" ? current() : job;
 }
 
+std::string SubmitFakeRelativePose(httplib::Client& client, int port, const std::string& dataset,
+                                   const nlohmann::json& rig_json) {
+  api::JobType fake;
+  fake.name = "relative_pose";
+  fake.validate = [](const nlohmann::json&) {};
+  fake.reads_images = false;
+  fake.run = [rig_json](const nlohmann::json&, const api::JobContext&) { return rig_json; };
+  api::RegisterJobType(fake);
+  const auto created = client.Post(
+      "/api/v1/jobs", nlohmann::json{{"type", "relative_pose"}, {"dataset", dataset}}.dump(),
+      "application/json");
+  if (!created || created->status != 202) {
+    throw std::runtime_error("the fake relative_pose job was refused: " +
+                             (created ? created->body : std::string("no answer")));
+  }
+  const std::string id = JsonOf(created)["id"];
+  if (WaitForJob(port, id, 30)["state"] != "succeeded") {
+    throw std::runtime_error("the fake relative_pose job " + id + " did not succeed");
+  }
+  return id;
+}
+
 ServerProcess::~ServerProcess() {
   if (pid_ > 0) {
     Kill(SIGKILL);

@@ -52,6 +52,13 @@ bool FollowEvents(
 nlohmann::json WaitForJob(int port, const std::string& id, double timeout_s,
                           const std::string& until_state = "");
 
+// Registers a relative_pose job type whose result is `rig_json` (api::RigToJson; after the
+// service started, it replaces the real type in this test binary only: what reads a rig job
+// depends on its JSON, not on the solver), submits one on `dataset` and waits for it to
+// succeed; returns the job's id.
+std::string SubmitFakeRelativePose(httplib::Client& client, int port, const std::string& dataset,
+                                   const nlohmann::json& rig_json);
+
 // `omnirig serve` in a child process: this test binary re-executed with "--serve ARGS..."
 // (see ServeIfRequested), so the child has the test job type registered.
 class ServerProcess {

@@ -22,7 +22,7 @@
 #include "api/camera_json.h"
 #include "api/job_types.h"
 #include "api/synth_json.h"
-#include "engine/geometry/camera_model.h"
+#include "engine/geometry/test_rig.h"
 #include "engine/slam/map_io.h"
 #include "engine/synth/presets.h"
 #include "server/service.h"
@@ -287,25 +287,6 @@ TEST_F(ServerVideoTest, ResumableUploadProtocol) {
   EXPECT_EQ(UploadStatus(dataset, "cam2.mkv")["received_bytes"], 0);
 }
 
-// A relative_pose job that returns `rig`: registered after the service started, it replaces the
-// real type in this test binary only (the slam job's contract is the rig JSON, not the solver).
-std::string SubmitRig(httplib::Client& client, int port, const std::string& dataset,
-                      const StereoRig& rig) {
-  api::JobType fake;
-  fake.name = "relative_pose";
-  fake.validate = [](const json&) {};
-  fake.reads_images = false;
-  fake.run = [rig](const json&, const api::JobContext&) { return api::RigToJson(rig); };
-  api::RegisterJobType(fake);
-  const auto created =
-      client.Post("/api/v1/jobs", json{{"type", "relative_pose"}, {"dataset", dataset}}.dump(),
-                  "application/json");
-  EXPECT_EQ(created->status, 202) << created->body;
-  const std::string id = JsonOf(created)["id"];
-  EXPECT_EQ(WaitForJob(port, id, 30)["state"], "succeeded");
-  return id;
-}
-
 // A rendered sequence written as cam0.mp4 and cam1.mp4 (mp4v, lossy), uploaded in chunks, runs
 // as a slam job: frames named by the containers' timestamps, the trajectory near the ground
 // truth at the bound the image test holds (api/slam_job_test.cc), frame_step and a time range.
@@ -329,7 +310,8 @@ TEST_F(ServerVideoTest, SlamJobOnAVideoPair) {
     ASSERT_TRUE(stored);
     ASSERT_EQ(stored->status, 201) << name << ": " << stored->body;
   }
-  const std::string rig = SubmitRig(client, port_, dataset, sequence.rig);
+  const std::string rig =
+      SubmitFakeRelativePose(client, port_, dataset, api::RigToJson(sequence.rig));
   const auto run = [&](const json& extra) {
     json params = {{"rig", rig}, {"ground_truth", "trajectory.tum"}};
     params.update(extra);
@@ -370,14 +352,8 @@ TEST_F(ServerVideoTest, SlamJobOnAVideoPair) {
 // Each bad recording is refused at submission (422, the reason), before any job is queued.
 TEST_F(ServerVideoTest, BadVideosAreRefusedAtSubmission) {
   auto& client = Start();
-  StereoRig rig;
-  for (CameraModel* camera : {&rig.cam0, &rig.cam1}) {
-    camera->intrinsics.params = {1.0, 30, 30, 32, 24, 0, 0, 0, 0, 0, 0};
-    camera->width = 64;
-    camera->height = 48;
-  }
-  rig.cam0_from_cam1 = Rigid3d(Eigen::Quaterniond::Identity(), Eigen::Vector3d(0, 0, 0.1));
-  const std::string rig_job = SubmitRig(client, port_, CreateDataset(), rig);
+  const std::string rig_job =
+      SubmitFakeRelativePose(client, port_, CreateDataset(), api::RigToJson(TinyTestRig(64, 48)));
   const auto submit = [&](const std::map<std::string, std::string>& files,
                           const json& extra = json::object()) {
     const std::string dataset = CreateDataset();

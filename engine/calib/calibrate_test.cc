@@ -21,14 +21,6 @@ CameraModel TrueCamera() {
   return camera;
 }
 
-BoardSpec Board() {
-  BoardSpec board;
-  board.cols = 8;
-  board.rows = 6;
-  board.square_size_m = 0.04;
-  return board;
-}
-
 // Mean angle between true and calibrated rays over a pixel grid on the annulus around the
 // principal point that the boards cover (the calibrated part of the mirror disk).
 double MeanRayErrorDeg(const CameraModel& truth, const CameraModel& estimate,
@@ -62,9 +54,9 @@ TEST(Calibrate, RecoversExactSyntheticCorners) {
   const CameraModel truth = TrueCamera();
   SyntheticCornerOptions synth;
   synth.num_views = 12;
-  const SyntheticCornerSet set = MakeSyntheticCornerSet(truth, Board(), synth);
+  const SyntheticCornerSet set = MakeSyntheticCornerSet(truth, SyntheticBoard(), synth);
   const CalibrationReport report =
-      Calibrate(set.views, truth.width, truth.height, Board(), CalibrationOptions(), {});
+      Calibrate(set.views, truth.width, truth.height, SyntheticBoard(), CalibrationOptions(), {});
   EXPECT_EQ(report.num_views_used, 12);
   EXPECT_LT(report.rms_px, 1e-6);
   EXPECT_LT(MeanRayErrorDeg(truth, report.camera, set), 1e-5);
@@ -85,9 +77,9 @@ TEST(Calibrate, NoisyCornersGiveSmallStdAndRayError) {
   SyntheticCornerOptions synth;
   synth.noise_px = 0.2;
   synth.seed = 7;
-  const SyntheticCornerSet set = MakeSyntheticCornerSet(truth, Board(), synth);
+  const SyntheticCornerSet set = MakeSyntheticCornerSet(truth, SyntheticBoard(), synth);
   const CalibrationReport report =
-      Calibrate(set.views, truth.width, truth.height, Board(), CalibrationOptions(), {});
+      Calibrate(set.views, truth.width, truth.height, SyntheticBoard(), CalibrationOptions(), {});
   // sqrt(2) * 0.2 px per corner, less the fitted parameters.
   EXPECT_NEAR(report.rms_px, 0.2 * std::sqrt(2.0), 0.03);
   EXPECT_LT(MeanRayErrorDeg(truth, report.camera, set), 0.1);
@@ -105,9 +97,9 @@ TEST(Calibrate, RejectsOutlierCorners) {
   synth.noise_px = 0.1;
   synth.outlier_fraction = 0.03;
   synth.seed = 11;
-  const SyntheticCornerSet set = MakeSyntheticCornerSet(truth, Board(), synth);
+  const SyntheticCornerSet set = MakeSyntheticCornerSet(truth, SyntheticBoard(), synth);
   const CalibrationReport report =
-      Calibrate(set.views, truth.width, truth.height, Board(), CalibrationOptions(), {});
+      Calibrate(set.views, truth.width, truth.height, SyntheticBoard(), CalibrationOptions(), {});
   int planted = 0, caught = 0, wrongly = 0;
   for (size_t v = 0; v < set.views.size(); ++v) {
     ASSERT_TRUE(report.images[v].used) << report.images[v].reason;
@@ -137,12 +129,12 @@ TEST(Calibrate, FixedParametersStayPut) {
   const CameraModel truth = TrueCamera();
   SyntheticCornerOptions synth;
   synth.noise_px = 0.1;
-  const SyntheticCornerSet set = MakeSyntheticCornerSet(truth, Board(), synth);
+  const SyntheticCornerSet set = MakeSyntheticCornerSet(truth, SyntheticBoard(), synth);
   CalibrationOptions options;
   options.SetFixed("xi", true);
   options.SetFixed("tangential", true);
   const CalibrationReport report =
-      Calibrate(set.views, truth.width, truth.height, Board(), options, {});
+      Calibrate(set.views, truth.width, truth.height, SyntheticBoard(), options, {});
   EXPECT_EQ(report.camera.intrinsics.xi(), 1.0);  // the initial value
   EXPECT_EQ(report.camera.intrinsics.k(3), 0.0);
   EXPECT_EQ(report.camera.intrinsics.k(4), 0.0);
@@ -153,13 +145,13 @@ TEST(Calibrate, TooFewViewsListsEveryReason) {
   const CameraModel truth = TrueCamera();
   SyntheticCornerOptions synth;
   synth.num_views = 2;
-  SyntheticCornerSet set = MakeSyntheticCornerSet(truth, Board(), synth);
+  SyntheticCornerSet set = MakeSyntheticCornerSet(truth, SyntheticBoard(), synth);
   CalibrationView missing;
   missing.name = "empty.png";
   missing.detection.reason = "no checkerboard 8x6 found";
   set.views.push_back(missing);
   try {
-    Calibrate(set.views, truth.width, truth.height, Board(), CalibrationOptions(), {});
+    Calibrate(set.views, truth.width, truth.height, SyntheticBoard(), CalibrationOptions(), {});
     FAIL() << "expected InvalidArgument";
   } catch (const InvalidArgument& e) {
     const std::string message = e.what();
@@ -174,32 +166,33 @@ TEST(Calibrate, BadInputsThrow) {
   EXPECT_THROW(options.SetFixed("k9", true), InvalidArgument);
   options.num_threads = 0;
   EXPECT_THROW(options.Check(), InvalidArgument);
-  BoardSpec board = Board();
+  BoardSpec board = SyntheticBoard();
   board.square_size_m = 40.0;  // metres: absurd
   EXPECT_THROW(board.Check(), InvalidArgument);
-  board = Board();
+  board = SyntheticBoard();
   board.cols = 1;
   EXPECT_THROW(board.Check(), InvalidArgument);
-  EXPECT_THROW(Calibrate({}, 0, 768, Board(), CalibrationOptions(), {}), InvalidArgument);
+  EXPECT_THROW(Calibrate({}, 0, 768, SyntheticBoard(), CalibrationOptions(), {}), InvalidArgument);
   CalibrationView bad;
   bad.detection.found = true;
   bad.detection.corners_px.resize(10);
   bad.detection.corner_ids.assign(10, 99);
-  EXPECT_THROW(Calibrate({bad, bad, bad}, 640, 480, Board(), CalibrationOptions(), {}),
+  EXPECT_THROW(Calibrate({bad, bad, bad}, 640, 480, SyntheticBoard(), CalibrationOptions(), {}),
                InvalidArgument);
 }
 
 TEST(Calibrate, CancelsThroughTheSink) {
   const CameraModel truth = TrueCamera();
-  const SyntheticCornerSet set = MakeSyntheticCornerSet(truth, Board(), {});
+  const SyntheticCornerSet set = MakeSyntheticCornerSet(truth, SyntheticBoard(), {});
   ProgressSink sink;
   int reports = 0;
   sink.report = [&](double, const std::string& stage, const std::string&) {
     reports += stage == "solve";
   };
   sink.is_cancelled = [&] { return reports >= 2; };
-  EXPECT_THROW(Calibrate(set.views, truth.width, truth.height, Board(), CalibrationOptions(), sink),
-               Cancelled);
+  EXPECT_THROW(
+      Calibrate(set.views, truth.width, truth.height, SyntheticBoard(), CalibrationOptions(), sink),
+      Cancelled);
 }
 
 TEST(Initialize, GammaFromLineIsExactForXiOne) {
@@ -218,11 +211,11 @@ TEST(BoardPose, RecoversThePoseWithTheModelFixed) {
   const CameraModel truth = TrueCamera();
   SyntheticCornerOptions synth;
   synth.num_views = 5;
-  const SyntheticCornerSet set = MakeSyntheticCornerSet(truth, Board(), synth);
+  const SyntheticCornerSet set = MakeSyntheticCornerSet(truth, SyntheticBoard(), synth);
   for (size_t v = 0; v < set.views.size(); ++v) {
     double rms = -1.0;
-    const auto pose =
-        EstimateBoardPose(truth, Board().ObjectPoints(), set.views[v].detection.corners_px, &rms);
+    const auto pose = EstimateBoardPose(truth, SyntheticBoard().ObjectPoints(),
+                                        set.views[v].detection.corners_px, &rms);
     ASSERT_TRUE(pose);
     EXPECT_LT(rms, 1e-8);
     EXPECT_LT((pose->translation - set.cam_from_board[v].translation).norm(), 1e-8);

@@ -76,16 +76,54 @@ struct CalibrationCovariance {
   double median_board_distance_m = 0.0;
 };
 
+// One used view's blocks of the Gauss-Newton normal matrix over its inlier corners: the
+// intrinsics' (a), the intrinsics' and the pose's (b), the pose's (d).
+struct ViewNormalBlocks {
+  Eigen::MatrixXd a;
+  Eigen::MatrixXd b;
+  Eigen::Matrix<double, 6, 6> d = Eigen::Matrix<double, 6, 6>::Zero();
+};
+
+// The normal blocks of one view; adds its corners' squared residuals and coordinates to the
+// totals.
+ViewNormalBlocks ViewNormal(const UnifiedIntrinsics& intrinsics, const std::vector<int>& free,
+                            const std::vector<Eigen::Vector3d>& object_points,
+                            const CalibrationImageReport& image, double* squared_error,
+                            int* num_coordinates) {
+  const int m = static_cast<int>(free.size());
+  ViewNormalBlocks blocks;
+  blocks.a = Eigen::MatrixXd::Zero(m, m);
+  blocks.b = Eigen::MatrixXd::Zero(m, 6);
+  for (size_t i = 0; i < image.corner_ids.size(); ++i) {
+    if (i < image.inlier.size() && !image.inlier[i]) continue;
+    const Eigen::Vector3d& x = object_points[image.corner_ids[i]];
+    Matrix2X ji;
+    Eigen::Matrix<double, 2, 6> pi;
+    if (!IntrinsicsJacobian(intrinsics, free, image.cam_from_board * x, &ji) ||
+        !PoseJacobian(intrinsics, image.cam_from_board, x, &pi)) {
+      continue;
+    }
+    blocks.a += ji.transpose() * ji;
+    blocks.b += ji.transpose() * pi;
+    blocks.d += pi.transpose() * pi;
+    if (i < image.reprojected_px.size()) {
+      *squared_error += (image.reprojected_px[i] - image.corners_px[i]).squaredNorm();
+    }
+    *num_coordinates += 2;
+  }
+  return blocks;
+}
+
 // The covariance of a calibration's free intrinsics and board poses (see coverage.h) from the
 // Gauss-Newton normal matrix of every used inlier corner, scaled by the residual variance per
 // coordinate; false when singular.
 bool EstimateCovariance(const CalibrationReport& report, const BoardSpec& board,
                         const std::vector<int>& free, CalibrationCovariance* covariance) {
   const int m = static_cast<int>(free.size());
-  const UnifiedIntrinsics& intrinsics = report.camera.intrinsics;
   const std::vector<Eigen::Vector3d> object_points = board.ObjectPoints();
   Eigen::Vector3d board_centre = Eigen::Vector3d::Zero();
   for (const Eigen::Vector3d& x : object_points) board_centre += x / object_points.size();
+  // The board poses eliminated view by view (Schur complement).
   Eigen::MatrixXd normal = Eigen::MatrixXd::Zero(m, m);
   double squared_error = 0.0;
   int num_coordinates = 0;
@@ -93,31 +131,13 @@ bool EstimateCovariance(const CalibrationReport& report, const BoardSpec& board,
   covariance->views.clear();
   for (const CalibrationImageReport& image : report.images) {
     if (!image.used) continue;
-    Eigen::MatrixXd a = Eigen::MatrixXd::Zero(m, m);
-    Eigen::MatrixXd b = Eigen::MatrixXd::Zero(m, 6);
-    Eigen::Matrix<double, 6, 6> d = Eigen::Matrix<double, 6, 6>::Zero();
-    for (size_t i = 0; i < image.corner_ids.size(); ++i) {
-      if (i < image.inlier.size() && !image.inlier[i]) continue;
-      const Eigen::Vector3d& x = object_points[image.corner_ids[i]];
-      Matrix2X ji;
-      Eigen::Matrix<double, 2, 6> pi;
-      if (!IntrinsicsJacobian(intrinsics, free, image.cam_from_board * x, &ji) ||
-          !PoseJacobian(intrinsics, image.cam_from_board, x, &pi)) {
-        continue;
-      }
-      a += ji.transpose() * ji;
-      b += ji.transpose() * pi;
-      d += pi.transpose() * pi;
-      if (i < image.reprojected_px.size()) {
-        squared_error += (image.reprojected_px[i] - image.corners_px[i]).squaredNorm();
-      }
-      num_coordinates += 2;
-    }
-    const Eigen::LDLT<Eigen::Matrix<double, 6, 6>> d_ldlt(d);
-    if (d_ldlt.info() != Eigen::Success || !(d.determinant() > 0.0)) continue;
-    normal += a - b * d_ldlt.solve(b.transpose());
+    const ViewNormalBlocks blocks = ViewNormal(report.camera.intrinsics, free, object_points, image,
+                                               &squared_error, &num_coordinates);
+    const Eigen::LDLT<Eigen::Matrix<double, 6, 6>> d_ldlt(blocks.d);
+    if (d_ldlt.info() != Eigen::Success || !(blocks.d.determinant() > 0.0)) continue;
+    normal += blocks.a - blocks.b * d_ldlt.solve(blocks.b.transpose());
     ViewPoseBlocks view;
-    view.response = -d_ldlt.solve(b.transpose());
+    view.response = -d_ldlt.solve(blocks.b.transpose());
     view.covariance = d_ldlt.solve(Eigen::Matrix<double, 6, 6>::Identity());
     view.translation = image.cam_from_board.translation;
     covariance->views.push_back(view);

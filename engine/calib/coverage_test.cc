@@ -21,14 +21,6 @@ CameraModel Camera() {
   return camera;
 }
 
-BoardSpec Board() {
-  BoardSpec board;
-  board.cols = 8;
-  board.rows = 6;
-  board.square_size_m = 0.04;
-  return board;
-}
-
 // Calibrates the views whose corners' mean azimuth around the principal point lies in
 // [from_deg, to_deg).
 CalibrationReport CalibrateSector(const SyntheticCornerSet& set, double from_deg, double to_deg) {
@@ -44,8 +36,32 @@ CalibrationReport CalibrateSector(const SyntheticCornerSet& set, double from_deg
     if (azimuth >= from_deg && azimuth < to_deg) views.push_back(view);
   }
   EXPECT_GE(views.size(), 5u);
-  return Calibrate(views, camera.width, camera.height, Board(), CalibrationOptions(),
+  return Calibrate(views, camera.width, camera.height, SyntheticBoard(), CalibrationOptions(),
                    ProgressSink());
+}
+
+// Whether a line of the report's advice holds `text`.
+bool Advises(const CoverageReport& report, const std::string& text) {
+  for (const std::string& line : report.advice) {
+    if (line.find(text) != std::string::npos) return true;
+  }
+  return false;
+}
+
+// The median of the uncertainty map over the disk's upper part (v above the centre by more than
+// 0.2 radii) or over the rest.
+float MedianOver(const CoverageReport& report, bool upper) {
+  std::vector<float> values;
+  const cv::Mat& map = report.uncertainty_px;
+  for (int row = 0; row < map.rows; ++row) {
+    const double v = row * report.uncertainty_step_px - report.disk_centre_px.y();
+    if ((v < -0.2 * report.disk_radius_px) != upper) continue;
+    for (int col = 0; col < map.cols; ++col) {
+      if (map.at<float>(row, col) > 0.0f) values.push_back(map.at<float>(row, col));
+    }
+  }
+  std::nth_element(values.begin(), values.begin() + values.size() / 2, values.end());
+  return values[values.size() / 2];
 }
 
 TEST(Coverage, NamesTheMissingSectorsAndPredictsMoreUncertaintyThere) {
@@ -53,27 +69,22 @@ TEST(Coverage, NamesTheMissingSectorsAndPredictsMoreUncertaintyThere) {
   options.num_views = 40;
   options.noise_px = 0.3;
   options.seed = 5;
-  const SyntheticCornerSet set = MakeSyntheticCornerSet(Camera(), Board(), options);
+  const SyntheticCornerSet set = MakeSyntheticCornerSet(Camera(), SyntheticBoard(), options);
   const CalibrationReport all = CalibrateSector(set, 0.0, 360.0);
   const CalibrationReport half = CalibrateSector(set, 0.0, 180.0);
   const CoverageReport everywhere =
-      AnalyseCoverage(all, Board(), cv::Mat(), nullptr, CoverageOptions());
-  const CoverageReport lower = AnalyseCoverage(half, Board(), cv::Mat(), nullptr, CoverageOptions());
+      AnalyseCoverage(all, SyntheticBoard(), cv::Mat(), nullptr, CoverageOptions());
+  const CoverageReport lower =
+      AnalyseCoverage(half, SyntheticBoard(), cv::Mat(), nullptr, CoverageOptions());
 
   EXPECT_GT(everywhere.covered_fraction, lower.covered_fraction + 0.1);
   EXPECT_GT(lower.covered_fraction, 0.05);
   // Boards only below the centre (image azimuth 0-180 deg, +v down): the advice names the
   // upper sectors near the rim, and not the lower ones.
-  auto advises = [](const CoverageReport& report, const std::string& text) {
-    for (const std::string& line : report.advice) {
-      if (line.find(text) != std::string::npos) return true;
-    }
-    return false;
-  };
-  EXPECT_TRUE(advises(lower, "between azimuth 180 and 270 deg near the rim"));
-  EXPECT_TRUE(advises(lower, "between azimuth 180 and 270 deg in the inner half"));
-  EXPECT_FALSE(advises(lower, "between azimuth 0 and 90 deg near the rim"));
-  EXPECT_FALSE(advises(everywhere, "near the rim"));
+  EXPECT_TRUE(Advises(lower, "between azimuth 180 and 270 deg near the rim"));
+  EXPECT_TRUE(Advises(lower, "between azimuth 180 and 270 deg in the inner half"));
+  EXPECT_FALSE(Advises(lower, "between azimuth 0 and 90 deg near the rim"));
+  EXPECT_FALSE(Advises(everywhere, "near the rim"));
 
   ASSERT_TRUE(everywhere.uncertainty_valid);
   ASSERT_TRUE(lower.uncertainty_valid);
@@ -81,31 +92,18 @@ TEST(Coverage, NamesTheMissingSectorsAndPredictsMoreUncertaintyThere) {
   EXPECT_GT(lower.median_uncertainty_px, everywhere.median_uncertainty_px);
   // Where the boards were, the uncertainty is lower than where none was: the median over the
   // empty upper half of the disk against the covered lower half.
-  auto median_over = [](const CoverageReport& report, bool upper) {
-    std::vector<float> values;
-    const cv::Mat& map = report.uncertainty_px;
-    for (int row = 0; row < map.rows; ++row) {
-      const double v = row * report.uncertainty_step_px - report.disk_centre_px.y();
-      if ((v < -0.2 * report.disk_radius_px) != upper) continue;
-      for (int col = 0; col < map.cols; ++col) {
-        if (map.at<float>(row, col) > 0.0f) values.push_back(map.at<float>(row, col));
-      }
-    }
-    std::nth_element(values.begin(), values.begin() + values.size() / 2, values.end());
-    return values[values.size() / 2];
-  };
   // Measured: 1.63 px over the empty half against 0.78 px over the covered one; 0.79 and 0.78
   // with every view. (A point fixed in the camera frame instead, not following the boards: 1.94
   // and 1.80, flat: the xi / gamma direction the board poses absorb at the corners.)
-  EXPECT_GT(median_over(lower, true), 1.5 * median_over(lower, false));
-  EXPECT_LT(median_over(everywhere, true), 1.2 * median_over(everywhere, false));
-  EXPECT_LT(median_over(everywhere, false), 1.2 * median_over(everywhere, true));
-  std::printf("uncertainty: all views median %.3f max %.3f; lower half: median %.3f max %.3f, "
-              "over the upper half %.3f, the lower %.3f; all views upper %.3f lower %.3f\n",
-              everywhere.median_uncertainty_px, everywhere.max_uncertainty_px,
-              lower.median_uncertainty_px, lower.max_uncertainty_px, median_over(lower, true),
-              median_over(lower, false), median_over(everywhere, true),
-              median_over(everywhere, false));
+  EXPECT_GT(MedianOver(lower, true), 1.5 * MedianOver(lower, false));
+  EXPECT_LT(MedianOver(everywhere, true), 1.2 * MedianOver(everywhere, false));
+  EXPECT_LT(MedianOver(everywhere, false), 1.2 * MedianOver(everywhere, true));
+  std::printf(
+      "uncertainty: all views median %.3f max %.3f; lower half: median %.3f max %.3f, "
+      "over the upper half %.3f, the lower %.3f; all views upper %.3f lower %.3f\n",
+      everywhere.median_uncertainty_px, everywhere.max_uncertainty_px, lower.median_uncertainty_px,
+      lower.max_uncertainty_px, MedianOver(lower, true), MedianOver(lower, false),
+      MedianOver(everywhere, true), MedianOver(everywhere, false));
   EXPECT_EQ(lower.uncertainty_px.type(), CV_32FC1);
   EXPECT_GT(lower.uncertainty_step_px, 0);
   EXPECT_EQ(everywhere.coverage_image.size(), cv::Size(1024, 768));

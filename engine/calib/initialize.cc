@@ -112,17 +112,15 @@ std::optional<InitResult> InitializeUnified(
       for (const InitView& view : views) rms.push_back(LinearViewRms(camera, view));
       const double score = Median(rms);
       if (std::isfinite(score) && (!best || score < best->score_px)) {
-        best = InitResult{camera, {}, {}, score};
+        best = InitResult{camera, {}, score};
       }
     }
   }
   if (!best) return std::nullopt;
   bool any_pose = false;
   for (const InitView& view : views) {
-    double rms = std::numeric_limits<double>::infinity();
     best->cam_from_board.push_back(
-        EstimateBoardPose(best->camera, view.object_points, view.corners_px, &rms));
-    best->view_rms_px.push_back(rms);
+        EstimateBoardPose(best->camera, view.object_points, view.corners_px));
     any_pose = any_pose || best->cam_from_board.back().has_value();
   }
   if (!any_pose) return std::nullopt;

@@ -33,7 +33,6 @@ std::optional<double> GammaFromLine(const std::vector<Eigen::Vector2d>& pixels,
 struct InitResult {
   CameraModel camera;
   std::vector<std::optional<Rigid3d>> cam_from_board;  // per view; nullopt when it failed
-  std::vector<double> view_rms_px;                    // per view at the initial estimate
   double score_px = 0.0;  // median view RMS that chose this candidate
 };
 

@@ -31,6 +31,15 @@ struct SyntheticCornerSet {
   std::vector<std::vector<bool>> is_outlier;  // per view, per corner
 };
 
+// The board of the synthetic-corner tests: 8 x 6 inner corners, 40 mm squares.
+inline BoardSpec SyntheticBoard() {
+  BoardSpec board;
+  board.cols = 8;
+  board.rows = 6;
+  board.square_size_m = 0.04;
+  return board;
+}
+
 // Views whose every corner projects inside the image (poses are redrawn until they do).
 SyntheticCornerSet MakeSyntheticCornerSet(const CameraModel& camera, const BoardSpec& board,
                                           const SyntheticCornerOptions& options);

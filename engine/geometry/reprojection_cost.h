@@ -57,13 +57,30 @@ class ReprojectionCost : public ceres::CostFunction {
 
  private:
   enum class Rig { kNone, kConstant, kBlock, kRotationTranslationBlocks };
+  // A posed point carried into the camera by the rig, with what the Jacobians need.
+  struct ThroughRig {
+    Eigen::Vector3d point_in_cam;
+    Eigen::Matrix3d d_cam_d_posed = Eigen::Matrix3d::Identity();
+    // A parameterised rig: cam0_from_cam1's inverse rotation and the posed point minus its
+    // translation (identity and zero otherwise).
+    Eigen::Quaterniond cam1_from_cam0 = Eigen::Quaterniond::Identity();
+    Eigen::Vector3d offset = Eigen::Vector3d::Zero();
+  };
   ReprojectionCost(const Eigen::Vector2d& measured_px, const std::optional<Eigen::Vector3d>& point,
                    Rig rig, const Rigid3d& cam_from_x,
                    const std::optional<UnifiedIntrinsics>& intrinsics);
+  ThroughRig CarryThroughRig(double const* const* parameters, const Eigen::Vector3d& posed) const;
+  // d pixel / d (the rig's blocks), given d pixel / d point_in_cam and d pixel / d posed.
+  void RigJacobians(const Eigen::Matrix<double, 2, 3>& d_pixel_d_cam,
+                    const Eigen::Matrix<double, 2, 3>& d_pixel_d_posed, const ThroughRig& rig,
+                    double** jacobians) const;
 
   Eigen::Vector2d measured_px_;
   std::optional<Eigen::Vector3d> point_;  // constant point; nullopt: a parameter block
   Rig rig_;
+  // Where each block stands in the parameters (-1: a constant, no Jacobian); kBlock holds the
+  // rig's rotation and translation in one block.
+  int point_block_ = -1, rotation_block_ = -1, translation_block_ = -1, intrinsics_block_ = -1;
   Eigen::Matrix3d cam_from_x_rotation_;   // Rig::kConstant
   Eigen::Vector3d cam_from_x_translation_;
   std::optional<std::array<double, UnifiedIntrinsics::kNumParams>> intrinsics_;  // constant

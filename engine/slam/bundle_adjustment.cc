@@ -157,6 +157,57 @@ void AddObservation(const StereoRig& rig, const Rigid3d (&cam_from_rig)[2],
   }
 }
 
+// The parameter blocks of one solve: the poses of the frames that see its landmarks, the
+// landmarks' points, the calibration when refined, and their elimination order (points first).
+struct SolveBlocks {
+  std::map<int, std::array<double, 7>> poses;
+  std::vector<int> landmark_ids;
+  std::vector<std::array<double, 3>> points;  // of landmark_ids, never resized once added
+  std::optional<CalibrationBlocks> calibration;
+  std::shared_ptr<ceres::ParameterBlockOrdering> ordering =
+      std::make_shared<ceres::ParameterBlockOrdering>();
+  int num_observations = 0;
+};
+
+// Adds the observations of landmark `landmark_ids[i]` from posed frames, and each frame's pose
+// the first time it is seen (constant unless the frame is free).
+void AddLandmark(const StereoRig& rig, const FrameFlags& free_frames, const SlamMap& map, size_t i,
+                 ceres::LossFunction* loss, ceres::Problem* problem, SolveBlocks* blocks) {
+  const Rigid3d cam_from_rig[2] = {CamFromRig(rig, 0), CamFromRig(rig, 1)};
+  const Landmark& landmark = map.landmarks[blocks->landmark_ids[i]];
+  double* point = blocks->points[i].data();
+  blocks->points[i] = {landmark.point_in_world.x(), landmark.point_in_world.y(),
+                       landmark.point_in_world.z()};
+  for (const Observation& o : landmark.observations) {
+    if (!map.has_pose[o.frame]) continue;
+    auto [it, inserted] =
+        blocks->poses.try_emplace(o.frame, map.rig_from_world[o.frame].ToParams());
+    double* pose = it->second.data();
+    if (inserted) {
+      problem->AddParameterBlock(pose, 7, NewPoseManifold());
+      blocks->ordering->AddElementToGroup(pose, 1);
+      if (!free_frames[o.frame]) problem->SetParameterBlockConstant(pose);
+    }
+    AddObservation(rig, cam_from_rig, blocks->calibration ? &*blocks->calibration : nullptr, o,
+                   pose, point, loss, problem);
+    ++blocks->num_observations;
+  }
+  if (problem->HasParameterBlock(point)) blocks->ordering->AddElementToGroup(point, 0);
+}
+
+// Writes a solve's poses, points and calibration back to the map and the rig.
+void WriteBack(const SolveBlocks& blocks, StereoRig* rig, SlamMap* map) {
+  for (const auto& [frame, params] : blocks.poses) {
+    map->rig_from_world[frame] = Rigid3d::FromParams(params.data());
+  }
+  for (size_t i = 0; i < blocks.landmark_ids.size(); ++i) {
+    const std::array<double, 3>& point = blocks.points[i];
+    map->landmarks[blocks.landmark_ids[i]].point_in_world =
+        Eigen::Vector3d(point[0], point[1], point[2]);
+  }
+  if (blocks.calibration) blocks.calibration->WriteTo(rig);
+}
+
 // One build-and-solve of the problem described at BundleAdjust(); writes the solution back,
 // the calibration too when `refinement` is given.
 ceres::Solver::Summary SolveOnce(const CalibrationRefinementOptions* refinement,
@@ -164,72 +215,41 @@ ceres::Solver::Summary SolveOnce(const CalibrationRefinementOptions* refinement,
                                  const BundleAdjustmentOptions& options, int max_iterations,
                                  const ProgressSink& progress, int iteration_offset,
                                  StereoRig* rig, SlamMap* map, BundleAdjustmentReport* report) {
-  std::map<int, std::array<double, 7>> poses;
-  std::vector<int> landmark_ids;
+  SolveBlocks blocks;
   for (int id : candidates) {
-    if (Adjustable(map->landmarks[id], free_frames, *map)) landmark_ids.push_back(id);
+    if (Adjustable(map->landmarks[id], free_frames, *map)) blocks.landmark_ids.push_back(id);
   }
-  std::vector<std::array<double, 3>> points(landmark_ids.size());
-  const Rigid3d cam_from_rig[2] = {CamFromRig(*rig, 0), CamFromRig(*rig, 1)};
-
+  blocks.points.resize(blocks.landmark_ids.size());
   ceres::Problem::Options problem_options;
   problem_options.manifold_ownership = ceres::TAKE_OWNERSHIP;
   ceres::Problem problem(problem_options);
   ceres::LossFunction* loss = new ceres::HuberLoss(options.huber_scale_px);
-  auto ordering = std::make_shared<ceres::ParameterBlockOrdering>();
-  std::optional<CalibrationBlocks> calibration;
   if (refinement) {
-    calibration.emplace(*rig);
-    calibration->AddTo(*refinement, &problem, ordering.get());
+    blocks.calibration.emplace(*rig);
+    blocks.calibration->AddTo(*refinement, &problem, blocks.ordering.get());
   }
-  int num_residuals = 0;
-  for (size_t i = 0; i < landmark_ids.size(); ++i) {
-    const Landmark& landmark = map->landmarks[landmark_ids[i]];
-    points[i] = {landmark.point_in_world.x(), landmark.point_in_world.y(),
-                 landmark.point_in_world.z()};
-    for (const Observation& o : landmark.observations) {
-      if (!map->has_pose[o.frame]) continue;
-      auto [it, inserted] = poses.try_emplace(o.frame, map->rig_from_world[o.frame].ToParams());
-      if (inserted) {
-        problem.AddParameterBlock(it->second.data(), 7, NewPoseManifold());
-        ordering->AddElementToGroup(it->second.data(), 1);
-        if (!free_frames[o.frame]) problem.SetParameterBlockConstant(it->second.data());
-      }
-      AddObservation(*rig, cam_from_rig, calibration ? &*calibration : nullptr, o,
-                     it->second.data(), points[i].data(), loss, &problem);
-      ++num_residuals;
-    }
-    if (problem.HasParameterBlock(points[i].data())) {
-      ordering->AddElementToGroup(points[i].data(), 0);
-    }
+  for (size_t i = 0; i < blocks.landmark_ids.size(); ++i) {
+    AddLandmark(*rig, free_frames, *map, i, loss, &problem, &blocks);
   }
-  FixGauge(free_frames, &poses, &problem, report);
-  report->num_points = static_cast<int>(landmark_ids.size());
-  report->num_residuals = 2 * num_residuals;
+  FixGauge(free_frames, &blocks.poses, &problem, report);
+  report->num_points = static_cast<int>(blocks.landmark_ids.size());
+  report->num_residuals = 2 * blocks.num_observations;
 
   ceres::Solver::Summary summary;
-  if (num_residuals == 0) {
+  if (blocks.num_observations == 0) {
     delete loss;  // the problem owns only loss functions it was given
     return summary;
   }
   ceres::Solver::Options solver = MakeSolverOptions(
       SolverSetup(report->num_free_poses, max_iterations, options.num_threads)
           .DenseSchurUpTo(options.max_dense_schur_poses));
-  solver.linear_solver_ordering = ordering;
+  solver.linear_solver_ordering = blocks.ordering;
   ProgressCallback callback(progress, iteration_offset,
                             options.max_iterations + SecondSolveIterations(options));
   solver.callbacks.push_back(&callback);
   ceres::Solve(solver, &problem, &summary);
   progress.ThrowIfCancelled();
-
-  for (const auto& [frame, params] : poses) {
-    map->rig_from_world[frame] = Rigid3d::FromParams(params.data());
-  }
-  for (size_t i = 0; i < landmark_ids.size(); ++i) {
-    map->landmarks[landmark_ids[i]].point_in_world =
-        Eigen::Vector3d(points[i][0], points[i][1], points[i][2]);
-  }
-  if (calibration) calibration->WriteTo(rig);
+  WriteBack(blocks, rig, map);
   return summary;
 }
 

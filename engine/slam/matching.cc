@@ -7,6 +7,7 @@
 #include <opencv2/core/hal/hal.hpp>
 #include <opencv2/features2d.hpp>
 
+#include "engine/stereo/descriptor_match.h"
 #include "engine/stereo/epipolar.h"
 #include "engine/stereo/essential.h"
 #include "engine/stereo/triangulation.h"
@@ -15,25 +16,10 @@
 namespace omnirig::slam {
 namespace {
 
-struct Best {
-  float distance = std::numeric_limits<float>::max();
-  float second = std::numeric_limits<float>::max();
-  int index = -1;
-  void Offer(float d, int i) {
-    if (d < distance) {
-      second = distance;
-      distance = d;
-      index = i;
-    } else if (d < second) {
-      second = d;
-    }
-  }
-  // Distances are squared: the ratio and the bound are squared too.
-  bool Passes(double ratio, double max_distance) const {
-    return index >= 0 && distance <= max_distance * max_distance &&
-           (second == std::numeric_limits<float>::max() || distance < ratio * ratio * second);
-  }
-};
+// Distances are squared: the bound is squared too.
+bool Passes(const BestTwo& best, double ratio, double max_distance) {
+  return best.best >= 0 && best.d1 <= max_distance * max_distance && best.PassesRatio(ratio);
+}
 
 // OpenCV's vectorised kernel: the compiler may not reorder a float sum into SIMD lanes.
 float SquaredDistance(const float* a, const float* b, int n) {
@@ -66,7 +52,7 @@ std::vector<StereoPoint> MatchStereo(const StereoRig& rig, const CameraFeatures&
   for (int i = 0; i < n0; ++i) normals[i] = (E * features0.bearings[i]).normalized();
   const double max_sine = std::sin(options.max_epipolar_error_rad);
   const int dims = features0.descriptors.cols;
-  std::vector<Best> best0(n0), best1(n1);
+  std::vector<BestTwo> best0(n0), best1(n1);
   for (int i = 0; i < n0; ++i) {
     const float* d0 = features0.descriptors.ptr<float>(i);
     const Eigen::Vector3d& b0 = features0.bearings[i];
@@ -80,8 +66,8 @@ std::vector<StereoPoint> MatchStereo(const StereoRig& rig, const CameraFeatures&
         continue;
       }
       const float d = SquaredDistance(d0, features1.descriptors.ptr<float>(j), dims);
-      best0[i].Offer(d, j);
-      best1[j].Offer(d, i);
+      best0[i].Add(j, d);
+      best1[j].Add(i, d);
     }
   }
   TriangulationOptions triangulation;
@@ -90,10 +76,10 @@ std::vector<StereoPoint> MatchStereo(const StereoRig& rig, const CameraFeatures&
   triangulation.bearing_std_rad = 0.5 / rig.cam0.intrinsics.gamma_u();
   std::vector<StereoPoint> points;
   for (int i = 0; i < n0; ++i) {
-    const int j = best0[i].index;
-    if (!best0[i].Passes(options.max_descriptor_ratio, options.max_descriptor_distance) ||
-        best1[j].index != i ||
-        !best1[j].Passes(options.max_descriptor_ratio, options.max_descriptor_distance)) {
+    const int j = best0[i].best;
+    if (!Passes(best0[i], options.max_descriptor_ratio, options.max_descriptor_distance) ||
+        best1[j].best != i ||
+        !Passes(best1[j], options.max_descriptor_ratio, options.max_descriptor_distance)) {
       continue;
     }
     const TriangulatedPoint point = TriangulateMidpoint(cam1_from_cam0, features0.bearings[i],
@@ -144,7 +130,7 @@ std::vector<std::pair<int, int>> MatchDescriptorsGated(const CameraFeatures& a,
   }
   const float min_cos = static_cast<float>(std::cos(max_angle_rad));
   const int dims = a.descriptors.cols;
-  std::vector<Best> best_a(na), best_b(nb);
+  std::vector<BestTwo> best_a(na), best_b(nb);
   for (int i = 0; i < na; ++i) {
     const Eigen::Vector3f r = (b_from_a_rotation * a.bearings[i]).cast<float>();
     const float* da = a.descriptors.ptr<float>(i);
@@ -152,14 +138,14 @@ std::vector<std::pair<int, int>> MatchDescriptorsGated(const CameraFeatures& a,
       const float* bj = &bearings_b[3 * j];
       if (r.x() * bj[0] + r.y() * bj[1] + r.z() * bj[2] < min_cos) continue;
       const float d = SquaredDistance(da, b.descriptors.ptr<float>(j), dims);
-      best_a[i].Offer(d, j);
-      best_b[j].Offer(d, i);
+      best_a[i].Add(j, d);
+      best_b[j].Add(i, d);
     }
   }
   for (int i = 0; i < na; ++i) {
-    const int j = best_a[i].index;
-    if (best_a[i].Passes(max_ratio, max_distance) && best_b[j].index == i &&
-        best_b[j].Passes(max_ratio, max_distance)) {
+    const int j = best_a[i].best;
+    if (Passes(best_a[i], max_ratio, max_distance) && best_b[j].best == i &&
+        Passes(best_b[j], max_ratio, max_distance)) {
       matches.emplace_back(i, j);
     }
   }
@@ -180,22 +166,22 @@ std::vector<std::pair<int, int>> MatchDescriptorsInGroups(const cv::Mat& descrip
   std::unordered_map<int, std::vector<int>> members_b;
   for (int j = 0; j < descriptors_b.rows; ++j) members_b[group_b[j]].push_back(j);
   const int dims = descriptors_a.cols;
-  std::vector<Best> best_a(descriptors_a.rows), best_b(descriptors_b.rows);
+  std::vector<BestTwo> best_a(descriptors_a.rows), best_b(descriptors_b.rows);
   for (int i = 0; i < descriptors_a.rows; ++i) {
     const auto group = members_b.find(group_a[i]);
     if (group == members_b.end()) continue;
     const float* da = descriptors_a.ptr<float>(i);
     for (int j : group->second) {
       const float d = SquaredDistance(da, descriptors_b.ptr<float>(j), dims);
-      best_a[i].Offer(d, j);
-      best_b[j].Offer(d, i);
+      best_a[i].Add(j, d);
+      best_b[j].Add(i, d);
     }
   }
   std::vector<std::pair<int, int>> matches;
   for (int i = 0; i < descriptors_a.rows; ++i) {
-    const int j = best_a[i].index;
-    if (best_a[i].Passes(max_ratio, max_distance) && best_b[j].index == i &&
-        best_b[j].Passes(max_ratio, max_distance)) {
+    const int j = best_a[i].best;
+    if (Passes(best_a[i], max_ratio, max_distance) && best_b[j].best == i &&
+        Passes(best_b[j], max_ratio, max_distance)) {
       matches.emplace_back(i, j);
     }
   }

@@ -39,17 +39,15 @@ SequenceAccuracy EvaluateOnSequence(const synth::StereoSequence& sequence,
   if (estimate_poses.size() < 2) return accuracy;
   accuracy.trajectory = EvaluateTrajectory(estimate_poses, truth);
   const Rigid3d gt_from_estimate = truth.front() * estimate_poses.front().Inverse();
-  std::vector<double> absolute, relative;
+  std::vector<double> relative;
   for (const MapPoint& point : result.map) {
     const Eigen::Vector3d p = gt_from_estimate * point.point_in_world;
     double range = 1e9;
     for (const Rigid3d& pose : truth) range = std::min(range, (p - pose.translation).norm());
     const double d = DistanceToSceneSurface(sequence.scene, p);
-    absolute.push_back(d);
     relative.push_back(100.0 * d / range);
   }
   accuracy.num_map_points = static_cast<int>(result.map.size());
-  accuracy.map_median_distance_m = Median(absolute);
   accuracy.map_median_percent_of_range = Median(relative);
   return accuracy;
 }

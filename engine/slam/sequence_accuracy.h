@@ -13,7 +13,6 @@ struct SequenceAccuracy {
   int num_tracked = 0;
   TrajectoryErrors trajectory;  // over the tracked frames (zeros with fewer than two)
   int num_map_points = 0;
-  double map_median_distance_m = 0.0;  // to the true surfaces
   // Each point's distance relative to its range from the nearest true rig position; median.
   double map_median_percent_of_range = 0.0;
   // CalibrationPixelRms over each camera's mirror annulus, and the rotation error of

@@ -56,6 +56,56 @@ int Vocabulary::NumNodes() const {
 
 int Vocabulary::FirstLeaf() const { return (Power(branching_, depth_) - 1) / (branching_ - 1); }
 
+void Vocabulary::SplitNode(const cv::Mat& all, const NodeRows& node, std::vector<NodeRows>* next) {
+  const auto& [parent, rows] = node;
+  cv::Mat samples(static_cast<int>(rows.size()), kDescriptorSize, CV_32F);
+  for (size_t i = 0; i < rows.size(); ++i) {
+    all.row(rows[i]).copyTo(samples.row(static_cast<int>(i)));
+  }
+  cv::Mat labels, centres;
+  const int k = std::min<int>(branching_, samples.rows);
+  if (k == 0) return;
+  if (k < branching_) {
+    centres = samples.clone();
+    labels = cv::Mat(samples.rows, 1, CV_32S);
+    for (int i = 0; i < samples.rows; ++i) labels.at<int>(i) = i;
+  } else {
+    cv::kmeans(samples, k, labels,
+               cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 15, 0.5), 1,
+               cv::KMEANS_PP_CENTERS, centres);
+  }
+  for (int c = 0; c < k; ++c) {
+    const int child = parent * branching_ + 1 + c;
+    valid_[child] = 1;
+    for (int i = 0; i < kDescriptorSize; ++i) {
+      centres_[static_cast<std::size_t>(child) * kDescriptorSize + i] =
+          cv::saturate_cast<std::uint8_t>(centres.at<float>(c, i));
+    }
+    next->push_back({child, {}});
+  }
+  const size_t first = next->size() - k;
+  for (int i = 0; i < labels.rows; ++i) {
+    (*next)[first + labels.at<int>(i)].second.push_back(rows[i]);
+  }
+}
+
+void Vocabulary::SetIdf(const std::vector<cv::Mat>& images) {
+  const int num_words = Power(branching_, depth_);
+  idf_.assign(num_words, 1.0f);  // Word() needs a non-empty vocabulary
+  std::vector<int> images_with(num_words, 0);
+  for (const cv::Mat& d : images) {
+    cv::Mat f;
+    d.convertTo(f, CV_32F);
+    std::set<int> words;
+    for (int r = 0; r < f.rows; ++r) words.insert(Word(f.ptr<float>(r)));
+    for (int w : words) ++images_with[w];
+  }
+  const double n = static_cast<double>(images.size());
+  for (int w = 0; w < num_words; ++w) {
+    idf_[w] = static_cast<float>(std::log(n / std::max(1, images_with[w])));
+  }
+}
+
 Vocabulary Vocabulary::Train(const std::vector<cv::Mat>& images, int branching, int depth,
                              std::uint64_t seed) {
   OMNIRIG_CHECK(branching >= 2 && depth >= 1 && Power(branching, depth) <= (1 << 20),
@@ -77,58 +127,15 @@ Vocabulary Vocabulary::Train(const std::vector<cv::Mat>& images, int branching, 
   vocabulary.valid_[0] = 1;
   cv::theRNG().state = seed == 0 ? 1 : seed;
   // Breadth first: the descriptors of each node of the current level.
-  std::vector<std::pair<int, std::vector<int>>> level = {{0, {}}};
+  std::vector<NodeRows> level = {{0, {}}};
   for (int r = 0; r < all.rows; ++r) level[0].second.push_back(r);
   for (int d = 0; d < depth; ++d) {
-    std::vector<std::pair<int, std::vector<int>>> next;
-    for (const auto& [node, rows] : level) {
-      cv::Mat samples(static_cast<int>(rows.size()), kDescriptorSize, CV_32F);
-      for (size_t i = 0; i < rows.size(); ++i) {
-        all.row(rows[i]).copyTo(samples.row(static_cast<int>(i)));
-      }
-      cv::Mat labels, centres;
-      const int k = std::min<int>(branching, samples.rows);
-      if (k == 0) continue;
-      if (k < branching) {
-        centres = samples.clone();
-        labels = cv::Mat(samples.rows, 1, CV_32S);
-        for (int i = 0; i < samples.rows; ++i) labels.at<int>(i) = i;
-      } else {
-        cv::kmeans(samples, k, labels,
-                   cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 15, 0.5), 1,
-                   cv::KMEANS_PP_CENTERS, centres);
-      }
-      for (int c = 0; c < k; ++c) {
-        const int child = node * branching + 1 + c;
-        vocabulary.valid_[child] = 1;
-        for (int i = 0; i < kDescriptorSize; ++i) {
-          vocabulary.centres_[static_cast<std::size_t>(child) * kDescriptorSize + i] =
-              cv::saturate_cast<std::uint8_t>(centres.at<float>(c, i));
-        }
-        next.push_back({child, {}});
-      }
-      const size_t first = next.size() - k;
-      for (int i = 0; i < labels.rows; ++i) {
-        next[first + labels.at<int>(i)].second.push_back(rows[i]);
-      }
-    }
+    std::vector<NodeRows> next;
+    for (const NodeRows& node : level) vocabulary.SplitNode(all, node, &next);
     level = std::move(next);
   }
   // idf from the rounded centres, as Word() will see them.
-  const int num_words = Power(branching, depth);
-  vocabulary.idf_.assign(num_words, 1.0f);  // Word() needs a non-empty vocabulary
-  std::vector<int> images_with(num_words, 0);
-  for (const cv::Mat& d : images) {
-    cv::Mat f;
-    d.convertTo(f, CV_32F);
-    std::set<int> words;
-    for (int r = 0; r < f.rows; ++r) words.insert(vocabulary.Word(f.ptr<float>(r)));
-    for (int w : words) ++images_with[w];
-  }
-  const double n = static_cast<double>(images.size());
-  for (int w = 0; w < num_words; ++w) {
-    vocabulary.idf_[w] = static_cast<float>(std::log(n / std::max(1, images_with[w])));
-  }
+  vocabulary.SetIdf(images);
   return vocabulary;
 }
 

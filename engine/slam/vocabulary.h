@@ -55,8 +55,15 @@ class Vocabulary {
   int depth() const { return depth_; }
 
  private:
+  // The descriptors of a node of the tree being trained (rows of the training matrix).
+  using NodeRows = std::pair<int, std::vector<int>>;
   int NumNodes() const;
   int FirstLeaf() const;
+  // Clusters a node's descriptors into its children (k-means, or one child per descriptor when
+  // fewer than `branching_`), appending the children to `next`.
+  void SplitNode(const cv::Mat& all, const NodeRows& node, std::vector<NodeRows>* next);
+  // idf per word from the images' descriptors, as Word() assigns them.
+  void SetIdf(const std::vector<cv::Mat>& images);
 
   int branching_ = 0;
   int depth_ = 0;

@@ -5,28 +5,16 @@
 
 #include <gtest/gtest.h>
 
+#include "engine/geometry/random_bearing.h"
 #include "engine/util/check.h"
 
 namespace omnirig {
 namespace {
 
-Eigen::Vector3d RandomUnit(std::mt19937_64& rng) {
-  std::normal_distribution<double> n(0.0, 1.0);
-  return Eigen::Vector3d(n(rng), n(rng), n(rng)).normalized();
-}
-
 Rigid3d RandomPose(std::mt19937_64& rng, const Eigen::Vector3d& translation) {
   std::uniform_real_distribution<double> angle(-0.6, 0.6);
-  const Eigen::Quaterniond q(Eigen::AngleAxisd(angle(rng), RandomUnit(rng)));
+  const Eigen::Quaterniond q(Eigen::AngleAxisd(angle(rng), RandomUnitVector(rng)));
   return Rigid3d(q, translation);
-}
-
-// Perturbs a unit bearing by an angle drawn from N(0, sigma) about a random perpendicular axis.
-Eigen::Vector3d Perturb(const Eigen::Vector3d& b, double sigma, std::mt19937_64& rng) {
-  if (sigma <= 0.0) return b;
-  std::normal_distribution<double> n(0.0, sigma);
-  const Eigen::Vector3d axis = b.cross(RandomUnit(rng)).normalized();
-  return Eigen::AngleAxisd(n(rng), axis) * b;
 }
 
 struct Correspondences {
@@ -43,16 +31,16 @@ Correspondences MakeCorrespondences(const Rigid3d& cam2_from_cam1, int n, double
   std::uniform_real_distribution<double> unit(0.0, 1.0);
   Correspondences c;
   for (int i = 0; i < n; ++i) {
-    const Eigen::Vector3d point_in_cam1 = range(rng) * RandomUnit(rng);
+    const Eigen::Vector3d point_in_cam1 = range(rng) * RandomUnitVector(rng);
     const Eigen::Vector3d point_in_cam2 = cam2_from_cam1 * point_in_cam1;
     if (point_in_cam2.norm() < 0.3) {
       --i;
       continue;
     }
     const bool outlier = unit(rng) < outlier_ratio;
-    c.bearings1.push_back(Perturb(point_in_cam1.normalized(), noise_rad, rng));
-    c.bearings2.push_back(outlier ? RandomUnit(rng)
-                                  : Perturb(point_in_cam2.normalized(), noise_rad, rng));
+    c.bearings1.push_back(PerturbBearing(point_in_cam1.normalized(), noise_rad, rng));
+    c.bearings2.push_back(outlier ? RandomUnitVector(rng)
+                                  : PerturbBearing(point_in_cam2.normalized(), noise_rad, rng));
     c.is_inlier.push_back(!outlier);
   }
   return c;
@@ -231,8 +219,8 @@ TEST(Essential, BadInputsAreReportedNotCrashes) {
   std::mt19937_64 rng(41);
   std::vector<Eigen::Vector3d> r1, r2;
   for (int i = 0; i < 300; ++i) {
-    r1.push_back(RandomUnit(rng));
-    r2.push_back(RandomUnit(rng));
+    r1.push_back(RandomUnitVector(rng));
+    r2.push_back(RandomUnitVector(rng));
   }
   options.max_iterations = 300;
   const EssentialReport random = EstimateEssentialRansac(r1, r2, options);

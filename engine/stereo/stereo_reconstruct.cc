@@ -10,6 +10,7 @@
 #include "engine/calib/detect.h"
 #include "engine/geometry/ply.h"
 #include "engine/geometry/unified_camera.h"
+#include "engine/stereo/descriptor_match.h"
 #include "engine/stereo/essential.h"
 #include "engine/stereo/sift_bias.h"
 #include "engine/stereo/triangulation.h"
@@ -43,24 +44,6 @@ struct Candidate {
   int i, j;
   float squared_distance;
   double epipolar_error_rad;
-};
-
-// Best and second-best squared distances per feature, over the candidates.
-struct BestTwo {
-  int best = -1;
-  float d1 = std::numeric_limits<float>::infinity();
-  float d2 = std::numeric_limits<float>::infinity();
-  void Add(int index, float d) {
-    if (d < d1) {
-      d2 = d1;
-      d1 = d;
-      best = index;
-    } else if (d < d2) {
-      d2 = d;
-    }
-  }
-  // Lowe's ratio on distances (squared distances compare with ratio^2).
-  bool PassesRatio(double ratio) const { return d1 < ratio * ratio * d2; }
 };
 
 std::array<uint8_t, 3> ColourAt(const cv::Mat& image, const cv::Point2f& pt) {
@@ -217,7 +200,7 @@ std::vector<StereoMatch> MatchAlongEpipolarCurves(const LiftedFeatures& features
         (best1[c.j].best != c.i || !best1[c.j].PassesRatio(options.ratio_test))) {
       continue;
     }
-    matches.push_back({c.i, c.j, std::sqrt(c.squared_distance), c.epipolar_error_rad});
+    matches.push_back({c.i, c.j, c.epipolar_error_rad});
   }
   return matches;
 }
@@ -300,14 +283,14 @@ StereoPairReport ReconstructStereoPair(const StereoRig& rig, const cv::Mat& imag
   return report;
 }
 
-void WriteColoredPly(const std::filesystem::path& path, const std::vector<StereoPoint>& points) {
+PlyCloud SparseCloud(const std::vector<StereoPoint>& points) {
   PlyCloud cloud;
   cloud.comment = "omnirig stereo_reconstruct: points in cam0's frame, metres";
   for (const StereoPoint& p : points) {
     cloud.positions.push_back(p.point_in_cam0.cast<float>());
     cloud.colours.push_back(p.rgb);
   }
-  WritePly(path, cloud);
+  return cloud;
 }
 
 }  // namespace omnirig

@@ -7,7 +7,6 @@
 // Frames: points are returned in cam0's frame, in metres (the rig's baseline unit).
 
 #include <array>
-#include <filesystem>
 #include <string>
 #include <vector>
 
@@ -15,6 +14,7 @@
 #include <opencv2/core.hpp>
 
 #include "engine/geometry/camera_model.h"
+#include "engine/geometry/ply.h"
 #include "engine/util/progress.h"
 
 namespace omnirig {
@@ -59,7 +59,6 @@ struct LiftedFeatures {
 struct StereoMatch {
   int index0 = -1;  // into cam0's LiftedFeatures
   int index1 = -1;  // into cam1's
-  float descriptor_distance = 0.f;
   double epipolar_error_rad = 0.0;  // the larger of the two cameras' eq. (16) angles
 };
 
@@ -112,8 +111,8 @@ StereoPairReport ReconstructStereoPair(const StereoRig& rig, const cv::Mat& imag
                                        const StereoReconstructOptions& options,
                                        const ProgressSink& progress = ProgressSink());
 
-// Writes a binary little-endian PLY (engine/geometry/ply.h): vertex x y z (float32, metres) and
-// red green blue (uchar). Throws std::runtime_error when the file cannot be written.
-void WriteColoredPly(const std::filesystem::path& path, const std::vector<StereoPoint>& points);
+// The points as a PLY cloud (engine/geometry/ply.h, WritePly): positions in cam0's frame
+// (metres) and colours.
+PlyCloud SparseCloud(const std::vector<StereoPoint>& points);
 
 }  // namespace omnirig

@@ -1,11 +1,6 @@
 #include "engine/stereo/stereo_reconstruct.h"
 
-#include <cstring>
-#include <fstream>
 #include <random>
-#include <sstream>
-
-#include <unistd.h>
 
 #include <gtest/gtest.h>
 #include <opencv2/imgproc.hpp>
@@ -173,47 +168,20 @@ TEST(StereoReconstruct, ImageSizeMismatchIsAnError) {
   EXPECT_THROW(bad.Check(), InvalidArgument);
 }
 
-TEST(StereoReconstruct, WritesBinaryLittleEndianPly) {
+// The points as a PLY cloud (the file format: engine/geometry/ply_test.cc).
+TEST(StereoReconstruct, SparseCloudHoldsPositionsAndColours) {
   std::vector<StereoPoint> points(2);
   points[0].point_in_cam0 = Eigen::Vector3d(1.5, -2.25, 3.0);
   points[0].rgb = {10, 20, 30};
   points[1].point_in_cam0 = Eigen::Vector3d(0.0, 0.5, -1.0);
   points[1].rgb = {255, 0, 128};
-  const std::filesystem::path path = std::filesystem::temp_directory_path() /
-                                     ("omnirig_ply_test_" + std::to_string(::getpid()) + ".ply");
-  WriteColoredPly(path, points);
-  std::ifstream in(path, std::ios::binary);
-  std::stringstream buffer;
-  buffer << in.rdbuf();
-  const std::string data = buffer.str();
-  std::filesystem::remove(path);
-  const std::string end = "end_header\n";
-  const size_t body = data.find(end);
-  ASSERT_NE(body, std::string::npos);
-  const std::string header = data.substr(0, body);
-  EXPECT_NE(header.find("format binary_little_endian 1.0"), std::string::npos);
-  EXPECT_NE(header.find("element vertex 2"), std::string::npos);
-  EXPECT_NE(header.find("property float x\nproperty float y\nproperty float z\nproperty uchar red\n"
-                        "property uchar green\nproperty uchar blue\n"),
-            std::string::npos);
-  const size_t start = body + end.size();
-  ASSERT_EQ(data.size() - start, 2u * 15u);
-  const auto read_float = [&](size_t offset) {
-    uint32_t bits = 0;
-    for (int k = 0; k < 4; ++k)
-      bits |= static_cast<uint32_t>(static_cast<uint8_t>(data[offset + k])) << (8 * k);
-    float value;
-    std::memcpy(&value, &bits, sizeof(value));
-    return value;
-  };
-  EXPECT_EQ(read_float(start), 1.5f);
-  EXPECT_EQ(read_float(start + 4), -2.25f);
-  EXPECT_EQ(read_float(start + 8), 3.0f);
-  EXPECT_EQ(static_cast<uint8_t>(data[start + 12]), 10);
-  EXPECT_EQ(static_cast<uint8_t>(data[start + 14]), 30);
-  EXPECT_EQ(read_float(start + 15 + 8), -1.0f);
-  EXPECT_EQ(static_cast<uint8_t>(data[start + 15 + 12]), 255);
-  EXPECT_EQ(static_cast<uint8_t>(data[start + 15 + 14]), 128);
+  const PlyCloud cloud = SparseCloud(points);
+  EXPECT_EQ(cloud.positions,
+            (std::vector<Eigen::Vector3f>{{1.5f, -2.25f, 3.0f}, {0.0f, 0.5f, -1.0f}}));
+  EXPECT_EQ(cloud.colours, (std::vector<std::array<uint8_t, 3>>{{10, 20, 30}, {255, 0, 128}}));
+  EXPECT_FALSE(cloud.has_confidence);
+  EXPECT_NE(cloud.comment.find("cam0's frame, metres"), std::string::npos);
+  cloud.Check();
 }
 
 }  // namespace

@@ -5,21 +5,11 @@
 
 #include <gtest/gtest.h>
 
+#include "engine/geometry/random_bearing.h"
 #include "engine/util/check.h"
 
 namespace omnirig {
 namespace {
-
-Eigen::Vector3d RandomUnit(std::mt19937_64& rng) {
-  std::normal_distribution<double> n(0.0, 1.0);
-  return Eigen::Vector3d(n(rng), n(rng), n(rng)).normalized();
-}
-
-Eigen::Vector3d Perturb(const Eigen::Vector3d& b, double sigma, std::mt19937_64& rng) {
-  std::normal_distribution<double> n(0.0, sigma);
-  const Eigen::Vector3d axis = b.cross(RandomUnit(rng)).normalized();
-  return Eigen::AngleAxisd(n(rng), axis) * b;
-}
 
 // A vertical rig with a 0.1 m baseline and a small relative rotation.
 Rigid3d Rig() {
@@ -39,7 +29,7 @@ TEST_P(Triangulation, ExactBearingsGiveTheExactPointAllAroundTheSphere) {
   std::uniform_real_distribution<double> range(0.3, 3.0);
   int valid = 0;
   for (int i = 0; i < 500; ++i) {
-    const Eigen::Vector3d point = range(rng) * RandomUnit(rng);
+    const Eigen::Vector3d point = range(rng) * RandomUnitVector(rng);
     const TriangulatedPoint t =
         GetParam()(cam2_from_cam1, point.normalized(), (cam2_from_cam1 * point).normalized(), {});
     if (!t.valid) {
@@ -66,8 +56,9 @@ TEST_P(Triangulation, RangeStdPredictsTheObservedRangeError) {
   int n = 0;
   for (int i = 0; i < 4000; ++i) {
     const TriangulatedPoint t = GetParam()(
-        cam2_from_cam1, Perturb(point.normalized(), options.bearing_std_rad, rng),
-        Perturb((cam2_from_cam1 * point).normalized(), options.bearing_std_rad, rng), options);
+        cam2_from_cam1, PerturbBearing(point.normalized(), options.bearing_std_rad, rng),
+        PerturbBearing((cam2_from_cam1 * point).normalized(), options.bearing_std_rad, rng),
+        options);
     ASSERT_TRUE(t.valid) << t.reason;
     const double error = t.point_in_cam1.norm() - point.norm();
     sum_sq += error * error;
@@ -123,9 +114,9 @@ TEST(TriangulationOptimal, AngularErrorNeverExceedsTheMidpoints) {
   options.min_parallax_rad = 0.0;
   int compared = 0;
   for (int i = 0; i < 500; ++i) {
-    const Eigen::Vector3d point = range(rng) * RandomUnit(rng);
-    const Eigen::Vector3d b1 = Perturb(point.normalized(), 2e-3, rng);
-    const Eigen::Vector3d b2 = Perturb((cam2_from_cam1 * point).normalized(), 2e-3, rng);
+    const Eigen::Vector3d point = range(rng) * RandomUnitVector(rng);
+    const Eigen::Vector3d b1 = PerturbBearing(point.normalized(), 2e-3, rng);
+    const Eigen::Vector3d b2 = PerturbBearing((cam2_from_cam1 * point).normalized(), 2e-3, rng);
     const TriangulatedPoint mid = TriangulateMidpoint(cam2_from_cam1, b1, b2, options);
     const TriangulatedPoint opt = TriangulateOptimalAngular(cam2_from_cam1, b1, b2, options);
     if (!mid.valid || !opt.valid) continue;

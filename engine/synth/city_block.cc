@@ -12,17 +12,6 @@ namespace {
 constexpr double kBuildingDepthM = 6.0;
 constexpr double kGroundTileM = 8.0;  // ground tiles of about this side keep texels near 1 cm
 
-TextureSpec Facade(uint64_t seed, uint64_t salt, const Eigen::Vector3d& rgb,
-                   double shapes_per_m2 = 30.0, double texel_size_m = 0.012) {
-  TextureSpec spec;
-  spec.texel_size_m = texel_size_m;
-  spec.style = TextureSpec::Style::kRich;
-  spec.seed = DeriveSeed(seed, salt);
-  spec.color_rgb = rgb;
-  spec.shapes_per_m2 = shapes_per_m2;
-  return spec;
-}
-
 Rigid3d Place(const Eigen::Vector2d& xy, double z, double yaw_rad) {
   return Rigid3d(Eigen::Quaterniond(Eigen::AngleAxisd(yaw_rad, Eigen::Vector3d::UnitZ())),
                  Eigen::Vector3d(xy.x(), xy.y(), z));
@@ -48,7 +37,8 @@ void AddBuildingRow(const Eigen::Vector2d& start, const Eigen::Vector2d& end,
                               0.5 + 0.12 * ((b + salt) % 3));
     const Eigen::Vector2d centre = start + (x + 0.5 * width) * along + 0.5 * depth * back;
     scene->AddBox(Place(centre, 0.5 * height, yaw), Eigen::Vector3d(width, depth, height),
-                  Facade(seed, 1000 * salt + b, rgb), name + "_" + std::to_string(b));
+                  RichTexture(seed, 1000 * salt + b, rgb, 30.0, 0.012),
+                  name + "_" + std::to_string(b));
     x += width;
   }
 }
@@ -90,7 +80,7 @@ void AddGround(const CityBlockLoop& loop, uint64_t seed, Scene* scene) {
       if (under_block) continue;
       const Eigen::Vector3d rgb(0.52 + 0.04 * ((i + j) % 3), 0.52 + 0.03 * (i % 2), 0.55);
       scene->AddPlane(Place({x0 + 0.5 * sx, y0 + 0.5 * sy}, 0.0, 0.0), sx, sy,
-                      Facade(seed, 20000 + j * nx + i, rgb, 30.0, 0.01),
+                      RichTexture(seed, 20000 + j * nx + i, rgb, 30.0, 0.01),
                       "ground_" + std::to_string(i) + "_" + std::to_string(j));
     }
   }
@@ -107,7 +97,7 @@ void AddStreetFurniture(const CityBlockLoop& loop, uint64_t seed, Scene* scene) 
     const double side = i % 2 == 0 ? -3.0 : 4.6;  // by the block or by the far façades
     scene->AddCylinder(Place(point + side * outward, 0.0, 0.0), 0.1 + 0.03 * (i % 3),
                        3.5 + 0.5 * (i % 3),
-                       Facade(seed, 30000 + i, Eigen::Vector3d(0.6, 0.6, 0.62), 200.0, 0.005),
+                       RichTexture(seed, 30000 + i, Eigen::Vector3d(0.6, 0.6, 0.62), 200.0),
                        "pole_" + std::to_string(i));
   }
   const double car_spacing = 17.0, car_length = 4.0;
@@ -122,7 +112,7 @@ void AddStreetFurniture(const CityBlockLoop& loop, uint64_t seed, Scene* scene) 
     const double yaw = std::atan2(outward.x(), -outward.y());  // along the path
     const Eigen::Vector3d rgb(0.3 + 0.15 * (i % 4), 0.35 + 0.1 * (i % 3), 0.85 - 0.15 * (i % 4));
     scene->AddBox(Place(point + 3.5 * outward, 0.7, yaw), Eigen::Vector3d(car_length, 1.8, 1.4),
-                  Facade(seed, 40000 + i, rgb, 80.0, 0.005), "car_" + std::to_string(i));
+                  RichTexture(seed, 40000 + i, rgb, 80.0), "car_" + std::to_string(i));
   }
 }
 

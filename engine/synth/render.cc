@@ -464,6 +464,13 @@ struct Renderer::Grid {
   // Per tile of kTilePixels x kTilePixels pixels (row-major), the cone of its corners' bearings.
   int tiles_x = 0, tiles_y = 0;
   std::vector<Cone> tile_cones;
+
+  // The steps of the constructor, in order. A class per pixel (dark, border or inside the
+  // mirror's annulus), and the pixel corners that pixels not dark need.
+  void ClassifyPixels();
+  // m and bearing at every needed pixel corner.
+  void LiftLattice(int num_threads);
+  void SetTileCones();
 };
 
 namespace {
@@ -506,16 +513,13 @@ Cone BearingCone(const std::vector<std::optional<Eigen::Vector3d>>& bearings, in
 
 }  // namespace
 
-Renderer::Renderer(const SynthCamera& camera, int num_threads) {
-  camera.Check();
-  auto grid = std::make_unique<Grid>();
-  grid->camera = camera;
+void Renderer::Grid::ClassifyPixels() {
   const int width = camera.model.width, height = camera.model.height;
   const UnifiedIntrinsics& k = camera.model.intrinsics;
-  grid->lattice_cols = width + 1;
-  grid->lattice_rows = height + 1;
-  grid->pixel_class.assign(static_cast<size_t>(width) * height, kDark);
-  grid->lattice_needed.assign(static_cast<size_t>(grid->lattice_cols) * grid->lattice_rows, 0);
+  lattice_cols = width + 1;
+  lattice_rows = height + 1;
+  pixel_class.assign(static_cast<size_t>(width) * height, kDark);
+  lattice_needed.assign(static_cast<size_t>(lattice_cols) * lattice_rows, 0);
   for (int j = 0; j < height; ++j) {
     for (int i = 0; i < width; ++i) {
       const double r = std::hypot(i - k.u0(), j - k.v0());
@@ -527,44 +531,59 @@ Renderer::Renderer(const SynthCamera& camera, int num_threads) {
                  r - kHalfPixelDiagonal > camera.hole_radius_px) {
         cls = kInside;
       }
-      grid->pixel_class[static_cast<size_t>(j) * width + i] = cls;
+      pixel_class[static_cast<size_t>(j) * width + i] = cls;
       if (cls == kDark) continue;
       for (int dj = 0; dj < 2; ++dj) {
         for (int di = 0; di < 2; ++di) {
-          grid->lattice_needed[static_cast<size_t>(j + dj) * grid->lattice_cols + i + di] = 1;
+          lattice_needed[static_cast<size_t>(j + dj) * lattice_cols + i + di] = 1;
         }
       }
     }
   }
-  grid->m.assign(grid->lattice_needed.size(), Eigen::Vector2d::Zero());
-  grid->m_valid.assign(grid->lattice_needed.size(), 0);
-  grid->bearing.assign(grid->lattice_needed.size(), std::nullopt);
-  Grid* g = grid.get();
-  ParallelRows(grid->lattice_rows, ResolveThreads(num_threads, grid->lattice_rows), [g, &k](int j) {
-    for (int i = 0; i < g->lattice_cols; ++i) {
-      const size_t index = static_cast<size_t>(j) * g->lattice_cols + i;
-      if (!g->lattice_needed[index]) continue;
+}
+
+void Renderer::Grid::LiftLattice(int num_threads) {
+  const UnifiedIntrinsics& k = camera.model.intrinsics;
+  m.assign(lattice_needed.size(), Eigen::Vector2d::Zero());
+  m_valid.assign(lattice_needed.size(), 0);
+  bearing.assign(lattice_needed.size(), std::nullopt);
+  ParallelRows(lattice_rows, ResolveThreads(num_threads, lattice_rows), [this, &k](int j) {
+    for (int i = 0; i < lattice_cols; ++i) {
+      const size_t index = static_cast<size_t>(j) * lattice_cols + i;
+      if (!lattice_needed[index]) continue;
       // Invert K (eq. 4), then the distortion (eq. 3).
       const double yd = (j - 0.5 - k.v0()) / k.gamma_v();
       const double xd = (i - 0.5 - k.u0()) / k.gamma_u() - k.alpha() * yd;
-      const auto m = Undistort(k, Eigen::Vector2d(xd, yd));
-      if (!m) continue;
-      g->m[index] = *m;
-      g->m_valid[index] = 1;
-      g->bearing[index] = Lift(NormalisedPlane(k.xi()), *m);
+      const auto undistorted = Undistort(k, Eigen::Vector2d(xd, yd));
+      if (!undistorted) continue;
+      m[index] = *undistorted;
+      m_valid[index] = 1;
+      bearing[index] = Lift(NormalisedPlane(k.xi()), *undistorted);
     }
   });
-  grid->tiles_x = (width + kTilePixels - 1) / kTilePixels;
-  grid->tiles_y = (height + kTilePixels - 1) / kTilePixels;
-  grid->tile_cones.resize(static_cast<size_t>(grid->tiles_x) * grid->tiles_y);
-  for (int ty = 0; ty < grid->tiles_y; ++ty) {
-    for (int tx = 0; tx < grid->tiles_x; ++tx) {
-      grid->tile_cones[static_cast<size_t>(ty) * grid->tiles_x + tx] = BearingCone(
-          grid->bearing, grid->lattice_cols, tx * kTilePixels,
-          std::min((tx + 1) * kTilePixels, width), ty * kTilePixels,
-          std::min((ty + 1) * kTilePixels, height));
+}
+
+void Renderer::Grid::SetTileCones() {
+  const int width = camera.model.width, height = camera.model.height;
+  tiles_x = (width + kTilePixels - 1) / kTilePixels;
+  tiles_y = (height + kTilePixels - 1) / kTilePixels;
+  tile_cones.resize(static_cast<size_t>(tiles_x) * tiles_y);
+  for (int ty = 0; ty < tiles_y; ++ty) {
+    for (int tx = 0; tx < tiles_x; ++tx) {
+      tile_cones[static_cast<size_t>(ty) * tiles_x + tx] = BearingCone(
+          bearing, lattice_cols, tx * kTilePixels, std::min((tx + 1) * kTilePixels, width),
+          ty * kTilePixels, std::min((ty + 1) * kTilePixels, height));
     }
   }
+}
+
+Renderer::Renderer(const SynthCamera& camera, int num_threads) {
+  camera.Check();
+  auto grid = std::make_unique<Grid>();
+  grid->camera = camera;
+  grid->ClassifyPixels();
+  grid->LiftLattice(num_threads);
+  grid->SetTileCones();
   grid_ = std::move(grid);
 }
 

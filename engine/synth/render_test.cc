@@ -95,12 +95,18 @@ TEST(Render, GrayscaleAndBackground) {
   EXPECT_NEAR(image.at<uint8_t>(static_cast<int>(k.v0()), u), 127.5, 1.0);
 }
 
-TEST(Render, BoardSquaresAreBlackAndWhiteWhereTheyProject) {
-  const SynthCamera camera = DefaultCamera(320, 240);
+// A board of 3 x 3 inner corners, 0.1 m squares.
+CheckerboardSpec SmallBoard() {
   CheckerboardSpec board;
   board.cols = 3;
   board.rows = 3;
   board.square_size_m = 0.1;
+  return board;
+}
+
+TEST(Render, BoardSquaresAreBlackAndWhiteWhereTheyProject) {
+  const SynthCamera camera = DefaultCamera(320, 240);
+  const CheckerboardSpec board = SmallBoard();
   // A board 0.6 m away on the horizon, facing the camera (printed side towards it).
   const Eigen::Matrix3d board_axes_in_cam =
       (Eigen::Matrix3d() << 0, 0, 1, 1, 0, 0, 0, 1, 0).finished();  // columns: x, y, z of board
@@ -136,14 +142,37 @@ double BoardLevel(const CheckerboardSpec& board, double x, double y) {
   return parity % 2 == 0 ? kBoardBlackLevel : kBoardWhiteLevel;
 }
 
-// Edge pixels of the board against brute force: 64 x 64 jittered samples per pixel, each
-// lifted exactly with Lift() and intersected with the board plane.
+// Board coordinates of the ray through `pixel`, or nullopt when it misses the board plane.
+std::optional<Eigen::Vector2d> BoardPoint(const SynthCamera& camera, const Rigid3d& board_from_cam,
+                                          const Eigen::Vector2d& pixel) {
+  const Eigen::Vector3d d = board_from_cam.rotation * *Lift(camera.model.intrinsics, pixel);
+  const Eigen::Vector3d& o = board_from_cam.translation;
+  const double t = -o.z() / d.z();
+  if (t <= 0.0) return std::nullopt;
+  return Eigen::Vector2d(o.x() + t * d.x(), o.y() + t * d.y());
+}
+
+// The board's mean grey level over pixel (u, v) by brute force: 64 x 64 jittered samples, each
+// lifted exactly with Lift() and intersected with the board plane; nullopt when one misses it.
+std::optional<double> BruteForceLevel(const SynthCamera& camera, const Rigid3d& board_from_cam,
+                                      const CheckerboardSpec& board, int u, int v, cv::RNG* rng) {
+  double sum = 0.0;
+  for (int a = 0; a < 64; ++a) {
+    for (int b = 0; b < 64; ++b) {
+      const auto point = BoardPoint(camera, board_from_cam,
+                                    Eigen::Vector2d(u - 0.5 + (a + rng->uniform(0.0, 1.0)) / 64,
+                                                    v - 0.5 + (b + rng->uniform(0.0, 1.0)) / 64));
+      if (!point) return std::nullopt;
+      sum += BoardLevel(board, point->x(), point->y());
+    }
+  }
+  return sum / (64 * 64);
+}
+
+// Edge pixels of the board against brute force (BruteForceLevel).
 TEST(Render, BoardEdgesAreExactlyAreaSampled) {
   const SynthCamera camera = DefaultCamera(320, 240);
-  CheckerboardSpec board;
-  board.cols = 3;
-  board.rows = 3;
-  board.square_size_m = 0.1;
+  const CheckerboardSpec board = SmallBoard();
   const Eigen::Matrix3d board_axes_in_cam =
       Eigen::AngleAxisd(0.4, Eigen::Vector3d(0.3, 1.0, 0.2).normalized()).toRotationMatrix() *
       (Eigen::Matrix3d() << 0, 0, 1, 1, 0, 0, 0, 1, 0).finished();
@@ -157,14 +186,6 @@ TEST(Render, BoardEdgesAreExactlyAreaSampled) {
   options.grayscale = true;
   options.supersampling = 1;  // the board does not depend on it
   const cv::Mat image = Render(scene, camera, Rigid3d(), options);
-  // Board coordinates of the ray through `pixel`, or nullopt when it misses the board plane.
-  const auto board_point = [&](const Eigen::Vector2d& pixel) -> std::optional<Eigen::Vector2d> {
-    const Eigen::Vector3d d = board_from_cam.rotation * *Lift(camera.model.intrinsics, pixel);
-    const Eigen::Vector3d& o = board_from_cam.translation;
-    const double t = -o.z() / d.z();
-    if (t <= 0.0) return std::nullopt;
-    return Eigen::Vector2d(o.x() + t * d.x(), o.y() + t * d.y());
-  };
   const double s = board.square_size_m;
   cv::RNG rng(4);
   int checked = 0;
@@ -175,24 +196,16 @@ TEST(Render, BoardEdgesAreExactlyAreaSampled) {
       if (level < kBoardBlackLevel + 10 || level > kBoardWhiteLevel - 10) continue;
       if (!InAnnulus(camera, Eigen::Vector2d(u, v), 2.0)) continue;
       // Edge pixels inside the squares, away from the board's outline.
-      const auto centre = board_point(Eigen::Vector2d(u, v));
+      const auto centre = BoardPoint(camera, board_from_cam, Eigen::Vector2d(u, v));
       if (!centre || centre->minCoeff() < -0.9 * s || centre->x() > (board.cols - 0.1) * s ||
           centre->y() > (board.rows - 0.1) * s) {
         continue;
       }
-      double sum = 0.0;
-      for (int a = 0; a < 64; ++a) {
-        for (int b = 0; b < 64; ++b) {
-          const auto point =
-              board_point(Eigen::Vector2d(u - 0.5 + (a + rng.uniform(0.0, 1.0)) / 64,
-                                          v - 0.5 + (b + rng.uniform(0.0, 1.0)) / 64));
-          ASSERT_TRUE(point.has_value());
-          sum += BoardLevel(board, point->x(), point->y());
-        }
-      }
-      const double expected = sum / (64 * 64);
-      EXPECT_NEAR(level, expected, 1.5) << "pixel " << u << ", " << v;
-      sum_abs += std::abs(level - expected);
+      const std::optional<double> expected =
+          BruteForceLevel(camera, board_from_cam, board, u, v, &rng);
+      ASSERT_TRUE(expected.has_value());
+      EXPECT_NEAR(level, *expected, 1.5) << "pixel " << u << ", " << v;
+      sum_abs += std::abs(level - *expected);
       ++checked;
     }
   }

@@ -88,6 +88,17 @@ uint64_t DeriveSeed(uint64_t seed, uint64_t salt) {
   return z ^ (z >> 31);
 }
 
+TextureSpec RichTexture(uint64_t seed, uint64_t salt, const Eigen::Vector3d& rgb,
+                        double shapes_per_m2, double texel_size_m) {
+  TextureSpec spec;
+  spec.texel_size_m = texel_size_m;
+  spec.style = TextureSpec::Style::kRich;
+  spec.seed = DeriveSeed(seed, salt);
+  spec.color_rgb = rgb;
+  spec.shapes_per_m2 = shapes_per_m2;
+  return spec;
+}
+
 void CheckerboardSpec::Check() const {
   OMNIRIG_CHECK(cols >= 2 && rows >= 2,
                 "a board needs at least 2 x 2 inner corners, got " << cols << " x " << rows);
@@ -150,18 +161,26 @@ cv::Mat MakeTexture(const TextureSpec& spec, double extent_x_m, double extent_y_
   return texture;
 }
 
+int Scene::Add(PrimitiveInfo::Kind kind, const std::string& name, const Rigid3d& world_from_local,
+               const Eigen::Vector3d& size_m, const TextureSpec& texture, Textures textures) {
+  PrimitiveInfo info;
+  info.kind = kind;
+  info.name = name;
+  info.world_from_local = world_from_local;
+  info.size_m = size_m;
+  info.texture = texture;
+  primitives_.push_back(info);
+  textures_.push_back(std::move(textures));
+  return static_cast<int>(primitives_.size()) - 1;
+}
+
 int Scene::AddCheckerboard(const CheckerboardSpec& spec, const Rigid3d& world_from_board,
                            const std::string& name) {
   spec.Check();
-  PrimitiveInfo info;
-  info.kind = PrimitiveInfo::Kind::kCheckerboard;
-  info.name = name;
-  info.world_from_local = world_from_board;
-  info.size_m = Eigen::Vector3d(spec.width_m(), spec.height_m(), 0.0);
-  info.board = spec;
-  primitives_.push_back(info);
-  textures_.emplace_back();
-  return static_cast<int>(primitives_.size()) - 1;
+  const int index = Add(PrimitiveInfo::Kind::kCheckerboard, name, world_from_board,
+                        Eigen::Vector3d(spec.width_m(), spec.height_m(), 0.0), TextureSpec(), {});
+  primitives_[index].board = spec;
+  return index;
 }
 
 void Scene::SetBoardPose(int index, const Rigid3d& world_from_board) {
@@ -175,28 +194,15 @@ int Scene::AddPlane(const Rigid3d& world_from_plane, double size_x_m, double siz
                     const TextureSpec& texture, const std::string& name) {
   CheckPositive(size_x_m, "plane size_x_m");
   CheckPositive(size_y_m, "plane size_y_m");
-  PrimitiveInfo info;
-  info.kind = PrimitiveInfo::Kind::kPlane;
-  info.name = name;
-  info.world_from_local = world_from_plane;
-  info.size_m = Eigen::Vector3d(size_x_m, size_y_m, 0.0);
-  info.texture = texture;
-  primitives_.push_back(info);
-  textures_.push_back({std::make_shared<const cv::Mat>(MakeTexture(texture, size_x_m, size_y_m))});
-  return static_cast<int>(primitives_.size()) - 1;
+  return Add(PrimitiveInfo::Kind::kPlane, name, world_from_plane,
+             Eigen::Vector3d(size_x_m, size_y_m, 0.0), texture,
+             {std::make_shared<const cv::Mat>(MakeTexture(texture, size_x_m, size_y_m))});
 }
 
 int Scene::AddBox(const Rigid3d& world_from_box, const Eigen::Vector3d& size_m,
                   const TextureSpec& texture, const std::string& name) {
   for (int k = 0; k < 3; ++k) CheckPositive(size_m[k], "box size");
-  PrimitiveInfo info;
-  info.kind = PrimitiveInfo::Kind::kBox;
-  info.name = name;
-  info.world_from_local = world_from_box;
-  info.size_m = size_m;
-  info.texture = texture;
-  primitives_.push_back(info);
-  std::vector<std::shared_ptr<const cv::Mat>> faces;
+  Textures faces;
   for (int face = 0; face < 6; ++face) {
     const int axis = face / 2;
     TextureSpec face_spec = texture;
@@ -205,22 +211,14 @@ int Scene::AddBox(const Rigid3d& world_from_box, const Eigen::Vector3d& size_m,
     faces.push_back(
         std::make_shared<const cv::Mat>(MakeTexture(face_spec, size_m[axes[0]], size_m[axes[1]])));
   }
-  textures_.push_back(std::move(faces));
-  return static_cast<int>(primitives_.size()) - 1;
+  return Add(PrimitiveInfo::Kind::kBox, name, world_from_box, size_m, texture, std::move(faces));
 }
 
 int Scene::AddCylinder(const Rigid3d& world_from_cylinder, double radius_m, double height_m,
                        const TextureSpec& texture, const std::string& name) {
   CheckPositive(radius_m, "cylinder radius_m");
   CheckPositive(height_m, "cylinder height_m");
-  PrimitiveInfo info;
-  info.kind = PrimitiveInfo::Kind::kCylinder;
-  info.name = name;
-  info.world_from_local = world_from_cylinder;
-  info.size_m = Eigen::Vector3d(radius_m, radius_m, height_m);
-  info.texture = texture;
-  primitives_.push_back(info);
-  std::vector<std::shared_ptr<const cv::Mat>> faces;
+  Textures faces;
   faces.push_back(
       std::make_shared<const cv::Mat>(MakeTexture(texture, 2.0 * M_PI * radius_m, height_m)));
   for (int cap = 0; cap < 2; ++cap) {
@@ -229,8 +227,8 @@ int Scene::AddCylinder(const Rigid3d& world_from_cylinder, double radius_m, doub
     faces.push_back(
         std::make_shared<const cv::Mat>(MakeTexture(cap_spec, 2.0 * radius_m, 2.0 * radius_m)));
   }
-  textures_.push_back(std::move(faces));
-  return static_cast<int>(primitives_.size()) - 1;
+  return Add(PrimitiveInfo::Kind::kCylinder, name, world_from_cylinder,
+             Eigen::Vector3d(radius_m, radius_m, height_m), texture, std::move(faces));
 }
 
 }  // namespace omnirig::synth

@@ -108,6 +108,11 @@ class Scene {
   }
 
  private:
+  using Textures = std::vector<std::shared_ptr<const cv::Mat>>;
+  // Appends a primitive with its textures (none for a checkerboard); returns its index.
+  int Add(PrimitiveInfo::Kind kind, const std::string& name, const Rigid3d& world_from_local,
+          const Eigen::Vector3d& size_m, const TextureSpec& texture, Textures textures);
+
   std::vector<PrimitiveInfo> primitives_;
   std::vector<std::vector<std::shared_ptr<const cv::Mat>>> textures_;
   Eigen::Vector3d background_rgb_{0.55, 0.65, 0.8};
@@ -122,6 +127,11 @@ inline std::array<int, 2> BoxFaceAxes(int axis) {
 
 // Derives an independent seed from (seed, salt) (SplitMix64): for faces, views and layers.
 uint64_t DeriveSeed(uint64_t seed, uint64_t salt);
+
+// The presets' textures: kRich, its seed derived from (seed, salt), tinted by `rgb`; the
+// defaults are TextureSpec's.
+TextureSpec RichTexture(uint64_t seed, uint64_t salt, const Eigen::Vector3d& rgb,
+                        double shapes_per_m2 = 40.0, double texel_size_m = 0.005);
 
 // A texture of the given spec covering extent_x_m x extent_y_m (CV_8UC1).
 cv::Mat MakeTexture(const TextureSpec& spec, double extent_x_m, double extent_y_m);

@@ -17,17 +17,6 @@ Rigid3d At(double x, double y, double z, double yaw_rad = 0.0) {
                  Eigen::Vector3d(x, y, z));
 }
 
-TextureSpec Rich(uint64_t seed, uint64_t salt, const Eigen::Vector3d& rgb,
-                 double shapes_per_m2 = 40.0, double texel_size_m = 0.005) {
-  TextureSpec spec;
-  spec.texel_size_m = texel_size_m;
-  spec.style = TextureSpec::Style::kRich;
-  spec.seed = DeriveSeed(seed, salt);
-  spec.color_rgb = rgb;
-  spec.shapes_per_m2 = shapes_per_m2;
-  return spec;
-}
-
 // Sway of about one degree at distance s along the path, as on a moving platform.
 Rigid3d Sway(double s) {
   const double roll = 0.015 * std::sin(1.3 * s), pitch = 0.012 * std::sin(2.1 * s + 0.5);
@@ -138,21 +127,21 @@ std::string FrameName(int index, int num_frames) {
 Scene MakeRoomScene(uint64_t seed) {
   Scene scene;
   scene.AddBox(At(0.0, 0.0, 1.4), Eigen::Vector3d(10.0, 7.0, 2.8),
-               Rich(seed, 1, Eigen::Vector3d(0.95, 0.9, 0.8)), "room");
+               RichTexture(seed, 1, Eigen::Vector3d(0.95, 0.9, 0.8)), "room");
   scene.AddBox(At(-2.5, 2.6, 0.375, 0.1), Eigen::Vector3d(1.6, 0.9, 0.75),
-               Rich(seed, 2, Eigen::Vector3d(0.8, 0.55, 0.35), 80.0), "table");
+               RichTexture(seed, 2, Eigen::Vector3d(0.8, 0.55, 0.35), 80.0), "table");
   scene.AddBox(At(2.0, -2.7, 0.45, -0.2), Eigen::Vector3d(1.2, 0.8, 0.9),
-               Rich(seed, 3, Eigen::Vector3d(0.5, 0.7, 0.9), 80.0), "desk");
+               RichTexture(seed, 3, Eigen::Vector3d(0.5, 0.7, 0.9), 80.0), "desk");
   scene.AddBox(At(4.6, 1.0, 0.9), Eigen::Vector3d(0.5, 1.6, 1.8),
-               Rich(seed, 4, Eigen::Vector3d(0.9, 0.85, 0.5), 80.0), "cabinet");
+               RichTexture(seed, 4, Eigen::Vector3d(0.9, 0.85, 0.5), 80.0), "cabinet");
   scene.AddBox(At(-4.6, -1.5, 0.6), Eigen::Vector3d(0.6, 1.2, 1.2),
-               Rich(seed, 5, Eigen::Vector3d(0.6, 0.9, 0.6), 80.0), "shelf");
+               RichTexture(seed, 5, Eigen::Vector3d(0.6, 0.9, 0.6), 80.0), "shelf");
   scene.AddBox(At(0.5, 2.9, 1.0), Eigen::Vector3d(2.0, 0.4, 2.0),
-               Rich(seed, 6, Eigen::Vector3d(0.9, 0.6, 0.6), 80.0), "bookcase");
+               RichTexture(seed, 6, Eigen::Vector3d(0.9, 0.6, 0.6), 80.0), "bookcase");
   for (int i = 0; i < 4; ++i) {
     const double x = i < 2 ? -1.5 : 1.5, y = (i % 2 == 0) ? -1.7 : 1.7;
     scene.AddCylinder(At(x, y, 0.0), 0.2, 2.8,
-                      Rich(seed, 10 + i, Eigen::Vector3d(0.85, 0.85, 0.9), 120.0),
+                      RichTexture(seed, 10 + i, Eigen::Vector3d(0.85, 0.85, 0.9), 120.0),
                       "pillar_" + std::to_string(i));
   }
   return scene;
@@ -162,7 +151,7 @@ Scene MakeStreetScene(uint64_t seed) {
   Scene scene;
   scene.SetBackgroundRgb(Eigen::Vector3d(0.6, 0.72, 0.9));
   scene.AddPlane(At(0.0, 0.0, 0.0), 40.0, 14.0,
-                 Rich(seed, 1, Eigen::Vector3d(0.55, 0.55, 0.58), 30.0), "ground");
+                 RichTexture(seed, 1, Eigen::Vector3d(0.55, 0.55, 0.58), 30.0), "ground");
   // Building fronts on both sides of the street, of varied widths and heights.
   const double widths[] = {5.0, 7.0, 4.0, 6.0, 5.5, 6.5, 4.5};
   for (int side = 0; side < 2; ++side) {
@@ -174,7 +163,7 @@ Scene MakeStreetScene(uint64_t seed) {
       const Eigen::Vector3d rgb(0.7 + 0.1 * (b % 3), 0.6 + 0.1 * ((b + 1) % 3),
                                 0.5 + 0.15 * (b % 2));
       scene.AddBox(At(x + 0.5 * width, y, 0.5 * height), Eigen::Vector3d(width - 0.2, 3.0, height),
-                   Rich(seed, 100 + 20 * side + b, rgb, 30.0, 0.012),
+                   RichTexture(seed, 100 + 20 * side + b, rgb, 30.0, 0.012),
                    "building_" + std::to_string(side) + "_" + std::to_string(b));
       x += width;
     }
@@ -183,14 +172,14 @@ Scene MakeStreetScene(uint64_t seed) {
   for (int i = 0; i < 8; ++i) {
     const double x = -14.0 + 4.0 * i, y = (i % 2 == 0) ? 3.6 : -3.6;
     scene.AddCylinder(At(x, y, 0.0), 0.1, 4.0,
-                      Rich(seed, 200 + i, Eigen::Vector3d(0.6, 0.6, 0.6), 200.0),
+                      RichTexture(seed, 200 + i, Eigen::Vector3d(0.6, 0.6, 0.6), 200.0),
                       "pole_" + std::to_string(i));
   }
   for (int i = 0; i < 4; ++i) {
     const double x = -6.0 + 4.5 * i, y = (i % 2 == 0) ? -2.6 : 2.7;
     const Eigen::Vector3d rgb(0.3 + 0.2 * i, 0.4, 0.9 - 0.2 * i);
     scene.AddBox(At(x, y, 0.7, 0.05 * i), Eigen::Vector3d(4.0, 1.8, 1.4),
-                 Rich(seed, 300 + i, rgb, 80.0), "car_" + std::to_string(i));
+                 RichTexture(seed, 300 + i, rgb, 80.0), "car_" + std::to_string(i));
   }
   return scene;
 }
