@@ -207,9 +207,12 @@ void RetryJob(ServiceState& state, const HttpRequest& request, HttpResponse& res
                         storage::JobStateName(job.state),
                     {{"state", storage::JobStateName(job.state)}});
   }
+  // Read before the workers are told: the reply shows the job back in the queue (a worker of
+  // another process, or one polling, may still claim it first: then it says "running").
+  const storage::JobRecord requeued = RequireJob(state, id);
   state.workers->Notify();
   state.events->Changed(id);
-  response.Json(202, JobJson(RequireJob(state, id)));
+  response.Json(202, JobJson(requeued));
 }
 
 void GetResult(ServiceState& state, const HttpRequest& request, HttpResponse& response) {
