@@ -88,12 +88,7 @@ cv::Mat MatchedGrey(const cv::Mat& right, const cv::Mat& disparity16) {
 }
 
 void CheckPairImages(const StereoRig& rig, const cv::Mat& image0, const cv::Mat& image1) {
-  OMNIRIG_CHECK(image0.cols == rig.cam0.width && image0.rows == rig.cam0.height,
-                "cam0 image is " << image0.cols << "x" << image0.rows << " but the rig's cam0 is "
-                                 << rig.cam0.width << "x" << rig.cam0.height);
-  OMNIRIG_CHECK(image1.cols == rig.cam1.width && image1.rows == rig.cam1.height,
-                "cam1 image is " << image1.cols << "x" << image1.rows << " but the rig's cam1 is "
-                                 << rig.cam1.width << "x" << rig.cam1.height);
+  CheckPairSizes(rig, image0.cols, image0.rows, image1.cols, image1.rows);
   OMNIRIG_CHECK(image0.depth() == CV_8U && image1.depth() == CV_8U &&
                     (image0.channels() == 1 || image0.channels() == 3) &&
                     (image1.channels() == 1 || image1.channels() == 3),

@@ -252,12 +252,7 @@ StereoPairReport ReconstructStereoPair(const StereoRig& rig, const cv::Mat& imag
                                        const StereoReconstructOptions& options,
                                        const ProgressSink& progress) {
   options.Check();
-  OMNIRIG_CHECK(image0.cols == rig.cam0.width && image0.rows == rig.cam0.height,
-                "cam0 image is " << image0.cols << "x" << image0.rows << " but the rig's cam0 is "
-                                 << rig.cam0.width << "x" << rig.cam0.height);
-  OMNIRIG_CHECK(image1.cols == rig.cam1.width && image1.rows == rig.cam1.height,
-                "cam1 image is " << image1.cols << "x" << image1.rows << " but the rig's cam1 is "
-                                 << rig.cam1.width << "x" << rig.cam1.height);
+  CheckPairSizes(rig, image0.cols, image0.rows, image1.cols, image1.rows);
   StereoPairReport report;
   progress.Report(0.0, "detect", "cam0");
   const LiftedFeatures f0 =
