@@ -95,8 +95,10 @@ JobRecord SqlJobStore::ReadJob(const SqlRow& row) {
 
 std::optional<JobRecord> SqlJobStore::SelectJob(SqlSession& db, const std::string& id,
                                                 const std::string& suffix) {
-  return db.First(std::string("SELECT ") + kJobColumns + " FROM jobs WHERE id = ?1" + suffix, {id},
-                  &ReadJob);
+  // Built once: a status poll is one lookup.
+  static const std::string kSelect =
+      std::string("SELECT ") + kJobColumns + " FROM jobs WHERE id = ?1";
+  return db.First(suffix.empty() ? kSelect : kSelect + suffix, {id}, &ReadJob);
 }
 
 RecoveryReport SqlJobStore::Recover(SqlSession& db, const std::vector<RunningJob>& running,
