@@ -7,10 +7,8 @@
 //       [--overlays DIR] [--threads N]
 //       [--svp] [--rim-radius-mm R --rim-height-mm H] [--svp-image IMAGE]
 
-#include <fstream>
 #include <iomanip>
 #include <iostream>
-#include <sstream>
 
 #include <nlohmann/json.hpp>
 
@@ -27,23 +25,13 @@ namespace {
 
 using nlohmann::json;
 
-std::vector<std::string> Split(const std::string& text, char separator) {
-  std::vector<std::string> parts;
-  std::stringstream ss(text);
-  std::string part;
-  while (std::getline(ss, part, separator)) {
-    if (!part.empty()) parts.push_back(part);
-  }
-  return parts;
-}
-
 // "IMAGE:u,v,u,v,u,v,u,v" entries separated by ';' -> the API's "hints" object.
 void AddHints(const std::string& text, json* hints) {
-  for (const std::string& entry : Split(text, ';')) {
+  for (const std::string& entry : SplitList(text, ';')) {
     const size_t colon = entry.rfind(':');
     OMNIRIG_CHECK(colon != std::string::npos && colon > 0,
                   "--hint: expected IMAGE:u,v,u,v,u,v,u,v, got '" << entry << "'");
-    const std::vector<std::string> numbers = Split(entry.substr(colon + 1), ',');
+    const std::vector<std::string> numbers = SplitList(entry.substr(colon + 1), ',');
     OMNIRIG_CHECK(numbers.size() == 8,
                   "--hint: expected 8 numbers for '" << entry.substr(0, colon) << "'");
     json corners = json::array();
@@ -60,8 +48,8 @@ void AddHints(const std::string& text, json* hints) {
 
 json ParamsFromArgs(const ArgParser& args) {
   json options = json::object();
-  if (args.Has("fix")) options["fix"] = Split(args.Get("fix"), ',');
-  if (args.Has("free")) options["free"] = Split(args.Get("free"), ',');
+  if (args.Has("fix")) options["fix"] = SplitList(args.Get("fix"), ',');
+  if (args.Has("free")) options["free"] = SplitList(args.Get("free"), ',');
   json hints = args.Has("hints") ? ReadJsonFile(args.Get("hints"), "--hints") : json::object();
   if (args.Has("hint")) AddHints(args.Get("hint"), &hints);
   json params = {{"board", BoardParams(args)}, {"options", options}};

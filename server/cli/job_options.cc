@@ -2,6 +2,7 @@
 
 #include <iomanip>
 #include <iostream>
+#include <sstream>
 
 #include "server/cli/files.h"
 
@@ -27,6 +28,15 @@ json BoardParams(const ArgParser& parser) {
   if (!parser.Get("marker-mm").empty()) board["marker_size_mm"] = parser.GetDouble("marker-mm");
   if (!parser.Get("dictionary").empty()) board["aruco_dictionary"] = parser.GetInt("dictionary");
   return board;
+}
+
+std::vector<std::string> SplitList(const std::string& text, char separator) {
+  std::vector<std::string> parts;
+  std::stringstream stream(text);
+  for (std::string part; std::getline(stream, part, separator);) {
+    if (!part.empty()) parts.push_back(part);
+  }
+  return parts;
 }
 
 void PrintProgress(double fraction, const std::string& stage, const std::string& message) {

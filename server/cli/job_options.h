@@ -4,6 +4,7 @@
 
 #include <filesystem>
 #include <string>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -21,6 +22,9 @@ void AddBoardOptions(const BoardDefaults& defaults, ArgParser* parser);
 // The job's "board" params from those options: the marker size and the dictionary only when
 // they have a value (given, or a default).
 nlohmann::json BoardParams(const ArgParser& parser);
+
+// The non-empty parts of `text` between `separator`s ("a,,b" -> a, b).
+std::vector<std::string> SplitList(const std::string& text, char separator);
 
 // "[ 42%] stage message" on stderr.
 void PrintProgress(double fraction, const std::string& stage, const std::string& message);

@@ -8,12 +8,8 @@
 // `omnirig calibrate` (or a bare camera object); without them each camera is calibrated from
 // its own images first.
 
-#include <filesystem>
-#include <fstream>
 #include <iomanip>
 #include <iostream>
-#include <set>
-#include <sstream>
 
 #include <nlohmann/json.hpp>
 
@@ -27,20 +23,12 @@
 namespace omnirig::cli {
 namespace {
 
-namespace fs = std::filesystem;
 using nlohmann::json;
 
 // A calibration file as a job result: `omnirig calibrate`'s JSON has "camera"; a bare camera
 // object is wrapped.
 json LoadCalibrationFile(const std::string& path) {
-  std::ifstream in(path);
-  OMNIRIG_CHECK(in.good(), "cannot open calibration file '" << path << "'");
-  json document;
-  try {
-    in >> document;
-  } catch (const json::exception& e) {
-    throw InvalidArgument("calibration file '" + path + "' is not valid JSON: " + e.what());
-  }
+  json document = ReadJsonFile(path, "calibration file");
   if (document.is_object() && document.contains("model") && !document.contains("camera")) {
     return {{"camera", document}};
   }
@@ -112,11 +100,7 @@ json ParamsFromArgs(const ArgParser& parser) {
   if (parser.Has("refine-intrinsics")) params["refine_intrinsics"] = true;
   if (parser.Has("intrinsics-model")) params["intrinsics_model"] = parser.Get("intrinsics-model");
   if (parser.Has("fixed-intrinsics")) {
-    params["fixed_intrinsics"] = json::array();
-    std::istringstream names(parser.Get("fixed-intrinsics"));
-    for (std::string name; std::getline(names, name, ',');) {
-      if (!name.empty()) params["fixed_intrinsics"].push_back(name);
-    }
+    params["fixed_intrinsics"] = SplitList(parser.Get("fixed-intrinsics"), ',');
   }
   return params;
 }
