@@ -130,14 +130,6 @@ class Result {
   double Double(int row, int column) const {
     return std::strtod(PQgetvalue(result_, row, column), nullptr);
   }
-  std::optional<double> OptionalDouble(int row, int column) const {
-    if (IsNull(row, column)) return std::nullopt;
-    return Double(row, column);
-  }
-  std::optional<std::string> OptionalText(int row, int column) const {
-    if (IsNull(row, column)) return std::nullopt;
-    return Text(row, column);
-  }
 
  private:
   PGresult* result_;
