@@ -145,10 +145,10 @@ ProgressSink PrintingProgress(bool terminal) {
   return progress;
 }
 
-void MonoCalibPreset(const ArgParser& args, uint64_t seed, const ProgressSink& progress,
-                     const std::string& out) {
-  synth::MonoCalibrationOptions options;
-  options.num_views = args.GetInt("views");
+// What mono-calib and stereo-board share: image size, board, its poses, background, rendering.
+template <typename Options>
+Options BoardViewOptionsFromArgs(const ArgParser& args, uint64_t seed) {
+  Options options;
   options.width = args.GetInt("width");
   options.height = args.GetInt("height");
   options.board = BoardFromArgs(args);
@@ -156,21 +156,21 @@ void MonoCalibPreset(const ArgParser& args, uint64_t seed, const ProgressSink& p
   options.textured_background = !args.Has("plain-background");
   options.render = RenderOptionsFromArgs(args);
   options.seed = seed;
+  return options;
+}
+
+void MonoCalibPreset(const ArgParser& args, uint64_t seed, const ProgressSink& progress,
+                     const std::string& out) {
+  auto options = BoardViewOptionsFromArgs<synth::MonoCalibrationOptions>(args, seed);
+  options.num_views = args.GetInt("views");
   api::WriteMonoCalibrationSet(synth::MakeMonoCalibrationSet(options, progress), out);
 }
 
 void StereoBoardPreset(const ArgParser& args, uint64_t seed, const ProgressSink& progress,
                        const std::string& out) {
-  synth::StereoBoardOptions options;
+  auto options = BoardViewOptionsFromArgs<synth::StereoBoardOptions>(args, seed);
   options.num_pairs = args.GetInt("views");
-  options.width = args.GetInt("width");
-  options.height = args.GetInt("height");
   options.cam0_from_cam1 = Cam0FromCam1FromArgs(args);
-  options.board = BoardFromArgs(args);
-  options.poses = PosesFromArgs(args);
-  options.textured_background = !args.Has("plain-background");
-  options.render = RenderOptionsFromArgs(args);
-  options.seed = seed;
   api::WriteStereoBoardSet(synth::MakeStereoBoardSet(options, progress), out);
 }
 
