@@ -405,34 +405,13 @@ bool PostgresJobStore::RenewLease(const std::string& id, const std::string& leas
   });
 }
 
-RecoveryReport PostgresJobStore::RecoverInterruptedJobs(int max_attempts) {
-  return RecoverRunning(max_attempts, /*only_expired=*/false);
-}
-
-RecoveryReport PostgresJobStore::RecoverExpiredLeases(int max_attempts) {
-  return RecoverRunning(max_attempts, /*only_expired=*/true);
-}
-
-RecoveryReport PostgresJobStore::RecoverRunning(int max_attempts, bool only_expired) {
-  RecoveryReport report;
-  InTransaction([&](SqlSession& db) {
-    // SKIP LOCKED: a job being finished or renewed right now is not expired; leave it.
-    std::vector<RunningJob> running;
-    db.Query(std::string("SELECT id, attempts, cancel_requested FROM jobs WHERE state = "
-                         "'running' ") +
-                 (only_expired ? std::string("AND (lease_expires_at IS NULL OR "
-                                             "lease_expires_at <= ") +
-                                     kDbNow + ") "
-                               : std::string()) +
-                 "ORDER BY seq FOR UPDATE SKIP LOCKED",
-             {}, [&](const SqlRow& row) {
-               running.push_back(RunningJob{row.Text(0), row.Int(1), row.Int(2) != 0});
-             });
-    report = Recover(db, running, max_attempts);
-    if (!report.requeued.empty()) OnJobsQueued(db);
-    return true;
-  });
-  return report;
+// SKIP LOCKED: a job being finished or renewed right now is not expired; leave it.
+SqlJobStore::SqlQuery PostgresJobStore::RunningJobs(bool only_expired) const {
+  const std::string expired =
+      std::string("AND (lease_expires_at IS NULL OR lease_expires_at <= ") + kDbNow + ") ";
+  return {std::string("SELECT id, attempts, cancel_requested FROM jobs WHERE state = 'running' ") +
+              (only_expired ? expired : "") + "ORDER BY seq FOR UPDATE SKIP LOCKED",
+          {}};
 }
 
 bool PostgresJobStore::WaitForQueueChange(double timeout_s) {

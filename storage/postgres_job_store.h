@@ -48,8 +48,6 @@ class PostgresJobStore : public SqlJobStore {
   using JobStore::ClaimNextJob;
   std::optional<JobRecord> ClaimNextJob(const ClaimRequest& request) override;
   bool RenewLease(const std::string& id, const std::string& lease_token, double lease_s) override;
-  RecoveryReport RecoverInterruptedJobs(int max_attempts) override;
-  RecoveryReport RecoverExpiredLeases(int max_attempts) override;
   bool NotifiesQueueChanges() const override { return true; }
   bool WaitForQueueChange(double timeout_s) override;
   std::string IntegrityCheck() override;
@@ -59,6 +57,7 @@ class PostgresJobStore : public SqlJobStore {
   void WithWriter(const std::function<void(SqlSession&)>& work) override;
   bool InTransaction(const std::function<bool(SqlSession&)>& work) override;
   void OnJobsQueued(SqlSession& db) override;
+  SqlQuery RunningJobs(bool only_expired) const override;
 
  private:
   class Lease;
@@ -66,7 +65,6 @@ class PostgresJobStore : public SqlJobStore {
   // Closes the idle connections and the listener (the destructor, a failed construction).
   void CloseConnections();
   void Migrate();
-  RecoveryReport RecoverRunning(int max_attempts, bool only_expired);
 
   std::string url_;
   int max_connections_;

@@ -51,6 +51,45 @@ SqlValue ErrorMessage(const std::optional<JobError>& error) {
   return error ? SqlValue(error->message) : SqlValue();
 }
 
+// A running job found interrupted, as recovery decides its fate.
+struct RunningJob {
+  std::string id;
+  int64_t attempts = 0;
+  bool cancel_requested = false;
+};
+
+// Cancels, fails or requeues each of `running` on `db` (DecideRecovery).
+RecoveryReport Recover(SqlSession& db, const std::vector<RunningJob>& running, int max_attempts) {
+  RecoveryReport report;
+  const double now = NowSeconds();
+  for (const RunningJob& job : running) {
+    switch (DecideRecovery(job.cancel_requested, job.attempts, max_attempts)) {
+      case RecoveryAction::kCancel:
+        db.Execute(
+            "UPDATE jobs SET state = 'canceled', finished_at = ?1, lease_expires_at = NULL "
+            "WHERE id = ?2",
+            {now, job.id});
+        report.canceled.push_back(job.id);
+        break;
+      case RecoveryAction::kFail:
+        db.Execute(
+            "UPDATE jobs SET state = 'failed', finished_at = ?1, error_code = 'interrupted', "
+            "error_message = ?2, lease_expires_at = NULL WHERE id = ?3",
+            {now, InterruptedMessage(job.attempts, max_attempts), job.id});
+        report.failed.push_back(job.id);
+        break;
+      case RecoveryAction::kRequeue:
+        db.Execute(
+            "UPDATE jobs SET state = 'queued', started_at = NULL, progress_stage = 'requeued', "
+            "eta_s = NULL, lease_expires_at = NULL WHERE id = ?1",
+            {job.id});
+        report.requeued.push_back(job.id);
+        break;
+    }
+  }
+  return report;
+}
+
 }  // namespace
 
 const char SqlJobStore::kJobColumns[] =
@@ -99,38 +138,6 @@ std::optional<JobRecord> SqlJobStore::SelectJob(SqlSession& db, const std::strin
   static const std::string kSelect =
       std::string("SELECT ") + kJobColumns + " FROM jobs WHERE id = ?1";
   return db.First(suffix.empty() ? kSelect : kSelect + suffix, {id}, &ReadJob);
-}
-
-RecoveryReport SqlJobStore::Recover(SqlSession& db, const std::vector<RunningJob>& running,
-                                    int max_attempts) {
-  RecoveryReport report;
-  const double now = NowSeconds();
-  for (const RunningJob& job : running) {
-    switch (DecideRecovery(job.cancel_requested, job.attempts, max_attempts)) {
-      case RecoveryAction::kCancel:
-        db.Execute(
-            "UPDATE jobs SET state = 'canceled', finished_at = ?1, lease_expires_at = NULL "
-            "WHERE id = ?2",
-            {now, job.id});
-        report.canceled.push_back(job.id);
-        break;
-      case RecoveryAction::kFail:
-        db.Execute(
-            "UPDATE jobs SET state = 'failed', finished_at = ?1, error_code = 'interrupted', "
-            "error_message = ?2, lease_expires_at = NULL WHERE id = ?3",
-            {now, InterruptedMessage(job.attempts, max_attempts), job.id});
-        report.failed.push_back(job.id);
-        break;
-      case RecoveryAction::kRequeue:
-        db.Execute(
-            "UPDATE jobs SET state = 'queued', started_at = NULL, progress_stage = 'requeued', "
-            "eta_s = NULL, lease_expires_at = NULL WHERE id = ?1",
-            {job.id});
-        report.requeued.push_back(job.id);
-        break;
-    }
-  }
-  return report;
 }
 
 DatasetRecord SqlJobStore::CreateDataset(const std::string& name) {
@@ -391,6 +398,29 @@ std::vector<WorkerRecord> SqlJobStore::ListWorkers(double seen_within_s) {
             dialect_.byte_order,
         {NowSeconds() - seen_within_s}, &ReadWorker);
   });
+}
+
+RecoveryReport SqlJobStore::RecoverInterruptedJobs(int max_attempts) {
+  return RecoverRunning(max_attempts, /*only_expired=*/false);
+}
+
+RecoveryReport SqlJobStore::RecoverExpiredLeases(int max_attempts) {
+  return RecoverRunning(max_attempts, /*only_expired=*/true);
+}
+
+RecoveryReport SqlJobStore::RecoverRunning(int max_attempts, bool only_expired) {
+  RecoveryReport report;
+  InTransaction([&](SqlSession& db) {
+    const SqlQuery select = RunningJobs(only_expired);
+    std::vector<RunningJob> running;
+    db.Query(select.sql, select.params, [&](const SqlRow& row) {
+      running.push_back(RunningJob{row.Text(0), row.Int(1), row.Int(2) != 0});
+    });
+    report = Recover(db, running, max_attempts);
+    if (!report.requeued.empty()) OnJobsQueued(db);
+    return true;
+  });
+  return report;
 }
 
 }  // namespace omnirig::storage

@@ -136,6 +136,8 @@ class SqlJobStore : public JobStore {
                  const std::vector<ArtifactRecord>& artifacts) override;
   void RecordHeartbeat(const WorkerRecord& worker) override;
   std::vector<WorkerRecord> ListWorkers(double seen_within_s) override;
+  RecoveryReport RecoverInterruptedJobs(int max_attempts) override;
+  RecoveryReport RecoverExpiredLeases(int max_attempts) override;
 
  protected:
   // The columns ReadJob reads, in its order.
@@ -149,16 +151,14 @@ class SqlJobStore : public JobStore {
   // The job `id` read on `db`, with `suffix` appended to its SELECT (a row lock).
   static std::optional<JobRecord> SelectJob(SqlSession& db, const std::string& id,
                                             const std::string& suffix = "");
-  // A running job found interrupted, as recovery decides its fate.
-  struct RunningJob {
-    std::string id;
-    int64_t attempts = 0;
-    bool cancel_requested = false;
+  // A statement with its parameters.
+  struct SqlQuery {
+    std::string sql;
+    std::vector<SqlValue> params;
   };
-  // Cancels, fails or requeues each of `running` on `db` (DecideRecovery); the caller holds the
-  // transaction and notifies when jobs were requeued.
-  static RecoveryReport Recover(SqlSession& db, const std::vector<RunningJob>& running,
-                                int max_attempts);
+  // The running jobs recovery looks at, as rows (id, attempts, cancel_requested): all of them, or
+  // those whose lease expired when `only_expired`. Run inside recovery's transaction.
+  virtual SqlQuery RunningJobs(bool only_expired) const = 0;
 
   // Runs `work` on a connection for reading.
   virtual void WithReader(const std::function<void(SqlSession&)>& work) = 0;
@@ -185,6 +185,9 @@ class SqlJobStore : public JobStore {
   }
 
  private:
+  // Cancels, fails or requeues each job RunningJobs lists (DecideRecovery), in one transaction.
+  RecoveryReport RecoverRunning(int max_attempts, bool only_expired);
+
   SqlDialect dialect_;
 };
 

@@ -250,30 +250,12 @@ bool SqliteJobStore::RenewLease(const std::string& id, const std::string& lease_
   });
 }
 
-RecoveryReport SqliteJobStore::RecoverInterruptedJobs(int max_attempts) {
-  return RecoverRunning(max_attempts, std::nullopt);
-}
-
-RecoveryReport SqliteJobStore::RecoverExpiredLeases(int max_attempts) {
-  return RecoverRunning(max_attempts, NowSeconds());
-}
-
-RecoveryReport SqliteJobStore::RecoverRunning(int max_attempts,
-                                              std::optional<double> expired_before) {
-  RecoveryReport report;
-  InTransaction([&](SqlSession& db) {
-    // A job claimed before leases existed (no expiry) counts as expired.
-    std::vector<RunningJob> running;
-    db.Query(
-        "SELECT id, attempts, cancel_requested FROM jobs WHERE state = 'running' "
-        "AND (?1 IS NULL OR lease_expires_at IS NULL OR lease_expires_at <= ?1)",
-        {expired_before}, [&](const SqlRow& row) {
-          running.push_back(RunningJob{row.Text(0), row.Int(1), row.Int(2) != 0});
-        });
-    report = Recover(db, running, max_attempts);
-    return true;
-  });
-  return report;
+// A job claimed before leases existed (no expiry) counts as expired.
+SqlJobStore::SqlQuery SqliteJobStore::RunningJobs(bool only_expired) const {
+  return {
+      "SELECT id, attempts, cancel_requested FROM jobs WHERE state = 'running' "
+      "AND (?1 IS NULL OR lease_expires_at IS NULL OR lease_expires_at <= ?1)",
+      {only_expired ? SqlValue(NowSeconds()) : SqlValue()}};
 }
 
 std::string SqliteJobStore::IntegrityCheck() {

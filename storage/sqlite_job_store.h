@@ -30,23 +30,19 @@ class SqliteJobStore : public SqlJobStore {
   using JobStore::ClaimNextJob;
   std::optional<JobRecord> ClaimNextJob(const ClaimRequest& request) override;
   bool RenewLease(const std::string& id, const std::string& lease_token, double lease_s) override;
-  RecoveryReport RecoverInterruptedJobs(int max_attempts) override;
-  RecoveryReport RecoverExpiredLeases(int max_attempts) override;
   std::string IntegrityCheck() override;
 
  protected:
   void WithReader(const std::function<void(SqlSession&)>& work) override;
   void WithWriter(const std::function<void(SqlSession&)>& work) override;
   bool InTransaction(const std::function<bool(SqlSession&)>& work) override;
+  SqlQuery RunningJobs(bool only_expired) const override;
 
  private:
   // A reader connection borrowed from the pool for one call.
   class ReaderLease;
   ReaderLease Reader();
   void Migrate();
-  // Requeues, fails or cancels the running jobs (those whose lease ended before `expired_before`
-  // when given).
-  RecoveryReport RecoverRunning(int max_attempts, std::optional<double> expired_before);
 
   std::string path_;
   std::mutex writer_mutex_;
