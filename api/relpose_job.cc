@@ -172,6 +172,33 @@ std::vector<ImagePairNames> MatchImagePairs(const std::vector<std::string>& imag
   return pairs;
 }
 
+namespace {
+
+json SingleViewToJson(const RelativePosePairReport& pair) {
+  return {{"name", pair.name},
+          {"camera", "cam" + std::to_string(pair.single_camera)},
+          {"used", pair.used},
+          {"reason", pair.reason},
+          {"rms_px", NullableRms(pair.used ? pair.rms_px : -1.0)},
+          {"num_corners", pair.num_corners}};
+}
+
+json PairToJson(const RelativePosePairReport& pair) {
+  json entry = {{"name", pair.name},
+                {"used", pair.used},
+                {"reason", pair.reason},
+                {"rms_px", NullableRms(pair.used ? pair.rms_px : -1.0)},
+                {"num_corners", pair.num_corners},
+                {"cam1_corner_order", pair.cam1_order}};
+  if (pair.used) entry["cam0_from_board"] = PoseToJson(pair.cam0_from_board);
+  entry["sync_statistic"] = NullableRms(pair.sync_statistic);
+  entry["board_offset_m"] = NullableRms(pair.board_offset_m);
+  entry["board_rotation_deg"] = NullableRms(pair.board_rotation_deg);
+  return entry;
+}
+
+}  // namespace
+
 json RelativePoseResultToJson(const RelativePoseReport& report, const json& camera0,
                               const json& camera1, bool intrinsics_refined) {
   json result = RigToJson(report.rig);
@@ -190,30 +217,14 @@ json RelativePoseResultToJson(const RelativePoseReport& report, const json& came
   result["spread_eigen_ratio"] = report.spread_eigen_ratio;
   result["intrinsics_refined"] = intrinsics_refined;
   json pairs = json::array(), single_views = json::array();
-  int num_single_views = 0;
   for (const RelativePosePairReport& pair : report.pairs) {
     if (pair.single_camera >= 0) {
-      ++num_single_views;
-      single_views.push_back({{"name", pair.name},
-                              {"camera", "cam" + std::to_string(pair.single_camera)},
-                              {"used", pair.used},
-                              {"reason", pair.reason},
-                              {"rms_px", NullableRms(pair.used ? pair.rms_px : -1.0)},
-                              {"num_corners", pair.num_corners}});
-      continue;
+      single_views.push_back(SingleViewToJson(pair));
+    } else {
+      pairs.push_back(PairToJson(pair));
     }
-    json entry = {{"name", pair.name},
-                  {"used", pair.used},
-                  {"reason", pair.reason},
-                  {"rms_px", NullableRms(pair.used ? pair.rms_px : -1.0)},
-                  {"num_corners", pair.num_corners},
-                  {"cam1_corner_order", pair.cam1_order}};
-    if (pair.used) entry["cam0_from_board"] = PoseToJson(pair.cam0_from_board);
-    entry["sync_statistic"] = NullableRms(pair.sync_statistic);
-    entry["board_offset_m"] = NullableRms(pair.board_offset_m);
-    entry["board_rotation_deg"] = NullableRms(pair.board_rotation_deg);
-    pairs.push_back(entry);
   }
+  const int num_single_views = static_cast<int>(single_views.size());
   result["pairs"] = pairs;
   // Which observations the estimate used: the pairs, and the given calibrations' own views
   // (each in one camera; they join the fit where the intrinsics are refined).
@@ -478,6 +489,22 @@ json RunAutoModel(const RelativePoseParams& parsed, const RelativePoseOptions& o
   return result;
 }
 
+// Each camera's images, all of its calibration's size (or of its first image's without one).
+std::array<std::vector<cv::Mat>, 2> ReadCheckedImages(
+    const std::array<std::vector<std::string>, 2>& names,
+    const std::array<std::optional<CameraSource>, 2>& cameras, const JobContext& context) {
+  std::array<std::vector<cv::Mat>, 2> images;
+  for (int c = 0; c < 2; ++c) {
+    images[c] = ReadImages(context, names[c], SubRange(context.progress, 0.05 * c, 0.05 * (c + 1)));
+    const int width = cameras[c] ? cameras[c]->model.width : images[c][0].cols;
+    const int height = cameras[c] ? cameras[c]->model.height : images[c][0].rows;
+    CheckImageSizes(images[c], names[c], width, height,
+                    cameras[c] ? "cam" + std::to_string(c) + "'s calibration"
+                               : "cam" + std::to_string(c) + "'s first image");
+  }
+  return images;
+}
+
 }  // namespace
 
 json RunRelativePoseJob(const json& params, const JobContext& context) {
@@ -494,15 +521,7 @@ json RunRelativePoseJob(const json& params, const JobContext& context) {
     cameras[1] = LoadCalibration(context, *parsed.cam1_calibration_job, "cam1");
   }
   // Everything that can refuse the input does so before detection starts.
-  std::array<std::vector<cv::Mat>, 2> images;
-  for (int c = 0; c < 2; ++c) {
-    images[c] = ReadImages(context, names[c], SubRange(context.progress, 0.05 * c, 0.05 * (c + 1)));
-    const int width = cameras[c] ? cameras[c]->model.width : images[c][0].cols;
-    const int height = cameras[c] ? cameras[c]->model.height : images[c][0].rows;
-    CheckImageSizes(images[c], names[c], width, height,
-                    cameras[c] ? "cam" + std::to_string(c) + "'s calibration"
-                               : "cam" + std::to_string(c) + "'s first image");
-  }
+  const std::array<std::vector<cv::Mat>, 2> images = ReadCheckedImages(names, cameras, context);
   std::array<std::vector<BoardDetection>, 2> detections;
   for (int c = 0; c < 2; ++c) {
     detections[c] = DetectAll(images[c], names[c], parsed.board,

@@ -624,6 +624,65 @@ SlamInput PrepareImageInput(const StereoRig& rig, const fs::path& dataset_dir,
   return input;
 }
 
+// The report's figures of a SLAM run: counts, timings, bundle adjustment, frames and loops.
+json SlamResultToJson(const slam::SlamResult& result) {
+  json report;
+  report["num_frames"] = result.frames.size();
+  report["num_tracked"] = result.num_tracked;
+  report["num_lost"] = result.num_lost;
+  report["num_map_points"] = result.map.size();
+  report["frames_per_second"] = result.total_s > 0 ? result.frames.size() / result.total_s : 0.0;
+  json timings = TimesToJson(result.stage_totals);
+  timings["global_ba"] = result.global_ba_s;
+  timings["total"] = result.total_s;
+  report["timings_s"] = timings;
+  // CPU seconds of the threads that ran each stage: the stable measure on a shared machine.
+  json cpu_timings = TimesToJson(result.cpu_stage_totals);
+  cpu_timings["global_ba"] = result.global_ba_cpu_s;
+  cpu_timings["total"] = result.total_cpu_s;
+  report["cpu_timings_s"] = cpu_timings;
+  report["global_bundle_adjustment"] = result.global_bundle_adjustment
+                                           ? BundleAdjustmentToJson(*result.global_bundle_adjustment)
+                                           : json(nullptr);
+  report["calibration_refinement"] =
+      result.calibration_refinement
+          ? CalibrationRefinementToJson(*result.calibration_refinement,
+                                        result.global_bundle_adjustment
+                                            ? &*result.global_bundle_adjustment
+                                            : nullptr)
+          : json(nullptr);
+  json frames = json::array();
+  for (const slam::FrameReport& f : result.frames) frames.push_back(FrameToJson(f));
+  report["frames"] = frames;
+  report["num_keyframes"] = result.num_keyframes;
+  json loops = json::array();
+  for (const slam::LoopReport& loop : result.loops) {
+    loops.push_back({{"frame", loop.frame},
+                     {"frame_index", loop.frame_index},
+                     {"matched_frame", loop.matched_frame},
+                     {"matched_frame_index", loop.matched_frame_index},
+                     {"inliers", loop.inliers},
+                     {"correction_m", loop.correction_m},
+                     {"correction_deg", loop.correction_deg},
+                     {"pose_graph", loop.pose_graph}});
+  }
+  report["loops"] = loops;
+  return report;
+}
+
+// The tracked frames' trajectory against the ground truth (`gt`, one pose per frame); null with
+// fewer than two tracked frames.
+json EvaluateTracked(const slam::SlamResult& result, const std::vector<slam::StampedPose>& gt) {
+  std::vector<Rigid3d> estimate, truth;
+  for (size_t i = 0; i < result.frames.size(); ++i) {
+    if (!result.frames[i].world_from_rig) continue;
+    estimate.push_back(*result.frames[i].world_from_rig);
+    truth.push_back(gt[i].world_from_rig);
+  }
+  return estimate.size() >= 2 ? EvaluationToJson(slam::EvaluateTrajectory(estimate, truth))
+                              : json(nullptr);
+}
+
 }  // namespace
 
 std::optional<slam::StereoVideoFiles> FindStereoVideos(const fs::path& dataset_dir,
@@ -694,7 +753,6 @@ json RunSlamOnDataset(const StereoRig& rig, const fs::path& dataset_dir,
       videos ? PrepareVideoInput(rig, *videos, frame_options, ground_truth, progress)
              : PrepareImageInput(rig, dataset_dir, image_names, frame_options.frame_step,
                                  ground_truth);
-  const std::vector<slam::StampedPose>& gt = input.ground_truth;
   const slam::StereoFrameLoader& load = input.load;
   const ProgressSink frame_progress{
       [&](double fraction, const std::string& stage, const std::string& message) {
@@ -704,59 +762,11 @@ json RunSlamOnDataset(const StereoRig& rig, const fs::path& dataset_dir,
       progress.is_cancelled};
   const slam::SlamResult result = slam::RunSlam(rig, input.names, load, options, frame_progress);
 
-  json report;
+  json report = SlamResultToJson(result);
   report["artifacts"] = WriteArtifacts(rig, result, input.timestamps_s, output_dir);
   report["input"] = input.source;
-  report["num_frames"] = result.frames.size();
-  report["num_tracked"] = result.num_tracked;
-  report["num_lost"] = result.num_lost;
-  report["num_map_points"] = result.map.size();
-  report["frames_per_second"] = result.total_s > 0 ? result.frames.size() / result.total_s : 0.0;
-  json timings = TimesToJson(result.stage_totals);
-  timings["global_ba"] = result.global_ba_s;
-  timings["total"] = result.total_s;
-  report["timings_s"] = timings;
-  // CPU seconds of the threads that ran each stage: the stable measure on a shared machine.
-  json cpu_timings = TimesToJson(result.cpu_stage_totals);
-  cpu_timings["global_ba"] = result.global_ba_cpu_s;
-  cpu_timings["total"] = result.total_cpu_s;
-  report["cpu_timings_s"] = cpu_timings;
-  report["global_bundle_adjustment"] = result.global_bundle_adjustment
-                                           ? BundleAdjustmentToJson(*result.global_bundle_adjustment)
-                                           : json(nullptr);
-  report["calibration_refinement"] =
-      result.calibration_refinement
-          ? CalibrationRefinementToJson(*result.calibration_refinement,
-                                        result.global_bundle_adjustment
-                                            ? &*result.global_bundle_adjustment
-                                            : nullptr)
-          : json(nullptr);
-  json frames = json::array();
-  for (const slam::FrameReport& f : result.frames) frames.push_back(FrameToJson(f));
-  report["frames"] = frames;
-  report["num_keyframes"] = result.num_keyframes;
-  json loops = json::array();
-  for (const slam::LoopReport& loop : result.loops) {
-    loops.push_back({{"frame", loop.frame},
-                     {"frame_index", loop.frame_index},
-                     {"matched_frame", loop.matched_frame},
-                     {"matched_frame_index", loop.matched_frame_index},
-                     {"inliers", loop.inliers},
-                     {"correction_m", loop.correction_m},
-                     {"correction_deg", loop.correction_deg},
-                     {"pose_graph", loop.pose_graph}});
-  }
-  report["loops"] = loops;
-  if (!gt.empty()) {
-    std::vector<Rigid3d> estimate, truth;
-    for (size_t i = 0; i < result.frames.size(); ++i) {
-      if (!result.frames[i].world_from_rig) continue;
-      estimate.push_back(*result.frames[i].world_from_rig);
-      truth.push_back(gt[i].world_from_rig);
-    }
-    report["evaluation"] = estimate.size() >= 2
-                               ? EvaluationToJson(slam::EvaluateTrajectory(estimate, truth))
-                               : json(nullptr);
+  if (!input.ground_truth.empty()) {
+    report["evaluation"] = EvaluateTracked(result, input.ground_truth);
   }
   if (dense_map) {
     report["dense_map"] = FuseDenseMap(rig, result, load, *dense_map, options.num_threads,

@@ -474,6 +474,36 @@ void ExpectSameJob(const JobRecord& a, const JobRecord& b) {
   EXPECT_EQ(a.lease_token, b.lease_token);
 }
 
+// Imports (store copy) keep a record as given and leave an existing id alone (false).
+TYPED_TEST(JobStoreContractTest, ImportsKeepRecordsAndSkipExistingIds) {
+  auto owned = this->Open();
+  JobStore& store = *owned;
+  const DatasetRecord dataset = store.CreateDataset("d");
+  EXPECT_FALSE(store.ImportDataset(DatasetRecord{dataset.id, "other", 1.0}));
+  EXPECT_EQ(store.GetDataset(dataset.id)->name, "d");
+  ASSERT_TRUE(store.ImportDataset(DatasetRecord{"copied", "c", 12.5}));
+  EXPECT_DOUBLE_EQ(store.GetDataset("copied")->created_at, 12.5);
+
+  JobRecord job;
+  job.id = "done";
+  job.type = "calibration";
+  job.dataset_id = "copied";
+  job.params = "{}";
+  job.state = JobState::kFailed;
+  job.created_at = 20;
+  job.attempts = 2;
+  job.error = JobError{"job_failed", "no board"};
+  const ArtifactRecord log{"log.txt", "jobs/done/attempt-2/log.txt", 3, "ab", "text/plain"};
+  ASSERT_TRUE(store.ImportJob(job, std::nullopt, {log}));
+  ExpectSameJob(*store.GetJob("done"), job);
+  ASSERT_EQ(store.ListArtifacts("done").size(), 1u);
+  EXPECT_EQ(store.ListArtifacts("done")[0].path, log.path);
+  job.state = JobState::kQueued;
+  EXPECT_FALSE(store.ImportJob(job, std::nullopt, {}));
+  EXPECT_EQ(store.GetJob("done")->state, JobState::kFailed);
+  EXPECT_EQ(store.ListArtifacts("done").size(), 1u);
+}
+
 // A one-machine service's records moved to PostgreSQL: every dataset, image, job (each state),
 // result and artifact record arrives unchanged; a second copy adds nothing; the queue and
 // recovery carry on from there.

@@ -8,7 +8,7 @@
 // written in PostgreSQL's dialect; the version lives in the table omnirig_schema and
 // migrations run under an advisory lock, so processes starting together migrate once.
 // Lease expiry is compared with the database server's clock, so the machines' clocks need not
-// agree.
+// agree. The methods whose SQL SQLite runs as written are SqlJobStore's (sql_job_store.h).
 
 #include <condition_variable>
 #include <memory>
@@ -17,7 +17,7 @@
 #include <string>
 #include <vector>
 
-#include "storage/job_store.h"
+#include "storage/sql_job_store.h"
 
 typedef struct pg_conn PGconn;
 
@@ -31,7 +31,7 @@ class PostgresError : public std::runtime_error {
 // True for "postgresql://..." and "postgres://..." connection URLs.
 bool IsPostgresUrl(const std::string& url);
 
-class PostgresJobStore : public JobStore {
+class PostgresJobStore : public SqlJobStore {
  public:
   // Connects to `url` (a libpq connection URL, postgresql://USER@HOST:PORT/DB) and applies
   // pending migrations. At most `max_connections` connections are opened, on demand.
@@ -42,45 +42,22 @@ class PostgresJobStore : public JobStore {
   // The schema version recorded in the database.
   int StoredSchemaVersion();
 
-  DatasetRecord CreateDataset(const std::string& name) override;
-  std::vector<DatasetRecord> ListDatasets() override;
-  std::optional<DatasetRecord> GetDataset(const std::string& id) override;
-  bool DeleteDataset(const std::string& id) override;
-  void PutImage(const std::string& dataset_id, const ImageRecord& image) override;
-  void PutImages(const std::string& dataset_id, const std::vector<ImageRecord>& images) override;
-  bool DeleteImage(const std::string& dataset_id, const std::string& name) override;
-  std::vector<ImageRecord> ListImages(const std::string& dataset_id) override;
-  std::optional<ImageRecord> GetImage(const std::string& dataset_id,
-                                      const std::string& name) override;
-
   JobRecord CreateJob(const std::string& type, const std::string& dataset_id,
                       const std::string& params) override;
-  std::optional<JobRecord> GetJob(const std::string& id) override;
   std::vector<JobRecord> ListJobs(const JobFilter& filter) override;
   using JobStore::ClaimNextJob;
   std::optional<JobRecord> ClaimNextJob(const ClaimRequest& request) override;
   bool RenewLease(const std::string& id, const std::string& lease_token, double lease_s) override;
-  void UpdateProgress(const std::string& id, const JobProgress& progress) override;
-  std::optional<JobState> RequestCancel(const std::string& id) override;
-  bool FinishJob(const std::string& id, const std::string& lease_token,
-                 const JobOutcome& outcome) override;
-  bool RequeueJob(const std::string& id, const std::string& lease_token) override;
-  bool RetryJob(const std::string& id) override;
-  bool DeleteJob(const std::string& id) override;
-  std::optional<std::string> GetResult(const std::string& id) override;
-  std::vector<ArtifactRecord> ListArtifacts(const std::string& job_id) override;
-  RecoveryReport RecoverInterruptedJobs(int max_attempts) override;
-  RecoveryReport RecoverExpiredLeases(int max_attempts) override;
-  std::map<JobState, int64_t> CountJobsByState() override;
-  int64_t CountActiveJobs(const std::string& dataset_id) override;
-  bool ImportDataset(const DatasetRecord& dataset) override;
-  bool ImportJob(const JobRecord& job, const std::optional<std::string>& result,
-                 const std::vector<ArtifactRecord>& artifacts) override;
-  void RecordHeartbeat(const WorkerRecord& worker) override;
-  std::vector<WorkerRecord> ListWorkers(double seen_within_s) override;
   bool NotifiesQueueChanges() const override { return true; }
   bool WaitForQueueChange(double timeout_s) override;
   std::string IntegrityCheck() override;
+
+ protected:
+  void WithReader(const std::function<void(SqlSession&)>& work) override;
+  void WithWriter(const std::function<void(SqlSession&)>& work) override;
+  bool InTransaction(const std::function<bool(SqlSession&)>& work) override;
+  void OnJobsQueued(SqlSession& db) override;
+  SqlQuery RunningJobs(bool only_expired) const override;
 
  private:
   class Lease;
@@ -88,7 +65,6 @@ class PostgresJobStore : public JobStore {
   // Closes the idle connections and the listener (the destructor, a failed construction).
   void CloseConnections();
   void Migrate();
-  RecoveryReport RecoverRunning(int max_attempts, bool only_expired);
 
   std::string url_;
   int max_connections_;

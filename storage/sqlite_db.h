@@ -5,7 +5,6 @@
 #include <sqlite3.h>
 
 #include <cstdint>
-#include <optional>
 #include <stdexcept>
 #include <string>
 #include <unordered_map>
@@ -32,13 +31,8 @@ class Statement {
   // Parameters are 1-based, as in SQLite.
   Statement& Bind(int index, const std::string& value);
   Statement& Bind(int index, int64_t value);
-  Statement& Bind(int index, int value) { return Bind(index, static_cast<int64_t>(value)); }
   Statement& Bind(int index, double value);
   Statement& BindNull(int index);
-  template <typename T>
-  Statement& Bind(int index, const std::optional<T>& value) {
-    return value ? Bind(index, *value) : BindNull(index);
-  }
 
   // Returns true while rows are available; false when done.
   bool Step();
@@ -49,8 +43,6 @@ class Statement {
   std::string Text(int column) const;
   int64_t Int(int column) const;
   double Double(int column) const;
-  std::optional<double> OptionalDouble(int column) const;
-  std::optional<std::string> OptionalText(int column) const;
 
  private:
   sqlite3* db_;

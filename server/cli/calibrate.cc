@@ -7,10 +7,8 @@
 //       [--overlays DIR] [--threads N]
 //       [--svp] [--rim-radius-mm R --rim-height-mm H] [--svp-image IMAGE]
 
-#include <fstream>
 #include <iomanip>
 #include <iostream>
-#include <sstream>
 
 #include <nlohmann/json.hpp>
 
@@ -19,29 +17,21 @@
 #include "engine/util/check.h"
 #include "server/cli/args.h"
 #include "server/cli/commands.h"
+#include "server/cli/files.h"
+#include "server/cli/job_options.h"
 
 namespace omnirig::cli {
 namespace {
 
 using nlohmann::json;
 
-std::vector<std::string> Split(const std::string& text, char separator) {
-  std::vector<std::string> parts;
-  std::stringstream ss(text);
-  std::string part;
-  while (std::getline(ss, part, separator)) {
-    if (!part.empty()) parts.push_back(part);
-  }
-  return parts;
-}
-
 // "IMAGE:u,v,u,v,u,v,u,v" entries separated by ';' -> the API's "hints" object.
 void AddHints(const std::string& text, json* hints) {
-  for (const std::string& entry : Split(text, ';')) {
+  for (const std::string& entry : SplitList(text, ';')) {
     const size_t colon = entry.rfind(':');
     OMNIRIG_CHECK(colon != std::string::npos && colon > 0,
                   "--hint: expected IMAGE:u,v,u,v,u,v,u,v, got '" << entry << "'");
-    const std::vector<std::string> numbers = Split(entry.substr(colon + 1), ',');
+    const std::vector<std::string> numbers = SplitList(entry.substr(colon + 1), ',');
     OMNIRIG_CHECK(numbers.size() == 8,
                   "--hint: expected 8 numbers for '" << entry.substr(0, colon) << "'");
     json corners = json::array();
@@ -57,29 +47,12 @@ void AddHints(const std::string& text, json* hints) {
 }
 
 json ParamsFromArgs(const ArgParser& args) {
-  json board = {{"type", args.Get("board")},
-                {"cols", args.GetInt("cols")},
-                {"rows", args.GetInt("rows")},
-                {"square_size_mm", args.GetDouble("square-mm")}};
-  if (args.Get("board") == "charuco") {
-    board["marker_size_mm"] = args.GetDouble("marker-mm");
-    board["aruco_dictionary"] = args.GetInt("dictionary");
-  }
   json options = json::object();
-  if (args.Has("fix")) options["fix"] = Split(args.Get("fix"), ',');
-  if (args.Has("free")) options["free"] = Split(args.Get("free"), ',');
-  json hints = json::object();
-  if (args.Has("hints")) {
-    std::ifstream in(args.Get("hints"));
-    OMNIRIG_CHECK(in, "--hints: cannot read '" << args.Get("hints") << "'");
-    try {
-      hints = json::parse(in);
-    } catch (const json::exception& e) {
-      OMNIRIG_CHECK(false, "--hints: '" << args.Get("hints") << "' is not JSON: " << e.what());
-    }
-  }
+  if (args.Has("fix")) options["fix"] = SplitList(args.Get("fix"), ',');
+  if (args.Has("free")) options["free"] = SplitList(args.Get("free"), ',');
+  json hints = args.Has("hints") ? ReadJsonFile(args.Get("hints"), "--hints") : json::object();
   if (args.Has("hint")) AddHints(args.Get("hint"), &hints);
-  json params = {{"board", board}, {"options", options}};
+  json params = {{"board", BoardParams(args)}, {"options", options}};
   if (!hints.empty()) params["hints"] = hints;
   const bool mirror = args.Has("rim-radius-mm") || args.Has("rim-height-mm");
   if (args.Has("svp") || mirror || args.Has("svp-image")) {
@@ -94,13 +67,6 @@ json ParamsFromArgs(const ArgParser& args) {
     params["svp"] = svp;
   }
   return params;
-}
-
-void WriteFile(const std::string& path, const std::string& text) {
-  std::ofstream out(path);
-  OMNIRIG_CHECK(out, "cannot write '" << path << "'");
-  out << text;
-  OMNIRIG_CHECK(out.good(), "cannot write '" << path << "'");
 }
 
 void Export(const CameraModel& camera, const ArgParser& args) {
@@ -156,12 +122,7 @@ void PrintSummary(const CalibrationReport& report) {
 int RunCalibrate(const Args& argv) {
   ArgParser args("calibrate",
                  "Calibrate a catadioptric camera (Mei's unified model) from board images.");
-  args.AddOption("board", "checkerboard", "board type: checkerboard or charuco");
-  args.AddOption("cols", "8", "inner corners per row");
-  args.AddOption("rows", "6", "inner corners per column");
-  args.AddOption("square-mm", "40", "square size in millimetres");
-  args.AddOption("marker-mm", "0", "charuco: marker size in millimetres");
-  args.AddOption("dictionary", "0", "charuco: cv::aruco predefined dictionary id");
+  AddBoardOptions({"8", "6", "40", "0", "0"}, &args);
   args.AddOption("o", "calib.json", "output JSON file");
   args.AddOption("export-opencv", "", "also write an OpenCV omnidir FileStorage YAML file");
   args.AddOption("export-kalibr", "", "also write a Kalibr omni-radtan camchain YAML file");
@@ -185,29 +146,17 @@ int RunCalibrate(const Args& argv) {
   args.AddOption("svp-image", "", "SVP check: image to check (default: the first used image)");
   args.SetPositional("IMAGES...", "board images (paths)");
   if (!args.Parse(argv)) return args.exit_code();
-  try {
-    OMNIRIG_CHECK(!args.positional().empty(), "no images given (see --help)");
-    api::CalibrationRequest request = api::CalibrationRequestFromJson(ParamsFromArgs(args));
-    request.options.calibrate.num_threads = args.GetInt("threads");
-    ProgressSink progress;
-    progress.report = [](double fraction, const std::string& stage, const std::string& message) {
-      std::cerr << "[" << std::setw(3) << static_cast<int>(100 * fraction) << "%] " << stage << " "
-                << message << "\n";
-    };
-    const CalibrationReport report = CalibrateImages(
-        "", args.positional(), request.board, request.options, args.Get("overlays"), progress);
-    PrintSummary(report);
-    WriteFile(args.Get("o"), api::CalibrationReportToJson(report).dump(2) + "\n");
-    Export(report.camera, args);
-    std::cerr << "wrote " << args.Get("o") << "\n";
-    return 0;
-  } catch (const InvalidArgument& e) {
-    std::cerr << "omnirig calibrate: " << e.what() << "\n";
-    return 2;
-  } catch (const std::exception& e) {
-    std::cerr << "omnirig calibrate: failed: " << e.what() << "\n";
-    return 1;
-  }
+  OMNIRIG_CHECK(!args.positional().empty(), "no images given (see --help)");
+  api::CalibrationRequest request = api::CalibrationRequestFromJson(ParamsFromArgs(args));
+  request.options.calibrate.num_threads = args.GetInt("threads");
+  const CalibrationReport report =
+      CalibrateImages("", args.positional(), request.board, request.options, args.Get("overlays"),
+                      ProgressSink{PrintProgress, nullptr});
+  PrintSummary(report);
+  WriteFile(args.Get("o"), api::CalibrationReportToJson(report).dump(2) + "\n");
+  Export(report.camera, args);
+  std::cerr << "wrote " << args.Get("o") << "\n";
+  return 0;
 }
 
 }  // namespace omnirig::cli

@@ -32,6 +32,13 @@ nlohmann::json ReadJsonFile(const std::string& path, const std::string& flag) {
   }
 }
 
+void WriteFile(const std::string& path, const std::string& text) {
+  std::ofstream out(path);
+  OMNIRIG_CHECK(out, "cannot write '" << path << "'");
+  out << text;
+  OMNIRIG_CHECK(out.good(), "cannot write '" << path << "'");
+}
+
 std::vector<std::string> ListPairImages(const fs::path& dir) {
   OMNIRIG_CHECK(fs::is_directory(dir), "'" << dir.string() << "' is not a directory");
   std::vector<std::string> names;

@@ -1,6 +1,6 @@
 #pragma once
-// Reading a subcommand's inputs from disk: a JSON file named by a flag, and a stereo folder's
-// image pairs.
+// A subcommand's files: a JSON file named by a flag, a stereo folder's image pairs, and writing
+// an output file.
 
 #include <filesystem>
 #include <string>
@@ -12,6 +12,8 @@ namespace omnirig::cli {
 
 // The JSON document in `path`; InvalidArgument naming `flag` when it cannot be read or parsed.
 nlohmann::json ReadJsonFile(const std::string& path, const std::string& flag);
+// Writes `text` to `path`; InvalidArgument when it cannot.
+void WriteFile(const std::string& path, const std::string& text);
 
 // "cam0/NAME" and "cam1/NAME" for every image file (by extension) in DIR/cam0 and DIR/cam1,
 // sorted; the jobs pair them by NAME and report images without a partner. InvalidArgument when

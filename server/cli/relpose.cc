@@ -8,12 +8,8 @@
 // `omnirig calibrate` (or a bare camera object); without them each camera is calibrated from
 // its own images first.
 
-#include <filesystem>
-#include <fstream>
 #include <iomanip>
 #include <iostream>
-#include <set>
-#include <sstream>
 
 #include <nlohmann/json.hpp>
 
@@ -22,47 +18,27 @@
 #include "server/cli/args.h"
 #include "server/cli/commands.h"
 #include "server/cli/files.h"
+#include "server/cli/job_options.h"
 
 namespace omnirig::cli {
 namespace {
 
-namespace fs = std::filesystem;
 using nlohmann::json;
 
 // A calibration file as a job result: `omnirig calibrate`'s JSON has "camera"; a bare camera
 // object is wrapped.
 json LoadCalibrationFile(const std::string& path) {
-  std::ifstream in(path);
-  OMNIRIG_CHECK(in.good(), "cannot open calibration file '" << path << "'");
-  json document;
-  try {
-    in >> document;
-  } catch (const json::exception& e) {
-    throw InvalidArgument("calibration file '" + path + "' is not valid JSON: " + e.what());
-  }
+  json document = ReadJsonFile(path, "calibration file");
   if (document.is_object() && document.contains("model") && !document.contains("camera")) {
     return {{"camera", document}};
   }
   return document;
 }
 
-json BoardParams(const ArgParser& parser) {
-  json board = {{"type", parser.Get("board")},
-                {"cols", parser.GetInt("cols")},
-                {"rows", parser.GetInt("rows")},
-                {"square_size_mm", parser.GetDouble("square-mm")}};
-  if (parser.Has("marker-mm")) board["marker_size_mm"] = parser.GetDouble("marker-mm");
-  if (parser.Has("dictionary")) {
-    board["aruco_dictionary"] = parser.GetInt("dictionary");
-  }
-  return board;
-}
-
-void PrintProgress(double fraction, const std::string& stage, const std::string& message) {
+void PrintStageProgress(double fraction, const std::string& stage, const std::string& message) {
   // Per-iteration and per-fold lines are noise here.
   if (stage == "refine" || stage == "solve" || stage == "cross_validation") return;
-  std::cerr << "[" << std::setw(3) << static_cast<int>(100.0 * fraction) << "%] " << stage
-            << (message.empty() ? "" : " " + message) << "\n";
+  PrintProgress(fraction, stage, message);
 }
 
 void PrintSummary(const json& result) {
@@ -90,44 +66,33 @@ void PrintSummary(const json& result) {
   }
 }
 
-}  // namespace
+void DeclareOptions(ArgParser* parser) {
+  AddBoardOptions({"", "", "", "", ""}, parser);
+  parser->AddOption("calib0", "", "cam0's calibration JSON (omnirig calibrate -o); with --calib1");
+  parser->AddOption("calib1", "",
+                    "cam1's calibration JSON; without both, each camera is "
+                    "calibrated from its own images first");
+  parser->AddFlag("refine-intrinsics", "refine both cameras' intrinsics with the rig");
+  parser->AddOption("fixed-intrinsics", "alpha,k5",
+                    "comma-separated intrinsics held fixed (names, or skew, tangential, "
+                    "principal_point, gamma); alpha,k5,tangential suits fisheye lenses");
+  parser->AddOption("intrinsics-model", "auto",
+                    "auto, fixed, tangential_fixed, tangential_free_cam0, tangential_free_cam1 "
+                    "or free: which intrinsics the joint refinement "
+                    "frees (auto: chosen by leave-one-pair-out cross-validation; the default "
+                    "when the cameras are calibrated here and neither --refine-intrinsics nor "
+                    "--fixed-intrinsics is given)");
+  parser->AddOption("threads", "1", "solver threads");
+  parser->AddOption("o", "", "write the result JSON here (also --output); default: stdout");
+  parser->AddOption("output", "", "the same as -o");
+  parser->SetPositional("DIR", "folder holding cam0/NAME and cam1/NAME images, paired by NAME");
+}
 
-int RunRelpose(const Args& args) {
-  ArgParser parser("relpose",
-                   "Measures the metric pose between a stereo rig's two cameras (cam0_from_cam1) "
-                   "from image pairs in which both see the same board.");
-  parser.AddOption("board", "checkerboard", "board type: checkerboard or charuco");
-  parser.AddOption("cols", "", "inner corners per row");
-  parser.AddOption("rows", "", "inner corners per column");
-  parser.AddOption("square-mm", "", "square size in millimetres");
-  parser.AddOption("marker-mm", "", "ChArUco marker size in millimetres");
-  parser.AddOption("dictionary", "", "ChArUco: OpenCV predefined ArUco dictionary number");
-  parser.AddOption("calib0", "", "cam0's calibration JSON (omnirig calibrate -o); with --calib1");
-  parser.AddOption("calib1", "", "cam1's calibration JSON; without both, each camera is "
-                                 "calibrated from its own images first");
-  parser.AddFlag("refine-intrinsics", "refine both cameras' intrinsics with the rig");
-  parser.AddOption("fixed-intrinsics", "alpha,k5",
-                   "comma-separated intrinsics held fixed (names, or skew, tangential, "
-                   "principal_point, gamma); alpha,k5,tangential suits fisheye lenses");
-  parser.AddOption("intrinsics-model", "auto",
-                   "auto, fixed, tangential_fixed, tangential_free_cam0, tangential_free_cam1 "
-                   "or free: which intrinsics the joint refinement "
-                   "frees (auto: chosen by leave-one-pair-out cross-validation; the default when "
-                   "the cameras are calibrated here and neither --refine-intrinsics nor "
-                   "--fixed-intrinsics is given)");
-  parser.AddOption("threads", "1", "solver threads");
-  parser.AddOption("o", "", "write the result JSON here (also --output); default: stdout");
-  parser.AddOption("output", "", "the same as -o");
-  parser.SetPositional("DIR", "folder holding cam0/NAME and cam1/NAME images, paired by NAME");
-  if (!parser.Parse(args)) return parser.exit_code();
-  OMNIRIG_CHECK(parser.positional().size() == 1, "expected exactly one DIR (see --help)");
+json ParamsFromArgs(const ArgParser& parser) {
   OMNIRIG_CHECK(parser.Has("cols") && parser.Has("rows") && parser.Has("square-mm"),
                 "--cols, --rows and --square-mm are required");
   OMNIRIG_CHECK(parser.Has("calib0") == parser.Has("calib1"),
                 "give both --calib0 and --calib1, or neither");
-  OMNIRIG_CHECK(!(parser.Has("o") && parser.Has("output")), "give -o or --output, not both");
-  const std::string output = parser.Has("o") ? parser.Get("o") : parser.Get("output");
-
   json params = {{"board", BoardParams(parser)}};
   if (parser.Has("calib0")) {
     params["calibrations"] = {{"cam0", parser.Get("calib0")}, {"cam1", parser.Get("calib1")}};
@@ -135,32 +100,35 @@ int RunRelpose(const Args& args) {
   if (parser.Has("refine-intrinsics")) params["refine_intrinsics"] = true;
   if (parser.Has("intrinsics-model")) params["intrinsics_model"] = parser.Get("intrinsics-model");
   if (parser.Has("fixed-intrinsics")) {
-    params["fixed_intrinsics"] = json::array();
-    std::istringstream names(parser.Get("fixed-intrinsics"));
-    for (std::string name; std::getline(names, name, ',');) {
-      if (!name.empty()) params["fixed_intrinsics"].push_back(name);
-    }
+    params["fixed_intrinsics"] = SplitList(parser.Get("fixed-intrinsics"), ',');
   }
+  return params;
+}
 
-  api::JobContext context;
-  context.job_id = "cli";
-  context.dataset_dir = parser.positional()[0];
-  context.image_names = ListPairImages(context.dataset_dir);
-  context.num_threads = parser.GetInt("threads");
-  context.progress.report = PrintProgress;
-  context.log = [](const std::string& line) { std::cerr << line << "\n"; };
+}  // namespace
+
+int RunRelpose(const Args& args) {
+  ArgParser parser("relpose",
+                   "Measures the metric pose between a stereo rig's two cameras (cam0_from_cam1) "
+                   "from image pairs in which both see the same board.");
+  DeclareOptions(&parser);
+  if (!parser.Parse(args)) return parser.exit_code();
+  OMNIRIG_CHECK(parser.positional().size() == 1, "expected exactly one DIR (see --help)");
+  OMNIRIG_CHECK(!(parser.Has("o") && parser.Has("output")), "give -o or --output, not both");
+  const std::string output = parser.Has("o") ? parser.Get("o") : parser.Get("output");
+  const json params = ParamsFromArgs(parser);
+
+  api::JobContext context = LocalJobContext(parser.positional()[0], parser.GetInt("threads"));
+  context.progress.report = PrintStageProgress;
   context.load_result = LoadCalibrationFile;  // the "job ids" are file paths here
-
   const json result = api::RunRelativePoseJob(params, context);
   PrintSummary(result);
-  if (!output.empty()) {
-    std::ofstream out(output);
-    OMNIRIG_CHECK(out.good(), "cannot write '" << output << "'");
-    out << result.dump(2) << "\n";
-    std::cerr << "wrote " << output << "\n";
-  } else {
+  if (output.empty()) {
     std::cout << result.dump(2) << "\n";
+    return 0;
   }
+  WriteFile(output, result.dump(2) + "\n");
+  std::cerr << "wrote " << output << "\n";
   return 0;
 }
 

@@ -11,7 +11,6 @@
 
 #include <filesystem>
 #include <fstream>
-#include <iomanip>
 #include <iostream>
 
 #include <nlohmann/json.hpp>
@@ -22,61 +21,16 @@
 #include "server/cli/args.h"
 #include "server/cli/commands.h"
 #include "server/cli/files.h"
+#include "server/cli/job_options.h"
 
 namespace omnirig::cli {
 
 namespace fs = std::filesystem;
 using nlohmann::json;
 
-int RunStereo(const Args& raw_args) {
-  ArgParser args("stereo",
-                 "3D from stereo pairs of a calibrated rig: dense range panoramas and clouds "
-                 "(default), or sparse SIFT points.");
-  args.AddOption("rig", "", "relative_pose result JSON (cam0_from_cam1 and both cameras)");
-  args.AddOption("method", "dense", "dense or sparse");
-  args.AddOption("o", "stereo_out", "output folder");
-  args.AddOption("options", "", "JSON file with the job's params other than rig and method");
-  args.AddOption("threads", "2", "threads for the dense matcher");
-  args.SetPositional("DIR", "folder with cam0/ and cam1/ images, paired by name (a .tum "
-                            "trajectory in it places the pairs into one merged cloud.ply)");
-  if (!args.Parse(raw_args)) return args.exit_code();
-  OMNIRIG_CHECK(args.positional().size() == 1, "expected one DIR (see --help)");
-  OMNIRIG_CHECK(args.Has("rig"), "--rig is required (a relative_pose result JSON)");
-  const int threads = args.GetInt("threads");
-  OMNIRIG_CHECK(threads >= 1, "--threads must be at least 1");
+namespace {
 
-  json params = json::object();
-  if (args.Has("options")) {
-    params = ReadJsonFile(args.Get("options"), "--options");
-    OMNIRIG_CHECK(params.is_object(), "--options: expected a JSON object");
-  }
-  params["rig"] = args.Get("rig");
-  params["method"] = args.Get("method");
-
-  const fs::path out_dir = args.Get("o");
-  fs::create_directories(out_dir);
-  api::JobContext context;
-  context.job_id = "cli";
-  context.dataset_dir = args.positional()[0];
-  context.image_names = ListPairImages(context.dataset_dir);
-  for (const fs::directory_entry& entry : fs::directory_iterator(context.dataset_dir)) {
-    if (entry.path().extension() == ".tum") {
-      context.image_names.push_back(entry.path().filename().string());
-    }
-  }
-  context.output_dir = out_dir;
-  context.num_threads = threads;
-  context.progress.report = [](double fraction, const std::string& stage, const std::string&) {
-    std::cerr << "[" << std::setw(3) << static_cast<int>(100.0 * fraction) << "%] " << stage
-              << "\n";
-  };
-  context.log = [](const std::string& line) { std::cerr << line << "\n"; };
-  const std::string rig_path = args.Get("rig");
-  context.load_result = [&](const std::string&) { return ReadJsonFile(rig_path, "--rig"); };
-
-  cv::setNumThreads(threads);
-  const json result = api::RunStereoReconstructJob(params, context);
-  std::ofstream(out_dir / "result.json") << result.dump(2) << "\n";
+void PrintResult(const json& result, const fs::path& out_dir) {
   std::cout << result["method"].get<std::string>() << ": " << result["num_points"] << " points in "
             << result["pairs"].size() << " pairs\n";
   for (const json& pair : result["pairs"]) {
@@ -90,6 +44,48 @@ int RunStereo(const Args& raw_args) {
               << (result.value("clouds_merged", true) ? "" : " (one of the pairs' clouds)")
               << ", result.json\n";
   }
+}
+
+}  // namespace
+
+int RunStereo(const Args& raw_args) {
+  ArgParser args("stereo",
+                 "3D from stereo pairs of a calibrated rig: dense range panoramas and clouds "
+                 "(default), or sparse SIFT points.");
+  args.AddOption("rig", "", "relative_pose result JSON (cam0_from_cam1 and both cameras)");
+  args.AddOption("method", "dense", "dense or sparse");
+  args.AddOption("o", "stereo_out", "output folder");
+  args.AddOption("options", "", "JSON file with the job's params other than rig and method");
+  args.AddOption("threads", "2", "threads for the dense matcher");
+  args.SetPositional("DIR",
+                     "folder with cam0/ and cam1/ images, paired by name (a .tum "
+                     "trajectory in it places the pairs into one merged cloud.ply)");
+  if (!args.Parse(raw_args)) return args.exit_code();
+  OMNIRIG_CHECK(args.positional().size() == 1, "expected one DIR (see --help)");
+  OMNIRIG_CHECK(args.Has("rig"), "--rig is required (a relative_pose result JSON)");
+  const int threads = args.GetInt("threads");
+  OMNIRIG_CHECK(threads >= 1, "--threads must be at least 1");
+  json params =
+      args.Has("options") ? ReadJsonFile(args.Get("options"), "--options") : json::object();
+  OMNIRIG_CHECK(params.is_object(), "--options: expected a JSON object");
+  params["rig"] = args.Get("rig");
+  params["method"] = args.Get("method");
+
+  const fs::path out_dir = args.Get("o");
+  fs::create_directories(out_dir);
+  api::JobContext context = LocalJobContext(args.positional()[0], threads);
+  for (const fs::directory_entry& entry : fs::directory_iterator(context.dataset_dir)) {
+    if (entry.path().extension() == ".tum") {
+      context.image_names.push_back(entry.path().filename().string());
+    }
+  }
+  context.output_dir = out_dir;
+  const std::string rig_path = args.Get("rig");
+  context.load_result = [&](const std::string&) { return ReadJsonFile(rig_path, "--rig"); };
+  cv::setNumThreads(threads);
+  const json result = api::RunStereoReconstructJob(params, context);
+  WriteFile((out_dir / "result.json").string(), result.dump(2) + "\n");
+  PrintResult(result, out_dir);
   return 0;
 }
 

@@ -255,6 +255,54 @@ json ReadParams(const std::string& text) {
   return params;
 }
 
+void DeclareOptions(ArgParser* parser) {
+  parser->SetPositional("FOLDER",
+                        "images, at top level or one folder deep (cam0/, cam1/), and "
+                        "videos (cam0.mp4 and cam1.mp4, or stacked.mp4)");
+  parser->AddOption("chunk-mb", "16",
+                    "videos and larger files go up in chunks of this size, resumable (at most "
+                    "the server's --max-chunk-mb)");
+  parser->AddOption("server", "http://127.0.0.1:8080", "server URL");
+  parser->AddOption("token", "", "bearer token (default: $OMNIRIG_TOKEN)");
+  parser->AddOption("type", "", "job type: calibration, relative_pose, stereo_reconstruct, slam");
+  parser->AddOption("params", "{}", "job params as JSON, or @FILE holding them");
+  parser->AddOption("dataset", "", "upload into this existing dataset id instead of a new one");
+  parser->AddOption("name", "", "name of the new dataset (default: the folder's name)");
+  parser->AddOption("out", "", "folder for result.json and artifacts (default: ./omnirig-JOB)");
+  parser->AddFlag("no-wait", "print the job id and return once the job is queued");
+}
+
+void Authenticate(const ArgParser& parser, httplib::Client* client) {
+  std::string token = parser.Get("token");
+  if (token.empty() && std::getenv("OMNIRIG_TOKEN")) token = std::getenv("OMNIRIG_TOKEN");
+  if (!token.empty()) client->set_bearer_token_auth(token.c_str());
+}
+
+// --dataset, or a new dataset named --name (default: the folder's name).
+std::string DatasetId(const ArgParser& parser, const fs::path& folder, httplib::Client& client) {
+  if (!parser.Get("dataset").empty()) return parser.Get("dataset");
+  std::string name = parser.Get("name");
+  if (name.empty()) name = fs::absolute(folder).lexically_normal().filename().string();
+  if (name.empty()) name = "dataset";
+  return Expect(client.Post("/api/v1/datasets", json{{"name", name}}.dump(), "application/json"),
+                {201}, "create dataset")["id"];
+}
+
+// The exit code of a finished job, its outcome on stderr.
+int ReportOutcome(const json& job, const std::string& id, const fs::path& out) {
+  if (job["state"] == "succeeded") {
+    std::cerr << "job " << id << " succeeded; results in " << out.string() << "\n";
+    return 0;
+  }
+  std::cerr << "job " << id << " " << job["state"].get<std::string>();
+  if (job["error"].is_object()) {
+    std::cerr << ": " << job["error"]["code"].get<std::string>() << ": "
+              << job["error"]["message"].get<std::string>();
+  }
+  std::cerr << "\n";
+  return 1;
+}
+
 }  // namespace
 
 int RunSubmit(const Args& args) {
@@ -263,20 +311,7 @@ int RunSubmit(const Args& args) {
                    "files the server already holds are skipped, a video's upload goes on where "
                    "it stopped), runs a job on it, shows its progress and "
                    "downloads the result and artifacts.");
-  parser.SetPositional("FOLDER",
-                       "images, at top level or one folder deep (cam0/, cam1/), and "
-                       "videos (cam0.mp4 and cam1.mp4, or stacked.mp4)");
-  parser.AddOption("chunk-mb", "16",
-                   "videos and larger files go up in chunks of this size, resumable (at most the "
-                   "server's --max-chunk-mb)");
-  parser.AddOption("server", "http://127.0.0.1:8080", "server URL");
-  parser.AddOption("token", "", "bearer token (default: $OMNIRIG_TOKEN)");
-  parser.AddOption("type", "", "job type: calibration, relative_pose, stereo_reconstruct, slam");
-  parser.AddOption("params", "{}", "job params as JSON, or @FILE holding them");
-  parser.AddOption("dataset", "", "upload into this existing dataset id instead of a new one");
-  parser.AddOption("name", "", "name of the new dataset (default: the folder's name)");
-  parser.AddOption("out", "", "folder for result.json and artifacts (default: ./omnirig-JOB)");
-  parser.AddFlag("no-wait", "print the job id and return once the job is queued");
+  DeclareOptions(&parser);
   if (!parser.Parse(args)) return parser.exit_code();
   if (parser.positional().size() != 1) throw InvalidArgument("expected one FOLDER (see --help)");
   if (parser.Get("type").empty()) throw InvalidArgument("--type is required");
@@ -286,19 +321,8 @@ int RunSubmit(const Args& args) {
 
   httplib::Client client(parser.Get("server"));
   client.set_read_timeout(120);
-  std::string token = parser.Get("token");
-  if (token.empty() && std::getenv("OMNIRIG_TOKEN")) token = std::getenv("OMNIRIG_TOKEN");
-  if (!token.empty()) client.set_bearer_token_auth(token.c_str());
-
-  std::string dataset = parser.Get("dataset");
-  if (dataset.empty()) {
-    std::string name = parser.Get("name");
-    if (name.empty()) name = fs::absolute(folder).lexically_normal().filename().string();
-    if (name.empty()) name = "dataset";
-    dataset =
-        Expect(client.Post("/api/v1/datasets", json{{"name", name}}.dump(), "application/json"),
-               {201}, "create dataset")["id"];
-  }
+  Authenticate(parser, &client);
+  const std::string dataset = DatasetId(parser, folder, client);
   std::cerr << "dataset " << dataset << ": " << images.size() << " image(s) in " << folder << "\n";
   const auto chunk_bytes = static_cast<int64_t>(parser.GetDouble("chunk-mb") * (1 << 20));
   if (chunk_bytes < 1) throw InvalidArgument("--chunk-mb must be positive");
@@ -317,17 +341,7 @@ int RunSubmit(const Args& args) {
       parser.Get("out").empty() ? fs::path("omnirig-" + id) : fs::path(parser.Get("out"));
   fs::create_directories(out);
   DownloadArtifacts(client, id, out);
-  if (done["state"] != "succeeded") {
-    std::cerr << "job " << id << " " << done["state"].get<std::string>();
-    if (done["error"].is_object()) {
-      std::cerr << ": " << done["error"]["code"].get<std::string>() << ": "
-                << done["error"]["message"].get<std::string>();
-    }
-    std::cerr << "\n";
-    return 1;
-  }
-  std::cerr << "job " << id << " succeeded; results in " << out.string() << "\n";
-  return 0;
+  return ReportOutcome(done, id, out);
 }
 
 }  // namespace omnirig::cli

@@ -12,6 +12,7 @@
 #include <cmath>
 #include <filesystem>
 #include <iostream>
+#include <map>
 #include <string>
 
 #include "api/synth_json.h"
@@ -144,83 +145,99 @@ ProgressSink PrintingProgress(bool terminal) {
   return progress;
 }
 
+// What mono-calib and stereo-board share: image size, board, its poses, background, rendering.
+template <typename Options>
+Options BoardViewOptionsFromArgs(const ArgParser& args, uint64_t seed) {
+  Options options;
+  options.width = args.GetInt("width");
+  options.height = args.GetInt("height");
+  options.board = BoardFromArgs(args);
+  options.poses = PosesFromArgs(args);
+  options.textured_background = !args.Has("plain-background");
+  options.render = RenderOptionsFromArgs(args);
+  options.seed = seed;
+  return options;
+}
+
+void MonoCalibPreset(const ArgParser& args, uint64_t seed, const ProgressSink& progress,
+                     const std::string& out) {
+  auto options = BoardViewOptionsFromArgs<synth::MonoCalibrationOptions>(args, seed);
+  options.num_views = args.GetInt("views");
+  api::WriteMonoCalibrationSet(synth::MakeMonoCalibrationSet(options, progress), out);
+}
+
+void StereoBoardPreset(const ArgParser& args, uint64_t seed, const ProgressSink& progress,
+                       const std::string& out) {
+  auto options = BoardViewOptionsFromArgs<synth::StereoBoardOptions>(args, seed);
+  options.num_pairs = args.GetInt("views");
+  options.cam0_from_cam1 = Cam0FromCam1FromArgs(args);
+  api::WriteStereoBoardSet(synth::MakeStereoBoardSet(options, progress), out);
+}
+
+void StereoSequencePreset(const ArgParser& args, uint64_t seed, const ProgressSink& progress,
+                          const std::string& out) {
+  const std::string scene = args.Get("scene");
+  OMNIRIG_CHECK(scene == "room" || scene == "street",
+                "--scene must be room or street, got '" << scene << "'");
+  synth::StereoSequenceOptions options = SequenceOptionsFromArgs(args, seed);
+  options.environment = scene == "room" ? synth::StereoSequenceOptions::Environment::kRoom
+                                        : synth::StereoSequenceOptions::Environment::kStreet;
+  options.num_frames = args.GetInt("frames");
+  options.path_length_m = args.GetDouble("path-length");
+  const std::string video = args.Get("video");
+  if (!video.empty() && video != "mp4" && video != "avi" && video != "mkv") {
+    throw InvalidArgument("--video must be mp4, avi or mkv, got '" + video + "'");
+  }
+  const synth::StereoSequence sequence = synth::MakeStereoSequence(options, progress);
+  if (video.empty()) {
+    api::WriteStereoSequence(sequence, scene, out);
+  } else {
+    api::WriteStereoSequenceVideos(sequence, scene, out, video, args.Has("stacked"));
+  }
+}
+
+void StereoLoopPreset(const ArgParser& args, uint64_t seed, const ProgressSink& progress,
+                      const std::string& out) {
+  synth::StereoSequenceOptions options = SequenceOptionsFromArgs(args, seed);
+  options.environment = synth::StereoSequenceOptions::Environment::kCityBlock;
+  options.path_length_m = args.GetDouble("loop-length");
+  options.num_laps = args.GetInt("laps");
+  OMNIRIG_CHECK(options.path_length_m >= 40.0 && options.path_length_m <= 400.0,
+                "--loop-length must be in [40, 400] metres, got " << options.path_length_m);
+  OMNIRIG_CHECK(options.num_laps >= 1 && options.num_laps <= 100,
+                "--laps must be in [1, 100], got " << options.num_laps);
+  options.num_frames =
+      args.Has("frames")
+          ? args.GetInt("frames")
+          : static_cast<int>(std::lround(10.0 * options.num_laps * options.path_length_m));
+  options.lighting_change = !args.Has("same-lighting");
+  // Frame by frame: 2,000 full-size pairs do not fit in memory.
+  for (const char* camera : {"cam0", "cam1"}) {
+    std::filesystem::create_directories(std::filesystem::path(out) / camera);
+  }
+  const synth::StereoSequence sequence = synth::RenderStereoSequence(
+      options,
+      [&out](int, const std::string& name, const cv::Mat& cam0_image, const cv::Mat& cam1_image) {
+        api::WriteStereoFrame(name, cam0_image, cam1_image, out);
+      },
+      progress);
+  api::WriteStereoSequenceGroundTruth(sequence, "city-block", out);
+}
+
 void RunPreset(const ArgParser& args, const std::string& preset, const std::string& out,
                bool terminal) {
-  const ProgressSink progress = PrintingProgress(terminal);
-  const uint64_t seed = SeedFromArgs(args);
-  if (preset == "mono-calib") {
-    synth::MonoCalibrationOptions options;
-    options.num_views = args.GetInt("views");
-    options.width = args.GetInt("width");
-    options.height = args.GetInt("height");
-    options.board = BoardFromArgs(args);
-    options.poses = PosesFromArgs(args);
-    options.textured_background = !args.Has("plain-background");
-    options.render = RenderOptionsFromArgs(args);
-    options.seed = seed;
-    api::WriteMonoCalibrationSet(synth::MakeMonoCalibrationSet(options, progress), out);
-  } else if (preset == "stereo-board") {
-    synth::StereoBoardOptions options;
-    options.num_pairs = args.GetInt("views");
-    options.width = args.GetInt("width");
-    options.height = args.GetInt("height");
-    options.cam0_from_cam1 = Cam0FromCam1FromArgs(args);
-    options.board = BoardFromArgs(args);
-    options.poses = PosesFromArgs(args);
-    options.textured_background = !args.Has("plain-background");
-    options.render = RenderOptionsFromArgs(args);
-    options.seed = seed;
-    api::WriteStereoBoardSet(synth::MakeStereoBoardSet(options, progress), out);
-  } else if (preset == "stereo-sequence") {
-    const std::string scene = args.Get("scene");
-    OMNIRIG_CHECK(scene == "room" || scene == "street",
-                  "--scene must be room or street, got '" << scene << "'");
-    synth::StereoSequenceOptions options = SequenceOptionsFromArgs(args, seed);
-    options.environment = scene == "room" ? synth::StereoSequenceOptions::Environment::kRoom
-                                          : synth::StereoSequenceOptions::Environment::kStreet;
-    options.num_frames = args.GetInt("frames");
-    options.path_length_m = args.GetDouble("path-length");
-    const std::string video = args.Get("video");
-    if (!video.empty() && video != "mp4" && video != "avi" && video != "mkv") {
-      throw InvalidArgument("--video must be mp4, avi or mkv, got '" + video + "'");
-    }
-    const synth::StereoSequence sequence = synth::MakeStereoSequence(options, progress);
-    if (video.empty()) {
-      api::WriteStereoSequence(sequence, scene, out);
-    } else {
-      api::WriteStereoSequenceVideos(sequence, scene, out, video, args.Has("stacked"));
-    }
-  } else if (preset == "stereo-loop") {
-    synth::StereoSequenceOptions options = SequenceOptionsFromArgs(args, seed);
-    options.environment = synth::StereoSequenceOptions::Environment::kCityBlock;
-    options.path_length_m = args.GetDouble("loop-length");
-    options.num_laps = args.GetInt("laps");
-    OMNIRIG_CHECK(options.path_length_m >= 40.0 && options.path_length_m <= 400.0,
-                  "--loop-length must be in [40, 400] metres, got " << options.path_length_m);
-    OMNIRIG_CHECK(options.num_laps >= 1 && options.num_laps <= 100,
-                  "--laps must be in [1, 100], got " << options.num_laps);
-    options.num_frames = args.Has("frames")
-                             ? args.GetInt("frames")
-                             : static_cast<int>(std::lround(10.0 * options.num_laps *
-                                                            options.path_length_m));
-    options.lighting_change = !args.Has("same-lighting");
-    // Frame by frame: 2,000 full-size pairs do not fit in memory.
-    for (const char* camera : {"cam0", "cam1"}) {
-      std::filesystem::create_directories(std::filesystem::path(out) / camera);
-    }
-    const synth::StereoSequence sequence = synth::RenderStereoSequence(
-        options,
-        [&out](int, const std::string& name, const cv::Mat& cam0_image,
-               const cv::Mat& cam1_image) {
-          api::WriteStereoFrame(name, cam0_image, cam1_image, out);
-        },
-        progress);
-    api::WriteStereoSequenceGroundTruth(sequence, "city-block", out);
-  } else {
+  using Preset = void (*)(const ArgParser&, uint64_t, const ProgressSink&, const std::string&);
+  const std::map<std::string, Preset> kPresets = {{"mono-calib", MonoCalibPreset},
+                                                  {"stereo-board", StereoBoardPreset},
+                                                  {"stereo-sequence", StereoSequencePreset},
+                                                  {"stereo-loop", StereoLoopPreset}};
+  const auto found = kPresets.find(preset);
+  if (found == kPresets.end()) {
     throw InvalidArgument(
         "--preset must be mono-calib, stereo-board, stereo-sequence or stereo-loop, got '" +
         preset + "'");
   }
+  found->second(args, SeedFromArgs(args), PrintingProgress(terminal), out);
 }
 
 }  // namespace
