@@ -8,9 +8,9 @@
 //
 // Keyframes: a frame enters the map only when it adds enough new view: too few landmarks
 // tracked, against what its reference keyframe (the one sharing the most landmarks with it)
-// holds, or it moved or turned far enough from that keyframe. Every tracked frame is matched
-// against its local map too (the landmarks of the keyframes sharing the most landmarks with it,
-// projected at its pose), so that after a loop to a mapped place tracking continues on the old
+// holds, or it moved or turned far enough from that keyframe. A frame that tracks landmarks of
+// keyframes of an earlier passage (after a loop to a mapped place) is matched against them too
+// (its local map: their landmarks projected at its pose), so that tracking continues on the old
 // keyframes' landmarks and a revisit adds a keyframe only where the map does not cover the view
 // (ORB-SLAM's local-map tracking and keyframe decision). A keyframe adds its observations and
 // new landmarks, and a local bundle adjustment frees it and the keyframes sharing the most
@@ -79,9 +79,10 @@ struct SlamOptions {
   // this many of that keyframe's landmarks needs no keyframe: the map covers the view (as many
   // as a loop needs confirmed).
   int keyframe_min_mapped_landmarks = 40;
-  // The local map a tracked frame is matched against: the landmarks of this many keyframes,
-  // those sharing the most landmarks with it, matched where its pose projects them (within
-  // map_gate_rad of the feature's bearing, then the descriptor ratio test).
+  // The local map a tracked frame is matched against on a revisit: the landmarks of this many
+  // keyframes of an earlier passage (older than loop_min_keyframe_gap keyframes), those sharing
+  // the most landmarks with it, matched where its pose projects them (within map_gate_rad of
+  // the feature's bearing, then the descriptor ratio test).
   int local_map_keyframes = 3;
   double map_gate_rad = 0.02;
   // The local bundle adjustment after each keyframe frees it and the keyframes sharing the most

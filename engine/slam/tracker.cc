@@ -281,9 +281,14 @@ void Tracker::TrackLocalMap(Frame* frame, FrameReport* report) {
   const size_t tracked = landmark_of_feature.size();
   std::vector<char> feature_taken(frame->features[0].size(), 0);
   for (const auto& [f, id] : landmark_of_feature) feature_taken[f] = 1;
-  const size_t num_local = std::min<size_t>(covisible.size(), options_.local_map_keyframes);
-  for (size_t k = 0; k < num_local; ++k) {
-    for (const auto& [f, id] : MatchKeyframeLandmarks(covisible[k].first, *frame)) {
+  // The keyframes of an earlier passage among them: on a first passage the frame tracks the
+  // recent keyframes' landmarks from the last frame already.
+  int num_local = 0;
+  for (const auto& [keyframe, shared] : covisible) {
+    if (num_local == options_.local_map_keyframes) break;
+    if (KeyframesSince(keyframe) <= options_.loop_min_keyframe_gap) continue;
+    ++num_local;
+    for (const auto& [f, id] : MatchKeyframeLandmarks(keyframe, *frame)) {
       if (feature_taken[f] || !known.insert(id).second) continue;
       feature_taken[f] = 1;
       landmark_of_feature.emplace_back(f, id);
@@ -344,14 +349,13 @@ void Tracker::DecideKeyframe(const std::vector<std::pair<int, int>>& covisible, 
   // make the frame's place a mapped one.
   std::vector<CovisibleKeyframe> candidates;
   const Rigid3d& rig_from_world = map_.rig_from_world[frame->index];
-  const int num_keyframes = static_cast<int>(keyframe_order_.size());
   for (const auto& [keyframe, shared] : covisible) {
     if (!candidates.empty() && shared < options_.keyframe_min_mapped_landmarks) break;
     const StoredKeyframe& stored = keyframes_.at(keyframe);
     CovisibleKeyframe& k = candidates.emplace_back();
     k.keyframe = keyframe;
     k.shared = shared;
-    k.keyframes_since = num_keyframes - 1 - stored.order;
+    k.keyframes_since = KeyframesSince(keyframe);
     k.keyframe_from_frame = map_.rig_from_world[keyframe] * rig_from_world.Inverse();
     for (int id : stored.frame.landmark_of[0]) {
       k.held += id >= 0 && map_.landmarks[id].valid ? 1 : 0;

@@ -170,16 +170,22 @@ class Tracker {
   // TrackLandmarks() with the landmarks given per cam0 feature: (frame's feature, landmark).
   bool RefineAgainstLandmarks(const std::vector<std::pair<int, int>>& landmark_of_feature,
                               Frame* frame, FrameReport* report);
-  // Map reuse: the landmarks of the keyframes that share the most landmarks with the tracked
-  // frame (its local map), projected at its pose and matched within options_.map_gate_rad,
-  // join the ones tracked from the last frame; the pose is refined against all of them. Sets
-  // frame->keyframe_decision. After a loop to a mapped place, this carries tracking onto the
-  // old keyframes' landmarks, so that the revisit is covered by the map it already has.
+  // Map reuse: the landmarks of the keyframes of an earlier passage that share the most
+  // landmarks with the tracked frame (its local map on a revisit), projected at its pose and
+  // matched within options_.map_gate_rad, join the ones tracked from the last frame; the pose is
+  // refined against all of them. Sets frame->keyframe_decision. After a loop to a mapped place,
+  // this carries tracking onto the old keyframes' landmarks, so that the revisit is covered by
+  // the map it already has.
   void TrackLocalMap(Frame* frame, FrameReport* report);
   // Sets frame->keyframe_decision from the keyframes sharing landmarks with the frame
   // (CovisibleKeyframes(), most first).
   void DecideKeyframe(const std::vector<std::pair<int, int>>& covisible, Frame* frame,
                       const FrameReport& report) const;
+  // Keyframes made after keyframe `keyframe`: more than options_.loop_min_keyframe_gap make it
+  // one of an earlier passage through its place.
+  int KeyframesSince(int keyframe) const {
+    return static_cast<int>(keyframe_order_.size()) - 1 - keyframes_.at(keyframe).order;
+  }
   // Keyframes that observe the landmarks `landmark_of` holds, by the number observed, most first.
   std::vector<std::pair<int, int>> CovisibleKeyframes(const std::vector<int>& landmark_of) const;
   // Matches of keyframe `keyframe`'s landmarks not yet in `frame`, at the frame's pose:
