@@ -163,9 +163,9 @@ struct FrameReport {
   // continue a motion prediction.
   bool linked = false;
   bool keyframe = false;  // entered the map
-  // The keyframe (frame index) that shared the most landmarks with the frame once tracked, -1
-  // for none: a non-keyframe's pose follows it. On a revisit tracked on the map, a keyframe of
-  // the earlier visit.
+  // The frame's reference keyframe (frame index, -1: none): on a revisit tracked on the map, the
+  // earlier passage's keyframe near it; elsewhere the keyframe sharing the most landmarks with
+  // it. A non-keyframe's pose follows it.
   int reference_keyframe = -1;
   std::string reason;         // why lost, reinitialised or relocalised
   std::string motion_source;  // "essential+scale", "3d-3d" or "" (no motion estimated)
