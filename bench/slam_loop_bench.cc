@@ -24,8 +24,9 @@
 //              the first loop's correction (the drift tracking had gathered), and the same
 //              figures of a run with --no-loop-closure.
 //   per-frame  CPU time of the frame's stages (median over frames 90-110, or around a fifth of a
-//              run shorter than 400 frames, and over the last 21), and wall; memory: the process's resident set at a tenth of the run each, beside
-//              the map's growth (landmarks created so far) and the keyframes so far.
+//              run shorter than 400 frames, and over the last 21), and wall; memory: the process's
+//              resident set at a tenth of the run each, beside the map's growth (landmarks created
+//              so far) and the keyframes so far.
 //
 // usage: bench_slam --loop [--loop-dir DIR] [--frames 2000] [--laps 2] [--loop-length 100]
 //                   [--width 1024] [--height 768] [--threads 2] [--revisit-m 1.5]
@@ -188,7 +189,7 @@ std::vector<std::string> RenderOrLoad(const LoopArgs& args, std::vector<Rigid3d>
 // FrameReport::keyframe): the one place that reads them.
 struct LoopView {
   std::vector<bool> keyframe;
-  std::vector<int> reference_keyframe;  // per frame, -1: none
+  std::vector<int> reference_keyframe;     // per frame, -1: none
   std::vector<std::pair<int, int>> loops;  // (frame index, matched frame index)
 };
 
@@ -287,8 +288,8 @@ LoopFigures CountLoops(const LoopArgs& args, const LoopView& view,
 // frame (the window must not grow with the laps).
 void PrintPerLap(const LoopArgs& args, const slam::SlamResult& result) {
   const int n = static_cast<int>(result.frames.size());
-  std::printf("\n%4s %10s %10s %12s %12s %16s\n", "lap", "keyframes", "local BAs",
-              "free poses", "fixed poses", "local BA ms/frame");
+  std::printf("\n%4s %10s %10s %12s %12s %16s\n", "lap", "keyframes", "local BAs", "free poses",
+              "fixed poses", "local BA ms/frame");
   for (int lap = 0; lap < args.laps; ++lap) {
     int keyframes = 0, adjustments = 0;
     double free_poses = 0, fixed_poses = 0, cpu_s = 0;
@@ -401,9 +402,10 @@ int RunLoopBench(int argc, char** argv) {
   if (!options.loop_closure) std::printf("(loop closure off: --no-loop-closure)\n");
   std::printf("%-52s %6d / %-5d %12s\n", "revisit frames recognised", loops.revisit_frames_found,
               loops.revisit_frames, "");
-  std::printf("%-52s %12.1f %12s\n", "recall per revisit frame (%)",
-              loops.revisit_frames ? 100.0 * loops.revisit_frames_found / loops.revisit_frames : 0.0,
-              ">= 90");
+  std::printf(
+      "%-52s %12.1f %12s\n", "recall per revisit frame (%)",
+      loops.revisit_frames ? 100.0 * loops.revisit_frames_found / loops.revisit_frames : 0.0,
+      ">= 90");
   std::printf("%-52s %12.1f %12s\n", "recall per revisited 10 m stretch (%)",
               loops.revisit_stretches ? 100.0 * loops.revisit_stretches_found / loops.revisit_stretches : 0.0,
               ">= 90");
