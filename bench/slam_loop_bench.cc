@@ -7,10 +7,15 @@
 // is reported apart. SLAM then runs end to end from the PNG files (decoding inside the timed run).
 //
 // What is measured (ground truth from trajectory.tum; the lap of frame i is laps * i / frames):
-//   revisits   a keyframe of lap >= 1 within --revisit-m metres and --revisit-deg degrees of a
-//              keyframe of an earlier lap. Recall per keyframe: revisits that are the query frame
-//              of a true loop; per 10 m stretch of path: stretches with a revisit in which some
-//              true loop was found.
+//   revisits   a frame of lap >= 1 within --revisit-m metres and --revisit-deg degrees of a
+//              keyframe of an earlier lap. Since revisits tracked on the map add few keyframes,
+//              recall is counted per revisit frame: recognised when the frame is localised on
+//              an earlier lap's keyframe (its reference keyframe, the one sharing the most
+//              landmarks with it, is of an earlier lap and truly within those bounds) or is the
+//              query of a true loop to an earlier lap. Per 10 m stretch of path: stretches with
+//              a revisit in which some revisit frame was recognised. Non-keyframes whose
+//              reference is an earlier lap's keyframe outside those bounds are counted apart
+//              (false references: their pose follows that keyframe).
 //   loops      true when its two keyframes are within those bounds in ground truth; false
 //              loops are the others.
 //   ATE        after the run's closure and global adjustment, SE(3)-aligned, as % of the
@@ -19,8 +24,9 @@
 //              the first loop's correction (the drift tracking had gathered), and the same
 //              figures of a run with --no-loop-closure.
 //   per-frame  CPU time of the frame's stages (median over frames 90-110, or around a fifth of a
-//              run shorter than 400 frames, and over the last 21), and wall; memory: the process's resident set at a tenth of the run each, beside
-//              the map's growth (landmarks created so far) and the keyframes so far.
+//              run shorter than 400 frames, and over the last 21), and wall; memory: the process's
+//              resident set at a tenth of the run each, beside the map's growth (landmarks created
+//              so far) and the keyframes so far.
 //
 // usage: bench_slam --loop [--loop-dir DIR] [--frames 2000] [--laps 2] [--loop-length 100]
 //                   [--width 1024] [--height 768] [--threads 2] [--revisit-m 1.5]
@@ -183,12 +189,16 @@ std::vector<std::string> RenderOrLoad(const LoopArgs& args, std::vector<Rigid3d>
 // FrameReport::keyframe): the one place that reads them.
 struct LoopView {
   std::vector<bool> keyframe;
+  std::vector<int> reference_keyframe;     // per frame, -1: none
   std::vector<std::pair<int, int>> loops;  // (frame index, matched frame index)
 };
 
 LoopView ReadLoops(const slam::SlamResult& result) {
   LoopView view;
-  for (const slam::FrameReport& frame : result.frames) view.keyframe.push_back(frame.keyframe);
+  for (const slam::FrameReport& frame : result.frames) {
+    view.keyframe.push_back(frame.keyframe);
+    view.reference_keyframe.push_back(frame.world_from_rig ? frame.reference_keyframe : -1);
+  }
   for (const slam::LoopReport& loop : result.loops) {
     view.loops.emplace_back(loop.frame_index, loop.matched_frame_index);
   }
@@ -200,8 +210,9 @@ double AngleDeg(const Rigid3d& a, const Rigid3d& b) {
 }
 
 struct LoopFigures {
-  int revisit_keyframes = 0, revisit_keyframes_found = 0;
+  int revisit_frames = 0, revisit_frames_found = 0;
   int revisit_stretches = 0, revisit_stretches_found = 0;
+  int false_references = 0;  // non-keyframes referenced to an earlier lap's keyframe not near it
   int true_loops = 0, false_loops = 0;
   // The false ones: matched to a keyframe of the same lap or of an earlier one, and the largest
   // ground-truth distance between a false loop's keyframes.
@@ -224,14 +235,13 @@ LoopFigures CountLoops(const LoopArgs& args, const LoopView& view,
     return lap(i) * 1000 + static_cast<int>(std::fmod(s, args.loop_length_m) / 10.0);
   };
   LoopFigures figures;
-  std::set<int> true_query_frames, stretches_with_revisit, stretches_found;
+  std::set<int> revisit_loop_frames, stretches_with_revisit, stretches_found;
   for (size_t l = 0; l < view.loops.size(); ++l) {
     const auto& [frame, matched] = view.loops[l];
     if (near(frame, matched)) {
       ++figures.true_loops;
-      true_query_frames.insert(frame);
       if (lap(matched) < lap(frame)) {
-        stretches_found.insert(stretch(frame));
+        revisit_loop_frames.insert(frame);
         if (figures.first_revisit_loop < 0) figures.first_revisit_loop = static_cast<int>(l);
       }
     } else {
@@ -241,20 +251,63 @@ LoopFigures CountLoops(const LoopArgs& args, const LoopView& view,
           figures.false_max_distance_m, (truth[frame].translation - truth[matched].translation).norm());
     }
   }
+  std::vector<int> keyframes;
+  for (int j = 0; j < n; ++j) {
+    if (view.keyframe[j]) keyframes.push_back(j);
+  }
   for (int k = 0; k < n; ++k) {
-    if (!view.keyframe[k] || lap(k) == 0) continue;
+    if (lap(k) == 0) continue;
+    const int reference = view.reference_keyframe[k];
+    const bool earlier_reference = reference >= 0 && lap(reference) < lap(k);
+    // A keyframe's reference may be far (that is why it became one: the previous keyframe
+    // across a lap's end, say); a non-keyframe's pose follows its reference.
+    if (earlier_reference && !view.keyframe[k] && !near(k, reference)) {
+      ++figures.false_references;
+      std::printf("false reference: frame %d -> keyframe %d, %.2f m, %.1f deg apart (truth)\n", k,
+                  reference, (truth[k].translation - truth[reference].translation).norm(),
+                  AngleDeg(truth[k], truth[reference]));
+    }
     bool revisit = false;
-    for (int j = 0; j < n && !revisit; ++j) {
-      revisit = view.keyframe[j] && lap(j) < lap(k) && near(k, j);
+    for (size_t j = 0; j < keyframes.size() && !revisit; ++j) {
+      revisit = lap(keyframes[j]) < lap(k) && near(k, keyframes[j]);
     }
     if (!revisit) continue;
-    ++figures.revisit_keyframes;
-    figures.revisit_keyframes_found += true_query_frames.count(k) > 0;
+    ++figures.revisit_frames;
     stretches_with_revisit.insert(stretch(k));
+    if ((earlier_reference && near(k, reference)) || revisit_loop_frames.count(k) > 0) {
+      ++figures.revisit_frames_found;
+      stretches_found.insert(stretch(k));
+    }
   }
   figures.revisit_stretches = static_cast<int>(stretches_with_revisit.size());
   for (const int s : stretches_with_revisit) figures.revisit_stretches_found += stretches_found.count(s);
   return figures;
+}
+
+// Per lap: keyframes made, and the local adjustments' mean free and fixed poses and CPU per
+// frame (the window must not grow with the laps).
+void PrintPerLap(const LoopArgs& args, const slam::SlamResult& result) {
+  const int n = static_cast<int>(result.frames.size());
+  std::printf("\n%4s %10s %10s %12s %12s %16s\n", "lap", "keyframes", "local BAs", "free poses",
+              "fixed poses", "local BA ms/frame");
+  for (int lap = 0; lap < args.laps; ++lap) {
+    int keyframes = 0, adjustments = 0;
+    double free_poses = 0, fixed_poses = 0, cpu_s = 0;
+    const int first = lap * n / args.laps, last = (lap + 1) * n / args.laps;
+    for (int i = first; i < last; ++i) {
+      const slam::FrameReport& f = result.frames[i];
+      keyframes += f.keyframe;
+      cpu_s += f.cpu_times.local_ba_s;
+      if (!f.local_bundle_adjustment) continue;
+      ++adjustments;
+      free_poses += f.local_bundle_adjustment->num_free_poses;
+      fixed_poses += f.local_bundle_adjustment->num_constant_poses;
+    }
+    std::printf("%4d %10d %10d %12.1f %12.1f %16.1f\n", lap + 1, keyframes, adjustments,
+                adjustments ? free_poses / adjustments : 0.0,
+                adjustments ? fixed_poses / adjustments : 0.0,
+                1e3 * cpu_s / std::max(1, last - first));
+  }
 }
 
 double MedianOver(const slam::SlamResult& result, int first, int last, bool cpu) {
@@ -347,16 +400,19 @@ int RunLoopBench(int argc, char** argv) {
   std::printf("\n%-52s %12s %12s\n", "metric", "measured", "target");
   const LoopFigures loops = CountLoops(args, view, truth);
   if (!options.loop_closure) std::printf("(loop closure off: --no-loop-closure)\n");
-  std::printf("%-52s %6d / %-5d %12s\n", "revisit keyframes detected", loops.revisit_keyframes_found,
-              loops.revisit_keyframes, "");
-  std::printf("%-52s %12.1f %12s\n", "recall per revisit keyframe (%)",
-              loops.revisit_keyframes ? 100.0 * loops.revisit_keyframes_found / loops.revisit_keyframes : 0.0,
-              ">= 90");
+  std::printf("%-52s %6d / %-5d %12s\n", "revisit frames recognised", loops.revisit_frames_found,
+              loops.revisit_frames, "");
+  std::printf(
+      "%-52s %12.1f %12s\n", "recall per revisit frame (%)",
+      loops.revisit_frames ? 100.0 * loops.revisit_frames_found / loops.revisit_frames : 0.0,
+      ">= 90");
   std::printf("%-52s %12.1f %12s\n", "recall per revisited 10 m stretch (%)",
               loops.revisit_stretches ? 100.0 * loops.revisit_stretches_found / loops.revisit_stretches : 0.0,
               ">= 90");
   std::printf("%-52s %12d %12s\n", "true loops accepted", loops.true_loops, "");
   std::printf("%-52s %12d %12s\n", "false loops accepted", loops.false_loops, "0");
+  std::printf("%-52s %12d %12s\n", "false references (non-keyframes, earlier lap, far)",
+              loops.false_references, "0");
   std::printf("%-52s %5d / %-6d %12s\n", "  of which to the same lap / an earlier lap",
               loops.false_same_lap, loops.false_earlier_lap, "");
   std::printf("%-52s %12.2f %12s\n", "  largest distance between their keyframes (m)",
@@ -374,6 +430,7 @@ int RunLoopBench(int argc, char** argv) {
   }
   PrintTrajectory(args, result, truth);
   std::printf("%-52s %12d %12s\n", "keyframes", result.num_keyframes, "");
+  PrintPerLap(args, result);
   std::printf("\n%8s %8s %8s %10s %10s %6s %10s\n", "frame", "matched", "inliers", "corr (m)",
               "corr (deg)", "graph", "truth (m)");
   for (const slam::LoopReport& loop : result.loops) {

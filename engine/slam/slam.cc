@@ -34,6 +34,10 @@ void SlamOptions::Check() const {
   OMNIRIG_CHECK(temporal_max_descriptor_ratio > 0 && temporal_max_descriptor_ratio <= 1,
                 "temporal_max_descriptor_ratio must be in (0, 1]");
   OMNIRIG_CHECK(local_window_frames >= 0, "local_window_frames must not be negative");
+  OMNIRIG_CHECK(keyframe_min_mapped_landmarks >= 1,
+                "keyframe_min_mapped_landmarks must be at least 1");
+  OMNIRIG_CHECK(local_map_keyframes >= 0, "local_map_keyframes must not be negative");
+  OMNIRIG_CHECK(map_gate_rad > 0 && map_gate_rad <= M_PI, "map_gate_rad must be in (0, pi]");
   OMNIRIG_CHECK(local_max_iterations >= 1, "local_max_iterations must be at least 1");
   OMNIRIG_CHECK(temporal_gate_rad > 0 && temporal_gate_rad <= M_PI,
                 "temporal_gate_rad must be in (0, pi]");

@@ -6,12 +6,17 @@
 // essential matrix on the sphere with RANSAC, the metric scale from the stereo points (eq. 18,
 // robust), then the pose refined against the map's landmarks tracked into the last frame.
 //
-// Keyframes: a frame enters the map only when it adds enough new view (too few of the last
-// keyframe's landmarks still tracked, or it moved or turned far enough); it then adds its
-// observations and new landmarks, and a local bundle adjustment frees the last few keyframes.
-// Other frames keep their pose relative to their keyframe and nothing else, so memory and the
-// per-frame work follow the map, not the frames. The global adjustment at the end runs over the
-// keyframes; the other frames follow their keyframes.
+// Keyframes: a frame enters the map only when it adds enough new view: too few landmarks
+// tracked, against what its reference keyframe (the one sharing the most landmarks with it)
+// holds, or it moved or turned far enough from that keyframe. A frame that tracks landmarks of
+// keyframes of an earlier passage (after a loop to a mapped place) is matched against them too
+// (its local map: their landmarks projected at its pose), so that tracking continues on the old
+// keyframes' landmarks and a revisit adds a keyframe only where the map does not cover the view
+// (ORB-SLAM's local-map tracking and keyframe decision). A keyframe adds its observations and
+// new landmarks, and a local bundle adjustment frees it and the keyframes sharing the most
+// landmarks with it. Other frames keep their pose relative to their reference keyframe and
+// nothing else, so memory and the per-frame work follow the map, not the frames. The global
+// adjustment at the end runs over the keyframes; the other frames follow their keyframes.
 //
 // Place recognition: every keyframe's bag of words (vocabulary.h) is queried against the older
 // keyframes that tracking's estimate puts near enough (loop_max_distance_m plus a drift
@@ -61,16 +66,29 @@ struct SlamOptions {
   EssentialRansacOptions essential = DefaultEssentialOptions();
   ScaleOptions scale;
   BundleAdjustmentOptions bundle_adjustment;
-  // A tracked frame becomes a keyframe when fewer than this fraction of the landmarks the last
-  // keyframe held are still tracked, or when it is this far from the last keyframe. On the
-  // synthetic room (15 cm steps) 0.7 makes every other frame a keyframe, drift 0.058 %; 0.5
-  // every third, drift 0.145 % (every frame, as before keyframes: 0.127 %).
+  // A tracked frame becomes a keyframe when it tracks fewer landmarks than this fraction of
+  // those its reference keyframe (the one sharing the most landmarks with it) holds, or when it
+  // is this far from that keyframe. On the synthetic room (15 cm steps) 0.7 makes every other
+  // frame a keyframe, drift 0.058 %; 0.5 every third, drift 0.145 % (every frame, as before
+  // keyframes: 0.127 %).
   double keyframe_min_tracked_fraction = 0.7;
   double keyframe_max_distance_m = 1.0;
   double keyframe_max_rotation_deg = 20.0;
-  // The local bundle adjustment after each keyframe frees the last few keyframes (0 = none).
-  // On the synthetic room the global adjustment alone reaches the same accuracy; the local one
-  // keeps the landmarks that tracking relies on accurate on long sequences.
+  // On a place an earlier passage mapped (a keyframe older than loop_min_keyframe_gap keyframes,
+  // within keyframe_max_distance_m and keyframe_max_rotation_deg), a frame that tracks at least
+  // this many of that keyframe's landmarks needs no keyframe: the map covers the view (as many
+  // as a loop needs confirmed).
+  int keyframe_min_mapped_landmarks = 40;
+  // The local map a tracked frame is matched against on a revisit: the landmarks of this many
+  // keyframes of an earlier passage (older than loop_min_keyframe_gap keyframes), those sharing
+  // the most landmarks with it, matched where its pose projects them (within map_gate_rad of
+  // the feature's bearing, then the descriptor ratio test).
+  int local_map_keyframes = 3;
+  double map_gate_rad = 0.02;
+  // The local bundle adjustment after each keyframe frees it and the keyframes sharing the most
+  // landmarks with it, this many in all (0 = none). On the synthetic room the global adjustment
+  // alone reaches the same accuracy; the local one keeps the landmarks that tracking relies on
+  // accurate on long sequences.
   int local_window_frames = 3;
   int local_max_iterations = 5;
   // Place recognition and loop closure (needs the global bundle adjustment's map; off: no loops
@@ -145,6 +163,10 @@ struct FrameReport {
   // continue a motion prediction.
   bool linked = false;
   bool keyframe = false;  // entered the map
+  // The frame's reference keyframe (frame index, -1: none): on a revisit tracked on the map, the
+  // earlier passage's keyframe near it; elsewhere the keyframe sharing the most landmarks with
+  // it. A non-keyframe's pose follows it.
+  int reference_keyframe = -1;
   std::string reason;         // why lost, reinitialised or relocalised
   std::string motion_source;  // "essential+scale", "3d-3d" or "" (no motion estimated)
   int num_features[2] = {0, 0};

@@ -168,14 +168,21 @@ bool Tracker::EstimateMotion(const Frame& reference, const Frame& frame,
 }
 
 bool Tracker::TrackLandmarks(const Frame& reference, Frame* frame,
-                             const std::vector<std::pair<int, int>>& matches,
-                             FrameReport* report) {
+                             const std::vector<std::pair<int, int>>& matches, FrameReport* report) {
+  std::vector<std::pair<int, int>> landmark_of_feature;
+  for (const auto& [a, b] : matches) {
+    const int id = reference.landmark_of[0][a];
+    if (id >= 0 && map_.landmarks[id].valid) landmark_of_feature.emplace_back(b, id);
+  }
+  return RefineAgainstLandmarks(landmark_of_feature, frame, report);
+}
+
+bool Tracker::RefineAgainstLandmarks(const std::vector<std::pair<int, int>>& landmark_of_feature,
+                                     Frame* frame, FrameReport* report) {
   std::vector<Observation> observations;
   std::vector<Eigen::Vector3d> points;
   std::vector<int> landmark_ids;
-  for (const auto& [a, b] : matches) {
-    const int id = reference.landmark_of[0][a];
-    if (id < 0 || !map_.landmarks[id].valid) continue;
+  for (const auto& [b, id] : landmark_of_feature) {
     observations.push_back({frame->index, 0, b, frame->features[0].pixels[b]});
     points.push_back(map_.landmarks[id].point_in_world);
     landmark_ids.push_back(id);
@@ -207,6 +214,155 @@ bool Tracker::TrackLandmarks(const Frame& reference, Frame* frame,
     frame->landmark_of[o.camera][o.feature] = landmark_ids[i];
   }
   return true;
+}
+
+std::vector<std::pair<int, int>> Tracker::CovisibleKeyframes(
+    const std::vector<int>& landmark_of) const {
+  std::map<int, int> shared;  // by keyframe
+  for (int id : landmark_of) {
+    if (id < 0 || !map_.landmarks[id].valid) continue;
+    for (const Observation& o : map_.landmarks[id].observations) {
+      if (o.camera == 0) ++shared[o.frame];
+    }
+  }
+  std::vector<std::pair<int, int>> keyframes(shared.begin(), shared.end());
+  // Most shared first; among equals the most recent.
+  std::sort(keyframes.begin(), keyframes.end(), [](const auto& a, const auto& b) {
+    return a.second != b.second ? a.second > b.second : a.first > b.first;
+  });
+  return keyframes;
+}
+
+std::vector<std::pair<int, int>> Tracker::MatchKeyframeLandmarks(int keyframe,
+                                                                 const Frame& frame) const {
+  const Frame& stored = keyframes_.at(keyframe).frame;
+  const Rigid3d& rig_from_world = map_.rig_from_world[frame.index];
+  // The keyframe's landmarks as features seen from the frame: the bearing its pose predicts
+  // (the rig frame is cam0's), the keyframe's descriptor.
+  CameraFeatures predicted;
+  std::vector<int> landmark_ids;
+  std::vector<int> rows;
+  for (int f = 0; f < stored.features[0].size(); ++f) {
+    const int id = stored.landmark_of[0][f];
+    if (id < 0 || !map_.landmarks[id].valid) continue;
+    const Eigen::Vector3d point_in_rig = rig_from_world * map_.landmarks[id].point_in_world;
+    if (point_in_rig.norm() < 1e-6) continue;
+    predicted.pixels.push_back(stored.features[0].pixels[f]);
+    predicted.bearings.push_back(point_in_rig.normalized());
+    landmark_ids.push_back(id);
+    rows.push_back(f);
+  }
+  predicted.descriptors.create(static_cast<int>(rows.size()), stored.features[0].descriptors.cols,
+                               CV_32F);
+  for (size_t r = 0; r < rows.size(); ++r) {
+    stored.features[0].descriptors.row(rows[r]).convertTo(
+        predicted.descriptors.row(static_cast<int>(r)), CV_32F);
+  }
+  std::vector<std::pair<int, int>> landmark_of_feature;
+  for (const auto& [a, b] : MatchDescriptorsGated(
+           predicted, frame.features[0], Eigen::Matrix3d::Identity(), options_.map_gate_rad,
+           options_.temporal_max_descriptor_ratio, options_.stereo.max_descriptor_distance)) {
+    if (frame.landmark_of[0][b] < 0) landmark_of_feature.emplace_back(b, landmark_ids[a]);
+  }
+  return landmark_of_feature;
+}
+
+void Tracker::TrackLocalMap(Frame* frame, FrameReport* report) {
+  StageClock timer;
+  std::vector<std::pair<int, int>> covisible = CovisibleKeyframes(frame->landmark_of[0]);
+  std::set<int> known;  // landmarks the frame holds or gained here
+  std::vector<std::pair<int, int>> landmark_of_feature;
+  for (int f = 0; f < frame->features[0].size(); ++f) {
+    const int id = frame->landmark_of[0][f];
+    if (id >= 0 && map_.landmarks[id].valid && known.insert(id).second) {
+      landmark_of_feature.emplace_back(f, id);
+    }
+  }
+  const size_t tracked = landmark_of_feature.size();
+  std::vector<char> feature_taken(frame->features[0].size(), 0);
+  for (const auto& [f, id] : landmark_of_feature) feature_taken[f] = 1;
+  // The keyframes of an earlier passage among them: on a first passage the frame tracks the
+  // recent keyframes' landmarks from the last frame already.
+  int num_local = 0;
+  for (const auto& [keyframe, shared] : covisible) {
+    if (num_local == options_.local_map_keyframes) break;
+    if (KeyframesSince(keyframe) <= options_.loop_min_keyframe_gap) continue;
+    ++num_local;
+    for (const auto& [f, id] : MatchKeyframeLandmarks(keyframe, *frame)) {
+      if (feature_taken[f] || !known.insert(id).second) continue;
+      feature_taken[f] = 1;
+      landmark_of_feature.emplace_back(f, id);
+    }
+  }
+  timer.ChargeTo(&StageTimes::match_s, report);
+  timer.Restart();
+  if (landmark_of_feature.size() > tracked) {
+    // Refined against all of them; the frame keeps what it had if that fails.
+    const Rigid3d before = map_.rig_from_world[frame->index];
+    const std::vector<int> landmark_of[2] = {frame->landmark_of[0], frame->landmark_of[1]};
+    for (int c = 0; c < 2; ++c) frame->landmark_of[c].assign(frame->features[c].size(), -1);
+    FrameReport attempt = *report;
+    if (RefineAgainstLandmarks(landmark_of_feature, frame, &attempt)) {
+      report->num_tracked_landmarks = attempt.num_tracked_landmarks;
+      covisible = CovisibleKeyframes(frame->landmark_of[0]);
+    } else {
+      map_.rig_from_world[frame->index] = before;
+      for (int c = 0; c < 2; ++c) frame->landmark_of[c] = landmark_of[c];
+    }
+  }
+  DecideKeyframe(covisible, frame, *report);
+  timer.ChargeTo(&StageTimes::motion_s, report);
+}
+
+KeyframeDecision DecideKeyframe(const std::vector<CovisibleKeyframe>& covisible,
+                                int num_tracked_landmarks, const SlamOptions& options) {
+  KeyframeDecision decision;
+  if (covisible.empty()) return decision;
+  auto near = [&](const CovisibleKeyframe& k) {
+    return k.keyframe_from_frame.translation.norm() <= options.keyframe_max_distance_m &&
+           RotationDeg(k.keyframe_from_frame.rotation, Eigen::Quaterniond::Identity()) <=
+               options.keyframe_max_rotation_deg;
+  };
+  // A keyframe of an earlier passage (older than the loop candidates' gap) near the frame, of
+  // whose landmarks the frame tracks enough: the map covers the view.
+  for (const CovisibleKeyframe& k : covisible) {
+    if (k.shared < options.keyframe_min_mapped_landmarks) break;
+    if (k.keyframes_since <= options.loop_min_keyframe_gap || !near(k)) continue;
+    decision.reference_keyframe = k.keyframe;
+    decision.on_mapped_place = true;
+    decision.needs_keyframe = false;
+    return decision;
+  }
+  // Elsewhere against the keyframe that shares the most landmarks with the frame (on a first
+  // visit, the last keyframe).
+  const CovisibleKeyframe& reference = covisible.front();
+  decision.reference_keyframe = reference.keyframe;
+  decision.needs_keyframe =
+      !near(reference) ||
+      num_tracked_landmarks < options.keyframe_min_tracked_fraction * reference.held;
+  return decision;
+}
+
+void Tracker::DecideKeyframe(const std::vector<std::pair<int, int>>& covisible, Frame* frame,
+                             const FrameReport& report) const {
+  // The keyframes the decision may look at: the most shared one, and those sharing enough to
+  // make the frame's place a mapped one.
+  std::vector<CovisibleKeyframe> candidates;
+  const Rigid3d& rig_from_world = map_.rig_from_world[frame->index];
+  for (const auto& [keyframe, shared] : covisible) {
+    if (!candidates.empty() && shared < options_.keyframe_min_mapped_landmarks) break;
+    const StoredKeyframe& stored = keyframes_.at(keyframe);
+    CovisibleKeyframe& k = candidates.emplace_back();
+    k.keyframe = keyframe;
+    k.shared = shared;
+    k.keyframes_since = KeyframesSince(keyframe);
+    k.keyframe_from_frame = map_.rig_from_world[keyframe] * rig_from_world.Inverse();
+    for (int id : stored.frame.landmark_of[0]) {
+      k.held += id >= 0 && map_.landmarks[id].valid ? 1 : 0;
+    }
+  }
+  frame->keyframe_decision =
+      internal::DecideKeyframe(candidates, report.num_tracked_landmarks, options_);
 }
 
 void Tracker::AddNewLandmarks(Frame* frame, FrameReport* report) {
@@ -247,11 +403,17 @@ void Tracker::AddNewLandmarks(Frame* frame, FrameReport* report) {
   }
 }
 
-void Tracker::LocalBundleAdjustment(FrameReport* report) {
+void Tracker::LocalBundleAdjustment(int keyframe, FrameReport* report) {
   if (options_.local_window_frames == 0 || keyframe_order_.size() < 2) return;
   const StageClock timer;
-  const size_t n = std::min<size_t>(options_.local_window_frames, keyframe_order_.size());
-  const std::vector<int> window(keyframe_order_.end() - n, keyframe_order_.end());
+  // The keyframe and those sharing the most landmarks with it: on a first visit the last few
+  // keyframes, on a revisit the mapped ones around it, however long ago they were made.
+  std::vector<int> window = {keyframe};
+  for (const auto& [other, shared] :
+       CovisibleKeyframes(keyframes_.at(keyframe).frame.landmark_of[0])) {
+    if (static_cast<int>(window.size()) >= options_.local_window_frames) break;
+    if (other != keyframe) window.push_back(other);
+  }
   // The window's landmarks, from the keyframes' own lists: no scan of the whole map.
   std::vector<int> landmarks;
   for (int keyframe : window) {
@@ -346,18 +508,25 @@ FrameReport Tracker::BackEnd(FrontEndResult front, bool last_frame) {
     }
   }
   if (!reference) reference = Relocalise(&frame, &matches, &report);
-  if (!reference) Restart(restart_pose, &frame, &matches, &report);
+  if (reference) {
+    TrackLocalMap(&frame, &report);
+  } else {
+    Restart(restart_pose, &frame, &matches, &report);
+  }
   map_.has_pose[index] = true;
   ChainTo(reference, matches, &frame);
-  frame.keyframe = report.state != "tracked" || last_frame || NeedsKeyframe(frame, report);
+  frame.keyframe =
+      report.state != "tracked" || last_frame || frame.keyframe_decision.needs_keyframe;
   if (frame.keyframe) {
     AddKeyframe(&frame, &report);
   } else {
-    keyframe_of_frame_[index] = frame.chain_keyframe;
+    const int keyframe = frame.keyframe_decision.reference_keyframe;
+    keyframe_of_frame_[index] = keyframe;
     rig_from_keyframe_[index] =
-        map_.rig_from_world[index] * map_.rig_from_world[frame.chain_keyframe].Inverse();
+        map_.rig_from_world[index] * map_.rig_from_world[keyframe].Inverse();
   }
   report.keyframe = frame.keyframe;
+  report.reference_keyframe = frame.keyframe_decision.reference_keyframe;
   linked_[index] = report.linked;
   last_linked_ = report.linked;
   last_ = std::move(frame);
@@ -373,17 +542,6 @@ void Tracker::ChainTo(const Frame* reference, const std::vector<std::pair<int, i
   for (const auto& [a, b] : matches) {
     frame->keyframe_feature_of[b] = reference->keyframe ? a : reference->keyframe_feature_of[a];
   }
-}
-
-bool Tracker::NeedsKeyframe(const Frame& frame, const FrameReport& report) const {
-  if (frame.chain_keyframe < 0) return true;
-  const Rigid3d keyframe_from_frame = map_.rig_from_world[frame.chain_keyframe] *
-                                      map_.rig_from_world[frame.index].Inverse();
-  return keyframe_from_frame.translation.norm() > options_.keyframe_max_distance_m ||
-         RotationDeg(keyframe_from_frame.rotation, Eigen::Quaterniond::Identity()) >
-             options_.keyframe_max_rotation_deg ||
-         report.num_tracked_landmarks <
-             options_.keyframe_min_tracked_fraction * last_keyframe_landmarks_;
 }
 
 void Tracker::AddKeyframe(Frame* frame, FrameReport* report) {
@@ -438,9 +596,7 @@ void Tracker::AddKeyframe(Frame* frame, FrameReport* report) {
   database_.Add(index, stored.bow);
   loop_timer.ChargeTo(&StageTimes::loop_s, report);
   const bool new_segment = report->state == "initialised" || report->state == "reinitialised";
-  if (!adjusted_globally && !new_segment) LocalBundleAdjustment(report);
-  last_keyframe_landmarks_ = 0;
-  for (int id : frame->landmark_of[0]) last_keyframe_landmarks_ += id >= 0 ? 1 : 0;
+  if (!adjusted_globally && !new_segment) LocalBundleAdjustment(index, report);
 }
 
 void Tracker::PlaceNonKeyframes() {

@@ -46,6 +46,34 @@ class StageClock {
   double cpu_start_ = 0;
 };
 
+// A keyframe that shares landmarks with a tracked frame, as the keyframe decision sees it.
+struct CovisibleKeyframe {
+  int keyframe = -1;        // its frame index
+  int shared = 0;           // its landmarks the frame tracks
+  int held = 0;             // landmarks it holds (cam0)
+  int keyframes_since = 0;  // keyframes made after it
+  Rigid3d keyframe_from_frame;
+};
+
+struct KeyframeDecision {
+  int reference_keyframe = -1;  // -1: none (the frame tracks no keyframe's landmarks)
+  // The reference is a keyframe of an earlier passage through the place (more than
+  // loop_min_keyframe_gap keyframes old), within keyframe_max_distance_m and
+  // keyframe_max_rotation_deg, of whose landmarks the frame tracks at least
+  // keyframe_min_mapped_landmarks: the map covers the view.
+  bool on_mapped_place = false;
+  bool needs_keyframe = true;
+};
+
+// The keyframe decision of a tracked frame that tracks `num_tracked_landmarks` landmarks, from
+// the keyframes sharing them (most shared first; those after the first sharing fewer than
+// keyframe_min_mapped_landmarks may be left out). On a mapped place (KeyframeDecision) no
+// keyframe; elsewhere the reference is the most shared keyframe, and a keyframe is needed when
+// the frame is beyond keyframe_max_distance_m / keyframe_max_rotation_deg of it or tracks fewer
+// than keyframe_min_tracked_fraction of the landmarks it holds.
+KeyframeDecision DecideKeyframe(const std::vector<CovisibleKeyframe>& covisible,
+                                int num_tracked_landmarks, const SlamOptions& options);
+
 // Everything kept of a tracked frame for matching the next one. The map's copy of a keyframe
 // (StoredKeyframe) keeps cam0's features, with the descriptors as bytes, and the stereo points.
 struct Frame {
@@ -59,6 +87,9 @@ struct Frame {
   // keyframe's observation, so that new landmarks are seen from two rig positions at once.
   std::vector<int> keyframe_feature_of;
   int chain_keyframe = -1;
+  // Once tracked on the local map: its reference keyframe (a non-keyframe keeps its pose
+  // relative to it) and whether it adds enough new view to become a keyframe.
+  KeyframeDecision keyframe_decision;
   bool keyframe = false;
   // cam0's bag of words and each cam0 feature's word, once computed (relocalisation needs
   // them before the frame becomes a keyframe, which needs them again).
@@ -136,6 +167,30 @@ class Tracker {
   // map gains the observations only if the frame becomes a keyframe).
   bool TrackLandmarks(const Frame& reference, Frame* frame,
                       const std::vector<std::pair<int, int>>& matches, FrameReport* report);
+  // TrackLandmarks() with the landmarks given per cam0 feature: (frame's feature, landmark).
+  bool RefineAgainstLandmarks(const std::vector<std::pair<int, int>>& landmark_of_feature,
+                              Frame* frame, FrameReport* report);
+  // Map reuse: the landmarks of the keyframes of an earlier passage that share the most
+  // landmarks with the tracked frame (its local map on a revisit), projected at its pose and
+  // matched within options_.map_gate_rad, join the ones tracked from the last frame; the pose is
+  // refined against all of them. Sets frame->keyframe_decision. After a loop to a mapped place,
+  // this carries tracking onto the old keyframes' landmarks, so that the revisit is covered by
+  // the map it already has.
+  void TrackLocalMap(Frame* frame, FrameReport* report);
+  // Sets frame->keyframe_decision from the keyframes sharing landmarks with the frame
+  // (CovisibleKeyframes(), most first).
+  void DecideKeyframe(const std::vector<std::pair<int, int>>& covisible, Frame* frame,
+                      const FrameReport& report) const;
+  // Keyframes made after keyframe `keyframe`: more than options_.loop_min_keyframe_gap make it
+  // one of an earlier passage through its place.
+  int KeyframesSince(int keyframe) const {
+    return static_cast<int>(keyframe_order_.size()) - 1 - keyframes_.at(keyframe).order;
+  }
+  // Keyframes that observe the landmarks `landmark_of` holds, by the number observed, most first.
+  std::vector<std::pair<int, int>> CovisibleKeyframes(const std::vector<int>& landmark_of) const;
+  // Matches of keyframe `keyframe`'s landmarks not yet in `frame`, at the frame's pose:
+  // (frame's cam0 feature, landmark).
+  std::vector<std::pair<int, int>> MatchKeyframeLandmarks(int keyframe, const Frame& frame) const;
   // Localises `frame` against the place recognition's candidate keyframes (P3P + RANSAC, then
   // the candidate's landmarks); on success fills `matches` (with the keyframe) and the report
   // and returns the keyframe's frame.
@@ -147,12 +202,13 @@ class Tracker {
   // Carries the features' keyframe ancestry over the matches with `reference`.
   static void ChainTo(const Frame* reference, const std::vector<std::pair<int, int>>& matches,
                       Frame* frame);
-  bool NeedsKeyframe(const Frame& frame, const FrameReport& report) const;
   // The frame enters the map: observations of its tracked landmarks, new landmarks, place
   // recognition (loop closure or re-linking), local bundle adjustment.
   void AddKeyframe(Frame* frame, FrameReport* report);
   void AddNewLandmarks(Frame* frame, FrameReport* report);
-  void LocalBundleAdjustment(FrameReport* report);
+  // Frees `keyframe` and the keyframes that share the most landmarks with it
+  // (options_.local_window_frames in all); the others that see their landmarks stay fixed.
+  void LocalBundleAdjustment(int keyframe, FrameReport* report);
   // Whether keyframe `keyframe` sees the place `frame` (a keyframe already stored) shows:
   // descriptor matches within vocabulary nodes, E on the bearings with the stereo scale (3D-3D
   // agreement), then the keyframe's landmarks confirmed in the frame at the pose that gives.
@@ -186,8 +242,7 @@ class Tracker {
   std::map<int, StoredKeyframe> keyframes_;  // by frame index
   std::vector<int> keyframe_order_;
   KeyframeDatabase database_;
-  Frame* working_ = nullptr;         // the keyframe being added (SetLandmark updates it too)
-  int last_keyframe_landmarks_ = 0;  // landmarks the last keyframe holds
+  Frame* working_ = nullptr;  // the keyframe being added (SetLandmark updates it too)
   // Per frame: the keyframe a non-keyframe follows (-1: a keyframe or no pose) and its pose
   // relative to it; whether the frame is linked to the first frame's world.
   std::vector<int> keyframe_of_frame_;
