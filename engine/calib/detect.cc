@@ -408,6 +408,7 @@ BoardDetection NotFound(const BoardSpec& board, const std::string& last_reason) 
                                "sharp, and not washed out by glare; cols and rows count inner "
                                "corners"
                          : "rejected candidate: " + last_reason;
+  detection.candidate_rejected = !last_reason.empty();
   return detection;
 }
 

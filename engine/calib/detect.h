@@ -29,6 +29,9 @@ namespace omnirig {
 struct BoardDetection {
   bool found = false;
   std::string reason;  // why not found (empty when found)
+  // Not found, but a whole grid of the board's size was, and failed the checks (e.g. a sub-board
+  // of a larger board): the view does not show a partial board.
+  bool candidate_rejected = false;
   // Pixel positions (centre of the top-left pixel is (0, 0)) and the index of each corner in
   // BoardSpec::ObjectPoints().
   std::vector<Eigen::Vector2d> corners_px;

@@ -60,7 +60,9 @@ ProgressSink ScaledSink(const ProgressSink& progress, double from, double to) {
 // Reads each image and detects the board in it, on options.calibrate.num_threads threads
 // (images are independent; each worker holds one image at a time). The results are in input
 // order whatever the scheduling. With `linked`, a view missed without a hint also gets the
-// partial grids the model-based second pass will place (LinkPartialGrids), in (*linked)[i].
+// partial grids the model-based second pass will place (LinkPartialGrids), in (*linked)[i],
+// unless a whole grid was seen and rejected (a wrong board size, not a partial view: when every
+// view is so, no second pass follows; otherwise the second pass links it as before).
 std::vector<CalibrationView> DetectAll(const std::filesystem::path& dir,
                                        const std::vector<std::string>& names,
                                        const BoardSpec& board,
@@ -81,7 +83,8 @@ std::vector<CalibrationView> DetectAll(const std::filesystem::path& dir,
     const auto hint = options.hints.find(names[i]);
     if (hint != options.hints.end()) detect.outer_corners_hint_px = hint->second;
     views[i].detection = DetectBoard(image, board, detect);
-    if (linked && !views[i].detection.found && hint == options.hints.end()) {
+    if (linked && !views[i].detection.found && !views[i].detection.candidate_rejected &&
+        hint == options.hints.end()) {
       (*linked)[i] = LinkPartialGrids(image, board);
     }
   };
