@@ -517,7 +517,7 @@ void WriteDensePair(size_t k, const std::string& name, const dense::DensePairRes
 }
 
 // Pair k's files are written on a background thread while pair k + 1 is read and matched (the
-// writing, 0.08 CPU s per 1024x768 pair, runs on one thread, the matching on all: bench_dense).
+// writing, 0.09 CPU s per 1024x768 pair, runs on one thread, the matching on all: bench_dense).
 // At most one pair waits to be written; a failed write stops the job at the next pair, naming
 // the pair, and nothing is written twice.
 size_t RunDense(const StereoReconstructParams& parsed, const StereoRig& rig,

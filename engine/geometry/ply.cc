@@ -54,9 +54,9 @@ size_t VertexBytes(const PlyCloud& cloud) {
   return 15 + 4 * cloud.has_confidence + 4 * cloud.has_num_observations;
 }
 
-// Packs vertices [begin, end) into `out` (VertexBytes each). One memcpy of a fixed size per
-// value, into a buffer sized once: about 10x faster than appending value by value to a string
-// (0.08 s for a dense pair's 940,000 vertices, bench_dense).
+// Packs vertices [begin, end) into `out` (VertexBytes each), one memcpy of a fixed size per
+// value: appending value by value to a string made a dense pair's 940,000 vertices cost 0.083
+// CPU s to write; packed, the whole write costs 0.013 (bench_dense).
 void PackVertices(const PlyCloud& cloud, size_t begin, size_t end, char* out) {
   const size_t stride = VertexBytes(cloud);
   for (size_t i = begin; i < end; ++i, out += stride) {
