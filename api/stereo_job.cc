@@ -534,10 +534,10 @@ size_t RunDense(const StereoReconstructParams& parsed, const StereoRig& rig,
     const cv::Mat image1 = ReadImage(context, pairs[k].cam1);
     auto pair_result = std::make_shared<dense::DensePairResult>();
     try {
-      *pair_result = dense.Reconstruct(
-          image0, image1,
-          SubRange(context.progress, static_cast<double>(k) / pairs.size(),
-                   static_cast<double>(k + 1) / pairs.size()));
+      *pair_result =
+          dense.Reconstruct(image0, image1,
+                            SubRange(context.progress, static_cast<double>(k) / pairs.size(),
+                                     static_cast<double>(k + 1) / pairs.size()));
     } catch (const InvalidArgument& e) {
       throw InvalidArgument("pair '" + pairs[k].name + "': " + e.what());
     }

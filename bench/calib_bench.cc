@@ -495,8 +495,7 @@ void ProfileRealSets(const std::string& filter) {
       cv_views.push_back({name, theirs});
       std::printf("     %-18s %8.3f %8.3f %-14s %8.3f %8.3f %-12s %8.3f %-18s %8.3f %3s\n",
                   name.c_str(), cheap_s, unrefined_s, cheap.found ? cheap.method.c_str() : "-",
-                  link.second,
-                  grow.second,
+                  link.second, grow.second,
                   cheap.found ? "" : (grow.first.found ? "model-grown" : "-"), every_s,
                   every.found ? every.method.c_str() : "-", cv_s, theirs.found ? "yes" : "no");
     }
@@ -504,14 +503,16 @@ void ProfileRealSets(const std::string& filter) {
     cpu = ProcessCpuSeconds();
     const OmnidirResult omnidir = RunOmnidir(cv_views, board, width, height);
     const double cv_cpu = cv_cpu_total + ProcessCpuSeconds() - cpu;
-    std::printf("     sum (1 thread, CPU s): cheap %.2f (of which OpenCV's detector calls %.2f) "
-                "+ link %.2f + grow %.2f = %.2f; every variant %.2f; OpenCV %.2f\n",
-                cheap_total, unrefined_total, link_total, grow_total,
-                cheap_total + link_total + grow_total, every_total, cv_cpu_total);
-    std::printf("     OpenCV's detector calls in the pipeline (cheap without refinement + link): "
-                "%.2f CPU s, %.2f per 10 views, %.2f s wall per 10 views on 2 cores at best\n",
-                unrefined_total + link_total, 10.0 * (unrefined_total + link_total) / names.size(),
-                5.0 * (unrefined_total + link_total) / names.size());
+    std::printf(
+        "     sum (1 thread, CPU s): cheap %.2f (of which OpenCV's detector calls %.2f) "
+        "+ link %.2f + grow %.2f = %.2f; every variant %.2f; OpenCV %.2f\n",
+        cheap_total, unrefined_total, link_total, grow_total, cheap_total + link_total + grow_total,
+        every_total, cv_cpu_total);
+    std::printf(
+        "     OpenCV's detector calls in the pipeline (cheap without refinement + link): "
+        "%.2f CPU s, %.2f per 10 views, %.2f s wall per 10 views on 2 cores at best\n",
+        unrefined_total + link_total, 10.0 * (unrefined_total + link_total) / names.size(),
+        5.0 * (unrefined_total + link_total) / names.size());
     if (!failure.empty()) {
       std::printf("     omnirig failed: %s\n", failure.substr(0, 200).c_str());
       continue;

@@ -190,11 +190,11 @@ void RunJob(const synth::StereoSequence& sequence, int num_frames,
   const double cpu = CpuSeconds();
   const nlohmann::json result = api::RunStereoReconstructJob(params, context);
   const double s = Seconds(start), cpu_s = CpuSeconds() - cpu;
-  std::printf("omnirig stereo_reconstruct job, %d pairs%s: %.3f s/pair wall, %.3f CPU s/pair, "
-              "%zu points, artifact %s\n",
-              num_frames, merged ? " + cloud.ply of all (.tum)" : "", s / num_frames,
-              cpu_s / num_frames, result["num_points"].get<size_t>(),
-              result["artifact"].get<std::string>().c_str());
+  std::printf(
+      "omnirig stereo_reconstruct job, %d pairs%s: %.3f s/pair wall, %.3f CPU s/pair, "
+      "%zu points, artifact %s\n",
+      num_frames, merged ? " + cloud.ply of all (.tum)" : "", s / num_frames, cpu_s / num_frames,
+      result["num_points"].get<size_t>(), result["artifact"].get<std::string>().c_str());
   std::filesystem::remove_all(root);
 }
 

@@ -63,13 +63,10 @@ ProgressSink ScaledSink(const ProgressSink& progress, double from, double to) {
 // partial grids the model-based second pass will place (LinkPartialGrids), in (*linked)[i],
 // unless a whole grid was seen and rejected (a wrong board size, not a partial view: when every
 // view is so, no second pass follows; otherwise the second pass links it as before).
-std::vector<CalibrationView> DetectAll(const std::filesystem::path& dir,
-                                       const std::vector<std::string>& names,
-                                       const BoardSpec& board,
-                                       const ImageCalibrationOptions& options,
-                                       const DetectOptions& detect_options, int* width,
-                                       int* height, const ProgressSink& progress,
-                                       std::vector<std::optional<LinkedGrids>>* linked) {
+std::vector<CalibrationView> DetectAll(
+    const std::filesystem::path& dir, const std::vector<std::string>& names, const BoardSpec& board,
+    const ImageCalibrationOptions& options, const DetectOptions& detect_options, int* width,
+    int* height, const ProgressSink& progress, std::vector<std::optional<LinkedGrids>>* linked) {
   std::vector<CalibrationView> views(names.size());
   std::vector<cv::Size> sizes(names.size());
   if (linked) linked->assign(names.size(), std::nullopt);
@@ -206,8 +203,7 @@ bool DetectMissed(const std::filesystem::path& dir, const BoardSpec& board,
 // whether every variant has run.
 bool DetectFirstPass(const std::filesystem::path& dir, const std::vector<std::string>& names,
                      const BoardSpec& board, const ImageCalibrationOptions& options, int* width,
-                     int* height, const ProgressSink& progress,
-                     std::vector<CalibrationView>* views,
+                     int* height, const ProgressSink& progress, std::vector<CalibrationView>* views,
                      std::vector<std::optional<LinkedGrids>>* linked) {
   DetectOptions first_pass = options.detect;
   first_pass.try_costly_variants =
@@ -375,8 +371,8 @@ CalibrationReport CalibrateImages(const std::filesystem::path& dir,
       Calibrate(views, width, height, board, options.calibrate, ScaledSink(progress, 0.5, 0.8));
   timer.Restart();
   if (options.redetect_with_model &&
-      DetectMissed(dir, board, options, &report.camera, !every_variant_tried, width, height,
-                   linked, progress, &views)) {
+      DetectMissed(dir, board, options, &report.camera, !every_variant_tried, width, height, linked,
+                   progress, &views)) {
     const double redetect_s = timer.ElapsedSeconds();
     report =
         Calibrate(views, width, height, board, options.calibrate, ScaledSink(progress, 0.85, 0.95));

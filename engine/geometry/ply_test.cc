@@ -221,7 +221,8 @@ TEST(Ply, WrittenCloudReadsBackIdentically) {
   // The appender's parts (one across a chunk's seam) read back as the whole.
   const PlyCloud whole = RandomCloud(100000, true, false);
   PlyAppender appender(path);
-  for (const auto& [begin, end] : std::vector<std::pair<size_t, size_t>>{{0, 70000}, {70000, 100000}}) {
+  for (const auto& [begin, end] :
+       std::vector<std::pair<size_t, size_t>>{{0, 70000}, {70000, 100000}}) {
     PlyCloud part;
     part.comment = whole.comment;
     part.has_confidence = true;
