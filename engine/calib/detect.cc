@@ -408,7 +408,6 @@ BoardDetection NotFound(const BoardSpec& board, const std::string& last_reason) 
                                "sharp, and not washed out by glare; cols and rows count inner "
                                "corners"
                          : "rejected candidate: " + last_reason;
-  detection.candidate_rejected = !last_reason.empty();
   return detection;
 }
 
@@ -661,6 +660,13 @@ int PlacedId(const BoardSpec& board, int sub_cols, int sub_rows, int symmetry, i
   return row * board.cols + col;
 }
 
+// A partial grid of a view the detectors missed: its corners row by row, cols x rows.
+struct PartialGrid {
+  std::vector<Eigen::Vector2d> corners;
+  int cols = 0;
+  int rows = 0;
+};
+
 // A grid that OpenCV's sector-based detector links around a seed of seed x seed corners with
 // CALIB_CB_LARGER: e.g. 6 x 7 of KaidanOmni8's 7 x 11 corners, where the camera's reflection and
 // a hand hide the rest. The grid must fit on the board and hold at least 40 % of its corners.
@@ -684,18 +690,6 @@ std::optional<PartialGrid> FindLinkedGrid(const cv::Mat& image, int seed, const 
   }
   for (const auto& c : corners) grid.corners.emplace_back(c.x, c.y);
   return grid;
-}
-
-// RedetectWithModel's linking calls, in order: seeds of 4 x 4 and 3 x 3 corners on the plain and
-// the equalised image link different grids (bench_calib profile: one of them grows each view of
-// KaidanOmni the cheap detector attempts miss), at about 0.1 s CPU each on 640x480.
-constexpr int kNumLinkingCalls = 4;
-
-// Linking call k on `grey` (the equalised copy made once, on the first call that needs it).
-std::optional<PartialGrid> LinkingCall(const cv::Mat& grey, const BoardSpec& board, int k,
-                                       cv::Mat* equalised) {
-  if (k >= 2 && equalised->empty()) *equalised = EqualisedImage(grey).image;
-  return FindLinkedGrid(k < 2 ? grey : *equalised, k % 2 == 0 ? 4 : 3, board);
 }
 
 // Every placement of a partial grid on the board (its eight symmetries, every offset), scored by
@@ -816,41 +810,26 @@ BoardDetection DetectBoardFromPose(const cv::Mat& image, const BoardSpec& board,
 
 namespace omnirig {
 
-LinkedGrids LinkPartialGrids(const cv::Mat& image, const BoardSpec& board) {
-  board.Check();
-  OMNIRIG_CHECK(!image.empty(), "detect: empty image");
-  const cv::Mat grey = ToGreyscale8(image);
-  cv::Mat equalised;
-  LinkedGrids linked;
-  while (static_cast<int>(linked.attempts.size()) < kNumLinkingCalls) {
-    linked.attempts.push_back(
-        LinkingCall(grey, board, static_cast<int>(linked.attempts.size()), &equalised));
-    if (linked.attempts.back()) break;
-  }
-  return linked;
-}
-
 BoardDetection RedetectWithModel(const cv::Mat& image, const BoardSpec& board,
-                                 const CameraModel& model, const DetectOptions& options,
-                                 const LinkedGrids* linked) {
+                                 const CameraModel& model, const DetectOptions& options) {
   board.Check();
   options.Check();
   OMNIRIG_CHECK(!image.empty(), "detect: empty image");
   const cv::Mat grey = ToGreyscale8(image);
-  cv::Mat equalised;
-  std::pair<int, int> tried = {0, 0};  // the last grid placed on this image variant
-  for (int k = 0; k < kNumLinkingCalls; ++k) {
-    if (k == 2) tried = {0, 0};
-    const bool made = linked && k < static_cast<int>(linked->attempts.size());
-    const std::optional<PartialGrid> grid =
-        made ? linked->attempts[k] : LinkingCall(grey, board, k, &equalised);
-    // A seed of 3 that links the grid of 4 again would place it again.
-    if (!grid || std::make_pair(grid->cols, grid->rows) == tried) continue;
-    tried = {grid->cols, grid->rows};
-    BoardDetection detection = BestPlacement(grey, board, model, *grid, options);
-    if (detection.found) {
-      detection.method = "model-grown";
-      return detection;
+  // Seeds of 4 x 4 and 3 x 3 corners on the plain and the equalised image link different
+  // grids (bench_calib profile: one of the four grows each view of KaidanOmni the cheap
+  // detector attempts miss), at about 0.1 s CPU each on 640x480.
+  for (const DetectorImage& variant : {DetectorImage{grey, 1.0, ""}, EqualisedImage(grey)}) {
+    std::pair<int, int> tried = {0, 0};
+    for (const int seed : {4, 3}) {
+      const auto grid = FindLinkedGrid(variant.image, seed, board);
+      if (!grid || std::make_pair(grid->cols, grid->rows) == tried) continue;
+      tried = {grid->cols, grid->rows};
+      BoardDetection detection = BestPlacement(grey, board, model, *grid, options);
+      if (detection.found) {
+        detection.method = "model-grown";
+        return detection;
+      }
     }
   }
   BoardDetection detection;

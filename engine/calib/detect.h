@@ -29,9 +29,6 @@ namespace omnirig {
 struct BoardDetection {
   bool found = false;
   std::string reason;  // why not found (empty when found)
-  // Not found, but a whole grid of the board's size was, and failed the checks (e.g. a sub-board
-  // of a larger board): the view does not show a partial board.
-  bool candidate_rejected = false;
   // Pixel positions (centre of the top-left pixel is (0, 0)) and the index of each corner in
   // BoardSpec::ObjectPoints().
   std::vector<Eigen::Vector2d> corners_px;
@@ -90,38 +87,14 @@ struct DetectOptions {
 BoardDetection DetectBoard(const cv::Mat& image, const BoardSpec& board,
                            const DetectOptions& options);
 
-// A partial grid OpenCV's sector-based detector linked on a view: its corners row by row,
-// cols x rows.
-struct PartialGrid {
-  std::vector<Eigen::Vector2d> corners;
-  int cols = 0;
-  int rows = 0;
-};
-
-// The results of RedetectWithModel's linking calls (seeds of 4 and 3 corners on the image, then
-// on its contrast-equalised copy), in that order; attempts[k] is empty when call k linked no
-// usable grid (none, too small, or not fitting on the board).
-struct LinkedGrids {
-  std::vector<std::optional<PartialGrid>> attempts;
-};
-
-// RedetectWithModel's linking calls on `image` (they need no model) up to the first that links
-// a usable grid, the one it places first. CalibrateImages makes them in its first pass on each
-// view the detector missed, while it holds the image: they then share the threads with the
-// other views' detection instead of running in the second pass on the few missed views.
-LinkedGrids LinkPartialGrids(const cv::Mat& image, const BoardSpec& board);
-
 // The re-detection pass for views the automatic detector missed, once a model exists from
 // other views: takes the grid OpenCV's sector-based detector links around a small seed
 // (CALIB_CB_LARGER; at least 40 % of the board's corners), tries every placement and
 // orientation of it on the board, fits the board pose with the model, predicts every corner and
-// refines it, and keeps the placement that confirms the most corners; the next linking call's
-// grid when none confirms enough. Returns found = false with a reason otherwise. `linked`, when
-// given, holds the first linking calls' results (LinkPartialGrids on the same image and board):
-// only the calls beyond them are made, and the result is the same as without it.
+// refines it, and keeps the placement that confirms the most corners. Returns found = false with
+// a reason otherwise.
 BoardDetection RedetectWithModel(const cv::Mat& image, const BoardSpec& board,
-                                 const CameraModel& model, const DetectOptions& options,
-                                 const LinkedGrids* linked = nullptr);
+                                 const CameraModel& model, const DetectOptions& options);
 
 // Checks a full grid (corner id i at grid[i]): every corner inside the image, no collapsed
 // squares, and no sub-board of a larger pattern: beyond the board's outer squares, along the

@@ -59,17 +59,15 @@ ProgressSink ScaledSink(const ProgressSink& progress, double from, double to) {
 
 // Reads each image and detects the board in it, on options.calibrate.num_threads threads
 // (images are independent; each worker holds one image at a time). The results are in input
-// order whatever the scheduling. With `linked`, a view missed without a hint also gets the
-// partial grids the model-based second pass will place (LinkPartialGrids), in (*linked)[i],
-// unless a whole grid was seen and rejected (a wrong board size, not a partial view: when every
-// view is so, no second pass follows; otherwise the second pass links it as before).
-std::vector<CalibrationView> DetectAll(
-    const std::filesystem::path& dir, const std::vector<std::string>& names, const BoardSpec& board,
-    const ImageCalibrationOptions& options, const DetectOptions& detect_options, int* width,
-    int* height, const ProgressSink& progress, std::vector<std::optional<LinkedGrids>>* linked) {
+// order whatever the scheduling.
+std::vector<CalibrationView> DetectAll(const std::filesystem::path& dir,
+                                       const std::vector<std::string>& names,
+                                       const BoardSpec& board,
+                                       const ImageCalibrationOptions& options,
+                                       const DetectOptions& detect_options, int* width,
+                                       int* height, const ProgressSink& progress) {
   std::vector<CalibrationView> views(names.size());
   std::vector<cv::Size> sizes(names.size());
-  if (linked) linked->assign(names.size(), std::nullopt);
   auto detect_one = [&](int i, const ProgressSink& cancellation) {
     cancellation.ThrowIfCancelled();
     views[i].name = names[i];
@@ -80,10 +78,6 @@ std::vector<CalibrationView> DetectAll(
     const auto hint = options.hints.find(names[i]);
     if (hint != options.hints.end()) detect.outer_corners_hint_px = hint->second;
     views[i].detection = DetectBoard(image, board, detect);
-    if (linked && !views[i].detection.found && !views[i].detection.candidate_rejected &&
-        hint == options.hints.end()) {
-      (*linked)[i] = LinkPartialGrids(image, board);
-    }
   };
   size_t done = 0;
   RunTasks(static_cast<int>(names.size()), options.calibrate.num_threads, progress, detect_one,
@@ -149,8 +143,8 @@ std::string DescribeBoardSizeMismatch(const std::filesystem::path& dir,
 // when it found any.
 bool DetectMissed(const std::filesystem::path& dir, const BoardSpec& board,
                   const ImageCalibrationOptions& options, const CameraModel* model, bool detect,
-                  int width, int height, const std::vector<std::optional<LinkedGrids>>& linked,
-                  const ProgressSink& progress, std::vector<CalibrationView>* views) {
+                  int width, int height, const ProgressSink& progress,
+                  std::vector<CalibrationView>* views) {
   std::vector<int> missed;
   for (size_t i = 0; i < views->size(); ++i) {
     const CalibrationView& view = (*views)[i];
@@ -163,11 +157,7 @@ bool DetectMissed(const std::filesystem::path& dir, const BoardSpec& board,
         cv::imread((dir / (*views)[missed[k]].name).string(), cv::IMREAD_COLOR);
     if (image.empty() || image.cols != width || image.rows != height) return;
     BoardDetection detection;
-    if (model) {
-      const std::optional<LinkedGrids>& grids = linked[missed[k]];
-      detection =
-          RedetectWithModel(image, board, *model, options.detect, grids ? &*grids : nullptr);
-    }
+    if (model) detection = RedetectWithModel(image, board, *model, options.detect);
     if (!detection.found && detect) detection = DetectBoard(image, board, options.detect);
     if (model || detect) found[k] = std::move(detection);
   };
@@ -198,18 +188,15 @@ bool DetectMissed(const std::filesystem::path& dir, const BoardSpec& board,
 // The first pass: every image read and searched, leaving out the detector's costly variants when
 // a second pass with a model follows (growing a view's partial grid with the model of the other
 // views takes a tenth of their time, bench_calib profile); with too few views for a first model,
-// the costly variants then run on every view missed. With a second pass, each missed view's
-// partial grids are linked here (`linked`), so that the second pass only places them. Returns
-// whether every variant has run.
+// the costly variants then run on every view missed. Returns whether every variant has run.
 bool DetectFirstPass(const std::filesystem::path& dir, const std::vector<std::string>& names,
                      const BoardSpec& board, const ImageCalibrationOptions& options, int* width,
-                     int* height, const ProgressSink& progress, std::vector<CalibrationView>* views,
-                     std::vector<std::optional<LinkedGrids>>* linked) {
+                     int* height, const ProgressSink& progress,
+                     std::vector<CalibrationView>* views) {
   DetectOptions first_pass = options.detect;
   first_pass.try_costly_variants =
       options.detect.try_costly_variants && !options.redetect_with_model;
-  *views = DetectAll(dir, names, board, options, first_pass, width, height, progress,
-                     options.redetect_with_model ? linked : nullptr);
+  *views = DetectAll(dir, names, board, options, first_pass, width, height, progress);
   OMNIRIG_CHECK(*width > 0,
                 "calibration: none of the " << names.size() << " images could be read");
   if (first_pass.try_costly_variants == options.detect.try_costly_variants) return true;
@@ -217,7 +204,7 @@ bool DetectFirstPass(const std::filesystem::path& dir, const std::vector<std::st
       std::count_if(views->begin(), views->end(),
                     [](const CalibrationView& view) { return view.detection.found; }));
   if (num_found >= options.calibrate.min_views) return false;
-  DetectMissed(dir, board, options, nullptr, true, *width, *height, *linked, progress, views);
+  DetectMissed(dir, board, options, nullptr, true, *width, *height, progress, views);
   return true;
 }
 
@@ -353,9 +340,8 @@ CalibrationReport CalibrateImages(const std::filesystem::path& dir,
   int width = 0, height = 0;
   Timer timer;
   std::vector<CalibrationView> views;
-  std::vector<std::optional<LinkedGrids>> linked(names.size());
   const bool every_variant_tried =
-      DetectFirstPass(dir, names, board, options, &width, &height, progress, &views, &linked);
+      DetectFirstPass(dir, names, board, options, &width, &height, progress, &views);
   const double detect_s = timer.ElapsedSeconds();
   if (board.type == BoardSpec::Type::kCheckerboard && options.hints.empty() &&
       std::none_of(views.begin(), views.end(),
@@ -371,7 +357,7 @@ CalibrationReport CalibrateImages(const std::filesystem::path& dir,
       Calibrate(views, width, height, board, options.calibrate, ScaledSink(progress, 0.5, 0.8));
   timer.Restart();
   if (options.redetect_with_model &&
-      DetectMissed(dir, board, options, &report.camera, !every_variant_tried, width, height, linked,
+      DetectMissed(dir, board, options, &report.camera, !every_variant_tried, width, height,
                    progress, &views)) {
     const double redetect_s = timer.ElapsedSeconds();
     report =
