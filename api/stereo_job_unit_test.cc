@@ -4,6 +4,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -216,6 +217,29 @@ TEST_F(StereoJobTest, DenseWritesCloudsAndRangePanoramasAndFlagsBadPairs) {
   const std::string header((std::istreambuf_iterator<char>(ply)), std::istreambuf_iterator<char>());
   EXPECT_NE(header.find("property float confidence"), std::string::npos);
   EXPECT_EQ(last_fraction_, 1.0);
+}
+
+// Pair k's files are written while pair k + 1 is matched: a failed write stops the job with an
+// error naming the pair, and the next pair's files are not written.
+TEST_F(StereoJobTest, DenseWriteErrorNamesThePairAndStopsTheJob) {
+  for (const std::string name : {"a.png", "b.png", "c.png"}) {
+    AddImage("cam0/" + name, 320, 240);
+    AddImage("cam1/" + name, 320, 240);
+  }
+  std::filesystem::create_directories(context_.output_dir / "a_range.png");  // not writable
+  try {
+    RunStereoReconstructJob({{"rig", "rig"}}, context_);
+    ADD_FAILURE() << "expected the write error";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("pair 'a.png': cannot write"), std::string::npos)
+        << e.what();
+    EXPECT_NE(std::string(e.what()).find("a_range.png"), std::string::npos) << e.what();
+  }
+  EXPECT_TRUE(std::filesystem::exists(context_.output_dir / "a_range.tiff"));
+  EXPECT_FALSE(std::filesystem::exists(context_.output_dir / "cloud_a_png.ply"));
+  for (const char* file : {"b_range.tiff", "b_range.png", "cloud_b_png.ply", "c_range.tiff"}) {
+    EXPECT_FALSE(std::filesystem::exists(context_.output_dir / file)) << file;
+  }
 }
 
 // The InvalidArgument message of running the job, or "" when it does not throw one.

@@ -397,6 +397,34 @@ BoardDetection OpenCvDetect(const cv::Mat& image, const BoardSpec& board) {
 // Section "profile": every real image set, per image the time of omnirig's detector and of
 // OpenCV's, then the whole detect + calibrate (CalibrateImages, 2 threads, with its re-detection
 // pass) against OpenCV's detector + cv::omnidir on the same images: views, RMS, wall seconds.
+// The linking calls RedetectWithModel (engine/calib/detect.cc) makes on a missed view, in its
+// order (findChessboardCornersSB with CALIB_CB_LARGER around seeds of 4 and 3 corners, on the
+// image, then on its CLAHE-equalised copy) up to the first that links a grid it can place (one
+// that fits on the board and holds at least 40 % of its corners): OpenCV's share of the second
+// pass when that grid grows the view, as it does on every missed KaidanOmni view.
+int LinkingCallsUpToAUsableGrid(const cv::Mat& image, const BoardSpec& board) {
+  cv::Mat grey, equalised;
+  cv::cvtColor(image, grey, cv::COLOR_BGR2GRAY);
+  cv::createCLAHE(3.0, cv::Size(8, 8))->apply(grey, equalised);
+  int calls = 0;
+  for (const cv::Mat* variant : {&grey, &equalised}) {
+    for (const int seed : {4, 3}) {
+      ++calls;
+      std::vector<cv::Point2f> corners;
+      cv::Mat meta;
+      if (!cv::findChessboardCornersSB(*variant, cv::Size(seed, seed), corners,
+                                       cv::CALIB_CB_NORMALIZE_IMAGE | cv::CALIB_CB_LARGER, meta)) {
+        continue;
+      }
+      const bool usable = std::min(meta.cols, meta.rows) <= std::min(board.cols, board.rows) &&
+                          std::max(meta.cols, meta.rows) <= std::max(board.cols, board.rows) &&
+                          5 * meta.cols * meta.rows >= 2 * board.NumCorners();
+      if (usable) return calls;
+    }
+  }
+  return calls;
+}
+
 void ProfileRealSets(const std::string& filter) {
   // The environment's OMNIRIG_SOURCE_DIR (as the tests read it) wins over the build's, for a
   // worktree that is not beside ../shared.
@@ -447,15 +475,20 @@ void ProfileRealSets(const std::string& filter) {
     const double ours_wall = wall.ElapsedSeconds();
     const double ours_cpu = ProcessCpuSeconds() - cpu;
     // Per image, 1 thread, CPU seconds: CalibrateImages' first pass (the cheap detector
-    // attempts), its second pass on the views that missed (growing a partial grid with the
-    // model), DetectBoard with every variant (what a caller of the detector alone gets), and
-    // OpenCV's detector.
-    std::printf("     %-18s %8s %-14s %8s %-12s %8s %-18s %8s %3s\n", "image", "cheap_s", "method",
-                "grow_s", "method", "every_s", "method", "cv_s", "cv");
+    // attempts; "of_which": the same without the sub-pixel refinement, i.e. OpenCV's detector
+    // calls and the grid's validation), its second pass on the views that missed (growing a
+    // partial grid with the model; "link": OpenCV's linking calls in it), DetectBoard with every
+    // variant (what a caller of the detector alone gets), and OpenCV's detector.
+    std::printf("     %-18s %8s %8s %-14s %8s %8s %-12s %8s %-18s %8s %3s\n", "image", "cheap_s",
+                "of_which", "method", "link_s", "grow_s", "method", "every_s", "method", "cv_s",
+                "cv");
     DetectOptions cheap_options;
     cheap_options.try_costly_variants = false;
+    DetectOptions unrefined_options = cheap_options;
+    unrefined_options.refine_subpixel = false;
     std::vector<CalibrationView> cv_views;
-    double cheap_total = 0.0, grow_total = 0.0, every_total = 0.0, cv_cpu_total = 0.0;
+    double cheap_total = 0.0, unrefined_total = 0.0, link_total = 0.0, grow_total = 0.0,
+           every_total = 0.0, cv_cpu_total = 0.0;
     int width = 0, height = 0;
     auto timed = [](auto run, double* total) {
       const double start = ProcessCpuSeconds();
@@ -470,8 +503,13 @@ void ProfileRealSets(const std::string& filter) {
       height = image.rows;
       const auto [cheap, cheap_s] =
           timed([&] { return DetectBoard(image, board, cheap_options); }, &cheap_total);
+      const double unrefined_s =
+          timed([&] { return DetectBoard(image, board, unrefined_options); }, &unrefined_total)
+              .second;
+      std::pair<int, double> link;
       std::pair<BoardDetection, double> grow;
       if (!cheap.found && failure.empty()) {
+        link = timed([&] { return LinkingCallsUpToAUsableGrid(image, board); }, &link_total);
         grow = timed([&] { return RedetectWithModel(image, board, report.camera, DetectOptions()); },
                      &grow_total);
       }
@@ -479,8 +517,9 @@ void ProfileRealSets(const std::string& filter) {
           timed([&] { return DetectBoard(image, board, DetectOptions()); }, &every_total);
       const auto [theirs, cv_s] = timed([&] { return OpenCvDetect(image, board); }, &cv_cpu_total);
       cv_views.push_back({name, theirs});
-      std::printf("     %-18s %8.3f %-14s %8.3f %-12s %8.3f %-18s %8.3f %3s\n", name.c_str(),
-                  cheap_s, cheap.found ? cheap.method.c_str() : "-", grow.second,
+      std::printf("     %-18s %8.3f %8.3f %-14s %8.3f %8.3f %-12s %8.3f %-18s %8.3f %3s\n",
+                  name.c_str(), cheap_s, unrefined_s, cheap.found ? cheap.method.c_str() : "-",
+                  link.second, grow.second,
                   cheap.found ? "" : (grow.first.found ? "model-grown" : "-"), every_s,
                   every.found ? every.method.c_str() : "-", cv_s, theirs.found ? "yes" : "no");
     }
@@ -488,9 +527,17 @@ void ProfileRealSets(const std::string& filter) {
     cpu = ProcessCpuSeconds();
     const OmnidirResult omnidir = RunOmnidir(cv_views, board, width, height);
     const double cv_cpu = cv_cpu_total + ProcessCpuSeconds() - cpu;
-    std::printf("     sum (1 thread, CPU s): cheap %.2f + grow %.2f = %.2f; every variant %.2f; "
-                "OpenCV %.2f\n",
-                cheap_total, grow_total, cheap_total + grow_total, every_total, cv_cpu_total);
+    std::printf(
+        "     sum (1 thread, CPU s): cheap %.2f (of which OpenCV's detector calls %.2f) "
+        "+ grow %.2f (of which OpenCV's linking calls %.2f) = %.2f; every variant %.2f; OpenCV "
+        "%.2f\n",
+        cheap_total, unrefined_total, grow_total, link_total, cheap_total + grow_total,
+        every_total, cv_cpu_total);
+    std::printf(
+        "     OpenCV's detector calls in the pipeline (cheap without refinement + linking): "
+        "%.2f CPU s, %.2f per 10 views, %.2f s wall per 10 views on 2 cores at best\n",
+        unrefined_total + link_total, 10.0 * (unrefined_total + link_total) / names.size(),
+        5.0 * (unrefined_total + link_total) / names.size());
     if (!failure.empty()) {
       std::printf("     omnirig failed: %s\n", failure.substr(0, 200).c_str());
       continue;

@@ -12,8 +12,11 @@
 //
 // Per stage: process CPU seconds, taken at the engine's progress reports (rectify + masks, SGBM,
 // confidence, then the pair-level fit check + triangulation + panoramas), and the writing of the
-// job's artifacts (NAME_range.tiff, NAME_range.png, the pair's PLY, into a temporary folder) as
-// api/stereo_job.cc does it.
+// job's artifacts (NAME_range.tiff, NAME_range.png, the pair's PLY, into a temporary folder)
+// with the job's functions, here one after the other so that each stage's CPU is its own.
+// Then the stereo_reconstruct job itself (api/stereo_job.cc) on the same renders, end to end:
+// it reads the images and writes pair k's artifacts while it matches pair k + 1; once with the
+// pairs' own clouds, once with a .tum trajectory (cloud.ply of all pairs as well).
 //
 // --no-peer runs omnirig only (for profiling).
 //
@@ -36,10 +39,14 @@
 
 #include <opencv2/ccalib/omnidir.hpp>
 #include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
 
+#include "api/camera_json.h"
+#include "api/stereo_job.h"
 #include "engine/dense/dense_stereo.h"
 #include "engine/dense/range_io.h"
 #include "engine/geometry/ply.h"
+#include "engine/slam/map_io.h"
 #include "engine/slam/surface_distance.h"
 #include "engine/synth/presets.h"
 
@@ -143,6 +150,52 @@ std::vector<Eigen::Vector3d> PeerReconstruct(const PeerRig& peer, const cv::Mat&
     points.push_back(cam0_from_rect * Eigen::Vector3d(p[0], p[1], p[2]));
   }
   return points;
+}
+
+// The stereo_reconstruct job itself (api/stereo_job.cc) on the renders saved as PNG in a
+// temporary dataset: reading the images, matching, the result's figures and the artifacts
+// (NAME_range.tiff, NAME_range.png, cloud_NAME.ply; with `merged`, the dataset holds the true
+// trajectory as a .tum file and the job also writes cloud.ply of all pairs). The job writes pair
+// k's files while it matches pair k + 1. Prints wall and CPU seconds per pair.
+void RunJob(const synth::StereoSequence& sequence, int num_frames,
+            const dense::DenseStereoOptions& dense_options, bool merged) {
+  const std::filesystem::path root =
+      std::filesystem::temp_directory_path() / "omnirig_bench_dense_job";
+  std::filesystem::remove_all(root);
+  api::JobContext context;
+  context.dataset_dir = root / "data";
+  context.output_dir = root / "out";
+  for (const char* dir : {"data/cam0", "data/cam1", "out"}) {
+    std::filesystem::create_directories(root / dir);
+  }
+  std::vector<slam::StampedPose> poses;
+  for (int f = 0; f < num_frames; ++f) {
+    for (int c = 0; c < 2; ++c) {
+      const std::string name = "cam" + std::to_string(c) + "/" + sequence.names[f] + ".png";
+      cv::imwrite((context.dataset_dir / name).string(), sequence.images[c][f]);
+      context.image_names.push_back(name);
+    }
+    poses.push_back({static_cast<double>(f), sequence.world_from_rig[f]});
+  }
+  if (merged) {
+    slam::WriteTum(context.dataset_dir / "truth.tum", poses);
+    context.image_names.push_back("truth.tum");
+  }
+  std::sort(context.image_names.begin(), context.image_names.end());
+  const nlohmann::json rig = api::RigToJson(sequence.rig);
+  context.load_result = [&rig](const std::string&) { return rig; };
+  nlohmann::json params = api::DenseStereoOptionsToJson(dense_options);
+  params["rig"] = "rig";
+  const auto start = std::chrono::steady_clock::now();
+  const double cpu = CpuSeconds();
+  const nlohmann::json result = api::RunStereoReconstructJob(params, context);
+  const double s = Seconds(start), cpu_s = CpuSeconds() - cpu;
+  std::printf(
+      "omnirig stereo_reconstruct job, %d pairs%s: %.3f s/pair wall, %.3f CPU s/pair, "
+      "%zu points, artifact %s\n",
+      num_frames, merged ? " + cloud.ply of all (.tum)" : "", s / num_frames, cpu_s / num_frames,
+      result["num_points"].get<size_t>(), result["artifact"].get<std::string>().c_str());
+  std::filesystem::remove_all(root);
 }
 
 int Run(int num_frames, int threads, bool with_peer,
@@ -271,6 +324,9 @@ int Run(int num_frames, int threads, bool with_peer,
       "tables built once per rig in %.3f s (wall; %.4f s for the next job of the rig)\n",
       dense.rectifier().rows(), dense.rectifier().cols(), dense.rectifier().theta_step_rad(),
       dense.num_disparities(), setup_s, again_s);
+  std::printf("\n");
+  RunJob(sequence, num_frames, dense_options, false);
+  RunJob(sequence, num_frames, dense_options, true);
   return 0;
 }
 

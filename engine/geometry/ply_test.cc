@@ -2,10 +2,15 @@
 
 #include "engine/geometry/ply.h"
 
+#include <array>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
+#include <random>
 #include <sstream>
+#include <utility>
+#include <vector>
 
 #include <gtest/gtest.h>
 #include <unistd.h>
@@ -109,6 +114,126 @@ TEST(Ply, AppenderWritesWhatOneWriteWould) {
   other.Append(first);
   EXPECT_THROW(other.Append(TwoPoints()), InvalidArgument);  // without confidence
   std::filesystem::remove(path.string() + ".part");
+}
+
+// A reader of the header's declared properties, written apart from the writer: what a PLY
+// consumer would see. Reads float, uchar and int properties of one vertex element.
+PlyCloud ReadPly(const std::filesystem::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::string line;
+  std::getline(in, line);
+  EXPECT_EQ(line, "ply");
+  std::getline(in, line);
+  EXPECT_EQ(line, "format binary_little_endian 1.0");
+  PlyCloud cloud;
+  size_t count = 0;
+  std::vector<std::pair<std::string, std::string>> properties;  // (type, name)
+  while (std::getline(in, line) && line != "end_header") {
+    std::istringstream words(line);
+    std::string keyword, type, name;
+    words >> keyword;
+    if (keyword == "comment") cloud.comment = line.substr(8);
+    if (keyword == "element") words >> name >> count;
+    if (keyword == "property") {
+      words >> type >> name;
+      properties.emplace_back(type, name);
+    }
+  }
+  for (const auto& [type, name] : properties) {
+    cloud.has_confidence |= name == "confidence";
+    cloud.has_num_observations |= name == "num_observations";
+  }
+  std::vector<char> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  size_t at = 0;
+  const auto take = [&](size_t n, const char* what) {
+    std::array<uint8_t, 4> value{};
+    EXPECT_LE(at + n, bytes.size()) << what;
+    for (size_t k = 0; k < n && at + k < bytes.size(); ++k) {
+      value[k] = static_cast<uint8_t>(bytes[at + k]);
+    }
+    at += n;
+    return value;
+  };
+  for (size_t i = 0; i < count; ++i) {
+    Eigen::Vector3f position;
+    std::array<uint8_t, 3> colour{};
+    for (const auto& [type, name] : properties) {
+      const std::array<uint8_t, 4> b = take(type == "uchar" ? 1 : 4, name.c_str());
+      const uint32_t bits = b[0] | b[1] << 8 | b[2] << 16 | static_cast<uint32_t>(b[3]) << 24;
+      float as_float;
+      std::memcpy(&as_float, &bits, 4);
+      if (name == "x" || name == "y" || name == "z") position[name[0] - 'x'] = as_float;
+      if (name == "red" || name == "green" || name == "blue") {
+        colour[name == "red" ? 0 : name == "green" ? 1 : 2] = b[0];
+      }
+      if (name == "confidence") cloud.confidence.push_back(as_float);
+      if (name == "num_observations") {
+        cloud.num_observations.push_back(static_cast<int32_t>(bits));
+      }
+    }
+    cloud.positions.push_back(position);
+    cloud.colours.push_back(colour);
+  }
+  EXPECT_EQ(at, bytes.size()) << "bytes after the last vertex";
+  return cloud;
+}
+
+// More vertices than the writer packs at once (65,536), so that its chunks' seams are read too.
+PlyCloud RandomCloud(size_t count, bool with_confidence, bool with_observations) {
+  std::mt19937 random(7);
+  std::uniform_real_distribution<float> coordinate(-50.f, 50.f), unit(0.f, 1.f);
+  PlyCloud cloud;
+  cloud.comment = "random, metres";
+  cloud.has_confidence = with_confidence;
+  cloud.has_num_observations = with_observations;
+  for (size_t i = 0; i < count; ++i) {
+    cloud.positions.emplace_back(coordinate(random), coordinate(random), coordinate(random));
+    cloud.colours.push_back({static_cast<uint8_t>(random()), static_cast<uint8_t>(random()),
+                             static_cast<uint8_t>(random())});
+    if (with_confidence) cloud.confidence.push_back(unit(random));
+    if (with_observations) cloud.num_observations.push_back(static_cast<int32_t>(random()));
+  }
+  return cloud;
+}
+
+void ExpectSameCloud(const PlyCloud& read, const PlyCloud& written) {
+  EXPECT_EQ(read.comment, written.comment);
+  EXPECT_EQ(read.has_confidence, written.has_confidence);
+  EXPECT_EQ(read.has_num_observations, written.has_num_observations);
+  ASSERT_EQ(read.size(), written.size());
+  for (size_t i = 0; i < written.size(); ++i) {
+    ASSERT_EQ(read.positions[i], written.positions[i]) << "vertex " << i;  // bit for bit
+    ASSERT_EQ(read.colours[i], written.colours[i]) << "vertex " << i;
+  }
+  EXPECT_EQ(read.confidence, written.confidence);
+  EXPECT_EQ(read.num_observations, written.num_observations);
+}
+
+TEST(Ply, WrittenCloudReadsBackIdentically) {
+  const std::filesystem::path path = std::filesystem::temp_directory_path() /
+                                     ("omnirig_ply_back_" + std::to_string(::getpid()) + ".ply");
+  for (const auto& [confidence, observations] :
+       std::vector<std::pair<bool, bool>>{{true, false}, {false, true}, {false, false}}) {
+    const PlyCloud cloud = RandomCloud(150000, confidence, observations);
+    WritePly(path, cloud);
+    ExpectSameCloud(ReadPly(path), cloud);
+  }
+  // The appender's parts (one across a chunk's seam) read back as the whole.
+  const PlyCloud whole = RandomCloud(100000, true, false);
+  PlyAppender appender(path);
+  for (const auto& [begin, end] :
+       std::vector<std::pair<size_t, size_t>>{{0, 70000}, {70000, 100000}}) {
+    PlyCloud part;
+    part.comment = whole.comment;
+    part.has_confidence = true;
+    part.positions.assign(whole.positions.begin() + begin, whole.positions.begin() + end);
+    part.colours.assign(whole.colours.begin() + begin, whole.colours.begin() + end);
+    part.confidence.assign(whole.confidence.begin() + begin, whole.confidence.begin() + end);
+    appender.Append(part);
+  }
+  appender.Finish();
+  ExpectSameCloud(ReadPly(path), whole);
+  std::filesystem::remove(path);
 }
 
 TEST(Ply, EmptyCloudDeclaresItsProperties) {
