@@ -612,14 +612,12 @@ SlamInput PrepareImageInput(const StereoRig& rig, const fs::path& dataset_dir,
                   {"num_frames", input.names.size()},
                   {"num_image_pairs", all.names.size()}};
   input.load = [sequence, dataset_dir](int i) {
-    slam::StereoImages images;
-    cv::Mat* targets[2] = {&images.cam0, &images.cam1};
-    const std::string* names[2] = {&sequence->cam0[i], &sequence->cam1[i]};
-    for (int c = 0; c < 2; ++c) {
-      *targets[c] = cv::imread((dataset_dir / *names[c]).string(), cv::IMREAD_COLOR);
-      OMNIRIG_CHECK(!targets[c]->empty(), "image " << *names[c] << " cannot be read");
-    }
-    return images;
+    return slam::ReadBoth([&](int c) {
+      const std::string& name = c == 0 ? sequence->cam0[i] : sequence->cam1[i];
+      cv::Mat image = cv::imread((dataset_dir / name).string(), cv::IMREAD_COLOR);
+      OMNIRIG_CHECK(!image.empty(), "image " << name << " cannot be read");
+      return image;
+    });
   };
   return input;
 }

@@ -378,9 +378,10 @@ int RunLoopBench(int argc, char** argv) {
   const fs::path dir(args.dir);
   auto load = [&](int i) {
     if (i % std::max(1, n / 10) == 0 || i == n - 1) memory.push_back({i, ResidentMegabytes()});
-    return slam::StereoImages{
-        cv::imread((dir / "cam0" / (names[i] + ".png")).string(), cv::IMREAD_COLOR),
-        cv::imread((dir / "cam1" / (names[i] + ".png")).string(), cv::IMREAD_COLOR)};
+    return slam::ReadBoth([&](int c) {
+      return cv::imread((dir / ("cam" + std::to_string(c)) / (names[i] + ".png")).string(),
+                        cv::IMREAD_COLOR);
+    });
   };
   slam::SlamOptions options;
   options.num_threads = args.threads;

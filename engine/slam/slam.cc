@@ -72,6 +72,14 @@ void StageTimes::Add(const StageTimes& o) {
   loop_s += o.loop_s;
 }
 
+StereoImages ReadBoth(const std::function<cv::Mat(int camera)>& read) {
+  std::future<cv::Mat> cam1 = std::async(std::launch::async, read, 1);
+  StereoImages images;
+  images.cam0 = read(0);  // on a throw, `cam1`'s destructor waits for the other read
+  images.cam1 = cam1.get();
+  return images;
+}
+
 SlamResult RunSlam(const StereoRig& rig, const std::vector<std::string>& frame_names,
                    const StereoFrameLoader& load, const SlamOptions& options,
                    const ProgressSink& progress) {

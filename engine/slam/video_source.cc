@@ -229,9 +229,8 @@ StereoImages StereoVideoReader::Load(int k) {
     images.cam1 = both.rowRange(both.rows / 2, both.rows);
     return images;
   }
-  images.cam0 = ReadFrame(0, frame.index[0]);
-  images.cam1 = ReadFrame(1, frame.index[1]);
-  return images;
+  // Two videos are two decoders: each camera's frame is read on its own thread.
+  return ReadBoth([&](int c) { return ReadFrame(c, frame.index[c]); });
 }
 
 }  // namespace omnirig::slam
