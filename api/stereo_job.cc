@@ -17,6 +17,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "api/camera_json.h"
+#include "api/json_fields.h"
 #include "api/relpose_job.h"
 #include "engine/dense/range_io.h"
 #include "engine/geometry/ply.h"
@@ -61,24 +62,6 @@ const std::set<std::string> kDenseFields = {"grid_step_rad",
 // a bad pair (dark, blurred, out of sync): the room renders give about 0.8, a pair with one
 // image shifted by 4 px about 0.3.
 constexpr double kFewConfidentFraction = 0.5;
-
-double Number(const json& params, const std::string& key) {
-  OMNIRIG_CHECK(params[key].is_number(), "field 'params." << key << "' must be a number");
-  return params[key].get<double>();
-}
-
-int Integer(const json& params, const std::string& key) {
-  OMNIRIG_CHECK(params[key].is_number_integer(), "field 'params." << key << "' must be an integer");
-  return params[key].get<int>();
-}
-
-void ReadNumber(const json& params, const std::string& key, double* value) {
-  if (params.contains(key)) *value = Number(params, key);
-}
-
-void ReadInteger(const json& params, const std::string& key, int* value) {
-  if (params.contains(key)) *value = Integer(params, key);
-}
 
 StereoRig LoadRig(const JobContext& context, const std::string& job_id) {
   OMNIRIG_CHECK(static_cast<bool>(context.load_result),
@@ -135,40 +118,36 @@ namespace {
 
 void ReadSparseOptions(const json& params, StereoReconstructOptions* options) {
   StereoReconstructOptions& o = *options;
-  ReadInteger(params, "max_features", &o.max_features);
-  ReadNumber(params, "ratio_test", &o.ratio_test);
-  ReadNumber(params, "max_epipolar_error_rad", &o.max_epipolar_error_rad);
-  if (params.contains("mutual_check")) {
-    OMNIRIG_CHECK(params["mutual_check"].is_boolean(),
-                  "field 'params.mutual_check' must be true or false");
-    o.mutual_check = params["mutual_check"].get<bool>();
-  }
-  ReadNumber(params, "min_parallax_rad", &o.min_parallax_rad);
-  ReadNumber(params, "max_reprojection_error_rad", &o.max_reprojection_error_rad);
-  ReadNumber(params, "keypoint_std_px", &o.keypoint_std_px);
-  ReadNumber(params, "max_relative_range_std", &o.max_relative_range_std);
-  ReadNumber(params, "dark_level", &o.dark_level);
-  ReadInteger(params, "mask_margin_px", &o.mask_margin_px);
+  ReadInteger(params, "params", "max_features", &o.max_features);
+  ReadNumber(params, "params", "ratio_test", &o.ratio_test);
+  ReadNumber(params, "params", "max_epipolar_error_rad", &o.max_epipolar_error_rad);
+  ReadBool(params, "params", "mutual_check", &o.mutual_check);
+  ReadNumber(params, "params", "min_parallax_rad", &o.min_parallax_rad);
+  ReadNumber(params, "params", "max_reprojection_error_rad", &o.max_reprojection_error_rad);
+  ReadNumber(params, "params", "keypoint_std_px", &o.keypoint_std_px);
+  ReadNumber(params, "params", "max_relative_range_std", &o.max_relative_range_std);
+  ReadNumber(params, "params", "dark_level", &o.dark_level);
+  ReadInteger(params, "params", "mask_margin_px", &o.mask_margin_px);
   o.Check();
 }
 
 void ReadDenseOptions(const json& params, dense::DenseStereoOptions* options) {
   dense::DenseStereoOptions& o = *options;
-  ReadNumber(params, "grid_step_rad", &o.grid.step_rad);
-  ReadNumber(params, "max_parallax_deg", &o.max_parallax_deg);
-  ReadInteger(params, "block_size", &o.block_size);
-  ReadInteger(params, "uniqueness_ratio", &o.uniqueness_ratio);
-  ReadInteger(params, "speckle_window_cells", &o.speckle_window_cells);
-  ReadInteger(params, "speckle_range_cells", &o.speckle_range_cells);
-  ReadInteger(params, "left_right_max_diff_cells", &o.left_right_max_diff_cells);
-  ReadInteger(params, "confidence_window_cells", &o.confidence_window_cells);
-  ReadNumber(params, "image_noise_grey", &o.image_noise_grey);
-  ReadNumber(params, "min_confidence", &o.min_confidence);
-  ReadNumber(params, "disparity_std_cells", &o.disparity_std_cells);
-  ReadNumber(params, "max_relative_range_std", &o.max_relative_range_std);
-  ReadNumber(params, "dark_level", &o.dark_level);
-  ReadInteger(params, "mask_margin_cells", &o.mask_margin_cells);
-  ReadNumber(params, "max_epipolar_offset_cells", &o.max_epipolar_offset_cells);
+  ReadNumber(params, "params", "grid_step_rad", &o.grid.step_rad);
+  ReadNumber(params, "params", "max_parallax_deg", &o.max_parallax_deg);
+  ReadInteger(params, "params", "block_size", &o.block_size);
+  ReadInteger(params, "params", "uniqueness_ratio", &o.uniqueness_ratio);
+  ReadInteger(params, "params", "speckle_window_cells", &o.speckle_window_cells);
+  ReadInteger(params, "params", "speckle_range_cells", &o.speckle_range_cells);
+  ReadInteger(params, "params", "left_right_max_diff_cells", &o.left_right_max_diff_cells);
+  ReadInteger(params, "params", "confidence_window_cells", &o.confidence_window_cells);
+  ReadNumber(params, "params", "image_noise_grey", &o.image_noise_grey);
+  ReadNumber(params, "params", "min_confidence", &o.min_confidence);
+  ReadNumber(params, "params", "disparity_std_cells", &o.disparity_std_cells);
+  ReadNumber(params, "params", "max_relative_range_std", &o.max_relative_range_std);
+  ReadNumber(params, "params", "dark_level", &o.dark_level);
+  ReadInteger(params, "params", "mask_margin_cells", &o.mask_margin_cells);
+  ReadNumber(params, "params", "max_epipolar_offset_cells", &o.max_epipolar_offset_cells);
   o.Check();
 }
 
