@@ -56,4 +56,26 @@ void ReadBool(const json& object, const std::string& path, const std::string& ke
   if (object.contains(key)) *value = BoolField(object, path, key);
 }
 
+std::set<std::string> KeysOf(const OptionTable& table) {
+  std::set<std::string> keys;
+  for (const OptionField& field : table) keys.insert(field.key);
+  return keys;
+}
+
+void ReadOptions(const json& object, const std::string& path, const OptionTable& table) {
+  for (const OptionField& field : table) {
+    if (auto* d = std::get_if<double*>(&field.value)) ReadNumber(object, path, field.key, *d);
+    if (auto* i = std::get_if<int*>(&field.value)) ReadInteger(object, path, field.key, *i);
+    if (auto* b = std::get_if<bool*>(&field.value)) ReadBool(object, path, field.key, *b);
+  }
+}
+
+json OptionsToJson(const OptionTable& table) {
+  json out = json::object();
+  for (const OptionField& field : table) {
+    std::visit([&](auto* value) { out[field.key] = *value; }, field.value);
+  }
+  return out;
+}
+
 }  // namespace omnirig::api

@@ -6,6 +6,8 @@
 
 #include <set>
 #include <string>
+#include <variant>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -27,5 +29,18 @@ void ReadInteger(const nlohmann::json& object, const std::string& path, const st
                  int* value);
 void ReadBool(const nlohmann::json& object, const std::string& path, const std::string& key,
               bool* value);
+
+// One tunable of an options struct: its JSON key and where it lives in one instance. A table of
+// these is at once the options' known keys, their reader and their echo in a job's result.
+struct OptionField {
+  std::string key;
+  std::variant<double*, int*, bool*> value;
+};
+using OptionTable = std::vector<OptionField>;
+
+std::set<std::string> KeysOf(const OptionTable& table);
+// Reads each field of table that object holds, in the table's order, with the messages above.
+void ReadOptions(const nlohmann::json& object, const std::string& path, const OptionTable& table);
+nlohmann::json OptionsToJson(const OptionTable& table);
 
 }  // namespace omnirig::api
