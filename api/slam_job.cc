@@ -27,13 +27,6 @@ namespace {
 using nlohmann::json;
 namespace fs = std::filesystem;
 
-const std::set<std::string> kOptionFields = {
-    "max_features", "contrast_threshold", "detection_scale", "max_epipolar_error_rad",
-    "temporal_max_descriptor_ratio", "temporal_gate_rad", "essential_max_angular_error_rad",
-    "local_window_frames", "local_max_iterations", "global_bundle_adjustment", "huber_scale_px",
-    "max_reprojection_error_px", "min_features", "min_stereo_points", "min_matches",
-    "min_tracked_landmarks", "seed", "refine_calibration", "fixed_intrinsics"};
-
 // Width and height from a PNG's IHDR or a JPEG's SOF marker, without decoding the pixels;
 // nullopt for other formats.
 std::optional<std::pair<int, int>> SizeFromHeader(const fs::path& path) {
@@ -231,23 +224,30 @@ slam::CalibrationRefinement CalibrationRefinementFromJson(const json& value) {
 }
 
 slam::SlamOptions SlamOptionsFromJson(const json& object) {
-  CheckKnownFields(object, "options", kOptionFields);
   slam::SlamOptions o;
+  // The plain tunables; seed, refine_calibration and fixed_intrinsics are read below.
+  const OptionTable table = {
+      {"max_features", &o.features.max_features},
+      {"contrast_threshold", &o.features.contrast_threshold},
+      {"detection_scale", &o.features.detection_scale},
+      {"max_epipolar_error_rad", &o.stereo.max_epipolar_error_rad},
+      {"temporal_max_descriptor_ratio", &o.temporal_max_descriptor_ratio},
+      {"temporal_gate_rad", &o.temporal_gate_rad},
+      {"essential_max_angular_error_rad", &o.essential.max_angular_error_rad},
+      {"local_window_frames", &o.local_window_frames},
+      {"local_max_iterations", &o.local_max_iterations},
+      {"global_bundle_adjustment", &o.global_bundle_adjustment},
+      {"huber_scale_px", &o.bundle_adjustment.huber_scale_px},
+      {"max_reprojection_error_px", &o.bundle_adjustment.max_reprojection_error_px},
+      {"min_features", &o.min_features},
+      {"min_stereo_points", &o.min_stereo_points},
+      {"min_matches", &o.min_matches},
+      {"min_tracked_landmarks", &o.min_tracked_landmarks}};
+  std::set<std::string> known = KeysOf(table);
+  known.insert({"seed", "refine_calibration", "fixed_intrinsics"});
+  CheckKnownFields(object, "options", known);
+  ReadOptions(object, "options", table);
   auto has = [&](const char* key) { return object.contains(key); };
-  ReadInteger(object, "options", "max_features", &o.features.max_features);
-  ReadNumber(object, "options", "contrast_threshold", &o.features.contrast_threshold);
-  ReadNumber(object, "options", "detection_scale", &o.features.detection_scale);
-  ReadNumber(object, "options", "max_epipolar_error_rad", &o.stereo.max_epipolar_error_rad);
-  ReadNumber(object, "options", "temporal_max_descriptor_ratio", &o.temporal_max_descriptor_ratio);
-  ReadNumber(object, "options", "temporal_gate_rad", &o.temporal_gate_rad);
-  ReadNumber(object, "options", "essential_max_angular_error_rad",
-             &o.essential.max_angular_error_rad);
-  ReadInteger(object, "options", "local_window_frames", &o.local_window_frames);
-  ReadInteger(object, "options", "local_max_iterations", &o.local_max_iterations);
-  ReadBool(object, "options", "global_bundle_adjustment", &o.global_bundle_adjustment);
-  ReadNumber(object, "options", "huber_scale_px", &o.bundle_adjustment.huber_scale_px);
-  ReadNumber(object, "options", "max_reprojection_error_px",
-             &o.bundle_adjustment.max_reprojection_error_px);
   if (has("refine_calibration")) {
     o.calibration_refinement.refine = CalibrationRefinementFromJson(object["refine_calibration"]);
   }
@@ -255,10 +255,6 @@ slam::SlamOptions SlamOptionsFromJson(const json& object) {
     o.calibration_refinement.fixed_intrinsics =
         FixedIntrinsicsFromJson(object["fixed_intrinsics"], "options.fixed_intrinsics");
   }
-  ReadInteger(object, "options", "min_features", &o.min_features);
-  ReadInteger(object, "options", "min_stereo_points", &o.min_stereo_points);
-  ReadInteger(object, "options", "min_matches", &o.min_matches);
-  ReadInteger(object, "options", "min_tracked_landmarks", &o.min_tracked_landmarks);
   if (has("seed")) {
     OMNIRIG_CHECK(object["seed"].is_number_unsigned() || object["seed"].is_number_integer(),
                   "field 'options.seed' must be a non-negative integer");
