@@ -7,6 +7,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "api/camera_json.h"
+#include "api/json_fields.h"
 #include "api/job_types.h"
 #include "engine/calib/coverage.h"
 #include "engine/calib/model_io.h"
@@ -23,17 +24,6 @@ void RequireObject(const json& value, const std::string& path,
   for (const auto& [key, unused] : value.items()) {
     OMNIRIG_CHECK(allowed.count(key), "unknown field '" << path << "." << key << "'");
   }
-}
-
-double GetNumber(const json& object, const std::string& key, const std::string& path,
-                 double fallback, bool required = false) {
-  const auto it = object.find(key);
-  if (it == object.end()) {
-    OMNIRIG_CHECK(!required, "missing field '" << path << "." << key << "'");
-    return fallback;
-  }
-  OMNIRIG_CHECK(it->is_number(), "field '" << path << "." << key << "' must be a number");
-  return it->get<double>();
 }
 
 int GetInt(const json& object, const std::string& key, const std::string& path, int fallback,
@@ -95,11 +85,11 @@ ImageCalibrationOptions OptionsFromJson(const json& options) {
   ApplyFixList(options, "fix", true, &c);
   ApplyFixList(options, "free", false, &c);
   const std::string p = "options";
-  c.huber_loss_px = GetNumber(options, "huber_loss_px", p, c.huber_loss_px);
-  c.outlier_sigmas = GetNumber(options, "outlier_sigmas", p, c.outlier_sigmas);
-  c.min_outlier_px = GetNumber(options, "min_outlier_px", p, c.min_outlier_px);
+  ReadNumber(options, p, "huber_loss_px", &c.huber_loss_px);
+  ReadNumber(options, p, "outlier_sigmas", &c.outlier_sigmas);
+  ReadNumber(options, p, "min_outlier_px", &c.min_outlier_px);
   c.max_rejection_rounds = GetInt(options, "max_rejection_rounds", p, c.max_rejection_rounds);
-  c.max_view_rms_px = GetNumber(options, "max_view_rms_px", p, c.max_view_rms_px);
+  ReadNumber(options, p, "max_view_rms_px", &c.max_view_rms_px);
   c.min_corners_per_view = GetInt(options, "min_corners_per_view", p, c.min_corners_per_view);
   c.min_views = GetInt(options, "min_views", p, c.min_views);
   c.max_num_iterations = GetInt(options, "max_num_iterations", p, c.max_num_iterations);
@@ -114,7 +104,7 @@ ImageCalibrationOptions OptionsFromJson(const json& options) {
   out.detect.try_enhanced = GetBool(options, "try_enhanced", p, true);
   out.detect.allow_exhaustive = GetBool(options, "allow_exhaustive", p, false);
   out.redetect_with_model = GetBool(options, "redetect", p, true);
-  out.overlay_error_scale = GetNumber(options, "overlay_error_scale", p, out.overlay_error_scale);
+  ReadNumber(options, p, "overlay_error_scale", &out.overlay_error_scale);
   return out;
 }
 
@@ -141,18 +131,17 @@ SvpOptions SvpFromJson(const json& svp) {
     const json& mirror = svp["mirror"];
     RequireObject(mirror, "svp.mirror", {"rim_radius_mm", "rim_height_mm"});
     MirrorRim rim;
-    rim.rim_radius_m = GetNumber(mirror, "rim_radius_mm", "svp.mirror", 0.0, true) * 1e-3;
-    rim.rim_height_m = GetNumber(mirror, "rim_height_mm", "svp.mirror", 0.0, true) * 1e-3;
+    rim.rim_radius_m = NumberField(mirror, "svp.mirror", "rim_radius_mm") * 1e-3;
+    rim.rim_height_m = NumberField(mirror, "svp.mirror", "rim_height_mm") * 1e-3;
     out.mirror = rim;
   }
   if (svp.contains("image")) {
     OMNIRIG_CHECK(svp["image"].is_string(), "field 'svp.image' must be a string");
     out.image = svp["image"].get<std::string>();
   }
-  out.check.search_margin_px =
-      GetNumber(svp, "search_margin_px", "svp", out.check.search_margin_px);
+  ReadNumber(svp, "svp", "search_margin_px", &out.check.search_margin_px);
   out.check.num_profiles = GetInt(svp, "num_profiles", "svp", out.check.num_profiles);
-  out.check.inlier_px = GetNumber(svp, "inlier_px", "svp", out.check.inlier_px);
+  ReadNumber(svp, "svp", "inlier_px", &out.check.inlier_px);
   try {
     out.Check();
   } catch (const InvalidArgument& e) {
@@ -214,9 +203,10 @@ BoardSpec BoardFromJson(const json& board) {
   }
   spec.cols = GetInt(board, "cols", "board", 0, true);
   spec.rows = GetInt(board, "rows", "board", 0, true);
-  spec.square_size_m = GetNumber(board, "square_size_mm", "board", 0.0, true) * 1e-3;
+  spec.square_size_m = NumberField(board, "board", "square_size_mm") * 1e-3;
   const bool charuco = spec.type == BoardSpec::Type::kCharuco;
-  spec.marker_size_m = GetNumber(board, "marker_size_mm", "board", 0.0, charuco) * 1e-3;
+  const bool has_marker = charuco || board.contains("marker_size_mm");
+  spec.marker_size_m = has_marker ? NumberField(board, "board", "marker_size_mm") * 1e-3 : 0.0;
   spec.aruco_dictionary = GetInt(board, "aruco_dictionary", "board", 0);
   try {
     spec.Check();

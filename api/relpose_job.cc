@@ -4,13 +4,13 @@
 #include <array>
 #include <cmath>
 #include <map>
-#include <set>
 #include <sstream>
 
 #include <opencv2/imgcodecs.hpp>
 
 #include "api/calibration_job.h"
 #include "api/camera_json.h"
+#include "api/json_fields.h"
 #include "engine/calib/calibrate.h"
 #include "engine/calib/detect.h"
 #include "engine/util/check.h"
@@ -19,32 +19,6 @@ namespace omnirig::api {
 namespace {
 
 using nlohmann::json;
-
-void CheckKnownFields(const json& object, const std::string& where,
-                      const std::set<std::string>& known) {
-  OMNIRIG_CHECK(object.is_object(), "'" << where << "' must be a JSON object");
-  for (const auto& [key, value] : object.items()) {
-    OMNIRIG_CHECK(known.count(key) > 0, "unknown field '" << where << "." << key << "'");
-  }
-}
-
-double NumberField(const json& object, const std::string& where, const std::string& key) {
-  OMNIRIG_CHECK(object.contains(key), "missing field '" << where << "." << key << "'");
-  OMNIRIG_CHECK(object[key].is_number(), "field '" << where << "." << key << "' must be a number");
-  return object[key].get<double>();
-}
-
-int IntField(const json& object, const std::string& where, const std::string& key) {
-  OMNIRIG_CHECK(object.contains(key), "missing field '" << where << "." << key << "'");
-  OMNIRIG_CHECK(object[key].is_number_integer(),
-                "field '" << where << "." << key << "' must be an integer");
-  return object[key].get<int>();
-}
-
-bool BoolField(const json& object, const std::string& key) {
-  OMNIRIG_CHECK(object[key].is_boolean(), "field 'params." << key << "' must be true or false");
-  return object[key].get<bool>();
-}
 
 std::string JobIdField(const json& calibrations, const std::string& camera) {
   OMNIRIG_CHECK(calibrations.contains(camera),
@@ -106,9 +80,7 @@ RelativePoseParams RelativePoseParamsFromJson(const json& params) {
   // over three seeds against -0.015 +- 0.03 % when refined); keep given calibrations as they
   // are.
   out.options.refine_intrinsics = !out.cam0_calibration_job.has_value();
-  if (params.contains("refine_intrinsics")) {
-    out.options.refine_intrinsics = BoolField(params, "refine_intrinsics");
-  }
+  ReadBool(params, "params", "refine_intrinsics", &out.options.refine_intrinsics);
   if (params.contains("fixed_intrinsics")) {
     out.options.fixed_intrinsics =
         FixedIntrinsicsFromJson(params["fixed_intrinsics"], "params.fixed_intrinsics");
@@ -126,15 +98,9 @@ RelativePoseParams RelativePoseParamsFromJson(const json& params) {
       out.options.cam1_fixed_intrinsics = model.cam1_joint_fixed;
     }
   }
-  if (params.contains("resolve_corner_order")) {
-    out.options.resolve_corner_order = BoolField(params, "resolve_corner_order");
-  }
-  if (params.contains("huber_loss_px")) {
-    out.options.huber_loss_px = NumberField(params, "params", "huber_loss_px");
-  }
-  if (params.contains("max_num_iterations")) {
-    out.options.max_num_iterations = IntField(params, "params", "max_num_iterations");
-  }
+  ReadBool(params, "params", "resolve_corner_order", &out.options.resolve_corner_order);
+  ReadNumber(params, "params", "huber_loss_px", &out.options.huber_loss_px);
+  ReadInteger(params, "params", "max_num_iterations", &out.options.max_num_iterations);
   if (params.contains("sync_false_alarm_rate")) {
     const double rate = NumberField(params, "params", "sync_false_alarm_rate");
     OMNIRIG_CHECK(rate >= 0.0 && rate < 1.0,

@@ -13,6 +13,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "api/camera_json.h"
+#include "api/json_fields.h"
 #include "api/stereo_job.h"
 #include "engine/calib/calibrate.h"
 #include "engine/geometry/ply.h"
@@ -25,24 +26,6 @@ namespace {
 
 using nlohmann::json;
 namespace fs = std::filesystem;
-
-const std::set<std::string> kOptionFields = {
-    "max_features", "contrast_threshold", "detection_scale", "max_epipolar_error_rad",
-    "temporal_max_descriptor_ratio", "temporal_gate_rad", "essential_max_angular_error_rad",
-    "local_window_frames", "local_max_iterations", "global_bundle_adjustment", "huber_scale_px",
-    "max_reprojection_error_px", "min_features", "min_stereo_points", "min_matches",
-    "min_tracked_landmarks", "seed", "refine_calibration", "fixed_intrinsics"};
-
-double Number(const json& object, const std::string& key) {
-  OMNIRIG_CHECK(object[key].is_number(), "field 'options." << key << "' must be a number");
-  return object[key].get<double>();
-}
-
-int Integer(const json& object, const std::string& key) {
-  OMNIRIG_CHECK(object[key].is_number_integer(),
-                "field 'options." << key << "' must be an integer");
-  return object[key].get<int>();
-}
 
 // Width and height from a PNG's IHDR or a JPEG's SOF marker, without decoding the pixels;
 // nullopt for other formats.
@@ -241,34 +224,30 @@ slam::CalibrationRefinement CalibrationRefinementFromJson(const json& value) {
 }
 
 slam::SlamOptions SlamOptionsFromJson(const json& object) {
-  OMNIRIG_CHECK(object.is_object(), "'options' must be a JSON object");
-  for (const auto& [key, value] : object.items()) {
-    OMNIRIG_CHECK(kOptionFields.count(key) > 0, "unknown field 'options." << key << "'");
-  }
   slam::SlamOptions o;
+  // The plain tunables; seed, refine_calibration and fixed_intrinsics are read below.
+  const OptionTable table = {
+      {"max_features", &o.features.max_features},
+      {"contrast_threshold", &o.features.contrast_threshold},
+      {"detection_scale", &o.features.detection_scale},
+      {"max_epipolar_error_rad", &o.stereo.max_epipolar_error_rad},
+      {"temporal_max_descriptor_ratio", &o.temporal_max_descriptor_ratio},
+      {"temporal_gate_rad", &o.temporal_gate_rad},
+      {"essential_max_angular_error_rad", &o.essential.max_angular_error_rad},
+      {"local_window_frames", &o.local_window_frames},
+      {"local_max_iterations", &o.local_max_iterations},
+      {"global_bundle_adjustment", &o.global_bundle_adjustment},
+      {"huber_scale_px", &o.bundle_adjustment.huber_scale_px},
+      {"max_reprojection_error_px", &o.bundle_adjustment.max_reprojection_error_px},
+      {"min_features", &o.min_features},
+      {"min_stereo_points", &o.min_stereo_points},
+      {"min_matches", &o.min_matches},
+      {"min_tracked_landmarks", &o.min_tracked_landmarks}};
+  std::set<std::string> known = KeysOf(table);
+  known.insert({"seed", "refine_calibration", "fixed_intrinsics"});
+  CheckKnownFields(object, "options", known);
+  ReadOptions(object, "options", table);
   auto has = [&](const char* key) { return object.contains(key); };
-  if (has("max_features")) o.features.max_features = Integer(object, "max_features");
-  if (has("contrast_threshold")) o.features.contrast_threshold = Number(object, "contrast_threshold");
-  if (has("detection_scale")) o.features.detection_scale = Number(object, "detection_scale");
-  if (has("max_epipolar_error_rad")) o.stereo.max_epipolar_error_rad = Number(object, "max_epipolar_error_rad");
-  if (has("temporal_max_descriptor_ratio")) {
-    o.temporal_max_descriptor_ratio = Number(object, "temporal_max_descriptor_ratio");
-  }
-  if (has("temporal_gate_rad")) o.temporal_gate_rad = Number(object, "temporal_gate_rad");
-  if (has("essential_max_angular_error_rad")) {
-    o.essential.max_angular_error_rad = Number(object, "essential_max_angular_error_rad");
-  }
-  if (has("local_window_frames")) o.local_window_frames = Integer(object, "local_window_frames");
-  if (has("local_max_iterations")) o.local_max_iterations = Integer(object, "local_max_iterations");
-  if (has("global_bundle_adjustment")) {
-    OMNIRIG_CHECK(object["global_bundle_adjustment"].is_boolean(),
-                  "field 'options.global_bundle_adjustment' must be true or false");
-    o.global_bundle_adjustment = object["global_bundle_adjustment"].get<bool>();
-  }
-  if (has("huber_scale_px")) o.bundle_adjustment.huber_scale_px = Number(object, "huber_scale_px");
-  if (has("max_reprojection_error_px")) {
-    o.bundle_adjustment.max_reprojection_error_px = Number(object, "max_reprojection_error_px");
-  }
   if (has("refine_calibration")) {
     o.calibration_refinement.refine = CalibrationRefinementFromJson(object["refine_calibration"]);
   }
@@ -276,10 +255,6 @@ slam::SlamOptions SlamOptionsFromJson(const json& object) {
     o.calibration_refinement.fixed_intrinsics =
         FixedIntrinsicsFromJson(object["fixed_intrinsics"], "options.fixed_intrinsics");
   }
-  if (has("min_features")) o.min_features = Integer(object, "min_features");
-  if (has("min_stereo_points")) o.min_stereo_points = Integer(object, "min_stereo_points");
-  if (has("min_matches")) o.min_matches = Integer(object, "min_matches");
-  if (has("min_tracked_landmarks")) o.min_tracked_landmarks = Integer(object, "min_tracked_landmarks");
   if (has("seed")) {
     OMNIRIG_CHECK(object["seed"].is_number_unsigned() || object["seed"].is_number_integer(),
                   "field 'options.seed' must be a non-negative integer");

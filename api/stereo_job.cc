@@ -17,6 +17,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "api/camera_json.h"
+#include "api/json_fields.h"
 #include "api/relpose_job.h"
 #include "engine/dense/range_io.h"
 #include "engine/geometry/ply.h"
@@ -30,55 +31,43 @@ namespace {
 
 using nlohmann::json;
 
-// Fields of each method; dark_level and max_relative_range_std belong to both.
-const std::set<std::string> kSparseFields = {"max_features",
-                                             "ratio_test",
-                                             "max_epipolar_error_rad",
-                                             "mutual_check",
-                                             "min_parallax_rad",
-                                             "max_reprojection_error_rad",
-                                             "keypoint_std_px",
-                                             "max_relative_range_std",
-                                             "dark_level",
-                                             "mask_margin_px"};
-const std::set<std::string> kDenseFields = {"grid_step_rad",
-                                            "max_parallax_deg",
-                                            "block_size",
-                                            "uniqueness_ratio",
-                                            "speckle_window_cells",
-                                            "speckle_range_cells",
-                                            "left_right_max_diff_cells",
-                                            "confidence_window_cells",
-                                            "image_noise_grey",
-                                            "min_confidence",
-                                            "disparity_std_cells",
-                                            "max_relative_range_std",
-                                            "dark_level",
-                                            "mask_margin_cells",
-                                            "max_epipolar_offset_cells"};
+// The tunables of each method by their JSON keys; dark_level and max_relative_range_std belong
+// to both.
+OptionTable SparseTable(StereoReconstructOptions* o) {
+  return {{"max_features", &o->max_features},
+          {"ratio_test", &o->ratio_test},
+          {"max_epipolar_error_rad", &o->max_epipolar_error_rad},
+          {"mutual_check", &o->mutual_check},
+          {"min_parallax_rad", &o->min_parallax_rad},
+          {"max_reprojection_error_rad", &o->max_reprojection_error_rad},
+          {"keypoint_std_px", &o->keypoint_std_px},
+          {"max_relative_range_std", &o->max_relative_range_std},
+          {"dark_level", &o->dark_level},
+          {"mask_margin_px", &o->mask_margin_px}};
+}
+
+OptionTable DenseTable(dense::DenseStereoOptions* o) {
+  return {{"grid_step_rad", &o->grid.step_rad},
+          {"max_parallax_deg", &o->max_parallax_deg},
+          {"block_size", &o->block_size},
+          {"uniqueness_ratio", &o->uniqueness_ratio},
+          {"speckle_window_cells", &o->speckle_window_cells},
+          {"speckle_range_cells", &o->speckle_range_cells},
+          {"left_right_max_diff_cells", &o->left_right_max_diff_cells},
+          {"confidence_window_cells", &o->confidence_window_cells},
+          {"image_noise_grey", &o->image_noise_grey},
+          {"min_confidence", &o->min_confidence},
+          {"disparity_std_cells", &o->disparity_std_cells},
+          {"max_relative_range_std", &o->max_relative_range_std},
+          {"dark_level", &o->dark_level},
+          {"mask_margin_cells", &o->mask_margin_cells},
+          {"max_epipolar_offset_cells", &o->max_epipolar_offset_cells}};
+}
 
 // A pair whose confident cells are fewer than this fraction of its mirror cells is reported as
 // a bad pair (dark, blurred, out of sync): the room renders give about 0.8, a pair with one
 // image shifted by 4 px about 0.3.
 constexpr double kFewConfidentFraction = 0.5;
-
-double Number(const json& params, const std::string& key) {
-  OMNIRIG_CHECK(params[key].is_number(), "field 'params." << key << "' must be a number");
-  return params[key].get<double>();
-}
-
-int Integer(const json& params, const std::string& key) {
-  OMNIRIG_CHECK(params[key].is_number_integer(), "field 'params." << key << "' must be an integer");
-  return params[key].get<int>();
-}
-
-void ReadNumber(const json& params, const std::string& key, double* value) {
-  if (params.contains(key)) *value = Number(params, key);
-}
-
-void ReadInteger(const json& params, const std::string& key, int* value) {
-  if (params.contains(key)) *value = Integer(params, key);
-}
 
 StereoRig LoadRig(const JobContext& context, const std::string& job_id) {
   OMNIRIG_CHECK(static_cast<bool>(context.load_result),
@@ -131,49 +120,6 @@ json PairJson(const std::string& name, const StereoPairReport& report) {
 
 }  // namespace
 
-namespace {
-
-void ReadSparseOptions(const json& params, StereoReconstructOptions* options) {
-  StereoReconstructOptions& o = *options;
-  ReadInteger(params, "max_features", &o.max_features);
-  ReadNumber(params, "ratio_test", &o.ratio_test);
-  ReadNumber(params, "max_epipolar_error_rad", &o.max_epipolar_error_rad);
-  if (params.contains("mutual_check")) {
-    OMNIRIG_CHECK(params["mutual_check"].is_boolean(),
-                  "field 'params.mutual_check' must be true or false");
-    o.mutual_check = params["mutual_check"].get<bool>();
-  }
-  ReadNumber(params, "min_parallax_rad", &o.min_parallax_rad);
-  ReadNumber(params, "max_reprojection_error_rad", &o.max_reprojection_error_rad);
-  ReadNumber(params, "keypoint_std_px", &o.keypoint_std_px);
-  ReadNumber(params, "max_relative_range_std", &o.max_relative_range_std);
-  ReadNumber(params, "dark_level", &o.dark_level);
-  ReadInteger(params, "mask_margin_px", &o.mask_margin_px);
-  o.Check();
-}
-
-void ReadDenseOptions(const json& params, dense::DenseStereoOptions* options) {
-  dense::DenseStereoOptions& o = *options;
-  ReadNumber(params, "grid_step_rad", &o.grid.step_rad);
-  ReadNumber(params, "max_parallax_deg", &o.max_parallax_deg);
-  ReadInteger(params, "block_size", &o.block_size);
-  ReadInteger(params, "uniqueness_ratio", &o.uniqueness_ratio);
-  ReadInteger(params, "speckle_window_cells", &o.speckle_window_cells);
-  ReadInteger(params, "speckle_range_cells", &o.speckle_range_cells);
-  ReadInteger(params, "left_right_max_diff_cells", &o.left_right_max_diff_cells);
-  ReadInteger(params, "confidence_window_cells", &o.confidence_window_cells);
-  ReadNumber(params, "image_noise_grey", &o.image_noise_grey);
-  ReadNumber(params, "min_confidence", &o.min_confidence);
-  ReadNumber(params, "disparity_std_cells", &o.disparity_std_cells);
-  ReadNumber(params, "max_relative_range_std", &o.max_relative_range_std);
-  ReadNumber(params, "dark_level", &o.dark_level);
-  ReadInteger(params, "mask_margin_cells", &o.mask_margin_cells);
-  ReadNumber(params, "max_epipolar_offset_cells", &o.max_epipolar_offset_cells);
-  o.Check();
-}
-
-}  // namespace
-
 StereoReconstructParams StereoReconstructParamsFromJson(const json& params) {
   OMNIRIG_CHECK(params.is_object(), "'params' must be a JSON object");
   StereoReconstructParams out;
@@ -183,8 +129,10 @@ StereoReconstructParams StereoReconstructParamsFromJson(const json& params) {
                   "field 'params.method' must be \"dense\" or \"sparse\"");
     out.method = params["method"].get<std::string>();
   }
-  const std::set<std::string>& fields = out.method == "dense" ? kDenseFields : kSparseFields;
-  const std::set<std::string>& other = out.method == "dense" ? kSparseFields : kDenseFields;
+  const std::set<std::string> sparse = KeysOf(SparseTable(&out.options));
+  const std::set<std::string> dense = KeysOf(DenseTable(&out.dense));
+  const std::set<std::string>& fields = out.method == "dense" ? dense : sparse;
+  const std::set<std::string>& other = out.method == "dense" ? sparse : dense;
   for (const auto& [key, value] : params.items()) {
     if (key == "rig" || key == "method" || key == "trajectory" || fields.count(key)) continue;
     OMNIRIG_CHECK(other.count(key) == 0, "field 'params." << key << "' applies to method '"
@@ -205,42 +153,23 @@ StereoReconstructParams StereoReconstructParamsFromJson(const json& params) {
     out.trajectory_job = params["trajectory"].get<std::string>();
   }
   if (out.method == "dense") {
-    ReadDenseOptions(params, &out.dense);
+    ReadOptions(params, "params", DenseTable(&out.dense));
+    out.dense.Check();
   } else {
-    ReadSparseOptions(params, &out.options);
+    ReadOptions(params, "params", SparseTable(&out.options));
+    out.options.Check();
   }
   return out;
 }
 
-json StereoReconstructOptionsToJson(const StereoReconstructOptions& o) {
-  return {{"max_features", o.max_features},
-          {"ratio_test", o.ratio_test},
-          {"max_epipolar_error_rad", o.max_epipolar_error_rad},
-          {"mutual_check", o.mutual_check},
-          {"min_parallax_rad", o.min_parallax_rad},
-          {"max_reprojection_error_rad", o.max_reprojection_error_rad},
-          {"keypoint_std_px", o.keypoint_std_px},
-          {"max_relative_range_std", o.max_relative_range_std},
-          {"dark_level", o.dark_level},
-          {"mask_margin_px", o.mask_margin_px}};
+json StereoReconstructOptionsToJson(const StereoReconstructOptions& options) {
+  StereoReconstructOptions copy = options;
+  return OptionsToJson(SparseTable(&copy));
 }
 
-json DenseStereoOptionsToJson(const dense::DenseStereoOptions& o) {
-  return {{"grid_step_rad", o.grid.step_rad},
-          {"max_parallax_deg", o.max_parallax_deg},
-          {"block_size", o.block_size},
-          {"uniqueness_ratio", o.uniqueness_ratio},
-          {"speckle_window_cells", o.speckle_window_cells},
-          {"speckle_range_cells", o.speckle_range_cells},
-          {"left_right_max_diff_cells", o.left_right_max_diff_cells},
-          {"confidence_window_cells", o.confidence_window_cells},
-          {"image_noise_grey", o.image_noise_grey},
-          {"min_confidence", o.min_confidence},
-          {"disparity_std_cells", o.disparity_std_cells},
-          {"max_relative_range_std", o.max_relative_range_std},
-          {"dark_level", o.dark_level},
-          {"mask_margin_cells", o.mask_margin_cells},
-          {"max_epipolar_offset_cells", o.max_epipolar_offset_cells}};
+json DenseStereoOptionsToJson(const dense::DenseStereoOptions& options) {
+  dense::DenseStereoOptions copy = options;
+  return OptionsToJson(DenseTable(&copy));
 }
 
 namespace {

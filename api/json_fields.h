@@ -1,0 +1,46 @@
+#pragma once
+
+// Readers of one field of a request's JSON object, shared by the job types' params parsers.
+// Their messages name the field by its path ("field 'params.block_size' must be an integer"):
+// those words are what a client reads in a 400, so they are the same for every job type.
+
+#include <set>
+#include <string>
+#include <variant>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+namespace omnirig::api {
+
+// Refuses a value that is not an object ("'PATH' must be a JSON object") and any key not in known.
+void CheckKnownFields(const nlohmann::json& object, const std::string& path,
+                      const std::set<std::string>& known);
+
+// PATH.KEY, which must be present ("missing field 'PATH.KEY'").
+double NumberField(const nlohmann::json& object, const std::string& path, const std::string& key);
+int IntegerField(const nlohmann::json& object, const std::string& path, const std::string& key);
+bool BoolField(const nlohmann::json& object, const std::string& path, const std::string& key);
+
+// The optional forms: *value keeps its default when PATH.KEY is absent.
+void ReadNumber(const nlohmann::json& object, const std::string& path, const std::string& key,
+                double* value);
+void ReadInteger(const nlohmann::json& object, const std::string& path, const std::string& key,
+                 int* value);
+void ReadBool(const nlohmann::json& object, const std::string& path, const std::string& key,
+              bool* value);
+
+// One tunable of an options struct: its JSON key and where it lives in one instance. A table of
+// these is at once the options' known keys, their reader and their echo in a job's result.
+struct OptionField {
+  std::string key;
+  std::variant<double*, int*, bool*> value;
+};
+using OptionTable = std::vector<OptionField>;
+
+std::set<std::string> KeysOf(const OptionTable& table);
+// Reads each field of table that object holds, in the table's order, with the messages above.
+void ReadOptions(const nlohmann::json& object, const std::string& path, const OptionTable& table);
+nlohmann::json OptionsToJson(const OptionTable& table);
+
+}  // namespace omnirig::api

@@ -1,0 +1,75 @@
+#include "api/json_fields.h"
+
+#include <functional>
+
+#include <gtest/gtest.h>
+
+#include "engine/util/check.h"
+
+namespace omnirig::api {
+namespace {
+
+using nlohmann::json;
+
+// The whole message, word for word: clients read it in a 400.
+std::string Refusal(const std::function<void()>& read) {
+  try {
+    read();
+  } catch (const InvalidArgument& e) {
+    return e.what();
+  }
+  return "accepted";
+}
+
+TEST(JsonFields, MessagesNameTheFieldByItsPath) {
+  const json params = {{"n", "x"}, {"i", 1.5}, {"b", 1}};
+  EXPECT_EQ(Refusal([&] { NumberField(params, "params", "n"); }),
+            "field 'params.n' must be a number");
+  EXPECT_EQ(Refusal([&] { IntegerField(params, "params", "i"); }),
+            "field 'params.i' must be an integer");
+  EXPECT_EQ(Refusal([&] { BoolField(params, "options", "b"); }),
+            "field 'options.b' must be true or false");
+  EXPECT_EQ(Refusal([&] { NumberField(params, "board", "gone"); }), "missing field 'board.gone'");
+  EXPECT_EQ(Refusal([&] { CheckKnownFields(params, "params", {"n", "i"}); }),
+            "unknown field 'params.b'");
+  EXPECT_EQ(Refusal([&] { CheckKnownFields(json::array(), "options", {}); }),
+            "'options' must be a JSON object");
+}
+
+TEST(JsonFields, OptionalFormsKeepTheDefaultWhenAbsent) {
+  double number = 2.5;
+  int integer = 7;
+  bool flag = true;
+  ReadNumber(json::object(), "params", "x", &number);
+  ReadInteger(json::object(), "params", "x", &integer);
+  ReadBool(json::object(), "params", "x", &flag);
+  EXPECT_EQ(number, 2.5);
+  EXPECT_EQ(integer, 7);
+  EXPECT_TRUE(flag);
+  ReadNumber({{"x", 3}}, "params", "x", &number);
+  EXPECT_EQ(number, 3.0);
+}
+
+TEST(JsonFields, OptionTableReadsAndEchoesEachFieldWithItsType) {
+  struct Options {
+    double step = 0.5;
+    int size = 3;
+    bool check = false;
+  } options;
+  const OptionTable table = {
+      {"step", &options.step}, {"size", &options.size}, {"check", &options.check}};
+  EXPECT_EQ(KeysOf(table), (std::set<std::string>{"check", "size", "step"}));
+  ReadOptions({{"size", 5}, {"check", true}}, "params", table);
+  EXPECT_EQ(options.step, 0.5);
+  EXPECT_EQ(options.size, 5);
+  EXPECT_TRUE(options.check);
+  const json echo = OptionsToJson(table);
+  EXPECT_TRUE(echo["step"].is_number_float());
+  EXPECT_TRUE(echo["size"].is_number_integer());
+  EXPECT_TRUE(echo["check"].is_boolean());
+  EXPECT_EQ(Refusal([&] { ReadOptions({{"size", 1.5}}, "params", table); }),
+            "field 'params.size' must be an integer");
+}
+
+}  // namespace
+}  // namespace omnirig::api
