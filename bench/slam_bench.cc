@@ -251,8 +251,8 @@ int Run(const Args& args) {
   }
   auto decoded_load = [&](int i) {
     if (!args.decode) return slam::StereoImages{sequence.images[0][i], sequence.images[1][i]};
-    return slam::StereoImages{cv::imdecode(png[0][i], cv::IMREAD_COLOR),
-                              cv::imdecode(png[1][i], cv::IMREAD_COLOR)};
+    // As the job's loader: the two images decoded side by side.
+    return slam::ReadBoth([&](int c) { return cv::imdecode(png[c][i], cv::IMREAD_COLOR); });
   };
 
   std::unique_ptr<slam::StereoVideoReader> reader;

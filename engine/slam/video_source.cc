@@ -222,12 +222,9 @@ StereoImages StereoVideoReader::Load(int k) {
   OMNIRIG_CHECK(k >= 0 && k < static_cast<int>(frames_.size()),
                 "video frame " << k << " out of range");
   const StereoVideoFrame& frame = frames_[k];
-  StereoImages images;
   if (files_.stacked()) {
     const cv::Mat both = ReadFrame(0, frame.index[0]);
-    images.cam0 = both.rowRange(0, both.rows / 2);
-    images.cam1 = both.rowRange(both.rows / 2, both.rows);
-    return images;
+    return StereoImages{both.rowRange(0, both.rows / 2), both.rowRange(both.rows / 2, both.rows)};
   }
   // Two videos are two decoders: each camera's frame is read on its own thread.
   return ReadBoth([&](int c) { return ReadFrame(c, frame.index[c]); });
