@@ -15,8 +15,8 @@
 
 #include "api/camera_json.h"
 #include "api/job_types.h"
-#include "engine/calib/model_io.h"
-#include "engine/calib/synthetic_corners.h"
+#include "testing/calib/model_import.h"
+#include "testing/calib/synthetic_corners.h"
 
 namespace omnirig::api {
 namespace {

@@ -16,8 +16,8 @@
 #include "api/relpose_job.h"
 #include "engine/calib/calibrate.h"
 #include "engine/calib/detect.h"
-#include "engine/synth/calib_board.h"
 #include "engine/synth/presets.h"
+#include "testing/synth/calib_board.h"
 
 namespace omnirig::api {
 namespace {

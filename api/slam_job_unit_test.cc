@@ -8,8 +8,8 @@
 #include <opencv2/videoio.hpp>
 
 #include "api/camera_json.h"
-#include "engine/geometry/test_rig.h"
 #include "engine/util/check.h"
+#include "testing/geometry/test_rig.h"
 
 namespace omnirig::api {
 namespace {

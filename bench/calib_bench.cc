@@ -20,11 +20,11 @@
 #include <opencv2/imgproc.hpp>
 
 #include "engine/calib/board_pose.h"
-#include "engine/calib/model_io.h"
 #include "engine/calib/pipeline.h"
-#include "engine/synth/calib_board.h"
 #include "engine/synth/presets.h"
 #include "engine/util/timer.h"
+#include "testing/calib/model_import.h"
+#include "testing/synth/calib_board.h"
 
 namespace omnirig {
 namespace {

@@ -4,7 +4,7 @@
 //
 // Renders: the textured room of engine/synth/presets.h (MakeStereoSequence), 1024x768, image
 // noise 1 grey level, the default rig (100 mm vertical baseline), 4 frames along the path. Each
-// point is scored by its distance to the room's true surfaces (engine/slam/surface_distance.h)
+// point is scored by its distance to the room's true surfaces (testing/slam/surface_distance.h)
 // divided by its range from cam0. Azimuth coverage: the fraction of 1-degree bins of the angle
 // around cam0's axis holding at least one point. Time: seconds per pair on the threads given
 // (default 2), after the per-rig set-up (omnirig's rectification tables, timed separately; the
@@ -47,8 +47,8 @@
 #include "engine/dense/range_io.h"
 #include "engine/geometry/ply.h"
 #include "engine/slam/map_io.h"
-#include "engine/slam/surface_distance.h"
 #include "engine/synth/presets.h"
+#include "testing/slam/surface_distance.h"
 
 namespace omnirig {
 namespace {

@@ -42,8 +42,8 @@
 #include "engine/calib/detect.h"
 #include "engine/calib/grid_check.h"
 #include "engine/geometry/unified_camera.h"
-#include "engine/synth/calib_board.h"
 #include "engine/synth/presets.h"
+#include "testing/synth/calib_board.h"
 
 namespace omnirig {
 namespace {

@@ -9,9 +9,9 @@
 #include <random>
 #include <vector>
 
-#include "engine/geometry/random_bearing.h"
 #include "engine/stereo/essential.h"
 #include "engine/util/timer.h"
+#include "testing/geometry/random_bearing.h"
 
 namespace omnirig {
 namespace {

@@ -76,8 +76,8 @@
 #include "engine/stereo/relpose_corner_order.h"
 #include "engine/stereo/relpose_model_select.h"
 #include "engine/stereo/triangulation.h"
-#include "engine/synth/calib_board.h"
 #include "engine/synth/presets.h"
+#include "testing/synth/calib_board.h"
 
 namespace omnirig {
 namespace {
@@ -1371,7 +1371,7 @@ void TallySyncRig(const SyncRenderedRig& rig, const BoardSpec& board,
   for (size_t k = 0; k < first.pairs.size(); ++k) {
     const PairSyncStatistic& pair = first.pairs[k];
     if (!pair.valid) continue;
-    const double p = SyncStatisticSurvival(pair.statistic, first);
+    const double p = SyncStatisticSurvival(pair.statistic);
     ++tally->pairs;
     tally->pairs_over_5 += p < 0.05 ? 1 : 0;
     tally->pairs_over_1 += p < 0.01 ? 1 : 0;

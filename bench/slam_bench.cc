@@ -48,14 +48,14 @@
 
 #include "bench/slam_loop_bench.h"
 #include "engine/dense/dense_map.h"
-#include "engine/dense/map_accuracy.h"
 #include "engine/slam/evaluation.h"
-#include "engine/slam/sequence_accuracy.h"
 #include "engine/slam/slam.h"
-#include "engine/slam/surface_distance.h"
 #include "engine/slam/video_source.h"
 #include "engine/synth/presets.h"
 #include "engine/util/timer.h"
+#include "testing/dense/map_accuracy.h"
+#include "testing/slam/sequence_accuracy.h"
+#include "testing/slam/surface_distance.h"
 
 namespace omnirig {
 namespace {

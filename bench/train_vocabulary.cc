@@ -16,6 +16,7 @@
 #include "engine/slam/vocabulary.h"
 #include "engine/synth/presets.h"
 #include "engine/util/timer.h"
+#include "testing/slam/vocabulary_training.h"
 
 namespace omnirig {
 namespace {
@@ -63,7 +64,7 @@ int Run(int argc, char** argv) {
   for (const cv::Mat& d : images) descriptors += d.rows;
   std::printf("%zu images, %d descriptors (%.1f s)\n", images.size(), descriptors,
               timer.ElapsedSeconds());
-  const slam::Vocabulary vocabulary = slam::Vocabulary::Train(images, branching, depth, 1);
+  const slam::Vocabulary vocabulary = slam::TrainVocabulary(images, branching, depth, 1);
   const std::vector<std::uint8_t> bytes = vocabulary.Serialize();
   std::ofstream out(argv[1], std::ios::binary);
   out.write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));

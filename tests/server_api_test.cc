@@ -21,11 +21,11 @@
 
 #include "api/camera_json.h"
 #include "api/job_types.h"
-#include "engine/geometry/test_rig.h"
 #include "engine/util/check.h"
 #include "server/service.h"
 #include "storage/sha256.h"
 #include "storage/sqlite_job_store.h"
+#include "testing/geometry/test_rig.h"
 #include "tests/server_test_util.h"
 
 namespace omnirig::testing {

@@ -22,11 +22,11 @@
 #include "api/camera_json.h"
 #include "api/job_types.h"
 #include "api/synth_json.h"
-#include "engine/geometry/test_rig.h"
 #include "engine/slam/map_io.h"
 #include "engine/synth/presets.h"
 #include "server/service.h"
 #include "storage/sha256.h"
+#include "testing/geometry/test_rig.h"
 #include "tests/server_test_util.h"
 
 namespace omnirig::testing {

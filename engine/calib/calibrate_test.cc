@@ -7,7 +7,7 @@
 
 #include "engine/calib/board_pose.h"
 #include "engine/calib/initialize.h"
-#include "engine/calib/synthetic_corners.h"
+#include "testing/calib/synthetic_corners.h"
 
 namespace omnirig {
 namespace {

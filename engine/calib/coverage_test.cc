@@ -7,7 +7,7 @@
 
 #include <gtest/gtest.h>
 
-#include "engine/calib/synthetic_corners.h"
+#include "testing/calib/synthetic_corners.h"
 
 namespace omnirig {
 namespace {

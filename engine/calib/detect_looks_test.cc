@@ -13,8 +13,8 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "engine/calib/detect.h"
-#include "engine/synth/calib_board.h"
 #include "engine/synth/presets.h"
+#include "testing/synth/calib_board.h"
 
 namespace omnirig {
 namespace {

@@ -1,5 +1,5 @@
 #pragma once
-// Import and export of the unified model in other tools' formats:
+// Export of the unified model in other tools' formats:
 //   OpenCV omnidir FileStorage (YAML or XML): K (camera_matrix), D = (k1, k2, p1, p2)
 //     (distortion_coefficients) and xi, as cv::omnidir::calibrate's sample writes them.
 //     K(0, 1) = s = gamma_u * alpha; (p1, p2) = the paper's (k3, k4).
@@ -7,14 +7,12 @@
 //     intrinsics [xi, fu, fv, pu, pv], distortion_coeffs [k1, k2, r1, r2], resolution [w, h].
 // Neither format has k5; Kalibr has no skew. Exports return a warning for each parameter they
 // drop (and write it into the file as a comment); CalibrationOptions fixes k5 and skew at zero
-// by default so that exports are exact.
-// Also reads board corners stored the way OpenCV's calibration samples store them.
+// by default so that exports are exact. The readers of both formats (for round-trip tests) are
+// testing/calib/model_import.h.
 
 #include <string>
 #include <vector>
 
-#include "engine/calib/board.h"
-#include "engine/calib/calibrate.h"
 #include "engine/geometry/camera_model.h"
 
 namespace omnirig {
@@ -24,33 +22,13 @@ std::vector<std::string> ExportWarnings(const CameraModel& camera, bool format_h
 
 // The FileStorage document as text (YAML). `warnings` receives what the format drops.
 std::string ToOpenCvOmnidir(const CameraModel& camera, std::vector<std::string>* warnings);
-// Parses an OpenCV omnidir FileStorage document (YAML or XML text). Throws InvalidArgument
-// naming the missing or malformed node.
-CameraModel FromOpenCvOmnidir(const std::string& text);
 
 std::string ToKalibrOmniRadtan(const CameraModel& camera, std::vector<std::string>* warnings,
                                const std::string& camera_name = "cam0");
-// Parses the camera `camera_name` of a Kalibr camchain YAML. Throws InvalidArgument for another
-// camera or distortion model or missing keys.
-CameraModel FromKalibrOmniRadtan(const std::string& text, const std::string& camera_name = "cam0");
 
 // A Kalibr camchain YAML of a stereo rig: cam0 and cam1 as ToKalibrOmniRadtan writes them,
 // cam1 with T_cn_cnm1 = cam1_from_cam0 (maps points in cam0's frame into cam1's; translation in
 // metres) as a 4x4 matrix. `warnings` receives what the format drops, per camera.
 std::string ToKalibrCamchain(const StereoRig& rig, std::vector<std::string>* warnings);
-// Parses a two-camera Kalibr camchain (cam0, cam1 with T_cn_cnm1; omni-radtan). Throws
-// InvalidArgument for missing keys or a T_cn_cnm1 that is not a rigid transform.
-StereoRig FromKalibrCamchain(const std::string& text);
-
-// The corners of a FileStorage file (YAML or XML) holding the sequences "objectPoints" (per
-// view, board points in the board's plane z = 0, as 3-channel matrices) and "imagePoints" (per
-// view, pixels as 2-channel matrices), as OpenCV's omnidir tutorial data and
-// cv::omnidir::calibrate's inputs are stored. Object points times `object_points_to_m` must lie
-// on `board`'s corner grid (x along the columns, y along the rows, spacing square_size_m); they
-// become corner ids. Views are named "view0", "view1", ... and marked found. Throws
-// InvalidArgument for an unreadable file, missing or mismatched sequences, or a point off the
-// grid.
-std::vector<CalibrationView> ReadOpenCvCornerViews(const std::string& path, const BoardSpec& board,
-                                                   double object_points_to_m = 1.0);
 
 }  // namespace omnirig

@@ -8,6 +8,8 @@
 #include <gtest/gtest.h>
 #include <opencv2/ccalib/omnidir.hpp>
 
+#include "testing/calib/model_import.h"
+
 namespace omnirig {
 namespace {
 

@@ -9,8 +9,8 @@
 #include <gtest/gtest.h>
 #include <opencv2/core.hpp>
 
-#include "engine/calib/model_io.h"
 #include "engine/calib/pipeline.h"
+#include "testing/calib/model_import.h"
 
 namespace omnirig {
 namespace {

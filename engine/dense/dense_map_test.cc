@@ -15,9 +15,9 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
-#include "engine/dense/map_accuracy.h"
 #include "engine/synth/presets.h"
 #include "engine/util/check.h"
+#include "testing/dense/map_accuracy.h"
 
 namespace omnirig::dense {
 namespace {

@@ -14,9 +14,9 @@
 #include <gtest/gtest.h>
 #include <opencv2/imgproc.hpp>
 
-#include "engine/slam/surface_distance.h"
 #include "engine/synth/presets.h"
 #include "engine/util/check.h"
+#include "testing/slam/surface_distance.h"
 
 namespace omnirig::dense {
 namespace {

@@ -153,20 +153,6 @@ SphericalRectifier::SphericalRectifier(const StereoRig& rig, const SphericalGrid
   }
 }
 
-Eigen::Vector3d SphericalRectifier::BearingInCam0(double row, double col) const {
-  const double theta = Theta(col), phi = Phi(row);
-  return cam0_from_grid_ * Eigen::Vector3d(std::sin(theta) * std::cos(phi),
-                                           std::sin(theta) * std::sin(phi), std::cos(theta));
-}
-
-Eigen::Vector2d SphericalRectifier::CellOfBearingInCam0(const Eigen::Vector3d& bearing) const {
-  const Eigen::Vector3d in_grid = cam0_from_grid_.transpose() * bearing.normalized();
-  double phi = std::atan2(in_grid.y(), in_grid.x());
-  if (phi < 0.0) phi += 2.0 * M_PI;
-  const double theta = std::acos(std::clamp(in_grid.z(), -1.0, 1.0));
-  return Eigen::Vector2d(phi / azimuth_step_rad(), (theta_max_rad_ - theta) / theta_step_rad_);
-}
-
 cv::Mat SphericalRectifier::Rectify(const cv::Mat& image, int camera) const {
   OMNIRIG_CHECK(camera == 0 || camera == 1, "camera must be 0 or 1, got " << camera);
   cv::Mat out;
@@ -211,17 +197,6 @@ std::shared_ptr<const SphericalRectifier> SharedRectifier(const StereoRig& rig,
   cache.emplace_front(key, rectifier);
   if (cache.size() > kKept) cache.pop_back();
   return rectifier;
-}
-
-double RangeFromAngles(double theta0_rad, double theta1_rad, double baseline_m) {
-  const double parallax = theta1_rad - theta0_rad;
-  if (!(parallax > 0.0)) return 0.0;
-  return baseline_m * std::sin(theta1_rad) / std::sin(parallax);
-}
-
-double RangeDerivative(double theta0_rad, double theta1_rad, double baseline_m) {
-  const double s = std::sin(theta1_rad - theta0_rad);
-  return baseline_m * std::sin(theta0_rad) / (s * s);
 }
 
 }  // namespace omnirig::dense

@@ -53,12 +53,6 @@ class SphericalRectifier {
   double Theta(double col) const { return theta_max_rad_ - col * theta_step_rad_; }
   double Phi(double row) const { return row * azimuth_step_rad(); }
 
-  // Unit direction of grid cell (row, col) (fractional allowed) in cam0's frame.
-  Eigen::Vector3d BearingInCam0(double row, double col) const;
-
-  // The grid cell of a direction in cam0's frame (inverse of BearingInCam0): (row, col).
-  Eigen::Vector2d CellOfBearingInCam0(const Eigen::Vector3d& bearing_in_cam0) const;
-
   // Camera `camera`'s image (0 or 1; any type cv::remap takes) resampled onto the grid
   // (bilinear); cells whose direction does not project into the image are 0.
   cv::Mat Rectify(const cv::Mat& image, int camera) const;
@@ -93,16 +87,5 @@ std::shared_ptr<const SphericalRectifier> SharedRectifier(const StereoRig& rig,
 // The finest angle between the bearings of neighbouring pixels (radially and tangentially) on
 // the largest circle around the principal point that fits in the image; the grid's default step.
 double FinestAngularStep(const CameraModel& camera);
-
-// Exact triangulation on the epipolar plane (law of sines): the range from cam0's centre of a
-// point seen at angle theta0 from the baseline by cam0 and theta1 by cam1, for a baseline of
-// baseline_m. The angle at the point is theta1 - theta0; returns 0 when it is not positive (no
-// intersection in front of both cameras).
-//   range0 = baseline * sin(theta1) / sin(theta1 - theta0).
-double RangeFromAngles(double theta0_rad, double theta1_rad, double baseline_m);
-
-// d(range0)/d(theta1) at fixed theta0, whose magnitude turns the parallax noise into the range
-// noise: |d range0 / d theta1| = baseline * sin(theta0) / sin^2(theta1 - theta0).
-double RangeDerivative(double theta0_rad, double theta1_rad, double baseline_m);
 
 }  // namespace omnirig::dense

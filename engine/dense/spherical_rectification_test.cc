@@ -1,8 +1,9 @@
-// The spherical grid: epipolar curves are grid rows, the remap tables are the unified model's
-// projection, and the law-of-sines range is exact.
+// The spherical grid: epipolar curves are grid rows, and the remap tables are the unified
+// model's projection.
 
 #include "engine/dense/spherical_rectification.h"
 
+#include <algorithm>
 #include <cmath>
 #include <random>
 
@@ -23,10 +24,29 @@ StereoRig DefaultRig() {
   return rig;
 }
 
+// Unit direction of grid cell (row, col) (fractional allowed) in cam0's frame.
+Eigen::Vector3d BearingInCam0(const SphericalRectifier& rectifier, double row, double col) {
+  const double theta = rectifier.Theta(col), phi = rectifier.Phi(row);
+  return rectifier.cam0_from_grid() * Eigen::Vector3d(std::sin(theta) * std::cos(phi),
+                                                      std::sin(theta) * std::sin(phi),
+                                                      std::cos(theta));
+}
+
+// The grid cell of a direction in cam0's frame (inverse of BearingInCam0): (row, col).
+Eigen::Vector2d CellOfBearingInCam0(const SphericalRectifier& rectifier,
+                                    const Eigen::Vector3d& bearing) {
+  const Eigen::Vector3d in_grid = rectifier.cam0_from_grid().transpose() * bearing.normalized();
+  double phi = std::atan2(in_grid.y(), in_grid.x());
+  if (phi < 0.0) phi += 2.0 * M_PI;
+  const double theta = std::acos(std::clamp(in_grid.z(), -1.0, 1.0));
+  return Eigen::Vector2d(phi / rectifier.azimuth_step_rad(),
+                         (rectifier.theta_max_rad() - theta) / rectifier.theta_step_rad());
+}
+
 // The grid cell of a point seen from cam1's centre, in the grid's (cam0-aligned) frame.
 Eigen::Vector2d CellFromCam1(const SphericalRectifier& rectifier, const StereoRig& rig,
                              const Eigen::Vector3d& point_in_cam0) {
-  return rectifier.CellOfBearingInCam0(point_in_cam0 - rig.cam0_from_cam1.translation);
+  return CellOfBearingInCam0(rectifier, point_in_cam0 - rig.cam0_from_cam1.translation);
 }
 
 TEST(SphericalRectification, EveryEpipolarCurveIsOneRow) {
@@ -36,7 +56,7 @@ TEST(SphericalRectification, EveryEpipolarCurveIsOneRow) {
   std::uniform_real_distribution<double> unit(-1.0, 1.0), range(0.5, 8.0);
   for (int k = 0; k < 1000; ++k) {
     const Eigen::Vector3d point = range(rng) * Eigen::Vector3d(unit(rng), unit(rng), unit(rng)).normalized();
-    const Eigen::Vector2d cell0 = rectifier.CellOfBearingInCam0(point);
+    const Eigen::Vector2d cell0 = CellOfBearingInCam0(rectifier, point);
     const Eigen::Vector2d cell1 = CellFromCam1(rectifier, rig, point);
     double row_difference = std::abs(cell0.x() - cell1.x());
     row_difference = std::min(row_difference, rectifier.rows() - row_difference);  // the seam
@@ -50,7 +70,7 @@ TEST(SphericalRectification, EveryEpipolarCurveIsOneRow) {
         (point - rig.cam0_from_cam1.translation).normalized()));
     EXPECT_NEAR(cell0.y() - cell1.y(), parallax / rectifier.theta_step_rad(), 1e-6);
     // BearingInCam0 inverts CellOfBearingInCam0.
-    EXPECT_LT((rectifier.BearingInCam0(cell0.x(), cell0.y()) - point.normalized()).norm(), 1e-9);
+    EXPECT_LT((BearingInCam0(rectifier, cell0.x(), cell0.y()) - point.normalized()).norm(), 1e-9);
   }
 }
 
@@ -111,7 +131,7 @@ TEST(SphericalRectification, RemapTablesAreTheModelsProjection) {
     for (int c = 0; c < rectifier.cols(); c += 11) {
       if (!rectifier.ValidMask(1).at<uint8_t>(r, c)) continue;
       const auto pixel =
-          Project(rig.cam1.intrinsics, cam1_from_cam0 * rectifier.BearingInCam0(r, c));
+          Project(rig.cam1.intrinsics, cam1_from_cam0 * BearingInCam0(rectifier, r, c));
       ASSERT_TRUE(pixel.has_value());
       if (pixel->x() > ramp.cols - 2.0 || pixel->y() > ramp.rows - 2.0) continue;
       // cv::remap quantises the source position to 1/32 px: u + 2 v is off by up to 3/64.
@@ -120,27 +140,6 @@ TEST(SphericalRectification, RemapTablesAreTheModelsProjection) {
     }
   }
   EXPECT_GT(checked, 1000);
-}
-
-TEST(SphericalRectification, LawOfSinesRangeIsExact) {
-  // cam1 at distance b along the pole; a point at range r and angle theta0 from the pole.
-  const double b = 0.1;
-  for (double theta0 : {0.3, 1.0, M_PI / 2, 2.0}) {
-    for (double r : {0.4, 2.0, 9.0}) {
-      const Eigen::Vector3d point(r * std::sin(theta0), 0.0, r * std::cos(theta0));
-      const Eigen::Vector3d from1 = point - Eigen::Vector3d(0, 0, b);
-      const double theta1 = std::atan2(from1.x(), from1.z());
-      EXPECT_NEAR(RangeFromAngles(theta0, theta1, b), r, 1e-9 * r);
-      // The derivative against a central difference.
-      const double h = 1e-7;
-      const double numeric =
-          (RangeFromAngles(theta0, theta1 + h, b) - RangeFromAngles(theta0, theta1 - h, b)) /
-          (2 * h);
-      EXPECT_NEAR(RangeDerivative(theta0, theta1, b), std::abs(numeric), 1e-4 * std::abs(numeric));
-    }
-  }
-  EXPECT_EQ(RangeFromAngles(1.0, 1.0, b), 0.0);
-  EXPECT_EQ(RangeFromAngles(1.0, 0.9, b), 0.0);
 }
 
 }  // namespace

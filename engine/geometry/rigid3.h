@@ -63,15 +63,4 @@ inline Eigen::Matrix3d Skew(const Eigen::Vector3d& v) {
   return m;
 }
 
-// Transforms a point by a pose held in a 7-element parameter block (Eigen order). Templated
-// so that Ceres Jets pass through.
-template <typename T>
-inline void TransformPoint(const T* pose_params, const T* point, T* out) {
-  const Eigen::Map<const Eigen::Quaternion<T>> q(pose_params);
-  const Eigen::Map<const Eigen::Matrix<T, 3, 1>> t(pose_params + 4);
-  const Eigen::Map<const Eigen::Matrix<T, 3, 1>> p(point);
-  Eigen::Map<Eigen::Matrix<T, 3, 1>> o(out);
-  o = q * p + t;
-}
-
 }  // namespace omnirig

@@ -9,7 +9,7 @@
 
 #include "engine/geometry/reprojection_cost.h"
 #include "engine/slam/evaluation.h"
-#include "engine/slam/sequence_accuracy.h"
+#include "testing/slam/sequence_accuracy.h"
 
 namespace omnirig::slam {
 namespace {

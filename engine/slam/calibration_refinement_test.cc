@@ -7,8 +7,8 @@
 
 #include <gtest/gtest.h>
 
-#include "engine/slam/sequence_accuracy.h"
 #include "engine/slam/slam.h"
+#include "testing/slam/sequence_accuracy.h"
 
 namespace omnirig::slam {
 namespace {

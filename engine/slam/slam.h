@@ -95,7 +95,7 @@ struct SlamOptions {
   // and no re-linking, relocalisation still uses the place recognition).
   bool loop_closure = true;
   int loop_min_keyframe_gap = 10;   // loop candidates are older than this many keyframes
-  double loop_min_score = 0.04;     // BowScore of a candidate (0..1)
+  double loop_min_score = 0.04;     // L1 score of a candidate (0..1; vocabulary.h)
   int loop_max_candidates = 4;      // verified per keyframe, best score first
   int loop_min_inliers = 40;        // essential inliers and landmarks confirmed
   // A loop is a return to a mapped place: the verified keyframe must be this close. Places

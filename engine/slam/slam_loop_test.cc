@@ -10,10 +10,10 @@
 #include <gtest/gtest.h>
 #include <opencv2/core.hpp>
 
-#include "engine/slam/sequence_accuracy.h"
 #include "engine/slam/slam.h"
 #include "engine/synth/scene.h"
 #include "engine/synth/synth_camera.h"
+#include "testing/slam/sequence_accuracy.h"
 
 namespace omnirig::slam {
 namespace {

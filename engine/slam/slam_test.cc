@@ -9,9 +9,9 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 
-#include "engine/slam/sequence_accuracy.h"
 #include "engine/slam/slam.h"
 #include "engine/util/check.h"
+#include "testing/slam/sequence_accuracy.h"
 
 namespace omnirig::slam {
 namespace {

@@ -1,11 +1,9 @@
 #include "engine/slam/vocabulary.h"
 
 #include <algorithm>
-#include <cmath>
 #include <cstring>
 #include <limits>
 #include <map>
-#include <set>
 
 #include "engine/util/check.h"
 
@@ -30,24 +28,26 @@ int Power(int base, int exponent) {
   return value;
 }
 
+void CheckShape(int branching, int depth) {
+  OMNIRIG_CHECK(branching >= 2 && depth >= 1 && Power(branching, depth) <= (1 << 20),
+                "vocabulary: invalid tree shape");
+}
+
 }  // namespace
 
-double BowScore(const BowVector& a, const BowVector& b) {
-  double score = 0;
-  auto i = a.begin();
-  auto j = b.begin();
-  while (i != a.end() && j != b.end()) {
-    if (i->first < j->first) {
-      ++i;
-    } else if (j->first < i->first) {
-      ++j;
-    } else {
-      score += std::min(i->second, j->second);
-      ++i;
-      ++j;
-    }
-  }
-  return score;
+Vocabulary::Vocabulary(int branching, int depth, std::vector<std::uint8_t> centres,
+                       std::vector<char> valid, std::vector<float> idf)
+    : branching_(branching),
+      depth_(depth),
+      centres_(std::move(centres)),
+      valid_(std::move(valid)),
+      idf_(std::move(idf)) {
+  CheckShape(branching_, depth_);
+  const std::size_t num_nodes = NumNodes();
+  OMNIRIG_CHECK(valid_.size() == num_nodes && centres_.size() == num_nodes * kDescriptorSize &&
+                    idf_.size() == static_cast<std::size_t>(Power(branching_, depth_)),
+                "vocabulary: arrays that do not fit a tree of branching "
+                    << branching_ << " and depth " << depth_);
 }
 
 int Vocabulary::NumNodes() const {
@@ -55,89 +55,6 @@ int Vocabulary::NumNodes() const {
 }
 
 int Vocabulary::FirstLeaf() const { return (Power(branching_, depth_) - 1) / (branching_ - 1); }
-
-void Vocabulary::SplitNode(const cv::Mat& all, const NodeRows& node, std::vector<NodeRows>* next) {
-  const auto& [parent, rows] = node;
-  cv::Mat samples(static_cast<int>(rows.size()), kDescriptorSize, CV_32F);
-  for (size_t i = 0; i < rows.size(); ++i) {
-    all.row(rows[i]).copyTo(samples.row(static_cast<int>(i)));
-  }
-  cv::Mat labels, centres;
-  const int k = std::min<int>(branching_, samples.rows);
-  if (k == 0) return;
-  if (k < branching_) {
-    centres = samples.clone();
-    labels = cv::Mat(samples.rows, 1, CV_32S);
-    for (int i = 0; i < samples.rows; ++i) labels.at<int>(i) = i;
-  } else {
-    cv::kmeans(samples, k, labels,
-               cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 15, 0.5), 1,
-               cv::KMEANS_PP_CENTERS, centres);
-  }
-  for (int c = 0; c < k; ++c) {
-    const int child = parent * branching_ + 1 + c;
-    valid_[child] = 1;
-    for (int i = 0; i < kDescriptorSize; ++i) {
-      centres_[static_cast<std::size_t>(child) * kDescriptorSize + i] =
-          cv::saturate_cast<std::uint8_t>(centres.at<float>(c, i));
-    }
-    next->push_back({child, {}});
-  }
-  const size_t first = next->size() - k;
-  for (int i = 0; i < labels.rows; ++i) {
-    (*next)[first + labels.at<int>(i)].second.push_back(rows[i]);
-  }
-}
-
-void Vocabulary::SetIdf(const std::vector<cv::Mat>& images) {
-  const int num_words = Power(branching_, depth_);
-  idf_.assign(num_words, 1.0f);  // Word() needs a non-empty vocabulary
-  std::vector<int> images_with(num_words, 0);
-  for (const cv::Mat& d : images) {
-    cv::Mat f;
-    d.convertTo(f, CV_32F);
-    std::set<int> words;
-    for (int r = 0; r < f.rows; ++r) words.insert(Word(f.ptr<float>(r)));
-    for (int w : words) ++images_with[w];
-  }
-  const double n = static_cast<double>(images.size());
-  for (int w = 0; w < num_words; ++w) {
-    idf_[w] = static_cast<float>(std::log(n / std::max(1, images_with[w])));
-  }
-}
-
-Vocabulary Vocabulary::Train(const std::vector<cv::Mat>& images, int branching, int depth,
-                             std::uint64_t seed) {
-  OMNIRIG_CHECK(branching >= 2 && depth >= 1 && Power(branching, depth) <= (1 << 20),
-                "a vocabulary needs branching >= 2, depth >= 1 and at most 2^20 words");
-  cv::Mat all;
-  for (const cv::Mat& d : images) {
-    OMNIRIG_CHECK(d.cols == kDescriptorSize, "vocabulary training needs SIFT descriptors");
-    cv::Mat f;
-    d.convertTo(f, CV_32F);
-    all.push_back(f);
-  }
-  OMNIRIG_CHECK(all.rows >= branching, "too few descriptors to train a vocabulary");
-  Vocabulary vocabulary;
-  vocabulary.branching_ = branching;
-  vocabulary.depth_ = depth;
-  const int num_nodes = vocabulary.NumNodes();
-  vocabulary.centres_.assign(static_cast<std::size_t>(num_nodes) * kDescriptorSize, 0);
-  vocabulary.valid_.assign(num_nodes, 0);
-  vocabulary.valid_[0] = 1;
-  cv::theRNG().state = seed == 0 ? 1 : seed;
-  // Breadth first: the descriptors of each node of the current level.
-  std::vector<NodeRows> level = {{0, {}}};
-  for (int r = 0; r < all.rows; ++r) level[0].second.push_back(r);
-  for (int d = 0; d < depth; ++d) {
-    std::vector<NodeRows> next;
-    for (const NodeRows& node : level) vocabulary.SplitNode(all, node, &next);
-    level = std::move(next);
-  }
-  // idf from the rounded centres, as Word() will see them.
-  vocabulary.SetIdf(images);
-  return vocabulary;
-}
 
 int Vocabulary::Word(const float* descriptor) const {
   OMNIRIG_CHECK(!empty(), "the vocabulary is empty");
@@ -213,25 +130,20 @@ Vocabulary Vocabulary::Deserialize(const std::uint8_t* data, std::size_t size) {
   std::memcpy(header, data, sizeof(header));
   OMNIRIG_CHECK(header[0] == kMagic && header[3] == kDescriptorSize,
                 "vocabulary: not a SIFT vocabulary file");
-  Vocabulary vocabulary;
-  vocabulary.branching_ = static_cast<int>(header[1]);
-  vocabulary.depth_ = static_cast<int>(header[2]);
-  OMNIRIG_CHECK(vocabulary.branching_ >= 2 && vocabulary.depth_ >= 1 &&
-                    Power(vocabulary.branching_, vocabulary.depth_) <= (1 << 20),
-                "vocabulary: invalid tree shape");
-  const std::size_t num_nodes = vocabulary.NumNodes();
-  const std::size_t num_words = Power(vocabulary.branching_, vocabulary.depth_);
+  const int branching = static_cast<int>(header[1]), depth = static_cast<int>(header[2]);
+  CheckShape(branching, depth);
+  const std::size_t num_words = Power(branching, depth);
+  const std::size_t num_nodes = (num_words * branching - 1) / (branching - 1);
   const std::size_t expected =
       sizeof(header) + num_nodes * (1 + kDescriptorSize) + num_words * sizeof(float);
   OMNIRIG_CHECK(size == expected, "vocabulary: " << size << " bytes, expected " << expected);
-  const std::uint8_t* p = data + sizeof(header);
-  vocabulary.valid_.assign(p, p + num_nodes);
-  p += num_nodes;
-  vocabulary.centres_.assign(p, p + num_nodes * kDescriptorSize);
-  p += num_nodes * kDescriptorSize;
-  vocabulary.idf_.resize(num_words);
-  std::memcpy(vocabulary.idf_.data(), p, num_words * sizeof(float));
-  return vocabulary;
+  const std::uint8_t* valid = data + sizeof(header);
+  const std::uint8_t* centres = valid + num_nodes;
+  std::vector<float> idf(num_words);
+  std::memcpy(idf.data(), centres + num_nodes * kDescriptorSize, num_words * sizeof(float));
+  return Vocabulary(branching, depth,
+                    std::vector<std::uint8_t>(centres, centres + num_nodes * kDescriptorSize),
+                    std::vector<char>(valid, valid + num_nodes), std::move(idf));
 }
 
 void KeyframeDatabase::Add(int keyframe, const BowVector& bow) {

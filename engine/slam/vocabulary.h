@@ -23,19 +23,16 @@ namespace omnirig::slam {
 // Sparse tf-idf vector: (word, weight) sorted by word, weights summing to 1.
 using BowVector = std::vector<std::pair<int, float>>;
 
-// DBoW2's L1 score of two L1-normalised vectors: 1 for identical word histograms, 0 for disjoint.
-double BowScore(const BowVector& a, const BowVector& b);
-
 class Vocabulary {
  public:
   static constexpr int kDescriptorSize = 128;  // SIFT
 
   Vocabulary() = default;
-  // Hierarchical k-means (cv::kmeans, k-means++ seeding, `seed`) over every descriptor of
-  // `images` (CV_32F, kDescriptorSize columns, one matrix per image); the idf of a word is
-  // log(N / n_w) with N images, n_w of them holding the word.
-  static Vocabulary Train(const std::vector<cv::Mat>& images, int branching, int depth,
-                          std::uint64_t seed);
+  // A trained tree (testing/slam/vocabulary_training.h trains one): `branching` children per
+  // node, `depth` levels; `centres` and `valid` per node in the layout of centres_ below, `idf`
+  // per word. Throws InvalidArgument for a shape out of range or arrays that do not fit it.
+  Vocabulary(int branching, int depth, std::vector<std::uint8_t> centres, std::vector<char> valid,
+             std::vector<float> idf);
   // The binary form (a header, then the centres as bytes: SIFT's components are integers in
   // [0, 255]; then the idf as float32). Throws InvalidArgument on a malformed blob.
   std::vector<std::uint8_t> Serialize() const;
@@ -55,15 +52,8 @@ class Vocabulary {
   int depth() const { return depth_; }
 
  private:
-  // The descriptors of a node of the tree being trained (rows of the training matrix).
-  using NodeRows = std::pair<int, std::vector<int>>;
   int NumNodes() const;
   int FirstLeaf() const;
-  // Clusters a node's descriptors into its children (k-means, or one child per descriptor when
-  // fewer than `branching_`), appending the children to `next`.
-  void SplitNode(const cv::Mat& all, const NodeRows& node, std::vector<NodeRows>* next);
-  // idf per word from the images' descriptors, as Word() assigns them.
-  void SetIdf(const std::vector<cv::Mat>& images);
 
   int branching_ = 0;
   int depth_ = 0;
@@ -81,7 +71,7 @@ class KeyframeDatabase {
  public:
   struct Candidate {
     int keyframe = -1;
-    double score = 0.0;  // BowScore
+    double score = 0.0;  // DBoW2's L1 score (see the top)
   };
   void Add(int keyframe, const BowVector& bow);
   // The keyframes `accept` lets through, scoring at least min_score, best first, at most

@@ -7,6 +7,7 @@
 
 #include "engine/slam/vocabulary.h"
 #include "engine/util/check.h"
+#include "testing/slam/vocabulary_training.h"
 
 namespace omnirig::slam {
 namespace {
@@ -30,7 +31,7 @@ TEST(Vocabulary, TrainsRoundTripsAndScoresTheSameImageHighest) {
   std::mt19937 rng(3);
   std::vector<cv::Mat> images;
   for (int k = 0; k < 6; ++k) images.push_back(Descriptors(200, k, &rng));
-  const Vocabulary vocabulary = Vocabulary::Train(images, 4, 2, 1);
+  const Vocabulary vocabulary = TrainVocabulary(images, 4, 2, 1);
   EXPECT_EQ(vocabulary.num_words(), 16);
   const std::vector<std::uint8_t> bytes = vocabulary.Serialize();
   const Vocabulary loaded = Vocabulary::Deserialize(bytes.data(), bytes.size());
@@ -73,7 +74,7 @@ TEST(Vocabulary, NodesHoldTheirWordsAndTransformReportsEachRowsWord) {
   std::mt19937 rng(4);
   std::vector<cv::Mat> images;
   for (int k = 0; k < 6; ++k) images.push_back(Descriptors(200, k, &rng));
-  const Vocabulary vocabulary = Vocabulary::Train(images, 4, 2, 1);
+  const Vocabulary vocabulary = TrainVocabulary(images, 4, 2, 1);
   // 16 words under 4 nodes of level 1: word w's path from the root is its base-4 digits.
   EXPECT_EQ(vocabulary.NodeOf(0, 1), 0);
   EXPECT_EQ(vocabulary.NodeOf(7, 1), 1);

@@ -396,17 +396,7 @@ void Decide(const std::vector<double>& raw, const std::vector<StatisticParts>& p
 
 }  // namespace
 
-double SyncStatisticSurvival(double x, const SyncTestReport& /*report*/) {
-  return ChiSquareSurvival(x, kPoseDof);
-}
-
-std::array<double, 2> EstimatePairCornerNoise(const StereoRig& rig,
-                                              const std::vector<RigPairCorners>& pairs,
-                                              const SyncTestOptions& options) {
-  std::vector<SeparateFit> separate;
-  for (const RigPairCorners& pair : pairs) separate.push_back(FitSeparately(rig, pair));
-  return CornerNoise(separate, options);
-}
+double SyncStatisticSurvival(double x) { return ChiSquareSurvival(x, kPoseDof); }
 
 SyncTestReport TestPairSynchronisation(const StereoRig& rig,
                                        const std::vector<RigPairCorners>& pairs,

@@ -128,15 +128,10 @@ struct SyncTestReport {
   std::vector<PairSyncStatistic> pairs;  // one per tested pair
 };
 
-// P(statistic > x) under the null hypothesis (simultaneous exposures) that `report`'s limit
-// is the quantile of: the per-pair p-value of a PairSyncStatistic::statistic.
-double SyncStatisticSurvival(double x, const SyncTestReport& report);
-
-// Step 1 of the rule alone: the corner noise per camera (px per coordinate) from each
-// camera's own board fits of `pairs` (also when the test itself is turned off).
-std::array<double, 2> EstimatePairCornerNoise(const StereoRig& rig,
-                                              const std::vector<RigPairCorners>& pairs,
-                                              const SyncTestOptions& options);
+// P(statistic > x) under the null hypothesis (simultaneous exposures) that
+// SyncTestReport::limit is the quantile of: the per-pair p-value of a
+// PairSyncStatistic::statistic.
+double SyncStatisticSurvival(double x);
 
 // The rigs the pairs are judged by when each was refitted without its pair (relative_pose.cc,
 // SyncTestRigs): cam0_from_cam1 and the intrinsics but `fixed_intrinsics` (per camera,

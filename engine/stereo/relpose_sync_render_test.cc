@@ -15,8 +15,8 @@
 #include "engine/calib/calibrate.h"
 #include "engine/calib/detect.h"
 #include "engine/stereo/relative_pose.h"
-#include "engine/synth/calib_board.h"
 #include "engine/synth/presets.h"
+#include "testing/synth/calib_board.h"
 
 namespace omnirig {
 namespace {
@@ -94,7 +94,7 @@ void RunSeed(uint64_t seed, std::array<Counts, 2>* counts_by_setting) {
       if (!pair.valid) continue;
       ++counts->pairs;
       counts->over_limit += pair.statistic > first_limit ? 1 : 0;
-      counts->p_under_1 += SyncStatisticSurvival(pair.statistic, first) < 0.01 ? 1 : 0;
+      counts->p_under_1 += SyncStatisticSurvival(pair.statistic) < 0.01 ? 1 : 0;
     }
     const RelativePoseReport moved_report = EstimateRelativePose(cam0, cam1, board, moved, options);
     ASSERT_TRUE(moved_report.success) << moved_report.message;

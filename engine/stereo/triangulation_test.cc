@@ -5,8 +5,8 @@
 
 #include <gtest/gtest.h>
 
-#include "engine/geometry/random_bearing.h"
 #include "engine/util/check.h"
+#include "testing/geometry/random_bearing.h"
 
 namespace omnirig {
 namespace {

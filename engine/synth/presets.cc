@@ -321,19 +321,6 @@ void StereoBoardOptions::Check() const {
   render.Check();
 }
 
-StereoBoardOptions QuickStereoBoardOptions(int num_pairs, uint64_t seed) {
-  StereoBoardOptions options;
-  options.num_pairs = num_pairs;
-  options.width = 800;
-  options.height = 600;
-  options.render.supersampling = 2;
-  options.render.noise_sigma = 2.0;
-  options.render.blur_sigma_px = 0.5;
-  options.render.grayscale = true;
-  options.seed = seed;
-  return options;
-}
-
 StereoBoardSet MakeStereoBoardSet(const StereoBoardOptions& options, const ProgressSink& progress) {
   options.Check();
   StereoBoardSet set;

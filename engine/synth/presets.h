@@ -143,10 +143,6 @@ struct StereoBoardSet {
 StereoBoardSet MakeStereoBoardSet(const StereoBoardOptions& options,
                                   const ProgressSink& progress = ProgressSink());
 
-// Small, quick stereo renders for tests and the detector bench: num_pairs pairs at 800x600,
-// 2x2 supersampling, 0.5 px blur, image noise of 2 grey levels, grey.
-StereoBoardOptions QuickStereoBoardOptions(int num_pairs, uint64_t seed);
-
 struct StereoSequenceOptions {
   // kRoom, kStreet: a gentle S-curve of path_length_m (<= 20 m) through the scene.
   // kCityBlock: num_laps laps of a closed loop of path_length_m (40 .. 400 m) along the street

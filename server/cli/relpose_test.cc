@@ -13,6 +13,7 @@
 #include "engine/synth/presets.h"
 #include "engine/util/check.h"
 #include "server/cli/commands.h"
+#include "testing/synth/calib_board.h"
 
 namespace omnirig::cli {
 namespace {

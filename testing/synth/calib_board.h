@@ -1,9 +1,10 @@
 #pragma once
 // The calibration board (engine/calib) that a rendered checkerboard (engine/synth) shows, for the
-// tests and benchmarks that render a board and then detect or fit it. Header-only, so that
-// neither library depends on the other.
+// tests and benchmarks that render a board and then detect or fit it, and the quick stereo board
+// renders they use. Header-only, so that neither library depends on the other.
 
 #include <algorithm>
+#include <cstdint>
 #include <vector>
 
 #include <Eigen/Core>
@@ -15,6 +16,24 @@
 #include "engine/synth/scene.h"
 
 namespace omnirig {
+namespace synth {
+
+// Small, quick stereo renders for tests and the detector bench: num_pairs pairs at 800x600,
+// 2x2 supersampling, 0.5 px blur, image noise of 2 grey levels, grey.
+inline StereoBoardOptions QuickStereoBoardOptions(int num_pairs, uint64_t seed) {
+  StereoBoardOptions options;
+  options.num_pairs = num_pairs;
+  options.width = 800;
+  options.height = 600;
+  options.render.supersampling = 2;
+  options.render.noise_sigma = 2.0;
+  options.render.blur_sigma_px = 0.5;
+  options.render.grayscale = true;
+  options.seed = seed;
+  return options;
+}
+
+}  // namespace synth
 
 inline BoardSpec ToBoardSpec(const synth::CheckerboardSpec& spec) {
   BoardSpec board;

@@ -1,9 +1,9 @@
-#include "engine/dense/map_accuracy.h"
+#include "testing/dense/map_accuracy.h"
 
 #include <algorithm>
 #include <cmath>
 
-#include "engine/slam/surface_distance.h"
+#include "testing/slam/surface_distance.h"
 
 namespace omnirig::dense {
 namespace {

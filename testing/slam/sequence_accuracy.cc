@@ -1,10 +1,10 @@
-#include "engine/slam/sequence_accuracy.h"
+#include "testing/slam/sequence_accuracy.h"
 
 #include <algorithm>
 #include <cmath>
 #include <vector>
 
-#include "engine/slam/surface_distance.h"
+#include "testing/slam/surface_distance.h"
 
 namespace omnirig::slam {
 namespace {

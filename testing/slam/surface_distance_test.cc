@@ -1,4 +1,4 @@
-#include "engine/slam/surface_distance.h"
+#include "testing/slam/surface_distance.h"
 
 #include <gtest/gtest.h>
 

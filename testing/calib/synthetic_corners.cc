@@ -1,4 +1,4 @@
-#include "engine/calib/synthetic_corners.h"
+#include "testing/calib/synthetic_corners.h"
 
 #include <cmath>
 #include <random>
