@@ -49,6 +49,9 @@ TEST(Vocabulary, TrainsRoundTripsAndScoresTheSameImageHighest) {
   std::vector<std::uint8_t> bad = bytes;
   bad[0] ^= 1;
   EXPECT_THROW(Vocabulary::Deserialize(bad.data(), bad.size()), InvalidArgument);
+  // A tree's arrays must fit its shape.
+  EXPECT_THROW(Vocabulary(4, 2, {}, {}, {}), InvalidArgument);
+  EXPECT_THROW(Vocabulary(1, 2, {}, {}, {}), InvalidArgument);
 }
 
 TEST(KeyframeDatabase, ReturnsAcceptedKeyframesBestFirst) {
