@@ -11,15 +11,13 @@
 
 #include <nlohmann/json.hpp>
 
+#include "engine/calib/calibrate.h"
 #include "engine/geometry/camera_model.h"
 
 namespace omnirig::api {
 
-nlohmann::json IntrinsicsToJson(const UnifiedIntrinsics& intrinsics);
-// Throws InvalidArgument naming the missing or mistyped key.
-UnifiedIntrinsics IntrinsicsFromJson(const nlohmann::json& json);
-
 nlohmann::json CameraToJson(const CameraModel& camera);
+// Throws InvalidArgument naming the missing or mistyped key.
 CameraModel CameraFromJson(const nlohmann::json& json);
 
 nlohmann::json PoseToJson(const Rigid3d& pose);
@@ -30,6 +28,11 @@ StereoRig RigFromJson(const nlohmann::json& json);
 // Writes cam0_from_cam1, baseline_m and cameras; callers add the rest of their result.
 nlohmann::json RigToJson(const StereoRig& rig);
 
+// Fixes (fix) or frees each intrinsic a list of names gives (UnifiedIntrinsics::kNames, or the
+// calibration's groups "skew", "tangential", "principal_point", "gamma"), the rest as it was.
+// `field` names the JSON field in error messages (e.g. "options.fix").
+void SetFixedFromJson(const nlohmann::json& names, const std::string& field, bool fix,
+                      CalibrationOptions* options);
 // A list of intrinsic names (UnifiedIntrinsics::kNames, or the calibration's groups "skew",
 // "tangential", "principal_point", "gamma") as a fixed set, nothing else fixed. `field` names
 // the JSON field in error messages (e.g. "params.fixed_intrinsics").

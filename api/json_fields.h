@@ -9,18 +9,38 @@
 #include <variant>
 #include <vector>
 
+#include <Eigen/Core>
 #include <nlohmann/json.hpp>
 
 namespace omnirig::api {
+
+// "PATH.KEY", or KEY alone where PATH is empty (the top level of a request body or a result).
+std::string FieldName(const std::string& path, const std::string& key);
 
 // Refuses a value that is not an object ("'PATH' must be a JSON object") and any key not in known.
 void CheckKnownFields(const nlohmann::json& object, const std::string& path,
                       const std::set<std::string>& known);
 
-// PATH.KEY, which must be present ("missing field 'PATH.KEY'").
+// PATH.KEY, which must be present ("missing field 'PATH.KEY'"). An integer must fit an int.
+const nlohmann::json& Field(const nlohmann::json& object, const std::string& path,
+                            const std::string& key);
 double NumberField(const nlohmann::json& object, const std::string& path, const std::string& key);
 int IntegerField(const nlohmann::json& object, const std::string& path, const std::string& key);
 bool BoolField(const nlohmann::json& object, const std::string& path, const std::string& key);
+std::string StringField(const nlohmann::json& object, const std::string& path,
+                        const std::string& key);
+// The id of another job: a non-empty string.
+std::string JobIdField(const nlohmann::json& object, const std::string& path,
+                       const std::string& key);
+
+// `value`, named `name` in messages, as an array of `size` numbers into out[0..size).
+void ReadNumberArray(const nlohmann::json& value, const std::string& name, int size, double* out);
+template <int N>
+Eigen::Matrix<double, N, 1> NumberVector(const nlohmann::json& value, const std::string& name) {
+  Eigen::Matrix<double, N, 1> out;
+  ReadNumberArray(value, name, N, out.data());
+  return out;
+}
 
 // The optional forms: *value keeps its default when PATH.KEY is absent.
 void ReadNumber(const nlohmann::json& object, const std::string& path, const std::string& key,
