@@ -8,12 +8,12 @@
 #include <map>
 #include <memory>
 #include <set>
-#include <sstream>
 
 #include <opencv2/imgcodecs.hpp>
 
 #include "api/camera_json.h"
 #include "api/json_fields.h"
+#include "api/relpose_job.h"
 #include "api/stereo_job.h"
 #include "engine/calib/calibrate.h"
 #include "engine/geometry/ply.h"
@@ -26,46 +26,6 @@ namespace {
 
 using nlohmann::json;
 namespace fs = std::filesystem;
-
-// Width and height from a PNG's IHDR or a JPEG's SOF marker, without decoding the pixels;
-// nullopt for other formats.
-std::optional<std::pair<int, int>> SizeFromHeader(const fs::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return std::nullopt;
-  unsigned char head[24] = {};
-  in.read(reinterpret_cast<char*>(head), sizeof(head));
-  if (in.gcount() == 24 && head[0] == 0x89 && head[1] == 'P' && head[2] == 'N' && head[3] == 'G') {
-    auto be32 = [&](int at) {
-      return (head[at] << 24) | (head[at + 1] << 16) | (head[at + 2] << 8) | head[at + 3];
-    };
-    return std::make_pair(be32(16), be32(20));
-  }
-  if (head[0] != 0xFF || head[1] != 0xD8) return std::nullopt;
-  in.clear();
-  in.seekg(2);
-  for (;;) {
-    unsigned char marker[4];
-    if (!in.read(reinterpret_cast<char*>(marker), 4) || marker[0] != 0xFF) return std::nullopt;
-    const int length = (marker[2] << 8) | marker[3];
-    const unsigned char type = marker[1];
-    const bool is_sof = type >= 0xC0 && type <= 0xCF && type != 0xC4 && type != 0xC8 && type != 0xCC;
-    if (is_sof) {
-      unsigned char sof[5];
-      if (!in.read(reinterpret_cast<char*>(sof), 5)) return std::nullopt;
-      return std::make_pair((sof[3] << 8) | sof[4], (sof[1] << 8) | sof[2]);
-    }
-    in.seekg(length - 2, std::ios::cur);
-  }
-}
-
-std::pair<int, int> ImageSize(const fs::path& dataset_dir, const std::string& name) {
-  const fs::path path = dataset_dir / name;
-  OMNIRIG_CHECK(fs::is_regular_file(path), "image " << name << " is missing from the dataset");
-  if (const auto size = SizeFromHeader(path)) return *size;
-  const cv::Mat image = cv::imread(path.string(), cv::IMREAD_UNCHANGED);
-  OMNIRIG_CHECK(!image.empty(), "image " << name << " cannot be read (truncated or not an image)");
-  return {image.cols, image.rows};
-}
 
 json BundleAdjustmentToJson(const slam::BundleAdjustmentReport& r) {
   return {{"num_free_poses", r.num_free_poses},     {"num_constant_poses", r.num_constant_poses},
@@ -147,15 +107,15 @@ json EvaluationToJson(const slam::TrajectoryErrors& e) {
 
 // Timestamps for the TUM file: the ground truth's when given, else NAME read as a number
 // (datasets often name frames by time), else the frame index in seconds.
-std::vector<double> Timestamps(const std::vector<std::string>& names,
+std::vector<double> Timestamps(const std::vector<ImagePairNames>& pairs,
                                const std::vector<slam::StampedPose>& ground_truth) {
-  std::vector<double> stamps(names.size());
-  for (size_t i = 0; i < names.size(); ++i) {
+  std::vector<double> stamps(pairs.size());
+  for (size_t i = 0; i < pairs.size(); ++i) {
     if (!ground_truth.empty()) {
       stamps[i] = ground_truth[i].timestamp_s;
       continue;
     }
-    const std::string stem = fs::path(names[i]).stem().string();
+    const std::string stem = fs::path(pairs[i].name).stem().string();
     char* end = nullptr;
     const double value = std::strtod(stem.c_str(), &end);
     stamps[i] = (!stem.empty() && end == stem.c_str() + stem.size()) ? value : static_cast<double>(i);
@@ -398,51 +358,6 @@ SlamParams SlamParamsFromJson(const json& params) {
   return parsed;
 }
 
-SlamSequence PrepareSlamSequence(const StereoRig& rig, const fs::path& dataset_dir,
-                                 const std::vector<std::string>& image_names) {
-  std::map<std::string, std::string> cams[2];
-  for (const std::string& name : image_names) {
-    for (int c = 0; c < 2; ++c) {
-      const std::string prefix = "cam" + std::to_string(c) + "/";
-      if (name.rfind(prefix, 0) == 0 && name.size() > prefix.size()) {
-        cams[c][name.substr(prefix.size())] = name;
-      }
-    }
-  }
-  OMNIRIG_CHECK(!cams[0].empty() || !cams[1].empty(),
-                "the dataset has no stereo images (expected cam0/NAME and cam1/NAME)");
-  std::ostringstream missing;
-  int num_missing = 0;
-  for (int c = 0; c < 2; ++c) {
-    for (const auto& [name, path] : cams[c]) {
-      if (cams[1 - c].count(name)) continue;
-      if (num_missing++ < 5) missing << " " << path << " has no cam" << (1 - c) << "/" << name << ";";
-    }
-  }
-  OMNIRIG_CHECK(num_missing == 0, num_missing << " image(s) without a partner:" << missing.str());
-  SlamSequence sequence;
-  const CameraModel* camera[2] = {&rig.cam0, &rig.cam1};
-  std::ostringstream sizes;
-  int num_bad = 0;
-  for (const auto& [name, path0] : cams[0]) {
-    sequence.names.push_back(name);
-    sequence.cam0.push_back(path0);
-    sequence.cam1.push_back(cams[1][name]);
-    for (int c = 0; c < 2; ++c) {
-      const std::string& path = c == 0 ? path0 : cams[1][name];
-      const auto [width, height] = ImageSize(dataset_dir, path);
-      if (width == camera[c]->width && height == camera[c]->height) continue;
-      if (num_bad++ < 5) {
-        sizes << " " << path << " is " << width << "x" << height << " but the rig's cam" << c
-              << " is calibrated for " << camera[c]->width << "x" << camera[c]->height << ";";
-      }
-    }
-  }
-  OMNIRIG_CHECK(num_bad == 0, num_bad << " image(s) do not match the rig's calibration:"
-                                      << sizes.str());
-  return sequence;
-}
-
 namespace {
 
 // Names the service stores as videos (as storage/video_container.h's IsVideoName).
@@ -565,30 +480,28 @@ SlamInput PrepareVideoInput(const StereoRig& rig, const slam::StereoVideoFiles& 
   return input;
 }
 
-SlamInput PrepareImageInput(const StereoRig& rig, const fs::path& dataset_dir,
+SlamInput PrepareImageInput(const fs::path& dataset_dir,
                             const std::vector<std::string>& image_names, int frame_step,
                             const std::optional<fs::path>& ground_truth) {
-  const SlamSequence all = PrepareSlamSequence(rig, dataset_dir, image_names);
+  const std::vector<ImagePairNames> all = MatchImagePairs(image_names);
   std::vector<slam::StampedPose> gt;
-  if (ground_truth) gt = ReadGroundTruth(*ground_truth, all.names.size());
-  const std::vector<double> all_stamps = Timestamps(all.names, gt);
-  auto sequence = std::make_shared<SlamSequence>();
+  if (ground_truth) gt = ReadGroundTruth(*ground_truth, all.size());
+  const std::vector<double> all_stamps = Timestamps(all, gt);
+  auto pairs = std::make_shared<std::vector<ImagePairNames>>();
   SlamInput input;
-  for (size_t i = 0; i < all.names.size(); i += frame_step) {
-    sequence->names.push_back(all.names[i]);
-    sequence->cam0.push_back(all.cam0[i]);
-    sequence->cam1.push_back(all.cam1[i]);
+  for (size_t i = 0; i < all.size(); i += frame_step) {
+    pairs->push_back(all[i]);
+    input.names.push_back(all[i].name);
     input.timestamps_s.push_back(all_stamps[i]);
     if (!gt.empty()) input.ground_truth.push_back(gt[i]);
   }
-  input.names = sequence->names;
   input.source = {{"kind", "images"},
                   {"frame_step", frame_step},
                   {"num_frames", input.names.size()},
-                  {"num_image_pairs", all.names.size()}};
-  input.load = [sequence, dataset_dir](int i) {
+                  {"num_image_pairs", all.size()}};
+  input.load = [pairs, dataset_dir](int i) {
     return slam::ReadBoth([&](int c) {
-      const std::string& name = c == 0 ? sequence->cam0[i] : sequence->cam1[i];
+      const std::string& name = c == 0 ? (*pairs)[i].cam0 : (*pairs)[i].cam1;
       cv::Mat image = cv::imread((dataset_dir / name).string(), cv::IMREAD_COLOR);
       OMNIRIG_CHECK(!image.empty(), "image " << name << " cannot be read");
       return image;
@@ -724,8 +637,7 @@ json RunSlamOnDataset(const StereoRig& rig, const fs::path& dataset_dir,
   const auto videos = FindStereoVideos(dataset_dir, image_names);
   const SlamInput input =
       videos ? PrepareVideoInput(rig, *videos, frame_options, ground_truth, progress)
-             : PrepareImageInput(rig, dataset_dir, image_names, frame_options.frame_step,
-                                 ground_truth);
+             : PrepareImageInput(dataset_dir, image_names, frame_options.frame_step, ground_truth);
   const slam::StereoFrameLoader& load = input.load;
   const ProgressSink frame_progress{
       [&](double fraction, const std::string& stage, const std::string& message) {
