@@ -76,6 +76,19 @@ StereoRig RigFromJson(const nlohmann::json& json) {
   return rig;
 }
 
+StereoRig LoadRig(const std::function<nlohmann::json(const std::string&)>& load_result,
+                  const std::string& job_id) {
+  OMNIRIG_CHECK(static_cast<bool>(load_result),
+                "this job cannot read other jobs' results (no result loader)");
+  const nlohmann::json result = load_result(job_id);
+  try {
+    return RigFromJson(result);
+  } catch (const InvalidArgument& e) {
+    throw InvalidArgument("job " + job_id +
+                          " holds no stereo rig (is it a relative_pose job?): " + e.what());
+  }
+}
+
 nlohmann::json RigToJson(const StereoRig& rig) {
   return {{"cam0_from_cam1", PoseToJson(rig.cam0_from_cam1)},
           {"baseline_m", rig.cam0_from_cam1.translation.norm()},

@@ -7,6 +7,7 @@
 //   rig:    {"cam0_from_cam1": pose, "cameras": {"cam0": camera, "cam1": camera}, ...}
 
 #include <array>
+#include <functional>
 #include <string>
 
 #include <nlohmann/json.hpp>
@@ -25,6 +26,9 @@ Rigid3d PoseFromJson(const nlohmann::json& json);
 
 // Reads cam0_from_cam1 and cameras.cam0/cam1 of a relative_pose result.
 StereoRig RigFromJson(const nlohmann::json& json);
+// RigFromJson of job `job_id`'s result read by `load_result`; the error names the job.
+StereoRig LoadRig(const std::function<nlohmann::json(const std::string&)>& load_result,
+                  const std::string& job_id);
 // Writes cam0_from_cam1, baseline_m and cameras; callers add the rest of their result.
 nlohmann::json RigToJson(const StereoRig& rig);
 

@@ -5,7 +5,6 @@
 #include <chrono>
 #include <ctime>
 #include <fstream>
-#include <map>
 #include <memory>
 #include <set>
 
@@ -72,25 +71,31 @@ json TimesToJson(const slam::StageTimes& t) {
           {"local_ba", t.local_ba_s}, {"loop", t.loop_s}};
 }
 
-json FrameToJson(const slam::FrameReport& f) {
+// What trajectory.json and the report both say of a frame.
+json FrameStateToJson(const slam::FrameReport& f) {
   return {{"name", f.name},
           {"state", f.state},
           {"linked", f.linked},
           {"keyframe", f.keyframe},
           {"reason", f.reason},
-          {"motion_source", f.motion_source},
-          {"num_features", {f.num_features[0], f.num_features[1]}},
-          {"num_stereo_points", f.num_stereo_points},
-          {"num_matches", f.num_matches},
-          {"num_essential_inliers", f.num_essential_inliers},
-          {"num_scale_inliers", f.num_scale_inliers},
-          {"num_tracked_landmarks", f.num_tracked_landmarks},
-          {"num_new_landmarks", f.num_new_landmarks},
-          {"times_s", TimesToJson(f.times)},
-          {"local_bundle_adjustment", f.local_bundle_adjustment
-                                          ? BundleAdjustmentToJson(*f.local_bundle_adjustment)
-                                          : json(nullptr)},
           {"world_from_rig", f.world_from_rig ? PoseToJson(*f.world_from_rig) : json(nullptr)}};
+}
+
+json FrameToJson(const slam::FrameReport& f) {
+  json out = FrameStateToJson(f);
+  out.update({{"motion_source", f.motion_source},
+              {"num_features", {f.num_features[0], f.num_features[1]}},
+              {"num_stereo_points", f.num_stereo_points},
+              {"num_matches", f.num_matches},
+              {"num_essential_inliers", f.num_essential_inliers},
+              {"num_scale_inliers", f.num_scale_inliers},
+              {"num_tracked_landmarks", f.num_tracked_landmarks},
+              {"num_new_landmarks", f.num_new_landmarks},
+              {"times_s", TimesToJson(f.times)},
+              {"local_bundle_adjustment", f.local_bundle_adjustment
+                                              ? BundleAdjustmentToJson(*f.local_bundle_adjustment)
+                                              : json(nullptr)}});
+  return out;
 }
 
 json EvaluationToJson(const slam::TrajectoryErrors& e) {
@@ -105,8 +110,8 @@ json EvaluationToJson(const slam::TrajectoryErrors& e) {
           {"gt_from_estimate", PoseToJson(e.gt_from_estimate)}};
 }
 
-// Timestamps for the TUM file: the ground truth's when given, else NAME read as a number
-// (datasets often name frames by time), else the frame index in seconds.
+// Timestamps for the TUM file: the ground truth's when given, else NAME's (NameAsTimestamp),
+// else the frame index in seconds.
 std::vector<double> Timestamps(const std::vector<ImagePairNames>& pairs,
                                const std::vector<slam::StampedPose>& ground_truth) {
   std::vector<double> stamps(pairs.size());
@@ -115,10 +120,7 @@ std::vector<double> Timestamps(const std::vector<ImagePairNames>& pairs,
       stamps[i] = ground_truth[i].timestamp_s;
       continue;
     }
-    const std::string stem = fs::path(pairs[i].name).stem().string();
-    char* end = nullptr;
-    const double value = std::strtod(stem.c_str(), &end);
-    stamps[i] = (!stem.empty() && end == stem.c_str() + stem.size()) ? value : static_cast<double>(i);
+    stamps[i] = NameAsTimestamp(pairs[i].name).value_or(static_cast<double>(i));
   }
   return stamps;
 }
@@ -130,14 +132,8 @@ json WriteArtifacts(const StereoRig& rig, const slam::SlamResult& result,
   std::vector<slam::StampedPose> tum;
   for (size_t i = 0; i < result.frames.size(); ++i) {
     const slam::FrameReport& f = result.frames[i];
-    frames.push_back({{"name", f.name},
-                      {"state", f.state},
-                      {"linked", f.linked},
-                      {"keyframe", f.keyframe},
-                      {"reason", f.reason},
-                      {"timestamp_s", stamps[i]},
-                      {"world_from_rig",
-                       f.world_from_rig ? PoseToJson(*f.world_from_rig) : json(nullptr)}});
+    frames.push_back(FrameStateToJson(f));
+    frames.back()["timestamp_s"] = stamps[i];
     if (f.world_from_rig) tum.push_back({stamps[i], *f.world_from_rig});
   }
   const json trajectory = {
@@ -153,15 +149,10 @@ json WriteArtifacts(const StereoRig& rig, const slam::SlamResult& result,
           {"report_json", "report.json"}};
 }
 
-std::vector<slam::StampedPose> ReadGroundTruth(const fs::path& path, size_t num_frames) {
+std::vector<slam::StampedPose> ReadGroundTruth(const fs::path& path) {
   OMNIRIG_CHECK(fs::is_regular_file(path),
                 "ground truth " << path.filename().string() << " is not in the dataset");
-  std::vector<slam::StampedPose> poses = slam::ReadTum(path);
-  OMNIRIG_CHECK(poses.size() == num_frames,
-                "ground truth " << path.filename().string() << " has " << poses.size()
-                                << " poses but the sequence has " << num_frames
-                                << " stereo frames (one pose per frame, in order)");
-  return poses;
+  return slam::ReadTum(path);
 }
 
 }  // namespace
@@ -171,16 +162,14 @@ slam::CalibrationRefinement CalibrationRefinementFromJson(const json& value) {
   if (value.is_boolean()) {
     return value.get<bool>() ? CalibrationRefinement::kAll : CalibrationRefinement::kNone;
   }
-  OMNIRIG_CHECK(value.is_string(), "field 'options.refine_calibration' must be one of \"none\", "
-                                   "\"intrinsics\", \"rig\", \"all\" (or true/false)");
-  const std::string name = value.get<std::string>();
   for (CalibrationRefinement r : {CalibrationRefinement::kNone, CalibrationRefinement::kIntrinsics,
                                   CalibrationRefinement::kRig, CalibrationRefinement::kAll}) {
-    if (name == slam::CalibrationRefinementName(r)) return r;
+    if (value == slam::CalibrationRefinementName(r)) return r;
   }
-  throw InvalidArgument("field 'options.refine_calibration' must be one of \"none\", "
-                        "\"intrinsics\", \"rig\", \"all\" (or true/false), not \"" +
-                        name + "\"");
+  throw InvalidArgument(
+      "field 'options.refine_calibration' must be one of \"none\", "
+      "\"intrinsics\", \"rig\", \"all\" (or true/false), not " +
+      value.dump());
 }
 
 slam::SlamOptions SlamOptionsFromJson(const json& object) {
@@ -233,22 +222,15 @@ slam::SlamOptions SlamOptionsFromJson(const json& object) {
 namespace {
 
 dense::DenseMapOptions DenseMapOptionsFromJson(const json& object) {
-  OMNIRIG_CHECK(object.is_object(), "field 'params.dense_map' must be an object, e.g. "
-                                    "{\"voxel_m\": 0.02}");
   dense::DenseMapOptions options;
-  const std::map<std::string, double*> fields = {
-      {"voxel_m", &options.voxel_m},
-      {"keyframe_spacing_m", &options.keyframe_spacing_m},
-      {"grid_step_factor", &options.grid_step_factor},
-      {"occupancy_cell_m", &options.occupancy_cell_m},
-      {"obstacle_min_height_m", &options.obstacle_min_height_m},
-      {"obstacle_max_height_m", &options.obstacle_max_height_m}};
-  for (const auto& [key, value] : object.items()) {
-    const auto it = fields.find(key);
-    OMNIRIG_CHECK(it != fields.end(), "unknown field 'params.dense_map." << key << "'");
-    OMNIRIG_CHECK(value.is_number(), "field 'params.dense_map." << key << "' must be a number");
-    *it->second = value.get<double>();
-  }
+  const OptionTable table = {{"voxel_m", &options.voxel_m},
+                             {"keyframe_spacing_m", &options.keyframe_spacing_m},
+                             {"grid_step_factor", &options.grid_step_factor},
+                             {"occupancy_cell_m", &options.occupancy_cell_m},
+                             {"obstacle_min_height_m", &options.obstacle_min_height_m},
+                             {"obstacle_max_height_m", &options.obstacle_max_height_m}};
+  CheckKnownFields(object, "params.dense_map", KeysOf(table));
+  ReadOptions(object, "params.dense_map", table);
   if (!object.contains("occupancy_cell_m")) {
     options.occupancy_cell_m = std::max(options.occupancy_cell_m, options.voxel_m);
   }
@@ -299,60 +281,33 @@ json FuseDenseMap(const StereoRig& rig, const slam::SlamResult& result,
            std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count()}};
 }
 
-const std::set<std::string> kParamFields = {"rig",       "ground_truth",    "options",
-                                            "dense_map", "frame_step",      "start_s",
-                                            "end_s",     "pair_tolerance_s"};
-
-// "frame_step", "start_s", "end_s", "pair_tolerance_s" of the params (each optional).
-slam::VideoFrameOptions VideoFrameOptionsFromJson(const json& params) {
-  slam::VideoFrameOptions frames;
-  if (params.contains("frame_step")) {
-    OMNIRIG_CHECK(
-        params["frame_step"].is_number_integer() && params["frame_step"].get<int64_t>() >= 1,
-        "field 'params.frame_step' must be an integer >= 1");
-    frames.frame_step = params["frame_step"].get<int>();
-  }
-  const std::map<std::string, double*> seconds = {{"start_s", &frames.start_s},
-                                                  {"end_s", &frames.end_s},
-                                                  {"pair_tolerance_s", &frames.pair_tolerance_s}};
-  for (const auto& [key, target] : seconds) {
-    if (!params.contains(key)) continue;
-    OMNIRIG_CHECK(params[key].is_number(),
-                  "field 'params." << key << "' must be a number of seconds");
-    *target = params[key].get<double>();
-  }
-  try {
-    frames.Check();
-  } catch (const InvalidArgument& e) {
-    throw InvalidArgument(std::string("invalid 'params': ") + e.what());
-  }
-  return frames;
-}
-
 }  // namespace
 
 SlamParams SlamParamsFromJson(const json& params) {
-  OMNIRIG_CHECK(params.is_object(), "params must be a JSON object");
-  for (const auto& [key, value] : params.items()) {
-    OMNIRIG_CHECK(kParamFields.count(key) > 0, "unknown field 'params." << key << "'");
-  }
   SlamParams parsed;
-  OMNIRIG_CHECK(params.contains("rig"), "missing field 'params.rig' (a relative_pose job id)");
-  OMNIRIG_CHECK(params["rig"].is_string() && !params["rig"].get<std::string>().empty(),
-                "field 'params.rig' must be a job id (a non-empty string)");
-  parsed.rig_job = params["rig"].get<std::string>();
+  // "frame_step", "start_s", "end_s", "pair_tolerance_s" (each optional).
+  const OptionTable frames = {{"frame_step", &parsed.frames.frame_step},
+                              {"start_s", &parsed.frames.start_s},
+                              {"end_s", &parsed.frames.end_s},
+                              {"pair_tolerance_s", &parsed.frames.pair_tolerance_s}};
+  std::set<std::string> known = KeysOf(frames);
+  known.insert({"rig", "ground_truth", "options", "dense_map"});
+  CheckKnownFields(params, "params", known);
+  parsed.rig_job = JobIdField(params, "params", "rig");
   if (params.contains("ground_truth")) {
-    OMNIRIG_CHECK(params["ground_truth"].is_string() &&
-                      !params["ground_truth"].get<std::string>().empty(),
-                  "field 'params.ground_truth' must be a file name in the dataset");
-    const std::string name = params["ground_truth"].get<std::string>();
-    OMNIRIG_CHECK(name.find("..") == std::string::npos && name.front() != '/',
+    const std::string name = StringField(params, "params", "ground_truth");
+    OMNIRIG_CHECK(!name.empty() && name.find("..") == std::string::npos && name.front() != '/',
                   "field 'params.ground_truth' must name a file inside the dataset");
     parsed.ground_truth = name;
   }
   if (params.contains("options")) parsed.options = SlamOptionsFromJson(params["options"]);
   if (params.contains("dense_map")) parsed.dense_map = DenseMapOptionsFromJson(params["dense_map"]);
-  parsed.frames = VideoFrameOptionsFromJson(params);
+  ReadOptions(params, "params", frames);
+  try {
+    parsed.frames.Check();
+  } catch (const InvalidArgument& e) {
+    throw InvalidArgument(std::string("invalid 'params': ") + e.what());
+  }
   parsed.video_only_fields =
       params.contains("start_s") || params.contains("end_s") || params.contains("pair_tolerance_s");
   return parsed;
@@ -411,9 +366,7 @@ struct SlamInput {
 std::vector<slam::StampedPose> MatchGroundTruth(const fs::path& path,
                                                 const std::vector<double>& stamps,
                                                 double tolerance_s) {
-  OMNIRIG_CHECK(fs::is_regular_file(path),
-                "ground truth " << path.filename().string() << " is not in the dataset");
-  std::vector<slam::StampedPose> poses = slam::ReadTum(path);
+  std::vector<slam::StampedPose> poses = ReadGroundTruth(path);
   std::sort(poses.begin(), poses.end(),
             [](const auto& a, const auto& b) { return a.timestamp_s < b.timestamp_s; });
   OMNIRIG_CHECK(!poses.empty(), "ground truth " << path.filename().string() << " holds no pose");
@@ -448,6 +401,8 @@ SlamInput PrepareVideoInput(const StereoRig& rig, const slam::StereoVideoFiles& 
   const auto pass_wall_start = std::chrono::steady_clock::now();
   std::vector<slam::StereoVideoFrame> frames =
       slam::PairStereoVideoFrames(files, frame_options, pass);
+  const double tolerance_s = frame_options.pair_tolerance_s > 0 ? frame_options.pair_tolerance_s
+                                                                : 0.25 / info.video[0].fps;
   SlamInput input;
   json file_names = {files.cam0.filename().string()};
   if (!files.stacked()) file_names.push_back(files.cam1.filename().string());
@@ -458,8 +413,7 @@ SlamInput PrepareVideoInput(const StereoRig& rig, const slam::StereoVideoFiles& 
       {"fps", info.video[0].fps},
       {"frame_count", info.video[0].frame_count},
       {"frame_size", {info.width[0], info.height[0]}},
-      {"pair_tolerance_s", frame_options.pair_tolerance_s > 0 ? frame_options.pair_tolerance_s
-                                                              : 0.25 / info.video[0].fps},
+      {"pair_tolerance_s", tolerance_s},
       {"frame_step", frame_options.frame_step},
       {"num_frames", frames.size()},
       // The pass that reads and pairs every timestamp before the first frame (decoding only).
@@ -471,8 +425,6 @@ SlamInput PrepareVideoInput(const StereoRig& rig, const slam::StereoVideoFiles& 
     input.timestamps_s.push_back(frame.timestamp_s);
   }
   if (ground_truth) {
-    const double tolerance_s = frame_options.pair_tolerance_s > 0 ? frame_options.pair_tolerance_s
-                                                                  : 0.25 / info.video[0].fps;
     input.ground_truth = MatchGroundTruth(*ground_truth, input.timestamps_s, tolerance_s);
   }
   auto reader = std::make_shared<slam::StereoVideoReader>(files, std::move(frames));
@@ -485,7 +437,13 @@ SlamInput PrepareImageInput(const fs::path& dataset_dir,
                             const std::optional<fs::path>& ground_truth) {
   const std::vector<ImagePairNames> all = MatchImagePairs(image_names);
   std::vector<slam::StampedPose> gt;
-  if (ground_truth) gt = ReadGroundTruth(*ground_truth, all.size());
+  if (ground_truth) {
+    gt = ReadGroundTruth(*ground_truth);
+    OMNIRIG_CHECK(gt.size() == all.size(),
+                  "ground truth " << ground_truth->filename().string() << " has " << gt.size()
+                                  << " poses but the sequence has " << all.size()
+                                  << " stereo frames (one pose per frame, in order)");
+  }
   const std::vector<double> all_stamps = Timestamps(all, gt);
   auto pairs = std::make_shared<std::vector<ImagePairNames>>();
   SlamInput input;
@@ -518,15 +476,12 @@ json SlamResultToJson(const slam::SlamResult& result) {
   report["num_lost"] = result.num_lost;
   report["num_map_points"] = result.map.size();
   report["frames_per_second"] = result.total_s > 0 ? result.frames.size() / result.total_s : 0.0;
-  json timings = TimesToJson(result.stage_totals);
-  timings["global_ba"] = result.global_ba_s;
-  timings["total"] = result.total_s;
-  report["timings_s"] = timings;
+  report["timings_s"] = TimesToJson(result.stage_totals);
+  report["timings_s"].update({{"global_ba", result.global_ba_s}, {"total", result.total_s}});
   // CPU seconds of the threads that ran each stage: the stable measure on a shared machine.
-  json cpu_timings = TimesToJson(result.cpu_stage_totals);
-  cpu_timings["global_ba"] = result.global_ba_cpu_s;
-  cpu_timings["total"] = result.total_cpu_s;
-  report["cpu_timings_s"] = cpu_timings;
+  report["cpu_timings_s"] = TimesToJson(result.cpu_stage_totals);
+  report["cpu_timings_s"].update(
+      {{"global_ba", result.global_ba_cpu_s}, {"total", result.total_cpu_s}});
   report["global_bundle_adjustment"] = result.global_bundle_adjustment
                                            ? BundleAdjustmentToJson(*result.global_bundle_adjustment)
                                            : json(nullptr);
@@ -615,14 +570,8 @@ void CheckSlamInputs(const json& params, const SubmissionInputs& dataset) {
                       << " holds none (cam0.EXT and cam1.EXT, or stacked.EXT)");
     return;
   }
-  StereoRig rig;
-  try {
-    rig = RigFromJson(dataset.load_result(parsed.rig_job));
-  } catch (const InvalidArgument& e) {
-    throw InvalidArgument("rig job " + parsed.rig_job +
-                          " is not a usable relative_pose result: " + e.what());
-  }
-  CheckVideoSizes(rig, *videos, slam::ProbeStereoVideo(*videos));
+  CheckVideoSizes(LoadRig(dataset.load_result, parsed.rig_job), *videos,
+                  slam::ProbeStereoVideo(*videos));
 }
 
 json RunSlamOnDataset(const StereoRig& rig, const fs::path& dataset_dir,
@@ -666,15 +615,7 @@ json RunSlamOnDataset(const StereoRig& rig, const fs::path& dataset_dir,
 
 json RunSlamJob(const json& params, const JobContext& context) {
   const SlamParams parsed = SlamParamsFromJson(params);
-  OMNIRIG_CHECK(static_cast<bool>(context.load_result),
-                "this job cannot read other jobs' results (no rig loader)");
-  StereoRig rig;
-  try {
-    rig = RigFromJson(context.load_result(parsed.rig_job));
-  } catch (const InvalidArgument& e) {
-    throw InvalidArgument("rig job " + parsed.rig_job + " is not a usable relative_pose result: " +
-                          e.what());
-  }
+  const StereoRig rig = LoadRig(context.load_result, parsed.rig_job);
   slam::SlamOptions options = parsed.options;
   options.num_threads = std::max(1, context.num_threads);
   std::optional<fs::path> ground_truth;
