@@ -1,7 +1,6 @@
 #include "api/calibration_job.h"
 
 #include <algorithm>
-#include <fstream>
 #include <set>
 
 #include <opencv2/imgcodecs.hpp>
@@ -222,18 +221,6 @@ json CalibrationReportToJson(const CalibrationReport& report) {
   if (report.svp) result["svp"] = SvpToJson(report);
   return result;
 }
-
-namespace {
-
-void WriteTextFile(const std::filesystem::path& path, const std::string& text) {
-  std::filesystem::create_directories(path.parent_path());
-  std::ofstream out(path, std::ios::binary | std::ios::trunc);
-  out << text;
-  out.close();
-  OMNIRIG_CHECK(out, "cannot write " << path.filename().string());
-}
-
-}  // namespace
 
 json WriteCameraExports(const CameraModel& camera, const std::filesystem::path& dir) {
   std::vector<std::string> warnings;

@@ -44,6 +44,10 @@ inline ProgressSink SubRange(const ProgressSink& progress, double begin, double 
           progress.is_cancelled};
 }
 
+// Writes `text` to `path` (an artifact, an export), creating its folder; throws
+// std::runtime_error naming the file when it cannot.
+void WriteTextFile(const std::filesystem::path& path, const std::string& text);
+
 // A job a job reads: its id, the type it must have (empty: any) and the parameter naming it.
 struct JobReference {
   std::string id;

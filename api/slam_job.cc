@@ -4,7 +4,6 @@
 #include <cctype>
 #include <chrono>
 #include <ctime>
-#include <fstream>
 #include <memory>
 #include <set>
 
@@ -140,7 +139,7 @@ json WriteArtifacts(const StereoRig& rig, const slam::SlamResult& result,
       {"world_frame", "the rig frame (cam0's frame) of the first tracked frame"},
       {"frames", frames},
       {"rig", RigToJson(rig)}};
-  std::ofstream(output_dir / "trajectory.json") << trajectory.dump(2) << "\n";
+  WriteTextFile(output_dir / "trajectory.json", trajectory.dump(2) + "\n");
   slam::WriteTum(output_dir / "trajectory.tum", tum);
   slam::WritePly(output_dir / "map.ply", result.map);
   return {{"trajectory_json", "trajectory.json"},
@@ -609,7 +608,7 @@ json RunSlamOnDataset(const StereoRig& rig, const fs::path& dataset_dir,
     report["artifacts"]["occupancy_pgm"] = "occupancy.pgm";
     report["artifacts"]["occupancy_yaml"] = "occupancy.yaml";
   }
-  std::ofstream(output_dir / "report.json") << report.dump(2) << "\n";
+  WriteTextFile(output_dir / "report.json", report.dump(2) + "\n");
   return report;
 }
 
