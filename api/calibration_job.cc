@@ -281,7 +281,6 @@ void RegisterCalibrationJobType() {
   JobType type;
   type.name = "calibration";
   type.validate = [](const json& params) { CalibrationRequestFromJson(params); };
-  type.referenced_jobs = [](const json&) { return std::vector<JobReference>(); };
   type.run = [](const json& params, const JobContext& context) {
     CalibrationRequest request = CalibrationRequestFromJson(params);
     request.options.calibrate.num_threads = std::max(1, context.num_threads);

@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <cctype>
-#include <chrono>
 #include <ctime>
 #include <memory>
 #include <set>
@@ -18,6 +17,7 @@
 #include "engine/slam/evaluation.h"
 #include "engine/slam/map_io.h"
 #include "engine/util/check.h"
+#include "engine/util/timer.h"
 
 namespace omnirig::api {
 namespace {
@@ -243,7 +243,7 @@ json FuseDenseMap(const StereoRig& rig, const slam::SlamResult& result,
                   const std::function<slam::StereoImages(int)>& load,
                   const dense::DenseMapOptions& options, int num_threads,
                   const fs::path& output_dir, const ProgressSink& progress) {
-  const auto start = std::chrono::steady_clock::now();
+  const Timer timer;
   dense::DenseMap map(options);
   std::vector<std::optional<Rigid3d>> world_from_rig;
   for (const slam::FrameReport& frame : result.frames) {
@@ -276,8 +276,7 @@ json FuseDenseMap(const StereoRig& rig, const slam::SlamResult& result,
           {"stereo_seconds", fusion.stereo_s},
           {"floor_height_m", grid.floor_height_m},
           {"occupancy_size", {grid.cells.cols, grid.cells.rows}},
-          {"seconds",
-           std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count()}};
+          {"seconds", timer.ElapsedSeconds()}};
 }
 
 }  // namespace
@@ -314,17 +313,16 @@ SlamParams SlamParamsFromJson(const json& params) {
 
 namespace {
 
-// Names the service stores as videos (as storage/video_container.h's IsVideoName).
-bool IsVideoFileName(const std::string& name) {
-  std::string ext = fs::path(name).extension().string();
-  for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  return ext == ".mp4" || ext == ".m4v" || ext == ".mov" || ext == ".mkv" || ext == ".webm" ||
-         ext == ".avi";
-}
-
 std::string Lower(std::string text) {
   for (char& c : text) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
   return text;
+}
+
+// Names the service stores as videos (as storage/video_container.h's IsVideoName).
+bool IsVideoFileName(const std::string& name) {
+  const std::string ext = Lower(fs::path(name).extension().string());
+  return ext == ".mp4" || ext == ".m4v" || ext == ".mov" || ext == ".mkv" || ext == ".webm" ||
+         ext == ".avi";
 }
 
 // CPU seconds of the whole process (the decoder may run threads of its own).
@@ -397,7 +395,7 @@ SlamInput PrepareVideoInput(const StereoRig& rig, const slam::StereoVideoFiles& 
                           },
                           progress.is_cancelled};
   const double pass_start_s = ProcessCpuSeconds();
-  const auto pass_wall_start = std::chrono::steady_clock::now();
+  const Timer pass_timer;
   std::vector<slam::StereoVideoFrame> frames =
       slam::PairStereoVideoFrames(files, frame_options, pass);
   const double tolerance_s = frame_options.pair_tolerance_s > 0 ? frame_options.pair_tolerance_s
@@ -416,8 +414,7 @@ SlamInput PrepareVideoInput(const StereoRig& rig, const slam::StereoVideoFiles& 
       {"frame_step", frame_options.frame_step},
       {"num_frames", frames.size()},
       // The pass that reads and pairs every timestamp before the first frame (decoding only).
-      {"timestamp_pass_s",
-       std::chrono::duration<double>(std::chrono::steady_clock::now() - pass_wall_start).count()},
+      {"timestamp_pass_s", pass_timer.ElapsedSeconds()},
       {"timestamp_pass_cpu_s", ProcessCpuSeconds() - pass_start_s}};
   for (const auto& frame : frames) {
     input.names.push_back(frame.name);
