@@ -180,11 +180,7 @@ CalibrationRequest CalibrationRequestFromJson(const json& params) {
 
 json CalibrationReportToJson(const CalibrationReport& report) {
   json camera = CameraToJson(report.camera);
-  json stds = json::object();
-  for (int i = 0; i < UnifiedIntrinsics::kNumParams; ++i) {
-    stds[UnifiedIntrinsics::kNames[i]] = report.intrinsics_std[i];
-  }
-  camera["intrinsics_std"] = stds;
+  camera["intrinsics_std"] = IntrinsicsToJson(report.intrinsics_std);
   json images = json::array();
   for (const auto& image : report.images) images.push_back(ImageToJson(image));
   const CalibrationSolverSummary& s = report.solver;

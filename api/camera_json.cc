@@ -6,15 +6,15 @@
 #include "engine/util/check.h"
 
 namespace omnirig::api {
-namespace {
-
-nlohmann::json IntrinsicsToJson(const UnifiedIntrinsics& intrinsics) {
+nlohmann::json IntrinsicsToJson(const std::array<double, UnifiedIntrinsics::kNumParams>& values) {
   nlohmann::json json = nlohmann::json::object();
   for (int i = 0; i < UnifiedIntrinsics::kNumParams; ++i) {
-    json[UnifiedIntrinsics::kNames[i]] = intrinsics.params[i];
+    json[UnifiedIntrinsics::kNames[i]] = values[i];
   }
   return json;
 }
+
+namespace {
 
 UnifiedIntrinsics IntrinsicsFromJson(const nlohmann::json& json) {
   UnifiedIntrinsics intrinsics;
@@ -36,7 +36,7 @@ UnifiedIntrinsics IntrinsicsFromJson(const nlohmann::json& json) {
 nlohmann::json CameraToJson(const CameraModel& camera) {
   return {{"model", "unified"},
           {"image_size", {camera.width, camera.height}},
-          {"intrinsics", IntrinsicsToJson(camera.intrinsics)}};
+          {"intrinsics", IntrinsicsToJson(camera.intrinsics.params)}};
 }
 
 CameraModel CameraFromJson(const nlohmann::json& json) {

@@ -17,6 +17,8 @@
 
 namespace omnirig::api {
 
+// {NAME: value} over UnifiedIntrinsics::kNames: the intrinsics, or their standard deviations.
+nlohmann::json IntrinsicsToJson(const std::array<double, UnifiedIntrinsics::kNumParams>& values);
 nlohmann::json CameraToJson(const CameraModel& camera);
 // Throws InvalidArgument naming the missing or mistyped key.
 CameraModel CameraFromJson(const nlohmann::json& json);

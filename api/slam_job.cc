@@ -250,11 +250,7 @@ json FuseDenseMap(const StereoRig& rig, const slam::SlamResult& result,
     world_from_rig.push_back(frame.world_from_rig);
   }
   // SLAM has reported 1.0; the fusion's stage is named, its fraction stays there.
-  const ProgressSink fusion_progress{
-      [&](double, const std::string& stage, const std::string& message) {
-        progress.Report(1.0, stage, message);
-      },
-      progress.is_cancelled};
+  const ProgressSink fusion_progress = SubRange(progress, 1.0, 1.0);
   const dense::KeyframeFusionReport fusion = dense::FuseKeyframes(
       rig, world_from_rig,
       [&](int i) {
@@ -390,10 +386,7 @@ SlamInput PrepareVideoInput(const StereoRig& rig, const slam::StereoVideoFiles& 
   const slam::StereoVideoInfo info = slam::ProbeStereoVideo(files);
   CheckVideoSizes(rig, files, info);
   // The timestamp pass reads the whole recording once; SLAM's own fractions follow it.
-  const ProgressSink pass{[&](double, const std::string& stage, const std::string& message) {
-                            progress.Report(0.0, stage, message);
-                          },
-                          progress.is_cancelled};
+  const ProgressSink pass = SubRange(progress, 0.0, 0.0);
   const double pass_start_s = ProcessCpuSeconds();
   const Timer pass_timer;
   std::vector<slam::StereoVideoFrame> frames =
