@@ -88,11 +88,7 @@ SvpOptions SvpFromJson(const json& svp) {
   ReadNumber(svp, "svp", "search_margin_px", &out.check.search_margin_px);
   ReadInteger(svp, "svp", "num_profiles", &out.check.num_profiles);
   ReadNumber(svp, "svp", "inlier_px", &out.check.inlier_px);
-  try {
-    out.Check();
-  } catch (const InvalidArgument& e) {
-    throw InvalidArgument(std::string("field 'svp': ") + e.what());
-  }
+  WithErrorPrefix("field 'svp': ", [&] { out.Check(); });
   return out;
 }
 
@@ -155,11 +151,7 @@ BoardSpec BoardFromJson(const json& board) {
   const bool has_marker = charuco || board.contains("marker_size_mm");
   spec.marker_size_m = has_marker ? NumberField(board, "board", "marker_size_mm") * 1e-3 : 0.0;
   ReadInteger(board, "board", "aruco_dictionary", &spec.aruco_dictionary);
-  try {
-    spec.Check();
-  } catch (const InvalidArgument& e) {
-    throw InvalidArgument(std::string("field 'board': ") + e.what());
-  }
+  WithErrorPrefix("field 'board': ", [&] { spec.Check(); });
   return spec;
 }
 
@@ -170,11 +162,7 @@ CalibrationRequest CalibrationRequestFromJson(const json& params) {
   if (params.contains("options")) request.options = OptionsFromJson(params["options"]);
   if (params.contains("hints")) HintsFromJson(params["hints"], &request.options);
   if (params.contains("svp")) request.options.svp = SvpFromJson(params["svp"]);
-  try {
-    request.options.Check();
-  } catch (const InvalidArgument& e) {
-    throw InvalidArgument(std::string("field 'options': ") + e.what());
-  }
+  WithErrorPrefix("field 'options': ", [&] { request.options.Check(); });
   return request;
 }
 

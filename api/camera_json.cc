@@ -81,12 +81,8 @@ StereoRig LoadRig(const std::function<nlohmann::json(const std::string&)>& load_
   OMNIRIG_CHECK(static_cast<bool>(load_result),
                 "this job cannot read other jobs' results (no result loader)");
   const nlohmann::json result = load_result(job_id);
-  try {
-    return RigFromJson(result);
-  } catch (const InvalidArgument& e) {
-    throw InvalidArgument("job " + job_id +
-                          " holds no stereo rig (is it a relative_pose job?): " + e.what());
-  }
+  return WithErrorPrefix("job " + job_id + " holds no stereo rig (is it a relative_pose job?): ",
+                         [&] { return RigFromJson(result); });
 }
 
 nlohmann::json RigToJson(const StereoRig& rig) {
@@ -100,11 +96,8 @@ void SetFixedFromJson(const nlohmann::json& names, const std::string& field, boo
   OMNIRIG_CHECK(names.is_array(), "field '" << field << "' must be an array of names");
   for (const nlohmann::json& name : names) {
     OMNIRIG_CHECK(name.is_string(), "field '" << field << "' must hold names, got " << name.dump());
-    try {
-      options->SetFixed(name.get<std::string>(), fix);
-    } catch (const InvalidArgument& e) {
-      throw InvalidArgument("field '" + field + "': " + e.what());
-    }
+    WithErrorPrefix("field '" + field + "': ",
+                    [&] { options->SetFixed(name.get<std::string>(), fix); });
   }
 }
 

@@ -52,6 +52,15 @@ TEST(JsonFields, IntegersMustFitAnInt) {
   }
 }
 
+TEST(JsonFields, ErrorPrefixNamesTheFieldAndKeepsTheValue) {
+  EXPECT_EQ(WithErrorPrefix("field 'board': ", [] { return 3; }), 3);
+  EXPECT_EQ(Refusal([] {
+              WithErrorPrefix("field 'board': ",
+                              [] { throw InvalidArgument("cols must be >= 2"); });
+            }),
+            "field 'board': cols must be >= 2");
+}
+
 TEST(JsonFields, NumberVectorsHaveTheirSize) {
   EXPECT_EQ(NumberVector<2>(json{1.5, 2}, "options.p"), Eigen::Vector2d(1.5, 2));
   EXPECT_EQ(Refusal([&] {

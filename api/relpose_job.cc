@@ -253,11 +253,8 @@ CameraSource LoadCalibration(const JobContext& context, const std::string& job_i
                 "calibration job " << job_id << " (" << camera
                                    << ") has no 'camera' in its result; is it a calibration job?");
   CameraSource source;
-  try {
-    source.model = CameraFromJson(result["camera"]);
-  } catch (const InvalidArgument& e) {
-    throw InvalidArgument("calibration job " + job_id + " (" + camera + "): " + e.what());
-  }
+  source.model = WithErrorPrefix("calibration job " + job_id + " (" + camera + "): ",
+                                 [&] { return CameraFromJson(result["camera"]); });
   source.camera_json = result["camera"];
   source.views = CalibrationViewsOf(result);
   source.provenance = {{"source", "job"}, {"job_id", job_id}};

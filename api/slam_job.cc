@@ -210,11 +210,7 @@ slam::SlamOptions SlamOptionsFromJson(const json& object) {
     o.essential.seed = object["seed"].get<std::uint64_t>();
     o.scale.seed = o.essential.seed;
   }
-  try {
-    o.Check();
-  } catch (const InvalidArgument& e) {
-    throw InvalidArgument(std::string("invalid 'options': ") + e.what());
-  }
+  WithErrorPrefix("invalid 'options': ", [&] { o.Check(); });
   return o;
 }
 
@@ -297,11 +293,7 @@ SlamParams SlamParamsFromJson(const json& params) {
   if (params.contains("options")) parsed.options = SlamOptionsFromJson(params["options"]);
   if (params.contains("dense_map")) parsed.dense_map = DenseMapOptionsFromJson(params["dense_map"]);
   ReadOptions(params, "params", frames);
-  try {
-    parsed.frames.Check();
-  } catch (const InvalidArgument& e) {
-    throw InvalidArgument(std::string("invalid 'params': ") + e.what());
-  }
+  WithErrorPrefix("invalid 'params': ", [&] { parsed.frames.Check(); });
   parsed.video_only_fields =
       params.contains("start_s") || params.contains("end_s") || params.contains("pair_tolerance_s");
   return parsed;

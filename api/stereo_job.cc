@@ -336,15 +336,11 @@ size_t RunSparse(const StereoReconstructParams& parsed, const StereoRig& rig,
     context.progress.ThrowIfCancelled();
     const cv::Mat image0 = ReadImage(context, pairs[k].cam0);
     const cv::Mat image1 = ReadImage(context, pairs[k].cam1);
-    StereoPairReport report;
-    try {
-      report =
-          ReconstructStereoPair(rig, image0, image1, parsed.options,
-                                SubRange(context.progress, static_cast<double>(k) / pairs.size(),
-                                         static_cast<double>(k + 1) / pairs.size()));
-    } catch (const InvalidArgument& e) {
-      throw InvalidArgument("pair '" + pairs[k].name + "': " + e.what());
-    }
+    const StereoPairReport report = WithErrorPrefix("pair '" + pairs[k].name + "': ", [&] {
+      return ReconstructStereoPair(rig, image0, image1, parsed.options,
+                                   SubRange(context.progress, static_cast<double>(k) / pairs.size(),
+                                            static_cast<double>(k + 1) / pairs.size()));
+    });
     json pair = PairJson(pairs[k].name, report);
     outputs->Add(k, pairs[k].name, SparseCloud(report.points), &pair);
     context.Log("pair " + pairs[k].name + ": " + std::to_string(report.num_matches) +
@@ -432,15 +428,12 @@ size_t RunDense(const StereoReconstructParams& parsed, const StereoRig& rig,
     context.progress.ThrowIfCancelled();
     const cv::Mat image0 = ReadImage(context, pairs[k].cam0);
     const cv::Mat image1 = ReadImage(context, pairs[k].cam1);
-    auto pair_result = std::make_shared<dense::DensePairResult>();
-    try {
-      *pair_result =
-          dense.Reconstruct(image0, image1,
-                            SubRange(context.progress, static_cast<double>(k) / pairs.size(),
-                                     static_cast<double>(k + 1) / pairs.size()));
-    } catch (const InvalidArgument& e) {
-      throw InvalidArgument("pair '" + pairs[k].name + "': " + e.what());
-    }
+    auto pair_result = std::make_shared<dense::DensePairResult>(
+        WithErrorPrefix("pair '" + pairs[k].name + "': ", [&] {
+          return dense.Reconstruct(image0, image1,
+                                   SubRange(context.progress, static_cast<double>(k) / pairs.size(),
+                                            static_cast<double>(k + 1) / pairs.size()));
+        }));
     json pair = DensePairJson(pairs[k].name, *pair_result);
     num_bad_pairs += pair.contains("warning");
     const std::string base = RangeBaseName(pairs[k].name);
@@ -540,12 +533,8 @@ json EpipolarCurveJson(const json& relative_pose_result, int from_camera, double
   OMNIRIG_CHECK(from_camera == 0 || from_camera == 1,
                 "'from' must be cam0 or cam1, got camera " << from_camera);
   OMNIRIG_CHECK(std::isfinite(u) && std::isfinite(v), "'u' and 'v' must be finite numbers");
-  StereoRig rig;
-  try {
-    rig = RigFromJson(relative_pose_result);
-  } catch (const InvalidArgument& e) {
-    throw InvalidArgument(std::string("this job's result holds no stereo rig: ") + e.what());
-  }
+  const StereoRig rig = WithErrorPrefix("this job's result holds no stereo rig: ",
+                                        [&] { return RigFromJson(relative_pose_result); });
   json polylines = json::array();
   for (const Polyline2d& curve : EpipolarCurve(rig, from_camera, Eigen::Vector2d(u, v))) {
     json line = json::array();
