@@ -51,13 +51,12 @@ json Vector3Json(const Eigen::Vector3d& v) { return json::array({v.x(), v.y(), v
 }  // namespace
 
 RelativePoseParams RelativePoseParamsFromJson(const json& params) {
-  CheckKnownFields(params, "params",
-                   {"board", "calibrations", "refine_intrinsics", "fixed_intrinsics",
-                    "intrinsics_model", "resolve_corner_order", "huber_loss_px",
-                    "max_num_iterations", "sync_false_alarm_rate"});
-  OMNIRIG_CHECK(params.contains("board"), "missing field 'params.board'");
+  CheckKnownFields(
+      params, "params",
+      {"board", "calibrations", "refine_intrinsics", "fixed_intrinsics", "intrinsics_model",
+       "resolve_corner_order", "huber_loss_px", "max_num_iterations", "sync_false_alarm_rate"});
   RelativePoseParams out;
-  out.board = BoardFromJson(params["board"]);
+  out.board = BoardFromJson(Field(params, "params", "board"));
   if (params.contains("calibrations")) {
     const json& calibrations = params["calibrations"];
     CheckKnownFields(calibrations, "calibrations", {"cam0", "cam1"});
@@ -242,7 +241,6 @@ std::vector<CalibrationView> CalibrationViewsOf(const json& result) {
   }
   return views;
 }
-
 
 CameraSource LoadCalibration(const JobContext& context, const std::string& job_id,
                              const std::string& camera) {
