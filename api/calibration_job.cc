@@ -1,7 +1,6 @@
 #include "api/calibration_job.h"
 
 #include <algorithm>
-#include <fstream>
 #include <set>
 
 #include <opencv2/imgcodecs.hpp>
@@ -18,93 +17,42 @@ namespace {
 
 using nlohmann::json;
 
-void RequireObject(const json& value, const std::string& path,
-                   const std::set<std::string>& allowed) {
-  OMNIRIG_CHECK(value.is_object(), "field '" << path << "' must be an object");
-  for (const auto& [key, unused] : value.items()) {
-    OMNIRIG_CHECK(allowed.count(key), "unknown field '" << path << "." << key << "'");
-  }
-}
-
-int GetInt(const json& object, const std::string& key, const std::string& path, int fallback,
-           bool required = false) {
-  const auto it = object.find(key);
-  if (it == object.end()) {
-    OMNIRIG_CHECK(!required, "missing field '" << path << "." << key << "'");
-    return fallback;
-  }
-  OMNIRIG_CHECK(it->is_number_integer(), "field '" << path << "." << key << "' must be an integer");
-  const int64_t value = it->get<int64_t>();
-  OMNIRIG_CHECK(value >= -1000000 && value <= 1000000,
-                "field '" << path << "." << key << "' is out of range");
-  return static_cast<int>(value);
-}
-
-bool GetBool(const json& object, const std::string& key, const std::string& path, bool fallback) {
-  const auto it = object.find(key);
-  if (it == object.end()) return fallback;
-  OMNIRIG_CHECK(it->is_boolean(), "field '" << path << "." << key << "' must be a boolean");
-  return it->get<bool>();
-}
-
-template <int N>
-Eigen::Matrix<double, N, 1> GetVector(const json& value, const std::string& path) {
-  OMNIRIG_CHECK(value.is_array() && value.size() == N,
-                "field '" << path << "' must be an array of " << N << " numbers");
-  Eigen::Matrix<double, N, 1> out;
-  for (int i = 0; i < N; ++i) {
-    OMNIRIG_CHECK(value[i].is_number(), "field '" << path << "' must hold numbers only");
-    out[i] = value[i].get<double>();
-  }
-  return out;
-}
-
-void ApplyFixList(const json& options, const std::string& key, bool fix,
-                  CalibrationOptions* calibrate) {
-  const auto it = options.find(key);
-  if (it == options.end()) return;
-  OMNIRIG_CHECK(it->is_array(), "field 'options." << key << "' must be an array of names");
-  for (const json& name : *it) {
-    OMNIRIG_CHECK(name.is_string(), "field 'options." << key << "' must hold strings only");
-    try {
-      calibrate->SetFixed(name.get<std::string>(), fix);
-    } catch (const InvalidArgument& e) {
-      throw InvalidArgument("field 'options." + key + "': " + e.what());
-    }
-  }
+// The options' plain tunables by their JSON keys; "fix", "free", "principal_point_px" and
+// "rim_circle_px" are read apart.
+OptionTable OptionTableOf(ImageCalibrationOptions* o) {
+  CalibrationOptions& c = o->calibrate;
+  return {{"huber_loss_px", &c.huber_loss_px},
+          {"outlier_sigmas", &c.outlier_sigmas},
+          {"min_outlier_px", &c.min_outlier_px},
+          {"max_rejection_rounds", &c.max_rejection_rounds},
+          {"max_view_rms_px", &c.max_view_rms_px},
+          {"min_corners_per_view", &c.min_corners_per_view},
+          {"min_views", &c.min_views},
+          {"max_num_iterations", &c.max_num_iterations},
+          {"refine_subpixel", &o->detect.refine_subpixel},
+          {"try_enhanced", &o->detect.try_enhanced},
+          {"allow_exhaustive", &o->detect.allow_exhaustive},
+          {"redetect", &o->redetect_with_model},
+          {"overlay_error_scale", &o->overlay_error_scale}};
 }
 
 ImageCalibrationOptions OptionsFromJson(const json& options) {
-  RequireObject(options, "options",
-                {"fix", "free", "huber_loss_px", "outlier_sigmas", "min_outlier_px",
-                 "max_rejection_rounds", "max_view_rms_px", "min_corners_per_view", "min_views",
-                 "max_num_iterations", "principal_point_px", "rim_circle_px", "refine_subpixel",
-                 "try_enhanced", "allow_exhaustive", "redetect", "overlay_error_scale"});
   ImageCalibrationOptions out;
+  const OptionTable table = OptionTableOf(&out);
+  std::set<std::string> known = KeysOf(table);
+  known.insert({"fix", "free", "principal_point_px", "rim_circle_px"});
+  CheckKnownFields(options, "options", known);
   CalibrationOptions& c = out.calibrate;
-  ApplyFixList(options, "fix", true, &c);
-  ApplyFixList(options, "free", false, &c);
-  const std::string p = "options";
-  ReadNumber(options, p, "huber_loss_px", &c.huber_loss_px);
-  ReadNumber(options, p, "outlier_sigmas", &c.outlier_sigmas);
-  ReadNumber(options, p, "min_outlier_px", &c.min_outlier_px);
-  c.max_rejection_rounds = GetInt(options, "max_rejection_rounds", p, c.max_rejection_rounds);
-  ReadNumber(options, p, "max_view_rms_px", &c.max_view_rms_px);
-  c.min_corners_per_view = GetInt(options, "min_corners_per_view", p, c.min_corners_per_view);
-  c.min_views = GetInt(options, "min_views", p, c.min_views);
-  c.max_num_iterations = GetInt(options, "max_num_iterations", p, c.max_num_iterations);
+  if (options.contains("fix")) SetFixedFromJson(options["fix"], "options.fix", true, &c);
+  if (options.contains("free")) SetFixedFromJson(options["free"], "options.free", false, &c);
+  ReadOptions(options, "options", table);
   if (options.contains("principal_point_px")) {
     c.principal_point_px =
-        GetVector<2>(options["principal_point_px"], "options.principal_point_px");
+        NumberVector<2>(options["principal_point_px"], "options.principal_point_px");
   }
   if (options.contains("rim_circle_px")) {
-    c.rim_circle_px = GetVector<3>(options["rim_circle_px"], "options.rim_circle_px");
+    c.rim_circle_px = NumberVector<3>(options["rim_circle_px"], "options.rim_circle_px");
   }
-  out.detect.refine_subpixel = GetBool(options, "refine_subpixel", p, true);
-  out.detect.try_enhanced = GetBool(options, "try_enhanced", p, true);
-  out.detect.allow_exhaustive = GetBool(options, "allow_exhaustive", p, false);
-  out.redetect_with_model = GetBool(options, "redetect", p, true);
-  ReadNumber(options, p, "overlay_error_scale", &out.overlay_error_scale);
   return out;
 }
 
@@ -116,7 +64,7 @@ void HintsFromJson(const json& hints, ImageCalibrationOptions* options) {
                   "field '" << path << "' must be an array of 4 [u, v] pixels");
     std::array<Eigen::Vector2d, 4> hint;
     for (int i = 0; i < 4; ++i) {
-      hint[i] = GetVector<2>(corners[i], path + "[" + std::to_string(i) + "]");
+      hint[i] = NumberVector<2>(corners[i], path + "[" + std::to_string(i) + "]");
     }
     options->hints[name] = hint;
   }
@@ -125,28 +73,22 @@ void HintsFromJson(const json& hints, ImageCalibrationOptions* options) {
 // "svp": {"mirror": {"rim_radius_mm", "rim_height_mm"}, "image", "search_margin_px",
 // "num_profiles", "inlier_px"} (all optional; {} finds the rim without a prediction).
 SvpOptions SvpFromJson(const json& svp) {
-  RequireObject(svp, "svp", {"mirror", "image", "search_margin_px", "num_profiles", "inlier_px"});
+  CheckKnownFields(svp, "svp",
+                   {"mirror", "image", "search_margin_px", "num_profiles", "inlier_px"});
   SvpOptions out;
   if (svp.contains("mirror")) {
     const json& mirror = svp["mirror"];
-    RequireObject(mirror, "svp.mirror", {"rim_radius_mm", "rim_height_mm"});
+    CheckKnownFields(mirror, "svp.mirror", {"rim_radius_mm", "rim_height_mm"});
     MirrorRim rim;
     rim.rim_radius_m = NumberField(mirror, "svp.mirror", "rim_radius_mm") * 1e-3;
     rim.rim_height_m = NumberField(mirror, "svp.mirror", "rim_height_mm") * 1e-3;
     out.mirror = rim;
   }
-  if (svp.contains("image")) {
-    OMNIRIG_CHECK(svp["image"].is_string(), "field 'svp.image' must be a string");
-    out.image = svp["image"].get<std::string>();
-  }
+  if (svp.contains("image")) out.image = StringField(svp, "svp", "image");
   ReadNumber(svp, "svp", "search_margin_px", &out.check.search_margin_px);
-  out.check.num_profiles = GetInt(svp, "num_profiles", "svp", out.check.num_profiles);
+  ReadInteger(svp, "svp", "num_profiles", &out.check.num_profiles);
   ReadNumber(svp, "svp", "inlier_px", &out.check.inlier_px);
-  try {
-    out.Check();
-  } catch (const InvalidArgument& e) {
-    throw InvalidArgument(std::string("field 'svp': ") + e.what());
-  }
+  WithErrorPrefix("field 'svp': ", [&] { out.Check(); });
   return out;
 }
 
@@ -192,8 +134,9 @@ json ImageToJson(const CalibrationImageReport& image) {
 }  // namespace
 
 BoardSpec BoardFromJson(const json& board) {
-  RequireObject(board, "board",
-                {"type", "cols", "rows", "square_size_mm", "marker_size_mm", "aruco_dictionary"});
+  CheckKnownFields(
+      board, "board",
+      {"type", "cols", "rows", "square_size_mm", "marker_size_mm", "aruco_dictionary"});
   BoardSpec spec;
   const auto type = board.find("type");
   if (type != board.end()) {
@@ -201,44 +144,31 @@ BoardSpec BoardFromJson(const json& board) {
                   "field 'board.type' must be \"checkerboard\" or \"charuco\"");
     spec.type = *type == "charuco" ? BoardSpec::Type::kCharuco : BoardSpec::Type::kCheckerboard;
   }
-  spec.cols = GetInt(board, "cols", "board", 0, true);
-  spec.rows = GetInt(board, "rows", "board", 0, true);
+  spec.cols = IntegerField(board, "board", "cols");
+  spec.rows = IntegerField(board, "board", "rows");
   spec.square_size_m = NumberField(board, "board", "square_size_mm") * 1e-3;
   const bool charuco = spec.type == BoardSpec::Type::kCharuco;
   const bool has_marker = charuco || board.contains("marker_size_mm");
   spec.marker_size_m = has_marker ? NumberField(board, "board", "marker_size_mm") * 1e-3 : 0.0;
-  spec.aruco_dictionary = GetInt(board, "aruco_dictionary", "board", 0);
-  try {
-    spec.Check();
-  } catch (const InvalidArgument& e) {
-    throw InvalidArgument(std::string("field 'board': ") + e.what());
-  }
+  ReadInteger(board, "board", "aruco_dictionary", &spec.aruco_dictionary);
+  WithErrorPrefix("field 'board': ", [&] { spec.Check(); });
   return spec;
 }
 
 CalibrationRequest CalibrationRequestFromJson(const json& params) {
-  RequireObject(params, "params", {"board", "options", "hints", "svp"});
-  OMNIRIG_CHECK(params.contains("board"), "missing field 'board'");
+  CheckKnownFields(params, "params", {"board", "options", "hints", "svp"});
   CalibrationRequest request;
-  request.board = BoardFromJson(params["board"]);
+  request.board = BoardFromJson(Field(params, "params", "board"));
   if (params.contains("options")) request.options = OptionsFromJson(params["options"]);
   if (params.contains("hints")) HintsFromJson(params["hints"], &request.options);
   if (params.contains("svp")) request.options.svp = SvpFromJson(params["svp"]);
-  try {
-    request.options.Check();
-  } catch (const InvalidArgument& e) {
-    throw InvalidArgument(std::string("field 'options': ") + e.what());
-  }
+  WithErrorPrefix("field 'options': ", [&] { request.options.Check(); });
   return request;
 }
 
 json CalibrationReportToJson(const CalibrationReport& report) {
   json camera = CameraToJson(report.camera);
-  json stds = json::object();
-  for (int i = 0; i < UnifiedIntrinsics::kNumParams; ++i) {
-    stds[UnifiedIntrinsics::kNames[i]] = report.intrinsics_std[i];
-  }
-  camera["intrinsics_std"] = stds;
+  camera["intrinsics_std"] = IntrinsicsToJson(report.intrinsics_std);
   json images = json::array();
   for (const auto& image : report.images) images.push_back(ImageToJson(image));
   const CalibrationSolverSummary& s = report.solver;
@@ -275,18 +205,6 @@ json CalibrationReportToJson(const CalibrationReport& report) {
   if (report.svp) result["svp"] = SvpToJson(report);
   return result;
 }
-
-namespace {
-
-void WriteTextFile(const std::filesystem::path& path, const std::string& text) {
-  std::filesystem::create_directories(path.parent_path());
-  std::ofstream out(path, std::ios::binary | std::ios::trunc);
-  out << text;
-  out.close();
-  OMNIRIG_CHECK(out, "cannot write " << path.filename().string());
-}
-
-}  // namespace
 
 json WriteCameraExports(const CameraModel& camera, const std::filesystem::path& dir) {
   std::vector<std::string> warnings;
@@ -347,7 +265,6 @@ void RegisterCalibrationJobType() {
   JobType type;
   type.name = "calibration";
   type.validate = [](const json& params) { CalibrationRequestFromJson(params); };
-  type.referenced_jobs = [](const json&) { return std::vector<JobReference>(); };
   type.run = [](const json& params, const JobContext& context) {
     CalibrationRequest request = CalibrationRequestFromJson(params);
     request.options.calibrate.num_threads = std::max(1, context.num_threads);

@@ -40,11 +40,10 @@ std::string ValidationError(const json& params) {
 
 TEST(CalibrationJson, ParsesBoardOptionsAndHints) {
   json params = ValidParams();
-  params["options"] = {{"fix", {"xi", "tangential"}},
-                       {"free", {"k5"}},
-                       {"huber_loss_px", 2.0},
-                       {"principal_point_px", {320, 240}},
-                       {"redetect", false}};
+  params["options"] = {{"fix", {"xi", "tangential"}}, {"free", {"k5"}},
+                       {"huber_loss_px", 2.0},        {"principal_point_px", {320, 240}},
+                       {"redetect", false},           {"allow_exhaustive", true},
+                       {"max_num_iterations", 50}};
   params["hints"] = {{"a.png", {{1, 2}, {3, 4}, {5, 6}, {7, 8}}}};
   const CalibrationRequest request = CalibrationRequestFromJson(params);
   EXPECT_EQ(request.board.cols, 8);
@@ -56,6 +55,9 @@ TEST(CalibrationJson, ParsesBoardOptionsAndHints) {
   EXPECT_TRUE(fixed[UnifiedIntrinsics::kAlpha]);  // default
   EXPECT_EQ(request.options.calibrate.huber_loss_px, 2.0);
   EXPECT_FALSE(request.options.redetect_with_model);
+  EXPECT_TRUE(request.options.detect.allow_exhaustive);
+  EXPECT_TRUE(request.options.detect.refine_subpixel);  // default
+  EXPECT_EQ(request.options.calibrate.max_num_iterations, 50);
   EXPECT_FALSE(request.options.svp);
   ASSERT_EQ(request.options.hints.count("a.png"), 1u);
   EXPECT_EQ(request.options.hints.at("a.png")[3], Eigen::Vector2d(7, 8));
@@ -80,7 +82,7 @@ TEST(CalibrationJson, ParsesTheSvpCheck) {
 }
 
 TEST(CalibrationJson, ValidationNamesTheField) {
-  EXPECT_NE(ValidationError(json::object()).find("'board'"), std::string::npos);
+  EXPECT_NE(ValidationError(json::object()).find("'params.board'"), std::string::npos);
   json params = ValidParams();
   params["board"]["colz"] = 3;
   EXPECT_NE(ValidationError(params).find("board.colz"), std::string::npos);
@@ -180,7 +182,7 @@ TEST(CalibrationJob, IsRegisteredAndFailsClearlyOnUnusableImages) {
   const JobType* type = FindJobType("calibration");
   ASSERT_NE(type, nullptr);
   EXPECT_THROW(type->validate(json::object()), InvalidArgument);
-  EXPECT_TRUE(type->referenced_jobs(ValidParams()).empty());
+  EXPECT_FALSE(type->referenced_jobs);  // it reads no other job
 
   const fs::path dir =
       fs::temp_directory_path() / ("omnirig_calib_job_" + std::to_string(::getpid()));

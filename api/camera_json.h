@@ -7,19 +7,20 @@
 //   rig:    {"cam0_from_cam1": pose, "cameras": {"cam0": camera, "cam1": camera}, ...}
 
 #include <array>
+#include <functional>
 #include <string>
 
 #include <nlohmann/json.hpp>
 
+#include "engine/calib/calibrate.h"
 #include "engine/geometry/camera_model.h"
 
 namespace omnirig::api {
 
-nlohmann::json IntrinsicsToJson(const UnifiedIntrinsics& intrinsics);
-// Throws InvalidArgument naming the missing or mistyped key.
-UnifiedIntrinsics IntrinsicsFromJson(const nlohmann::json& json);
-
+// {NAME: value} over UnifiedIntrinsics::kNames: the intrinsics, or their standard deviations.
+nlohmann::json IntrinsicsToJson(const std::array<double, UnifiedIntrinsics::kNumParams>& values);
 nlohmann::json CameraToJson(const CameraModel& camera);
+// Throws InvalidArgument naming the missing or mistyped key.
 CameraModel CameraFromJson(const nlohmann::json& json);
 
 nlohmann::json PoseToJson(const Rigid3d& pose);
@@ -27,9 +28,17 @@ Rigid3d PoseFromJson(const nlohmann::json& json);
 
 // Reads cam0_from_cam1 and cameras.cam0/cam1 of a relative_pose result.
 StereoRig RigFromJson(const nlohmann::json& json);
+// RigFromJson of job `job_id`'s result read by `load_result`; the error names the job.
+StereoRig LoadRig(const std::function<nlohmann::json(const std::string&)>& load_result,
+                  const std::string& job_id);
 // Writes cam0_from_cam1, baseline_m and cameras; callers add the rest of their result.
 nlohmann::json RigToJson(const StereoRig& rig);
 
+// Fixes (fix) or frees each intrinsic a list of names gives (UnifiedIntrinsics::kNames, or the
+// calibration's groups "skew", "tangential", "principal_point", "gamma"), the rest as it was.
+// `field` names the JSON field in error messages (e.g. "options.fix").
+void SetFixedFromJson(const nlohmann::json& names, const std::string& field, bool fix,
+                      CalibrationOptions* options);
 // A list of intrinsic names (UnifiedIntrinsics::kNames, or the calibration's groups "skew",
 // "tangential", "principal_point", "gamma") as a fixed set, nothing else fixed. `field` names
 // the JSON field in error messages (e.g. "params.fixed_intrinsics").

@@ -1,7 +1,9 @@
 #include "api/job_types.h"
 
+#include <fstream>
 #include <memory>
 #include <mutex>
+#include <stdexcept>
 
 #include "api/calibration_job.h"
 #include "api/relpose_job.h"
@@ -9,6 +11,15 @@
 #include "api/stereo_job.h"
 
 namespace omnirig::api {
+
+void WriteTextFile(const std::filesystem::path& path, const std::string& text) {
+  std::filesystem::create_directories(path.parent_path());
+  std::ofstream out(path, std::ios::binary | std::ios::trunc);
+  out << text;
+  out.close();
+  if (!out) throw std::runtime_error("cannot write " + path.filename().string());
+}
+
 namespace {
 
 std::mutex& RegistryMutex() {

@@ -44,6 +44,10 @@ inline ProgressSink SubRange(const ProgressSink& progress, double begin, double 
           progress.is_cancelled};
 }
 
+// Writes `text` to `path` (an artifact, an export), creating its folder; throws
+// std::runtime_error naming the file when it cannot.
+void WriteTextFile(const std::filesystem::path& path, const std::string& text);
+
 // A job a job reads: its id, the type it must have (empty: any) and the parameter naming it.
 struct JobReference {
   std::string id;
@@ -81,7 +85,7 @@ struct JobType {
   std::function<void(const nlohmann::json& params)> validate;
   // Earlier jobs this job reads, each with the type it must have (e.g. "relative_pose" for a
   // job that reads a rig): the server refuses, at submission, a reference to a missing job
-  // (404), to a job of another type or one that has not succeeded (422).
+  // (404), to a job of another type or one that has not succeeded (422). Optional.
   std::function<std::vector<JobReference>(const nlohmann::json& params)> referenced_jobs;
   // Checks at submission, without decoding pixels, that the dataset's files fit `params` and
   // the referenced jobs' results (e.g. images of another size than the rig's calibration, a

@@ -1,46 +1,76 @@
 #include "api/json_fields.h"
 
+#include <limits>
+
 #include "engine/util/check.h"
 
 namespace omnirig::api {
 
 using nlohmann::json;
 
+std::string FieldName(const std::string& path, const std::string& key) {
+  return path.empty() ? key : path + "." + key;
+}
+
 void CheckKnownFields(const json& object, const std::string& path,
                       const std::set<std::string>& known) {
   OMNIRIG_CHECK(object.is_object(), "'" << path << "' must be a JSON object");
   for (const auto& [key, value] : object.items()) {
-    OMNIRIG_CHECK(known.count(key) > 0, "unknown field '" << path << "." << key << "'");
+    OMNIRIG_CHECK(known.count(key) > 0, "unknown field '" << FieldName(path, key) << "'");
   }
 }
 
-namespace {
-
-const json& Present(const json& object, const std::string& path, const std::string& key) {
+const json& Field(const json& object, const std::string& path, const std::string& key) {
   const auto it = object.find(key);
-  OMNIRIG_CHECK(it != object.end(), "missing field '" << path << "." << key << "'");
+  OMNIRIG_CHECK(it != object.end(), "missing field '" << FieldName(path, key) << "'");
   return *it;
 }
 
-}  // namespace
-
 double NumberField(const json& object, const std::string& path, const std::string& key) {
-  const json& value = Present(object, path, key);
-  OMNIRIG_CHECK(value.is_number(), "field '" << path << "." << key << "' must be a number");
+  const json& value = Field(object, path, key);
+  OMNIRIG_CHECK(value.is_number(), "field '" << FieldName(path, key) << "' must be a number");
   return value.get<double>();
 }
 
 int IntegerField(const json& object, const std::string& path, const std::string& key) {
-  const json& value = Present(object, path, key);
+  const json& value = Field(object, path, key);
   OMNIRIG_CHECK(value.is_number_integer(),
-                "field '" << path << "." << key << "' must be an integer");
+                "field '" << FieldName(path, key) << "' must be an integer");
+  // get<int>() would wrap a larger value into range.
+  const bool fits = value.is_number_unsigned()
+                        ? value.get<uint64_t>() <= std::numeric_limits<int>::max()
+                        : value.get<int64_t>() >= std::numeric_limits<int>::min() &&
+                              value.get<int64_t>() <= std::numeric_limits<int>::max();
+  OMNIRIG_CHECK(fits, "field '" << FieldName(path, key) << "' is out of range");
   return value.get<int>();
 }
 
 bool BoolField(const json& object, const std::string& path, const std::string& key) {
-  const json& value = Present(object, path, key);
-  OMNIRIG_CHECK(value.is_boolean(), "field '" << path << "." << key << "' must be true or false");
+  const json& value = Field(object, path, key);
+  OMNIRIG_CHECK(value.is_boolean(), "field '" << FieldName(path, key) << "' must be true or false");
   return value.get<bool>();
+}
+
+std::string StringField(const json& object, const std::string& path, const std::string& key) {
+  const json& value = Field(object, path, key);
+  OMNIRIG_CHECK(value.is_string(), "field '" << FieldName(path, key) << "' must be a string");
+  return value.get<std::string>();
+}
+
+std::string JobIdField(const json& object, const std::string& path, const std::string& key) {
+  const json& value = Field(object, path, key);
+  OMNIRIG_CHECK(value.is_string() && !value.get<std::string>().empty(),
+                "field '" << FieldName(path, key) << "' must be a job id (a non-empty string)");
+  return value.get<std::string>();
+}
+
+void ReadNumberArray(const json& value, const std::string& name, int size, double* out) {
+  OMNIRIG_CHECK(value.is_array() && value.size() == static_cast<size_t>(size),
+                "field '" << name << "' must be an array of " << size << " numbers");
+  for (int i = 0; i < size; ++i) {
+    OMNIRIG_CHECK(value[i].is_number(), "field '" << name << "' must hold numbers only");
+    out[i] = value[i].get<double>();
+  }
 }
 
 void ReadNumber(const json& object, const std::string& path, const std::string& key,

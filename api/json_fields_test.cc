@@ -34,6 +34,43 @@ TEST(JsonFields, MessagesNameTheFieldByItsPath) {
             "unknown field 'params.b'");
   EXPECT_EQ(Refusal([&] { CheckKnownFields(json::array(), "options", {}); }),
             "'options' must be a JSON object");
+  EXPECT_EQ(Refusal([&] { StringField(params, "", "i"); }), "field 'i' must be a string");
+  EXPECT_EQ(Refusal([&] {
+              JobIdField({{"rig", ""}}, "params", "rig");
+            }),
+            "field 'params.rig' must be a job id (a non-empty string)");
+  EXPECT_EQ(Refusal([&] { CheckKnownFields(params, "", {"n", "i"}); }), "unknown field 'b'");
+}
+
+TEST(JsonFields, IntegersMustFitAnInt) {
+  EXPECT_EQ(IntegerField({{"i", -2147483648LL}}, "params", "i"), -2147483648LL);
+  for (const json& big : {json(2147483648LL), json(-2147483649LL), json(18446744073709551615ULL)}) {
+    EXPECT_EQ(Refusal([&] {
+                IntegerField({{"i", big}}, "params", "i");
+              }),
+              "field 'params.i' is out of range");
+  }
+}
+
+TEST(JsonFields, ErrorPrefixNamesTheFieldAndKeepsTheValue) {
+  EXPECT_EQ(WithErrorPrefix("field 'board': ", [] { return 3; }), 3);
+  EXPECT_EQ(Refusal([] {
+              WithErrorPrefix("field 'board': ",
+                              [] { throw InvalidArgument("cols must be >= 2"); });
+            }),
+            "field 'board': cols must be >= 2");
+}
+
+TEST(JsonFields, NumberVectorsHaveTheirSize) {
+  EXPECT_EQ(NumberVector<2>(json{1.5, 2}, "options.p"), Eigen::Vector2d(1.5, 2));
+  EXPECT_EQ(Refusal([&] {
+              NumberVector<3>(json{1, 2}, "options.p");
+            }),
+            "field 'options.p' must be an array of 3 numbers");
+  EXPECT_EQ(Refusal([&] {
+              NumberVector<2>(json{1, "2"}, "options.p");
+            }),
+            "field 'options.p' must hold numbers only");
 }
 
 TEST(JsonFields, OptionalFormsKeepTheDefaultWhenAbsent) {

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdlib>
+#include <filesystem>
 #include <map>
 #include <sstream>
 
@@ -20,25 +22,13 @@ namespace {
 
 using nlohmann::json;
 
-std::string JobIdField(const json& calibrations, const std::string& camera) {
-  OMNIRIG_CHECK(calibrations.contains(camera),
-                "missing field 'calibrations." << camera << "' (give both cameras' calibration "
-                                                             "jobs, or neither)");
-  const json& id = calibrations[camera];
-  OMNIRIG_CHECK(id.is_string() && !id.get<std::string>().empty(),
-                "field 'calibrations." << camera << "' must be a job id (a non-empty string)");
-  return id.get<std::string>();
-}
-
 // params.intrinsics_model, or its default: "auto" when the intrinsics options were not given,
 // "" (those options as given) otherwise.
 std::string IntrinsicsModelField(const json& params, bool self_calibrating) {
   const bool explicit_options =
       params.contains("refine_intrinsics") || params.contains("fixed_intrinsics");
   if (!params.contains("intrinsics_model")) return explicit_options ? "" : "auto";
-  OMNIRIG_CHECK(params["intrinsics_model"].is_string(),
-                "field 'params.intrinsics_model' must be a string");
-  const std::string model = params["intrinsics_model"].get<std::string>();
+  const std::string model = StringField(params, "params", "intrinsics_model");
   OMNIRIG_CHECK(model == "auto" || model == "fixed" || model == "tangential_fixed" ||
                     model == "tangential_free_cam0" || model == "tangential_free_cam1" ||
                     model == "free",
@@ -61,18 +51,17 @@ json Vector3Json(const Eigen::Vector3d& v) { return json::array({v.x(), v.y(), v
 }  // namespace
 
 RelativePoseParams RelativePoseParamsFromJson(const json& params) {
-  CheckKnownFields(params, "params",
-                   {"board", "calibrations", "refine_intrinsics", "fixed_intrinsics",
-                    "intrinsics_model", "resolve_corner_order", "huber_loss_px",
-                    "max_num_iterations", "sync_false_alarm_rate"});
-  OMNIRIG_CHECK(params.contains("board"), "missing field 'params.board'");
+  CheckKnownFields(
+      params, "params",
+      {"board", "calibrations", "refine_intrinsics", "fixed_intrinsics", "intrinsics_model",
+       "resolve_corner_order", "huber_loss_px", "max_num_iterations", "sync_false_alarm_rate"});
   RelativePoseParams out;
-  out.board = BoardFromJson(params["board"]);
+  out.board = BoardFromJson(Field(params, "params", "board"));
   if (params.contains("calibrations")) {
     const json& calibrations = params["calibrations"];
     CheckKnownFields(calibrations, "calibrations", {"cam0", "cam1"});
-    out.cam0_calibration_job = JobIdField(calibrations, "cam0");
-    out.cam1_calibration_job = JobIdField(calibrations, "cam1");
+    out.cam0_calibration_job = JobIdField(calibrations, "calibrations", "cam0");
+    out.cam1_calibration_job = JobIdField(calibrations, "calibrations", "cam1");
   }
   // Without a model: refine the intrinsics with the rig when the job calibrates the cameras
   // itself (a per-camera calibration leaves xi, the focal length and k1 trading off, which
@@ -138,11 +127,19 @@ std::vector<ImagePairNames> MatchImagePairs(const std::vector<std::string>& imag
   return pairs;
 }
 
+std::optional<double> NameAsTimestamp(const std::string& name) {
+  const std::string stem = std::filesystem::path(name).stem().string();
+  char* end = nullptr;
+  const double value = std::strtod(stem.c_str(), &end);
+  if (stem.empty() || end != stem.c_str() + stem.size()) return std::nullopt;
+  return value;
+}
+
 namespace {
 
-json SingleViewToJson(const RelativePosePairReport& pair) {
+// What the result says of a pair and of a calibration's single-camera view alike.
+json ViewToJson(const RelativePosePairReport& pair) {
   return {{"name", pair.name},
-          {"camera", "cam" + std::to_string(pair.single_camera)},
           {"used", pair.used},
           {"reason", pair.reason},
           {"rms_px", NullableRms(pair.used ? pair.rms_px : -1.0)},
@@ -150,12 +147,8 @@ json SingleViewToJson(const RelativePosePairReport& pair) {
 }
 
 json PairToJson(const RelativePosePairReport& pair) {
-  json entry = {{"name", pair.name},
-                {"used", pair.used},
-                {"reason", pair.reason},
-                {"rms_px", NullableRms(pair.used ? pair.rms_px : -1.0)},
-                {"num_corners", pair.num_corners},
-                {"cam1_corner_order", pair.cam1_order}};
+  json entry = ViewToJson(pair);
+  entry["cam1_corner_order"] = pair.cam1_order;
   if (pair.used) entry["cam0_from_board"] = PoseToJson(pair.cam0_from_board);
   entry["sync_statistic"] = NullableRms(pair.sync_statistic);
   entry["board_offset_m"] = NullableRms(pair.board_offset_m);
@@ -185,7 +178,8 @@ json RelativePoseResultToJson(const RelativePoseReport& report, const json& came
   json pairs = json::array(), single_views = json::array();
   for (const RelativePosePairReport& pair : report.pairs) {
     if (pair.single_camera >= 0) {
-      single_views.push_back(SingleViewToJson(pair));
+      single_views.push_back(ViewToJson(pair));
+      single_views.back()["camera"] = "cam" + std::to_string(pair.single_camera);
     } else {
       pairs.push_back(PairToJson(pair));
     }
@@ -248,7 +242,6 @@ std::vector<CalibrationView> CalibrationViewsOf(const json& result) {
   return views;
 }
 
-
 CameraSource LoadCalibration(const JobContext& context, const std::string& job_id,
                              const std::string& camera) {
   OMNIRIG_CHECK(static_cast<bool>(context.load_result),
@@ -258,11 +251,8 @@ CameraSource LoadCalibration(const JobContext& context, const std::string& job_i
                 "calibration job " << job_id << " (" << camera
                                    << ") has no 'camera' in its result; is it a calibration job?");
   CameraSource source;
-  try {
-    source.model = CameraFromJson(result["camera"]);
-  } catch (const InvalidArgument& e) {
-    throw InvalidArgument("calibration job " + job_id + " (" + camera + "): " + e.what());
-  }
+  source.model = WithErrorPrefix("calibration job " + job_id + " (" + camera + "): ",
+                                 [&] { return CameraFromJson(result["camera"]); });
   source.camera_json = result["camera"];
   source.views = CalibrationViewsOf(result);
   source.provenance = {{"source", "job"}, {"job_id", job_id}};

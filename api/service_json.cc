@@ -2,32 +2,11 @@
 
 #include <cmath>
 #include <ctime>
-#include <set>
 
+#include "api/json_fields.h"
 #include "engine/util/check.h"
 
 namespace omnirig::api {
-namespace {
-
-void RefuseUnknownFields(const nlohmann::json& object, const std::set<std::string>& known,
-                         const std::string& what) {
-  for (const auto& [key, value] : object.items()) {
-    if (!known.count(key)) {
-      std::string list;
-      for (const std::string& name : known) list += (list.empty() ? "" : ", ") + name;
-      throw InvalidArgument("unknown field '" + key + "' in " + what + " (known: " + list + ")");
-    }
-  }
-}
-
-std::string RequiredString(const nlohmann::json& object, const std::string& field) {
-  const auto it = object.find(field);
-  if (it == object.end()) throw InvalidArgument("missing field '" + field + "'");
-  if (!it->is_string()) throw InvalidArgument("field '" + field + "' must be a string");
-  return it->get<std::string>();
-}
-
-}  // namespace
 
 nlohmann::json ParseJsonBody(const std::string& body) {
   nlohmann::json json;
@@ -42,8 +21,8 @@ nlohmann::json ParseJsonBody(const std::string& body) {
 
 CreateDatasetRequest ParseCreateDatasetRequest(const std::string& body) {
   const nlohmann::json json = ParseJsonBody(body);
-  RefuseUnknownFields(json, {"name"}, "the dataset");
-  CreateDatasetRequest request{RequiredString(json, "name")};
+  CheckKnownFields(json, "", {"name"});
+  CreateDatasetRequest request{StringField(json, "", "name")};
   if (request.name.empty() || request.name.size() > 200) {
     throw InvalidArgument("field 'name' must hold 1 to 200 characters");
   }
@@ -52,10 +31,10 @@ CreateDatasetRequest ParseCreateDatasetRequest(const std::string& body) {
 
 CreateJobRequest ParseCreateJobRequest(const std::string& body) {
   const nlohmann::json json = ParseJsonBody(body);
-  RefuseUnknownFields(json, {"type", "dataset", "params"}, "the job");
+  CheckKnownFields(json, "", {"type", "dataset", "params"});
   CreateJobRequest request;
-  request.type = RequiredString(json, "type");
-  request.dataset = RequiredString(json, "dataset");
+  request.type = StringField(json, "", "type");
+  request.dataset = StringField(json, "", "dataset");
   if (const auto it = json.find("params"); it != json.end()) {
     if (!it->is_object()) throw InvalidArgument("field 'params' must be an object");
     request.params = *it;

@@ -2,70 +2,28 @@
 
 #include <algorithm>
 #include <cctype>
-#include <chrono>
 #include <ctime>
-#include <fstream>
-#include <map>
 #include <memory>
 #include <set>
-#include <sstream>
 
 #include <opencv2/imgcodecs.hpp>
 
 #include "api/camera_json.h"
 #include "api/json_fields.h"
+#include "api/relpose_job.h"
 #include "api/stereo_job.h"
 #include "engine/calib/calibrate.h"
 #include "engine/geometry/ply.h"
 #include "engine/slam/evaluation.h"
 #include "engine/slam/map_io.h"
 #include "engine/util/check.h"
+#include "engine/util/timer.h"
 
 namespace omnirig::api {
 namespace {
 
 using nlohmann::json;
 namespace fs = std::filesystem;
-
-// Width and height from a PNG's IHDR or a JPEG's SOF marker, without decoding the pixels;
-// nullopt for other formats.
-std::optional<std::pair<int, int>> SizeFromHeader(const fs::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return std::nullopt;
-  unsigned char head[24] = {};
-  in.read(reinterpret_cast<char*>(head), sizeof(head));
-  if (in.gcount() == 24 && head[0] == 0x89 && head[1] == 'P' && head[2] == 'N' && head[3] == 'G') {
-    auto be32 = [&](int at) {
-      return (head[at] << 24) | (head[at + 1] << 16) | (head[at + 2] << 8) | head[at + 3];
-    };
-    return std::make_pair(be32(16), be32(20));
-  }
-  if (head[0] != 0xFF || head[1] != 0xD8) return std::nullopt;
-  in.clear();
-  in.seekg(2);
-  for (;;) {
-    unsigned char marker[4];
-    if (!in.read(reinterpret_cast<char*>(marker), 4) || marker[0] != 0xFF) return std::nullopt;
-    const int length = (marker[2] << 8) | marker[3];
-    const unsigned char type = marker[1];
-    const bool is_sof = type >= 0xC0 && type <= 0xCF && type != 0xC4 && type != 0xC8 && type != 0xCC;
-    if (is_sof) {
-      unsigned char sof[5];
-      if (!in.read(reinterpret_cast<char*>(sof), 5)) return std::nullopt;
-      return std::make_pair((sof[3] << 8) | sof[4], (sof[1] << 8) | sof[2]);
-    }
-    in.seekg(length - 2, std::ios::cur);
-  }
-}
-
-std::pair<int, int> ImageSize(const fs::path& dataset_dir, const std::string& name) {
-  const fs::path path = dataset_dir / name;
-  OMNIRIG_CHECK(fs::is_regular_file(path), "image " << name << " is missing from the dataset");
-  if (const auto size = SizeFromHeader(path)) return *size;
-  const cv::Mat image = cv::imread(path.string(), cv::IMREAD_UNCHANGED);
-  OMNIRIG_CHECK(!image.empty(), "image " << name << " cannot be read (truncated or not an image)");
-  return {image.cols, image.rows};
-}
 
 json BundleAdjustmentToJson(const slam::BundleAdjustmentReport& r) {
   return {{"num_free_poses", r.num_free_poses},     {"num_constant_poses", r.num_constant_poses},
@@ -112,25 +70,31 @@ json TimesToJson(const slam::StageTimes& t) {
           {"local_ba", t.local_ba_s}, {"loop", t.loop_s}};
 }
 
-json FrameToJson(const slam::FrameReport& f) {
+// What trajectory.json and the report both say of a frame.
+json FrameStateToJson(const slam::FrameReport& f) {
   return {{"name", f.name},
           {"state", f.state},
           {"linked", f.linked},
           {"keyframe", f.keyframe},
           {"reason", f.reason},
-          {"motion_source", f.motion_source},
-          {"num_features", {f.num_features[0], f.num_features[1]}},
-          {"num_stereo_points", f.num_stereo_points},
-          {"num_matches", f.num_matches},
-          {"num_essential_inliers", f.num_essential_inliers},
-          {"num_scale_inliers", f.num_scale_inliers},
-          {"num_tracked_landmarks", f.num_tracked_landmarks},
-          {"num_new_landmarks", f.num_new_landmarks},
-          {"times_s", TimesToJson(f.times)},
-          {"local_bundle_adjustment", f.local_bundle_adjustment
-                                          ? BundleAdjustmentToJson(*f.local_bundle_adjustment)
-                                          : json(nullptr)},
           {"world_from_rig", f.world_from_rig ? PoseToJson(*f.world_from_rig) : json(nullptr)}};
+}
+
+json FrameToJson(const slam::FrameReport& f) {
+  json out = FrameStateToJson(f);
+  out.update({{"motion_source", f.motion_source},
+              {"num_features", {f.num_features[0], f.num_features[1]}},
+              {"num_stereo_points", f.num_stereo_points},
+              {"num_matches", f.num_matches},
+              {"num_essential_inliers", f.num_essential_inliers},
+              {"num_scale_inliers", f.num_scale_inliers},
+              {"num_tracked_landmarks", f.num_tracked_landmarks},
+              {"num_new_landmarks", f.num_new_landmarks},
+              {"times_s", TimesToJson(f.times)},
+              {"local_bundle_adjustment", f.local_bundle_adjustment
+                                              ? BundleAdjustmentToJson(*f.local_bundle_adjustment)
+                                              : json(nullptr)}});
+  return out;
 }
 
 json EvaluationToJson(const slam::TrajectoryErrors& e) {
@@ -145,20 +109,17 @@ json EvaluationToJson(const slam::TrajectoryErrors& e) {
           {"gt_from_estimate", PoseToJson(e.gt_from_estimate)}};
 }
 
-// Timestamps for the TUM file: the ground truth's when given, else NAME read as a number
-// (datasets often name frames by time), else the frame index in seconds.
-std::vector<double> Timestamps(const std::vector<std::string>& names,
+// Timestamps for the TUM file: the ground truth's when given, else NAME's (NameAsTimestamp),
+// else the frame index in seconds.
+std::vector<double> Timestamps(const std::vector<ImagePairNames>& pairs,
                                const std::vector<slam::StampedPose>& ground_truth) {
-  std::vector<double> stamps(names.size());
-  for (size_t i = 0; i < names.size(); ++i) {
+  std::vector<double> stamps(pairs.size());
+  for (size_t i = 0; i < pairs.size(); ++i) {
     if (!ground_truth.empty()) {
       stamps[i] = ground_truth[i].timestamp_s;
       continue;
     }
-    const std::string stem = fs::path(names[i]).stem().string();
-    char* end = nullptr;
-    const double value = std::strtod(stem.c_str(), &end);
-    stamps[i] = (!stem.empty() && end == stem.c_str() + stem.size()) ? value : static_cast<double>(i);
+    stamps[i] = NameAsTimestamp(pairs[i].name).value_or(static_cast<double>(i));
   }
   return stamps;
 }
@@ -170,21 +131,15 @@ json WriteArtifacts(const StereoRig& rig, const slam::SlamResult& result,
   std::vector<slam::StampedPose> tum;
   for (size_t i = 0; i < result.frames.size(); ++i) {
     const slam::FrameReport& f = result.frames[i];
-    frames.push_back({{"name", f.name},
-                      {"state", f.state},
-                      {"linked", f.linked},
-                      {"keyframe", f.keyframe},
-                      {"reason", f.reason},
-                      {"timestamp_s", stamps[i]},
-                      {"world_from_rig",
-                       f.world_from_rig ? PoseToJson(*f.world_from_rig) : json(nullptr)}});
+    frames.push_back(FrameStateToJson(f));
+    frames.back()["timestamp_s"] = stamps[i];
     if (f.world_from_rig) tum.push_back({stamps[i], *f.world_from_rig});
   }
   const json trajectory = {
       {"world_frame", "the rig frame (cam0's frame) of the first tracked frame"},
       {"frames", frames},
       {"rig", RigToJson(rig)}};
-  std::ofstream(output_dir / "trajectory.json") << trajectory.dump(2) << "\n";
+  WriteTextFile(output_dir / "trajectory.json", trajectory.dump(2) + "\n");
   slam::WriteTum(output_dir / "trajectory.tum", tum);
   slam::WritePly(output_dir / "map.ply", result.map);
   return {{"trajectory_json", "trajectory.json"},
@@ -193,15 +148,10 @@ json WriteArtifacts(const StereoRig& rig, const slam::SlamResult& result,
           {"report_json", "report.json"}};
 }
 
-std::vector<slam::StampedPose> ReadGroundTruth(const fs::path& path, size_t num_frames) {
+std::vector<slam::StampedPose> ReadGroundTruth(const fs::path& path) {
   OMNIRIG_CHECK(fs::is_regular_file(path),
                 "ground truth " << path.filename().string() << " is not in the dataset");
-  std::vector<slam::StampedPose> poses = slam::ReadTum(path);
-  OMNIRIG_CHECK(poses.size() == num_frames,
-                "ground truth " << path.filename().string() << " has " << poses.size()
-                                << " poses but the sequence has " << num_frames
-                                << " stereo frames (one pose per frame, in order)");
-  return poses;
+  return slam::ReadTum(path);
 }
 
 }  // namespace
@@ -211,16 +161,14 @@ slam::CalibrationRefinement CalibrationRefinementFromJson(const json& value) {
   if (value.is_boolean()) {
     return value.get<bool>() ? CalibrationRefinement::kAll : CalibrationRefinement::kNone;
   }
-  OMNIRIG_CHECK(value.is_string(), "field 'options.refine_calibration' must be one of \"none\", "
-                                   "\"intrinsics\", \"rig\", \"all\" (or true/false)");
-  const std::string name = value.get<std::string>();
   for (CalibrationRefinement r : {CalibrationRefinement::kNone, CalibrationRefinement::kIntrinsics,
                                   CalibrationRefinement::kRig, CalibrationRefinement::kAll}) {
-    if (name == slam::CalibrationRefinementName(r)) return r;
+    if (value == slam::CalibrationRefinementName(r)) return r;
   }
-  throw InvalidArgument("field 'options.refine_calibration' must be one of \"none\", "
-                        "\"intrinsics\", \"rig\", \"all\" (or true/false), not \"" +
-                        name + "\"");
+  throw InvalidArgument(
+      "field 'options.refine_calibration' must be one of \"none\", "
+      "\"intrinsics\", \"rig\", \"all\" (or true/false), not " +
+      value.dump());
 }
 
 slam::SlamOptions SlamOptionsFromJson(const json& object) {
@@ -262,33 +210,22 @@ slam::SlamOptions SlamOptionsFromJson(const json& object) {
     o.essential.seed = object["seed"].get<std::uint64_t>();
     o.scale.seed = o.essential.seed;
   }
-  try {
-    o.Check();
-  } catch (const InvalidArgument& e) {
-    throw InvalidArgument(std::string("invalid 'options': ") + e.what());
-  }
+  WithErrorPrefix("invalid 'options': ", [&] { o.Check(); });
   return o;
 }
 
 namespace {
 
 dense::DenseMapOptions DenseMapOptionsFromJson(const json& object) {
-  OMNIRIG_CHECK(object.is_object(), "field 'params.dense_map' must be an object, e.g. "
-                                    "{\"voxel_m\": 0.02}");
   dense::DenseMapOptions options;
-  const std::map<std::string, double*> fields = {
-      {"voxel_m", &options.voxel_m},
-      {"keyframe_spacing_m", &options.keyframe_spacing_m},
-      {"grid_step_factor", &options.grid_step_factor},
-      {"occupancy_cell_m", &options.occupancy_cell_m},
-      {"obstacle_min_height_m", &options.obstacle_min_height_m},
-      {"obstacle_max_height_m", &options.obstacle_max_height_m}};
-  for (const auto& [key, value] : object.items()) {
-    const auto it = fields.find(key);
-    OMNIRIG_CHECK(it != fields.end(), "unknown field 'params.dense_map." << key << "'");
-    OMNIRIG_CHECK(value.is_number(), "field 'params.dense_map." << key << "' must be a number");
-    *it->second = value.get<double>();
-  }
+  const OptionTable table = {{"voxel_m", &options.voxel_m},
+                             {"keyframe_spacing_m", &options.keyframe_spacing_m},
+                             {"grid_step_factor", &options.grid_step_factor},
+                             {"occupancy_cell_m", &options.occupancy_cell_m},
+                             {"obstacle_min_height_m", &options.obstacle_min_height_m},
+                             {"obstacle_max_height_m", &options.obstacle_max_height_m}};
+  CheckKnownFields(object, "params.dense_map", KeysOf(table));
+  ReadOptions(object, "params.dense_map", table);
   if (!object.contains("occupancy_cell_m")) {
     options.occupancy_cell_m = std::max(options.occupancy_cell_m, options.voxel_m);
   }
@@ -302,18 +239,14 @@ json FuseDenseMap(const StereoRig& rig, const slam::SlamResult& result,
                   const std::function<slam::StereoImages(int)>& load,
                   const dense::DenseMapOptions& options, int num_threads,
                   const fs::path& output_dir, const ProgressSink& progress) {
-  const auto start = std::chrono::steady_clock::now();
+  const Timer timer;
   dense::DenseMap map(options);
   std::vector<std::optional<Rigid3d>> world_from_rig;
   for (const slam::FrameReport& frame : result.frames) {
     world_from_rig.push_back(frame.world_from_rig);
   }
   // SLAM has reported 1.0; the fusion's stage is named, its fraction stays there.
-  const ProgressSink fusion_progress{
-      [&](double, const std::string& stage, const std::string& message) {
-        progress.Report(1.0, stage, message);
-      },
-      progress.is_cancelled};
+  const ProgressSink fusion_progress = SubRange(progress, 1.0, 1.0);
   const dense::KeyframeFusionReport fusion = dense::FuseKeyframes(
       rig, world_from_rig,
       [&](int i) {
@@ -335,127 +268,49 @@ json FuseDenseMap(const StereoRig& rig, const slam::SlamResult& result,
           {"stereo_seconds", fusion.stereo_s},
           {"floor_height_m", grid.floor_height_m},
           {"occupancy_size", {grid.cells.cols, grid.cells.rows}},
-          {"seconds",
-           std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count()}};
-}
-
-const std::set<std::string> kParamFields = {"rig",       "ground_truth",    "options",
-                                            "dense_map", "frame_step",      "start_s",
-                                            "end_s",     "pair_tolerance_s"};
-
-// "frame_step", "start_s", "end_s", "pair_tolerance_s" of the params (each optional).
-slam::VideoFrameOptions VideoFrameOptionsFromJson(const json& params) {
-  slam::VideoFrameOptions frames;
-  if (params.contains("frame_step")) {
-    OMNIRIG_CHECK(
-        params["frame_step"].is_number_integer() && params["frame_step"].get<int64_t>() >= 1,
-        "field 'params.frame_step' must be an integer >= 1");
-    frames.frame_step = params["frame_step"].get<int>();
-  }
-  const std::map<std::string, double*> seconds = {{"start_s", &frames.start_s},
-                                                  {"end_s", &frames.end_s},
-                                                  {"pair_tolerance_s", &frames.pair_tolerance_s}};
-  for (const auto& [key, target] : seconds) {
-    if (!params.contains(key)) continue;
-    OMNIRIG_CHECK(params[key].is_number(),
-                  "field 'params." << key << "' must be a number of seconds");
-    *target = params[key].get<double>();
-  }
-  try {
-    frames.Check();
-  } catch (const InvalidArgument& e) {
-    throw InvalidArgument(std::string("invalid 'params': ") + e.what());
-  }
-  return frames;
+          {"seconds", timer.ElapsedSeconds()}};
 }
 
 }  // namespace
 
 SlamParams SlamParamsFromJson(const json& params) {
-  OMNIRIG_CHECK(params.is_object(), "params must be a JSON object");
-  for (const auto& [key, value] : params.items()) {
-    OMNIRIG_CHECK(kParamFields.count(key) > 0, "unknown field 'params." << key << "'");
-  }
   SlamParams parsed;
-  OMNIRIG_CHECK(params.contains("rig"), "missing field 'params.rig' (a relative_pose job id)");
-  OMNIRIG_CHECK(params["rig"].is_string() && !params["rig"].get<std::string>().empty(),
-                "field 'params.rig' must be a job id (a non-empty string)");
-  parsed.rig_job = params["rig"].get<std::string>();
+  // "frame_step", "start_s", "end_s", "pair_tolerance_s" (each optional).
+  const OptionTable frames = {{"frame_step", &parsed.frames.frame_step},
+                              {"start_s", &parsed.frames.start_s},
+                              {"end_s", &parsed.frames.end_s},
+                              {"pair_tolerance_s", &parsed.frames.pair_tolerance_s}};
+  std::set<std::string> known = KeysOf(frames);
+  known.insert({"rig", "ground_truth", "options", "dense_map"});
+  CheckKnownFields(params, "params", known);
+  parsed.rig_job = JobIdField(params, "params", "rig");
   if (params.contains("ground_truth")) {
-    OMNIRIG_CHECK(params["ground_truth"].is_string() &&
-                      !params["ground_truth"].get<std::string>().empty(),
-                  "field 'params.ground_truth' must be a file name in the dataset");
-    const std::string name = params["ground_truth"].get<std::string>();
-    OMNIRIG_CHECK(name.find("..") == std::string::npos && name.front() != '/',
+    const std::string name = StringField(params, "params", "ground_truth");
+    OMNIRIG_CHECK(!name.empty() && name.find("..") == std::string::npos && name.front() != '/',
                   "field 'params.ground_truth' must name a file inside the dataset");
     parsed.ground_truth = name;
   }
   if (params.contains("options")) parsed.options = SlamOptionsFromJson(params["options"]);
   if (params.contains("dense_map")) parsed.dense_map = DenseMapOptionsFromJson(params["dense_map"]);
-  parsed.frames = VideoFrameOptionsFromJson(params);
+  ReadOptions(params, "params", frames);
+  WithErrorPrefix("invalid 'params': ", [&] { parsed.frames.Check(); });
   parsed.video_only_fields =
       params.contains("start_s") || params.contains("end_s") || params.contains("pair_tolerance_s");
   return parsed;
 }
 
-SlamSequence PrepareSlamSequence(const StereoRig& rig, const fs::path& dataset_dir,
-                                 const std::vector<std::string>& image_names) {
-  std::map<std::string, std::string> cams[2];
-  for (const std::string& name : image_names) {
-    for (int c = 0; c < 2; ++c) {
-      const std::string prefix = "cam" + std::to_string(c) + "/";
-      if (name.rfind(prefix, 0) == 0 && name.size() > prefix.size()) {
-        cams[c][name.substr(prefix.size())] = name;
-      }
-    }
-  }
-  OMNIRIG_CHECK(!cams[0].empty() || !cams[1].empty(),
-                "the dataset has no stereo images (expected cam0/NAME and cam1/NAME)");
-  std::ostringstream missing;
-  int num_missing = 0;
-  for (int c = 0; c < 2; ++c) {
-    for (const auto& [name, path] : cams[c]) {
-      if (cams[1 - c].count(name)) continue;
-      if (num_missing++ < 5) missing << " " << path << " has no cam" << (1 - c) << "/" << name << ";";
-    }
-  }
-  OMNIRIG_CHECK(num_missing == 0, num_missing << " image(s) without a partner:" << missing.str());
-  SlamSequence sequence;
-  const CameraModel* camera[2] = {&rig.cam0, &rig.cam1};
-  std::ostringstream sizes;
-  int num_bad = 0;
-  for (const auto& [name, path0] : cams[0]) {
-    sequence.names.push_back(name);
-    sequence.cam0.push_back(path0);
-    sequence.cam1.push_back(cams[1][name]);
-    for (int c = 0; c < 2; ++c) {
-      const std::string& path = c == 0 ? path0 : cams[1][name];
-      const auto [width, height] = ImageSize(dataset_dir, path);
-      if (width == camera[c]->width && height == camera[c]->height) continue;
-      if (num_bad++ < 5) {
-        sizes << " " << path << " is " << width << "x" << height << " but the rig's cam" << c
-              << " is calibrated for " << camera[c]->width << "x" << camera[c]->height << ";";
-      }
-    }
-  }
-  OMNIRIG_CHECK(num_bad == 0, num_bad << " image(s) do not match the rig's calibration:"
-                                      << sizes.str());
-  return sequence;
-}
-
 namespace {
-
-// Names the service stores as videos (as storage/video_container.h's IsVideoName).
-bool IsVideoFileName(const std::string& name) {
-  std::string ext = fs::path(name).extension().string();
-  for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  return ext == ".mp4" || ext == ".m4v" || ext == ".mov" || ext == ".mkv" || ext == ".webm" ||
-         ext == ".avi";
-}
 
 std::string Lower(std::string text) {
   for (char& c : text) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
   return text;
+}
+
+// Names the service stores as videos (as storage/video_container.h's IsVideoName).
+bool IsVideoFileName(const std::string& name) {
+  const std::string ext = Lower(fs::path(name).extension().string());
+  return ext == ".mp4" || ext == ".m4v" || ext == ".mov" || ext == ".mkv" || ext == ".webm" ||
+         ext == ".avi";
 }
 
 // CPU seconds of the whole process (the decoder may run threads of its own).
@@ -496,9 +351,7 @@ struct SlamInput {
 std::vector<slam::StampedPose> MatchGroundTruth(const fs::path& path,
                                                 const std::vector<double>& stamps,
                                                 double tolerance_s) {
-  OMNIRIG_CHECK(fs::is_regular_file(path),
-                "ground truth " << path.filename().string() << " is not in the dataset");
-  std::vector<slam::StampedPose> poses = slam::ReadTum(path);
+  std::vector<slam::StampedPose> poses = ReadGroundTruth(path);
   std::sort(poses.begin(), poses.end(),
             [](const auto& a, const auto& b) { return a.timestamp_s < b.timestamp_s; });
   OMNIRIG_CHECK(!poses.empty(), "ground truth " << path.filename().string() << " holds no pose");
@@ -525,14 +378,13 @@ SlamInput PrepareVideoInput(const StereoRig& rig, const slam::StereoVideoFiles& 
   const slam::StereoVideoInfo info = slam::ProbeStereoVideo(files);
   CheckVideoSizes(rig, files, info);
   // The timestamp pass reads the whole recording once; SLAM's own fractions follow it.
-  const ProgressSink pass{[&](double, const std::string& stage, const std::string& message) {
-                            progress.Report(0.0, stage, message);
-                          },
-                          progress.is_cancelled};
+  const ProgressSink pass = SubRange(progress, 0.0, 0.0);
   const double pass_start_s = ProcessCpuSeconds();
-  const auto pass_wall_start = std::chrono::steady_clock::now();
+  const Timer pass_timer;
   std::vector<slam::StereoVideoFrame> frames =
       slam::PairStereoVideoFrames(files, frame_options, pass);
+  const double tolerance_s = frame_options.pair_tolerance_s > 0 ? frame_options.pair_tolerance_s
+                                                                : 0.25 / info.video[0].fps;
   SlamInput input;
   json file_names = {files.cam0.filename().string()};
   if (!files.stacked()) file_names.push_back(files.cam1.filename().string());
@@ -543,21 +395,17 @@ SlamInput PrepareVideoInput(const StereoRig& rig, const slam::StereoVideoFiles& 
       {"fps", info.video[0].fps},
       {"frame_count", info.video[0].frame_count},
       {"frame_size", {info.width[0], info.height[0]}},
-      {"pair_tolerance_s", frame_options.pair_tolerance_s > 0 ? frame_options.pair_tolerance_s
-                                                              : 0.25 / info.video[0].fps},
+      {"pair_tolerance_s", tolerance_s},
       {"frame_step", frame_options.frame_step},
       {"num_frames", frames.size()},
       // The pass that reads and pairs every timestamp before the first frame (decoding only).
-      {"timestamp_pass_s",
-       std::chrono::duration<double>(std::chrono::steady_clock::now() - pass_wall_start).count()},
+      {"timestamp_pass_s", pass_timer.ElapsedSeconds()},
       {"timestamp_pass_cpu_s", ProcessCpuSeconds() - pass_start_s}};
   for (const auto& frame : frames) {
     input.names.push_back(frame.name);
     input.timestamps_s.push_back(frame.timestamp_s);
   }
   if (ground_truth) {
-    const double tolerance_s = frame_options.pair_tolerance_s > 0 ? frame_options.pair_tolerance_s
-                                                                  : 0.25 / info.video[0].fps;
     input.ground_truth = MatchGroundTruth(*ground_truth, input.timestamps_s, tolerance_s);
   }
   auto reader = std::make_shared<slam::StereoVideoReader>(files, std::move(frames));
@@ -565,30 +413,34 @@ SlamInput PrepareVideoInput(const StereoRig& rig, const slam::StereoVideoFiles& 
   return input;
 }
 
-SlamInput PrepareImageInput(const StereoRig& rig, const fs::path& dataset_dir,
+SlamInput PrepareImageInput(const fs::path& dataset_dir,
                             const std::vector<std::string>& image_names, int frame_step,
                             const std::optional<fs::path>& ground_truth) {
-  const SlamSequence all = PrepareSlamSequence(rig, dataset_dir, image_names);
+  const std::vector<ImagePairNames> all = MatchImagePairs(image_names);
   std::vector<slam::StampedPose> gt;
-  if (ground_truth) gt = ReadGroundTruth(*ground_truth, all.names.size());
-  const std::vector<double> all_stamps = Timestamps(all.names, gt);
-  auto sequence = std::make_shared<SlamSequence>();
+  if (ground_truth) {
+    gt = ReadGroundTruth(*ground_truth);
+    OMNIRIG_CHECK(gt.size() == all.size(),
+                  "ground truth " << ground_truth->filename().string() << " has " << gt.size()
+                                  << " poses but the sequence has " << all.size()
+                                  << " stereo frames (one pose per frame, in order)");
+  }
+  const std::vector<double> all_stamps = Timestamps(all, gt);
+  auto pairs = std::make_shared<std::vector<ImagePairNames>>();
   SlamInput input;
-  for (size_t i = 0; i < all.names.size(); i += frame_step) {
-    sequence->names.push_back(all.names[i]);
-    sequence->cam0.push_back(all.cam0[i]);
-    sequence->cam1.push_back(all.cam1[i]);
+  for (size_t i = 0; i < all.size(); i += frame_step) {
+    pairs->push_back(all[i]);
+    input.names.push_back(all[i].name);
     input.timestamps_s.push_back(all_stamps[i]);
     if (!gt.empty()) input.ground_truth.push_back(gt[i]);
   }
-  input.names = sequence->names;
   input.source = {{"kind", "images"},
                   {"frame_step", frame_step},
                   {"num_frames", input.names.size()},
-                  {"num_image_pairs", all.names.size()}};
-  input.load = [sequence, dataset_dir](int i) {
+                  {"num_image_pairs", all.size()}};
+  input.load = [pairs, dataset_dir](int i) {
     return slam::ReadBoth([&](int c) {
-      const std::string& name = c == 0 ? sequence->cam0[i] : sequence->cam1[i];
+      const std::string& name = c == 0 ? (*pairs)[i].cam0 : (*pairs)[i].cam1;
       cv::Mat image = cv::imread((dataset_dir / name).string(), cv::IMREAD_COLOR);
       OMNIRIG_CHECK(!image.empty(), "image " << name << " cannot be read");
       return image;
@@ -605,15 +457,12 @@ json SlamResultToJson(const slam::SlamResult& result) {
   report["num_lost"] = result.num_lost;
   report["num_map_points"] = result.map.size();
   report["frames_per_second"] = result.total_s > 0 ? result.frames.size() / result.total_s : 0.0;
-  json timings = TimesToJson(result.stage_totals);
-  timings["global_ba"] = result.global_ba_s;
-  timings["total"] = result.total_s;
-  report["timings_s"] = timings;
+  report["timings_s"] = TimesToJson(result.stage_totals);
+  report["timings_s"].update({{"global_ba", result.global_ba_s}, {"total", result.total_s}});
   // CPU seconds of the threads that ran each stage: the stable measure on a shared machine.
-  json cpu_timings = TimesToJson(result.cpu_stage_totals);
-  cpu_timings["global_ba"] = result.global_ba_cpu_s;
-  cpu_timings["total"] = result.total_cpu_s;
-  report["cpu_timings_s"] = cpu_timings;
+  report["cpu_timings_s"] = TimesToJson(result.cpu_stage_totals);
+  report["cpu_timings_s"].update(
+      {{"global_ba", result.global_ba_cpu_s}, {"total", result.total_cpu_s}});
   report["global_bundle_adjustment"] = result.global_bundle_adjustment
                                            ? BundleAdjustmentToJson(*result.global_bundle_adjustment)
                                            : json(nullptr);
@@ -702,14 +551,8 @@ void CheckSlamInputs(const json& params, const SubmissionInputs& dataset) {
                       << " holds none (cam0.EXT and cam1.EXT, or stacked.EXT)");
     return;
   }
-  StereoRig rig;
-  try {
-    rig = RigFromJson(dataset.load_result(parsed.rig_job));
-  } catch (const InvalidArgument& e) {
-    throw InvalidArgument("rig job " + parsed.rig_job +
-                          " is not a usable relative_pose result: " + e.what());
-  }
-  CheckVideoSizes(rig, *videos, slam::ProbeStereoVideo(*videos));
+  CheckVideoSizes(LoadRig(dataset.load_result, parsed.rig_job), *videos,
+                  slam::ProbeStereoVideo(*videos));
 }
 
 json RunSlamOnDataset(const StereoRig& rig, const fs::path& dataset_dir,
@@ -724,8 +567,7 @@ json RunSlamOnDataset(const StereoRig& rig, const fs::path& dataset_dir,
   const auto videos = FindStereoVideos(dataset_dir, image_names);
   const SlamInput input =
       videos ? PrepareVideoInput(rig, *videos, frame_options, ground_truth, progress)
-             : PrepareImageInput(rig, dataset_dir, image_names, frame_options.frame_step,
-                                 ground_truth);
+             : PrepareImageInput(dataset_dir, image_names, frame_options.frame_step, ground_truth);
   const slam::StereoFrameLoader& load = input.load;
   const ProgressSink frame_progress{
       [&](double fraction, const std::string& stage, const std::string& message) {
@@ -748,21 +590,13 @@ json RunSlamOnDataset(const StereoRig& rig, const fs::path& dataset_dir,
     report["artifacts"]["occupancy_pgm"] = "occupancy.pgm";
     report["artifacts"]["occupancy_yaml"] = "occupancy.yaml";
   }
-  std::ofstream(output_dir / "report.json") << report.dump(2) << "\n";
+  WriteTextFile(output_dir / "report.json", report.dump(2) + "\n");
   return report;
 }
 
 json RunSlamJob(const json& params, const JobContext& context) {
   const SlamParams parsed = SlamParamsFromJson(params);
-  OMNIRIG_CHECK(static_cast<bool>(context.load_result),
-                "this job cannot read other jobs' results (no rig loader)");
-  StereoRig rig;
-  try {
-    rig = RigFromJson(context.load_result(parsed.rig_job));
-  } catch (const InvalidArgument& e) {
-    throw InvalidArgument("rig job " + parsed.rig_job + " is not a usable relative_pose result: " +
-                          e.what());
-  }
+  const StereoRig rig = LoadRig(context.load_result, parsed.rig_job);
   slam::SlamOptions options = parsed.options;
   options.num_threads = std::max(1, context.num_threads);
   std::optional<fs::path> ground_truth;

@@ -117,19 +117,6 @@ std::optional<slam::StereoVideoFiles> FindStereoVideos(const std::filesystem::pa
 // read from their headers; the video-only params are refused on images. Throws InvalidArgument with the reason.
 void CheckSlamInputs(const nlohmann::json& params, const SubmissionInputs& dataset);
 
-// The sequence's frames after the checks that run before any work.
-struct SlamSequence {
-  std::vector<std::string> names;  // NAME, sorted
-  std::vector<std::string> cam0;   // "cam0/NAME"
-  std::vector<std::string> cam1;   // "cam1/NAME"
-};
-
-// Pairs the dataset's images and checks, without decoding them, that every image exists and
-// has its camera's calibrated size. Throws InvalidArgument naming missing partners, unreadable
-// images, and size mismatches (e.g. "cam1/0003.png is 800x600 but the rig's cam1 is 1024x768").
-SlamSequence PrepareSlamSequence(const StereoRig& rig, const std::filesystem::path& dataset_dir,
-                                 const std::vector<std::string>& image_names);
-
 // Runs SLAM over a dataset of images or videos, writes the artifacts into output_dir and
 // returns the result JSON. A ground truth (TUM file) is read and checked (one pose per frame)
 // and a recording's timestamps are read and paired, before the first frame is processed.

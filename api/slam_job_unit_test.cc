@@ -111,41 +111,42 @@ TEST(SlamParamsFromJson, NeedsARigJob) {
   EXPECT_EQ(*SlamParamsFromJson({{"rig", "a"}, {"ground_truth", "gt.tum"}}).ground_truth, "gt.tum");
 }
 
-TEST_F(TempDataset, PairsFramesByName) {
-  WriteImage("cam0/b.png", 64, 48);
-  WriteImage("cam1/b.png", 64, 48);
-  WriteImage("cam0/a.png", 64, 48);
-  WriteImage("cam1/a.png", 64, 48);
-  names_.push_back("gt.tum");  // other files are ignored
-  const SlamSequence sequence = PrepareSlamSequence(TinyTestRig(64, 48), dir_, names_);
-  EXPECT_EQ(sequence.names, (std::vector<std::string>{"a.png", "b.png"}));
-  EXPECT_EQ(sequence.cam1[1], "cam1/b.png");
-}
-
-// Each bad dataset is refused with the reason: a frame without its partner, a pair of other
-// sizes, a rig calibrated for other images.
-TEST_F(TempDataset, RefusesBadPairsAndARigOfAnotherSize) {
+// Images of another size than the rig's calibration (a pair of other sizes, a rig calibrated for
+// other images) are refused at submission from the sizes the upload's header check stored, and
+// by the tracker at the frame where a run meets them (`omnirig slam DIR` has no submission).
+TEST_F(TempDataset, RefusesImagesOfAnotherSizeThanTheRig) {
   const struct {
     std::vector<std::pair<std::string, int>> images;  // name, width (all 48 px high)
     int rig_width, rig_height;
-    std::string reason;
+    std::string at_submission, at_run;
   } cases[] = {
-      {{{"cam0/a.png", 64}, {"cam1/a.png", 64}, {"cam0/b.png", 64}},
-       64,
-       48,
-       "cam0/b.png has no cam1/b.png"},
       {{{"cam0/a.png", 64}, {"cam1/a.png", 64}, {"cam0/b.jpg", 64}, {"cam1/b.jpg", 80}},
        64,
        48,
-       "cam1/b.jpg is 80x48"},
-      {{{"cam0/a.png", 64}, {"cam1/a.png", 64}}, 1024, 768, "calibrated for 1024x768"},
+       "cam1/b.jpg is 80x48",
+       "frame b.jpg: cam1 image is 80x48"},
+      {{{"cam0/a.png", 64}, {"cam1/a.png", 64}},
+       1024,
+       768,
+       "calibrated for 1024x768",
+       "calibration is 1024x768"},
   };
   for (const auto& c : cases) {
     names_.clear();
-    for (const auto& [name, width] : c.images) WriteImage(name, width, 48);
-    const std::string message = ExpectInvalid(
-        [&] { PrepareSlamSequence(TinyTestRig(c.rig_width, c.rig_height), dir_, names_); });
-    EXPECT_NE(message.find(c.reason), std::string::npos) << message;
+    const StereoRig rig = TinyTestRig(c.rig_width, c.rig_height);
+    SubmissionInputs inputs{
+        "dataset-1", dir_, {}, [&](const std::string&) { return RigToJson(rig); }};
+    for (const auto& [name, width] : c.images) {
+      WriteImage(name, width, 48);
+      inputs.images.push_back({name, width, 48});
+    }
+    const std::string refused = ExpectInvalid([&] { CheckSlamInputs({{"rig", "r"}}, inputs); });
+    EXPECT_NE(refused.find(c.at_submission), std::string::npos) << refused;
+    const std::string failed = ExpectInvalid([&] {
+      RunSlamOnDataset(rig, dir_, names_, slam::SlamOptions(), std::nullopt, dir_ / "out",
+                       ProgressSink(), nullptr);
+    });
+    EXPECT_NE(failed.find(c.at_run), std::string::npos) << failed;
   }
 }
 

@@ -69,18 +69,6 @@ OptionTable DenseTable(dense::DenseStereoOptions* o) {
 // image shifted by 4 px about 0.3.
 constexpr double kFewConfidentFraction = 0.5;
 
-StereoRig LoadRig(const JobContext& context, const std::string& job_id) {
-  OMNIRIG_CHECK(static_cast<bool>(context.load_result),
-                "this job cannot read other jobs' results (no result loader)");
-  const json result = context.load_result(job_id);
-  try {
-    return RigFromJson(result);
-  } catch (const InvalidArgument& e) {
-    throw InvalidArgument("job " + job_id +
-                          " holds no stereo rig (is it a relative_pose job?): " + e.what());
-  }
-}
-
 cv::Mat ReadImage(const JobContext& context, const std::string& name) {
   const cv::Mat image = cv::imread((context.dataset_dir / name).string(), cv::IMREAD_COLOR);
   OMNIRIG_CHECK(!image.empty(), "cannot read image '" << name << "'");
@@ -99,23 +87,31 @@ std::string SafeArtifactName(const std::string& pair_name) {
   return out + ".ply";
 }
 
-json PairJson(const std::string& name, const StereoPairReport& report) {
+// A pair's "median_range_m" and "median_range_std_m" over its points (either method's).
+template <typename Point>
+json RangeMediansJson(const std::vector<Point>& points) {
   std::vector<double> ranges, stds;
-  for (const StereoPoint& p : report.points) {
+  ranges.reserve(points.size());
+  stds.reserve(points.size());
+  for (const Point& p : points) {
     ranges.push_back(p.point_in_cam0.norm());
     stds.push_back(p.range_std_m);
   }
-  return {{"name", name},
-          {"num_keypoints", {report.num_keypoints0, report.num_keypoints1}},
-          {"num_candidates", report.num_candidates},
-          {"num_matches", report.num_matches},
-          {"num_points", report.points.size()},
-          {"rejected",
-           {{"parallax", report.num_rejected_parallax},
-            {"reprojection", report.num_rejected_reprojection},
-            {"uncertain", report.num_rejected_uncertain}}},
-          {"median_range_m", Median(ranges)},
-          {"median_range_std_m", Median(stds)}};
+  return {{"median_range_m", Median(ranges)}, {"median_range_std_m", Median(stds)}};
+}
+
+json PairJson(const std::string& name, const StereoPairReport& report) {
+  json pair = {{"name", name},
+               {"num_keypoints", {report.num_keypoints0, report.num_keypoints1}},
+               {"num_candidates", report.num_candidates},
+               {"num_matches", report.num_matches},
+               {"num_points", report.points.size()},
+               {"rejected",
+                {{"parallax", report.num_rejected_parallax},
+                 {"reprojection", report.num_rejected_reprojection},
+                 {"uncertain", report.num_rejected_uncertain}}}};
+  pair.update(RangeMediansJson(report.points));
+  return pair;
 }
 
 }  // namespace
@@ -141,17 +137,9 @@ StereoReconstructParams StereoReconstructParamsFromJson(const json& params) {
                                                           << out.method << "')");
     OMNIRIG_CHECK(false, "unknown field 'params." << key << "'");
   }
-  OMNIRIG_CHECK(params.contains("rig"),
-                "missing field 'params.rig' (the id of a succeeded relative_pose job)");
-  OMNIRIG_CHECK(params["rig"].is_string() && !params["rig"].get<std::string>().empty(),
-                "field 'params.rig' must be a job id (a non-empty string)");
-  out.rig_job = params["rig"].get<std::string>();
-  if (params.contains("trajectory")) {
-    const json& trajectory = params["trajectory"];
-    OMNIRIG_CHECK(trajectory.is_string() && !trajectory.get<std::string>().empty(),
-                  "field 'params.trajectory' must be a job id (a succeeded slam job)");
-    out.trajectory_job = params["trajectory"].get<std::string>();
-  }
+  out.rig_job = JobIdField(params, "params", "rig");
+  if (params.contains("trajectory"))
+    out.trajectory_job = JobIdField(params, "params", "trajectory");
   if (out.method == "dense") {
     ReadOptions(params, "params", DenseTable(&out.dense));
     out.dense.Check();
@@ -219,22 +207,13 @@ PairPlacement PlaceBySlamJob(const std::string& job_id, const std::vector<ImageP
   return placement;
 }
 
-// NAME read as a number (datasets often name frames by time).
-std::optional<double> NameAsNumber(const std::string& name) {
-  const std::string stem = std::filesystem::path(name).stem().string();
-  char* end = nullptr;
-  const double value = std::strtod(stem.c_str(), &end);
-  if (stem.empty() || end != stem.c_str() + stem.size()) return std::nullopt;
-  return value;
-}
-
 PairPlacement PlaceByTum(const std::string& file, const std::vector<ImagePairNames>& pairs,
                          const JobContext& context) {
   PairPlacement placement{file, std::vector<std::optional<Rigid3d>>(pairs.size()), ""};
   const std::vector<slam::StampedPose> poses = slam::ReadTum(context.dataset_dir / file);
   int num_by_time = 0;
   for (size_t k = 0; k < pairs.size(); ++k) {
-    const std::optional<double> stamp = NameAsNumber(pairs[k].name);
+    const std::optional<double> stamp = NameAsTimestamp(pairs[k].name);
     for (const slam::StampedPose& pose : poses) {
       if (stamp && std::abs(pose.timestamp_s - *stamp) < 1e-6 * std::max(1.0, std::abs(*stamp))) {
         placement.world_from_cam0[k] = pose.world_from_rig;
@@ -357,15 +336,11 @@ size_t RunSparse(const StereoReconstructParams& parsed, const StereoRig& rig,
     context.progress.ThrowIfCancelled();
     const cv::Mat image0 = ReadImage(context, pairs[k].cam0);
     const cv::Mat image1 = ReadImage(context, pairs[k].cam1);
-    StereoPairReport report;
-    try {
-      report =
-          ReconstructStereoPair(rig, image0, image1, parsed.options,
-                                SubRange(context.progress, static_cast<double>(k) / pairs.size(),
-                                         static_cast<double>(k + 1) / pairs.size()));
-    } catch (const InvalidArgument& e) {
-      throw InvalidArgument("pair '" + pairs[k].name + "': " + e.what());
-    }
+    const StereoPairReport report = WithErrorPrefix("pair '" + pairs[k].name + "': ", [&] {
+      return ReconstructStereoPair(rig, image0, image1, parsed.options,
+                                   SubRange(context.progress, static_cast<double>(k) / pairs.size(),
+                                            static_cast<double>(k + 1) / pairs.size()));
+    });
     json pair = PairJson(pairs[k].name, report);
     outputs->Add(k, pairs[k].name, SparseCloud(report.points), &pair);
     context.Log("pair " + pairs[k].name + ": " + std::to_string(report.num_matches) +
@@ -392,13 +367,6 @@ PlyCloud DenseCloud(const std::vector<dense::DensePoint>& points) {
 }
 
 json DensePairJson(const std::string& name, const dense::DensePairResult& r) {
-  std::vector<double> ranges, stds;
-  ranges.reserve(r.points.size());
-  stds.reserve(r.points.size());
-  for (const dense::DensePoint& p : r.points) {
-    ranges.push_back(p.point_in_cam0.norm());
-    stds.push_back(p.range_std_m);
-  }
   const double confident_fraction =
       r.num_mirror_cells > 0 ? static_cast<double>(r.num_points) / r.num_mirror_cells : 0.0;
   json pair = {{"name", name},
@@ -407,11 +375,10 @@ json DensePairJson(const std::string& name, const dense::DensePairResult& r) {
                {"num_points", r.num_points},
                {"confident_fraction", confident_fraction},
                {"mean_confidence", r.mean_confidence},
-               {"median_range_m", Median(ranges)},
-               {"median_range_std_m", Median(stds)},
                {"epipolar_offset_cells", r.epipolar_offset_cells},
                {"num_epipolar_samples", r.num_epipolar_samples},
                {"confidence_scale", r.confidence_scale}};
+  pair.update(RangeMediansJson(r.points));
   std::ostringstream warning;
   if (r.confidence_scale < 1.0) {
     warning << std::setprecision(2) << "the images do not fit the rig: their matches lie "
@@ -461,15 +428,12 @@ size_t RunDense(const StereoReconstructParams& parsed, const StereoRig& rig,
     context.progress.ThrowIfCancelled();
     const cv::Mat image0 = ReadImage(context, pairs[k].cam0);
     const cv::Mat image1 = ReadImage(context, pairs[k].cam1);
-    auto pair_result = std::make_shared<dense::DensePairResult>();
-    try {
-      *pair_result =
-          dense.Reconstruct(image0, image1,
-                            SubRange(context.progress, static_cast<double>(k) / pairs.size(),
-                                     static_cast<double>(k + 1) / pairs.size()));
-    } catch (const InvalidArgument& e) {
-      throw InvalidArgument("pair '" + pairs[k].name + "': " + e.what());
-    }
+    auto pair_result = std::make_shared<dense::DensePairResult>(
+        WithErrorPrefix("pair '" + pairs[k].name + "': ", [&] {
+          return dense.Reconstruct(image0, image1,
+                                   SubRange(context.progress, static_cast<double>(k) / pairs.size(),
+                                            static_cast<double>(k + 1) / pairs.size()));
+        }));
     json pair = DensePairJson(pairs[k].name, *pair_result);
     num_bad_pairs += pair.contains("warning");
     const std::string base = RangeBaseName(pairs[k].name);
@@ -501,7 +465,7 @@ size_t RunDense(const StereoReconstructParams& parsed, const StereoRig& rig,
 
 json RunStereoReconstructJob(const json& params, const JobContext& context) {
   const StereoReconstructParams parsed = StereoReconstructParamsFromJson(params);
-  const StereoRig rig = LoadRig(context, parsed.rig_job);
+  const StereoRig rig = LoadRig(context.load_result, parsed.rig_job);
   const std::vector<ImagePairNames> pairs = MatchImagePairs(context.image_names);
 
   json result = {{"rig", parsed.rig_job},
@@ -525,7 +489,7 @@ void CheckImagesFitRig(const json& params, const SubmissionInputs& inputs) {
   const std::string rig_job = params["rig"].get<std::string>();
   StereoRig rig;
   try {
-    rig = RigFromJson(inputs.load_result(rig_job));
+    rig = LoadRig(inputs.load_result, rig_job);
   } catch (const std::exception&) {
     return;
   }
@@ -569,12 +533,8 @@ json EpipolarCurveJson(const json& relative_pose_result, int from_camera, double
   OMNIRIG_CHECK(from_camera == 0 || from_camera == 1,
                 "'from' must be cam0 or cam1, got camera " << from_camera);
   OMNIRIG_CHECK(std::isfinite(u) && std::isfinite(v), "'u' and 'v' must be finite numbers");
-  StereoRig rig;
-  try {
-    rig = RigFromJson(relative_pose_result);
-  } catch (const InvalidArgument& e) {
-    throw InvalidArgument(std::string("this job's result holds no stereo rig: ") + e.what());
-  }
+  const StereoRig rig = WithErrorPrefix("this job's result holds no stereo rig: ",
+                                        [&] { return RigFromJson(relative_pose_result); });
   json polylines = json::array();
   for (const Polyline2d& curve : EpipolarCurve(rig, from_camera, Eigen::Vector2d(u, v))) {
     json line = json::array();

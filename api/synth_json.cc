@@ -1,9 +1,6 @@
 #include "api/synth_json.h"
 
 #include <filesystem>
-#include <fstream>
-#include <iomanip>
-#include <sstream>
 #include <stdexcept>
 
 #include <opencv2/core.hpp>
@@ -11,6 +8,8 @@
 #include <opencv2/videoio.hpp>
 
 #include "api/camera_json.h"
+#include "api/job_types.h"
+#include "engine/slam/map_io.h"
 #include "engine/util/check.h"
 
 namespace omnirig::api {
@@ -37,16 +36,7 @@ nlohmann::json Header(const std::string& preset, int width, int height) {
           {"image_size", {width, height}}};
 }
 
-void WriteText(const std::string& text, const std::filesystem::path& path) {
-  std::ofstream out(path);
-  out << text;
-  out.close();
-  if (!out) throw std::runtime_error("cannot write " + path.string());
-}
-
 std::string PngName(const std::string& name) { return name + ".png"; }
-
-}  // namespace
 
 nlohmann::json SynthCameraToJson(const synth::SynthCamera& camera) {
   nlohmann::json json = CameraToJson(camera.model);
@@ -64,14 +54,6 @@ nlohmann::json BoardToJson(const synth::CheckerboardSpec& board) {
           {"square_size_m", board.square_size_m},
           {"margin_m", board.margin_m},
           {"corners_in_board_m", corners}};
-}
-
-nlohmann::json CornersToJson(const std::vector<Eigen::Vector2d>& corners_px) {
-  nlohmann::json json = nlohmann::json::array();
-  for (const Eigen::Vector2d& pixel : corners_px) {
-    json.push_back(pixel.allFinite() ? nlohmann::json{pixel.x(), pixel.y()} : nlohmann::json());
-  }
-  return json;
 }
 
 nlohmann::json SceneToJson(const synth::Scene& scene, const std::string& world_frame) {
@@ -102,6 +84,16 @@ nlohmann::json StereoRigToJson(const StereoRig& rig,
   nlohmann::json json = RigToJson(rig);
   json["cameras"]["cam0"] = SynthCameraToJson(cameras[0]);
   json["cameras"]["cam1"] = SynthCameraToJson(cameras[1]);
+  return json;
+}
+
+}  // namespace
+
+nlohmann::json CornersToJson(const std::vector<Eigen::Vector2d>& corners_px) {
+  nlohmann::json json = nlohmann::json::array();
+  for (const Eigen::Vector2d& pixel : corners_px) {
+    json.push_back(pixel.allFinite() ? nlohmann::json{pixel.x(), pixel.y()} : nlohmann::json());
+  }
   return json;
 }
 
@@ -175,26 +167,13 @@ nlohmann::json StereoSequenceToJson(const synth::StereoSequence& sequence,
   return json;
 }
 
-std::string TrajectoryToTum(const synth::StereoSequence& sequence) {
-  std::ostringstream out;
-  out << std::setprecision(12);
-  for (size_t i = 0; i < sequence.world_from_rig.size(); ++i) {
-    const Rigid3d& pose = sequence.world_from_rig[i];
-    const Eigen::Quaterniond q = pose.rotation.normalized();
-    out << sequence.timestamps_s[i] << ' ' << pose.translation.x() << ' ' << pose.translation.y()
-        << ' ' << pose.translation.z() << ' ' << q.x() << ' ' << q.y() << ' ' << q.z() << ' '
-        << q.w() << '\n';
-  }
-  return out.str();
-}
-
 void WriteMonoCalibrationSet(const synth::MonoCalibrationSet& set, const std::string& dir) {
   const std::filesystem::path root(dir);
   std::filesystem::create_directories(root);
   for (size_t i = 0; i < set.images.size(); ++i) {
     synth::WritePng(set.images[i], (root / PngName(set.names[i])).string());
   }
-  WriteText(MonoCalibrationSetToJson(set).dump(2) + "\n", root / "ground_truth.json");
+  WriteTextFile(root / "ground_truth.json", MonoCalibrationSetToJson(set).dump(2) + "\n");
 }
 
 void WriteStereoBoardSet(const synth::StereoBoardSet& set, const std::string& dir) {
@@ -206,7 +185,7 @@ void WriteStereoBoardSet(const synth::StereoBoardSet& set, const std::string& di
       synth::WritePng(set.images[k][i], (folder / PngName(set.names[i])).string());
     }
   }
-  WriteText(StereoBoardSetToJson(set).dump(2) + "\n", root / "ground_truth.json");
+  WriteTextFile(root / "ground_truth.json", StereoBoardSetToJson(set).dump(2) + "\n");
 }
 
 void WriteStereoFrame(const std::string& name, const cv::Mat& cam0_image,
@@ -220,8 +199,13 @@ void WriteStereoSequenceGroundTruth(const synth::StereoSequence& sequence,
                                     const std::string& environment, const std::string& dir) {
   const std::filesystem::path root(dir);
   std::filesystem::create_directories(root);
-  WriteText(StereoSequenceToJson(sequence, environment).dump(2) + "\n", root / "ground_truth.json");
-  WriteText(TrajectoryToTum(sequence), root / "trajectory.tum");
+  WriteTextFile(root / "ground_truth.json",
+                StereoSequenceToJson(sequence, environment).dump(2) + "\n");
+  std::vector<slam::StampedPose> poses;
+  for (size_t i = 0; i < sequence.world_from_rig.size(); ++i) {
+    poses.push_back({sequence.timestamps_s[i], sequence.world_from_rig[i]});
+  }
+  slam::WriteTum(root / "trajectory.tum", poses);
 }
 
 namespace {
@@ -269,8 +253,7 @@ void WriteStereoSequenceVideos(const synth::StereoSequence& sequence,
       writer.write(both);
     }
   }
-  WriteText(StereoSequenceToJson(sequence, environment).dump(2) + "\n", root / "ground_truth.json");
-  WriteText(TrajectoryToTum(sequence), root / "trajectory.tum");
+  WriteStereoSequenceGroundTruth(sequence, environment, dir);
 }
 
 void WriteStereoSequence(const synth::StereoSequence& sequence, const std::string& environment,

@@ -32,7 +32,8 @@
 //                  {"length_m" (one lap), "num_laps", "lighting_change",
 //                  "motion_blur_exposure_s", "motion_blur_samples"} and per frame "lap".
 // Image files: mono DIR/NAME.png; stereo DIR/cam0/NAME.png and DIR/cam1/NAME.png.
-// trajectory.tum: one line per frame, "timestamp tx ty tz qx qy qz qw" of world_from_rig.
+// trajectory.tum: one line per frame, "timestamp tx ty tz qx qy qz qw" of world_from_rig
+// (slam::WriteTum).
 
 #include <string>
 #include <vector>
@@ -43,18 +44,11 @@
 
 namespace omnirig::api {
 
-nlohmann::json SynthCameraToJson(const synth::SynthCamera& camera);
-nlohmann::json BoardToJson(const synth::CheckerboardSpec& board);
 nlohmann::json CornersToJson(const std::vector<Eigen::Vector2d>& corners_px);
-nlohmann::json SceneToJson(const synth::Scene& scene, const std::string& world_frame);
-nlohmann::json StereoRigToJson(const StereoRig& rig,
-                               const std::array<synth::SynthCamera, 2>& cameras);
-
 nlohmann::json MonoCalibrationSetToJson(const synth::MonoCalibrationSet& set);
 nlohmann::json StereoBoardSetToJson(const synth::StereoBoardSet& set);
 nlohmann::json StereoSequenceToJson(const synth::StereoSequence& sequence,
                                     const std::string& environment);
-std::string TrajectoryToTum(const synth::StereoSequence& sequence);
 
 // Write the images and ground_truth.json (and trajectory.tum) into `dir`, creating it. Throw
 // std::runtime_error when a file cannot be written.

@@ -10,6 +10,7 @@
 #include <unistd.h>
 
 #include "api/camera_json.h"
+#include "engine/slam/map_io.h"
 
 namespace omnirig::api {
 namespace {
@@ -86,15 +87,16 @@ TEST(SynthJson, SequenceRigAndTrajectory) {
   EXPECT_EQ(json["frames"][1]["files"]["cam1"], "cam1/frame_001.png");
   EXPECT_DOUBLE_EQ(json["frames"][1]["timestamp_s"].get<double>(), 0.1);
   EXPECT_TRUE(json["frames"][1]["world_from_rig"].contains("rotation_wxyz"));
-  const std::string tum = TrajectoryToTum(sequence);
-  std::istringstream lines(tum);
-  double t, x, y, z, qx, qy, qz, qw;
-  ASSERT_TRUE(lines >> t >> x >> y >> z >> qx >> qy >> qz >> qw);
-  ASSERT_TRUE(lines >> t >> x >> y >> z >> qx >> qy >> qz >> qw);
-  EXPECT_DOUBLE_EQ(t, 0.1);
-  EXPECT_DOUBLE_EQ(x, 1.0);
+  const std::filesystem::path dir =
+      std::filesystem::temp_directory_path() / ("omnirig_synth_tum_" + std::to_string(::getpid()));
+  WriteStereoSequenceGroundTruth(sequence, "room", dir.string());
+  const std::vector<slam::StampedPose> tum = slam::ReadTum(dir / "trajectory.tum");
+  std::filesystem::remove_all(dir);
+  ASSERT_EQ(tum.size(), sequence.world_from_rig.size());
+  EXPECT_DOUBLE_EQ(tum[1].timestamp_s, 0.1);
+  EXPECT_DOUBLE_EQ(tum[1].world_from_rig.translation.x(), 1.0);
   const Eigen::Quaterniond q = sequence.world_from_rig[1].rotation;
-  EXPECT_NEAR(std::abs(qx * q.x() + qy * q.y() + qz * q.z() + qw * q.w()), 1.0, 1e-9);
+  EXPECT_NEAR(std::abs(tum[1].world_from_rig.rotation.dot(q)), 1.0, 1e-9);
 }
 
 TEST(SynthJson, WritersCreateTheLayout) {
