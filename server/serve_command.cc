@@ -1,4 +1,4 @@
-#include "server/serve_command.h"
+#include "server/commands.h"
 
 #include <fcntl.h>
 #include <poll.h>

@@ -1,4 +1,4 @@
-#include "server/worker_command.h"
+#include "server/commands.h"
 
 #include <signal.h>
 
@@ -8,7 +8,6 @@
 #include "engine/util/check.h"
 #include "server/cli/args.h"
 #include "server/metrics.h"
-#include "server/serve_command.h"
 #include "server/service.h"
 #include "server/worker_pool.h"
 #include "storage/postgres_job_store.h"

@@ -1,0 +1,31 @@
+#pragma once
+// The subcommands that run the service (server/): `omnirig serve` (serve_command.cc), `omnirig
+// worker` (worker_command.cc) and `omnirig store copy` (store_command.cc). Each takes the
+// arguments after its name and returns the process exit code.
+
+#include <string>
+#include <vector>
+
+namespace omnirig::server {
+
+// SIGTERM and SIGINT, from any thread, wake WaitForSignal (which returns the signal number).
+// Shared by `omnirig serve` and `omnirig worker`.
+void InstallStopSignalHandlers();
+int WaitForSignal();
+
+// Runs the service until SIGTERM or SIGINT, then drains. Prints "omnirig listening on
+// http://HOST:PORT" on stdout once the port is bound (with --port 0 the line names the port the
+// system chose).
+int ServeCommand(const std::vector<std::string>& args);
+
+// Runs jobs from a shared PostgreSQL job store, with no HTTP (see docs/multi-machine.md); waits
+// for SIGTERM/SIGINT, then drains like `omnirig serve`. Prints "omnirig worker ID running N
+// job(s) at a time" on stdout once it takes jobs.
+int WorkerCommand(const std::vector<std::string>& args);
+
+// `omnirig store copy --from sqlite:DIR --to postgresql://...`: moves a one-machine service's
+// records (datasets, jobs, results, artifact records) into a shared PostgreSQL store (or back),
+// so a team keeps its history when it grows to several machines.
+int StoreCommand(const std::vector<std::string>& args);
+
+}  // namespace omnirig::server
