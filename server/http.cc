@@ -98,25 +98,14 @@ bool HasBody(const httplib::Request& req) {
          req.has_header("Transfer-Encoding");
 }
 
-const char* DefaultErrorCode(int status) {
-  switch (status) {
-    case 400:
-      return "bad_request";
-    case 401:
-      return "unauthorized";
-    case 404:
-      return "not_found";
-    case 413:
-      return "payload_too_large";
-    case 414:
-      return "uri_too_long";
-    case 416:
-      return "range_not_satisfiable";
-    case 503:
-      return "unavailable";
-    default:
-      return status >= 500 ? "internal" : "error";
-  }
+// The error code of a status httplib answers by itself (its error handler).
+std::string DefaultErrorCode(int status) {
+  static const std::map<int, std::string> kCodes = {
+      {400, "bad_request"},       {401, "unauthorized"}, {404, "not_found"},
+      {413, "payload_too_large"}, {414, "uri_too_long"}, {416, "range_not_satisfiable"},
+      {503, "unavailable"}};
+  const auto it = kCodes.find(status);
+  return it != kCodes.end() ? it->second : status >= 500 ? "internal" : "error";
 }
 
 // Sets a body that httplib must neither slice by the request's Range header (it slices every

@@ -90,6 +90,14 @@ class Service {
   std::unique_ptr<HttpServer> http_;
 };
 
+// A route handler that runs `handler` on `state`.
+inline HttpHandler WithState(ServiceState& state,
+                             void (*handler)(ServiceState&, const HttpRequest&, HttpResponse&)) {
+  return [&state, handler](const HttpRequest& request, HttpResponse& response) {
+    handler(state, request, response);
+  };
+}
+
 // Route registration (routes_*.cc).
 void AddSystemRoutes(HttpServer& http, ServiceState& state);
 void AddDatasetRoutes(HttpServer& http, ServiceState& state);

@@ -254,7 +254,8 @@ class PostgresJobStore::Lease {
 };
 
 PostgresJobStore::PostgresJobStore(const std::string& url, int max_connections)
-    : SqlJobStore(SqlDialect{/*byte_order=*/" COLLATE \"C\"", /*lock_row=*/" FOR UPDATE"}),
+    : SqlJobStore(SqlDialect{/*byte_order=*/" COLLATE \"C\"", /*lock_row=*/" FOR UPDATE",
+                             /*insertion_order=*/"seq"}),
       url_(url),
       max_connections_(std::max(1, max_connections)) {
   try {
@@ -365,19 +366,6 @@ JobRecord PostgresJobStore::CreateJob(const std::string& type, const std::string
                {job.id, type, dataset_id, params, job.created_at});
   });
   return job;
-}
-
-std::vector<JobRecord> PostgresJobStore::ListJobs(const JobFilter& filter) {
-  return Read([&](SqlSession& db) {
-    return db.All(std::string("SELECT ") + kJobColumns +
-                      " FROM jobs WHERE (?1::TEXT IS NULL OR state = ?1) AND (?2::TEXT IS NULL "
-                      "OR type = ?2) AND (?3::TEXT IS NULL OR dataset_id = ?3) "
-                      "ORDER BY created_at DESC, seq DESC "
-                      "LIMIT CASE WHEN ?4::BIGINT < 0 THEN NULL ELSE ?4::BIGINT END",
-                  {filter.state ? SqlValue(JobStateName(*filter.state)) : SqlValue(), filter.type,
-                   filter.dataset_id, filter.limit},
-                  &ReadJob);
-  });
 }
 
 std::optional<JobRecord> PostgresJobStore::ClaimNextJob(const ClaimRequest& request) {

@@ -44,7 +44,6 @@ class PostgresJobStore : public SqlJobStore {
 
   JobRecord CreateJob(const std::string& type, const std::string& dataset_id,
                       const std::string& params) override;
-  std::vector<JobRecord> ListJobs(const JobFilter& filter) override;
   using JobStore::ClaimNextJob;
   std::optional<JobRecord> ClaimNextJob(const ClaimRequest& request) override;
   bool RenewLease(const std::string& id, const std::string& lease_token, double lease_s) override;

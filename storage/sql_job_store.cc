@@ -215,6 +215,20 @@ std::optional<JobRecord> SqlJobStore::GetJob(const std::string& id) {
   return Read([&](SqlSession& db) { return SelectJob(db, id); });
 }
 
+std::vector<JobRecord> SqlJobStore::ListJobs(const JobFilter& filter) {
+  const int64_t limit = filter.limit < 0 ? INT64_MAX : filter.limit;
+  return Read([&](SqlSession& db) {
+    return db.All(std::string("SELECT ") + kJobColumns +
+                      " FROM jobs WHERE (CAST(?1 AS TEXT) IS NULL OR state = ?1) AND (CAST(?2 AS "
+                      "TEXT) IS NULL OR type = ?2) AND (CAST(?3 AS TEXT) IS NULL OR dataset_id = "
+                      "?3) ORDER BY created_at DESC, " +
+                      dialect_.insertion_order + " DESC LIMIT ?4",
+                  {filter.state ? SqlValue(JobStateName(*filter.state)) : SqlValue(), filter.type,
+                   filter.dataset_id, limit},
+                  &ReadJob);
+  });
+}
+
 void SqlJobStore::UpdateProgress(const std::string& id, const JobProgress& progress) {
   WithWriter([&](SqlSession& db) {
     db.Execute(

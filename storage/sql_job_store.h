@@ -102,6 +102,8 @@ struct SqlDialect {
   // Appended to the SELECT of a row the same transaction then updates (empty where the
   // transaction holds the database's write lock from its start).
   std::string lock_row;
+  // The column that orders rows inserted in the same instant (SQLite's rowid, a sequence).
+  std::string insertion_order;
 };
 
 class SqlJobStore : public JobStore {
@@ -120,6 +122,7 @@ class SqlJobStore : public JobStore {
                                       const std::string& name) override;
 
   std::optional<JobRecord> GetJob(const std::string& id) override;
+  std::vector<JobRecord> ListJobs(const JobFilter& filter) override;
   void UpdateProgress(const std::string& id, const JobProgress& progress) override;
   std::optional<JobState> RequestCancel(const std::string& id) override;
   bool FinishJob(const std::string& id, const std::string& lease_token,

@@ -140,7 +140,8 @@ class SqliteJobStore::ReaderLease {
 };
 
 SqliteJobStore::SqliteJobStore(const std::string& path, int num_readers)
-    : SqlJobStore(SqlDialect{/*byte_order=*/"", /*lock_row=*/""}), path_(path) {
+    : SqlJobStore(SqlDialect{/*byte_order=*/"", /*lock_row=*/"", /*insertion_order=*/"rowid"}),
+      path_(path) {
   writer_ = std::make_unique<Connection>(path);
   Migrate();
   for (int i = 0; i < std::max(1, num_readers); ++i) {
@@ -207,17 +208,6 @@ JobRecord SqliteJobStore::CreateJob(const std::string& type, const std::string& 
     db.Execute(kInsertJob, {job.id, type, dataset_id, params, job.created_at});
   });
   return job;
-}
-
-std::vector<JobRecord> SqliteJobStore::ListJobs(const JobFilter& filter) {
-  return Read([&](SqlSession& db) {
-    return db.All(std::string("SELECT ") + kJobColumns +
-                      " FROM jobs WHERE (?1 IS NULL OR state = ?1) AND (?2 IS NULL OR type = ?2)"
-                      " AND (?3 IS NULL OR dataset_id = ?3) ORDER BY created_at DESC LIMIT ?4",
-                  {filter.state ? SqlValue(JobStateName(*filter.state)) : SqlValue(), filter.type,
-                   filter.dataset_id, filter.limit},
-                  &ReadJob);
-  });
 }
 
 std::optional<JobRecord> SqliteJobStore::ClaimNextJob(const ClaimRequest& request) {

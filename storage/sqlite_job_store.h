@@ -26,7 +26,6 @@ class SqliteJobStore : public SqlJobStore {
 
   JobRecord CreateJob(const std::string& type, const std::string& dataset_id,
                       const std::string& params) override;
-  std::vector<JobRecord> ListJobs(const JobFilter& filter) override;
   using JobStore::ClaimNextJob;
   std::optional<JobRecord> ClaimNextJob(const ClaimRequest& request) override;
   bool RenewLease(const std::string& id, const std::string& lease_token, double lease_s) override;
