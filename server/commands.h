@@ -3,15 +3,19 @@
 // worker` (worker_command.cc) and `omnirig store copy` (store_command.cc). Each takes the
 // arguments after its name and returns the process exit code.
 
+#include <functional>
 #include <string>
 #include <vector>
 
 namespace omnirig::server {
 
-// SIGTERM and SIGINT, from any thread, wake WaitForSignal (which returns the signal number).
-// Shared by `omnirig serve` and `omnirig worker`.
+// SIGTERM and SIGINT, from any thread, wake WaitThenDrain; SIGPIPE is ignored. Shared by
+// `omnirig serve` and `omnirig worker`.
 void InstallStopSignalHandlers();
-int WaitForSignal();
+// Waits for SIGTERM or SIGINT, then calls `drain` with `timeout_s` (it returns the running jobs
+// it handed back to the queue), logging both on stderr as `who`. Returns the exit code, 0.
+int WaitThenDrain(const std::string& who, double timeout_s,
+                  const std::function<int(double timeout_s)>& drain);
 
 // Runs the service until SIGTERM or SIGINT, then drains. Prints "omnirig listening on
 // http://HOST:PORT" on stdout once the port is bound (with --port 0 the line names the port the

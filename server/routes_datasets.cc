@@ -356,8 +356,9 @@ nlohmann::json UploadStatusJson(const std::string& name, const storage::UploadPa
           {"stored", stored ? ImageJson(*stored) : nlohmann::json(nullptr)}};
 }
 
-// The record of a complete file on disk, checked as a plain PUT checks its body: a video's
-// container, or an image's header and completeness (read once, in blocks).
+}  // namespace
+
+// Read once, in blocks.
 storage::ImageRecord CheckCompleteFile(const std::string& name, const std::filesystem::path& path) {
   const storage::FileDigest digest = storage::DigestFile(path);
   if (storage::IsVideoName(name)) return VideoRecord(name, path, digest);
@@ -370,6 +371,8 @@ storage::ImageRecord CheckCompleteFile(const std::string& name, const std::files
   const storage::ImageHeader header = check.Finish(name);
   return {name, digest.size, digest.sha256, header.width, header.height, header.content_type};
 }
+
+namespace {
 
 // The checks of a chunk before its body is read: sizes (413 with the limit), the declared
 // length, the dataset's room.

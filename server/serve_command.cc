@@ -129,20 +129,27 @@ void InstallStopSignalHandlers() {
   action.sa_flags = SA_RESTART;
   sigaction(SIGTERM, &action, nullptr);
   sigaction(SIGINT, &action, nullptr);
+  signal(SIGPIPE, SIG_IGN);
 }
 
 // Waits in poll() before reading: ThreadSanitizer runs a signal handler at once only in a call
 // it knows to block (poll, not read), else it defers it to the thread's next intercepted call;
 // a SIGTERM that landed on this thread while it sat in read() (restarted: SA_RESTART) was never
 // handled, and the server under TSan did not stop (scripts/tsan.sh, tests/server_crash).
-int WaitForSignal() {
+int WaitThenDrain(const std::string& who, double timeout_s,
+                  const std::function<int(double timeout_s)>& drain) {
   pollfd ready{signal_pipe[0], POLLIN, 0};
   while (::poll(&ready, 1, -1) < 0 && errno == EINTR) {
   }
-  char byte = 0;
-  while (::read(signal_pipe[0], &byte, 1) < 0 && errno == EINTR) {
+  char received = 0;
+  while (::read(signal_pipe[0], &received, 1) < 0 && errno == EINTR) {
   }
-  return byte;
+  std::cerr << who << ": " << (received == SIGTERM ? "SIGTERM" : "SIGINT") << ": draining (up to "
+            << timeout_s << " s)" << std::endl;
+  const int requeued = drain(timeout_s);
+  std::cerr << who << ": stopped; " << requeued << " running job(s) handed back to the queue"
+            << std::endl;
+  return 0;
 }
 
 int ServeCommand(const std::vector<std::string>& args) {
@@ -158,20 +165,13 @@ int ServeCommand(const std::vector<std::string>& args) {
   // mask and sigwait) works whichever thread the kernel picks, including threads that libraries
   // start before this point.
   InstallStopSignalHandlers();
-  signal(SIGPIPE, SIG_IGN);
-
   Service service(options);
   const int port = service.Start();
   std::cout << "omnirig listening on http://" << options.host << ":" << port << std::endl;
   std::cerr << "omnirig: at most " << options.max_connections << " open connections (0: no cap)"
             << std::endl;
-  const int received = WaitForSignal();
-  std::cerr << "omnirig: " << (received == SIGTERM ? "SIGTERM" : "SIGINT") << ": draining (up to "
-            << drain_timeout_s << " s)" << std::endl;
-  const int requeued = service.Drain(drain_timeout_s);
-  std::cerr << "omnirig: stopped; " << requeued << " running job(s) handed back to the queue"
-            << std::endl;
-  return 0;
+  return WaitThenDrain("omnirig", drain_timeout_s,
+                       [&service](double timeout_s) { return service.Drain(timeout_s); });
 }
 
 }  // namespace omnirig::server

@@ -90,6 +90,11 @@ class Service {
   std::unique_ptr<HttpServer> http_;
 };
 
+// The record of a complete file on disk, checked as a plain PUT checks its body
+// (routes_datasets.cc): a video's container, or an image's (or .tum's) header and completeness;
+// HttpError 415 or 422 when it fails.
+storage::ImageRecord CheckCompleteFile(const std::string& name, const std::filesystem::path& path);
+
 // A route handler that runs `handler` on `state`.
 inline HttpHandler WithState(ServiceState& state,
                              void (*handler)(ServiceState&, const HttpRequest&, HttpResponse&)) {

@@ -1,7 +1,5 @@
 #include "server/commands.h"
 
-#include <signal.h>
-
 #include <iostream>
 
 #include "api/job_types.h"
@@ -57,7 +55,6 @@ int WorkerCommand(const std::vector<std::string>& args) {
   const double drain_timeout_s = parser.GetDouble("drain-timeout");
 
   InstallStopSignalHandlers();
-  signal(SIGPIPE, SIG_IGN);
   api::RegisterBuiltinJobTypes();
   const storage::DataDir data_dir(parser.Get("data"));
   storage::PostgresJobStore store(database);
@@ -66,13 +63,8 @@ int WorkerCommand(const std::vector<std::string>& args) {
   pool.Start();
   std::cout << "omnirig worker " << pool.worker_id() << " running " << options.num_workers
             << " job(s) at a time" << std::endl;
-  const int received = WaitForSignal();
-  std::cerr << "omnirig worker: " << (received == SIGTERM ? "SIGTERM" : "SIGINT")
-            << ": draining (up to " << drain_timeout_s << " s)" << std::endl;
-  const int requeued = pool.Drain(drain_timeout_s);
-  std::cerr << "omnirig worker: stopped; " << requeued << " running job(s) handed back"
-            << std::endl;
-  return 0;
+  return WaitThenDrain("omnirig worker", drain_timeout_s,
+                       [&pool](double timeout_s) { return pool.Drain(timeout_s); });
 }
 
 }  // namespace omnirig::server
