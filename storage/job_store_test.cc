@@ -9,6 +9,7 @@
 #include <libpq-fe.h>
 
 #include <atomic>
+#include <cstdlib>
 #include <memory>
 #include <mutex>
 #include <set>
@@ -413,13 +414,23 @@ TYPED_TEST(JobStoreContractTest, QueueChangesWakeOtherProcesses) {
   EXPECT_FALSE(worker_owned->WaitForQueueChange(0));
 }
 
+// The schema version recorded in the database at `url`.
+int StoredSchemaVersion(const std::string& url) {
+  PGconn* db = PQconnectdb(url.c_str());
+  PGresult* rows = PQexec(db, "SELECT version FROM omnirig_schema");
+  const int version = PQntuples(rows) == 0 ? 0 : std::atoi(PQgetvalue(rows, 0, 0));
+  PQclear(rows);
+  PQfinish(db);
+  return version;
+}
+
 TEST(PostgresJobStoreTest, MigratesOnceAndRefusesANewerSchema) {
   const std::string url = testing::SharedPostgresTestServer().CreateDatabase();
   std::string dataset_id;
   {
     PostgresJobStore store(url);
     dataset_id = store.CreateDataset("rig").id;
-    EXPECT_EQ(store.StoredSchemaVersion(), PostgresJobStore::SchemaVersion());
+    EXPECT_EQ(StoredSchemaVersion(url), PostgresJobStore::SchemaVersion());
   }
   EXPECT_EQ(PostgresJobStore::SchemaVersion(), SqliteJobStore::SchemaVersion());
   {
@@ -430,7 +441,7 @@ TEST(PostgresJobStoreTest, MigratesOnceAndRefusesANewerSchema) {
     for (int i = 0; i < 4; ++i) {
       openers.emplace_back([&] {
         PostgresJobStore store(fresh, 1);
-        opened += store.StoredSchemaVersion() == PostgresJobStore::SchemaVersion();
+        opened += StoredSchemaVersion(fresh) == PostgresJobStore::SchemaVersion();
       });
     }
     for (auto& opener : openers) opener.join();

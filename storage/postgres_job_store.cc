@@ -255,7 +255,8 @@ class PostgresJobStore::Lease {
 
 PostgresJobStore::PostgresJobStore(const std::string& url, int max_connections)
     : SqlJobStore(SqlDialect{/*byte_order=*/" COLLATE \"C\"", /*lock_row=*/" FOR UPDATE",
-                             /*insertion_order=*/"seq"}),
+                             /*insertion_order=*/"seq", /*skip_locked=*/" FOR UPDATE SKIP LOCKED",
+                             /*now=*/kDbNow}),
       url_(url),
       max_connections_(std::max(1, max_connections)) {
   try {
@@ -326,12 +327,6 @@ void PostgresJobStore::Migrate() {
   transaction.Commit();
 }
 
-int PostgresJobStore::StoredSchemaVersion() {
-  Lease db = Borrow();
-  const Result rows = Run(db.get(), "SELECT version FROM omnirig_schema");
-  return rows.rows() == 0 ? 0 : static_cast<int>(rows.Int(0, 0));
-}
-
 void PostgresJobStore::WithReader(const std::function<void(SqlSession&)>& work) {
   WithWriter(work);  // any pooled connection reads and writes
 }
@@ -366,40 +361,6 @@ JobRecord PostgresJobStore::CreateJob(const std::string& type, const std::string
                {job.id, type, dataset_id, params, job.created_at});
   });
   return job;
-}
-
-std::optional<JobRecord> PostgresJobStore::ClaimNextJob(const ClaimRequest& request) {
-  // SKIP LOCKED: a row another worker is claiming right now is passed over, not waited for.
-  return Write([&](SqlSession& db) {
-    return db.First(
-        std::string("UPDATE jobs SET state = 'running', started_at = ?1, finished_at = NULL, "
-                    "attempts = attempts + 1, progress_fraction = 0, progress_stage = "
-                    "'starting', progress_message = '', eta_s = NULL, worker_id = ?2, "
-                    "lease_token = ?3, lease_expires_at = ") +
-            kDbNow +
-            " + ?4 WHERE id = (SELECT id FROM jobs WHERE state = 'queued' "
-            "ORDER BY queued_at, seq LIMIT 1 FOR UPDATE SKIP LOCKED) RETURNING " +
-            kJobColumns,
-        {NowSeconds(), request.worker_id, NewId(), request.lease_s}, &ReadJob);
-  });
-}
-
-bool PostgresJobStore::RenewLease(const std::string& id, const std::string& lease_token,
-                                  double lease_s) {
-  return Write([&](SqlSession& db) {
-    return db.Execute(std::string("UPDATE jobs SET lease_expires_at = ") + kDbNow +
-                          " + ?1 WHERE id = ?2 AND state = 'running' AND lease_token = ?3",
-                      {lease_s, id, lease_token}) > 0;
-  });
-}
-
-// SKIP LOCKED: a job being finished or renewed right now is not expired; leave it.
-SqlJobStore::SqlQuery PostgresJobStore::RunningJobs(bool only_expired) const {
-  const std::string expired =
-      std::string("AND (lease_expires_at IS NULL OR lease_expires_at <= ") + kDbNow + ") ";
-  return {std::string("SELECT id, attempts, cancel_requested FROM jobs WHERE state = 'running' ") +
-              (only_expired ? expired : "") + "ORDER BY seq FOR UPDATE SKIP LOCKED",
-          {}};
 }
 
 bool PostgresJobStore::WaitForQueueChange(double timeout_s) {

@@ -43,6 +43,41 @@ void InsertArtifacts(SqlSession& db, const std::string& job_id,
   }
 }
 
+// The columns ReadJob reads, in its order.
+constexpr char kJobColumns[] =
+    "id, type, dataset_id, params, state, progress_fraction, progress_stage, progress_message, "
+    "eta_s, created_at, started_at, finished_at, attempts, error_code, error_message, "
+    "cancel_requested, worker_id, lease_token, lease_expires_at";
+
+JobRecord ReadJob(const SqlRow& row) {
+  JobRecord job;
+  job.id = row.Text(0);
+  job.type = row.Text(1);
+  job.dataset_id = row.Text(2);
+  job.params = row.Text(3);
+  job.state = ParseJobState(row.Text(4)).value_or(JobState::kFailed);
+  job.progress = JobProgress{row.Double(5), row.Text(6), row.Text(7), row.OptionalDouble(8)};
+  job.created_at = row.Double(9);
+  job.started_at = row.OptionalDouble(10);
+  job.finished_at = row.OptionalDouble(11);
+  job.attempts = static_cast<int>(row.Int(12));
+  if (!row.IsNull(13)) job.error = JobError{row.Text(13), row.Text(14)};
+  job.cancel_requested = row.Int(15) != 0;
+  job.worker_id = row.Text(16);
+  job.lease_token = row.Text(17);
+  job.lease_expires_at = row.OptionalDouble(18);
+  return job;
+}
+
+// The job `id` read on `db`, with `suffix` appended to its SELECT (a row lock).
+std::optional<JobRecord> SelectJob(SqlSession& db, const std::string& id,
+                                   const std::string& suffix = "") {
+  // Built once: a status poll is one lookup.
+  static const std::string kSelect =
+      std::string("SELECT ") + kJobColumns + " FROM jobs WHERE id = ?1";
+  return db.First(suffix.empty() ? kSelect : kSelect + suffix, {id}, &ReadJob);
+}
+
 // The error's code and message, NULL and NULL without one.
 SqlValue ErrorCode(const std::optional<JobError>& error) {
   return error ? SqlValue(error->code) : SqlValue();
@@ -92,11 +127,6 @@ RecoveryReport Recover(SqlSession& db, const std::vector<RunningJob>& running, i
 
 }  // namespace
 
-const char SqlJobStore::kJobColumns[] =
-    "id, type, dataset_id, params, state, progress_fraction, progress_stage, progress_message, "
-    "eta_s, created_at, started_at, finished_at, attempts, error_code, error_message, "
-    "cancel_requested, worker_id, lease_token, lease_expires_at";
-
 const char SqlJobStore::kInsertJob[] =
     "INSERT INTO jobs(id, type, dataset_id, params, state, created_at, queued_at) "
     "VALUES(?1, ?2, ?3, ?4, 'queued', ?5, ?5)";
@@ -110,34 +140,6 @@ JobRecord SqlJobStore::NewJob(const std::string& type, const std::string& datase
   job.params = params;
   job.created_at = NowSeconds();
   return job;
-}
-
-JobRecord SqlJobStore::ReadJob(const SqlRow& row) {
-  JobRecord job;
-  job.id = row.Text(0);
-  job.type = row.Text(1);
-  job.dataset_id = row.Text(2);
-  job.params = row.Text(3);
-  job.state = ParseJobState(row.Text(4)).value_or(JobState::kFailed);
-  job.progress = JobProgress{row.Double(5), row.Text(6), row.Text(7), row.OptionalDouble(8)};
-  job.created_at = row.Double(9);
-  job.started_at = row.OptionalDouble(10);
-  job.finished_at = row.OptionalDouble(11);
-  job.attempts = static_cast<int>(row.Int(12));
-  if (!row.IsNull(13)) job.error = JobError{row.Text(13), row.Text(14)};
-  job.cancel_requested = row.Int(15) != 0;
-  job.worker_id = row.Text(16);
-  job.lease_token = row.Text(17);
-  job.lease_expires_at = row.OptionalDouble(18);
-  return job;
-}
-
-std::optional<JobRecord> SqlJobStore::SelectJob(SqlSession& db, const std::string& id,
-                                                const std::string& suffix) {
-  // Built once: a status poll is one lookup.
-  static const std::string kSelect =
-      std::string("SELECT ") + kJobColumns + " FROM jobs WHERE id = ?1";
-  return db.First(suffix.empty() ? kSelect : kSelect + suffix, {id}, &ReadJob);
 }
 
 DatasetRecord SqlJobStore::CreateDataset(const std::string& name) {
@@ -226,6 +228,31 @@ std::vector<JobRecord> SqlJobStore::ListJobs(const JobFilter& filter) {
                   {filter.state ? SqlValue(JobStateName(*filter.state)) : SqlValue(), filter.type,
                    filter.dataset_id, limit},
                   &ReadJob);
+  });
+}
+
+// One statement: the oldest queued job is taken and returned as it is now running.
+std::optional<JobRecord> SqlJobStore::ClaimNextJob(const ClaimRequest& request) {
+  return Write([&](SqlSession& db) {
+    return db.First(
+        "UPDATE jobs SET state = 'running', started_at = ?1, finished_at = NULL, attempts = "
+        "attempts + 1, progress_fraction = 0, progress_stage = 'starting', progress_message = '', "
+        "eta_s = NULL, worker_id = ?2, lease_token = ?3, lease_expires_at = " +
+            dialect_.now +
+            " + ?4 WHERE id = (SELECT id FROM jobs WHERE state = 'queued' ORDER BY "
+            "queued_at, " +
+            dialect_.insertion_order + " LIMIT 1" + dialect_.skip_locked + ") RETURNING " +
+            kJobColumns,
+        {NowSeconds(), request.worker_id, NewId(), request.lease_s}, &ReadJob);
+  });
+}
+
+bool SqlJobStore::RenewLease(const std::string& id, const std::string& lease_token,
+                             double lease_s) {
+  return Write([&](SqlSession& db) {
+    return db.Execute("UPDATE jobs SET lease_expires_at = " + dialect_.now +
+                          " + ?1 WHERE id = ?2 AND state = 'running' AND lease_token = ?3",
+                      {lease_s, id, lease_token}) > 0;
   });
 }
 
@@ -424,12 +451,17 @@ RecoveryReport SqlJobStore::RecoverExpiredLeases(int max_attempts) {
 
 RecoveryReport SqlJobStore::RecoverRunning(int max_attempts, bool only_expired) {
   RecoveryReport report;
+  // A job claimed before leases existed (no expiry) counts as expired.
+  const std::string expired =
+      only_expired ? " AND (lease_expires_at IS NULL OR lease_expires_at <= " + dialect_.now + ")"
+                   : "";
   InTransaction([&](SqlSession& db) {
-    const SqlQuery select = RunningJobs(only_expired);
     std::vector<RunningJob> running;
-    db.Query(select.sql, select.params, [&](const SqlRow& row) {
-      running.push_back(RunningJob{row.Text(0), row.Int(1), row.Int(2) != 0});
-    });
+    db.Query("SELECT id, attempts, cancel_requested FROM jobs WHERE state = 'running'" + expired +
+                 " ORDER BY " + dialect_.insertion_order + dialect_.skip_locked,
+             {}, [&](const SqlRow& row) {
+               running.push_back(RunningJob{row.Text(0), row.Int(1), row.Int(2) != 0});
+             });
     report = Recover(db, running, max_attempts);
     if (!report.requeued.empty()) OnJobsQueued(db);
     return true;

@@ -140,7 +140,9 @@ class SqliteJobStore::ReaderLease {
 };
 
 SqliteJobStore::SqliteJobStore(const std::string& path, int num_readers)
-    : SqlJobStore(SqlDialect{/*byte_order=*/"", /*lock_row=*/"", /*insertion_order=*/"rowid"}),
+    : SqlJobStore(SqlDialect{/*byte_order=*/"", /*lock_row=*/"", /*insertion_order=*/"rowid",
+                             /*skip_locked=*/"",
+                             /*now=*/"((julianday('now') - 2440587.5) * 86400.0)"}),
       path_(path) {
   writer_ = std::make_unique<Connection>(path);
   Migrate();
@@ -208,44 +210,6 @@ JobRecord SqliteJobStore::CreateJob(const std::string& type, const std::string& 
     db.Execute(kInsertJob, {job.id, type, dataset_id, params, job.created_at});
   });
   return job;
-}
-
-std::optional<JobRecord> SqliteJobStore::ClaimNextJob(const ClaimRequest& request) {
-  std::optional<JobRecord> job;
-  InTransaction([&](SqlSession& db) {
-    std::optional<std::string> id;
-    db.Query("SELECT id FROM jobs WHERE state = 'queued' ORDER BY queued_at, rowid LIMIT 1", {},
-             [&](const SqlRow& row) { id = row.Text(0); });
-    if (!id) return false;
-    const double now = NowSeconds();
-    db.Execute(
-        "UPDATE jobs SET state = 'running', started_at = ?1, finished_at = NULL, "
-        "attempts = attempts + 1, progress_fraction = 0, progress_stage = 'starting', "
-        "progress_message = '', eta_s = NULL, worker_id = ?2, lease_token = ?3, "
-        "lease_expires_at = ?4 WHERE id = ?5",
-        {now, request.worker_id, NewId(), now + request.lease_s, *id});
-    job = SelectJob(db, *id);
-    return true;
-  });
-  return job;
-}
-
-bool SqliteJobStore::RenewLease(const std::string& id, const std::string& lease_token,
-                                double lease_s) {
-  return Write([&](SqlSession& db) {
-    return db.Execute(
-               "UPDATE jobs SET lease_expires_at = ?1 WHERE id = ?2 AND state = 'running' AND "
-               "lease_token = ?3",
-               {NowSeconds() + lease_s, id, lease_token}) > 0;
-  });
-}
-
-// A job claimed before leases existed (no expiry) counts as expired.
-SqlJobStore::SqlQuery SqliteJobStore::RunningJobs(bool only_expired) const {
-  return {
-      "SELECT id, attempts, cancel_requested FROM jobs WHERE state = 'running' "
-      "AND (?1 IS NULL OR lease_expires_at IS NULL OR lease_expires_at <= ?1)",
-      {only_expired ? SqlValue(NowSeconds()) : SqlValue()}};
 }
 
 std::string SqliteJobStore::IntegrityCheck() {
