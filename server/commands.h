@@ -7,11 +7,17 @@
 #include <string>
 #include <vector>
 
+#include "server/cli/args.h"
+#include "server/worker_pool.h"
+
 namespace omnirig::server {
 
 // SIGTERM and SIGINT, from any thread, wake WaitThenDrain; SIGPIPE is ignored. Shared by
 // `omnirig serve` and `omnirig worker`.
 void InstallStopSignalHandlers();
+// The job threads' options `omnirig serve` and `omnirig worker` both take (--threads-per-job,
+// --lease-seconds, --max-attempts, --worker-nice) for `num_workers` workers.
+WorkerPoolOptions WorkerOptionsFromArgs(const cli::ArgParser& parser, int num_workers);
 // Waits for SIGTERM or SIGINT, then calls `drain` with `timeout_s` (it returns the running jobs
 // it handed back to the queue), logging both on stderr as `who`. Returns the exit code, 0.
 int WaitThenDrain(const std::string& who, double timeout_s,

@@ -88,20 +88,14 @@ ServiceOptions ToOptions(const cli::ArgParser& parser) {
   if (options.token.empty() && std::getenv("OMNIRIG_TOKEN")) {
     options.token = std::getenv("OMNIRIG_TOKEN");
   }
-  options.num_workers = parser.GetInt("workers");
-  options.threads_per_job = parser.Get("threads-per-job").empty()
-                                ? DefaultThreadsPerJob(options.num_workers)
-                                : parser.GetInt("threads-per-job");
+  options.workers = WorkerOptionsFromArgs(parser, parser.GetInt("workers"));
+  options.workers.idle_scheduling = OneOf(parser, "worker-sched", "idle", "normal") == "idle";
   options.http_threads = parser.GetInt("http-threads");
   // Raised here, before anything opens files: the default cap is what the raised limit allows.
   const int64_t open_file_limit = RaiseOpenFileLimit();
   options.max_connections = parser.Get("max-connections").empty()
                                 ? DefaultMaxConnections(open_file_limit, options.http_threads)
                                 : parser.GetInt("max-connections");
-  options.worker_nice = parser.GetInt("worker-nice");
-  options.worker_idle_scheduling = OneOf(parser, "worker-sched", "idle", "normal") == "idle";
-  options.max_attempts = parser.GetInt("max-attempts");
-  options.lease_s = parser.GetDouble("lease-seconds");
   options.max_file_bytes = Megabytes(parser, "max-file-mb");
   options.max_video_bytes = Megabytes(parser, "max-video-mb");
   options.max_chunk_bytes = Megabytes(parser, "max-chunk-mb");
@@ -120,6 +114,18 @@ extern "C" void OnStopSignal(int signal_number) {
 }
 
 }  // namespace
+
+WorkerPoolOptions WorkerOptionsFromArgs(const cli::ArgParser& parser, int num_workers) {
+  WorkerPoolOptions options;
+  options.num_workers = num_workers;
+  options.threads_per_job = parser.Get("threads-per-job").empty()
+                                ? DefaultThreadsPerJob(num_workers)
+                                : parser.GetInt("threads-per-job");
+  options.lease_s = parser.GetDouble("lease-seconds");
+  options.max_attempts = parser.GetInt("max-attempts");
+  options.nice = parser.GetInt("worker-nice");
+  return options;
+}
 
 void InstallStopSignalHandlers() {
   if (::pipe2(signal_pipe, O_CLOEXEC) != 0) throw std::runtime_error("cannot create a pipe");

@@ -37,16 +37,10 @@ int WorkerCommand(const std::vector<std::string>& args) {
   if (!storage::IsPostgresUrl(database)) {
     throw InvalidArgument("--database must be a postgresql:// URL (workers share its queue)");
   }
-  WorkerPoolOptions options;
-  options.num_workers = parser.GetInt("threads");
-  OMNIRIG_CHECK(options.num_workers >= 1, "--threads must be at least 1");
-  options.threads_per_job = parser.Get("threads-per-job").empty()
-                                ? DefaultThreadsPerJob(options.num_workers)
-                                : parser.GetInt("threads-per-job");
+  const int num_workers = parser.GetInt("threads");
+  OMNIRIG_CHECK(num_workers >= 1, "--threads must be at least 1");
+  WorkerPoolOptions options = WorkerOptionsFromArgs(parser, num_workers);
   options.worker_id = parser.Get("worker-id");
-  options.lease_s = parser.GetDouble("lease-seconds");
-  options.max_attempts = parser.GetInt("max-attempts");
-  options.nice = parser.GetInt("worker-nice");
   // This process serves no HTTP: job threads need not yield to anything.
   options.idle_scheduling = false;
   // NOTIFY wakes idle workers at once; the poll only covers a lost notification.
