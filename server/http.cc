@@ -446,11 +446,24 @@ void HttpServer::Impl::Dispatch(const RouteInfo& route, std::map<std::string, st
   request.header = [&req](const std::string& name) { return req.get_header_value(name); };
   bool reader_called = false;  // by the handler
   bool body_read = reader == nullptr;
+  // No exception crosses httplib's reader: the first one stops it and is rethrown after it.
+  std::exception_ptr failure;
+  const auto guarded = [&failure](const auto& step) {
+    try {
+      return step();
+    } catch (...) {
+      failure = std::current_exception();
+      return false;
+    }
+  };
   if (reader != nullptr && route.streaming) {
     request.is_multipart = req.is_multipart_form_data();
     request.read_body = [&](const std::function<bool(const char*, size_t)>& on_data) {
       reader_called = true;
-      body_read = (*reader)([&](const char* data, size_t size) { return on_data(data, size); });
+      body_read = (*reader)([&](const char* data, size_t size) {
+        return guarded([&] { return on_data(data, size); });
+      });
+      if (failure) std::rethrow_exception(std::exchange(failure, nullptr));
       return body_read;
     };
     request.read_multipart = [&](const std::function<bool(const MultipartPart&)>& on_part,
@@ -458,9 +471,14 @@ void HttpServer::Impl::Dispatch(const RouteInfo& route, std::map<std::string, st
       reader_called = true;
       body_read = (*reader)(
           [&](const httplib::MultipartFormData& part) {
-            return on_part(MultipartPart{part.name, part.filename, part.content_type});
+            return guarded([&] {
+              return on_part(MultipartPart{part.name, part.filename, part.content_type});
+            });
           },
-          [&](const char* data, size_t size) { return on_data(data, size); });
+          [&](const char* data, size_t size) {
+            return guarded([&] { return on_data(data, size); });
+          });
+      if (failure) std::rethrow_exception(std::exchange(failure, nullptr));
       return body_read;
     };
   }

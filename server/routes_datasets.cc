@@ -449,21 +449,20 @@ void PutChunk(ServiceState& state, const storage::DatasetRecord& dataset, const 
   }
   if (range.first == 0) part->Truncate();
   if (part->size() != range.first) OffsetMismatch(name, part->size(), range.total, range.first);
-  std::exception_ptr failure;
-  const bool whole = request.read_body([&](const char* data, size_t size) {
-    try {
+  bool whole = false;
+  try {
+    whole = request.read_body([&](const char* data, size_t size) {
       if (part->size() + static_cast<int64_t>(size) > range.last + 1) {
         throw HttpError(400, "invalid_argument", "the body is longer than its Content-Range");
       }
       part->Append(data, size);
       return true;
-    } catch (...) {
-      failure = std::current_exception();
-      return false;
-    }
-  });
+    });
+  } catch (...) {
+    part->Sync();  // what arrived before the failure stays
+    throw;
+  }
   part->Sync();
-  if (failure) std::rethrow_exception(failure);
   if (!whole || part->size() != range.last + 1) {
     throw HttpError(400, "incomplete_body",
                     "the chunk ended after " + std::to_string(part->size() - range.first) + " of " +
@@ -507,17 +506,10 @@ void PutImage(ServiceState& state, const HttpRequest& request, HttpResponse& res
   const auto previous = state.store->GetImage(dataset.id, name);
   CheckRoom(state, dataset, length.value_or(0) - (previous ? previous->size : 0));
   ImageUpload upload(state, dataset, name);
-  std::exception_ptr failure;
   request.read_body([&](const char* data, size_t size) {
-    try {
-      upload.Append(data, size);
-      return true;
-    } catch (...) {
-      failure = std::current_exception();
-      return false;
-    }
+    upload.Append(data, size);
+    return true;
   });
-  if (failure) std::rethrow_exception(failure);
   const storage::ImageRecord image = upload.Commit();
   response.Json(previous ? 200 : 201, ImageJson(image));
 }
@@ -558,28 +550,23 @@ void PostImages(ServiceState& state, const HttpRequest& request, HttpResponse& r
   CheckRoom(state, dataset, DeclaredLength(request).value_or(0));
   ImageBatch batch(state, dataset);
   std::exception_ptr failure;
-  const auto guarded = [&failure](const auto& step) {
-    try {
-      step();
-      return true;
-    } catch (...) {
-      failure = std::current_exception();
-      return false;
-    }
-  };
-  const bool whole = request.read_multipart(
-      [&](const MultipartPart& part) {
-        return guarded([&] {
+  bool whole = false;
+  try {
+    whole = request.read_multipart(
+        [&](const MultipartPart& part) {
           batch.End();
           if (!part.filename.empty()) batch.Begin(part.filename);  // else a form field: ignored
+          return true;
+        },
+        [&](const char* data, size_t size) {
+          batch.Append(data, size);
+          return true;
         });
-      },
-      [&](const char* data, size_t size) { return guarded([&] { batch.Append(data, size); }); });
-  if (whole && !failure) {
-    guarded([&] { batch.End(); });
-  } else {
-    batch.Abandon();
+    if (whole) batch.End();
+  } catch (...) {
+    failure = std::current_exception();
   }
+  if (!whole || failure) batch.Abandon();
   std::vector<std::string> over_limit;
   const std::vector<storage::ImageRecord> stored = batch.Commit(over_limit);
   nlohmann::json stored_names = nlohmann::json::array();
