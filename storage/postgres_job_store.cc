@@ -6,6 +6,7 @@
 #include <cctype>
 #include <cstdio>
 #include <cstdlib>
+#include <type_traits>
 
 namespace omnirig::storage {
 namespace {
@@ -79,21 +80,23 @@ constexpr char kDbNow[] = "EXTRACT(EPOCH FROM clock_timestamp())::DOUBLE PRECISI
 constexpr char kMigrationLock[] = "SELECT pg_advisory_xact_lock(7210418309)";
 
 // A parameter as libpq's text format; NULL stays NULL.
-std::optional<std::string> Text(const SqlValue& value) {
-  switch (value.kind()) {
-    case SqlValue::Kind::kNull:
-      return std::nullopt;
-    case SqlValue::Kind::kInt:
-      return std::to_string(value.int_value());
-    case SqlValue::Kind::kReal: {
-      char text[32];
-      std::snprintf(text, sizeof(text), "%.17g", value.real_value());
-      return std::string(text);
-    }
-    case SqlValue::Kind::kText:
-      return value.text();
-  }
-  return std::nullopt;
+std::optional<std::string> Text(const SqlValue& param) {
+  return std::visit(
+      [](const auto& value) -> std::optional<std::string> {
+        using T = std::decay_t<decltype(value)>;
+        if constexpr (std::is_same_v<T, std::monostate>) {
+          return std::nullopt;
+        } else if constexpr (std::is_same_v<T, std::string>) {
+          return value;
+        } else if constexpr (std::is_same_v<T, double>) {
+          char text[32];
+          std::snprintf(text, sizeof(text), "%.17g", value);
+          return std::string(text);
+        } else {
+          return std::to_string(value);
+        }
+      },
+      param.value());
 }
 
 // SQLite's numbered parameters ?1..?n as PostgreSQL's $1..$n (the shared SQL has no '?' in

@@ -12,38 +12,34 @@
 #include <optional>
 #include <string>
 #include <utility>
+#include <variant>
 #include <vector>
 
 #include "storage/job_store.h"
 
 namespace omnirig::storage {
 
-// A query parameter: NULL, an integer, a real or text (NULL for an empty optional).
+// A query parameter: NULL (std::monostate), an integer, a real or text (NULL for an empty
+// optional).
 class SqlValue {
  public:
-  enum class Kind { kNull, kInt, kReal, kText };
+  using Value = std::variant<std::monostate, int64_t, double, std::string>;
   SqlValue() = default;
   // Implicit, so that a parameter list reads {id, 1, 2.5}.
   // NOLINTBEGIN(google-explicit-constructor)
-  SqlValue(int value) : SqlValue(int64_t{value}) {}
-  SqlValue(int64_t value) : kind_(Kind::kInt), int_(value) {}
-  SqlValue(double value) : kind_(Kind::kReal), real_(value) {}
-  SqlValue(std::string value) : kind_(Kind::kText), text_(std::move(value)) {}
-  SqlValue(const char* value) : SqlValue(std::string(value)) {}
+  SqlValue(int value) : value_(int64_t{value}) {}
+  SqlValue(int64_t value) : value_(value) {}
+  SqlValue(double value) : value_(value) {}
+  SqlValue(std::string value) : value_(std::move(value)) {}
+  SqlValue(const char* value) : value_(std::string(value)) {}
   template <typename T>
   SqlValue(const std::optional<T>& value) : SqlValue(value ? SqlValue(*value) : SqlValue()) {}
   // NOLINTEND(google-explicit-constructor)
 
-  Kind kind() const { return kind_; }
-  int64_t int_value() const { return int_; }
-  double real_value() const { return real_; }
-  const std::string& text() const { return text_; }
+  const Value& value() const { return value_; }
 
  private:
-  Kind kind_ = Kind::kNull;
-  int64_t int_ = 0;
-  double real_ = 0;
-  std::string text_;
+  Value value_;
 };
 
 // One row of a query's result; columns are 0-based.

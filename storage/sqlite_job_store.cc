@@ -1,5 +1,7 @@
 #include "storage/sqlite_job_store.h"
 
+#include <type_traits>
+
 namespace omnirig::storage {
 namespace {
 
@@ -98,21 +100,15 @@ class SqliteSession : public SqlSession {
 
   static void Bind(Statement& statement, const std::vector<SqlValue>& params) {
     for (int i = 0; i < static_cast<int>(params.size()); ++i) {
-      const SqlValue& value = params[i];
-      switch (value.kind()) {
-        case SqlValue::Kind::kNull:
-          statement.BindNull(i + 1);
-          break;
-        case SqlValue::Kind::kInt:
-          statement.Bind(i + 1, value.int_value());
-          break;
-        case SqlValue::Kind::kReal:
-          statement.Bind(i + 1, value.real_value());
-          break;
-        case SqlValue::Kind::kText:
-          statement.Bind(i + 1, value.text());
-          break;
-      }
+      std::visit(
+          [&](const auto& value) {
+            if constexpr (std::is_same_v<std::decay_t<decltype(value)>, std::monostate>) {
+              statement.BindNull(i + 1);
+            } else {
+              statement.Bind(i + 1, value);
+            }
+          },
+          params[i].value());
     }
   }
 
