@@ -446,40 +446,37 @@ void HttpServer::Impl::Dispatch(const RouteInfo& route, std::map<std::string, st
   request.header = [&req](const std::string& name) { return req.get_header_value(name); };
   bool reader_called = false;  // by the handler
   bool body_read = reader == nullptr;
-  // No exception crosses httplib's reader: the first one stops it and is rethrown after it.
+  // Streaming routes: no exception crosses httplib's reader; the first one a callback throws
+  // stops the reading and is rethrown after it.
   std::exception_ptr failure;
-  const auto guarded = [&failure](const auto& step) {
-    try {
-      return step();
-    } catch (...) {
-      failure = std::current_exception();
-      return false;
-    }
+  const auto guard = [&failure](auto callback) {
+    return [&failure, callback](const auto&... args) {
+      try {
+        return callback(args...);
+      } catch (...) {
+        failure = std::current_exception();
+        return false;
+      }
+    };
+  };
+  const auto read = [&](const auto&... callbacks) {
+    reader_called = true;
+    body_read = (*reader)(guard(callbacks)...);
+    if (failure) std::rethrow_exception(failure);
+    return body_read;
   };
   if (reader != nullptr && route.streaming) {
     request.is_multipart = req.is_multipart_form_data();
     request.read_body = [&](const std::function<bool(const char*, size_t)>& on_data) {
-      reader_called = true;
-      body_read = (*reader)([&](const char* data, size_t size) {
-        return guarded([&] { return on_data(data, size); });
-      });
-      if (failure) std::rethrow_exception(std::exchange(failure, nullptr));
-      return body_read;
+      return read(on_data);
     };
     request.read_multipart = [&](const std::function<bool(const MultipartPart&)>& on_part,
                                  const std::function<bool(const char*, size_t)>& on_data) {
-      reader_called = true;
-      body_read = (*reader)(
+      return read(
           [&](const httplib::MultipartFormData& part) {
-            return guarded([&] {
-              return on_part(MultipartPart{part.name, part.filename, part.content_type});
-            });
+            return on_part(MultipartPart{part.name, part.filename, part.content_type});
           },
-          [&](const char* data, size_t size) {
-            return guarded([&] { return on_data(data, size); });
-          });
-      if (failure) std::rethrow_exception(std::exchange(failure, nullptr));
-      return body_read;
+          on_data);
     };
   }
   HttpResponse response = AnswerOrError(route.label, [&](HttpResponse& answer) {
