@@ -62,17 +62,6 @@ void DeclareOptions(cli::ArgParser& parser) {
                    "seconds SIGTERM waits for running jobs before re-queuing them");
 }
 
-// The value of option `name`, which must be `a` or `b`.
-std::string OneOf(const cli::ArgParser& parser, const std::string& name, const std::string& a,
-                  const std::string& b) {
-  const std::string value = parser.Get(name);
-  if (value != a && value != b) {
-    throw omnirig::InvalidArgument("--" + name + " must be '" + a + "' or '" + b + "', got '" +
-                                   value + "'");
-  }
-  return value;
-}
-
 int64_t Megabytes(const cli::ArgParser& parser, const std::string& name) {
   return static_cast<int64_t>(parser.GetDouble(name) * 1024 * 1024);
 }
@@ -89,7 +78,10 @@ ServiceOptions ToOptions(const cli::ArgParser& parser) {
     options.token = std::getenv("OMNIRIG_TOKEN");
   }
   options.workers = WorkerOptionsFromArgs(parser, parser.GetInt("workers"));
-  options.workers.idle_scheduling = OneOf(parser, "worker-sched", "idle", "normal") == "idle";
+  const std::string scheduling = parser.Get("worker-sched");
+  OMNIRIG_CHECK(scheduling == "idle" || scheduling == "normal",
+                "--worker-sched must be 'idle' or 'normal', got '" << scheduling << "'");
+  options.workers.idle_scheduling = scheduling == "idle";
   options.http_threads = parser.GetInt("http-threads");
   // Raised here, before anything opens files: the default cap is what the raised limit allows.
   const int64_t open_file_limit = RaiseOpenFileLimit();
