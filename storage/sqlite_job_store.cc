@@ -117,24 +117,6 @@ class SqliteSession : public SqlSession {
 
 }  // namespace
 
-class SqliteJobStore::ReaderLease {
- public:
-  ReaderLease(SqliteJobStore& store, std::unique_ptr<Connection> connection)
-      : store_(&store), connection_(std::move(connection)) {}
-  ReaderLease(ReaderLease&& other) noexcept = default;
-  ~ReaderLease() {
-    if (!connection_) return;
-    std::lock_guard<std::mutex> lock(store_->readers_mutex_);
-    store_->idle_readers_.push_back(std::move(connection_));
-    store_->readers_available_.notify_one();
-  }
-  Connection& operator*() { return *connection_; }
-
- private:
-  SqliteJobStore* store_;
-  std::unique_ptr<Connection> connection_;
-};
-
 SqliteJobStore::SqliteJobStore(const std::string& path, int num_readers)
     : SqlJobStore(SqlDialect{/*byte_order=*/"", /*lock_row=*/"", /*insertion_order=*/"rowid",
                              /*skip_locked=*/"",
@@ -153,17 +135,22 @@ int SqliteJobStore::SchemaVersion() {
   return static_cast<int>(sizeof(kMigrations) / sizeof(kMigrations[0]));
 }
 
-SqliteJobStore::ReaderLease SqliteJobStore::Reader() {
+// On a reader connection borrowed from the pool, given back however `work` ends.
+void SqliteJobStore::WithReader(const std::function<void(SqlSession&)>& work) {
   std::unique_lock<std::mutex> lock(readers_mutex_);
   readers_available_.wait(lock, [this] { return !idle_readers_.empty(); });
-  std::unique_ptr<Connection> connection = std::move(idle_readers_.back());
+  struct Lease {
+    SqliteJobStore* store;
+    std::unique_ptr<Connection> connection;
+    ~Lease() {
+      std::lock_guard<std::mutex> lock(store->readers_mutex_);
+      store->idle_readers_.push_back(std::move(connection));
+      store->readers_available_.notify_one();
+    }
+  } lease{this, std::move(idle_readers_.back())};
   idle_readers_.pop_back();
-  return ReaderLease(*this, std::move(connection));
-}
-
-void SqliteJobStore::WithReader(const std::function<void(SqlSession&)>& work) {
-  ReaderLease db = Reader();
-  SqliteSession session(*db);
+  lock.unlock();
+  SqliteSession session(*lease.connection);
   work(session);
 }
 

@@ -34,9 +34,6 @@ class SqliteJobStore : public SqlJobStore {
   bool InTransaction(const std::function<bool(SqlSession&)>& work) override;
 
  private:
-  // A reader connection borrowed from the pool for one call.
-  class ReaderLease;
-  ReaderLease Reader();
   void Migrate();
 
   std::string path_;
