@@ -46,6 +46,9 @@ int DefaultThreadsPerJob(int num_workers) {
   return std::max(1, cores / std::max(1, num_workers));
 }
 
+namespace {
+
+// The job store `database` names (see ServiceOptions::database), migrated.
 std::unique_ptr<storage::JobStore> OpenJobStore(const std::string& database,
                                                 const storage::DataDir& data_dir) {
   if (storage::IsPostgresUrl(database))
@@ -54,8 +57,6 @@ std::unique_ptr<storage::JobStore> OpenJobStore(const std::string& database,
                 "unsupported --database '" << database << "' (expected postgresql://...)");
   return std::make_unique<storage::SqliteJobStore>(data_dir.DatabasePath().string());
 }
-
-namespace {
 
 void PrintStartupReport(const ServiceState& state) {
   const auto& consistency = state.consistency;

@@ -46,9 +46,6 @@ struct ServiceOptions {
 int DefaultWorkers();
 // Cores per job: the machine's cores shared among the workers.
 int DefaultThreadsPerJob(int num_workers);
-// The job store `database` names (see ServiceOptions::database), migrated.
-std::unique_ptr<storage::JobStore> OpenJobStore(const std::string& database,
-                                                const storage::DataDir& data_dir);
 
 // Shared by the route files.
 struct ServiceState {

@@ -1,5 +1,7 @@
 #include "storage/sql_job_store.h"
 
+#include <algorithm>
+
 namespace omnirig::storage {
 namespace {
 
@@ -29,6 +31,24 @@ ImageRecord ReadImage(const SqlRow& row) {
 
 ArtifactRecord ReadArtifact(const SqlRow& row) {
   return ArtifactRecord{row.Text(0), row.Text(1), row.Int(2), row.Text(3), row.Text(4)};
+}
+
+// A list of job ids as stored in one text column ("a,b,c") and back.
+std::string JoinIds(const std::vector<std::string>& ids) {
+  std::string joined;
+  for (const std::string& id : ids) joined += (joined.empty() ? "" : ",") + id;
+  return joined;
+}
+
+std::vector<std::string> SplitIds(const std::string& joined) {
+  std::vector<std::string> ids;
+  size_t start = 0;
+  while (start < joined.size()) {
+    const size_t comma = std::min(joined.find(',', start), joined.size());
+    if (comma > start) ids.push_back(joined.substr(start, comma - start));
+    start = comma + 1;
+  }
+  return ids;
 }
 
 WorkerRecord ReadWorker(const SqlRow& row) {
@@ -93,33 +113,33 @@ struct RunningJob {
   bool cancel_requested = false;
 };
 
-// Cancels, fails or requeues each of `running` on `db` (DecideRecovery).
+// Cancels, fails or requeues each of `running` on `db`: a requested cancel wins, then a job that
+// used up `max_attempts` runs fails ("interrupted"), else it runs again.
 RecoveryReport Recover(SqlSession& db, const std::vector<RunningJob>& running, int max_attempts) {
   RecoveryReport report;
   const double now = NowSeconds();
   for (const RunningJob& job : running) {
-    switch (DecideRecovery(job.cancel_requested, job.attempts, max_attempts)) {
-      case RecoveryAction::kCancel:
-        db.Execute(
-            "UPDATE jobs SET state = 'canceled', finished_at = ?1, lease_expires_at = NULL "
-            "WHERE id = ?2",
-            {now, job.id});
-        report.canceled.push_back(job.id);
-        break;
-      case RecoveryAction::kFail:
-        db.Execute(
-            "UPDATE jobs SET state = 'failed', finished_at = ?1, error_code = 'interrupted', "
-            "error_message = ?2, lease_expires_at = NULL WHERE id = ?3",
-            {now, InterruptedMessage(job.attempts, max_attempts), job.id});
-        report.failed.push_back(job.id);
-        break;
-      case RecoveryAction::kRequeue:
-        db.Execute(
-            "UPDATE jobs SET state = 'queued', started_at = NULL, progress_stage = 'requeued', "
-            "eta_s = NULL, lease_expires_at = NULL WHERE id = ?1",
-            {job.id});
-        report.requeued.push_back(job.id);
-        break;
+    if (job.cancel_requested) {
+      db.Execute(
+          "UPDATE jobs SET state = 'canceled', finished_at = ?1, lease_expires_at = NULL "
+          "WHERE id = ?2",
+          {now, job.id});
+      report.canceled.push_back(job.id);
+    } else if (job.attempts >= max_attempts) {
+      db.Execute(
+          "UPDATE jobs SET state = 'failed', finished_at = ?1, error_code = 'interrupted', "
+          "error_message = ?2, lease_expires_at = NULL WHERE id = ?3",
+          {now,
+           "the job's worker stopped during each of its " + std::to_string(job.attempts) +
+               " attempts (maximum " + std::to_string(max_attempts) + ")",
+           job.id});
+      report.failed.push_back(job.id);
+    } else {
+      db.Execute(
+          "UPDATE jobs SET state = 'queued', started_at = NULL, progress_stage = 'requeued', "
+          "eta_s = NULL, lease_expires_at = NULL WHERE id = ?1",
+          {job.id});
+      report.requeued.push_back(job.id);
     }
   }
   return report;

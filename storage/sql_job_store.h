@@ -179,8 +179,8 @@ class SqlJobStore : public JobStore {
   }
 
  private:
-  // Cancels, fails or requeues the running jobs (those whose lease expired when `only_expired`;
-  // DecideRecovery), in one transaction.
+  // Cancels, fails or requeues the running jobs (those whose lease expired when `only_expired`),
+  // in one transaction.
   RecoveryReport RecoverRunning(int max_attempts, bool only_expired);
 
   SqlDialect dialect_;
