@@ -125,7 +125,6 @@ class SqlJobStore : public JobStore {
 
   std::optional<JobRecord> GetJob(const std::string& id) override;
   std::vector<JobRecord> ListJobs(const JobFilter& filter) override;
-  using JobStore::ClaimNextJob;
   std::optional<JobRecord> ClaimNextJob(const ClaimRequest& request) override;
   bool RenewLease(const std::string& id, const std::string& lease_token, double lease_s) override;
   void UpdateProgress(const std::string& id, const JobProgress& progress) override;
