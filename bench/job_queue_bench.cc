@@ -27,8 +27,8 @@
 #include <vector>
 
 #include "api/job_types.h"
+#include "server/commands.h"
 #include "server/metrics.h"
-#include "server/worker_command.h"
 #include "server/worker_pool.h"
 #include "storage/data_dir.h"
 #include "storage/postgres_job_store.h"

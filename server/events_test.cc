@@ -73,7 +73,7 @@ TEST_F(JobEventsTest, AStreamGetsEachChangeAsTheJobNowIs) {
   JobEvents::Stream stream(events_, std::nullopt);
   const std::string id = NewJob();
   events_.Changed(id);
-  store_.ClaimNextJob();  // `before`, the oldest
+  store_.ClaimNextJob({});  // `before`, the oldest
   store_.UpdateProgress(before, {0.25, "sleep", "step 1", 3.0});
   events_.Changed(before);
   std::string text;

@@ -98,25 +98,14 @@ bool HasBody(const httplib::Request& req) {
          req.has_header("Transfer-Encoding");
 }
 
-const char* DefaultErrorCode(int status) {
-  switch (status) {
-    case 400:
-      return "bad_request";
-    case 401:
-      return "unauthorized";
-    case 404:
-      return "not_found";
-    case 413:
-      return "payload_too_large";
-    case 414:
-      return "uri_too_long";
-    case 416:
-      return "range_not_satisfiable";
-    case 503:
-      return "unavailable";
-    default:
-      return status >= 500 ? "internal" : "error";
-  }
+// The error code of a status httplib answers by itself (its error handler).
+std::string DefaultErrorCode(int status) {
+  static const std::map<int, std::string> kCodes = {
+      {400, "bad_request"},       {401, "unauthorized"}, {404, "not_found"},
+      {413, "payload_too_large"}, {414, "uri_too_long"}, {416, "range_not_satisfiable"},
+      {503, "unavailable"}};
+  const auto it = kCodes.find(status);
+  return it != kCodes.end() ? it->second : status >= 500 ? "internal" : "error";
 }
 
 // Sets a body that httplib must neither slice by the request's Range header (it slices every
@@ -457,22 +446,37 @@ void HttpServer::Impl::Dispatch(const RouteInfo& route, std::map<std::string, st
   request.header = [&req](const std::string& name) { return req.get_header_value(name); };
   bool reader_called = false;  // by the handler
   bool body_read = reader == nullptr;
+  // Streaming routes: no exception crosses httplib's reader; the first one a callback throws
+  // stops the reading and is rethrown after it.
+  std::exception_ptr failure;
+  const auto guard = [&failure](auto callback) {
+    return [&failure, callback](const auto&... args) {
+      try {
+        return callback(args...);
+      } catch (...) {
+        failure = std::current_exception();
+        return false;
+      }
+    };
+  };
+  const auto read = [&](const auto&... callbacks) {
+    reader_called = true;
+    body_read = (*reader)(guard(callbacks)...);
+    if (failure) std::rethrow_exception(failure);
+    return body_read;
+  };
   if (reader != nullptr && route.streaming) {
     request.is_multipart = req.is_multipart_form_data();
     request.read_body = [&](const std::function<bool(const char*, size_t)>& on_data) {
-      reader_called = true;
-      body_read = (*reader)([&](const char* data, size_t size) { return on_data(data, size); });
-      return body_read;
+      return read(on_data);
     };
     request.read_multipart = [&](const std::function<bool(const MultipartPart&)>& on_part,
                                  const std::function<bool(const char*, size_t)>& on_data) {
-      reader_called = true;
-      body_read = (*reader)(
+      return read(
           [&](const httplib::MultipartFormData& part) {
             return on_part(MultipartPart{part.name, part.filename, part.content_type});
           },
-          [&](const char* data, size_t size) { return on_data(data, size); });
-      return body_read;
+          on_data);
     };
   }
   HttpResponse response = AnswerOrError(route.label, [&](HttpResponse& answer) {

@@ -49,9 +49,10 @@ struct HttpRequest {
   std::multimap<std::string, std::string> query;
   std::string body;                                       // empty for streaming routes
   std::function<std::string(const std::string&)> header;  // "" when absent
-  // Streaming routes only: reads the body chunk by chunk (return false to stop).
+  // Streaming routes only: reads the body chunk by chunk (return false to stop); true when it
+  // was read to its end. An exception the callback throws stops the reading and comes out here.
   std::function<bool(const std::function<bool(const char*, size_t)>&)> read_body;
-  // Streaming routes only: multipart bodies part by part.
+  // Streaming routes only: multipart bodies part by part (exceptions as read_body's).
   std::function<bool(const std::function<bool(const MultipartPart&)>&,
                      const std::function<bool(const char*, size_t)>&)>
       read_multipart;

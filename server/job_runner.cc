@@ -192,6 +192,26 @@ api::JobContext BuildContext(const storage::JobRecord& job, storage::JobStore& s
   return context;
 }
 
+// Every regular file under `dir` as an artifact (name relative to dir), fsynced and hashed.
+std::vector<storage::ArtifactRecord> CollectArtifacts(const fs::path& dir,
+                                                      const fs::path& data_root) {
+  std::vector<storage::ArtifactRecord> artifacts;
+  for (const auto& entry : fs::recursive_directory_iterator(dir)) {
+    if (!entry.is_regular_file()) continue;
+    const std::string name = fs::relative(entry.path(), dir).generic_string();
+    if (storage::IsTemporaryFileName(entry.path().filename().string())) continue;
+    storage::FsyncPath(entry.path());
+    const storage::FileDigest digest = storage::DigestFile(entry.path());
+    artifacts.push_back(
+        storage::ArtifactRecord{name, fs::relative(entry.path(), data_root).generic_string(),
+                                digest.size, digest.sha256, storage::ContentTypeForName(name)});
+  }
+  storage::FsyncPath(dir);
+  std::sort(artifacts.begin(), artifacts.end(),
+            [](const auto& a, const auto& b) { return a.name < b.name; });
+  return artifacts;
+}
+
 storage::JobOutcome Failed(const std::string& code, const std::string& message) {
   storage::JobOutcome outcome;
   outcome.state = JobState::kFailed;
@@ -215,25 +235,6 @@ storage::JobOutcome RunJobType(const storage::JobRecord& job, const api::JobCont
 }
 
 }  // namespace
-
-std::vector<storage::ArtifactRecord> CollectArtifacts(const fs::path& dir,
-                                                      const fs::path& data_root) {
-  std::vector<storage::ArtifactRecord> artifacts;
-  for (const auto& entry : fs::recursive_directory_iterator(dir)) {
-    if (!entry.is_regular_file()) continue;
-    const std::string name = fs::relative(entry.path(), dir).generic_string();
-    if (storage::IsTemporaryFileName(entry.path().filename().string())) continue;
-    storage::FsyncPath(entry.path());
-    const storage::FileDigest digest = storage::DigestFile(entry.path());
-    artifacts.push_back(
-        storage::ArtifactRecord{name, fs::relative(entry.path(), data_root).generic_string(),
-                                digest.size, digest.sha256, storage::ContentTypeForName(name)});
-  }
-  storage::FsyncPath(dir);
-  std::sort(artifacts.begin(), artifacts.end(),
-            [](const auto& a, const auto& b) { return a.name < b.name; });
-  return artifacts;
-}
 
 storage::JobOutcome RunJobAttempt(const storage::JobRecord& job, storage::JobStore& store,
                                   const storage::DataDir& data_dir, const JobRunOptions& options,

@@ -38,8 +38,4 @@ storage::JobOutcome RunJobAttempt(const storage::JobRecord& job, storage::JobSto
 // its job over.
 void RemoveOtherAttempts(const storage::DataDir& data_dir, const storage::JobRecord& job);
 
-// Every regular file under `dir` as an artifact (name relative to dir), fsynced and hashed.
-std::vector<storage::ArtifactRecord> CollectArtifacts(const std::filesystem::path& dir,
-                                                      const std::filesystem::path& data_root);
-
 }  // namespace omnirig::server

@@ -7,6 +7,7 @@
 
 #include "engine/util/check.h"
 #include "server/cli/commands.h"
+#include "server/commands.h"
 
 namespace {
 
@@ -17,11 +18,12 @@ struct Command {
 };
 
 const Command kCommands[] = {
-    {"serve", "run the HTTP service (REST API, job workers, web page)", omnirig::cli::RunServe},
+    {"serve", "run the HTTP service (REST API, job workers, web page)",
+     omnirig::server::ServeCommand},
     {"worker", "run jobs from a PostgreSQL job store shared by several machines",
-     omnirig::cli::RunWorker},
+     omnirig::server::WorkerCommand},
     {"store", "store copy: move a service's records from SQLite to PostgreSQL",
-     omnirig::cli::RunStore},
+     omnirig::server::StoreCommand},
     {"synth", "render synthetic omnidirectional images with ground truth", omnirig::cli::RunSynth},
     {"calibrate", "calibrate one catadioptric camera from board images",
      omnirig::cli::RunCalibrate},

@@ -21,12 +21,6 @@ std::string Escape(const std::string& value) {
   return escaped;
 }
 
-void Observe(std::vector<int64_t>& buckets, const std::vector<double>& bounds, double value) {
-  buckets.resize(bounds.size() + 1, 0);
-  const auto it = std::lower_bound(bounds.begin(), bounds.end(), value);
-  ++buckets[static_cast<size_t>(it - bounds.begin())];
-}
-
 void RenderHistogram(std::ostringstream& out, const std::string& name, const std::string& labels,
                      const std::vector<double>& bounds, const std::vector<int64_t>& buckets,
                      double sum, int64_t count) {
@@ -47,22 +41,24 @@ Metrics::Metrics()
     : request_bounds_s_{0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.5, 1, 5},
       job_bounds_s_{0.1, 0.5, 1, 5, 10, 30, 60, 300, 1800, 7200} {}
 
+void Metrics::Histogram::Add(const std::vector<double>& bounds, double value) {
+  bucket_counts.resize(bounds.size() + 1, 0);
+  ++bucket_counts[static_cast<size_t>(std::lower_bound(bounds.begin(), bounds.end(), value) -
+                                      bounds.begin())];
+  sum += value;
+  ++count;
+}
+
 void Metrics::CountRequest(const std::string& route, int status, double seconds) {
   std::lock_guard<std::mutex> lock(mutex_);
   ++requests_[{route, status}];
-  Histogram& histogram = request_durations_[route];
-  Observe(histogram.bucket_counts, request_bounds_s_, seconds);
-  histogram.sum += seconds;
-  ++histogram.count;
+  request_durations_[route].Add(request_bounds_s_, seconds);
 }
 
 void Metrics::ObserveJobDuration(const std::string& type, const std::string& state,
                                  double seconds) {
   std::lock_guard<std::mutex> lock(mutex_);
-  Histogram& histogram = job_durations_[{type, state}];
-  Observe(histogram.bucket_counts, job_bounds_s_, seconds);
-  histogram.sum += seconds;
-  ++histogram.count;
+  job_durations_[{type, state}].Add(job_bounds_s_, seconds);
 }
 
 void Metrics::SetOpenConnectionsGauge(std::function<int64_t()> open_connections) {

@@ -36,6 +36,7 @@ class Metrics {
     std::vector<int64_t> bucket_counts;  // cumulative counts are computed when rendering
     double sum = 0;
     int64_t count = 0;
+    void Add(const std::vector<double>& bounds, double value);
   };
   std::function<int64_t()> open_connections_;
   double worker_alive_window_s_ = 30;

@@ -126,6 +126,40 @@ void CheckImageLimit(ServiceState& state, const std::string& dataset_id, const s
   }
 }
 
+// The checks of an image's (or a .tum's) bytes as they arrive: its first bytes for the header,
+// the whole for completeness (storage/image_header.h).
+class ImageCheck {
+ public:
+  void Append(const char* data, size_t size) {
+    if (head_.size() < storage::kImageProbeBytes) {
+      head_.append(data, std::min(size, storage::kImageProbeBytes - head_.size()));
+    }
+    completeness_.Append(data, size);
+  }
+
+  // After the last byte: the header, or 415 (not an image) or 422 (a corrupt header, or a file
+  // cut short or damaged in transfer, which is refused whole: its header alone looks fine).
+  storage::ImageHeader Finish(const std::string& name) {
+    const storage::ImageHeader header = ProbeUpload(name, head_);
+    if (header.status == storage::ImageHeader::Status::kNotAnImage) {
+      throw HttpError(415, "unsupported_media_type", name + ": " + header.problem,
+                      {{"name", name}});
+    }
+    std::string problem =
+        header.status == storage::ImageHeader::Status::kCorrupt ? header.problem : "";
+    if (problem.empty() && header.format != "tum") problem = completeness_.Finish(header, head_);
+    if (!problem.empty()) {
+      throw HttpError(422, "corrupt_image", name + ": " + problem, {{"name", name}});
+    }
+    std::string().swap(head_);  // a batch holds many sealed uploads
+    return header;
+  }
+
+ private:
+  std::string head_;
+  storage::ImageCompletenessCheck completeness_;
+};
+
 // One image on its way to disk: streamed into an atomic temporary file while the first bytes
 // are kept for the header check; sealed (fsynced under its temporary name) once it passed, and
 // put into place (rename) with its record only when everything passed.
@@ -142,15 +176,8 @@ class ImageUpload {
     if (writer_.bytes_written() + static_cast<int64_t>(size) > limit) {
       TooLarge(name_ + " is larger than " + std::to_string(limit) + " bytes", limit);
     }
-    if (video_) {
-      writer_.Append(data, size);
-      return;
-    }
-    if (head_.size() < storage::kImageProbeBytes) {
-      head_.append(data, std::min(size, storage::kImageProbeBytes - head_.size()));
-    }
     writer_.Append(data, size);
-    completeness_.Append(data, size);
+    if (!video_) check_.Append(data, size);
   }
 
   // Checks the header (415 or 422 for what is not an image) and seals the file: written and
@@ -161,25 +188,9 @@ class ImageUpload {
       record_ = VideoRecord(name_, writer_.temp_path(), digest);
       return record_;
     }
-    const storage::ImageHeader header = ProbeUpload(name_, head_);
-    if (header.status == storage::ImageHeader::Status::kNotAnImage) {
-      throw HttpError(415, "unsupported_media_type", name_ + ": " + header.problem,
-                      {{"name", name_}});
-    }
-    if (header.status == storage::ImageHeader::Status::kCorrupt) {
-      throw HttpError(422, "corrupt_image", name_ + ": " + header.problem, {{"name", name_}});
-    }
-    // A file cut short or damaged in transfer is refused whole (its header alone looks fine).
-    if (header.format != "tum") {
-      const std::string problem = completeness_.Finish(header, head_);
-      if (!problem.empty()) {
-        throw HttpError(422, "corrupt_image", name_ + ": " + problem, {{"name", name_}});
-      }
-    }
+    const storage::ImageHeader header = check_.Finish(name_);
     const storage::FileDigest digest = writer_.Seal();
-    std::string().swap(head_);  // a batch holds many sealed uploads
-    record_ = storage::ImageRecord{name_,        digest.size,   digest.sha256,
-                                   header.width, header.height, header.content_type};
+    record_ = {name_, digest.size, digest.sha256, header.width, header.height, header.content_type};
     return record_;
   }
   // Renames the sealed file into place; `sync_folder` false when the caller fsyncs the folder.
@@ -206,8 +217,7 @@ class ImageUpload {
   std::string name_;
   storage::AtomicFileWriter writer_;
   bool video_ = storage::IsVideoName(name_);
-  std::string head_;
-  storage::ImageCompletenessCheck completeness_;
+  ImageCheck check_;
   storage::ImageRecord record_;  // set by Seal()
 };
 
@@ -346,33 +356,23 @@ nlohmann::json UploadStatusJson(const std::string& name, const storage::UploadPa
           {"stored", stored ? ImageJson(*stored) : nlohmann::json(nullptr)}};
 }
 
-// The record of a complete file on disk, checked as a plain PUT checks its body: a video's
-// container, or an image's header and completeness (read once, in blocks).
+}  // namespace
+
+// Read once, in blocks.
 storage::ImageRecord CheckCompleteFile(const std::string& name, const std::filesystem::path& path) {
   const storage::FileDigest digest = storage::DigestFile(path);
   if (storage::IsVideoName(name)) return VideoRecord(name, path, digest);
   std::ifstream in(path, std::ios::binary);
-  std::string head, block(1 << 20, '\0');
-  storage::ImageCompletenessCheck completeness;
+  std::string block(1 << 20, '\0');
+  ImageCheck check;
   while (in.read(block.data(), static_cast<std::streamsize>(block.size())) || in.gcount() > 0) {
-    const size_t got = static_cast<size_t>(in.gcount());
-    if (head.size() < storage::kImageProbeBytes) {
-      head.append(block.data(), std::min(got, storage::kImageProbeBytes - head.size()));
-    }
-    completeness.Append(block.data(), got);
+    check.Append(block.data(), static_cast<size_t>(in.gcount()));
   }
-  const storage::ImageHeader header = ProbeUpload(name, head);
-  if (header.status == storage::ImageHeader::Status::kNotAnImage) {
-    throw HttpError(415, "unsupported_media_type", name + ": " + header.problem, {{"name", name}});
-  }
-  std::string problem =
-      header.status == storage::ImageHeader::Status::kCorrupt ? header.problem : "";
-  if (problem.empty() && header.format != "tum") problem = completeness.Finish(header, head);
-  if (!problem.empty())
-    throw HttpError(422, "corrupt_image", name + ": " + problem, {{"name", name}});
-  return storage::ImageRecord{name,         digest.size,   digest.sha256,
-                              header.width, header.height, header.content_type};
+  const storage::ImageHeader header = check.Finish(name);
+  return {name, digest.size, digest.sha256, header.width, header.height, header.content_type};
 }
+
+namespace {
 
 // The checks of a chunk before its body is read: sizes (413 with the limit), the declared
 // length, the dataset's room.
@@ -449,21 +449,20 @@ void PutChunk(ServiceState& state, const storage::DatasetRecord& dataset, const 
   }
   if (range.first == 0) part->Truncate();
   if (part->size() != range.first) OffsetMismatch(name, part->size(), range.total, range.first);
-  std::exception_ptr failure;
-  const bool whole = request.read_body([&](const char* data, size_t size) {
-    try {
+  bool whole = false;
+  try {
+    whole = request.read_body([&](const char* data, size_t size) {
       if (part->size() + static_cast<int64_t>(size) > range.last + 1) {
         throw HttpError(400, "invalid_argument", "the body is longer than its Content-Range");
       }
       part->Append(data, size);
       return true;
-    } catch (...) {
-      failure = std::current_exception();
-      return false;
-    }
-  });
+    });
+  } catch (...) {
+    part->Sync();  // what arrived before the failure stays
+    throw;
+  }
   part->Sync();
-  if (failure) std::rethrow_exception(failure);
   if (!whole || part->size() != range.last + 1) {
     throw HttpError(400, "incomplete_body",
                     "the chunk ended after " + std::to_string(part->size() - range.first) + " of " +
@@ -507,17 +506,10 @@ void PutImage(ServiceState& state, const HttpRequest& request, HttpResponse& res
   const auto previous = state.store->GetImage(dataset.id, name);
   CheckRoom(state, dataset, length.value_or(0) - (previous ? previous->size : 0));
   ImageUpload upload(state, dataset, name);
-  std::exception_ptr failure;
   request.read_body([&](const char* data, size_t size) {
-    try {
-      upload.Append(data, size);
-      return true;
-    } catch (...) {
-      failure = std::current_exception();
-      return false;
-    }
+    upload.Append(data, size);
+    return true;
   });
-  if (failure) std::rethrow_exception(failure);
   const storage::ImageRecord image = upload.Commit();
   response.Json(previous ? 200 : 201, ImageJson(image));
 }
@@ -558,28 +550,23 @@ void PostImages(ServiceState& state, const HttpRequest& request, HttpResponse& r
   CheckRoom(state, dataset, DeclaredLength(request).value_or(0));
   ImageBatch batch(state, dataset);
   std::exception_ptr failure;
-  const auto guarded = [&failure](const auto& step) {
-    try {
-      step();
-      return true;
-    } catch (...) {
-      failure = std::current_exception();
-      return false;
-    }
-  };
-  const bool whole = request.read_multipart(
-      [&](const MultipartPart& part) {
-        return guarded([&] {
+  bool whole = false;
+  try {
+    whole = request.read_multipart(
+        [&](const MultipartPart& part) {
           batch.End();
           if (!part.filename.empty()) batch.Begin(part.filename);  // else a form field: ignored
+          return true;
+        },
+        [&](const char* data, size_t size) {
+          batch.Append(data, size);
+          return true;
         });
-      },
-      [&](const char* data, size_t size) { return guarded([&] { batch.Append(data, size); }); });
-  if (whole && !failure) {
-    guarded([&] { batch.End(); });
-  } else {
-    batch.Abandon();
+    if (whole) batch.End();
+  } catch (...) {
+    failure = std::current_exception();
   }
+  if (!whole || failure) batch.Abandon();
   std::vector<std::string> over_limit;
   const std::vector<storage::ImageRecord> stored = batch.Commit(over_limit);
   nlohmann::json stored_names = nlohmann::json::array();
@@ -652,34 +639,14 @@ void AddDatasetRoutes(HttpServer& http, ServiceState& state) {
                const storage::DatasetRecord dataset = RequireDataset(state, request.Param("id"));
                response.Json(200, DatasetJson(dataset, state.store->ListImages(dataset.id)));
              });
-  http.Route("DELETE", "/api/v1/datasets/{id}",
-             [&state](const HttpRequest& request, HttpResponse& response) {
-               DeleteDataset(state, request, response);
-             });
-  http.Route(
-      "PUT", "/api/v1/datasets/{id}/images/{name+}",
-      [&state](const HttpRequest& request, HttpResponse& response) {
-        PutImage(state, request, response);
-      },
-      /*streaming=*/true);
-  http.Route(
-      "POST", "/api/v1/datasets/{id}/images",
-      [&state](const HttpRequest& request, HttpResponse& response) {
-        PostImages(state, request, response);
-      },
-      /*streaming=*/true);
-  http.Route("GET", "/api/v1/datasets/{id}/uploads/{name+}",
-             [&state](const HttpRequest& request, HttpResponse& response) {
-               GetUpload(state, request, response);
-             });
-  http.Route("DELETE", "/api/v1/datasets/{id}/uploads/{name+}",
-             [&state](const HttpRequest& request, HttpResponse& response) {
-               DeleteUpload(state, request, response);
-             });
-  http.Route("GET", "/api/v1/datasets/{id}/images/{name+}",
-             [&state](const HttpRequest& request, HttpResponse& response) {
-               GetImage(state, request, response);
-             });
+  http.Route("DELETE", "/api/v1/datasets/{id}", WithState(state, DeleteDataset));
+  http.Route("PUT", "/api/v1/datasets/{id}/images/{name+}", WithState(state, PutImage),
+             /*streaming=*/true);
+  http.Route("POST", "/api/v1/datasets/{id}/images", WithState(state, PostImages),
+             /*streaming=*/true);
+  http.Route("GET", "/api/v1/datasets/{id}/uploads/{name+}", WithState(state, GetUpload));
+  http.Route("DELETE", "/api/v1/datasets/{id}/uploads/{name+}", WithState(state, DeleteUpload));
+  http.Route("GET", "/api/v1/datasets/{id}/images/{name+}", WithState(state, GetImage));
 }
 
 }  // namespace omnirig::server

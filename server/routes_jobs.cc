@@ -346,19 +346,14 @@ void StreamEvents(ServiceState& state, const HttpRequest& request, HttpResponse&
 }  // namespace
 
 void AddJobRoutes(HttpServer& http, ServiceState& state) {
-  const auto bind = [&state](void (*handler)(ServiceState&, const HttpRequest&, HttpResponse&)) {
-    return [&state, handler](const HttpRequest& request, HttpResponse& response) {
-      handler(state, request, response);
-    };
-  };
-  http.Route("POST", "/api/v1/jobs", bind(CreateJob));
-  http.Route("GET", "/api/v1/jobs", bind(ListJobs));
-  http.Route("GET", "/api/v1/jobs/{id}", bind(GetJob));
-  http.Route("GET", "/api/v1/events", bind(StreamEvents));
-  http.Route("POST", "/api/v1/jobs/{id}/cancel", bind(CancelJob));
-  http.Route("DELETE", "/api/v1/jobs/{id}", bind(DeleteJob));
-  http.Route("POST", "/api/v1/jobs/{id}/retry", bind(RetryJob));
-  http.Route("GET", "/api/v1/jobs/{id}/result", bind(GetResult));
+  http.Route("POST", "/api/v1/jobs", WithState(state, CreateJob));
+  http.Route("GET", "/api/v1/jobs", WithState(state, ListJobs));
+  http.Route("GET", "/api/v1/jobs/{id}", WithState(state, GetJob));
+  http.Route("GET", "/api/v1/events", WithState(state, StreamEvents));
+  http.Route("POST", "/api/v1/jobs/{id}/cancel", WithState(state, CancelJob));
+  http.Route("DELETE", "/api/v1/jobs/{id}", WithState(state, DeleteJob));
+  http.Route("POST", "/api/v1/jobs/{id}/retry", WithState(state, RetryJob));
+  http.Route("GET", "/api/v1/jobs/{id}/result", WithState(state, GetResult));
   http.Route("GET", "/api/v1/jobs/{id}/artifacts",
              [&state](const HttpRequest& request, HttpResponse& response) {
                RequireJob(state, request.Param("id"));
@@ -368,8 +363,8 @@ void AddJobRoutes(HttpServer& http, ServiceState& state) {
                }
                response.Json(200, list);
              });
-  http.Route("GET", "/api/v1/jobs/{id}/artifacts/{name+}", bind(GetArtifact));
-  http.Route("GET", "/api/v1/jobs/{id}/epipolar", bind(GetEpipolar));
+  http.Route("GET", "/api/v1/jobs/{id}/artifacts/{name+}", WithState(state, GetArtifact));
+  http.Route("GET", "/api/v1/jobs/{id}/epipolar", WithState(state, GetEpipolar));
 }
 
 }  // namespace omnirig::server

@@ -15,7 +15,7 @@ void AddSystemRoutes(HttpServer& http, ServiceState& state) {
                         {"uptime_s", storage::NowSeconds() - state.started_at},
                         {"workers", state.workers->size()},
                         {"busy_workers", state.workers->busy()},
-                        {"threads_per_job", state.options.threads_per_job},
+                        {"threads_per_job", state.options.workers.threads_per_job},
                         {"queue_depth", counts.at(storage::JobState::kQueued)},
                         {"job_types", api::JobTypeNames()},
                         {"auth_required", !state.options.token.empty()},

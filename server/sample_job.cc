@@ -1,7 +1,6 @@
 #include "server/sample_job.h"
 
 #include <algorithm>
-#include <fstream>
 #include <mutex>
 
 #include "api/job_types.h"
@@ -9,7 +8,6 @@
 #include "engine/synth/presets.h"
 #include "engine/util/check.h"
 #include "storage/atomic_file.h"
-#include "storage/image_header.h"
 
 namespace omnirig::server {
 namespace fs = std::filesystem;
@@ -33,11 +31,15 @@ std::string PresetOf(const nlohmann::json& params) {
   return preset;
 }
 
-synth::RenderOptions Render(const api::JobContext& context) {
-  synth::RenderOptions render;
-  render.supersampling = kSupersampling;
-  render.num_threads = std::max(1, context.num_threads);
-  return render;
+// A preset's options at the small size.
+template <typename Options>
+Options Small(const api::JobContext& context) {
+  Options options;
+  options.width = kWidth;
+  options.height = kHeight;
+  options.render.supersampling = kSupersampling;
+  options.render.num_threads = std::max(1, context.num_threads);
+  return options;
 }
 
 // Renders `preset` into `dir` with omnirig synth's writers (PNG images, ground_truth.json, and
@@ -46,53 +48,19 @@ void RenderPreset(const std::string& preset, const api::JobContext& context,
                   const fs::path& dir) {
   const ProgressSink progress = api::SubRange(context.progress, 0.0, 0.95);
   if (preset == "mono-calib") {
-    synth::MonoCalibrationOptions options;
+    auto options = Small<synth::MonoCalibrationOptions>(context);
     options.num_views = 8;
-    options.width = kWidth;
-    options.height = kHeight;
-    options.render = Render(context);
     api::WriteMonoCalibrationSet(synth::MakeMonoCalibrationSet(options, progress), dir);
   } else if (preset == "stereo-board") {
-    synth::StereoBoardOptions options;
+    auto options = Small<synth::StereoBoardOptions>(context);
     options.num_pairs = 8;
-    options.width = kWidth;
-    options.height = kHeight;
-    options.render = Render(context);
     api::WriteStereoBoardSet(synth::MakeStereoBoardSet(options, progress), dir);
   } else {
-    synth::StereoSequenceOptions options;
+    auto options = Small<synth::StereoSequenceOptions>(context);
     options.num_frames = 10;
     options.path_length_m = 1.5;
-    options.width = kWidth;
-    options.height = kHeight;
-    options.render = Render(context);
     api::WriteStereoSequence(synth::MakeStereoSequence(options, progress), "room", dir);
   }
-}
-
-// The record of a rendered file as an upload would make it (header probed, digest taken).
-storage::ImageRecord RecordOf(const fs::path& path, const std::string& name) {
-  std::string head(storage::kImageProbeBytes, '\0');
-  std::ifstream in(path, std::ios::binary);
-  in.read(head.data(), static_cast<std::streamsize>(head.size()));
-  head.resize(static_cast<size_t>(in.gcount()));
-  storage::ImageRecord record;
-  record.name = name;
-  if (path.extension() == ".tum") {
-    record.content_type = "text/plain";
-  } else {
-    const storage::ImageHeader header = storage::ProbeImageHeader(head);
-    if (header.status != storage::ImageHeader::Status::kOk) {
-      throw std::runtime_error("rendered file " + name + " is not an image: " + header.problem);
-    }
-    record.width = header.width;
-    record.height = header.height;
-    record.content_type = header.content_type;
-  }
-  const storage::FileDigest digest = storage::DigestFile(path);
-  record.size = digest.size;
-  record.sha256 = digest.sha256;
-  return record;
 }
 
 // Moves the rendered images (and trajectory.tum) into the dataset, with their records, under
@@ -113,7 +81,7 @@ size_t AddToDataset(ServiceState& state, const std::string& dataset_id, const fs
   const fs::path images_dir = state.data_dir->ImagesDir(dataset_id);
   std::vector<storage::ImageRecord> records;
   for (const auto& [path, name] : files) {
-    records.push_back(RecordOf(path, name));
+    records.push_back(CheckCompleteFile(name, path));  // as an upload records it
     fs::create_directories((images_dir / name).parent_path());
     fs::rename(path, images_dir / name);
     storage::FsyncPath((images_dir / name).parent_path());

@@ -1,4 +1,4 @@
-#include "server/serve_command.h"
+#include "server/commands.h"
 
 #include <fcntl.h>
 #include <poll.h>
@@ -62,17 +62,6 @@ void DeclareOptions(cli::ArgParser& parser) {
                    "seconds SIGTERM waits for running jobs before re-queuing them");
 }
 
-// The value of option `name`, which must be `a` or `b`.
-std::string OneOf(const cli::ArgParser& parser, const std::string& name, const std::string& a,
-                  const std::string& b) {
-  const std::string value = parser.Get(name);
-  if (value != a && value != b) {
-    throw omnirig::InvalidArgument("--" + name + " must be '" + a + "' or '" + b + "', got '" +
-                                   value + "'");
-  }
-  return value;
-}
-
 int64_t Megabytes(const cli::ArgParser& parser, const std::string& name) {
   return static_cast<int64_t>(parser.GetDouble(name) * 1024 * 1024);
 }
@@ -88,20 +77,17 @@ ServiceOptions ToOptions(const cli::ArgParser& parser) {
   if (options.token.empty() && std::getenv("OMNIRIG_TOKEN")) {
     options.token = std::getenv("OMNIRIG_TOKEN");
   }
-  options.num_workers = parser.GetInt("workers");
-  options.threads_per_job = parser.Get("threads-per-job").empty()
-                                ? DefaultThreadsPerJob(options.num_workers)
-                                : parser.GetInt("threads-per-job");
+  options.workers = WorkerOptionsFromArgs(parser, parser.GetInt("workers"));
+  const std::string scheduling = parser.Get("worker-sched");
+  OMNIRIG_CHECK(scheduling == "idle" || scheduling == "normal",
+                "--worker-sched must be 'idle' or 'normal', got '" << scheduling << "'");
+  options.workers.idle_scheduling = scheduling == "idle";
   options.http_threads = parser.GetInt("http-threads");
   // Raised here, before anything opens files: the default cap is what the raised limit allows.
   const int64_t open_file_limit = RaiseOpenFileLimit();
   options.max_connections = parser.Get("max-connections").empty()
                                 ? DefaultMaxConnections(open_file_limit, options.http_threads)
                                 : parser.GetInt("max-connections");
-  options.worker_nice = parser.GetInt("worker-nice");
-  options.worker_idle_scheduling = OneOf(parser, "worker-sched", "idle", "normal") == "idle";
-  options.max_attempts = parser.GetInt("max-attempts");
-  options.lease_s = parser.GetDouble("lease-seconds");
   options.max_file_bytes = Megabytes(parser, "max-file-mb");
   options.max_video_bytes = Megabytes(parser, "max-video-mb");
   options.max_chunk_bytes = Megabytes(parser, "max-chunk-mb");
@@ -121,6 +107,18 @@ extern "C" void OnStopSignal(int signal_number) {
 
 }  // namespace
 
+WorkerPoolOptions WorkerOptionsFromArgs(const cli::ArgParser& parser, int num_workers) {
+  WorkerPoolOptions options;
+  options.num_workers = num_workers;
+  options.threads_per_job = parser.Get("threads-per-job").empty()
+                                ? DefaultThreadsPerJob(num_workers)
+                                : parser.GetInt("threads-per-job");
+  options.lease_s = parser.GetDouble("lease-seconds");
+  options.max_attempts = parser.GetInt("max-attempts");
+  options.nice = parser.GetInt("worker-nice");
+  return options;
+}
+
 void InstallStopSignalHandlers() {
   if (::pipe2(signal_pipe, O_CLOEXEC) != 0) throw std::runtime_error("cannot create a pipe");
   struct sigaction action {};
@@ -129,20 +127,27 @@ void InstallStopSignalHandlers() {
   action.sa_flags = SA_RESTART;
   sigaction(SIGTERM, &action, nullptr);
   sigaction(SIGINT, &action, nullptr);
+  signal(SIGPIPE, SIG_IGN);
 }
 
 // Waits in poll() before reading: ThreadSanitizer runs a signal handler at once only in a call
 // it knows to block (poll, not read), else it defers it to the thread's next intercepted call;
 // a SIGTERM that landed on this thread while it sat in read() (restarted: SA_RESTART) was never
 // handled, and the server under TSan did not stop (scripts/tsan.sh, tests/server_crash).
-int WaitForSignal() {
+int WaitThenDrain(const std::string& who, double timeout_s,
+                  const std::function<int(double timeout_s)>& drain) {
   pollfd ready{signal_pipe[0], POLLIN, 0};
   while (::poll(&ready, 1, -1) < 0 && errno == EINTR) {
   }
-  char byte = 0;
-  while (::read(signal_pipe[0], &byte, 1) < 0 && errno == EINTR) {
+  char received = 0;
+  while (::read(signal_pipe[0], &received, 1) < 0 && errno == EINTR) {
   }
-  return byte;
+  std::cerr << who << ": " << (received == SIGTERM ? "SIGTERM" : "SIGINT") << ": draining (up to "
+            << timeout_s << " s)" << std::endl;
+  const int requeued = drain(timeout_s);
+  std::cerr << who << ": stopped; " << requeued << " running job(s) handed back to the queue"
+            << std::endl;
+  return 0;
 }
 
 int ServeCommand(const std::vector<std::string>& args) {
@@ -158,20 +163,13 @@ int ServeCommand(const std::vector<std::string>& args) {
   // mask and sigwait) works whichever thread the kernel picks, including threads that libraries
   // start before this point.
   InstallStopSignalHandlers();
-  signal(SIGPIPE, SIG_IGN);
-
   Service service(options);
   const int port = service.Start();
   std::cout << "omnirig listening on http://" << options.host << ":" << port << std::endl;
   std::cerr << "omnirig: at most " << options.max_connections << " open connections (0: no cap)"
             << std::endl;
-  const int received = WaitForSignal();
-  std::cerr << "omnirig: " << (received == SIGTERM ? "SIGTERM" : "SIGINT") << ": draining (up to "
-            << drain_timeout_s << " s)" << std::endl;
-  const int requeued = service.Drain(drain_timeout_s);
-  std::cerr << "omnirig: stopped; " << requeued << " running job(s) handed back to the queue"
-            << std::endl;
-  return 0;
+  return WaitThenDrain("omnirig", drain_timeout_s,
+                       [&service](double timeout_s) { return service.Drain(timeout_s); });
 }
 
 }  // namespace omnirig::server

@@ -14,15 +14,16 @@ namespace omnirig::server {
 void ServiceOptions::Check() const {
   OMNIRIG_CHECK(port >= 0 && port <= 65535, "--port must be in [0, 65535], got " << port);
   OMNIRIG_CHECK(!data_dir.empty(), "--data must name a folder");
-  OMNIRIG_CHECK(num_workers >= 0 && num_workers <= 256, "--workers must be in [0, 256]");
+  OMNIRIG_CHECK(workers.num_workers >= 0 && workers.num_workers <= 256,
+                "--workers must be in [0, 256]");
   OMNIRIG_CHECK(database.empty() || storage::IsPostgresUrl(database),
                 "--database must be a postgresql:// URL (or omitted for SQLite under --data)");
-  OMNIRIG_CHECK(lease_s > 0, "--lease-seconds must be positive");
-  OMNIRIG_CHECK(threads_per_job >= 1, "--threads-per-job must be at least 1");
+  OMNIRIG_CHECK(workers.lease_s > 0, "--lease-seconds must be positive");
+  OMNIRIG_CHECK(workers.threads_per_job >= 1, "--threads-per-job must be at least 1");
   OMNIRIG_CHECK(http_threads >= 2, "--http-threads must be at least 2");
   OMNIRIG_CHECK(max_connections >= 0, "--max-connections must not be negative");
-  OMNIRIG_CHECK(worker_nice >= 0 && worker_nice <= 19, "--worker-nice must be in [0, 19]");
-  OMNIRIG_CHECK(max_attempts >= 1, "--max-attempts must be at least 1");
+  OMNIRIG_CHECK(workers.nice >= 0 && workers.nice <= 19, "--worker-nice must be in [0, 19]");
+  OMNIRIG_CHECK(workers.max_attempts >= 1, "--max-attempts must be at least 1");
   OMNIRIG_CHECK(max_file_bytes > 0 && max_dataset_bytes >= max_file_bytes,
                 "--max-file-mb must be positive and at most --max-dataset-mb");
   OMNIRIG_CHECK(max_video_bytes > 0, "--max-video-mb must be positive");
@@ -45,6 +46,9 @@ int DefaultThreadsPerJob(int num_workers) {
   return std::max(1, cores / std::max(1, num_workers));
 }
 
+namespace {
+
+// The job store `database` names (see ServiceOptions::database), migrated.
 std::unique_ptr<storage::JobStore> OpenJobStore(const std::string& database,
                                                 const storage::DataDir& data_dir) {
   if (storage::IsPostgresUrl(database))
@@ -53,8 +57,6 @@ std::unique_ptr<storage::JobStore> OpenJobStore(const std::string& database,
                 "unsupported --database '" << database << "' (expected postgresql://...)");
   return std::make_unique<storage::SqliteJobStore>(data_dir.DatabasePath().string());
 }
-
-namespace {
 
 void PrintStartupReport(const ServiceState& state) {
   const auto& consistency = state.consistency;
@@ -96,24 +98,17 @@ Service::Service(const ServiceOptions& options) : state_(std::make_unique<Servic
   // SQLite is this process's alone: whatever it left running was interrupted. PostgreSQL is
   // shared: only jobs whose lease expired are (the others run on live workers elsewhere).
   state.recovery = options.database.empty()
-                       ? state.store->RecoverInterruptedJobs(options.max_attempts)
-                       : state.store->RecoverExpiredLeases(options.max_attempts);
+                       ? state.store->RecoverInterruptedJobs(options.workers.max_attempts)
+                       : state.store->RecoverExpiredLeases(options.workers.max_attempts);
   state.events = std::make_unique<JobEvents>(*state.store);
   PrintStartupReport(state);
-  WorkerPoolOptions pool_options;
-  pool_options.num_workers = options.num_workers;
-  pool_options.threads_per_job = options.threads_per_job;
-  pool_options.progress_interval_s = options.progress_interval_s;
-  pool_options.nice = options.worker_nice;
-  pool_options.idle_scheduling = options.worker_idle_scheduling;
+  WorkerPoolOptions pool_options = options.workers;
   pool_options.on_job_changed = [events = state.events.get()](const std::string& id) {
     events->Changed(id);
   };
-  pool_options.lease_s = options.lease_s;
-  pool_options.max_attempts = options.max_attempts;
   // NOTIFY wakes idle workers at once; the poll only covers a lost notification.
   if (state.store->NotifiesQueueChanges()) pool_options.idle_poll_s = 5;
-  state.metrics.SetWorkerAliveWindow(options.lease_s);
+  state.metrics.SetWorkerAliveWindow(options.workers.lease_s);
   state.workers =
       std::make_unique<WorkerPool>(*state.store, *state.data_dir, state.metrics, pool_options);
 

@@ -25,14 +25,11 @@ struct ServiceOptions {
   std::string database;
   std::filesystem::path web_dir;  // static files; empty: none
   std::string token;              // bearer token; required for non-loopback hosts
-  int num_workers = 1;            // 0: API only (workers elsewhere, through PostgreSQL)
-  int threads_per_job = 1;
-  double lease_s = 30;  // a claimed job's lease, renewed by the worker's heartbeat
+  // The job threads: workers.num_workers 0 is an API-only server (workers elsewhere, through
+  // PostgreSQL); max_attempts also bounds the runs of a job a crash interrupted at start-up.
+  WorkerPoolOptions workers;
   int http_threads = 256;   // one per open connection (see HttpServerOptions)
   int max_connections = 0;  // open HTTP connections at most, then 503 (0: no cap; see serve)
-  bool worker_idle_scheduling = false;  // SCHED_IDLE for worker (and solver) threads
-  int worker_nice = 0;                  // niceness of worker (and solver) threads
-  int max_attempts = 3;  // runs started before a crash-looping job fails
   int64_t max_file_bytes = 256LL << 20;  // an image (or .tum) upload
   int64_t max_video_bytes = 8LL << 30;   // a video upload (mp4, mkv, avi, ...)
   // A resumable upload's chunk (PUT with Content-Range) at most: the client sends a large file
@@ -42,7 +39,6 @@ struct ServiceOptions {
   int64_t max_images_per_dataset = 20000;
   int64_t max_queued_jobs = 1000;
   int64_t min_free_bytes = 256LL << 20;  // uploads leaving less free disk get 507
-  double progress_interval_s = 0.2;
   void Check() const;  // throws InvalidArgument
 };
 
@@ -50,9 +46,6 @@ struct ServiceOptions {
 int DefaultWorkers();
 // Cores per job: the machine's cores shared among the workers.
 int DefaultThreadsPerJob(int num_workers);
-// The job store `database` names (see ServiceOptions::database), migrated.
-std::unique_ptr<storage::JobStore> OpenJobStore(const std::string& database,
-                                                const storage::DataDir& data_dir);
 
 // Shared by the route files.
 struct ServiceState {
@@ -89,6 +82,19 @@ class Service {
   std::unique_ptr<ServiceState> state_;
   std::unique_ptr<HttpServer> http_;
 };
+
+// The record of a complete file on disk, checked as a plain PUT checks its body
+// (routes_datasets.cc): a video's container, or an image's (or .tum's) header and completeness;
+// HttpError 415 or 422 when it fails.
+storage::ImageRecord CheckCompleteFile(const std::string& name, const std::filesystem::path& path);
+
+// A route handler that runs `handler` on `state`.
+inline HttpHandler WithState(ServiceState& state,
+                             void (*handler)(ServiceState&, const HttpRequest&, HttpResponse&)) {
+  return [&state, handler](const HttpRequest& request, HttpResponse& response) {
+    handler(state, request, response);
+  };
+}
 
 // Route registration (routes_*.cc).
 void AddSystemRoutes(HttpServer& http, ServiceState& state);

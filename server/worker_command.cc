@@ -1,6 +1,4 @@
-#include "server/worker_command.h"
-
-#include <signal.h>
+#include "server/commands.h"
 
 #include <iostream>
 
@@ -8,7 +6,6 @@
 #include "engine/util/check.h"
 #include "server/cli/args.h"
 #include "server/metrics.h"
-#include "server/serve_command.h"
 #include "server/service.h"
 #include "server/worker_pool.h"
 #include "storage/postgres_job_store.h"
@@ -40,16 +37,10 @@ int WorkerCommand(const std::vector<std::string>& args) {
   if (!storage::IsPostgresUrl(database)) {
     throw InvalidArgument("--database must be a postgresql:// URL (workers share its queue)");
   }
-  WorkerPoolOptions options;
-  options.num_workers = parser.GetInt("threads");
-  OMNIRIG_CHECK(options.num_workers >= 1, "--threads must be at least 1");
-  options.threads_per_job = parser.Get("threads-per-job").empty()
-                                ? DefaultThreadsPerJob(options.num_workers)
-                                : parser.GetInt("threads-per-job");
+  const int num_workers = parser.GetInt("threads");
+  OMNIRIG_CHECK(num_workers >= 1, "--threads must be at least 1");
+  WorkerPoolOptions options = WorkerOptionsFromArgs(parser, num_workers);
   options.worker_id = parser.Get("worker-id");
-  options.lease_s = parser.GetDouble("lease-seconds");
-  options.max_attempts = parser.GetInt("max-attempts");
-  options.nice = parser.GetInt("worker-nice");
   // This process serves no HTTP: job threads need not yield to anything.
   options.idle_scheduling = false;
   // NOTIFY wakes idle workers at once; the poll only covers a lost notification.
@@ -58,7 +49,6 @@ int WorkerCommand(const std::vector<std::string>& args) {
   const double drain_timeout_s = parser.GetDouble("drain-timeout");
 
   InstallStopSignalHandlers();
-  signal(SIGPIPE, SIG_IGN);
   api::RegisterBuiltinJobTypes();
   const storage::DataDir data_dir(parser.Get("data"));
   storage::PostgresJobStore store(database);
@@ -67,13 +57,8 @@ int WorkerCommand(const std::vector<std::string>& args) {
   pool.Start();
   std::cout << "omnirig worker " << pool.worker_id() << " running " << options.num_workers
             << " job(s) at a time" << std::endl;
-  const int received = WaitForSignal();
-  std::cerr << "omnirig worker: " << (received == SIGTERM ? "SIGTERM" : "SIGINT")
-            << ": draining (up to " << drain_timeout_s << " s)" << std::endl;
-  const int requeued = pool.Drain(drain_timeout_s);
-  std::cerr << "omnirig worker: stopped; " << requeued << " running job(s) handed back"
-            << std::endl;
-  return 0;
+  return WaitThenDrain("omnirig worker", drain_timeout_s,
+                       [&pool](double timeout_s) { return pool.Drain(timeout_s); });
 }
 
 }  // namespace omnirig::server

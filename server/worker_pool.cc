@@ -22,11 +22,16 @@ void WorkerPoolOptions::Check() const {
   OMNIRIG_CHECK(max_attempts >= 1, "--max-attempts must be at least 1");
 }
 
+namespace {
+
+// "HOST:PID": unique among live processes sharing a store.
 std::string DefaultWorkerId() {
   char host[256] = {};
   if (::gethostname(host, sizeof(host) - 1) != 0) std::strcpy(host, "localhost");
   return std::string(host) + ":" + std::to_string(::getpid());
 }
+
+}  // namespace
 
 WorkerPool::WorkerPool(storage::JobStore& store, const storage::DataDir& data_dir, Metrics& metrics,
                        const WorkerPoolOptions& options)

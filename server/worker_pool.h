@@ -43,14 +43,11 @@ struct WorkerPoolOptions {
   // Called with a job's id when this pool changed it (claimed, progress, finished, handed
   // back), e.g. JobEvents::Changed; may be empty.
   std::function<void(const std::string&)> on_job_changed;
-  std::string worker_id;  // in leases and heartbeats; empty: DefaultWorkerId()
+  std::string worker_id;  // in leases and heartbeats; empty: HOST:PID
   double lease_s = 30;    // a claim's lease, renewed every lease_s / 3 while the job runs
   int max_attempts = 3;   // runs started before a job whose lease keeps expiring fails
   void Check() const;
 };
-
-// "HOST:PID": unique among live processes sharing a store.
-std::string DefaultWorkerId();
 
 class WorkerPool {
  public:

@@ -5,9 +5,10 @@
 
 #include <cerrno>
 #include <cstring>
-#include <random>
 #include <stdexcept>
 #include <vector>
+
+#include "storage/records.h"
 
 namespace omnirig::storage {
 namespace {
@@ -16,22 +17,13 @@ namespace {
   throw std::runtime_error(what + " " + path.string() + ": " + std::strerror(errno));
 }
 
-std::string RandomSuffix() {
-  thread_local std::mt19937_64 engine{std::random_device{}()};
-  static const char kHex[] = "0123456789abcdef";
-  std::string suffix;
-  uint64_t bits = engine();
-  for (int i = 0; i < 12; ++i, bits >>= 4) suffix.push_back(kHex[bits & 15]);
-  return suffix;
-}
-
 }  // namespace
 
 AtomicFileWriter::AtomicFileWriter(std::filesystem::path final_path)
     : final_path_(std::move(final_path)) {
   std::filesystem::create_directories(final_path_.parent_path());
-  temp_path_ = final_path_.parent_path() /
-               ("." + final_path_.filename().string() + ".part-" + RandomSuffix());
+  temp_path_ =
+      final_path_.parent_path() / ("." + final_path_.filename().string() + ".part-" + NewId());
   fd_ = ::open(temp_path_.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
   if (fd_ < 0) ThrowErrno("cannot create", temp_path_);
 }
@@ -55,18 +47,8 @@ void AtomicFileWriter::Append(const char* data, size_t size) {
 }
 
 void AtomicFileWriter::Flush() {
-  const char* data = buffer_.data();
-  size_t size = buffer_.size();
   const int64_t offset = flushed_;
-  while (size > 0) {
-    const ssize_t written = ::write(fd_, data, size);
-    if (written < 0) {
-      if (errno == EINTR) continue;
-      ThrowErrno("cannot write", temp_path_);
-    }
-    data += written;
-    size -= static_cast<size_t>(written);
-  }
+  WriteAll(fd_, buffer_, temp_path_);
   flushed_ += static_cast<int64_t>(buffer_.size());
 #ifdef __linux__
   // Start writing this piece to disk now (without waiting), so the disk works while the rest of
@@ -125,6 +107,15 @@ FileDigest DigestFile(const std::filesystem::path& path) {
   }
   ::close(fd);
   return FileDigest{size, hasher.HexDigest()};
+}
+
+void WriteAll(int fd, std::string_view data, const std::filesystem::path& path) {
+  while (!data.empty()) {
+    const ssize_t written = ::write(fd, data.data(), data.size());
+    if (written < 0 && errno == EINTR) continue;
+    if (written < 0) ThrowErrno("cannot write", path);
+    data.remove_prefix(static_cast<size_t>(written));
+  }
 }
 
 void FsyncPath(const std::filesystem::path& path) {

@@ -57,6 +57,9 @@ class AtomicFileWriter {
 FileDigest WriteFileAtomically(const std::filesystem::path& path, std::string_view content);
 // Size and SHA-256 of an existing file (reads it once).
 FileDigest DigestFile(const std::filesystem::path& path);
+// Writes all of `data` to `fd`, across short writes and EINTR; throws std::runtime_error naming
+// `path` on failure.
+void WriteAll(int fd, std::string_view data, const std::filesystem::path& path);
 // fsync of a file or folder by path; throws std::runtime_error on failure.
 void FsyncPath(const std::filesystem::path& path);
 // True for names of temporary files left by an interrupted AtomicFileWriter.

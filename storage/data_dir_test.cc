@@ -36,7 +36,7 @@ TEST(DataDir, ReportsMissingArtifacts) {
   DataDir data(dir.path());
   SqliteJobStore store(data.DatabasePath().string());
   const auto job = store.CreateJob("t", "d", "{}");
-  const auto claimed = store.ClaimNextJob();
+  const auto claimed = store.ClaimNextJob({});
   ASSERT_TRUE(claimed);
   JobOutcome outcome;
   outcome.result = "{}";

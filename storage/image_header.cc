@@ -4,7 +4,6 @@
 #include <array>
 #include <cctype>
 #include <optional>
-#include <utility>
 
 namespace omnirig::storage {
 namespace {
@@ -172,14 +171,6 @@ const uint32_t* CrcTable() {
 
 uint32_t CrcUpdate(uint32_t crc, uint8_t byte) {
   return CrcTable()[(crc ^ byte) & 0xFF] ^ (crc >> 8);
-}
-
-// The header's length of a binary PNM (up to the single whitespace after maxval), its maxval;
-// nullopt when the header is malformed (ProbeImageHeader refuses those first).
-std::optional<std::pair<size_t, int64_t>> PnmHeaderLength(std::string_view head) {
-  const std::optional<PnmHeader> header = ParsePnmHeader(head);
-  if (!header || header->length == 0) return std::nullopt;
-  return std::make_pair(header->length, header->values[2]);
 }
 
 std::string Truncated(const std::string& what, uint64_t have, uint64_t need) {
@@ -357,11 +348,12 @@ std::string ImageCompletenessCheck::Finish(const ImageHeader& header,
       break;
   }
   if (header.format == "pnm") {
-    const auto parsed = PnmHeaderLength(head);
-    if (!parsed) return "PNM header is malformed";
+    // ProbeImageHeader refused a malformed header first; `length` is 0 when `head` ends at maxval.
+    const std::optional<PnmHeader> parsed = ParsePnmHeader(head);
+    if (!parsed || parsed->length == 0) return "PNM header is malformed";
     const uint64_t channels = head.size() > 1 && head[1] == '6' ? 3 : 1;
-    const uint64_t sample_bytes = parsed->second > 255 ? 2 : 1;
-    const uint64_t need = parsed->first + pixels * channels * sample_bytes;
+    const uint64_t sample_bytes = parsed->values[2] > 255 ? 2 : 1;
+    const uint64_t need = parsed->length + pixels * channels * sample_bytes;
     if (total_bytes_ < need) return Truncated("PNM", total_bytes_, need);
   }
   if (header.format == "bmp" && head.size() >= 34) {

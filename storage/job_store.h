@@ -50,7 +50,6 @@ class JobStore {
   // Takes the oldest queued job: running, started_at now, attempts + 1, leased to
   // `request.worker_id` with a new lease token until now + `request.lease_s`.
   virtual std::optional<JobRecord> ClaimNextJob(const ClaimRequest& request) = 0;
-  std::optional<JobRecord> ClaimNextJob() { return ClaimNextJob(ClaimRequest()); }
   // Extends a running job's lease to now + `lease_s`; false when the job is no longer running
   // under `lease_token` (the lease was lost: the worker must stop the job).
   virtual bool RenewLease(const std::string& id, const std::string& lease_token,

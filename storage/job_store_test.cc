@@ -9,6 +9,7 @@
 #include <libpq-fe.h>
 
 #include <atomic>
+#include <cstdlib>
 #include <memory>
 #include <mutex>
 #include <set>
@@ -127,12 +128,12 @@ TYPED_TEST(JobStoreContractTest, JobLifecycle) {
   JobStore& store = *owned;
   const JobRecord created = store.CreateJob("calibration", "ds", R"({"a":1})");
   EXPECT_EQ(created.state, JobState::kQueued);
-  auto claimed = store.ClaimNextJob();
+  auto claimed = store.ClaimNextJob({});
   ASSERT_TRUE(claimed);
   EXPECT_EQ(claimed->id, created.id);
   EXPECT_EQ(claimed->state, JobState::kRunning);
   EXPECT_EQ(claimed->attempts, 1);
-  EXPECT_FALSE(store.ClaimNextJob());
+  EXPECT_FALSE(store.ClaimNextJob({}));
   store.UpdateProgress(created.id, JobProgress{0.5, "solve", "iteration 3", 2.0});
   EXPECT_DOUBLE_EQ(store.GetJob(created.id)->progress.fraction, 0.5);
   EXPECT_FALSE(store.GetResult(created.id));
@@ -158,7 +159,7 @@ TYPED_TEST(JobStoreContractTest, CancelQueuedAndRunning) {
   JobStore& store = *owned;
   const auto first = store.CreateJob("t", "ds", "{}");
   const auto second = store.CreateJob("t", "ds", "{}");
-  ASSERT_EQ(store.ClaimNextJob()->id, first.id);  // oldest first
+  ASSERT_EQ(store.ClaimNextJob({})->id, first.id);  // oldest first
   EXPECT_EQ(store.RequestCancel(second.id), JobState::kCanceled);
   EXPECT_EQ(store.RequestCancel(first.id), JobState::kRunning);
   EXPECT_TRUE(store.GetJob(first.id)->cancel_requested);
@@ -175,7 +176,7 @@ TYPED_TEST(JobStoreContractTest, RecoveryRequeuesThenFails) {
   const auto canceled = store.CreateJob("t", "ds", "{}");
   for (int attempt = 1; attempt <= 3; ++attempt) {
     std::set<std::string> running;
-    while (auto claimed = store.ClaimNextJob()) running.insert(claimed->id);
+    while (auto claimed = store.ClaimNextJob({})) running.insert(claimed->id);
     if (attempt == 1) store.RequestCancel(canceled.id);
     const RecoveryReport report = store.RecoverInterruptedJobs(3);
     if (attempt < 3) {
@@ -202,7 +203,7 @@ TYPED_TEST(JobStoreContractTest, ConcurrentClaimsNeverShareAJob) {
   std::vector<std::thread> workers;
   for (int w = 0; w < 4; ++w) {
     workers.emplace_back([&] {
-      while (auto job = store.ClaimNextJob()) {
+      while (auto job = store.ClaimNextJob({})) {
         std::lock_guard<std::mutex> lock(mutex);
         claimed.push_back(job->id);
       }
@@ -241,7 +242,7 @@ TYPED_TEST(JobStoreContractTest, SecondStoreSeesCancelAndProgressOfTheFirst) {
   JobStore& api_side = *api_owned;
   const std::string dataset = worker_side.CreateDataset("rig").id;
   const JobRecord job = api_side.CreateJob("calibration", dataset, "{}");
-  const auto claimed = worker_side.ClaimNextJob();
+  const auto claimed = worker_side.ClaimNextJob({});
   ASSERT_TRUE(claimed);
   for (int poll = 0; poll < 3; ++poll) {  // warm both sides' cached statements
     ASSERT_FALSE(worker_side.GetJob(job.id)->cancel_requested);
@@ -366,13 +367,13 @@ TYPED_TEST(JobStoreContractTest, RequeueNeedsTheLeaseAndDoesNotCountTheAttempt) 
   auto owned = this->Open();
   JobStore& store = *owned;
   const JobRecord job = store.CreateJob("t", "ds", "{}");
-  const auto claimed = store.ClaimNextJob();
+  const auto claimed = store.ClaimNextJob({});
   ASSERT_TRUE(claimed);
   EXPECT_FALSE(store.RequeueJob(job.id, "not-the-token"));
   EXPECT_TRUE(store.RequeueJob(job.id, claimed->lease_token));
   EXPECT_EQ(store.GetJob(job.id)->state, JobState::kQueued);
   EXPECT_EQ(store.GetJob(job.id)->attempts, 0);
-  EXPECT_EQ(store.ClaimNextJob()->attempts, 1);
+  EXPECT_EQ(store.ClaimNextJob({})->attempts, 1);
 }
 
 TYPED_TEST(JobStoreContractTest, HeartbeatsListLiveWorkersAndTheirJobs) {
@@ -409,8 +410,18 @@ TYPED_TEST(JobStoreContractTest, QueueChangesWakeOtherProcesses) {
   std::thread producer([&] { api_owned->CreateJob("t", "ds", "{}"); });
   EXPECT_TRUE(worker_owned->WaitForQueueChange(30));
   producer.join();
-  EXPECT_TRUE(worker_owned->ClaimNextJob());
+  EXPECT_TRUE(worker_owned->ClaimNextJob({}));
   EXPECT_FALSE(worker_owned->WaitForQueueChange(0));
+}
+
+// The schema version recorded in the database at `url`.
+int StoredSchemaVersion(const std::string& url) {
+  PGconn* db = PQconnectdb(url.c_str());
+  PGresult* rows = PQexec(db, "SELECT version FROM omnirig_schema");
+  const int version = PQntuples(rows) == 0 ? 0 : std::atoi(PQgetvalue(rows, 0, 0));
+  PQclear(rows);
+  PQfinish(db);
+  return version;
 }
 
 TEST(PostgresJobStoreTest, MigratesOnceAndRefusesANewerSchema) {
@@ -419,7 +430,7 @@ TEST(PostgresJobStoreTest, MigratesOnceAndRefusesANewerSchema) {
   {
     PostgresJobStore store(url);
     dataset_id = store.CreateDataset("rig").id;
-    EXPECT_EQ(store.StoredSchemaVersion(), PostgresJobStore::SchemaVersion());
+    EXPECT_EQ(StoredSchemaVersion(url), PostgresJobStore::SchemaVersion());
   }
   EXPECT_EQ(PostgresJobStore::SchemaVersion(), SqliteJobStore::SchemaVersion());
   {
@@ -430,7 +441,7 @@ TEST(PostgresJobStoreTest, MigratesOnceAndRefusesANewerSchema) {
     for (int i = 0; i < 4; ++i) {
       openers.emplace_back([&] {
         PostgresJobStore store(fresh, 1);
-        opened += store.StoredSchemaVersion() == PostgresJobStore::SchemaVersion();
+        opened += StoredSchemaVersion(fresh) == PostgresJobStore::SchemaVersion();
       });
     }
     for (auto& opener : openers) opener.join();

@@ -6,6 +6,7 @@
 #include <cctype>
 #include <cstdio>
 #include <cstdlib>
+#include <type_traits>
 
 namespace omnirig::storage {
 namespace {
@@ -79,21 +80,23 @@ constexpr char kDbNow[] = "EXTRACT(EPOCH FROM clock_timestamp())::DOUBLE PRECISI
 constexpr char kMigrationLock[] = "SELECT pg_advisory_xact_lock(7210418309)";
 
 // A parameter as libpq's text format; NULL stays NULL.
-std::optional<std::string> Text(const SqlValue& value) {
-  switch (value.kind()) {
-    case SqlValue::Kind::kNull:
-      return std::nullopt;
-    case SqlValue::Kind::kInt:
-      return std::to_string(value.int_value());
-    case SqlValue::Kind::kReal: {
-      char text[32];
-      std::snprintf(text, sizeof(text), "%.17g", value.real_value());
-      return std::string(text);
-    }
-    case SqlValue::Kind::kText:
-      return value.text();
-  }
-  return std::nullopt;
+std::optional<std::string> Text(const SqlValue& param) {
+  return std::visit(
+      [](const auto& value) -> std::optional<std::string> {
+        using T = std::decay_t<decltype(value)>;
+        if constexpr (std::is_same_v<T, std::monostate>) {
+          return std::nullopt;
+        } else if constexpr (std::is_same_v<T, std::string>) {
+          return value;
+        } else if constexpr (std::is_same_v<T, double>) {
+          char text[32];
+          std::snprintf(text, sizeof(text), "%.17g", value);
+          return std::string(text);
+        } else {
+          return std::to_string(value);
+        }
+      },
+      param.value());
 }
 
 // SQLite's numbered parameters ?1..?n as PostgreSQL's $1..$n (the shared SQL has no '?' in
@@ -254,7 +257,9 @@ class PostgresJobStore::Lease {
 };
 
 PostgresJobStore::PostgresJobStore(const std::string& url, int max_connections)
-    : SqlJobStore(SqlDialect{/*byte_order=*/" COLLATE \"C\"", /*lock_row=*/" FOR UPDATE"}),
+    : SqlJobStore(SqlDialect{/*byte_order=*/" COLLATE \"C\"", /*lock_row=*/" FOR UPDATE",
+                             /*insertion_order=*/"seq", /*skip_locked=*/" FOR UPDATE SKIP LOCKED",
+                             /*now=*/kDbNow}),
       url_(url),
       max_connections_(std::max(1, max_connections)) {
   try {
@@ -325,12 +330,6 @@ void PostgresJobStore::Migrate() {
   transaction.Commit();
 }
 
-int PostgresJobStore::StoredSchemaVersion() {
-  Lease db = Borrow();
-  const Result rows = Run(db.get(), "SELECT version FROM omnirig_schema");
-  return rows.rows() == 0 ? 0 : static_cast<int>(rows.Int(0, 0));
-}
-
 void PostgresJobStore::WithReader(const std::function<void(SqlSession&)>& work) {
   WithWriter(work);  // any pooled connection reads and writes
 }
@@ -365,53 +364,6 @@ JobRecord PostgresJobStore::CreateJob(const std::string& type, const std::string
                {job.id, type, dataset_id, params, job.created_at});
   });
   return job;
-}
-
-std::vector<JobRecord> PostgresJobStore::ListJobs(const JobFilter& filter) {
-  return Read([&](SqlSession& db) {
-    return db.All(std::string("SELECT ") + kJobColumns +
-                      " FROM jobs WHERE (?1::TEXT IS NULL OR state = ?1) AND (?2::TEXT IS NULL "
-                      "OR type = ?2) AND (?3::TEXT IS NULL OR dataset_id = ?3) "
-                      "ORDER BY created_at DESC, seq DESC "
-                      "LIMIT CASE WHEN ?4::BIGINT < 0 THEN NULL ELSE ?4::BIGINT END",
-                  {filter.state ? SqlValue(JobStateName(*filter.state)) : SqlValue(), filter.type,
-                   filter.dataset_id, filter.limit},
-                  &ReadJob);
-  });
-}
-
-std::optional<JobRecord> PostgresJobStore::ClaimNextJob(const ClaimRequest& request) {
-  // SKIP LOCKED: a row another worker is claiming right now is passed over, not waited for.
-  return Write([&](SqlSession& db) {
-    return db.First(
-        std::string("UPDATE jobs SET state = 'running', started_at = ?1, finished_at = NULL, "
-                    "attempts = attempts + 1, progress_fraction = 0, progress_stage = "
-                    "'starting', progress_message = '', eta_s = NULL, worker_id = ?2, "
-                    "lease_token = ?3, lease_expires_at = ") +
-            kDbNow +
-            " + ?4 WHERE id = (SELECT id FROM jobs WHERE state = 'queued' "
-            "ORDER BY queued_at, seq LIMIT 1 FOR UPDATE SKIP LOCKED) RETURNING " +
-            kJobColumns,
-        {NowSeconds(), request.worker_id, NewId(), request.lease_s}, &ReadJob);
-  });
-}
-
-bool PostgresJobStore::RenewLease(const std::string& id, const std::string& lease_token,
-                                  double lease_s) {
-  return Write([&](SqlSession& db) {
-    return db.Execute(std::string("UPDATE jobs SET lease_expires_at = ") + kDbNow +
-                          " + ?1 WHERE id = ?2 AND state = 'running' AND lease_token = ?3",
-                      {lease_s, id, lease_token}) > 0;
-  });
-}
-
-// SKIP LOCKED: a job being finished or renewed right now is not expired; leave it.
-SqlJobStore::SqlQuery PostgresJobStore::RunningJobs(bool only_expired) const {
-  const std::string expired =
-      std::string("AND (lease_expires_at IS NULL OR lease_expires_at <= ") + kDbNow + ") ";
-  return {std::string("SELECT id, attempts, cancel_requested FROM jobs WHERE state = 'running' ") +
-              (only_expired ? expired : "") + "ORDER BY seq FOR UPDATE SKIP LOCKED",
-          {}};
 }
 
 bool PostgresJobStore::WaitForQueueChange(double timeout_s) {

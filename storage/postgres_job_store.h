@@ -39,15 +39,9 @@ class PostgresJobStore : public SqlJobStore {
   ~PostgresJobStore() override;
 
   static int SchemaVersion();
-  // The schema version recorded in the database.
-  int StoredSchemaVersion();
 
   JobRecord CreateJob(const std::string& type, const std::string& dataset_id,
                       const std::string& params) override;
-  std::vector<JobRecord> ListJobs(const JobFilter& filter) override;
-  using JobStore::ClaimNextJob;
-  std::optional<JobRecord> ClaimNextJob(const ClaimRequest& request) override;
-  bool RenewLease(const std::string& id, const std::string& lease_token, double lease_s) override;
   bool NotifiesQueueChanges() const override { return true; }
   bool WaitForQueueChange(double timeout_s) override;
   std::string IntegrityCheck() override;
@@ -57,7 +51,6 @@ class PostgresJobStore : public SqlJobStore {
   void WithWriter(const std::function<void(SqlSession&)>& work) override;
   bool InTransaction(const std::function<bool(SqlSession&)>& work) override;
   void OnJobsQueued(SqlSession& db) override;
-  SqlQuery RunningJobs(bool only_expired) const override;
 
  private:
   class Lease;

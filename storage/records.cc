@@ -1,6 +1,5 @@
 #include "storage/records.h"
 
-#include <algorithm>
 #include <chrono>
 #include <random>
 
@@ -46,34 +45,6 @@ std::string NewId() {
   uint64_t bits = engine();
   for (int i = 0; i < 16; ++i, bits >>= 4) id.push_back(kHex[bits & 15]);
   return id;
-}
-
-RecoveryAction DecideRecovery(bool cancel_requested, int64_t attempts, int max_attempts) {
-  if (cancel_requested) return RecoveryAction::kCancel;
-  if (attempts >= max_attempts) return RecoveryAction::kFail;
-  return RecoveryAction::kRequeue;
-}
-
-std::string InterruptedMessage(int64_t attempts, int max_attempts) {
-  return "the job's worker stopped during each of its " + std::to_string(attempts) +
-         " attempts (maximum " + std::to_string(max_attempts) + ")";
-}
-
-std::string JoinIds(const std::vector<std::string>& ids) {
-  std::string joined;
-  for (const std::string& id : ids) joined += (joined.empty() ? "" : ",") + id;
-  return joined;
-}
-
-std::vector<std::string> SplitIds(const std::string& joined) {
-  std::vector<std::string> ids;
-  size_t start = 0;
-  while (start < joined.size()) {
-    const size_t comma = std::min(joined.find(',', start), joined.size());
-    if (comma > start) ids.push_back(joined.substr(start, comma - start));
-    start = comma + 1;
-  }
-  return ids;
 }
 
 }  // namespace omnirig::storage

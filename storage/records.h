@@ -119,15 +119,4 @@ struct RecoveryReport {
 // A random 16-hex-digit identifier (records and lease tokens).
 std::string NewId();
 
-// What recovery does with a running job found interrupted (server crash, expired lease): a
-// requested cancel wins, then a job that used up `max_attempts` runs fails, else it runs again.
-enum class RecoveryAction { kCancel, kFail, kRequeue };
-RecoveryAction DecideRecovery(bool cancel_requested, int64_t attempts, int max_attempts);
-// The error message of a job failed by recovery.
-std::string InterruptedMessage(int64_t attempts, int max_attempts);
-
-// A list of job ids as stored in one text column ("a,b,c") and back.
-std::string JoinIds(const std::vector<std::string>& ids);
-std::vector<std::string> SplitIds(const std::string& joined);
-
 }  // namespace omnirig::storage

@@ -6,28 +6,23 @@
 
 namespace omnirig::storage {
 
-struct Sha256::Impl {
-  EVP_MD_CTX* context = nullptr;
-};
-
-Sha256::Sha256() : impl_(std::make_unique<Impl>()) {
-  impl_->context = EVP_MD_CTX_new();
-  if (impl_->context == nullptr || EVP_DigestInit_ex(impl_->context, EVP_sha256(), nullptr) != 1) {
-    EVP_MD_CTX_free(impl_->context);
+Sha256::Sha256() : context_(EVP_MD_CTX_new()) {
+  if (context_ == nullptr || EVP_DigestInit_ex(context_, EVP_sha256(), nullptr) != 1) {
+    EVP_MD_CTX_free(context_);
     throw std::runtime_error("cannot initialise SHA-256");
   }
 }
 
-Sha256::~Sha256() { EVP_MD_CTX_free(impl_->context); }
+Sha256::~Sha256() { EVP_MD_CTX_free(context_); }
 
 void Sha256::Update(const void* data, size_t size) {
-  if (size > 0) EVP_DigestUpdate(impl_->context, data, size);
+  if (size > 0) EVP_DigestUpdate(context_, data, size);
 }
 
 std::string Sha256::HexDigest() {
   unsigned char digest[EVP_MAX_MD_SIZE];
   unsigned int length = 0;
-  EVP_DigestFinal_ex(impl_->context, digest, &length);
+  EVP_DigestFinal_ex(context_, digest, &length);
   static const char kHex[] = "0123456789abcdef";
   std::string hex;
   hex.reserve(2 * length);

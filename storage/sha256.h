@@ -3,9 +3,10 @@
 // used to fingerprint every stored image and artifact.
 
 #include <cstddef>
-#include <memory>
 #include <string>
 #include <string_view>
+
+typedef struct evp_md_ctx_st EVP_MD_CTX;
 
 namespace omnirig::storage {
 
@@ -22,8 +23,7 @@ class Sha256 {
   std::string HexDigest();
 
  private:
-  struct Impl;
-  std::unique_ptr<Impl> impl_;
+  EVP_MD_CTX* context_;
 };
 
 // Hex SHA-256 of a whole buffer.

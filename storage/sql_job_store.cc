@@ -1,5 +1,7 @@
 #include "storage/sql_job_store.h"
 
+#include <algorithm>
+
 namespace omnirig::storage {
 namespace {
 
@@ -31,6 +33,24 @@ ArtifactRecord ReadArtifact(const SqlRow& row) {
   return ArtifactRecord{row.Text(0), row.Text(1), row.Int(2), row.Text(3), row.Text(4)};
 }
 
+// A list of job ids as stored in one text column ("a,b,c") and back.
+std::string JoinIds(const std::vector<std::string>& ids) {
+  std::string joined;
+  for (const std::string& id : ids) joined += (joined.empty() ? "" : ",") + id;
+  return joined;
+}
+
+std::vector<std::string> SplitIds(const std::string& joined) {
+  std::vector<std::string> ids;
+  size_t start = 0;
+  while (start < joined.size()) {
+    const size_t comma = std::min(joined.find(',', start), joined.size());
+    if (comma > start) ids.push_back(joined.substr(start, comma - start));
+    start = comma + 1;
+  }
+  return ids;
+}
+
 WorkerRecord ReadWorker(const SqlRow& row) {
   return WorkerRecord{row.Text(0), row.Double(1), row.Double(2), SplitIds(row.Text(3))};
 }
@@ -43,76 +63,13 @@ void InsertArtifacts(SqlSession& db, const std::string& job_id,
   }
 }
 
-// The error's code and message, NULL and NULL without one.
-SqlValue ErrorCode(const std::optional<JobError>& error) {
-  return error ? SqlValue(error->code) : SqlValue();
-}
-SqlValue ErrorMessage(const std::optional<JobError>& error) {
-  return error ? SqlValue(error->message) : SqlValue();
-}
-
-// A running job found interrupted, as recovery decides its fate.
-struct RunningJob {
-  std::string id;
-  int64_t attempts = 0;
-  bool cancel_requested = false;
-};
-
-// Cancels, fails or requeues each of `running` on `db` (DecideRecovery).
-RecoveryReport Recover(SqlSession& db, const std::vector<RunningJob>& running, int max_attempts) {
-  RecoveryReport report;
-  const double now = NowSeconds();
-  for (const RunningJob& job : running) {
-    switch (DecideRecovery(job.cancel_requested, job.attempts, max_attempts)) {
-      case RecoveryAction::kCancel:
-        db.Execute(
-            "UPDATE jobs SET state = 'canceled', finished_at = ?1, lease_expires_at = NULL "
-            "WHERE id = ?2",
-            {now, job.id});
-        report.canceled.push_back(job.id);
-        break;
-      case RecoveryAction::kFail:
-        db.Execute(
-            "UPDATE jobs SET state = 'failed', finished_at = ?1, error_code = 'interrupted', "
-            "error_message = ?2, lease_expires_at = NULL WHERE id = ?3",
-            {now, InterruptedMessage(job.attempts, max_attempts), job.id});
-        report.failed.push_back(job.id);
-        break;
-      case RecoveryAction::kRequeue:
-        db.Execute(
-            "UPDATE jobs SET state = 'queued', started_at = NULL, progress_stage = 'requeued', "
-            "eta_s = NULL, lease_expires_at = NULL WHERE id = ?1",
-            {job.id});
-        report.requeued.push_back(job.id);
-        break;
-    }
-  }
-  return report;
-}
-
-}  // namespace
-
-const char SqlJobStore::kJobColumns[] =
+// The columns ReadJob reads, in its order.
+constexpr char kJobColumns[] =
     "id, type, dataset_id, params, state, progress_fraction, progress_stage, progress_message, "
     "eta_s, created_at, started_at, finished_at, attempts, error_code, error_message, "
     "cancel_requested, worker_id, lease_token, lease_expires_at";
 
-const char SqlJobStore::kInsertJob[] =
-    "INSERT INTO jobs(id, type, dataset_id, params, state, created_at, queued_at) "
-    "VALUES(?1, ?2, ?3, ?4, 'queued', ?5, ?5)";
-
-JobRecord SqlJobStore::NewJob(const std::string& type, const std::string& dataset_id,
-                              const std::string& params) {
-  JobRecord job;
-  job.id = NewId();
-  job.type = type;
-  job.dataset_id = dataset_id;
-  job.params = params;
-  job.created_at = NowSeconds();
-  return job;
-}
-
-JobRecord SqlJobStore::ReadJob(const SqlRow& row) {
+JobRecord ReadJob(const SqlRow& row) {
   JobRecord job;
   job.id = row.Text(0);
   job.type = row.Text(1);
@@ -132,12 +89,77 @@ JobRecord SqlJobStore::ReadJob(const SqlRow& row) {
   return job;
 }
 
-std::optional<JobRecord> SqlJobStore::SelectJob(SqlSession& db, const std::string& id,
-                                                const std::string& suffix) {
+// The job `id` read on `db`, with `suffix` appended to its SELECT (a row lock).
+std::optional<JobRecord> SelectJob(SqlSession& db, const std::string& id,
+                                   const std::string& suffix = "") {
   // Built once: a status poll is one lookup.
   static const std::string kSelect =
       std::string("SELECT ") + kJobColumns + " FROM jobs WHERE id = ?1";
   return db.First(suffix.empty() ? kSelect : kSelect + suffix, {id}, &ReadJob);
+}
+
+// The error's code and message, NULL and NULL without one.
+SqlValue ErrorCode(const std::optional<JobError>& error) {
+  return error ? SqlValue(error->code) : SqlValue();
+}
+SqlValue ErrorMessage(const std::optional<JobError>& error) {
+  return error ? SqlValue(error->message) : SqlValue();
+}
+
+// A running job found interrupted, as recovery decides its fate.
+struct RunningJob {
+  std::string id;
+  int64_t attempts = 0;
+  bool cancel_requested = false;
+};
+
+// Cancels, fails or requeues each of `running` on `db`: a requested cancel wins, then a job that
+// used up `max_attempts` runs fails ("interrupted"), else it runs again.
+RecoveryReport Recover(SqlSession& db, const std::vector<RunningJob>& running, int max_attempts) {
+  RecoveryReport report;
+  const double now = NowSeconds();
+  for (const RunningJob& job : running) {
+    if (job.cancel_requested) {
+      db.Execute(
+          "UPDATE jobs SET state = 'canceled', finished_at = ?1, lease_expires_at = NULL "
+          "WHERE id = ?2",
+          {now, job.id});
+      report.canceled.push_back(job.id);
+    } else if (job.attempts >= max_attempts) {
+      db.Execute(
+          "UPDATE jobs SET state = 'failed', finished_at = ?1, error_code = 'interrupted', "
+          "error_message = ?2, lease_expires_at = NULL WHERE id = ?3",
+          {now,
+           "the job's worker stopped during each of its " + std::to_string(job.attempts) +
+               " attempts (maximum " + std::to_string(max_attempts) + ")",
+           job.id});
+      report.failed.push_back(job.id);
+    } else {
+      db.Execute(
+          "UPDATE jobs SET state = 'queued', started_at = NULL, progress_stage = 'requeued', "
+          "eta_s = NULL, lease_expires_at = NULL WHERE id = ?1",
+          {job.id});
+      report.requeued.push_back(job.id);
+    }
+  }
+  return report;
+}
+
+}  // namespace
+
+const char SqlJobStore::kInsertJob[] =
+    "INSERT INTO jobs(id, type, dataset_id, params, state, created_at, queued_at) "
+    "VALUES(?1, ?2, ?3, ?4, 'queued', ?5, ?5)";
+
+JobRecord SqlJobStore::NewJob(const std::string& type, const std::string& dataset_id,
+                              const std::string& params) {
+  JobRecord job;
+  job.id = NewId();
+  job.type = type;
+  job.dataset_id = dataset_id;
+  job.params = params;
+  job.created_at = NowSeconds();
+  return job;
 }
 
 DatasetRecord SqlJobStore::CreateDataset(const std::string& name) {
@@ -213,6 +235,45 @@ std::optional<ImageRecord> SqlJobStore::GetImage(const std::string& dataset_id,
 
 std::optional<JobRecord> SqlJobStore::GetJob(const std::string& id) {
   return Read([&](SqlSession& db) { return SelectJob(db, id); });
+}
+
+std::vector<JobRecord> SqlJobStore::ListJobs(const JobFilter& filter) {
+  const int64_t limit = filter.limit < 0 ? INT64_MAX : filter.limit;
+  return Read([&](SqlSession& db) {
+    return db.All(std::string("SELECT ") + kJobColumns +
+                      " FROM jobs WHERE (CAST(?1 AS TEXT) IS NULL OR state = ?1) AND (CAST(?2 AS "
+                      "TEXT) IS NULL OR type = ?2) AND (CAST(?3 AS TEXT) IS NULL OR dataset_id = "
+                      "?3) ORDER BY created_at DESC, " +
+                      dialect_.insertion_order + " DESC LIMIT ?4",
+                  {filter.state ? SqlValue(JobStateName(*filter.state)) : SqlValue(), filter.type,
+                   filter.dataset_id, limit},
+                  &ReadJob);
+  });
+}
+
+// One statement: the oldest queued job is taken and returned as it is now running.
+std::optional<JobRecord> SqlJobStore::ClaimNextJob(const ClaimRequest& request) {
+  return Write([&](SqlSession& db) {
+    return db.First(
+        "UPDATE jobs SET state = 'running', started_at = ?1, finished_at = NULL, attempts = "
+        "attempts + 1, progress_fraction = 0, progress_stage = 'starting', progress_message = '', "
+        "eta_s = NULL, worker_id = ?2, lease_token = ?3, lease_expires_at = " +
+            dialect_.now +
+            " + ?4 WHERE id = (SELECT id FROM jobs WHERE state = 'queued' ORDER BY "
+            "queued_at, " +
+            dialect_.insertion_order + " LIMIT 1" + dialect_.skip_locked + ") RETURNING " +
+            kJobColumns,
+        {NowSeconds(), request.worker_id, NewId(), request.lease_s}, &ReadJob);
+  });
+}
+
+bool SqlJobStore::RenewLease(const std::string& id, const std::string& lease_token,
+                             double lease_s) {
+  return Write([&](SqlSession& db) {
+    return db.Execute("UPDATE jobs SET lease_expires_at = " + dialect_.now +
+                          " + ?1 WHERE id = ?2 AND state = 'running' AND lease_token = ?3",
+                      {lease_s, id, lease_token}) > 0;
+  });
 }
 
 void SqlJobStore::UpdateProgress(const std::string& id, const JobProgress& progress) {
@@ -410,12 +471,17 @@ RecoveryReport SqlJobStore::RecoverExpiredLeases(int max_attempts) {
 
 RecoveryReport SqlJobStore::RecoverRunning(int max_attempts, bool only_expired) {
   RecoveryReport report;
+  // A job claimed before leases existed (no expiry) counts as expired.
+  const std::string expired =
+      only_expired ? " AND (lease_expires_at IS NULL OR lease_expires_at <= " + dialect_.now + ")"
+                   : "";
   InTransaction([&](SqlSession& db) {
-    const SqlQuery select = RunningJobs(only_expired);
     std::vector<RunningJob> running;
-    db.Query(select.sql, select.params, [&](const SqlRow& row) {
-      running.push_back(RunningJob{row.Text(0), row.Int(1), row.Int(2) != 0});
-    });
+    db.Query("SELECT id, attempts, cancel_requested FROM jobs WHERE state = 'running'" + expired +
+                 " ORDER BY " + dialect_.insertion_order + dialect_.skip_locked,
+             {}, [&](const SqlRow& row) {
+               running.push_back(RunningJob{row.Text(0), row.Int(1), row.Int(2) != 0});
+             });
     report = Recover(db, running, max_attempts);
     if (!report.requeued.empty()) OnJobsQueued(db);
     return true;

@@ -3,48 +3,43 @@
 // records, and every method whose SQL both dialects run as written. A store supplies its
 // connections (SqlSession) and how it takes them: SqliteJobStore reads through a pool of reader
 // connections and writes through one writer; PostgresJobStore borrows a pooled connection and
-// announces queued jobs with NOTIFY (OnJobsQueued). Claims, lease renewal, job listing, job
-// creation, the choice of jobs to recover, migrations and the integrity check differ between
-// the two (SKIP LOCKED, the database server's clock, NOTIFY in the insert) and stay in each
-// store.
+// announces queued jobs with NOTIFY (OnJobsQueued). Where their SQL differs in a phrase (the
+// clock leases are compared on, SKIP LOCKED, the insertion order) the SqlDialect names it; job
+// creation (NOTIFY in the insert), migrations and the integrity check stay in each store.
 
 #include <cstdint>
 #include <functional>
 #include <optional>
 #include <string>
 #include <utility>
+#include <variant>
 #include <vector>
 
 #include "storage/job_store.h"
 
 namespace omnirig::storage {
 
-// A query parameter: NULL, an integer, a real or text (NULL for an empty optional).
+// A query parameter: NULL (std::monostate), an integer, a real or text (NULL for an empty
+// optional).
 class SqlValue {
  public:
-  enum class Kind { kNull, kInt, kReal, kText };
+  using Value = std::variant<std::monostate, int64_t, double, std::string>;
   SqlValue() = default;
   // Implicit, so that a parameter list reads {id, 1, 2.5}.
   // NOLINTBEGIN(google-explicit-constructor)
-  SqlValue(int value) : SqlValue(int64_t{value}) {}
-  SqlValue(int64_t value) : kind_(Kind::kInt), int_(value) {}
-  SqlValue(double value) : kind_(Kind::kReal), real_(value) {}
-  SqlValue(std::string value) : kind_(Kind::kText), text_(std::move(value)) {}
-  SqlValue(const char* value) : SqlValue(std::string(value)) {}
+  SqlValue(int value) : value_(int64_t{value}) {}
+  SqlValue(int64_t value) : value_(value) {}
+  SqlValue(double value) : value_(value) {}
+  SqlValue(std::string value) : value_(std::move(value)) {}
+  SqlValue(const char* value) : value_(std::string(value)) {}
   template <typename T>
   SqlValue(const std::optional<T>& value) : SqlValue(value ? SqlValue(*value) : SqlValue()) {}
   // NOLINTEND(google-explicit-constructor)
 
-  Kind kind() const { return kind_; }
-  int64_t int_value() const { return int_; }
-  double real_value() const { return real_; }
-  const std::string& text() const { return text_; }
+  const Value& value() const { return value_; }
 
  private:
-  Kind kind_ = Kind::kNull;
-  int64_t int_ = 0;
-  double real_ = 0;
-  std::string text_;
+  Value value_;
 };
 
 // One row of a query's result; columns are 0-based.
@@ -102,6 +97,15 @@ struct SqlDialect {
   // Appended to the SELECT of a row the same transaction then updates (empty where the
   // transaction holds the database's write lock from its start).
   std::string lock_row;
+  // The column that orders rows inserted in the same instant (SQLite's rowid, a sequence).
+  std::string insertion_order;
+  // Appended to the SELECT of the jobs a claim or recovery takes: a row another process is
+  // claiming, finishing or renewing right now is passed over, not waited for (empty where one
+  // process holds the database's write lock).
+  std::string skip_locked;
+  // The clock, in epoch seconds, that lease expiry is written and compared on: one clock for
+  // every process sharing the store (PostgreSQL's server; SQLite's is this machine's).
+  std::string now;
 };
 
 class SqlJobStore : public JobStore {
@@ -120,6 +124,9 @@ class SqlJobStore : public JobStore {
                                       const std::string& name) override;
 
   std::optional<JobRecord> GetJob(const std::string& id) override;
+  std::vector<JobRecord> ListJobs(const JobFilter& filter) override;
+  std::optional<JobRecord> ClaimNextJob(const ClaimRequest& request) override;
+  bool RenewLease(const std::string& id, const std::string& lease_token, double lease_s) override;
   void UpdateProgress(const std::string& id, const JobProgress& progress) override;
   std::optional<JobState> RequestCancel(const std::string& id) override;
   bool FinishJob(const std::string& id, const std::string& lease_token,
@@ -140,25 +147,11 @@ class SqlJobStore : public JobStore {
   RecoveryReport RecoverExpiredLeases(int max_attempts) override;
 
  protected:
-  // The columns ReadJob reads, in its order.
-  static const char kJobColumns[];
   // INSERT of a new queued job: id, type, dataset_id, params, created_at (= queued_at).
   static const char kInsertJob[];
   // A new queued job's record (what kInsertJob stores).
   static JobRecord NewJob(const std::string& type, const std::string& dataset_id,
                           const std::string& params);
-  static JobRecord ReadJob(const SqlRow& row);
-  // The job `id` read on `db`, with `suffix` appended to its SELECT (a row lock).
-  static std::optional<JobRecord> SelectJob(SqlSession& db, const std::string& id,
-                                            const std::string& suffix = "");
-  // A statement with its parameters.
-  struct SqlQuery {
-    std::string sql;
-    std::vector<SqlValue> params;
-  };
-  // The running jobs recovery looks at, as rows (id, attempts, cancel_requested): all of them, or
-  // those whose lease expired when `only_expired`. Run inside recovery's transaction.
-  virtual SqlQuery RunningJobs(bool only_expired) const = 0;
 
   // Runs `work` on a connection for reading.
   virtual void WithReader(const std::function<void(SqlSession&)>& work) = 0;
@@ -185,7 +178,8 @@ class SqlJobStore : public JobStore {
   }
 
  private:
-  // Cancels, fails or requeues each job RunningJobs lists (DecideRecovery), in one transaction.
+  // Cancels, fails or requeues the running jobs (those whose lease expired when `only_expired`),
+  // in one transaction.
   RecoveryReport RecoverRunning(int max_attempts, bool only_expired);
 
   SqlDialect dialect_;

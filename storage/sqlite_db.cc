@@ -7,32 +7,30 @@ namespace {
   throw SqliteError(what + ": " + (db ? sqlite3_errmsg(db) : "out of memory"));
 }
 
-}  // namespace
-
-Statement::Statement(sqlite3* db, const std::string& sql) : db_(db) {
-  if (sqlite3_prepare_v2(db, sql.c_str(), static_cast<int>(sql.size()), &statement_, nullptr) !=
+sqlite3_stmt* Prepare(sqlite3* db, const std::string& sql) {
+  sqlite3_stmt* statement = nullptr;
+  if (sqlite3_prepare_v2(db, sql.c_str(), static_cast<int>(sql.size()), &statement, nullptr) !=
       SQLITE_OK) {
     Throw(db, "cannot prepare '" + sql + "'");
   }
+  return statement;
 }
 
-Statement::Statement(Connection& connection, const std::string& sql) : db_(connection.handle()) {
-  Connection::CachedStatement& cached = connection.statements_[sql];
-  if (cached.in_use) {  // the same query nested in itself: a private copy
-    if (sqlite3_prepare_v2(db_, sql.c_str(), static_cast<int>(sql.size()), &statement_,
-                           nullptr) != SQLITE_OK) {
-      Throw(db_, "cannot prepare '" + sql + "'");
-    }
+}  // namespace
+
+Statement::Statement(Connection& connection, const std::string& sql) : db_(connection.db_) {
+  auto cached = connection.statements_.find(sql);
+  if (cached != connection.statements_.end() && cached->second.in_use) {
+    statement_ = Prepare(db_, sql);  // the same query nested in itself: a private copy
     return;
   }
-  if (!cached.statement && sqlite3_prepare_v2(db_, sql.c_str(), static_cast<int>(sql.size()),
-                                              &cached.statement, nullptr) != SQLITE_OK) {
-    connection.statements_.erase(sql);
-    Throw(db_, "cannot prepare '" + sql + "'");
+  if (cached == connection.statements_.end()) {
+    cached =
+        connection.statements_.emplace(sql, Connection::CachedStatement{Prepare(db_, sql)}).first;
   }
-  statement_ = cached.statement;
-  cached.in_use = true;
-  cached_in_use_ = &cached.in_use;
+  statement_ = cached->second.statement;
+  cached->second.in_use = true;
+  cached_in_use_ = &cached->second.in_use;
 }
 
 Statement::~Statement() {

@@ -20,7 +20,6 @@ class SqliteError : public std::runtime_error {
 
 class Statement {
  public:
-  Statement(sqlite3* db, const std::string& sql);
   // Reuses the connection's prepared copy of `sql` (reset when this Statement ends): a status
   // poll then skips SQLite's parser and planner, most of its cost.
   Statement(Connection& connection, const std::string& sql);
@@ -60,7 +59,6 @@ class Connection {
   Connection& operator=(const Connection&) = delete;
 
   void Exec(const std::string& sql);
-  sqlite3* handle() const { return db_; }
   int64_t changes() const { return sqlite3_changes(db_); }
 
  private:

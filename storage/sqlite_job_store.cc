@@ -1,5 +1,7 @@
 #include "storage/sqlite_job_store.h"
 
+#include <type_traits>
+
 namespace omnirig::storage {
 namespace {
 
@@ -98,21 +100,15 @@ class SqliteSession : public SqlSession {
 
   static void Bind(Statement& statement, const std::vector<SqlValue>& params) {
     for (int i = 0; i < static_cast<int>(params.size()); ++i) {
-      const SqlValue& value = params[i];
-      switch (value.kind()) {
-        case SqlValue::Kind::kNull:
-          statement.BindNull(i + 1);
-          break;
-        case SqlValue::Kind::kInt:
-          statement.Bind(i + 1, value.int_value());
-          break;
-        case SqlValue::Kind::kReal:
-          statement.Bind(i + 1, value.real_value());
-          break;
-        case SqlValue::Kind::kText:
-          statement.Bind(i + 1, value.text());
-          break;
-      }
+      std::visit(
+          [&](const auto& value) {
+            if constexpr (std::is_same_v<std::decay_t<decltype(value)>, std::monostate>) {
+              statement.BindNull(i + 1);
+            } else {
+              statement.Bind(i + 1, value);
+            }
+          },
+          params[i].value());
     }
   }
 
@@ -121,26 +117,11 @@ class SqliteSession : public SqlSession {
 
 }  // namespace
 
-class SqliteJobStore::ReaderLease {
- public:
-  ReaderLease(SqliteJobStore& store, std::unique_ptr<Connection> connection)
-      : store_(&store), connection_(std::move(connection)) {}
-  ReaderLease(ReaderLease&& other) noexcept = default;
-  ~ReaderLease() {
-    if (!connection_) return;
-    std::lock_guard<std::mutex> lock(store_->readers_mutex_);
-    store_->idle_readers_.push_back(std::move(connection_));
-    store_->readers_available_.notify_one();
-  }
-  Connection& operator*() { return *connection_; }
-
- private:
-  SqliteJobStore* store_;
-  std::unique_ptr<Connection> connection_;
-};
-
 SqliteJobStore::SqliteJobStore(const std::string& path, int num_readers)
-    : SqlJobStore(SqlDialect{/*byte_order=*/"", /*lock_row=*/""}), path_(path) {
+    : SqlJobStore(SqlDialect{/*byte_order=*/"", /*lock_row=*/"", /*insertion_order=*/"rowid",
+                             /*skip_locked=*/"",
+                             /*now=*/"((julianday('now') - 2440587.5) * 86400.0)"}),
+      path_(path) {
   writer_ = std::make_unique<Connection>(path);
   Migrate();
   for (int i = 0; i < std::max(1, num_readers); ++i) {
@@ -154,17 +135,22 @@ int SqliteJobStore::SchemaVersion() {
   return static_cast<int>(sizeof(kMigrations) / sizeof(kMigrations[0]));
 }
 
-SqliteJobStore::ReaderLease SqliteJobStore::Reader() {
+// On a reader connection borrowed from the pool, given back however `work` ends.
+void SqliteJobStore::WithReader(const std::function<void(SqlSession&)>& work) {
   std::unique_lock<std::mutex> lock(readers_mutex_);
   readers_available_.wait(lock, [this] { return !idle_readers_.empty(); });
-  std::unique_ptr<Connection> connection = std::move(idle_readers_.back());
+  struct Lease {
+    SqliteJobStore* store;
+    std::unique_ptr<Connection> connection;
+    ~Lease() {
+      std::lock_guard<std::mutex> lock(store->readers_mutex_);
+      store->idle_readers_.push_back(std::move(connection));
+      store->readers_available_.notify_one();
+    }
+  } lease{this, std::move(idle_readers_.back())};
   idle_readers_.pop_back();
-  return ReaderLease(*this, std::move(connection));
-}
-
-void SqliteJobStore::WithReader(const std::function<void(SqlSession&)>& work) {
-  ReaderLease db = Reader();
-  SqliteSession session(*db);
+  lock.unlock();
+  SqliteSession session(*lease.connection);
   work(session);
 }
 
@@ -207,55 +193,6 @@ JobRecord SqliteJobStore::CreateJob(const std::string& type, const std::string& 
     db.Execute(kInsertJob, {job.id, type, dataset_id, params, job.created_at});
   });
   return job;
-}
-
-std::vector<JobRecord> SqliteJobStore::ListJobs(const JobFilter& filter) {
-  return Read([&](SqlSession& db) {
-    return db.All(std::string("SELECT ") + kJobColumns +
-                      " FROM jobs WHERE (?1 IS NULL OR state = ?1) AND (?2 IS NULL OR type = ?2)"
-                      " AND (?3 IS NULL OR dataset_id = ?3) ORDER BY created_at DESC LIMIT ?4",
-                  {filter.state ? SqlValue(JobStateName(*filter.state)) : SqlValue(), filter.type,
-                   filter.dataset_id, filter.limit},
-                  &ReadJob);
-  });
-}
-
-std::optional<JobRecord> SqliteJobStore::ClaimNextJob(const ClaimRequest& request) {
-  std::optional<JobRecord> job;
-  InTransaction([&](SqlSession& db) {
-    std::optional<std::string> id;
-    db.Query("SELECT id FROM jobs WHERE state = 'queued' ORDER BY queued_at, rowid LIMIT 1", {},
-             [&](const SqlRow& row) { id = row.Text(0); });
-    if (!id) return false;
-    const double now = NowSeconds();
-    db.Execute(
-        "UPDATE jobs SET state = 'running', started_at = ?1, finished_at = NULL, "
-        "attempts = attempts + 1, progress_fraction = 0, progress_stage = 'starting', "
-        "progress_message = '', eta_s = NULL, worker_id = ?2, lease_token = ?3, "
-        "lease_expires_at = ?4 WHERE id = ?5",
-        {now, request.worker_id, NewId(), now + request.lease_s, *id});
-    job = SelectJob(db, *id);
-    return true;
-  });
-  return job;
-}
-
-bool SqliteJobStore::RenewLease(const std::string& id, const std::string& lease_token,
-                                double lease_s) {
-  return Write([&](SqlSession& db) {
-    return db.Execute(
-               "UPDATE jobs SET lease_expires_at = ?1 WHERE id = ?2 AND state = 'running' AND "
-               "lease_token = ?3",
-               {NowSeconds() + lease_s, id, lease_token}) > 0;
-  });
-}
-
-// A job claimed before leases existed (no expiry) counts as expired.
-SqlJobStore::SqlQuery SqliteJobStore::RunningJobs(bool only_expired) const {
-  return {
-      "SELECT id, attempts, cancel_requested FROM jobs WHERE state = 'running' "
-      "AND (?1 IS NULL OR lease_expires_at IS NULL OR lease_expires_at <= ?1)",
-      {only_expired ? SqlValue(NowSeconds()) : SqlValue()}};
 }
 
 std::string SqliteJobStore::IntegrityCheck() {

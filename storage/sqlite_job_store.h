@@ -26,22 +26,14 @@ class SqliteJobStore : public SqlJobStore {
 
   JobRecord CreateJob(const std::string& type, const std::string& dataset_id,
                       const std::string& params) override;
-  std::vector<JobRecord> ListJobs(const JobFilter& filter) override;
-  using JobStore::ClaimNextJob;
-  std::optional<JobRecord> ClaimNextJob(const ClaimRequest& request) override;
-  bool RenewLease(const std::string& id, const std::string& lease_token, double lease_s) override;
   std::string IntegrityCheck() override;
 
  protected:
   void WithReader(const std::function<void(SqlSession&)>& work) override;
   void WithWriter(const std::function<void(SqlSession&)>& work) override;
   bool InTransaction(const std::function<bool(SqlSession&)>& work) override;
-  SqlQuery RunningJobs(bool only_expired) const override;
 
  private:
-  // A reader connection borrowed from the pool for one call.
-  class ReaderLease;
-  ReaderLease Reader();
   void Migrate();
 
   std::string path_;

@@ -27,10 +27,10 @@ TEST_F(SqliteJobStoreTest, MigratesAndReopens) {
   EXPECT_EQ(reopened.GetDataset(dataset_id)->name, "rig");
   EXPECT_EQ(reopened.IntegrityCheck(), "ok");
   Connection raw(DbPath());
-  Statement version(raw.handle(), "PRAGMA user_version");
+  Statement version(raw, "PRAGMA user_version");
   ASSERT_TRUE(version.Step());
   EXPECT_EQ(version.Int(0), SqliteJobStore::SchemaVersion());
-  Statement mode(raw.handle(), "PRAGMA journal_mode");
+  Statement mode(raw, "PRAGMA journal_mode");
   ASSERT_TRUE(mode.Step());
   EXPECT_EQ(mode.Text(0), "wal");
 }

@@ -114,20 +114,14 @@ void UploadPartWriter::Append(const char* data, size_t size) {
 }
 
 void UploadPartWriter::Flush() {
-  const char* data = buffer_.data();
-  size_t left = buffer_.size();
-  while (left > 0) {
-    const ssize_t written = ::write(fd_, data, left);
-    if (written < 0) {
-      if (errno == EINTR) continue;
-      // Whatever was not written is not in the part: report the size the file has.
-      struct stat stats {};
-      if (::fstat(fd_, &stats) == 0) size_ = stats.st_size;
-      buffer_.clear();
-      ThrowErrno("cannot write", path_);
-    }
-    data += written;
-    left -= static_cast<size_t>(written);
+  try {
+    WriteAll(fd_, buffer_, path_);
+  } catch (const std::runtime_error&) {
+    // Whatever was not written is not in the part: report the size the file has.
+    struct stat stats {};
+    if (::fstat(fd_, &stats) == 0) size_ = stats.st_size;
+    buffer_.clear();
+    throw;
   }
   buffer_.clear();
 }

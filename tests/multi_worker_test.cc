@@ -24,7 +24,7 @@
 #include <sstream>
 #include <thread>
 
-#include "server/worker_command.h"
+#include "server/commands.h"
 #include "storage/postgres_test_server.h"
 #include "storage/sha256.h"
 #include "tests/server_test_util.h"

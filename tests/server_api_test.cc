@@ -47,11 +47,11 @@ class ServerApiTest : public ::testing::Test {
     options.port = 0;
     options.data_dir = dir_.path() / "data";
     options.web_dir = dir_.path() / "web";
-    options.num_workers = 2;
-    options.threads_per_job = 1;
+    options.workers.num_workers = 2;
+    options.workers.threads_per_job = 1;
     options.http_threads = 8;
     options.min_free_bytes = 0;
-    options.progress_interval_s = 0.02;
+    options.workers.progress_interval_s = 0.02;
     return options;
   }
 
@@ -635,7 +635,7 @@ TEST_F(ServerApiTest, ResultIs409UntilSucceededAndProgressIsStored) {
 
 TEST_F(ServerApiTest, CancelStopsARunningJob) {
   auto options = Options();
-  options.num_workers = 1;
+  options.workers.num_workers = 1;
   auto& client = Start(options);
   const std::string dataset = CreateDataset(client);
   const std::string running =
@@ -663,7 +663,7 @@ TEST_F(ServerApiTest, CancelStopsARunningJob) {
 // another process (a second store on the same database file) stops the job.
 TEST_F(ServerApiTest, CancelWrittenToTheStoreByAnotherProcessStopsTheJob) {
   auto options = Options();
-  options.num_workers = 1;
+  options.workers.num_workers = 1;
   auto& client = Start(options);
   const std::string dataset = CreateDataset(client);
   const std::string running =
@@ -750,7 +750,7 @@ TEST_F(ServerApiTest, RetryDeleteAndFilters) {
 
 TEST_F(ServerApiTest, QueueLimitGives503) {
   auto options = Options();
-  options.num_workers = 1;
+  options.workers.num_workers = 1;
   options.max_queued_jobs = 2;
   auto& client = Start(options);
   const std::string dataset = CreateDataset(client);
@@ -789,7 +789,7 @@ TEST_F(ServerApiTest, RefusesNonLoopbackWithoutToken) {
 
 TEST_F(ServerApiTest, DrainHandsRunningJobsBackAndRestartFinishesThem) {
   auto options = Options();
-  options.num_workers = 1;
+  options.workers.num_workers = 1;
   auto& client = Start(options);
   const std::string dataset = CreateDataset(client);
   const std::string id = SubmitSleep(client, dataset, {{"steps", 20}, {"step_ms", 25}})["id"];
@@ -928,8 +928,8 @@ TEST_F(ServerApiTest, ErrorsCarryNoSourceLocations) {
 // the job type and the data are present.
 TEST_F(ServerApiTest, RealCalibrationJob) {
   auto options = Options();
-  options.num_workers = 1;
-  options.threads_per_job = 2;
+  options.workers.num_workers = 1;
+  options.workers.threads_per_job = 2;
   auto& client = Start(options);
   ASSERT_NE(api::FindJobType("calibration"), nullptr);  // registered by the service
   const char* source = std::getenv("OMNIRIG_SOURCE_DIR");

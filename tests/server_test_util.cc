@@ -14,7 +14,7 @@
 
 #include "api/job_types.h"
 #include "engine/util/check.h"
-#include "server/serve_command.h"
+#include "server/commands.h"
 
 namespace omnirig::testing {
 namespace fs = std::filesystem;

@@ -72,8 +72,8 @@ class ServerVideoTest : public ::testing::Test {
     options.host = "127.0.0.1";
     options.port = 0;
     options.data_dir = dir_.path() / "data";
-    options.num_workers = 2;
-    options.threads_per_job = 1;
+    options.workers.num_workers = 2;
+    options.workers.threads_per_job = 1;
     options.http_threads = 16;
     options.min_free_bytes = 0;
     options.max_chunk_bytes = kChunk;

@@ -1,5 +1,6 @@
 #pragma once
-// The `omnirig` subcommands. Each takes the arguments after its name and returns the exit code.
+// The `omnirig` subcommands of server/cli/ (serve, worker and store are server/commands.h's).
+// Each takes the arguments after its name and returns the exit code.
 
 #include <string>
 #include <vector>
@@ -8,9 +9,6 @@ namespace omnirig::cli {
 
 using Args = std::vector<std::string>;
 
-int RunServe(const Args& args);      // server/cli/serve.cc
-int RunWorker(const Args& args);     // server/cli/serve.cc
-int RunStore(const Args& args);      // server/cli/serve.cc
 int RunSynth(const Args& args);      // server/cli/synth.cc
 int RunCalibrate(const Args& args);  // server/cli/calibrate.cc
 int RunRelpose(const Args& args);    // server/cli/relpose.cc

@@ -20,6 +20,7 @@
 #include "server/cli/args.h"
 #include "server/cli/commands.h"
 #include "storage/atomic_file.h"
+#include "storage/video_container.h"
 
 namespace omnirig::cli {
 namespace {
@@ -33,16 +34,10 @@ std::string Extension(const fs::path& path) {
   return ext;
 }
 
-bool IsVideoFile(const fs::path& path) {
-  const std::string ext = Extension(path);
-  return ext == ".mp4" || ext == ".m4v" || ext == ".mov" || ext == ".mkv" || ext == ".webm" ||
-         ext == ".avi";
-}
-
 bool IsUploadFile(const fs::path& path) {
   const std::string ext = Extension(path);
   return ext == ".png" || ext == ".jpg" || ext == ".jpeg" || ext == ".bmp" || ext == ".pgm" ||
-         ext == ".ppm" || ext == ".tum" || IsVideoFile(path);
+         ext == ".ppm" || ext == ".tum" || storage::IsVideoName(path.string());
 }
 
 // Image and video files (and .tum trajectories, a slam job's ground truth) of `folder` and of
@@ -184,7 +179,8 @@ int SyncImages(httplib::Client& client, const std::string& dataset,
       if (local.size == it->second.first && local.sha256 == it->second.second) continue;
     }
     const std::string url = "/api/v1/datasets/" + dataset + "/images/" + name;
-    if (IsVideoFile(path) || static_cast<int64_t>(fs::file_size(path)) > chunk_bytes) {
+    if (storage::IsVideoName(path.string()) ||
+        static_cast<int64_t>(fs::file_size(path)) > chunk_bytes) {
       UploadInChunks(client, dataset, name, path, chunk_bytes);
     } else {
       UploadWithRetries(client, url, path);

@@ -1,0 +1,41 @@
+#pragma once
+// The subcommands that run the service (server/): `omnirig serve` (serve_command.cc), `omnirig
+// worker` (worker_command.cc) and `omnirig store copy` (store_command.cc). Each takes the
+// arguments after its name and returns the process exit code.
+
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "server/cli/args.h"
+#include "server/worker_pool.h"
+
+namespace omnirig::server {
+
+// SIGTERM and SIGINT, from any thread, wake WaitThenDrain; SIGPIPE is ignored. Shared by
+// `omnirig serve` and `omnirig worker`.
+void InstallStopSignalHandlers();
+// The job threads' options `omnirig serve` and `omnirig worker` both take (--threads-per-job,
+// --lease-seconds, --max-attempts, --worker-nice) for `num_workers` workers.
+WorkerPoolOptions WorkerOptionsFromArgs(const cli::ArgParser& parser, int num_workers);
+// Waits for SIGTERM or SIGINT, then calls `drain` with `timeout_s` (it returns the running jobs
+// it handed back to the queue), logging both on stderr as `who`. Returns the exit code, 0.
+int WaitThenDrain(const std::string& who, double timeout_s,
+                  const std::function<int(double timeout_s)>& drain);
+
+// Runs the service until SIGTERM or SIGINT, then drains. Prints "omnirig listening on
+// http://HOST:PORT" on stdout once the port is bound (with --port 0 the line names the port the
+// system chose).
+int ServeCommand(const std::vector<std::string>& args);
+
+// Runs jobs from a shared PostgreSQL job store, with no HTTP (see docs/multi-machine.md); waits
+// for SIGTERM/SIGINT, then drains like `omnirig serve`. Prints "omnirig worker ID running N
+// job(s) at a time" on stdout once it takes jobs.
+int WorkerCommand(const std::vector<std::string>& args);
+
+// `omnirig store copy --from sqlite:DIR --to postgresql://...`: moves a one-machine service's
+// records (datasets, jobs, results, artifact records) into a shared PostgreSQL store (or back),
+// so a team keeps its history when it grows to several machines.
+int StoreCommand(const std::vector<std::string>& args);
+
+}  // namespace omnirig::server
