@@ -10,6 +10,7 @@
 #include "engine/calib/initialize.h"
 #include "engine/geometry/ceres_problem.h"
 #include "engine/geometry/reprojection_cost.h"
+#include "engine/util/option_check.h"
 #include "engine/util/timer.h"
 
 namespace omnirig {
@@ -414,18 +415,15 @@ void CalibrationOptions::SetFixed(const std::string& name, bool fix) {
 }
 
 void CalibrationOptions::Check() const {
-  OMNIRIG_CHECK(huber_loss_px >= 0.0, "calibration: huber_loss_px must be >= 0");
-  OMNIRIG_CHECK(outlier_sigmas > 0.0, "calibration: outlier_sigmas must be > 0");
-  OMNIRIG_CHECK(min_outlier_px >= 0.0, "calibration: min_outlier_px must be >= 0");
-  OMNIRIG_CHECK(max_rejection_rounds >= 0 && max_rejection_rounds <= 20,
-                "calibration: max_rejection_rounds must be in [0, 20]");
-  OMNIRIG_CHECK(max_view_rms_px > 0.0, "calibration: max_view_rms_px must be > 0");
-  OMNIRIG_CHECK(min_corners_per_view >= 4, "calibration: min_corners_per_view must be >= 4");
-  OMNIRIG_CHECK(min_views >= 1, "calibration: min_views must be >= 1");
-  OMNIRIG_CHECK(max_num_iterations >= 1 && max_num_iterations <= 10000,
-                "calibration: max_num_iterations must be in [1, 10000]");
-  OMNIRIG_CHECK(num_threads >= 1 && num_threads <= 256,
-                "calibration: num_threads must be in [1, 256]");
+  OMNIRIG_CHECK_NON_NEGATIVE(huber_loss_px);
+  OMNIRIG_CHECK_POSITIVE(outlier_sigmas);
+  OMNIRIG_CHECK_NON_NEGATIVE(min_outlier_px);
+  OMNIRIG_CHECK_IN(max_rejection_rounds, '[', 0, 20, ']');
+  OMNIRIG_CHECK_POSITIVE(max_view_rms_px);
+  OMNIRIG_CHECK_AT_LEAST(min_corners_per_view, 4);
+  OMNIRIG_CHECK_AT_LEAST(min_views, 1);
+  OMNIRIG_CHECK_IN(max_num_iterations, '[', 1, 10000, ']');
+  OMNIRIG_CHECK_IN(num_threads, '[', 1, 256, ']');
   if (principal_point_px) {
     OMNIRIG_CHECK(principal_point_px->allFinite(), "calibration: principal point not finite");
   }

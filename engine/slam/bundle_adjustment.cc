@@ -10,6 +10,7 @@
 #include "engine/geometry/ceres_problem.h"
 #include "engine/geometry/reprojection_cost.h"
 #include "engine/util/check.h"
+#include "engine/util/option_check.h"
 #include "engine/util/timer.h"
 
 namespace omnirig::slam {
@@ -420,17 +421,16 @@ void CalibrationRefinementOptions::Check() const {
   OMNIRIG_CHECK(!RefinesIntrinsics() ||
                     std::count(fixed_intrinsics.begin(), fixed_intrinsics.end(), false) > 0,
                 "refining the intrinsics needs at least one free intrinsic parameter");
-  OMNIRIG_CHECK(min_frames >= 2, "calibration refinement needs min_frames >= 2");
-  OMNIRIG_CHECK(min_observations_per_camera >= 1,
-                "calibration refinement needs min_observations_per_camera >= 1");
+  OMNIRIG_CHECK_AT_LEAST(min_frames, 2);
+  OMNIRIG_CHECK_AT_LEAST(min_observations_per_camera, 1);
 }
 
 void BundleAdjustmentOptions::Check() const {
-  OMNIRIG_CHECK(huber_scale_px > 0, "huber_scale_px must be positive");
-  OMNIRIG_CHECK(max_reprojection_error_px > 0, "max_reprojection_error_px must be positive");
-  OMNIRIG_CHECK(max_iterations > 0, "max_iterations must be positive");
-  OMNIRIG_CHECK(num_threads > 0, "num_threads must be positive");
-  OMNIRIG_CHECK(max_dense_schur_poses >= 0, "max_dense_schur_poses must not be negative");
+  OMNIRIG_CHECK_POSITIVE(huber_scale_px);
+  OMNIRIG_CHECK_POSITIVE(max_reprojection_error_px);
+  OMNIRIG_CHECK_POSITIVE(max_iterations);
+  OMNIRIG_CHECK_POSITIVE(num_threads);
+  OMNIRIG_CHECK_NON_NEGATIVE(max_dense_schur_poses);
 }
 
 BundleAdjustmentReport BundleAdjust(const StereoRig& rig, const std::vector<int>& free_frames,
