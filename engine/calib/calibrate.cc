@@ -205,25 +205,6 @@ UnifiedIntrinsics Initialise(const BoardSpec& board, const CalibrationOptions& o
   return init->camera.intrinsics;
 }
 
-class ProgressCallback : public ceres::IterationCallback {
- public:
-  ProgressCallback(const ProgressSink& progress, int round, int max_iterations)
-      : progress_(progress), round_(round), max_iterations_(max_iterations) {}
-  ceres::CallbackReturnType operator()(const ceres::IterationSummary& summary) override {
-    if (progress_.IsCancelled()) return ceres::SOLVER_ABORT;
-    std::ostringstream os;
-    os << "round " << round_ + 1 << " iteration " << summary.iteration << " cost " << summary.cost;
-    const double within = std::min(1.0, summary.iteration / static_cast<double>(max_iterations_));
-    progress_.Report(0.1 + 0.8 * std::min(1.0, (round_ + within) / 4.0), "solve", os.str());
-    return ceres::SOLVER_CONTINUE;
-  }
-
- private:
-  const ProgressSink& progress_;
-  int round_;
-  int max_iterations_;
-};
-
 // Builds eq. (7) over the inlier corners and solves it.
 ceres::Solver::Summary Solve(const CalibrationOptions& options, bool robust, int round,
                              const ProgressSink& progress, UnifiedIntrinsics* intrinsics,
@@ -263,7 +244,14 @@ ceres::Solver::Summary Solve(const CalibrationOptions& options, bool robust, int
   // monotone LM crawls along it in tiny steps (42 iterations on ocamcalib-vmr), non-monotone
   // steps take 13 to the same minimum. Ceres returns the parameters of the lowest cost seen.
   solver_options.use_nonmonotonic_steps = true;
-  ProgressCallback callback(progress, round, options.max_num_iterations);
+  // Four rounds of the robust solve fill the fraction from 0.1 to 0.9.
+  const auto fraction_at = [&](int iteration) {
+    const double within =
+        std::min(1.0, iteration / static_cast<double>(options.max_num_iterations));
+    return 0.1 + 0.8 * std::min(1.0, (round + within) / 4.0);
+  };
+  SolverProgress callback(progress, "solve", fraction_at,
+                          "round " + std::to_string(round + 1) + ", ");
   solver_options.callbacks.push_back(&callback);
   ceres::Solver::Summary summary;
   ceres::Solve(solver_options, problem, &summary);

@@ -48,30 +48,6 @@ std::optional<double> SquaredError(const StereoRig& rig, const Rigid3d& rig_from
   return (*pixel - observation.pixel).squaredNorm();
 }
 
-// Aborts the solver as soon as the sink is cancelled (Ceres calls this after every iteration,
-// well under a second apart even for the global adjustment) and reports the iterations.
-class ProgressCallback : public ceres::IterationCallback {
- public:
-  // Iterations are counted from `offset` out of `budget` (the solves of one adjustment).
-  ProgressCallback(const ProgressSink& progress, int offset, int budget)
-      : progress_(progress), offset_(offset), budget_(budget) {}
-  ceres::CallbackReturnType operator()(const ceres::IterationSummary& summary) override {
-    if (progress_.IsCancelled()) return ceres::SOLVER_ABORT;
-    if (progress_.report) {
-      progress_.Report(std::min(1.0, (offset_ + summary.iteration) / static_cast<double>(budget_)),
-                       "bundle_adjustment",
-                       "iteration " + std::to_string(summary.iteration) + ", cost " +
-                           std::to_string(summary.cost));
-    }
-    return ceres::SOLVER_CONTINUE;
-  }
-
- private:
-  const ProgressSink& progress_;
-  int offset_;
-  int budget_;
-};
-
 // Iterations of the first and the (optional) second solve of BundleAdjust().
 int SecondSolveIterations(const BundleAdjustmentOptions& options) {
   return std::max(5, options.max_iterations / 2);
@@ -245,8 +221,11 @@ ceres::Solver::Summary SolveOnce(const CalibrationRefinementOptions* refinement,
       SolverSetup(report->num_free_poses, max_iterations, options.num_threads)
           .DenseSchurUpTo(options.max_dense_schur_poses));
   solver.linear_solver_ordering = blocks.ordering;
-  ProgressCallback callback(progress, iteration_offset,
-                            options.max_iterations + SecondSolveIterations(options));
+  // Iterations are counted from `iteration_offset` out of the solves of one adjustment.
+  const int budget = options.max_iterations + SecondSolveIterations(options);
+  SolverProgress callback(progress, "bundle_adjustment", [&](int iteration) {
+    return std::min(1.0, (iteration_offset + iteration) / static_cast<double>(budget));
+  });
   solver.callbacks.push_back(&callback);
   ceres::Solve(solver, &problem, &summary);
   progress.ThrowIfCancelled();
