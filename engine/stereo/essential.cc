@@ -315,8 +315,8 @@ EssentialReport EstimateEssentialRansac(const std::vector<Eigen::Vector3d>& bear
   // Triangulation-based choice tolerates a few times the epipolar threshold: the midpoint's
   // reprojection error exceeds the epipolar error, and a wrong candidate is off by ~pi anyway.
   const double support_threshold = std::max(10.0 * options.max_angular_error_rad, 0.01);
-  const int chosen = SelectDecomposition(candidates, bearings1, bearings2, inliers,
-                                         support_threshold, &report.num_supporting);
+  const int chosen =
+      SelectDecomposition(candidates, bearings1, bearings2, inliers, support_threshold, nullptr);
   if (chosen < 0) return Fail(report, "no decomposition of E triangulates any inlier");
   Rigid3d pose = candidates[chosen];
   if (options.refine) {

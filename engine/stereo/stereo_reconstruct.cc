@@ -229,10 +229,8 @@ void TriangulateMatches(const StereoRig& rig, const LiftedFeatures& f0, const Li
     StereoPoint point;
     point.point_in_cam0 = t.point_in_cam1;  // the triangulation's camera 1 is the rig's cam0
     const cv::Point2f& p0 = f0.keypoints[match.index0].pt;
-    const cv::Point2f& p1 = f1.keypoints[match.index1].pt;
     point.rgb = ColourAt(image0, p0);
     point.pixel0 = Eigen::Vector2d(p0.x, p0.y);
-    point.pixel1 = Eigen::Vector2d(p1.x, p1.y);
     point.parallax_rad = t.parallax_rad;
     point.range_std_m = t.range_std_m;
     report->points.push_back(point);
