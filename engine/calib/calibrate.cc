@@ -10,6 +10,7 @@
 #include "engine/calib/initialize.h"
 #include "engine/geometry/ceres_problem.h"
 #include "engine/geometry/reprojection_cost.h"
+#include "engine/util/option_check.h"
 #include "engine/util/timer.h"
 
 namespace omnirig {
@@ -204,25 +205,6 @@ UnifiedIntrinsics Initialise(const BoardSpec& board, const CalibrationOptions& o
   return init->camera.intrinsics;
 }
 
-class ProgressCallback : public ceres::IterationCallback {
- public:
-  ProgressCallback(const ProgressSink& progress, int round, int max_iterations)
-      : progress_(progress), round_(round), max_iterations_(max_iterations) {}
-  ceres::CallbackReturnType operator()(const ceres::IterationSummary& summary) override {
-    if (progress_.IsCancelled()) return ceres::SOLVER_ABORT;
-    std::ostringstream os;
-    os << "round " << round_ + 1 << " iteration " << summary.iteration << " cost " << summary.cost;
-    const double within = std::min(1.0, summary.iteration / static_cast<double>(max_iterations_));
-    progress_.Report(0.1 + 0.8 * std::min(1.0, (round_ + within) / 4.0), "solve", os.str());
-    return ceres::SOLVER_CONTINUE;
-  }
-
- private:
-  const ProgressSink& progress_;
-  int round_;
-  int max_iterations_;
-};
-
 // Builds eq. (7) over the inlier corners and solves it.
 ceres::Solver::Summary Solve(const CalibrationOptions& options, bool robust, int round,
                              const ProgressSink& progress, UnifiedIntrinsics* intrinsics,
@@ -262,7 +244,14 @@ ceres::Solver::Summary Solve(const CalibrationOptions& options, bool robust, int
   // monotone LM crawls along it in tiny steps (42 iterations on ocamcalib-vmr), non-monotone
   // steps take 13 to the same minimum. Ceres returns the parameters of the lowest cost seen.
   solver_options.use_nonmonotonic_steps = true;
-  ProgressCallback callback(progress, round, options.max_num_iterations);
+  // Four rounds of the robust solve fill the fraction from 0.1 to 0.9.
+  const auto fraction_at = [&](int iteration) {
+    const double within =
+        std::min(1.0, iteration / static_cast<double>(options.max_num_iterations));
+    return 0.1 + 0.8 * std::min(1.0, (round + within) / 4.0);
+  };
+  SolverProgress callback(progress, "solve", fraction_at,
+                          "round " + std::to_string(round + 1) + ", ");
   solver_options.callbacks.push_back(&callback);
   ceres::Solver::Summary summary;
   ceres::Solve(solver_options, problem, &summary);
@@ -414,18 +403,15 @@ void CalibrationOptions::SetFixed(const std::string& name, bool fix) {
 }
 
 void CalibrationOptions::Check() const {
-  OMNIRIG_CHECK(huber_loss_px >= 0.0, "calibration: huber_loss_px must be >= 0");
-  OMNIRIG_CHECK(outlier_sigmas > 0.0, "calibration: outlier_sigmas must be > 0");
-  OMNIRIG_CHECK(min_outlier_px >= 0.0, "calibration: min_outlier_px must be >= 0");
-  OMNIRIG_CHECK(max_rejection_rounds >= 0 && max_rejection_rounds <= 20,
-                "calibration: max_rejection_rounds must be in [0, 20]");
-  OMNIRIG_CHECK(max_view_rms_px > 0.0, "calibration: max_view_rms_px must be > 0");
-  OMNIRIG_CHECK(min_corners_per_view >= 4, "calibration: min_corners_per_view must be >= 4");
-  OMNIRIG_CHECK(min_views >= 1, "calibration: min_views must be >= 1");
-  OMNIRIG_CHECK(max_num_iterations >= 1 && max_num_iterations <= 10000,
-                "calibration: max_num_iterations must be in [1, 10000]");
-  OMNIRIG_CHECK(num_threads >= 1 && num_threads <= 256,
-                "calibration: num_threads must be in [1, 256]");
+  OMNIRIG_CHECK_NON_NEGATIVE(huber_loss_px);
+  OMNIRIG_CHECK_POSITIVE(outlier_sigmas);
+  OMNIRIG_CHECK_NON_NEGATIVE(min_outlier_px);
+  OMNIRIG_CHECK_IN(max_rejection_rounds, '[', 0, 20, ']');
+  OMNIRIG_CHECK_POSITIVE(max_view_rms_px);
+  OMNIRIG_CHECK_AT_LEAST(min_corners_per_view, 4);
+  OMNIRIG_CHECK_AT_LEAST(min_views, 1);
+  OMNIRIG_CHECK_IN(max_num_iterations, '[', 1, 10000, ']');
+  OMNIRIG_CHECK_IN(num_threads, '[', 1, 256, ']');
   if (principal_point_px) {
     OMNIRIG_CHECK(principal_point_px->allFinite(), "calibration: principal point not finite");
   }

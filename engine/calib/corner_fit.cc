@@ -10,6 +10,7 @@
 #include <Eigen/Dense>
 
 #include "engine/util/check.h"
+#include "engine/util/option_check.h"
 
 namespace omnirig {
 namespace {
@@ -217,9 +218,9 @@ double CornerModelForTest(const std::array<double, 11>& params, double x, double
 }  // namespace internal
 
 void CornerFitOptions::Check() const {
-  OMNIRIG_CHECK(max_radius_px >= 3.0, "corner fit: max_radius_px must be >= 3");
-  OMNIRIG_CHECK(max_iterations >= 1, "corner fit: max_iterations must be >= 1");
-  OMNIRIG_CHECK(max_shift_px > 0.0, "corner fit: max_shift_px must be > 0");
+  OMNIRIG_CHECK_AT_LEAST(max_radius_px, 3);
+  OMNIRIG_CHECK_AT_LEAST(max_iterations, 1);
+  OMNIRIG_CHECK_POSITIVE(max_shift_px);
 }
 
 std::optional<Eigen::Vector2d> FitCheckerCorner(const cv::Mat& image,

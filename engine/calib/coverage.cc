@@ -13,6 +13,7 @@
 #include "engine/geometry/rigid3.h"
 #include "engine/geometry/unified_camera.h"
 #include "engine/util/check.h"
+#include "engine/util/option_check.h"
 
 namespace omnirig {
 namespace {
@@ -370,12 +371,10 @@ cv::Mat DrawUncertainty(const cv::Mat& sigma, const CalibrationReport& report,
 }  // namespace
 
 void CoverageOptions::Check() const {
-  OMNIRIG_CHECK(near_px > 0.0, "coverage: near_px must be positive");
-  OMNIRIG_CHECK(grid_step_px >= 1, "coverage: grid_step_px must be >= 1");
-  OMNIRIG_CHECK(azimuth_sector_deg > 0.0 && azimuth_sector_deg <= 360.0,
-                "coverage: azimuth_sector_deg must be in (0, 360]");
-  OMNIRIG_CHECK(min_sector_coverage >= 0.0 && min_sector_coverage <= 1.0,
-                "coverage: min_sector_coverage must be in [0, 1]");
+  OMNIRIG_CHECK_POSITIVE(near_px);
+  OMNIRIG_CHECK_AT_LEAST(grid_step_px, 1);
+  OMNIRIG_CHECK_IN(azimuth_sector_deg, '(', 0, 360, ']');
+  OMNIRIG_CHECK_IN(min_sector_coverage, '[', 0, 1, ']');
 }
 
 CoverageReport AnalyseCoverage(const CalibrationReport& report, const BoardSpec& board,

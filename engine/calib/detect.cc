@@ -14,6 +14,7 @@
 #include "engine/calib/corner_fit.h"
 #include "engine/calib/grid_check.h"
 #include "engine/calib/initialize.h"
+#include "engine/util/option_check.h"
 
 namespace omnirig {
 namespace {
@@ -760,7 +761,7 @@ std::string ValidateBoardGrid(const cv::Mat& image, const BoardSpec& board,
 }
 
 void DetectOptions::Check() const {
-  OMNIRIG_CHECK(min_charuco_corners >= 4, "detect: min_charuco_corners must be >= 4");
+  OMNIRIG_CHECK_AT_LEAST(min_charuco_corners, 4);
   if (outer_corners_hint_px) {
     for (const auto& corner : *outer_corners_hint_px) {
       OMNIRIG_CHECK(corner.allFinite(), "detect: hint corners must be finite");
@@ -768,8 +769,7 @@ void DetectOptions::Check() const {
   }
   if (model) model->intrinsics.Check();
   grid_check.Check();
-  OMNIRIG_CHECK(max_dropped_fraction >= 0.0 && max_dropped_fraction <= 1.0,
-                "detect: max_dropped_fraction must be in [0, 1]");
+  OMNIRIG_CHECK_IN(max_dropped_fraction, '[', 0, 1, ']');
 }
 
 BoardDetection DetectBoard(const cv::Mat& image, const BoardSpec& board,

@@ -8,6 +8,7 @@
 #include <Eigen/Dense>
 
 #include "engine/util/check.h"
+#include "engine/util/option_check.h"
 
 namespace omnirig {
 namespace {
@@ -54,11 +55,10 @@ double NearestNeighbourPx(const std::vector<Eigen::Vector2d>& grid, const std::v
 }  // namespace
 
 void GridCheckOptions::Check() const {
-  OMNIRIG_CHECK(min_deviation_px > 0.0, "grid check: min_deviation_px must be positive");
-  OMNIRIG_CHECK(max_relative_deviation > 0.0,
-                "grid check: max_relative_deviation must be positive");
-  OMNIRIG_CHECK(num_neighbours >= 3, "grid check: num_neighbours must be >= 3");
-  OMNIRIG_CHECK(max_flagged >= 0, "grid check: max_flagged must be >= 0");
+  OMNIRIG_CHECK_POSITIVE(min_deviation_px);
+  OMNIRIG_CHECK_POSITIVE(max_relative_deviation);
+  OMNIRIG_CHECK_AT_LEAST(num_neighbours, 3);
+  OMNIRIG_CHECK_NON_NEGATIVE(max_flagged);
 }
 
 std::vector<GridCornerPrediction> PredictFromGridNeighbours(

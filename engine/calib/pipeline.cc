@@ -8,6 +8,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "engine/util/option_check.h"
 #include "engine/util/parallel.h"
 #include "engine/util/timer.h"
 
@@ -247,7 +248,7 @@ void SvpOptions::Check() const {
 void ImageCalibrationOptions::Check() const {
   detect.Check();
   calibrate.Check();
-  OMNIRIG_CHECK(overlay_error_scale > 0.0, "overlay_error_scale must be positive");
+  OMNIRIG_CHECK_POSITIVE(overlay_error_scale);
   if (svp) svp->Check();
   for (const auto& [name, hint] : hints) {
     for (const auto& corner : hint) {

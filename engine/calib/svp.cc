@@ -8,6 +8,7 @@
 
 #include "engine/calib/detect.h"
 #include "engine/util/check.h"
+#include "engine/util/option_check.h"
 
 namespace omnirig {
 namespace {
@@ -135,15 +136,14 @@ std::optional<double> StrongestCircularStep(const cv::Mat& grey, const Eigen::Ve
 }  // namespace
 
 void MirrorRim::Check() const {
-  OMNIRIG_CHECK(rim_radius_m > 0.0 && std::isfinite(rim_radius_m),
-                "svp: rim_radius_m must be positive");
+  OMNIRIG_CHECK_POSITIVE(rim_radius_m);
   OMNIRIG_CHECK(std::isfinite(rim_height_m), "svp: rim_height_m must be finite");
 }
 
 void SvpCheckOptions::Check() const {
   OMNIRIG_CHECK(search_margin_px > 1.0, "svp: search_margin_px must be > 1");
-  OMNIRIG_CHECK(num_profiles >= 8 && num_profiles <= 10000, "svp: num_profiles in [8, 10000]");
-  OMNIRIG_CHECK(inlier_px > 0.0, "svp: inlier_px must be positive");
+  OMNIRIG_CHECK_IN(num_profiles, '[', 8, 10000, ']');
+  OMNIRIG_CHECK_POSITIVE(inlier_px);
 }
 
 SvpCheckReport CheckSingleViewpoint(const cv::Mat& image, const CameraModel& camera,

@@ -8,6 +8,7 @@
 #include <string>
 
 #include "engine/util/check.h"
+#include "engine/util/option_check.h"
 #include "engine/util/parallel.h"
 #include "engine/util/timer.h"
 
@@ -24,20 +25,14 @@ int64_t Key(const Eigen::Vector3i& index) {
 }  // namespace
 
 void DenseMapOptions::Check() const {
-  OMNIRIG_CHECK(voxel_m >= 0.005 && voxel_m <= 1.0,
-                "voxel_m must lie in [0.005, 1] m, got " << voxel_m);
-  OMNIRIG_CHECK(keyframe_spacing_m >= 0.0,
-                "keyframe_spacing_m must be non-negative, got " << keyframe_spacing_m);
-  OMNIRIG_CHECK(grid_step_factor >= 1.0 && grid_step_factor <= 8.0,
-                "grid_step_factor must lie in [1, 8], got " << grid_step_factor);
-  OMNIRIG_CHECK(max_relative_range_std > 0.0,
-                "max_relative_range_std must be positive, got " << max_relative_range_std);
-  OMNIRIG_CHECK(min_points >= 1, "min_points must be at least 1, got " << min_points);
-  OMNIRIG_CHECK(min_frames >= 1, "min_frames must be at least 1, got " << min_frames);
-  OMNIRIG_CHECK(occupancy_cell_m >= voxel_m && occupancy_cell_m <= 2.0,
-                "occupancy_cell_m must lie in [voxel_m, 2] m, got " << occupancy_cell_m);
-  OMNIRIG_CHECK(min_obstacle_voxels >= 1,
-                "min_obstacle_voxels must be at least 1, got " << min_obstacle_voxels);
+  OMNIRIG_CHECK_IN(voxel_m, '[', 0.005, 1, ']');
+  OMNIRIG_CHECK_NON_NEGATIVE(keyframe_spacing_m);
+  OMNIRIG_CHECK_IN(grid_step_factor, '[', 1, 8, ']');
+  OMNIRIG_CHECK_POSITIVE(max_relative_range_std);
+  OMNIRIG_CHECK_AT_LEAST(min_points, 1);
+  OMNIRIG_CHECK_AT_LEAST(min_frames, 1);
+  OMNIRIG_CHECK_IN(occupancy_cell_m, '[', voxel_m, 2, ']');
+  OMNIRIG_CHECK_AT_LEAST(min_obstacle_voxels, 1);
   OMNIRIG_CHECK(obstacle_min_height_m > 0.0 && obstacle_max_height_m > obstacle_min_height_m,
                 "the obstacle band must satisfy 0 < obstacle_min_height_m < "
                 "obstacle_max_height_m");

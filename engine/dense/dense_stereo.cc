@@ -10,6 +10,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "engine/util/check.h"
+#include "engine/util/option_check.h"
 #include "engine/util/timer.h"
 
 namespace omnirig::dense {
@@ -99,40 +100,26 @@ void CheckPairImages(const StereoRig& rig, const cv::Mat& image0, const cv::Mat&
 
 void DenseStereoOptions::Check() const {
   grid.Check();
-  OMNIRIG_CHECK(max_parallax_deg > 0.0 && max_parallax_deg <= 45.0,
-                "max_parallax_deg must lie in (0, 45], got " << max_parallax_deg);
+  OMNIRIG_CHECK_IN(max_parallax_deg, '(', 0, 45, ']');
   OMNIRIG_CHECK(block_size >= 1 && block_size <= 11 && block_size % 2 == 1,
                 "block_size must be odd and in [1, 11], got " << block_size);
-  OMNIRIG_CHECK(uniqueness_ratio >= 0 && uniqueness_ratio <= 100,
-                "uniqueness_ratio must lie in [0, 100], got " << uniqueness_ratio);
-  OMNIRIG_CHECK(speckle_window_cells >= 0,
-                "speckle_window_cells must be non-negative, got " << speckle_window_cells);
-  OMNIRIG_CHECK(speckle_range_cells >= 1 && speckle_range_cells <= 16,
-                "speckle_range_cells must lie in [1, 16], got " << speckle_range_cells);
-  OMNIRIG_CHECK(left_right_max_diff_cells >= 0 && left_right_max_diff_cells <= 16,
-                "left_right_max_diff_cells must lie in [0, 16], got " << left_right_max_diff_cells);
+  OMNIRIG_CHECK_IN(uniqueness_ratio, '[', 0, 100, ']');
+  OMNIRIG_CHECK_NON_NEGATIVE(speckle_window_cells);
+  OMNIRIG_CHECK_IN(speckle_range_cells, '[', 1, 16, ']');
+  OMNIRIG_CHECK_IN(left_right_max_diff_cells, '[', 0, 16, ']');
   OMNIRIG_CHECK(
       confidence_window_cells >= 3 && confidence_window_cells <= 31 &&
           confidence_window_cells % 2 == 1,
       "confidence_window_cells must be odd and in [3, 31], got " << confidence_window_cells);
-  OMNIRIG_CHECK(image_noise_grey >= 0.0 && image_noise_grey <= 50.0,
-                "image_noise_grey must lie in [0, 50], got " << image_noise_grey);
-  OMNIRIG_CHECK(min_confidence >= 0.0 && min_confidence < 1.0,
-                "min_confidence must lie in [0, 1), got " << min_confidence);
-  OMNIRIG_CHECK(disparity_std_cells > 0.0,
-                "disparity_std_cells must be positive, got " << disparity_std_cells);
-  OMNIRIG_CHECK(max_relative_range_std > 0.0,
-                "max_relative_range_std must be positive, got " << max_relative_range_std);
-  OMNIRIG_CHECK(dark_level >= 0.0 && dark_level < 255.0,
-                "dark_level must lie in [0, 255), got " << dark_level);
-  OMNIRIG_CHECK(mask_margin_cells >= 0 && mask_margin_cells <= 100,
-                "mask_margin_cells must lie in [0, 100], got " << mask_margin_cells);
-  OMNIRIG_CHECK(epipolar_samples >= 0,
-                "epipolar_samples must be non-negative, got " << epipolar_samples);
-  OMNIRIG_CHECK(epipolar_search_rows >= 1 && epipolar_search_rows <= 16,
-                "epipolar_search_rows must lie in [1, 16], got " << epipolar_search_rows);
-  OMNIRIG_CHECK(max_epipolar_offset_cells > 0.0,
-                "max_epipolar_offset_cells must be positive, got " << max_epipolar_offset_cells);
+  OMNIRIG_CHECK_IN(image_noise_grey, '[', 0, 50, ']');
+  OMNIRIG_CHECK_IN(min_confidence, '[', 0, 1, ')');
+  OMNIRIG_CHECK_POSITIVE(disparity_std_cells);
+  OMNIRIG_CHECK_POSITIVE(max_relative_range_std);
+  OMNIRIG_CHECK_IN(dark_level, '[', 0, 255, ')');
+  OMNIRIG_CHECK_IN(mask_margin_cells, '[', 0, 100, ']');
+  OMNIRIG_CHECK_NON_NEGATIVE(epipolar_samples);
+  OMNIRIG_CHECK_IN(epipolar_search_rows, '[', 1, 16, ']');
+  OMNIRIG_CHECK_POSITIVE(max_epipolar_offset_cells);
 }
 
 cv::Mat GridMirrorMask(const cv::Mat& grey_on_grid, const cv::Mat& valid,

@@ -12,6 +12,7 @@
 
 #include "engine/geometry/unified_camera.h"
 #include "engine/util/check.h"
+#include "engine/util/option_check.h"
 
 namespace omnirig::dense {
 namespace {
@@ -74,8 +75,7 @@ std::pair<double, double> ThetaRange(const StereoRig& rig, const Eigen::Vector3d
 void SphericalGridOptions::Check() const {
   OMNIRIG_CHECK(step_rad == 0.0 || (step_rad >= 1e-4 && step_rad <= 0.05),
                 "the grid step must be 0 (automatic) or lie in [1e-4, 0.05] rad, got " << step_rad);
-  OMNIRIG_CHECK(step_factor >= 1.0 && step_factor <= 8.0,
-                "the grid step factor must lie in [1, 8], got " << step_factor);
+  OMNIRIG_CHECK_IN(step_factor, '[', 1, 8, ']');
 }
 
 double FinestAngularStep(const CameraModel& camera) {

@@ -1,6 +1,6 @@
 #pragma once
 // The geometry's Ceres layer, shared by calibration, relative pose and bundle adjustment: the
-// pose manifold, the rotated point's Jacobian, and the one solver set-up.
+// pose manifold, the rotated point's Jacobian, the one solver set-up and its progress callback.
 //
 // Parameter blocks hold a Rigid3d as 7 doubles in Eigen's order [qx, qy, qz, qw, tx, ty, tz]
 // (Rigid3d::ToParams).
@@ -8,8 +8,12 @@
 #include <ceres/ceres.h>
 #include <Eigen/Core>
 #include <Eigen/Geometry>
+#include <functional>
+#include <string>
+#include <utility>
 
 #include "engine/geometry/rigid3.h"
+#include "engine/util/progress.h"
 
 namespace omnirig {
 
@@ -84,5 +88,34 @@ inline ceres::Solver::Options MakeSolverOptions(const SolverSetup& setup) {
   options.minimizer_progress_to_stdout = false;
   return options;
 }
+
+// Aborts a solve as soon as `progress` is cancelled (Ceres calls this after every iteration,
+// well under a second apart even for the global adjustment; the caller then calls
+// progress.ThrowIfCancelled()) and reports each iteration as `stage` at the fraction of the
+// whole call that fraction_at(iteration) gives. `label` starts the message ("round 2, ").
+class SolverProgress : public ceres::IterationCallback {
+ public:
+  SolverProgress(const ProgressSink& progress, std::string stage,
+                 std::function<double(int iteration)> fraction_at, std::string label = "")
+      : progress_(progress),
+        stage_(std::move(stage)),
+        fraction_at_(std::move(fraction_at)),
+        label_(std::move(label)) {}
+  ceres::CallbackReturnType operator()(const ceres::IterationSummary& summary) override {
+    if (progress_.IsCancelled()) return ceres::SOLVER_ABORT;
+    if (progress_.report) {
+      progress_.Report(fraction_at_(summary.iteration), stage_,
+                       label_ + "iteration " + std::to_string(summary.iteration) + ", cost " +
+                           std::to_string(summary.cost));
+    }
+    return ceres::SOLVER_CONTINUE;
+  }
+
+ private:
+  const ProgressSink& progress_;
+  std::string stage_;
+  std::function<double(int)> fraction_at_;
+  std::string label_;
+};
 
 }  // namespace omnirig

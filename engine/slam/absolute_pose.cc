@@ -11,6 +11,7 @@
 #include <opengv/sac_problems/absolute_pose/AbsolutePoseSacProblem.hpp>
 
 #include "engine/util/check.h"
+#include "engine/util/option_check.h"
 
 namespace omnirig::slam {
 namespace {
@@ -31,10 +32,9 @@ class SeededAbsolutePoseProblem : public AbsolutePoseSacProblem {
 }  // namespace
 
 void AbsolutePoseOptions::Check() const {
-  OMNIRIG_CHECK(max_angular_error_rad > 0 && max_angular_error_rad < 0.5,
-                "max_angular_error_rad must be in (0, 0.5)");
-  OMNIRIG_CHECK(max_iterations >= 1, "max_iterations must be at least 1");
-  OMNIRIG_CHECK(min_inliers >= 4, "min_inliers must be at least 4");
+  OMNIRIG_CHECK_IN(max_angular_error_rad, '(', 0, 0.5, ')');
+  OMNIRIG_CHECK_AT_LEAST(max_iterations, 1);
+  OMNIRIG_CHECK_AT_LEAST(min_inliers, 4);
 }
 
 AbsolutePoseReport EstimateAbsolutePose(const std::vector<Eigen::Vector3d>& bearings_in_rig,

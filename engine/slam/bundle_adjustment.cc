@@ -10,6 +10,7 @@
 #include "engine/geometry/ceres_problem.h"
 #include "engine/geometry/reprojection_cost.h"
 #include "engine/util/check.h"
+#include "engine/util/option_check.h"
 #include "engine/util/timer.h"
 
 namespace omnirig::slam {
@@ -46,30 +47,6 @@ std::optional<double> SquaredError(const StereoRig& rig, const Rigid3d& rig_from
   if (!pixel) return std::nullopt;
   return (*pixel - observation.pixel).squaredNorm();
 }
-
-// Aborts the solver as soon as the sink is cancelled (Ceres calls this after every iteration,
-// well under a second apart even for the global adjustment) and reports the iterations.
-class ProgressCallback : public ceres::IterationCallback {
- public:
-  // Iterations are counted from `offset` out of `budget` (the solves of one adjustment).
-  ProgressCallback(const ProgressSink& progress, int offset, int budget)
-      : progress_(progress), offset_(offset), budget_(budget) {}
-  ceres::CallbackReturnType operator()(const ceres::IterationSummary& summary) override {
-    if (progress_.IsCancelled()) return ceres::SOLVER_ABORT;
-    if (progress_.report) {
-      progress_.Report(std::min(1.0, (offset_ + summary.iteration) / static_cast<double>(budget_)),
-                       "bundle_adjustment",
-                       "iteration " + std::to_string(summary.iteration) + ", cost " +
-                           std::to_string(summary.cost));
-    }
-    return ceres::SOLVER_CONTINUE;
-  }
-
- private:
-  const ProgressSink& progress_;
-  int offset_;
-  int budget_;
-};
 
 // Iterations of the first and the (optional) second solve of BundleAdjust().
 int SecondSolveIterations(const BundleAdjustmentOptions& options) {
@@ -244,8 +221,11 @@ ceres::Solver::Summary SolveOnce(const CalibrationRefinementOptions* refinement,
       SolverSetup(report->num_free_poses, max_iterations, options.num_threads)
           .DenseSchurUpTo(options.max_dense_schur_poses));
   solver.linear_solver_ordering = blocks.ordering;
-  ProgressCallback callback(progress, iteration_offset,
-                            options.max_iterations + SecondSolveIterations(options));
+  // Iterations are counted from `iteration_offset` out of the solves of one adjustment.
+  const int budget = options.max_iterations + SecondSolveIterations(options);
+  SolverProgress callback(progress, "bundle_adjustment", [&](int iteration) {
+    return std::min(1.0, (iteration_offset + iteration) / static_cast<double>(budget));
+  });
   solver.callbacks.push_back(&callback);
   ceres::Solve(solver, &problem, &summary);
   progress.ThrowIfCancelled();
@@ -420,17 +400,16 @@ void CalibrationRefinementOptions::Check() const {
   OMNIRIG_CHECK(!RefinesIntrinsics() ||
                     std::count(fixed_intrinsics.begin(), fixed_intrinsics.end(), false) > 0,
                 "refining the intrinsics needs at least one free intrinsic parameter");
-  OMNIRIG_CHECK(min_frames >= 2, "calibration refinement needs min_frames >= 2");
-  OMNIRIG_CHECK(min_observations_per_camera >= 1,
-                "calibration refinement needs min_observations_per_camera >= 1");
+  OMNIRIG_CHECK_AT_LEAST(min_frames, 2);
+  OMNIRIG_CHECK_AT_LEAST(min_observations_per_camera, 1);
 }
 
 void BundleAdjustmentOptions::Check() const {
-  OMNIRIG_CHECK(huber_scale_px > 0, "huber_scale_px must be positive");
-  OMNIRIG_CHECK(max_reprojection_error_px > 0, "max_reprojection_error_px must be positive");
-  OMNIRIG_CHECK(max_iterations > 0, "max_iterations must be positive");
-  OMNIRIG_CHECK(num_threads > 0, "num_threads must be positive");
-  OMNIRIG_CHECK(max_dense_schur_poses >= 0, "max_dense_schur_poses must not be negative");
+  OMNIRIG_CHECK_POSITIVE(huber_scale_px);
+  OMNIRIG_CHECK_POSITIVE(max_reprojection_error_px);
+  OMNIRIG_CHECK_POSITIVE(max_iterations);
+  OMNIRIG_CHECK_POSITIVE(num_threads);
+  OMNIRIG_CHECK_NON_NEGATIVE(max_dense_schur_poses);
 }
 
 BundleAdjustmentReport BundleAdjust(const StereoRig& rig, const std::vector<int>& free_frames,

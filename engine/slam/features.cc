@@ -8,6 +8,7 @@
 
 #include "engine/stereo/sift_bias.h"
 #include "engine/util/check.h"
+#include "engine/util/option_check.h"
 
 namespace omnirig::slam {
 namespace {
@@ -25,13 +26,11 @@ cv::Mat ToGray(const cv::Mat& image) {
 }  // namespace
 
 void FeatureOptions::Check() const {
-  OMNIRIG_CHECK(max_features >= 0, "max_features must not be negative");
-  OMNIRIG_CHECK(contrast_threshold > 0 && contrast_threshold < 1,
-                "contrast_threshold must be in (0, 1)");
-  OMNIRIG_CHECK(dark_level >= 0 && dark_level < 255, "dark_level must be in [0, 255)");
-  OMNIRIG_CHECK(mask_margin_px >= 0, "mask_margin_px must not be negative");
-  OMNIRIG_CHECK(detection_scale > 0.1 && detection_scale <= 1,
-                "detection_scale must be in (0.1, 1]");
+  OMNIRIG_CHECK_NON_NEGATIVE(max_features);
+  OMNIRIG_CHECK_IN(contrast_threshold, '(', 0, 1, ')');
+  OMNIRIG_CHECK_IN(dark_level, '[', 0, 255, ')');
+  OMNIRIG_CHECK_NON_NEGATIVE(mask_margin_px);
+  OMNIRIG_CHECK_IN(detection_scale, '(', 0.1, 1, ']');
 }
 
 MirrorAnnulus EstimateMirrorAnnulus(const CameraModel& camera, const cv::Mat& image,

@@ -12,6 +12,7 @@
 #include "engine/stereo/essential.h"
 #include "engine/stereo/triangulation.h"
 #include "engine/util/check.h"
+#include "engine/util/option_check.h"
 
 namespace omnirig::slam {
 namespace {
@@ -29,12 +30,11 @@ float SquaredDistance(const float* a, const float* b, int n) {
 }  // namespace
 
 void StereoMatchOptions::Check() const {
-  OMNIRIG_CHECK(max_epipolar_error_rad > 0, "max_epipolar_error_rad must be positive");
-  OMNIRIG_CHECK(max_descriptor_ratio > 0 && max_descriptor_ratio <= 1,
-                "max_descriptor_ratio must be in (0, 1]");
-  OMNIRIG_CHECK(max_descriptor_distance > 0, "max_descriptor_distance must be positive");
-  OMNIRIG_CHECK(min_parallax_rad >= 0, "min_parallax_rad must not be negative");
-  OMNIRIG_CHECK(max_range_m > 0, "max_range_m must be positive");
+  OMNIRIG_CHECK_POSITIVE(max_epipolar_error_rad);
+  OMNIRIG_CHECK_IN(max_descriptor_ratio, '(', 0, 1, ']');
+  OMNIRIG_CHECK_POSITIVE(max_descriptor_distance);
+  OMNIRIG_CHECK_NON_NEGATIVE(min_parallax_rad);
+  OMNIRIG_CHECK_POSITIVE(max_range_m);
 }
 
 std::vector<StereoPoint> MatchStereo(const StereoRig& rig, const CameraFeatures& features0,

@@ -5,6 +5,7 @@
 #include "engine/slam/evaluation.h"
 #include "engine/stereo/ransac.h"
 #include "engine/util/check.h"
+#include "engine/util/option_check.h"
 
 namespace omnirig::slam {
 namespace {
@@ -59,10 +60,10 @@ struct RigidMotionEstimator {
 }  // namespace
 
 void ScaleOptions::Check() const {
-  OMNIRIG_CHECK(max_error_sigmas > 0, "max_error_sigmas must be positive");
-  OMNIRIG_CHECK(min_tolerance_m >= 0, "min_tolerance_m must not be negative");
-  OMNIRIG_CHECK(min_inliers >= 1, "min_inliers must be at least 1");
-  OMNIRIG_CHECK(max_iterations >= 1, "max_iterations must be at least 1");
+  OMNIRIG_CHECK_POSITIVE(max_error_sigmas);
+  OMNIRIG_CHECK_NON_NEGATIVE(min_tolerance_m);
+  OMNIRIG_CHECK_AT_LEAST(min_inliers, 1);
+  OMNIRIG_CHECK_AT_LEAST(max_iterations, 1);
 }
 
 ScaleReport EstimateScale(const Eigen::Matrix3d& rotation, const Eigen::Vector3d& t_unit,

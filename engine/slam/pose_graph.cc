@@ -85,7 +85,6 @@ PoseGraphReport OptimisePoseGraph(const std::vector<PoseGraphEdge>& edges,
   }
   PoseGraphReport report;
   report.num_poses = static_cast<int>(params.size());
-  report.num_edges = static_cast<int>(edges.size());
   report.iterations = static_cast<int>(summary.iterations.size());
   report.initial_cost = summary.initial_cost;
   report.final_cost = summary.final_cost;

@@ -24,7 +24,6 @@ struct PoseGraphEdge {
 
 struct PoseGraphReport {
   int num_poses = 0;
-  int num_edges = 0;
   int iterations = 0;
   double initial_cost = 0.0;
   double final_cost = 0.0;

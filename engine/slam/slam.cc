@@ -7,6 +7,7 @@
 
 #include "engine/slam/tracker.h"
 #include "engine/util/check.h"
+#include "engine/util/option_check.h"
 
 namespace omnirig::slam {
 
@@ -31,33 +32,29 @@ void SlamOptions::Check() const {
   OMNIRIG_CHECK(calibration_refinement.refine == CalibrationRefinement::kNone ||
                     global_bundle_adjustment,
                 "refining the calibration needs the global bundle adjustment");
-  OMNIRIG_CHECK(temporal_max_descriptor_ratio > 0 && temporal_max_descriptor_ratio <= 1,
-                "temporal_max_descriptor_ratio must be in (0, 1]");
-  OMNIRIG_CHECK(local_window_frames >= 0, "local_window_frames must not be negative");
-  OMNIRIG_CHECK(keyframe_min_mapped_landmarks >= 1,
-                "keyframe_min_mapped_landmarks must be at least 1");
-  OMNIRIG_CHECK(local_map_keyframes >= 0, "local_map_keyframes must not be negative");
-  OMNIRIG_CHECK(map_gate_rad > 0 && map_gate_rad <= M_PI, "map_gate_rad must be in (0, pi]");
-  OMNIRIG_CHECK(local_max_iterations >= 1, "local_max_iterations must be at least 1");
-  OMNIRIG_CHECK(temporal_gate_rad > 0 && temporal_gate_rad <= M_PI,
-                "temporal_gate_rad must be in (0, pi]");
+  OMNIRIG_CHECK_IN(temporal_max_descriptor_ratio, '(', 0, 1, ']');
+  OMNIRIG_CHECK_NON_NEGATIVE(local_window_frames);
+  OMNIRIG_CHECK_AT_LEAST(keyframe_min_mapped_landmarks, 1);
+  OMNIRIG_CHECK_NON_NEGATIVE(local_map_keyframes);
+  OMNIRIG_CHECK_IN(map_gate_rad, '(', 0, M_PI, ']');
+  OMNIRIG_CHECK_AT_LEAST(local_max_iterations, 1);
+  OMNIRIG_CHECK_IN(temporal_gate_rad, '(', 0, M_PI, ']');
   OMNIRIG_CHECK(min_features >= 8 && min_stereo_points >= 3 && min_matches >= 8 &&
                     min_tracked_landmarks >= 3,
                 "minimum counts are too small to estimate a pose");
-  OMNIRIG_CHECK(num_threads >= 1, "num_threads must be at least 1");
-  OMNIRIG_CHECK(min_map_point_frames >= 1, "min_map_point_frames must be at least 1");
-  OMNIRIG_CHECK(keyframe_min_tracked_fraction >= 0 && keyframe_min_tracked_fraction <= 1,
-                "keyframe_min_tracked_fraction must be in [0, 1]");
-  OMNIRIG_CHECK(keyframe_max_distance_m > 0 && keyframe_max_rotation_deg > 0,
-                "keyframe_max_distance_m and keyframe_max_rotation_deg must be positive");
-  OMNIRIG_CHECK(loop_min_keyframe_gap >= 1 && loop_max_candidates >= 1,
-                "loop_min_keyframe_gap and loop_max_candidates must be at least 1");
-  OMNIRIG_CHECK(loop_min_score >= 0 && loop_min_score <= 1, "loop_min_score must be in [0, 1]");
-  OMNIRIG_CHECK(loop_max_distance_m > 0, "loop_max_distance_m must be positive");
-  OMNIRIG_CHECK(loop_max_drift_fraction >= 0, "loop_max_drift_fraction must not be negative");
-  OMNIRIG_CHECK(loop_min_inliers >= 8, "loop_min_inliers must be at least 8");
-  OMNIRIG_CHECK(loop_min_correction_m >= 0 && loop_min_correction_deg >= 0,
-                "loop corrections must not be negative");
+  OMNIRIG_CHECK_AT_LEAST(num_threads, 1);
+  OMNIRIG_CHECK_AT_LEAST(min_map_point_frames, 1);
+  OMNIRIG_CHECK_IN(keyframe_min_tracked_fraction, '[', 0, 1, ']');
+  OMNIRIG_CHECK_POSITIVE(keyframe_max_distance_m);
+  OMNIRIG_CHECK_POSITIVE(keyframe_max_rotation_deg);
+  OMNIRIG_CHECK_AT_LEAST(loop_min_keyframe_gap, 1);
+  OMNIRIG_CHECK_AT_LEAST(loop_max_candidates, 1);
+  OMNIRIG_CHECK_IN(loop_min_score, '[', 0, 1, ']');
+  OMNIRIG_CHECK_POSITIVE(loop_max_distance_m);
+  OMNIRIG_CHECK_NON_NEGATIVE(loop_max_drift_fraction);
+  OMNIRIG_CHECK_AT_LEAST(loop_min_inliers, 8);
+  OMNIRIG_CHECK_NON_NEGATIVE(loop_min_correction_m);
+  OMNIRIG_CHECK_NON_NEGATIVE(loop_min_correction_deg);
   absolute_pose.Check();
 }
 

@@ -6,6 +6,7 @@
 #include <sstream>
 
 #include "engine/util/check.h"
+#include "engine/util/option_check.h"
 
 namespace omnirig::slam {
 namespace {
@@ -132,10 +133,9 @@ StereoVideoInfo ProbeStereoVideo(const StereoVideoFiles& files) {
 }
 
 void VideoFrameOptions::Check() const {
-  OMNIRIG_CHECK(std::isfinite(pair_tolerance_s) && pair_tolerance_s >= 0,
-                "pair_tolerance_s must be a non-negative number of seconds");
-  OMNIRIG_CHECK(frame_step >= 1, "frame_step must be at least 1");
-  OMNIRIG_CHECK(std::isfinite(start_s) && start_s >= 0, "start_s must be a time >= 0 s");
+  OMNIRIG_CHECK_NON_NEGATIVE(pair_tolerance_s);
+  OMNIRIG_CHECK_AT_LEAST(frame_step, 1);
+  OMNIRIG_CHECK_NON_NEGATIVE(start_s);
   OMNIRIG_CHECK(end_s > start_s,
                 "end_s (" << end_s << ") must be after start_s (" << start_s << ")");
 }

@@ -11,6 +11,7 @@
 #include "engine/stereo/ransac.h"
 #include "engine/stereo/triangulation.h"
 #include "engine/util/check.h"
+#include "engine/util/option_check.h"
 
 namespace omnirig {
 namespace {
@@ -241,13 +242,10 @@ int SelectDecomposition(const std::vector<Rigid3d>& candidates,
 }
 
 void EssentialRansacOptions::Check() const {
-  OMNIRIG_CHECK(std::isfinite(max_angular_error_rad) && max_angular_error_rad > 0.0 &&
-                    max_angular_error_rad < 0.5 * M_PI,
-                "max_angular_error_rad must lie in (0, pi/2), got " << max_angular_error_rad);
-  OMNIRIG_CHECK(max_iterations >= 1, "max_iterations must be at least 1, got " << max_iterations);
-  OMNIRIG_CHECK(confidence > 0.0 && confidence < 1.0,
-                "confidence must lie in (0, 1), got " << confidence);
-  OMNIRIG_CHECK(min_inliers >= 8, "min_inliers must be at least 8, got " << min_inliers);
+  OMNIRIG_CHECK_IN(max_angular_error_rad, '(', 0, 0.5 * M_PI, ')');
+  OMNIRIG_CHECK_AT_LEAST(max_iterations, 1);
+  OMNIRIG_CHECK_IN(confidence, '(', 0, 1, ')');
+  OMNIRIG_CHECK_AT_LEAST(min_inliers, 8);
 }
 
 bool RefineRelativePose(const std::vector<Eigen::Vector3d>& bearings1,
@@ -317,8 +315,8 @@ EssentialReport EstimateEssentialRansac(const std::vector<Eigen::Vector3d>& bear
   // Triangulation-based choice tolerates a few times the epipolar threshold: the midpoint's
   // reprojection error exceeds the epipolar error, and a wrong candidate is off by ~pi anyway.
   const double support_threshold = std::max(10.0 * options.max_angular_error_rad, 0.01);
-  const int chosen = SelectDecomposition(candidates, bearings1, bearings2, inliers,
-                                         support_threshold, &report.num_supporting);
+  const int chosen =
+      SelectDecomposition(candidates, bearings1, bearings2, inliers, support_threshold, nullptr);
   if (chosen < 0) return Fail(report, "no decomposition of E triangulates any inlier");
   Rigid3d pose = candidates[chosen];
   if (options.refine) {

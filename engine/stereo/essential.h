@@ -80,8 +80,6 @@ struct EssentialReport {
   std::vector<char> inlier_mask;  // one per pair
   int num_inliers = 0;
   int num_iterations = 0;
-  // Pairs (among inliers) whose triangulation supports the chosen decomposition.
-  int num_supporting = 0;
   double rms_angular_error_rad = 0.0;  // over inliers, after refinement
   // Median angle between the two rays over the inliers that triangulate in front of both
   // cameras (unit baseline). Near zero for a (nearly) pure rotation, where every translation

@@ -25,7 +25,7 @@
 #include <random>
 #include <vector>
 
-#include "engine/util/check.h"
+#include "engine/util/option_check.h"
 
 namespace omnirig {
 
@@ -41,13 +41,11 @@ struct RansacOptions {
   bool local_optimization = true;
 
   void Check() const {
-    OMNIRIG_CHECK(std::isfinite(max_error) && max_error > 0.0,
-                  "RansacOptions: max_error must be positive, got " << max_error);
+    OMNIRIG_CHECK_POSITIVE(max_error);
     OMNIRIG_CHECK(
         min_iterations >= 0 && max_iterations >= 1 && min_iterations <= max_iterations,
         "RansacOptions: need 0 <= min_iterations <= max_iterations and max_iterations >= 1");
-    OMNIRIG_CHECK(confidence > 0.0 && confidence < 1.0,
-                  "RansacOptions: confidence must lie in (0, 1), got " << confidence);
+    OMNIRIG_CHECK_IN(confidence, '(', 0, 1, ')');
   }
 };
 

@@ -13,25 +13,20 @@
 #include "engine/stereo/relpose_corner_order.h"
 #include "engine/stereo/relpose_linear.h"
 #include "engine/stereo/relpose_refine.h"
+#include "engine/util/option_check.h"
 
 namespace omnirig {
 
 void RelativePoseOptions::Check() const {
-  OMNIRIG_CHECK(consensus_rotation_deg > 0.0 && consensus_rotation_deg < 90.0,
-                "consensus_rotation_deg must be in (0, 90), got " << consensus_rotation_deg);
-  OMNIRIG_CHECK(
-      consensus_translation_fraction > 0.0 && consensus_translation_fraction < 1.0,
-      "consensus_translation_fraction must be in (0, 1), got " << consensus_translation_fraction);
-  OMNIRIG_CHECK(max_board_pose_rms_px > 0.0,
-                "max_board_pose_rms_px must be positive, got " << max_board_pose_rms_px);
+  OMNIRIG_CHECK_IN(consensus_rotation_deg, '(', 0, 90, ')');
+  OMNIRIG_CHECK_IN(consensus_translation_fraction, '(', 0, 1, ')');
+  OMNIRIG_CHECK_POSITIVE(max_board_pose_rms_px);
   sync_test.Check();
-  OMNIRIG_CHECK(huber_loss_px >= 0.0, "huber_loss_px must be >= 0, got " << huber_loss_px);
-  OMNIRIG_CHECK(max_num_iterations >= 1 && max_num_iterations <= 10000,
-                "max_num_iterations must be in [1, 10000], got " << max_num_iterations);
-  OMNIRIG_CHECK(num_threads >= 1, "num_threads must be >= 1, got " << num_threads);
-  OMNIRIG_CHECK(min_num_pairs >= 1, "min_num_pairs must be >= 1, got " << min_num_pairs);
-  OMNIRIG_CHECK(min_spread_eigen_ratio >= 0.0 && min_spread_eigen_ratio < 1.0,
-                "min_spread_eigen_ratio must be in [0, 1), got " << min_spread_eigen_ratio);
+  OMNIRIG_CHECK_NON_NEGATIVE(huber_loss_px);
+  OMNIRIG_CHECK_IN(max_num_iterations, '[', 1, 10000, ']');
+  OMNIRIG_CHECK_AT_LEAST(num_threads, 1);
+  OMNIRIG_CHECK_AT_LEAST(min_num_pairs, 1);
+  OMNIRIG_CHECK_IN(min_spread_eigen_ratio, '[', 0, 1, ')');
 }
 
 RigRefinementOptions RelativePoseOptions::RefinementOptions() const {

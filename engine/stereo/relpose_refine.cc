@@ -20,29 +20,6 @@ std::array<bool, UnifiedIntrinsics::kNumParams> DefaultFixedIntrinsics() {
 
 namespace {
 
-// Cancels the solve between iterations and reports progress.
-class ProgressCallback : public ceres::IterationCallback {
- public:
-  ProgressCallback(const ProgressSink& progress, int max_iterations)
-      : progress_(progress), max_iterations_(max_iterations) {}
-  ceres::CallbackReturnType operator()(const ceres::IterationSummary& summary) override {
-    if (progress_.IsCancelled()) {
-      cancelled_ = true;
-      return ceres::SOLVER_ABORT;
-    }
-    progress_.Report(std::min(1.0, (summary.iteration + 1.0) / max_iterations_), "refine",
-                     "iteration " + std::to_string(summary.iteration) + ", cost " +
-                         std::to_string(summary.cost));
-    return ceres::SOLVER_CONTINUE;
-  }
-  bool cancelled() const { return cancelled_; }
-
- private:
-  const ProgressSink& progress_;
-  int max_iterations_;
-  bool cancelled_ = false;
-};
-
 struct RigBlocks {
   std::array<double, 7> cam0_from_cam1;
   std::vector<std::array<double, 7>> cam0_from_board;
@@ -271,11 +248,13 @@ RigRefinementSummary RefineRig(const std::vector<RigPairCorners>& pairs,
   ceres::Solver::Options solver_options = MakeSolverOptions(
       SolverSetup(3, options.max_num_iterations, std::max(1, options.num_threads))
           .Tolerances(1e-12, 1e-14, 1e-12));
-  ProgressCallback callback(progress, options.max_num_iterations);
+  SolverProgress callback(progress, "refine", [&](int iteration) {
+    return std::min(1.0, (iteration + 1.0) / options.max_num_iterations);
+  });
   solver_options.callbacks.push_back(&callback);
   ceres::Solver::Summary summary;
   ceres::Solve(solver_options, &problem, &summary);
-  if (callback.cancelled()) throw Cancelled();
+  progress.ThrowIfCancelled();
 
   RigRefinementSummary result;
   result.initial_cost = summary.initial_cost;

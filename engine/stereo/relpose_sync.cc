@@ -11,6 +11,7 @@
 #include "engine/geometry/ceres_problem.h"
 #include "engine/geometry/reprojection_cost.h"
 #include "engine/util/check.h"
+#include "engine/util/option_check.h"
 
 namespace omnirig {
 
@@ -67,12 +68,9 @@ double ScaledFUpperQuantile(double p, int dof, double denominator_dof) {
 }
 
 void SyncTestOptions::Check() const {
-  OMNIRIG_CHECK(false_alarm_rate >= 0.0 && false_alarm_rate < 1.0,
-                "sync_test.false_alarm_rate must be in [0, 1), got " << false_alarm_rate);
-  OMNIRIG_CHECK(min_corner_noise_px > 0.0,
-                "sync_test.min_corner_noise_px must be positive, got " << min_corner_noise_px);
-  OMNIRIG_CHECK(max_rounds >= 1 && max_rounds <= 100,
-                "sync_test.max_rounds must be in [1, 100], got " << max_rounds);
+  OMNIRIG_CHECK_IN(false_alarm_rate, '[', 0, 1, ')');
+  OMNIRIG_CHECK_POSITIVE(min_corner_noise_px);
+  OMNIRIG_CHECK_IN(max_rounds, '[', 1, 100, ']');
 }
 
 namespace {

@@ -15,6 +15,7 @@
 #include "engine/stereo/sift_bias.h"
 #include "engine/stereo/triangulation.h"
 #include "engine/util/check.h"
+#include "engine/util/option_check.h"
 
 namespace omnirig {
 namespace {
@@ -60,22 +61,15 @@ std::array<uint8_t, 3> ColourAt(const cv::Mat& image, const cv::Point2f& pt) {
 }  // namespace
 
 void StereoReconstructOptions::Check() const {
-  OMNIRIG_CHECK(max_features >= 0, "max_features must be non-negative, got " << max_features);
-  OMNIRIG_CHECK(ratio_test > 0.0 && ratio_test <= 1.0,
-                "ratio_test must lie in (0, 1], got " << ratio_test);
-  OMNIRIG_CHECK(max_epipolar_error_rad > 0.0 && max_epipolar_error_rad < 0.5,
-                "max_epipolar_error_rad must lie in (0, 0.5), got " << max_epipolar_error_rad);
-  OMNIRIG_CHECK(min_parallax_rad >= 0.0 && min_parallax_rad < M_PI,
-                "min_parallax_rad must lie in [0, pi), got " << min_parallax_rad);
-  OMNIRIG_CHECK(max_reprojection_error_rad > 0.0,
-                "max_reprojection_error_rad must be positive, got " << max_reprojection_error_rad);
-  OMNIRIG_CHECK(keypoint_std_px > 0.0, "keypoint_std_px must be positive, got " << keypoint_std_px);
-  OMNIRIG_CHECK(max_relative_range_std > 0.0,
-                "max_relative_range_std must be positive, got " << max_relative_range_std);
-  OMNIRIG_CHECK(dark_level >= 0.0 && dark_level < 255.0,
-                "dark_level must lie in [0, 255), got " << dark_level);
-  OMNIRIG_CHECK(mask_margin_px >= 0 && mask_margin_px <= 200,
-                "mask_margin_px must lie in [0, 200], got " << mask_margin_px);
+  OMNIRIG_CHECK_NON_NEGATIVE(max_features);
+  OMNIRIG_CHECK_IN(ratio_test, '(', 0, 1, ']');
+  OMNIRIG_CHECK_IN(max_epipolar_error_rad, '(', 0, 0.5, ')');
+  OMNIRIG_CHECK_IN(min_parallax_rad, '[', 0, M_PI, ')');
+  OMNIRIG_CHECK_POSITIVE(max_reprojection_error_rad);
+  OMNIRIG_CHECK_POSITIVE(keypoint_std_px);
+  OMNIRIG_CHECK_POSITIVE(max_relative_range_std);
+  OMNIRIG_CHECK_IN(dark_level, '[', 0, 255, ')');
+  OMNIRIG_CHECK_IN(mask_margin_px, '[', 0, 200, ']');
 }
 
 cv::Mat MirrorMask(const cv::Mat& image, const CameraModel& camera,
@@ -235,10 +229,8 @@ void TriangulateMatches(const StereoRig& rig, const LiftedFeatures& f0, const Li
     StereoPoint point;
     point.point_in_cam0 = t.point_in_cam1;  // the triangulation's camera 1 is the rig's cam0
     const cv::Point2f& p0 = f0.keypoints[match.index0].pt;
-    const cv::Point2f& p1 = f1.keypoints[match.index1].pt;
     point.rgb = ColourAt(image0, p0);
     point.pixel0 = Eigen::Vector2d(p0.x, p0.y);
-    point.pixel1 = Eigen::Vector2d(p1.x, p1.y);
     point.parallax_rad = t.parallax_rad;
     point.range_std_m = t.range_std_m;
     report->points.push_back(point);

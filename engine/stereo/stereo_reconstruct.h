@@ -66,7 +66,6 @@ struct StereoPoint {
   Eigen::Vector3d point_in_cam0 = Eigen::Vector3d::Zero();
   std::array<uint8_t, 3> rgb{0, 0, 0};  // colour at the cam0 keypoint
   Eigen::Vector2d pixel0 = Eigen::Vector2d::Zero();
-  Eigen::Vector2d pixel1 = Eigen::Vector2d::Zero();
   double parallax_rad = 0.0;
   double range_std_m = 0.0;
 };

@@ -7,6 +7,7 @@
 #include <Eigen/Geometry>
 
 #include "engine/util/check.h"
+#include "engine/util/option_check.h"
 
 namespace omnirig {
 namespace {
@@ -95,12 +96,9 @@ bool SetUpRays(const Rigid3d& cam2_from_cam1, const Eigen::Vector3d& bearing1,
 }  // namespace
 
 void TriangulationOptions::Check() const {
-  OMNIRIG_CHECK(min_parallax_rad >= 0.0 && min_parallax_rad < M_PI,
-                "TriangulationOptions: min_parallax_rad must lie in [0, pi)");
-  OMNIRIG_CHECK(bearing_std_rad >= 0.0 && std::isfinite(bearing_std_rad),
-                "TriangulationOptions: bearing_std_rad must be non-negative");
-  OMNIRIG_CHECK(max_angular_error_rad > 0.0,
-                "TriangulationOptions: max_angular_error_rad must be positive");
+  OMNIRIG_CHECK_IN(min_parallax_rad, '[', 0, M_PI, ')');
+  OMNIRIG_CHECK_NON_NEGATIVE(bearing_std_rad);
+  OMNIRIG_CHECK_POSITIVE(max_angular_error_rad);
 }
 
 TriangulatedPoint TriangulateMidpoint(const Rigid3d& cam2_from_cam1,

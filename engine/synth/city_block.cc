@@ -4,7 +4,7 @@
 #include <cmath>
 #include <string>
 
-#include "engine/util/check.h"
+#include "engine/util/option_check.h"
 
 namespace omnirig::synth {
 namespace {
@@ -119,9 +119,7 @@ void AddStreetFurniture(const CityBlockLoop& loop, uint64_t seed, Scene* scene) 
 }  // namespace
 
 CityBlockLoop::CityBlockLoop(double length_m) : length_m_(length_m) {
-  OMNIRIG_CHECK(std::isfinite(length_m) && length_m >= kMinLengthM && length_m <= kMaxLengthM,
-                "the loop's length must be in [" << kMinLengthM << ", " << kMaxLengthM
-                                                 << "] m, got " << length_m);
+  OMNIRIG_CHECK_IN(length_m, '[', kMinLengthM, kMaxLengthM, ']');
   // length = 4 a + 4 b + 2 pi r with a = 2 b (half extents of the core).
   const double b = (length_m - 2.0 * M_PI * kPathOffsetM) / 12.0;
   core_half_ = Eigen::Vector2d(2.0 * b, b);

@@ -11,6 +11,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "engine/util/check.h"
+#include "engine/util/option_check.h"
 
 namespace omnirig::synth {
 namespace {
@@ -181,9 +182,10 @@ void BoardPoseOptions::Check() const {
   OMNIRIG_CHECK(min_distance_m > 0.0 && max_distance_m >= min_distance_m,
                 "board distances must satisfy 0 < min <= max, got " << min_distance_m << " .. "
                                                                     << max_distance_m);
-  OMNIRIG_CHECK(max_tilt_deg >= 0.0 && max_tilt_deg < 80.0, "max_tilt_deg must be in [0, 80)");
-  OMNIRIG_CHECK(max_roll_deg >= 0.0 && max_roll_deg <= 180.0, "max_roll_deg must be in [0, 180]");
-  OMNIRIG_CHECK(min_margin_px >= 0.0 && min_square_px >= 0.0, "pixel margins must be >= 0");
+  OMNIRIG_CHECK_IN(max_tilt_deg, '[', 0, 80, ')');
+  OMNIRIG_CHECK_IN(max_roll_deg, '[', 0, 180, ']');
+  OMNIRIG_CHECK_NON_NEGATIVE(min_margin_px);
+  OMNIRIG_CHECK_NON_NEGATIVE(min_square_px);
 }
 
 std::vector<Eigen::Vector2d> ProjectBoardCorners(const SynthCamera& camera,
@@ -254,16 +256,14 @@ Scene MakeCalibrationBackground(uint64_t seed) {
 }
 
 void BoardLook::Check() const {
-  OMNIRIG_CHECK(frame_width_m >= 0.0 && frame_width_m <= 1.0, "frame_width_m must be in [0, 1]");
-  OMNIRIG_CHECK(frame_grey > 0.0 && frame_grey <= 1.0, "frame_grey must be in (0, 1]");
-  OMNIRIG_CHECK(highlight_sigma_squares >= 0.0 && highlight_sigma_squares <= 10.0,
-                "highlight_sigma_squares must be in [0, 10]");
-  OMNIRIG_CHECK(highlight_level >= 0.0 && highlight_level <= 255.0,
-                "highlight_level must be in [0, 255]");
+  OMNIRIG_CHECK_IN(frame_width_m, '[', 0, 1, ']');
+  OMNIRIG_CHECK_IN(frame_grey, '(', 0, 1, ']');
+  OMNIRIG_CHECK_IN(highlight_sigma_squares, '[', 0, 10, ']');
+  OMNIRIG_CHECK_IN(highlight_level, '[', 0, 255, ']');
 }
 
 void MonoCalibrationOptions::Check() const {
-  OMNIRIG_CHECK(num_views >= 1 && num_views <= 10000, "num_views must be in [1, 10000]");
+  OMNIRIG_CHECK_IN(num_views, '[', 1, 10000, ']');
   CheckImageSize(width, height);
   if (camera) camera->Check();
   board.Check();
@@ -309,7 +309,7 @@ Rigid3d DefaultCam0FromCam1() {
 }
 
 void StereoBoardOptions::Check() const {
-  OMNIRIG_CHECK(num_pairs >= 1 && num_pairs <= 10000, "num_pairs must be in [1, 10000]");
+  OMNIRIG_CHECK_IN(num_pairs, '[', 1, 10000, ']');
   CheckImageSize(width, height);
   if (cameras) {
     (*cameras)[0].Check();

@@ -13,6 +13,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "engine/util/check.h"
+#include "engine/util/option_check.h"
 #include "engine/util/parallel.h"
 
 namespace omnirig::synth {
@@ -429,24 +430,21 @@ std::optional<float> BoardPixelLevel(const FramePrimitive& board, const Polygon&
 }  // namespace
 
 void RenderOptions::Check() const {
-  OMNIRIG_CHECK(supersampling >= 1 && supersampling <= 16,
-                "supersampling must be in [1, 16], got " << supersampling);
-  OMNIRIG_CHECK(std::isfinite(noise_sigma) && noise_sigma >= 0.0, "noise_sigma must be >= 0");
-  OMNIRIG_CHECK(std::isfinite(blur_sigma_px) && blur_sigma_px >= 0.0, "blur_sigma_px must be >= 0");
-  OMNIRIG_CHECK(std::isfinite(vignetting) && vignetting >= 0.0 && vignetting <= 1.0,
-                "vignetting must be in [0, 1], got " << vignetting);
-  OMNIRIG_CHECK(num_threads >= 0, "num_threads must be >= 0");
+  OMNIRIG_CHECK_IN(supersampling, '[', 1, 16, ']');
+  OMNIRIG_CHECK_NON_NEGATIVE(noise_sigma);
+  OMNIRIG_CHECK_NON_NEGATIVE(blur_sigma_px);
+  OMNIRIG_CHECK_IN(vignetting, '[', 0, 1, ']');
+  OMNIRIG_CHECK_NON_NEGATIVE(num_threads);
   lighting.Check();
 }
 
 void Lighting::Check() const {
-  OMNIRIG_CHECK(std::isfinite(gain) && gain > 0.0, "lighting gain must be positive");
+  OMNIRIG_CHECK_POSITIVE(gain);
   OMNIRIG_CHECK(tint_rgb.allFinite() && tint_rgb.minCoeff() > 0.0,
                 "lighting tint components must be positive");
   OMNIRIG_CHECK(sun_in_world.allFinite() && sun_in_world.norm() > 0.0,
                 "the sun direction must be a non-zero vector");
-  OMNIRIG_CHECK(std::isfinite(sun_share) && sun_share >= 0.0 && sun_share <= 1.0,
-                "sun_share must be in [0, 1]");
+  OMNIRIG_CHECK_IN(sun_share, '[', 0, 1, ']');
 }
 
 // Per-camera precomputation: the undistorted normalised-plane point m of every pixel corner

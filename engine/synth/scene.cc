@@ -6,16 +6,13 @@
 #include <opencv2/imgproc.hpp>
 
 #include "engine/util/check.h"
+#include "engine/util/option_check.h"
 
 namespace omnirig::synth {
 namespace {
 
 constexpr int kMaxTextureSide = 2048;
 constexpr int kMaxShapes = 20000;
-
-void CheckPositive(double value, const char* what) {
-  OMNIRIG_CHECK(std::isfinite(value) && value > 0.0, what << " must be positive, got " << value);
-}
 
 // Value noise: the sum of uniform random grids with cells of cell_m metres, upsampled
 // bicubically. Returns values roughly in [0, 1].
@@ -102,8 +99,8 @@ TextureSpec RichTexture(uint64_t seed, uint64_t salt, const Eigen::Vector3d& rgb
 void CheckerboardSpec::Check() const {
   OMNIRIG_CHECK(cols >= 2 && rows >= 2,
                 "a board needs at least 2 x 2 inner corners, got " << cols << " x " << rows);
-  CheckPositive(square_size_m, "square_size_m");
-  OMNIRIG_CHECK(std::isfinite(margin_m) && margin_m >= 0.0, "margin_m must be >= 0");
+  OMNIRIG_CHECK_POSITIVE(square_size_m);
+  OMNIRIG_CHECK_NON_NEGATIVE(margin_m);
 }
 
 std::vector<Eigen::Vector3d> BoardCorners(const CheckerboardSpec& spec) {
@@ -142,9 +139,9 @@ const char* KindName(PrimitiveInfo::Kind kind) {
 }
 
 cv::Mat MakeTexture(const TextureSpec& spec, double extent_x_m, double extent_y_m) {
-  CheckPositive(extent_x_m, "texture extent");
-  CheckPositive(extent_y_m, "texture extent");
-  CheckPositive(spec.texel_size_m, "texel_size_m");
+  OMNIRIG_CHECK_POSITIVE(extent_x_m);
+  OMNIRIG_CHECK_POSITIVE(extent_y_m);
+  OMNIRIG_CHECK_POSITIVE(spec.texel_size_m);
   const double texel_m =
       std::max(spec.texel_size_m, std::max(extent_x_m, extent_y_m) / kMaxTextureSide);
   const int cols = std::max(2, static_cast<int>(std::ceil(extent_x_m / texel_m)));
@@ -192,8 +189,8 @@ void Scene::SetBoardPose(int index, const Rigid3d& world_from_board) {
 
 int Scene::AddPlane(const Rigid3d& world_from_plane, double size_x_m, double size_y_m,
                     const TextureSpec& texture, const std::string& name) {
-  CheckPositive(size_x_m, "plane size_x_m");
-  CheckPositive(size_y_m, "plane size_y_m");
+  OMNIRIG_CHECK_POSITIVE(size_x_m);
+  OMNIRIG_CHECK_POSITIVE(size_y_m);
   return Add(PrimitiveInfo::Kind::kPlane, name, world_from_plane,
              Eigen::Vector3d(size_x_m, size_y_m, 0.0), texture,
              {std::make_shared<const cv::Mat>(MakeTexture(texture, size_x_m, size_y_m))});
@@ -201,7 +198,7 @@ int Scene::AddPlane(const Rigid3d& world_from_plane, double size_x_m, double siz
 
 int Scene::AddBox(const Rigid3d& world_from_box, const Eigen::Vector3d& size_m,
                   const TextureSpec& texture, const std::string& name) {
-  for (int k = 0; k < 3; ++k) CheckPositive(size_m[k], "box size");
+  for (int k = 0; k < 3; ++k) OMNIRIG_CHECK_POSITIVE(size_m[k]);
   Textures faces;
   for (int face = 0; face < 6; ++face) {
     const int axis = face / 2;
@@ -216,8 +213,8 @@ int Scene::AddBox(const Rigid3d& world_from_box, const Eigen::Vector3d& size_m,
 
 int Scene::AddCylinder(const Rigid3d& world_from_cylinder, double radius_m, double height_m,
                        const TextureSpec& texture, const std::string& name) {
-  CheckPositive(radius_m, "cylinder radius_m");
-  CheckPositive(height_m, "cylinder height_m");
+  OMNIRIG_CHECK_POSITIVE(radius_m);
+  OMNIRIG_CHECK_POSITIVE(height_m);
   Textures faces;
   faces.push_back(
       std::make_shared<const cv::Mat>(MakeTexture(texture, 2.0 * M_PI * radius_m, height_m)));

@@ -8,6 +8,7 @@
 #include "engine/synth/city_block.h"
 #include "engine/synth/presets.h"
 #include "engine/util/check.h"
+#include "engine/util/option_check.h"
 
 namespace omnirig::synth {
 namespace {
@@ -215,25 +216,20 @@ Lighting LapLighting(int lap) {
 }
 
 void StereoSequenceOptions::Check() const {
-  OMNIRIG_CHECK(num_frames >= 1 && num_frames <= 100000, "num_frames must be in [1, 100000]");
+  OMNIRIG_CHECK_IN(num_frames, '[', 1, 100000, ']');
   if (environment == Environment::kCityBlock) {
-    OMNIRIG_CHECK(path_length_m >= CityBlockLoop::kMinLengthM &&
-                      path_length_m <= CityBlockLoop::kMaxLengthM,
-                  "path_length_m (one lap around the city block) must be in ["
-                      << CityBlockLoop::kMinLengthM << ", " << CityBlockLoop::kMaxLengthM << "]");
-    OMNIRIG_CHECK(num_laps >= 1 && num_laps <= 100, "num_laps must be in [1, 100]");
+    // One lap around the city block.
+    OMNIRIG_CHECK_IN(path_length_m, '[', CityBlockLoop::kMinLengthM, CityBlockLoop::kMaxLengthM,
+                     ']');
+    OMNIRIG_CHECK_IN(num_laps, '[', 1, 100, ']');
   } else {
-    OMNIRIG_CHECK(path_length_m >= 0.0 && path_length_m <= 20.0,
-                  "path_length_m must be in [0, 20] (the scenes are about 10 m across)");
+    OMNIRIG_CHECK_IN(path_length_m, '[', 0, 20, ']');  // the scenes are about 10 m across
     OMNIRIG_CHECK(num_laps == 1, "num_laps applies to the city block's loop only");
   }
-  OMNIRIG_CHECK(frame_interval_s > 0.0, "frame_interval_s must be positive");
-  OMNIRIG_CHECK(std::isfinite(motion_blur_exposure_s) && motion_blur_exposure_s >= 0.0,
-                "motion_blur_exposure_s must be >= 0");
-  OMNIRIG_CHECK(motion_blur_samples >= 1 && motion_blur_samples <= 64,
-                "motion_blur_samples must be in [1, 64]");
-  OMNIRIG_CHECK(sensor_height_m > 0.2 && sensor_height_m < 2.5,
-                "sensor_height_m must be in (0.2, 2.5) to stay inside the room");
+  OMNIRIG_CHECK_POSITIVE(frame_interval_s);
+  OMNIRIG_CHECK_NON_NEGATIVE(motion_blur_exposure_s);
+  OMNIRIG_CHECK_IN(motion_blur_samples, '[', 1, 64, ']');
+  OMNIRIG_CHECK_IN(sensor_height_m, '(', 0.2, 2.5, ')');  // to stay inside the room
   OMNIRIG_CHECK(width >= 64 && height >= 64 && width <= 8192 && height <= 8192,
                 "image size must be within 64 .. 8192 pixels");
   if (cameras) {
