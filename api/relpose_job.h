@@ -1,6 +1,6 @@
 #pragma once
 // The `relative_pose` job type: the metric pose between a stereo rig's two cameras from image
-// pairs of a shared board (engine/stereo/relative_pose.h).
+// pairs of a shared board (engine/rig/relative_pose.h).
 //
 // Dataset: images named cam0/NAME and cam1/NAME, paired by NAME.
 // Params (unknown fields are refused):
@@ -33,7 +33,7 @@
 //        calibrations),
 //    "resolve_corner_order": bool, "huber_loss_px": number, "max_num_iterations": int,
 //    "sync_false_alarm_rate": number in [0, 1) (default 0.01: the probability that a set of
-//        simultaneous pairs loses one to the synchronisation test, engine/stereo/relpose_sync.h;
+//        simultaneous pairs loses one to the synchronisation test, engine/rig/relpose_sync.h;
 //        0 turns the test off)}
 // Result:
 //   {"cam0_from_cam1": {"rotation_wxyz", "translation_m"}, "baseline_m", "baseline_std_m",
@@ -65,8 +65,8 @@
 
 #include "api/job_types.h"
 #include "engine/calib/board.h"
-#include "engine/stereo/relative_pose.h"
-#include "engine/stereo/relpose_model_select.h"
+#include "engine/rig/relative_pose.h"
+#include "engine/rig/relpose_model_select.h"
 
 namespace omnirig::api {
 
@@ -74,7 +74,7 @@ struct RelativePoseParams {
   BoardSpec board;
   std::optional<std::string> cam0_calibration_job;  // both or neither
   std::optional<std::string> cam1_calibration_job;
-  // "auto" (choose by cross-validation, engine/stereo/relpose_model_select.h), one of the
+  // "auto" (choose by cross-validation, engine/rig/relpose_model_select.h), one of the
   // candidate models "fixed", "tangential_fixed", "tangential_free_cam0",
   // "tangential_free_cam1", "free" (already applied to `options`), or ""
   // when refine_intrinsics / fixed_intrinsics were given without it.

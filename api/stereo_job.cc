@@ -22,7 +22,7 @@
 #include "engine/dense/range_io.h"
 #include "engine/geometry/ply.h"
 #include "engine/slam/map_io.h"
-#include "engine/stereo/epipolar.h"
+#include "engine/estimators/epipolar.h"
 #include "engine/util/background_task.h"
 #include "engine/util/check.h"
 

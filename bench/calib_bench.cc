@@ -19,7 +19,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
-#include "engine/calib/board_pose.h"
+#include "engine/estimators/board_pose.h"
 #include "engine/calib/pipeline.h"
 #include "engine/synth/presets.h"
 #include "engine/util/timer.h"

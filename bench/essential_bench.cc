@@ -9,7 +9,7 @@
 #include <random>
 #include <vector>
 
-#include "engine/stereo/essential.h"
+#include "engine/estimators/essential.h"
 #include "engine/util/timer.h"
 #include "testing/geometry/random_bearing.h"
 

@@ -24,8 +24,8 @@
 //      what fixing / freeing k5, skew and the tangential terms, the robust loss, pair rejection
 //      and dropping outer corners do; the baseline without each pair and from each half; the
 //      job's default: the intrinsics model chosen by leave-one-pair-out cross-validation
-//      (engine/stereo/relpose_model_select.h), with each candidate's held-out error, with and
-//      without the test for unsynchronised pairs (engine/stereo/relpose_sync.h), whose
+//      (engine/rig/relpose_model_select.h), with each candidate's held-out error, with and
+//      without the test for unsynchronised pairs (engine/rig/relpose_sync.h), whose
 //      per-pair statistics it prints.
 //   5. (--only preset; not in a full run: tens of CPU minutes) The synthetic readings B and C
 //      with a recording preset: 60 pairs of a board of 11 x 8 corners of 40 mm, 3 seeds, all
@@ -69,13 +69,13 @@
 #include <opencv2/core/eigen.hpp>
 #include <opencv2/imgcodecs.hpp>
 
-#include "engine/calib/board_pose.h"
+#include "engine/estimators/board_pose.h"
 #include "engine/calib/calibrate.h"
 #include "engine/calib/detect.h"
-#include "engine/stereo/relative_pose.h"
-#include "engine/stereo/relpose_corner_order.h"
-#include "engine/stereo/relpose_model_select.h"
-#include "engine/stereo/triangulation.h"
+#include "engine/rig/relative_pose.h"
+#include "engine/rig/relpose_corner_order.h"
+#include "engine/rig/relpose_model_select.h"
+#include "engine/estimators/triangulation.h"
 #include "engine/synth/presets.h"
 #include "testing/synth/calib_board.h"
 
@@ -968,7 +968,7 @@ void PrintTangentialSignificance(const std::vector<StereoBoardPair>& pairs, cv::
 }
 
 // The job's default ("intrinsics_model": "auto"): the candidate models scored by
-// leave-one-pair-out prediction (engine/stereo/relpose_model_select.h), and the one chosen.
+// leave-one-pair-out prediction (engine/rig/relpose_model_select.h), and the one chosen.
 RigModelSelection PrintModelSelection(const std::vector<RigModelCandidate>& candidates,
                                       const BoardSpec& board,
                                       const std::vector<StereoBoardPair>& pairs,
@@ -1002,7 +1002,7 @@ RigModelSelection PrintModelSelection(const std::vector<RigModelCandidate>& cand
   return selection;
 }
 
-// The synchronisation test of one fit (engine/stereo/relpose_sync.h): the noise it found, its
+// The synchronisation test of one fit (engine/rig/relpose_sync.h): the noise it found, its
 // limit, and every pair's statistic and board disagreement, with the reason of those left out.
 void PrintSyncTest(const std::string& name, const RelativePoseReport& report) {
   const SyncTestReport& test = report.sync_test;
@@ -1431,7 +1431,7 @@ void PrintSyncTallies(const std::array<SyncTally, 2>& tally) {
   }
 }
 
-// 7. The synchronisation test (engine/stereo/relpose_sync.h) on the renderer's synchronised
+// 7. The synchronisation test (engine/rig/relpose_sync.h) on the renderer's synchronised
 // pairs: QuickStereoBoardOptions(20, 3000 + seed), each camera calibrated from its own 20
 // images, the rig with the cameras kept at those calibrations ("fixed") and with the
 // intrinsics refined. The false-alarm rate (rigs losing a pair; the option promises at most

@@ -12,7 +12,7 @@
 #include <string>
 #include <vector>
 
-#include "engine/slam/features.h"
+#include "engine/features/features.h"
 #include "engine/slam/vocabulary.h"
 #include "engine/synth/presets.h"
 #include "engine/util/timer.h"
@@ -31,13 +31,13 @@ void AddSequence(synth::StereoSequenceOptions::Environment environment, std::uin
   options.render.noise_sigma = 1.0;
   options.render.supersampling = 2;
   const synth::StereoSequence sequence = synth::MakeStereoSequence(options);
-  const slam::FeatureOptions features;
+  const FeatureOptions features;
   const CameraModel& camera = sequence.rig.cam0;
-  const slam::MirrorAnnulus annulus =
-      slam::EstimateMirrorAnnulus(camera, sequence.images[0][0], features.dark_level);
-  const cv::Mat mask = slam::MirrorMask(camera, annulus, features.mask_margin_px);
+  const MirrorAnnulus annulus =
+      EstimateMirrorAnnulus(camera, sequence.images[0][0], features.dark_level);
+  const cv::Mat mask = MirrorMask(camera, annulus, features.mask_margin_px);
   for (const cv::Mat& image : sequence.images[0]) {
-    images->push_back(slam::DetectFeatures(camera, image, mask, features).descriptors);
+    images->push_back(DetectFeatures(camera, image, mask, features).descriptors);
   }
 }
 

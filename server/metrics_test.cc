@@ -8,7 +8,7 @@
 #include <gtest/gtest.h>
 
 #include "storage/sqlite_job_store.h"
-#include "storage/test_util.h"
+#include "testing/storage/test_util.h"
 
 namespace omnirig::server {
 namespace {

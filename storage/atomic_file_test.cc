@@ -5,7 +5,7 @@
 #include <fstream>
 #include <sstream>
 
-#include "storage/test_util.h"
+#include "testing/storage/test_util.h"
 
 namespace omnirig::storage {
 namespace {

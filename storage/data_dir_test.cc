@@ -4,7 +4,7 @@
 
 #include "storage/atomic_file.h"
 #include "storage/sqlite_job_store.h"
-#include "storage/test_util.h"
+#include "testing/storage/test_util.h"
 
 namespace omnirig::storage {
 namespace {

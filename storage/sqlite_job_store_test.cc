@@ -2,7 +2,7 @@
 
 #include <gtest/gtest.h>
 
-#include "storage/test_util.h"
+#include "testing/storage/test_util.h"
 
 namespace omnirig::storage {
 namespace {

@@ -5,7 +5,7 @@
 
 #include <gtest/gtest.h>
 
-#include "engine/calib/board_pose.h"
+#include "engine/estimators/board_pose.h"
 #include "engine/calib/initialize.h"
 #include "testing/calib/synthetic_corners.h"
 

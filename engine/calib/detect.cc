@@ -9,12 +9,13 @@
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
 
-#include "engine/calib/board_pose.h"
+#include "engine/estimators/board_pose.h"
 #include "engine/calib/calibrate.h"
 #include "engine/calib/corner_fit.h"
 #include "engine/calib/grid_check.h"
 #include "engine/calib/initialize.h"
 #include "engine/util/option_check.h"
+#include "engine/features/image.h"
 
 namespace omnirig {
 namespace {
@@ -735,23 +736,6 @@ BoardDetection BestPlacement(const cv::Mat& grey, const BoardSpec& board, const 
 }
 
 }  // namespace
-
-cv::Mat ToGreyscale8(const cv::Mat& image) {
-  cv::Mat grey;
-  if (image.channels() == 3) {
-    cv::cvtColor(image, grey, cv::COLOR_BGR2GRAY);
-  } else if (image.channels() == 4) {
-    cv::cvtColor(image, grey, cv::COLOR_BGRA2GRAY);
-  } else {
-    grey = image;
-  }
-  if (grey.depth() != CV_8U) {
-    cv::Mat converted;
-    cv::normalize(grey, converted, 0, 255, cv::NORM_MINMAX, CV_8U);
-    grey = converted;
-  }
-  return grey;
-}
 
 std::string ValidateBoardGrid(const cv::Mat& image, const BoardSpec& board,
                               const std::vector<Eigen::Vector2d>& grid) {

@@ -114,8 +114,4 @@ BoardDetection DetectBoardFromPose(const cv::Mat& image, const BoardSpec& board,
                                    const CameraModel& model, const Rigid3d& cam_from_board,
                                    const DetectOptions& options);
 
-// An 8-bit single-channel view of `image`: BGR and BGRA are converted, deeper images (16-bit,
-// float) are stretched to 0..255. Shared by the detector and the SVP rim search.
-cv::Mat ToGreyscale8(const cv::Mat& image);
-
 }  // namespace omnirig

@@ -12,6 +12,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "engine/synth/presets.h"
+#include "engine/features/image.h"
 #include "testing/synth/calib_board.h"
 
 namespace omnirig {

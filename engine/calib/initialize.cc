@@ -6,7 +6,7 @@
 
 #include <Eigen/SVD>
 
-#include "engine/calib/board_pose.h"
+#include "engine/estimators/board_pose.h"
 
 namespace omnirig {
 namespace {

@@ -9,6 +9,7 @@
 #include "engine/calib/detect.h"
 #include "engine/util/check.h"
 #include "engine/util/option_check.h"
+#include "engine/features/image.h"
 
 namespace omnirig {
 namespace {

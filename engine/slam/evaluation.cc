@@ -10,29 +10,6 @@
 
 namespace omnirig::slam {
 
-Rigid3d AlignRigid(const std::vector<Eigen::Vector3d>& src,
-                   const std::vector<Eigen::Vector3d>& dst) {
-  OMNIRIG_CHECK(!src.empty() && src.size() == dst.size(),
-                "AlignRigid needs two equally long, non-empty point lists");
-  const double n = static_cast<double>(src.size());
-  Eigen::Vector3d mean_src = Eigen::Vector3d::Zero(), mean_dst = Eigen::Vector3d::Zero();
-  for (size_t i = 0; i < src.size(); ++i) {
-    mean_src += src[i] / n;
-    mean_dst += dst[i] / n;
-  }
-  Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();
-  for (size_t i = 0; i < src.size(); ++i) {
-    covariance += (dst[i] - mean_dst) * (src[i] - mean_src).transpose();
-  }
-  const Eigen::JacobiSVD<Eigen::Matrix3d> svd(covariance,
-                                              Eigen::ComputeFullU | Eigen::ComputeFullV);
-  // Umeyama's sign correction keeps a proper rotation when the best orthogonal fit reflects.
-  Eigen::Matrix3d s = Eigen::Matrix3d::Identity();
-  if (svd.matrixU().determinant() * svd.matrixV().determinant() < 0) s(2, 2) = -1;
-  const Eigen::Matrix3d rotation = svd.matrixU() * s * svd.matrixV().transpose();
-  return Rigid3d(Eigen::Quaterniond(rotation), mean_dst - rotation * mean_src);
-}
-
 TrajectoryErrors EvaluateTrajectory(const std::vector<Rigid3d>& estimate,
                                     const std::vector<Rigid3d>& gt) {
   OMNIRIG_CHECK(estimate.size() == gt.size(),

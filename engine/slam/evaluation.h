@@ -7,16 +7,11 @@
 
 #include <Eigen/Core>
 
+#include "engine/estimators/motion.h"
 #include "engine/geometry/rigid3.h"
 #include "engine/geometry/unified_camera.h"
 
 namespace omnirig::slam {
-
-// Least-squares rigid transform dst_from_src with dst_i ~ dst_from_src * src_i (Umeyama's
-// closed form without scale). Needs at least 3 non-collinear points for a unique rotation;
-// with fewer it still returns the best translation-only fit. Throws InvalidArgument when the
-// two lists differ in length or are empty.
-Rigid3d AlignRigid(const std::vector<Eigen::Vector3d>& src, const std::vector<Eigen::Vector3d>& dst);
 
 struct TrajectoryErrors {
   int num_poses = 0;

@@ -45,13 +45,13 @@
 #include <opencv2/core.hpp>
 
 #include "engine/geometry/camera_model.h"
-#include "engine/slam/absolute_pose.h"
+#include "engine/estimators/absolute_pose.h"
 #include "engine/slam/bundle_adjustment.h"
-#include "engine/slam/features.h"
+#include "engine/features/features.h"
 #include "engine/slam/map_io.h"
-#include "engine/slam/matching.h"
-#include "engine/slam/motion.h"
-#include "engine/stereo/essential.h"
+#include "engine/features/matching.h"
+#include "engine/estimators/motion.h"
+#include "engine/estimators/essential.h"
 #include "engine/util/progress.h"
 
 namespace omnirig::slam {

@@ -10,12 +10,13 @@
 #include "engine/calib/detect.h"
 #include "engine/geometry/ply.h"
 #include "engine/geometry/unified_camera.h"
-#include "engine/stereo/descriptor_match.h"
-#include "engine/stereo/essential.h"
-#include "engine/stereo/sift_bias.h"
-#include "engine/stereo/triangulation.h"
+#include "engine/features/descriptor_match.h"
+#include "engine/estimators/essential.h"
+#include "engine/features/sift_bias.h"
+#include "engine/estimators/triangulation.h"
 #include "engine/util/check.h"
 #include "engine/util/option_check.h"
+#include "engine/features/image.h"
 
 namespace omnirig {
 namespace {
@@ -226,7 +227,7 @@ void TriangulateMatches(const StereoRig& rig, const LiftedFeatures& f0, const Li
       ++report->num_rejected_uncertain;
       continue;
     }
-    StereoPoint point;
+    SparsePoint point;
     point.point_in_cam0 = t.point_in_cam1;  // the triangulation's camera 1 is the rig's cam0
     const cv::Point2f& p0 = f0.keypoints[match.index0].pt;
     point.rgb = ColourAt(image0, p0);
@@ -270,10 +271,10 @@ StereoPairReport ReconstructStereoPair(const StereoRig& rig, const cv::Mat& imag
   return report;
 }
 
-PlyCloud SparseCloud(const std::vector<StereoPoint>& points) {
+PlyCloud SparseCloud(const std::vector<SparsePoint>& points) {
   PlyCloud cloud;
   cloud.comment = "omnirig stereo_reconstruct: points in cam0's frame, metres";
-  for (const StereoPoint& p : points) {
+  for (const SparsePoint& p : points) {
     cloud.positions.push_back(p.point_in_cam0.cast<float>());
     cloud.colours.push_back(p.rgb);
   }

@@ -62,7 +62,7 @@ struct StereoMatch {
   double epipolar_error_rad = 0.0;  // the larger of the two cameras' eq. (16) angles
 };
 
-struct StereoPoint {
+struct SparsePoint {
   Eigen::Vector3d point_in_cam0 = Eigen::Vector3d::Zero();
   std::array<uint8_t, 3> rgb{0, 0, 0};  // colour at the cam0 keypoint
   Eigen::Vector2d pixel0 = Eigen::Vector2d::Zero();
@@ -79,7 +79,7 @@ struct StereoPairReport {
   int num_rejected_reprojection = 0;  // includes rays meeting behind a camera
   int num_rejected_uncertain = 0;     // range std above max_relative_range_std
   std::vector<StereoMatch> matches;
-  std::vector<StereoPoint> points;  // one per accepted match
+  std::vector<SparsePoint> points;  // one per accepted match
 };
 
 // The mirror disk of an omnidirectional image (CV_8U, 255 inside). Dark regions (see the
@@ -112,6 +112,6 @@ StereoPairReport ReconstructStereoPair(const StereoRig& rig, const cv::Mat& imag
 
 // The points as a PLY cloud (engine/geometry/ply.h, WritePly): positions in cam0's frame
 // (metres) and colours.
-PlyCloud SparseCloud(const std::vector<StereoPoint>& points);
+PlyCloud SparseCloud(const std::vector<SparsePoint>& points);
 
 }  // namespace omnirig

@@ -170,7 +170,7 @@ TEST(StereoReconstruct, ImageSizeMismatchIsAnError) {
 
 // The points as a PLY cloud (the file format: engine/geometry/ply_test.cc).
 TEST(StereoReconstruct, SparseCloudHoldsPositionsAndColours) {
-  std::vector<StereoPoint> points(2);
+  std::vector<SparsePoint> points(2);
   points[0].point_in_cam0 = Eigen::Vector3d(1.5, -2.25, 3.0);
   points[0].rgb = {10, 20, 30};
   points[1].point_in_cam0 = Eigen::Vector3d(0.0, 0.5, -1.0);

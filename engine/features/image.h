@@ -1,0 +1,13 @@
+#pragma once
+// Image conversions every front end shares.
+
+#include <opencv2/core.hpp>
+
+namespace omnirig {
+
+// An 8-bit single-channel view of `image`: BGR and BGRA are converted, deeper images (16-bit,
+// float) are stretched to 0..255. Shared by the board detector, the SVP rim search and the
+// feature detectors.
+cv::Mat ToGreyscale8(const cv::Mat& image);
+
+}  // namespace omnirig
