@@ -20,9 +20,9 @@
 #include "api/json_fields.h"
 #include "api/relpose_job.h"
 #include "engine/dense/range_io.h"
+#include "engine/estimators/epipolar.h"
 #include "engine/geometry/ply.h"
 #include "engine/slam/map_io.h"
-#include "engine/estimators/epipolar.h"
 #include "engine/util/background_task.h"
 #include "engine/util/check.h"
 

@@ -19,8 +19,8 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
-#include "engine/estimators/board_pose.h"
 #include "engine/calib/pipeline.h"
+#include "engine/estimators/board_pose.h"
 #include "engine/synth/presets.h"
 #include "engine/util/timer.h"
 #include "testing/calib/model_import.h"

@@ -32,8 +32,8 @@
 #include "server/worker_pool.h"
 #include "storage/data_dir.h"
 #include "storage/postgres_job_store.h"
-#include "testing/storage/postgres_test_server.h"
 #include "storage/sqlite_job_store.h"
+#include "testing/storage/postgres_test_server.h"
 #include "testing/storage/test_util.h"
 #include "tests/server_test_util.h"
 

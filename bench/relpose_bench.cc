@@ -69,13 +69,13 @@
 #include <opencv2/core/eigen.hpp>
 #include <opencv2/imgcodecs.hpp>
 
-#include "engine/estimators/board_pose.h"
 #include "engine/calib/calibrate.h"
 #include "engine/calib/detect.h"
+#include "engine/estimators/board_pose.h"
+#include "engine/estimators/triangulation.h"
 #include "engine/rig/relative_pose.h"
 #include "engine/rig/relpose_corner_order.h"
 #include "engine/rig/relpose_model_select.h"
-#include "engine/estimators/triangulation.h"
 #include "engine/synth/presets.h"
 #include "testing/synth/calib_board.h"
 

@@ -16,9 +16,9 @@
 #include <thread>
 
 #include "storage/postgres_job_store.h"
-#include "testing/storage/postgres_test_server.h"
 #include "storage/sqlite_job_store.h"
 #include "storage/store_copy.h"
+#include "testing/storage/postgres_test_server.h"
 #include "testing/storage/test_util.h"
 
 namespace omnirig::storage {

@@ -25,8 +25,8 @@
 #include <thread>
 
 #include "server/commands.h"
-#include "testing/storage/postgres_test_server.h"
 #include "storage/sha256.h"
+#include "testing/storage/postgres_test_server.h"
 #include "tests/server_test_util.h"
 
 namespace omnirig::testing {

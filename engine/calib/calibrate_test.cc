@@ -5,8 +5,8 @@
 
 #include <gtest/gtest.h>
 
-#include "engine/estimators/board_pose.h"
 #include "engine/calib/initialize.h"
+#include "engine/estimators/board_pose.h"
 #include "testing/calib/synthetic_corners.h"
 
 namespace omnirig {

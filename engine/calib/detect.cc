@@ -9,13 +9,13 @@
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
 
-#include "engine/estimators/board_pose.h"
 #include "engine/calib/calibrate.h"
 #include "engine/calib/corner_fit.h"
 #include "engine/calib/grid_check.h"
 #include "engine/calib/initialize.h"
-#include "engine/util/option_check.h"
+#include "engine/estimators/board_pose.h"
 #include "engine/features/image.h"
+#include "engine/util/option_check.h"
 
 namespace omnirig {
 namespace {

@@ -11,8 +11,8 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
-#include "engine/synth/presets.h"
 #include "engine/features/image.h"
+#include "engine/synth/presets.h"
 #include "testing/synth/calib_board.h"
 
 namespace omnirig {

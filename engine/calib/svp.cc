@@ -7,9 +7,9 @@
 #include <opencv2/imgproc.hpp>
 
 #include "engine/calib/detect.h"
+#include "engine/features/image.h"
 #include "engine/util/check.h"
 #include "engine/util/option_check.h"
-#include "engine/features/image.h"
 
 namespace omnirig {
 namespace {

@@ -7,9 +7,9 @@
 #include <Eigen/Eigenvalues>
 #include <Eigen/SVD>
 
-#include "engine/geometry/ceres_problem.h"
 #include "engine/estimators/ransac.h"
 #include "engine/estimators/triangulation.h"
+#include "engine/geometry/ceres_problem.h"
 #include "engine/util/check.h"
 #include "engine/util/option_check.h"
 

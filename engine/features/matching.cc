@@ -7,10 +7,10 @@
 #include <opencv2/core/hal/hal.hpp>
 #include <opencv2/features2d.hpp>
 
-#include "engine/features/descriptor_match.h"
 #include "engine/estimators/epipolar.h"
 #include "engine/estimators/essential.h"
 #include "engine/estimators/triangulation.h"
+#include "engine/features/descriptor_match.h"
 #include "engine/util/check.h"
 #include "engine/util/option_check.h"
 

@@ -9,8 +9,8 @@
 
 #include <Eigen/Core>
 
-#include "engine/geometry/camera_model.h"
 #include "engine/features/features.h"
+#include "engine/geometry/camera_model.h"
 
 namespace omnirig {
 

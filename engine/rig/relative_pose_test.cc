@@ -6,8 +6,8 @@
 #include <ceres/ceres.h>
 #include <gtest/gtest.h>
 
-#include "engine/rig/relpose_corner_order.h"
 #include "engine/geometry/reprojection_cost.h"
+#include "engine/rig/relpose_corner_order.h"
 #include "engine/rig/relpose_linear.h"
 #include "testing/rig/relpose_test_scene.h"
 

@@ -44,14 +44,14 @@
 
 #include <opencv2/core.hpp>
 
-#include "engine/geometry/camera_model.h"
 #include "engine/estimators/absolute_pose.h"
-#include "engine/slam/bundle_adjustment.h"
-#include "engine/features/features.h"
-#include "engine/slam/map_io.h"
-#include "engine/features/matching.h"
-#include "engine/estimators/motion.h"
 #include "engine/estimators/essential.h"
+#include "engine/estimators/motion.h"
+#include "engine/features/features.h"
+#include "engine/features/matching.h"
+#include "engine/geometry/camera_model.h"
+#include "engine/slam/bundle_adjustment.h"
+#include "engine/slam/map_io.h"
 #include "engine/util/progress.h"
 
 namespace omnirig::slam {

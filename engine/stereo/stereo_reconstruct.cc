@@ -8,15 +8,15 @@
 #include <opencv2/imgproc.hpp>
 
 #include "engine/calib/detect.h"
+#include "engine/estimators/essential.h"
+#include "engine/estimators/triangulation.h"
+#include "engine/features/descriptor_match.h"
+#include "engine/features/image.h"
+#include "engine/features/sift_bias.h"
 #include "engine/geometry/ply.h"
 #include "engine/geometry/unified_camera.h"
-#include "engine/features/descriptor_match.h"
-#include "engine/estimators/essential.h"
-#include "engine/features/sift_bias.h"
-#include "engine/estimators/triangulation.h"
 #include "engine/util/check.h"
 #include "engine/util/option_check.h"
-#include "engine/features/image.h"
 
 namespace omnirig {
 namespace {
