@@ -117,7 +117,7 @@ TEST_F(RelposeJob, WithCalibrationsRecoversTheRenderedRig) {
   EXPECT_FALSE(result["intrinsics_model"].contains("candidates"));
   EXPECT_TRUE(monotone);
   EXPECT_NEAR(last_fraction, 1.0, 1e-9);
-  // The job ends on its summary (issue 20), not a bare "done".
+  // The job ends on its summary, not a bare "done".
   EXPECT_EQ(last_stage, "done");
   std::ostringstream baseline;
   baseline << std::fixed << std::setprecision(2) << "baseline "

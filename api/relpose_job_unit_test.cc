@@ -78,7 +78,7 @@ TEST(RelposeJson, FixedIntrinsicsReplaceTheDefaultSet) {
 }
 
 // "auto" is the default when no intrinsics option was given (with given calibrations too: it
-// then chooses between keeping them and refining them with their own views, issue 16); a
+// then chooses between keeping them and refining them with their own views); a
 // named model sets the options it stands for, on top of fixed_intrinsics.
 TEST(RelposeJson, IntrinsicsModelDefaultsAndNamedModels) {
   EXPECT_EQ(RelativePoseParamsFromJson({{"board", Board()}}).intrinsics_model, "auto");

@@ -1,5 +1,5 @@
 #pragma once
-// JSON request validation and shared JSON forms of the service API (issue 6). Requests are
+// JSON request validation and shared JSON forms of the service API. Requests are
 // checked strictly: unknown fields and wrong types are refused with InvalidArgument naming the
 // field, which the server sends as HTTP 400.
 //

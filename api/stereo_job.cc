@@ -252,7 +252,7 @@ std::optional<PairPlacement> PlacePairs(const StereoReconstructParams& parsed,
   return PlaceByTum(tum[0], pairs, context);
 }
 
-// Where the pairs' clouds go (issue 20). Without a trajectory: one pair writes cloud.ply, in its
+// Where the pairs' clouds go. Without a trajectory: one pair writes cloud.ply, in its
 // cam0 frame; several write cloud_NAME.ply each in its own cam0 frame and no merged cloud (the
 // pairs of a moving rig share no frame). With one: cloud_NAME.ply per pair as well, and
 // cloud.ply with every placed pair moved into the trajectory's world.

@@ -1,4 +1,4 @@
-// bench_calib: calibration accuracy and speed (issue 3), printed as tables.
+// bench_calib: calibration accuracy and speed, printed as tables.
 //   1. Synthetic renders (omnirig synth, 1024x768, 20 views + 5 held out, image noise): mean ray
 //      angle error over the mirror annulus and held-out reprojection error against the exact
 //      corners, omnirig vs cv::omnidir::calibrate on the same detected corners.

@@ -1,4 +1,4 @@
-// bench_dense: dense 3D from one pair of the vertical rig (issue 17's targets), next to
+// bench_dense: dense 3D from one pair of the vertical rig (against its targets), next to
 // cv::omnidir::stereoReconstruct (RECTIFY_PERSPECTIVE and RECTIFY_LONGLATI, each rectifying and
 // running StereoSGBM) on the same renders, in the same run.
 //

@@ -1,4 +1,4 @@
-// bench_essential: essential matrix with RANSAC on bearings (issue 4's target: 2,000 bearings
+// bench_essential: essential matrix with RANSAC on bearings (target: 2,000 bearings
 // with 30% outliers in under 20 ms on one core). Prints a table of timings over several
 // seeds and outlier ratios, with the pose errors so a fast but wrong run cannot pass.
 

@@ -1,4 +1,4 @@
-// The job queue under load (issue 18): 1,000 trivial jobs (test_sleep, one step, no sleep: the
+// The job queue under load: 1,000 trivial jobs (test_sleep, one step, no sleep: the
 // run is the queue, the job folder, log and result files) through 1, 2 and 4 workers, SQLite
 // (worker threads in one process: SQLite is one machine's store) beside PostgreSQL (`omnirig
 // worker` processes, this binary re-executed, on a real PostgreSQL started here with fsync on).

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Load benchmark of the omnirig service (issue 15 targets), on this machine:
+# Load benchmark of the omnirig service (against its targets), on this machine:
 #   1. 200 clients following jobs while the workers run real calibration jobs on real images
 #      (CPU busy): wrk's 200 connections poll GET /jobs/{id} at ~1,000 requests/s for 20 s
 #      (target: p99 under 10 ms on 2 cores), independently and then in lockstep (see

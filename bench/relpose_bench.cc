@@ -1,4 +1,4 @@
-// bench_relpose: accuracy of the stereo rig's relative pose (issue 4's targets), next to the
+// bench_relpose: accuracy of the stereo rig's relative pose (against its targets), next to the
 // paper's method and cv::omnidir::stereoCalibrate on the same corners, in the same run.
 //
 //   1. Synthetic vertical rig (100 mm), 20 pairs rendered at 1024x768 per seed, 3 seeds, corners
@@ -32,7 +32,7 @@
 //      methods incl. cv::omnidir::stereoCalibrate on the same renders.
 // RMS everywhere is sqrt(mean |e|^2) of the Euclidean corner error, as OpenCV reports it.
 //
-//   6. Issue 16's camera chain (--only chain): rigs with given calibrations, kept or refined
+//   6. The camera chain (--only chain): rigs with given calibrations, kept or refined
 //      with the calibrations' own views, against cv::omnidir::stereoCalibrate, 5 seeds.
 //   7. (--only sync; not in a full run) The synchronisation test's false-alarm rate on the
 //      renderer's synchronised pairs, with its 95 % interval, and its power on pairs whose
@@ -561,9 +561,9 @@ void RunSyntheticPreset(bool quick) {
   }
 }
 
-// Issue 16's camera chain: 10 board pairs and 12 views of each camera alone per seed (vertical
+// The camera chain: 10 board pairs and 12 views of each camera alone per seed (vertical
 // rig, 100 mm), each camera calibrated from its 22 images, then the rig with those
-// calibrations given: kept as they are (before issue 16, now "intrinsics_model": "fixed"), and
+// calibrations given: kept as they are (once the default, now "intrinsics_model": "fixed"), and
 // the job's default (the calibrations' 12 own views join the pairs, the model chosen by
 // cross-validation between "fixed" and "free"); against cv::omnidir::stereoCalibrate on the
 // same pairs' corners (it takes pairs only).
@@ -643,7 +643,7 @@ void RunCameraChain(bool quick) {
   std::printf("\n");
 }
 
-// The issue's synthetic target on renders, over several seeds (the estimator's spread at this
+// The synthetic target on renders, over several seeds (the estimator's spread at this
 // noise is larger than the target, so one seed alone could pass or fail by luck).
 void RunSynthetic(bool quick) {
   const int num_pairs = quick ? 8 : 20;

@@ -1,4 +1,4 @@
-// bench_slam: stereo omnidirectional SLAM on the synthetic textured-room sequence (issue 5's
+// bench_slam: stereo omnidirectional SLAM on the synthetic textured-room sequence (the
 // targets: drift under 1% of the distance travelled over 40 frames / ~6 m, map points' median
 // distance to the true surfaces under 1% of their range, >= 5 stereo frames/s at 1024x768 on
 // 2 cores end to end, global bundle adjustment under 1 s). Renders the sequence first (not
@@ -16,7 +16,7 @@
 // to 0.02 rad for both), without and with the global adjustment's calibration refinement
 // (--no-calibration-runs skips them).
 //
-// --dense-map: after the timed run, the dense map of the slam job's "dense_map" (issue 17) is
+// --dense-map: after the timed run, the dense map of the slam job's "dense_map" is
 // fused along the estimated trajectory with the same loader (PNG decode included), timed in wall
 // and CPU seconds against the SLAM run's (target: at most 30 % added to the job's wall time),
 // and scored against the room (median distance to the true surfaces <= 0.5 % of range,

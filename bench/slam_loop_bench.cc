@@ -1,4 +1,4 @@
-// bench_slam --loop: SLAM on long closed loops (issue 19's targets). The rig drives laps around
+// bench_slam --loop: SLAM on long closed loops, against their targets. The rig drives laps around
 // the city block of engine/synth/city_block.h (default: a 100 m loop driven twice, 2,000 stereo
 // frames at 1024x768, each lap under its own light, image noise 1 grey level).
 //

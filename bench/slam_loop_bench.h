@@ -1,6 +1,6 @@
 #pragma once
-// bench_slam --loop: SLAM on long closed loops around the synthetic city block (issue 19's
-// targets). See slam_loop_bench.cc for what it measures.
+// bench_slam --loop: SLAM on long closed loops around the synthetic city block (against
+// their targets). See slam_loop_bench.cc for what it measures.
 
 namespace omnirig {
 

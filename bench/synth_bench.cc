@@ -1,6 +1,6 @@
 // bench_synth: time per rendered image of the synthetic omnidirectional renderer.
 //
-// Issue 2 target: one 1024x768 image at 4x4 supersampling in under 0.5 s on one core. Prints a
+// Target: one 1024x768 image at 4x4 supersampling in under 0.5 s on one core. Prints a
 // table for four scenes (a calibration board in a room, the textured room of the stereo
 // sequence, the street front, the city block of the loop sequences), on one thread and on all
 // cores. The per-camera precomputation (Renderer construction) is timed separately: it is paid

@@ -1,11 +1,11 @@
 #pragma once
-// JSON forms of the stored records, as issue 6 names them:
+// JSON forms of the stored records, with the names the API promises:
 //   dataset:  {"id", "name", "created_at", "image_count", "total_bytes"[, "images": [image]]}
 //   image:    {"name", "size", "width", "height", "sha256", "content_type"}
 //   job:      {"id", "type", "dataset", "params", "state", "progress": {"fraction", "stage",
 //              "message", "eta_s"}, "created_at", "started_at", "finished_at", "attempts",
 //              "cancel_requested", "error": null | {"code", "message"}, "worker": null |
-//              "HOST:PID" (issue 18: who ran the last attempt)}
+//              "HOST:PID" (who ran the last attempt)}
 //   artifact: {"name", "size", "content_type", "sha256"}
 // Times are ISO 8601 UTC strings (null when not reached yet).
 

@@ -1,4 +1,4 @@
-// Jobs shared by several processes through PostgreSQL (issue 18): a real PostgreSQL 15, one
+// Jobs shared by several processes through PostgreSQL: a real PostgreSQL 15, one
 // API-only server and `omnirig worker` processes (this binary re-executed, so test_sleep is
 // registered), all on one shared data folder.
 //

@@ -1,6 +1,6 @@
 // The REST API end to end: the real service on an ephemeral loopback port with a temporary
-// data folder, driven through a real HTTP client. Covers every endpoint and the bad inputs of
-// issue 6. Jobs use the test-only "test_sleep" type (server_test_util.h).
+// data folder, driven through a real HTTP client. Covers every endpoint and the bad inputs
+// the API promises to refuse. Jobs use the test-only "test_sleep" type (server_test_util.h).
 
 #include <arpa/inet.h>
 #include <gtest/gtest.h>

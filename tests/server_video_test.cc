@@ -1,4 +1,4 @@
-// Videos through the real service (issue 19): resumable uploads (PUT with Content-Range) over a
+// Videos through the real service: resumable uploads (PUT with Content-Range) over a
 // real HTTP server, each bad video refused at POST /api/v1/jobs with the reason, and a slam job
 // on a rendered video pair whose trajectory lands near the ground truth. Small renders, few
 // frames: label integration, but light.

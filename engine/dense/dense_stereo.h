@@ -26,7 +26,7 @@ namespace omnirig::dense {
 struct DenseStereoOptions {
   // The grid: by default 1.25 times the images' finest angular step (bench_dense: on the room
   // renders the same accuracy as the finest step with a 5-cell window, 2/3 of the points, about
-  // 0.6 of the CPU; the 0.4 s per pair). grid.step_factor 1 (or grid.step_rad) keeps
+  // 0.6 of the CPU; the target is 0.4 s per pair). grid.step_factor 1 (or grid.step_rad) keeps
   // every detail of the images.
   SphericalGridOptions grid{0.0, 1.25};
   // The largest parallax searched (the angle at the point between the two rays). A point at

@@ -1,5 +1,5 @@
 // Integration: dense 3D on a rendered pair of the textured room (engine/synth/presets.h), each
-// point's distance to the room's true surfaces (the renderer's primitives) against the issue's
+// point's distance to the room's true surfaces (the renderer's primitives) against the
 // targets; bad pairs (one image shifted, dark) lose their confidence instead of giving a
 // confident wrong surface.
 

@@ -111,8 +111,8 @@ TEST_F(RelativePoseReal, FisheyePairsGiveTheReferenceBaseline) {
   EXPECT_GT(report.rig.cam0_from_cam1.translation.x(), 0.1);
   // The README's figure for this configuration ("free"): 109.74 mm (-0.20 % of the
   // reference), to the stated precision. The figures are stated to 0.01 mm, not 0.001: the
-  // solver's stopping rule and another CPU's rounding move them by about 0.5 micrometre (session 8
-  // measured 109.7400, the next CI run 109.7395), still 100 times below the covariance's
+  // solver's stopping rule and another CPU's rounding move them by about 0.5 micrometre (a run on
+  // 2026-11-25 measured 109.7400, the next CI run 109.7395), still 100 times below the covariance's
   // std (0.059 mm).
   EXPECT_NEAR(report.baseline_m, 0.10974, 0.005e-3);
   EXPECT_LT(RotationDistanceRad(report.rig.cam0_from_cam1.rotation, Eigen::Quaterniond::Identity()),
@@ -220,7 +220,7 @@ TEST_F(RelativePoseReal, CrossValidationScoresEveryModelAndFollowsItsRule) {
   }
   // The job's default: "tangential_free_cam0", 109.74 mm (-0.21 %), 0.225 px, 21 of 29 pairs
   // (docs/relpose.md). The folds are the pairs every candidate kept: since the synchronisation
-  // test expects the held-out rig's own error at a pair (session 9), the "fixed" candidate keeps
+  // test expects the held-out rig's own error at a pair (a144b07), the "fixed" candidate keeps
   // pair 12 too (statistic 24.2 against 24.22), "tangential_fixed" (110.00 mm) is 1.4 standard
   // errors worse than "free" and the rule chooses "tangential_free_cam0".
   EXPECT_EQ(chosen.name, "tangential_free_cam0");

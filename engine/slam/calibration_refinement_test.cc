@@ -80,7 +80,7 @@ TEST_F(CalibrationRefinementOnSequence, RefinementRecoversTheCalibrationAndTheAc
   EXPECT_LT(refined_result.global_bundle_adjustment->final_rms_px,
             0.5 * fixed_result.global_bundle_adjustment->final_rms_px);
 
-  // The trajectory and the map: from useless to within the targets.
+  // The trajectory and the map: from useless to within the targets.
   EXPECT_EQ(refined.num_tracked, fixed.num_tracked);
   EXPECT_LT(refined.trajectory.ate_rmse_m, 0.2 * fixed.trajectory.ate_rmse_m);
   EXPECT_LT(refined.trajectory.final_drift_percent, 0.2 * fixed.trajectory.final_drift_percent);

@@ -955,7 +955,7 @@ async function stepViewerSlam(page, server) {
     (refused ? `; ground truth not uploaded (${refused})` : '');
 }
 
-// Loop closures and states in the top view (issue 19). A loop sequence is too long for this
+// Loop closures and states in the top view. A loop sequence is too long for this
 // test, so the page's requests for the job's result and trajectory.json are answered with the
 // real ones plus a loop from the last frame to the first and, from the middle on, a lost frame
 // then relinked ones; the page must draw the loop's line and the relinked colour.
