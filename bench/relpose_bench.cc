@@ -632,7 +632,7 @@ void RunCameraChain(bool quick) {
   }
   char title[400];
   std::snprintf(title, sizeof(title),
-                "Camera chain (issue 16): 10 pairs + 12 views per camera of 1024x768, 100 mm "
+                "Camera chain: 10 pairs + 12 views per camera of 1024x768, 100 mm "
                 "vertical rig, image noise 2 grey levels, %zu seeds (%.0f s wall); target: "
                 "baseline and rotation errors no higher than cv::omnidir::stereoCalibrate",
                 seeds.size(), Seconds(start));
