@@ -85,6 +85,13 @@ StereoRig LoadRig(const std::function<nlohmann::json(const std::string&)>& load_
                          [&] { return RigFromJson(result); });
 }
 
+std::string RigJobField(const nlohmann::json& params) {
+  OMNIRIG_CHECK(params.is_object() && params.contains("rig"),
+                "missing field 'params.rig': the id of a succeeded relative_pose job, which makes "
+                "the stereo rig (submit one on board pairs seen by both cameras first)");
+  return JobIdField(params, "params", "rig");
+}
+
 nlohmann::json RigToJson(const StereoRig& rig) {
   return {{"cam0_from_cam1", PoseToJson(rig.cam0_from_cam1)},
           {"baseline_m", rig.cam0_from_cam1.translation.norm()},

@@ -31,6 +31,9 @@ StereoRig RigFromJson(const nlohmann::json& json);
 // RigFromJson of job `job_id`'s result read by `load_result`; the error names the job.
 StereoRig LoadRig(const std::function<nlohmann::json(const std::string&)>& load_result,
                   const std::string& job_id);
+// params.rig of a job that needs a stereo rig: the id of a succeeded relative_pose job. A request
+// without one is told which job type makes a rig.
+std::string RigJobField(const nlohmann::json& params);
 // Writes cam0_from_cam1, baseline_m and cameras; callers add the rest of their result.
 nlohmann::json RigToJson(const StereoRig& rig);
 

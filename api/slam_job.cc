@@ -5,6 +5,7 @@
 #include <ctime>
 #include <memory>
 #include <set>
+#include <sstream>
 
 #include <opencv2/imgcodecs.hpp>
 
@@ -283,7 +284,7 @@ SlamParams SlamParamsFromJson(const json& params) {
   std::set<std::string> known = KeysOf(frames);
   known.insert({"rig", "ground_truth", "options", "dense_map"});
   CheckKnownFields(params, "params", known);
-  parsed.rig_job = JobIdField(params, "params", "rig");
+  parsed.rig_job = RigJobField(params);
   if (params.contains("ground_truth")) {
     const std::string name = StringField(params, "params", "ground_truth");
     OMNIRIG_CHECK(!name.empty() && name.find("..") == std::string::npos && name.front() != '/',
@@ -540,15 +541,47 @@ std::optional<slam::StereoVideoFiles> FindStereoVideos(const fs::path& dataset_d
   return slam::StereoVideoFiles{dataset_dir / found[0][0], dataset_dir / found[1][0]};
 }
 
+namespace {
+
+// The ground truth the params name must be a file of the dataset; the error lists the TUM files
+// the dataset has, so that a mistyped name is put right at once.
+void CheckGroundTruthPresent(const std::string& name, const SubmissionInputs& dataset) {
+  if (fs::is_regular_file(dataset.dataset_dir / name)) return;
+  std::vector<std::string> tum_files;
+  std::error_code error;
+  for (fs::recursive_directory_iterator it(dataset.dataset_dir, error), end; !error && it != end;
+       it.increment(error)) {
+    if (it->is_regular_file(error) && it->path().extension() == ".tum") {
+      tum_files.push_back(fs::relative(it->path(), dataset.dataset_dir).generic_string());
+    }
+  }
+  std::sort(tum_files.begin(), tum_files.end());
+  std::ostringstream os;
+  os << "ground truth '" << name << "' is not in dataset " << dataset.dataset_id;
+  if (tum_files.empty()) {
+    os << ", which holds no .tum file (a TUM trajectory: 'time tx ty tz qx qy qz qw' per line)";
+  } else {
+    os << "; its .tum files:";
+    for (const std::string& file : tum_files) os << " " << file;
+  }
+  throw InvalidArgument(os.str());
+}
+
+}  // namespace
+
 void CheckSlamInputs(const json& params, const SubmissionInputs& dataset) {
   CheckImagesFitRig(params, dataset);
   const SlamParams parsed = SlamParamsFromJson(params);
+  if (parsed.ground_truth) CheckGroundTruthPresent(*parsed.ground_truth, dataset);
   const auto videos = FindStereoVideos(dataset.dataset_dir, dataset.file_names());
   if (!videos) {
     OMNIRIG_CHECK(!parsed.video_only_fields,
                   "'start_s', 'end_s' and 'pair_tolerance_s' select frames of videos, and dataset "
                       << dataset.dataset_id
                       << " holds none (cam0.EXT and cam1.EXT, or stacked.EXT)");
+    // Stereo frames are pairs cam0/NAME + cam1/NAME: refused now rather than at the job's start.
+    WithErrorPrefix("a slam job needs stereo frames: ",
+                    [&] { return MatchImagePairs(dataset.file_names()); });
     return;
   }
   CheckVideoSizes(LoadRig(dataset.load_result, parsed.rig_job), *videos,

@@ -150,6 +150,33 @@ TEST_F(TempDataset, RefusesImagesOfAnotherSizeThanTheRig) {
   }
 }
 
+TEST_F(TempDataset, RefusesAtSubmissionWhatTheJobWouldFailOnAtItsStart) {
+  const StereoRig rig = TinyTestRig(64, 48);
+  SubmissionInputs inputs{"dataset-1", dir_, {}, [&](const std::string&) { return RigToJson(rig); }};
+  WriteImage("cam0/a.png", 64, 48);
+  inputs.images.push_back({"cam0/a.png", 64, 48});
+  // Images of one camera only.
+  std::string refused = ExpectInvalid([&] { CheckSlamInputs({{"rig", "r"}}, inputs); });
+  EXPECT_NE(refused.find("stereo frames"), std::string::npos) << refused;
+  EXPECT_NE(refused.find("0 cam1/ images"), std::string::npos) << refused;
+
+  WriteImage("cam1/a.png", 64, 48);
+  inputs.images.push_back({"cam1/a.png", 64, 48});
+  EXPECT_NO_THROW(CheckSlamInputs({{"rig", "r"}}, inputs));
+  // A ground truth that is not there: the error lists the ones there are.
+  refused = ExpectInvalid(
+      [&] { CheckSlamInputs({{"rig", "r"}, {"ground_truth", "ground_truth.tum"}}, inputs); });
+  EXPECT_NE(refused.find("holds no .tum file"), std::string::npos) << refused;
+  std::ofstream(dir_ / "trajectory.tum") << "0 0 0 0 0 0 0 1\n";
+  refused = ExpectInvalid(
+      [&] { CheckSlamInputs({{"rig", "r"}, {"ground_truth", "ground_truth.tum"}}, inputs); });
+  EXPECT_NE(refused.find("its .tum files: trajectory.tum"), std::string::npos) << refused;
+  EXPECT_NO_THROW(CheckSlamInputs({{"rig", "r"}, {"ground_truth", "trajectory.tum"}}, inputs));
+  // No rig: the message names the job type that makes one.
+  refused = ExpectInvalid([&] { SlamParamsFromJson(json::object()); });
+  EXPECT_NE(refused.find("relative_pose job"), std::string::npos) << refused;
+}
+
 TEST_F(TempDataset, RefusesAGroundTruthOfTheWrongLengthBeforeWork) {
   WriteImage("cam0/a.png", 64, 48);
   WriteImage("cam1/a.png", 64, 48);

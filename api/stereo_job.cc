@@ -137,7 +137,7 @@ StereoReconstructParams StereoReconstructParamsFromJson(const json& params) {
                                                           << out.method << "')");
     OMNIRIG_CHECK(false, "unknown field 'params." << key << "'");
   }
-  out.rig_job = JobIdField(params, "params", "rig");
+  out.rig_job = RigJobField(params);
   if (params.contains("trajectory"))
     out.trajectory_job = JobIdField(params, "params", "trajectory");
   if (out.method == "dense") {
