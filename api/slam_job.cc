@@ -99,6 +99,14 @@ json FrameToJson(const slam::FrameReport& f) {
 }
 
 json EvaluationToJson(const slam::TrajectoryErrors& e) {
+  json segments = json::array();
+  for (const slam::SegmentErrors& segment : e.segments) {
+    segments.push_back({{"length_m", segment.length_m},
+                        {"num_segments", segment.num_segments},
+                        {"translation_rmse_m", segment.translation_rmse_m},
+                        {"translation_mean_percent", segment.translation_mean_percent},
+                        {"rotation_rmse_deg", segment.rotation_rmse_deg}});
+  }
   return {{"num_poses", e.num_poses},
           {"path_length_m", e.path_length_m},
           {"ate_rmse_m", e.ate_rmse_m},
@@ -107,7 +115,12 @@ json EvaluationToJson(const slam::TrajectoryErrors& e) {
           {"rpe_rotation_rmse_deg", e.rpe_rotation_rmse_deg},
           {"final_drift_percent", e.final_drift_percent},
           {"max_drift_percent", e.max_drift_percent},
-          {"gt_from_estimate", PoseToJson(e.gt_from_estimate)}};
+          {"gt_from_estimate", PoseToJson(e.gt_from_estimate)},
+          {"rpe_segments", segments},
+          {"per_frame",
+           {{"distance_m", e.distance_m},
+            {"translation_error_m", e.translation_error_m},
+            {"rotation_error_deg", e.rotation_error_deg}}}};
 }
 
 // Timestamps for the TUM file: the ground truth's when given, else NAME's (NameAsTimestamp),
@@ -142,9 +155,11 @@ json WriteArtifacts(const StereoRig& rig, const slam::SlamResult& result,
       {"rig", RigToJson(rig)}};
   WriteTextFile(output_dir / "trajectory.json", trajectory.dump(2) + "\n");
   slam::WriteTum(output_dir / "trajectory.tum", tum);
+  slam::WriteKitti(output_dir / "trajectory.kitti.txt", tum);
   slam::WritePly(output_dir / "map.ply", result.map);
   return {{"trajectory_json", "trajectory.json"},
           {"trajectory_tum", "trajectory.tum"},
+          {"trajectory_kitti", "trajectory.kitti.txt"},
           {"map_ply", "map.ply"},
           {"report_json", "report.json"}};
 }

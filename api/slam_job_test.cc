@@ -122,6 +122,15 @@ TEST_F(SlamJob, TracksTheSequenceWithSmallDriftAndWritesArtifacts) {
   EXPECT_NEAR(evaluation["path_length_m"].get<double>(), gt_length, 1e-6);
   EXPECT_LT(evaluation["final_drift_percent"].get<double>(), 3.0) << evaluation.dump(2);
   EXPECT_LT(evaluation["ate_rmse_m"].get<double>(), 0.02);
+  // The figures evo plots: each frame's error against the distance travelled, and the relative
+  // pose error over 1 m and 10 m of path (the sequence is shorter than 10 m: no such segment).
+  EXPECT_EQ(evaluation["per_frame"]["distance_m"].size(), 12u);
+  EXPECT_EQ(evaluation["per_frame"]["translation_error_m"].size(), 12u);
+  EXPECT_NEAR(evaluation["per_frame"]["distance_m"].back().get<double>(), gt_length, 1e-6);
+  ASSERT_EQ(evaluation["rpe_segments"].size(), 2u);
+  EXPECT_EQ(evaluation["rpe_segments"][0]["length_m"], 1.0);
+  EXPECT_GT(evaluation["rpe_segments"][0]["num_segments"].get<int>(), 0);
+  EXPECT_LT(evaluation["rpe_segments"][0]["translation_mean_percent"].get<double>(), 3.0);
   EXPECT_GT(result["num_map_points"].get<int>(), 500);
   ASSERT_FALSE(result["global_bundle_adjustment"].is_null());
   EXPECT_LT(result["global_bundle_adjustment"]["final_rms_px"].get<double>(), 1.0);
@@ -132,6 +141,10 @@ TEST_F(SlamJob, TracksTheSequenceWithSmallDriftAndWritesArtifacts) {
   EXPECT_EQ(trajectory["frames"].size(), 12u);
   EXPECT_EQ(trajectory["frames"][3]["world_from_rig"]["rotation_wxyz"].size(), 4u);
   EXPECT_EQ(slam::ReadTum(context_.output_dir / "trajectory.tum").size(), 12u);
+  std::ifstream kitti(context_.output_dir / "trajectory.kitti.txt");
+  int kitti_lines = 0;
+  for (std::string row; std::getline(kitti, row);) ++kitti_lines;
+  EXPECT_EQ(kitti_lines, 12);
   std::ifstream ply(context_.output_dir / "map.ply", std::ios::binary);
   std::string line;
   std::getline(ply, line);

@@ -1,7 +1,9 @@
 #pragma once
 // Trajectory accuracy against a ground truth: ATE after an SE(3) alignment (Umeyama 1991),
-// relative pose error between consecutive frames, and drift as a percentage of the distance
-// travelled. Both trajectories are world_from_rig poses of the same frames, in order.
+// relative pose error between consecutive frames and over fixed lengths of path, each frame's
+// error against the distance travelled, and drift as a percentage of the distance travelled
+// (the figures evo and the KITTI benchmark report). Both trajectories are world_from_rig poses
+// of the same frames, in order.
 
 #include <vector>
 
@@ -12,6 +14,17 @@
 #include "engine/geometry/unified_camera.h"
 
 namespace omnirig::slam {
+
+// Relative pose error over segments of a fixed length of the ground truth's path (evo_rpe with
+// --delta L --delta_unit m; KITTI's segments): every frame starts a segment that ends at the
+// first frame at least length_m further along the path.
+struct SegmentErrors {
+  double length_m = 0.0;
+  int num_segments = 0;  // 0 when the path is shorter than length_m
+  double translation_rmse_m = 0.0;
+  double translation_mean_percent = 0.0;  // mean of the error over the segment's length
+  double rotation_rmse_deg = 0.0;
+};
 
 struct TrajectoryErrors {
   int num_poses = 0;
@@ -25,11 +38,19 @@ struct TrajectoryErrors {
   double final_drift_percent = 0.0;
   double max_drift_percent = 0.0;
   Rigid3d gt_from_estimate;  // the alignment used for the ATE
+  // Per frame, in order: the ground truth's distance travelled so far, and the frame's
+  // position and rotation error after the ATE's alignment.
+  std::vector<double> distance_m;
+  std::vector<double> translation_error_m;
+  std::vector<double> rotation_error_deg;
+  std::vector<SegmentErrors> segments;  // one per segment length asked for
 };
 
-// Throws InvalidArgument when the lengths differ or fewer than 2 poses are given.
+// Throws InvalidArgument when the lengths differ, fewer than 2 poses are given or a segment
+// length is not positive.
 TrajectoryErrors EvaluateTrajectory(const std::vector<Rigid3d>& estimate_world_from_rig,
-                                    const std::vector<Rigid3d>& gt_world_from_rig);
+                                    const std::vector<Rigid3d>& gt_world_from_rig,
+                                    const std::vector<double>& segment_lengths_m = {1.0, 10.0});
 
 // How far apart two calibrations of one camera image the same bearings: the RMS, over a
 // 4-pixel grid in the annulus [min_radius_px, max_radius_px] around truth's principal point,

@@ -48,6 +48,40 @@ TEST(EvaluateTrajectory, ZeroForARigidlyMovedCopy) {
   EXPECT_LT(RotationDistanceRad(errors.gt_from_estimate.rotation, moved.rotation.conjugate()), 1e-9);
 }
 
+TEST(EvaluateTrajectory, ErrorsOverDistanceAndSegmentsOfFixedLength) {
+  const std::vector<Rigid3d> gt = Circle(30);  // 29 steps of ~0.32 m: ~9.2 m in all
+  std::vector<Rigid3d> estimate;
+  for (const Rigid3d& pose : gt) {
+    estimate.emplace_back(pose.rotation, gt[0].translation + 1.02 * (pose.translation - gt[0].translation));
+  }
+  const TrajectoryErrors exact = EvaluateTrajectory(gt, gt);
+  ASSERT_EQ(exact.segments.size(), 2u);
+  EXPECT_EQ(exact.segments[0].length_m, 1.0);
+  EXPECT_GT(exact.segments[0].num_segments, 20);
+  EXPECT_LT(exact.segments[0].translation_rmse_m, 1e-12);
+  EXPECT_EQ(exact.segments[1].num_segments, 0);  // the path is shorter than 10 m
+
+  const TrajectoryErrors errors = EvaluateTrajectory(estimate, gt, {1.0, 5.0});
+  ASSERT_EQ(errors.distance_m.size(), gt.size());
+  ASSERT_EQ(errors.translation_error_m.size(), gt.size());
+  ASSERT_EQ(errors.rotation_error_deg.size(), gt.size());
+  EXPECT_DOUBLE_EQ(errors.distance_m.front(), 0.0);
+  EXPECT_DOUBLE_EQ(errors.distance_m.back(), errors.path_length_m);
+  double sum_sq = 0;
+  for (const double e : errors.translation_error_m) sum_sq += e * e;
+  EXPECT_NEAR(std::sqrt(sum_sq / gt.size()), errors.ate_rmse_m, 1e-12);
+  // 2 % too long: every segment's translation error is 2 % of its chord, so a little less of
+  // its path along the circle (radius 3 m), and the less the longer the segment.
+  for (const SegmentErrors& segment : errors.segments) {
+    EXPECT_GT(segment.num_segments, 0);
+    EXPECT_LE(segment.translation_mean_percent, 2.0 + 1e-9);
+    EXPECT_LT(segment.rotation_rmse_deg, 1e-6);
+  }
+  EXPECT_GT(errors.segments[0].translation_mean_percent, 1.95);
+  EXPECT_LT(errors.segments[1].translation_mean_percent, errors.segments[0].translation_mean_percent);
+  EXPECT_THROW(EvaluateTrajectory(estimate, gt, {0.0}), InvalidArgument);
+}
+
 TEST(EvaluateTrajectory, MeasuresAScaleDriftAndAnOffset) {
   const std::vector<Rigid3d> gt = Circle(30);
   // 2% too long: every position scaled about the first pose.

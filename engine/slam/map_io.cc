@@ -33,6 +33,21 @@ void WriteTum(const std::filesystem::path& path, const std::vector<StampedPose>&
   if (!out) throw std::runtime_error("failed writing " + path.string());
 }
 
+void WriteKitti(const std::filesystem::path& path, const std::vector<StampedPose>& poses) {
+  std::ofstream out = OpenForWriting(path, std::ios::out | std::ios::trunc);
+  out << std::setprecision(17);
+  for (const StampedPose& pose : poses) {
+    const Eigen::Matrix3d r = pose.world_from_rig.rotation.normalized().toRotationMatrix();
+    const Eigen::Vector3d& t = pose.world_from_rig.translation;
+    for (int row = 0; row < 3; ++row) {
+      // Adding +0.0 turns negative zeros into plain zeros, as in the TUM file.
+      out << r(row, 0) + 0.0 << ' ' << r(row, 1) + 0.0 << ' ' << r(row, 2) + 0.0 << ' '
+          << t(row) + 0.0 << (row == 2 ? '\n' : ' ');
+    }
+  }
+  if (!out) throw std::runtime_error("failed writing " + path.string());
+}
+
 std::vector<StampedPose> ReadTum(const std::filesystem::path& path) {
   std::ifstream in(path);
   OMNIRIG_CHECK(in, "cannot open the TUM trajectory " << path.filename().string());

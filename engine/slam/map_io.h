@@ -25,6 +25,11 @@ struct StampedPose {
 // cannot be written.
 void WriteTum(const std::filesystem::path& path, const std::vector<StampedPose>& poses);
 
+// Writes the poses in the KITTI odometry format the evaluation tools read (evo_traj kitti): per
+// line the first three rows of world_from_rig's 4x4 matrix, row-major, no timestamps (the
+// TUM file carries them). Throws std::runtime_error when the file cannot be written.
+void WriteKitti(const std::filesystem::path& path, const std::vector<StampedPose>& poses);
+
 // Reads a TUM file; '#' lines and blank lines are skipped. Throws InvalidArgument naming the
 // line when one does not hold eight numbers, or when the file cannot be opened.
 std::vector<StampedPose> ReadTum(const std::filesystem::path& path);

@@ -43,6 +43,30 @@ TEST(Tum, WriteThenReadRoundTrips) {
   std::filesystem::remove(path);
 }
 
+TEST(Kitti, ThreeRowsOfTheMatrixPerPose) {
+  const Rigid3d pose(Eigen::Quaterniond(Eigen::AngleAxisd(0.3, Eigen::Vector3d(1, 2, 3).normalized())),
+                     Eigen::Vector3d(1.5, -2, 0.25));
+  const auto path = TempPath("traj.kitti.txt");
+  WriteKitti(path, {{0.0, Rigid3d()}, {0.1, pose}});
+  std::ifstream in(path);
+  std::string line;
+  std::vector<std::vector<double>> rows;
+  while (std::getline(in, line)) {
+    std::istringstream fields(line);
+    rows.emplace_back();
+    for (double x; fields >> x;) rows.back().push_back(x);
+  }
+  ASSERT_EQ(rows.size(), 2u);
+  const Eigen::Matrix3d r = pose.rotation.toRotationMatrix();
+  for (int row = 0; row < 3; ++row) {
+    ASSERT_EQ(rows[1].size(), 12u);
+    for (int col = 0; col < 3; ++col) EXPECT_NEAR(rows[1][4 * row + col], r(row, col), 1e-15);
+    EXPECT_DOUBLE_EQ(rows[1][4 * row + 3], pose.translation(row));
+    EXPECT_DOUBLE_EQ(rows[0][4 * row + row], 1.0);
+  }
+  std::filesystem::remove(path);
+}
+
 TEST(Tum, RejectsMalformedLinesNamingTheLine) {
   const auto path = TempPath("bad.tum");
   std::ofstream(path) << "# header\n1 2 3 4 0 0 0 1\n2 2 3 oops\n";
