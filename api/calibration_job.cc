@@ -156,14 +156,43 @@ BoardSpec BoardFromJson(const json& board) {
 }
 
 CalibrationRequest CalibrationRequestFromJson(const json& params) {
-  CheckKnownFields(params, "params", {"board", "options", "hints", "svp"});
+  CheckKnownFields(params, "params", {"board", "options", "hints", "svp", "camera"});
   CalibrationRequest request;
   request.board = BoardFromJson(Field(params, "params", "board"));
+  if (params.contains("camera")) {
+    const json& camera = params["camera"];
+    OMNIRIG_CHECK(camera == "cam0" || camera == "cam1",
+                  "field 'params.camera' must be \"cam0\" or \"cam1\" (the folder of the "
+                  "camera's images)");
+    request.camera = camera.get<std::string>();
+  }
   if (params.contains("options")) request.options = OptionsFromJson(params["options"]);
   if (params.contains("hints")) HintsFromJson(params["hints"], &request.options);
   if (params.contains("svp")) request.options.svp = SvpFromJson(params["svp"]);
   WithErrorPrefix("field 'options': ", [&] { request.options.Check(); });
   return request;
+}
+
+std::vector<std::string> CalibrationImageNames(const std::optional<std::string>& camera,
+                                               const std::vector<std::string>& image_names) {
+  std::vector<std::string> names, folder[2];
+  for (const std::string& name : image_names) {
+    for (int c = 0; c < 2; ++c) {
+      if (name.rfind("cam" + std::to_string(c) + "/", 0) == 0) folder[c].push_back(name);
+    }
+  }
+  if (camera) {
+    const std::vector<std::string>& chosen = folder[*camera == "cam1" ? 1 : 0];
+    OMNIRIG_CHECK(!chosen.empty(), "'camera' is \"" << *camera << "\" but the dataset has no "
+                                                     << *camera << "/ images");
+    return chosen;
+  }
+  OMNIRIG_CHECK(folder[0].empty() || folder[1].empty(),
+                "the dataset holds images of two cameras (" << folder[0].size() << " in cam0/, "
+                    << folder[1].size()
+                    << " in cam1/), which one calibration would take for one camera: name the "
+                       "camera with \"camera\": \"cam0\" or \"cam1\" in the params");
+  return image_names;
 }
 
 json CalibrationReportToJson(const CalibrationReport& report) {
@@ -265,12 +294,15 @@ void RegisterCalibrationJobType() {
   JobType type;
   type.name = "calibration";
   type.validate = [](const json& params) { CalibrationRequestFromJson(params); };
+  type.check_inputs = [](const json& params, const SubmissionInputs& inputs) {
+    CalibrationImageNames(CalibrationRequestFromJson(params).camera, inputs.file_names());
+  };
   type.run = [](const json& params, const JobContext& context) {
     CalibrationRequest request = CalibrationRequestFromJson(params);
     request.options.calibrate.num_threads = std::max(1, context.num_threads);
     const CalibrationReport report =
-        CalibrateImages(context.dataset_dir, context.image_names, request.board, request.options,
-                        context.output_dir, context.progress);
+        CalibrateImages(context.dataset_dir, CalibrationImageNames(request.camera, context.image_names),
+                        request.board, request.options, context.output_dir, context.progress);
     context.Log("calibration: RMS " + std::to_string(report.rms_px) + " px over " +
                 std::to_string(report.num_views_used) + " views; " + report.solver.brief);
     json result = CalibrationReportToJson(report);

@@ -26,7 +26,9 @@
 //          "coverage": {...} (see WriteCoverageReport)}
 
 #include <filesystem>
+#include <optional>
 #include <string>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -39,12 +41,21 @@ namespace omnirig::api {
 struct CalibrationRequest {
   BoardSpec board;
   ImageCalibrationOptions options;
+  // "camera": "cam0" or "cam1": calibrate that camera of a stereo dataset from its folder's
+  // images only (cam0/..., cam1/...).
+  std::optional<std::string> camera;
 };
 
 // Parses and validates job params; throws InvalidArgument naming the offending field (unknown
 // fields and wrong types included).
 CalibrationRequest CalibrationRequestFromJson(const nlohmann::json& params);
 BoardSpec BoardFromJson(const nlohmann::json& board);
+
+// The images one calibration uses: those of `camera`'s folder when it is given; otherwise all,
+// unless they are of two cameras (cam0/ and cam1/ images), which would calibrate two cameras as
+// one: that throws InvalidArgument asking for "camera".
+std::vector<std::string> CalibrationImageNames(const std::optional<std::string>& camera,
+                                               const std::vector<std::string>& image_names);
 
 nlohmann::json CalibrationReportToJson(const CalibrationReport& report);
 

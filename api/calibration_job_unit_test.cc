@@ -123,6 +123,30 @@ TEST(CalibrationJson, ValidationNamesTheField) {
   EXPECT_EQ(ValidationError(ValidParams()), "");
 }
 
+TEST(CalibrationJson, OneCameraOfAStereoDataset) {
+  json params = ValidParams();
+  params["camera"] = "cam2";
+  EXPECT_NE(ValidationError(params).find("'params.camera'"), std::string::npos);
+  params["camera"] = "cam1";
+  const CalibrationRequest request = CalibrationRequestFromJson(params);
+  ASSERT_TRUE(request.camera.has_value());
+  const std::vector<std::string> stereo = {"cam0/a.png", "cam0/b.png", "cam1/a.png"};
+  EXPECT_EQ(CalibrationImageNames(request.camera, stereo), std::vector<std::string>{"cam1/a.png"});
+  EXPECT_EQ(CalibrationImageNames(std::string("cam0"), stereo).size(), 2u);
+  // Both cameras' images as one camera: refused, naming "camera".
+  try {
+    CalibrationImageNames(std::nullopt, stereo);
+    ADD_FAILURE() << "two cameras' images were taken for one";
+  } catch (const InvalidArgument& e) {
+    EXPECT_NE(std::string(e.what()).find("\"camera\""), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("2 in cam0/, 1 in cam1/"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(CalibrationImageNames(std::string("cam1"), {"cam0/a.png"}), InvalidArgument);
+  // A mono dataset (any folder layout but both camN/) is taken whole.
+  const std::vector<std::string> mono = {"a.png", "cam0/b.png"};
+  EXPECT_EQ(CalibrationImageNames(std::nullopt, mono), mono);
+}
+
 TEST(CalibrationJson, ResultHasTheIssuesKeys) {
   CameraModel camera;
   camera.width = 1024;
