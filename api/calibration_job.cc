@@ -3,11 +3,10 @@
 #include <algorithm>
 #include <set>
 
-#include <opencv2/imgcodecs.hpp>
-
+#include "api/board_json.h"
 #include "api/camera_json.h"
-#include "api/json_fields.h"
 #include "api/job_types.h"
+#include "api/json_fields.h"
 #include "engine/calib/coverage.h"
 #include "engine/calib/model_io.h"
 #include "engine/util/check.h"
@@ -133,28 +132,6 @@ json ImageToJson(const CalibrationImageReport& image) {
 
 }  // namespace
 
-BoardSpec BoardFromJson(const json& board) {
-  CheckKnownFields(
-      board, "board",
-      {"type", "cols", "rows", "square_size_mm", "marker_size_mm", "aruco_dictionary"});
-  BoardSpec spec;
-  const auto type = board.find("type");
-  if (type != board.end()) {
-    OMNIRIG_CHECK(type->is_string() && (*type == "checkerboard" || *type == "charuco"),
-                  "field 'board.type' must be \"checkerboard\" or \"charuco\"");
-    spec.type = *type == "charuco" ? BoardSpec::Type::kCharuco : BoardSpec::Type::kCheckerboard;
-  }
-  spec.cols = IntegerField(board, "board", "cols");
-  spec.rows = IntegerField(board, "board", "rows");
-  spec.square_size_m = NumberField(board, "board", "square_size_mm") * 1e-3;
-  const bool charuco = spec.type == BoardSpec::Type::kCharuco;
-  const bool has_marker = charuco || board.contains("marker_size_mm");
-  spec.marker_size_m = has_marker ? NumberField(board, "board", "marker_size_mm") * 1e-3 : 0.0;
-  ReadInteger(board, "board", "aruco_dictionary", &spec.aruco_dictionary);
-  WithErrorPrefix("field 'board': ", [&] { spec.Check(); });
-  return spec;
-}
-
 CalibrationRequest CalibrationRequestFromJson(const json& params) {
   CheckKnownFields(params, "params", {"board", "options", "hints", "svp", "camera"});
   CalibrationRequest request;
@@ -253,18 +230,10 @@ json WriteCameraExports(const CameraModel& camera, const std::filesystem::path& 
 json WriteCoverageReport(const CalibrationReport& report, const BoardSpec& board,
                          const std::filesystem::path& dataset_dir,
                          const std::filesystem::path& dir) {
-  cv::Mat background;
-  for (const CalibrationImageReport& image : report.images) {
-    if (!image.used) continue;
-    background = cv::imread((dataset_dir / image.name).string(), cv::IMREAD_COLOR);
-    break;
-  }
-  const Eigen::Vector3d* rim =
-      report.svp && report.svp->found_circle_px ? &*report.svp->found_circle_px : nullptr;
   const CoverageOptions options;
-  const CoverageReport coverage = AnalyseCoverage(report, board, background, rim, options);
-  std::filesystem::create_directories(dir);
-  cv::imwrite((dir / kCoverageImageFileName).string(), coverage.coverage_image);
+  const CoverageReport coverage = AnalyseCoverageOfImages(report, board, dataset_dir, options);
+  WriteCoverageImages(coverage, dir / kCoverageImageFileName, dir / kUncertaintyImageFileName);
+  const bool rim = report.svp && report.svp->found_circle_px;
   json result = {{"image", kCoverageImageFileName},
                  {"disk_centre_px", {coverage.disk_centre_px.x(), coverage.disk_centre_px.y()}},
                  {"disk_radius_px", coverage.disk_radius_px},
@@ -276,7 +245,6 @@ json WriteCoverageReport(const CalibrationReport& report, const BoardSpec& board
                  {"median_uncertainty_px", nullptr},
                  {"advice", coverage.advice}};
   if (coverage.uncertainty_valid) {
-    cv::imwrite((dir / kUncertaintyImageFileName).string(), coverage.uncertainty_image);
     result["uncertainty_image"] = kUncertaintyImageFileName;
     result["max_uncertainty_px"] = coverage.max_uncertainty_px;
     result["median_uncertainty_px"] = coverage.median_uncertainty_px;
@@ -290,7 +258,7 @@ json WriteRigExports(const StereoRig& rig, const std::filesystem::path& dir) {
   return {{"kalibr_camchain", kCamchainKalibrFileName}, {"warnings", warnings}};
 }
 
-void RegisterCalibrationJobType() {
+JobType CalibrationJobType() {
   JobType type;
   type.name = "calibration";
   type.validate = [](const json& params) { CalibrationRequestFromJson(params); };
@@ -311,7 +279,7 @@ void RegisterCalibrationJobType() {
         WriteCoverageReport(report, request.board, context.dataset_dir, context.output_dir);
     return result;
   };
-  RegisterJobType(std::move(type));
+  return type;
 }
 
 }  // namespace omnirig::api

@@ -32,6 +32,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "api/job_types.h"
 #include "engine/calib/board.h"
 #include "engine/calib/calibrate.h"
 #include "engine/calib/pipeline.h"
@@ -49,7 +50,6 @@ struct CalibrationRequest {
 // Parses and validates job params; throws InvalidArgument naming the offending field (unknown
 // fields and wrong types included).
 CalibrationRequest CalibrationRequestFromJson(const nlohmann::json& params);
-BoardSpec BoardFromJson(const nlohmann::json& board);
 
 // The images one calibration uses: those of `camera`'s folder when it is given; otherwise all,
 // unless they are of two cameras (cam0/ and cam1/ images), which would calibrate two cameras as
@@ -86,7 +86,7 @@ nlohmann::json WriteCoverageReport(const CalibrationReport& report, const BoardS
 inline constexpr const char* kCamchainKalibrFileName = "camchain_kalibr.yaml";
 nlohmann::json WriteRigExports(const StereoRig& rig, const std::filesystem::path& dir);
 
-// Registers the job type "calibration" (called from RegisterBuiltinJobTypes()).
-void RegisterCalibrationJobType();
+// The job type (its validation, references and run), for JobTypes::Add.
+JobType CalibrationJobType();
 
 }  // namespace omnirig::api

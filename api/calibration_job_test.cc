@@ -25,7 +25,6 @@ TEST(CalibrationJob, RunsOnTheVmrSetWithOverlays) {
   const fs::path data =
       fs::path(source ? source : ".") / ".." / "shared" / "data" / "real" / "ocamcalib-vmr";
   if (!fs::is_directory(data)) GTEST_SKIP() << "real data not found at " << data;
-  RegisterCalibrationJobType();
   const fs::path out =
       fs::temp_directory_path() / ("omnirig_calib_vmr_" + std::to_string(::getpid()));
   JobContext context;
@@ -41,7 +40,7 @@ TEST(CalibrationJob, RunsOnTheVmrSetWithOverlays) {
   json params = ValidParams();
   params["board"] = {{"cols", 6}, {"rows", 7}, {"square_size_mm", 30}};
   params["svp"] = json::object();  // find the rim, no mirror dimensions
-  const json result = FindJobType("calibration")->run(params, context);
+  const json result = CalibrationJobType().run(params, context);
   EXPECT_EQ(result["num_views_used"], 10);
   EXPECT_LT(result["rms_px"].get<double>(), 0.5);
   EXPECT_GT(solve_reports, 3);

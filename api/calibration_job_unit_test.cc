@@ -202,9 +202,9 @@ TEST(CalibrationJson, ResultHasTheIssuesKeys) {
 }
 
 TEST(CalibrationJob, IsRegisteredAndFailsClearlyOnUnusableImages) {
-  RegisterCalibrationJobType();
-  const JobType* type = FindJobType("calibration");
-  ASSERT_NE(type, nullptr);
+  const JobType job_type = CalibrationJobType();
+  EXPECT_EQ(job_type.name, "calibration");
+  const JobType* type = &job_type;
   EXPECT_THROW(type->validate(json::object()), InvalidArgument);
   EXPECT_FALSE(type->referenced_jobs);  // it reads no other job
 

@@ -1,16 +1,19 @@
 #pragma once
-// The job types the service runs, as a registry: the server knows job types only through
-// this interface, and each engine module's API file registers its own.
+// The job types the service runs: the server knows job types only through this interface, and
+// each job's API file provides its own.
 
 #include <filesystem>
 #include <functional>
 #include <map>
+#include <memory>
+#include <mutex>
 #include <string>
 #include <vector>
 
 #include <nlohmann/json.hpp>
 
 #include "engine/util/progress.h"
+#include "engine/util/progress_range.h"
 
 namespace omnirig::api {
 
@@ -33,16 +36,6 @@ struct JobContext {
     if (log) log(line);
   }
 };
-
-// A sink for one part of a job: its fractions in [0, 1] map onto [begin, end] of `progress`,
-// sharing its cancellation.
-inline ProgressSink SubRange(const ProgressSink& progress, double begin, double end) {
-  return {[progress, begin, end](double fraction, const std::string& stage,
-                                 const std::string& message) {
-            progress.Report(begin + (end - begin) * fraction, stage, message);
-          },
-          progress.is_cancelled};
-}
 
 // Writes `text` to `path` (an artifact, an export), creating its folder; throws
 // std::runtime_error naming the file when it cannot.
@@ -103,14 +96,27 @@ struct JobType {
   std::function<nlohmann::json(const nlohmann::json& params, const JobContext& context)> run;
 };
 
-// Registers a job type; later registrations of the same name replace earlier ones for
-// FindJobType, while pointers it returned before stay valid (and unchanged) for the process's
-// lifetime.
-void RegisterJobType(JobType type);
-// nullptr when no such type.
-const JobType* FindJobType(const std::string& name);
-std::vector<std::string> JobTypeNames();
-// Registers every job type omnirig ships (called once by the server at start-up).
-void RegisterBuiltinJobTypes();
+// The job types a service runs, by name. The service owns one and passes it to its routes and
+// workers; each job type's API file provides its JobType (e.g. RelativePoseJobType()).
+// Thread-safe: a type may be added while workers look types up (tests replace one while the
+// service runs).
+class JobTypes {
+ public:
+  // Adds `type`; one of the same name is replaced for Find, while pointers Find returned before
+  // stay valid (and unchanged) for this object's lifetime, for a job that is running.
+  void Add(JobType type);
+  // nullptr when no such type.
+  const JobType* Find(const std::string& name) const;
+  std::vector<std::string> Names() const;
+
+ private:
+  mutable std::mutex mutex_;
+  std::map<std::string, std::unique_ptr<const JobType>> types_;
+  std::vector<std::unique_ptr<const JobType>> replaced_;
+};
+
+// Adds every job type omnirig ships that needs nothing of the service (all but "sample",
+// which adds to the service's datasets: api/sample_job.h).
+void AddBuiltinJobTypes(JobTypes* types);
 
 }  // namespace omnirig::api

@@ -13,6 +13,7 @@
 #include <nlohmann/json.hpp>
 
 #include "engine/util/check.h"
+#include "engine/util/error_prefix.h"
 
 namespace omnirig::api {
 
@@ -51,17 +52,6 @@ void ReadInteger(const nlohmann::json& object, const std::string& path, const st
                  int* value);
 void ReadBool(const nlohmann::json& object, const std::string& path, const std::string& key,
               bool* value);
-
-// Returns f(); an InvalidArgument it throws gets `prefix` before its message, so that an engine
-// check names the request's field or item ("field 'board': ", "pair 'a.png': ").
-template <typename F>
-auto WithErrorPrefix(const std::string& prefix, F&& f) -> decltype(f()) {
-  try {
-    return f();
-  } catch (const InvalidArgument& e) {
-    throw InvalidArgument(prefix + e.what(), e.where());
-  }
-}
 
 // One tunable of an options struct: its JSON key and where it lives in one instance. A table of
 // these is at once the options' known keys, their reader and their echo in a job's result.

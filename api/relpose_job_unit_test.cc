@@ -35,7 +35,7 @@ std::string ErrorOf(F f) {
 TEST(RelposeJson, ParamsParseBoardCalibrationsAndOptions) {
   const json params = {{"board", Board()},
                        {"calibrations", {{"cam0", "job-a"}, {"cam1", "job-b"}}},
-                       {"refine_intrinsics", true},
+                       {"intrinsics_model", "free"},
                        {"huber_loss_px", 0.5},
                        {"sync_false_alarm_rate", 0.05}};
   const RelativePoseParams parsed = RelativePoseParamsFromJson(params);
@@ -44,94 +44,56 @@ TEST(RelposeJson, ParamsParseBoardCalibrationsAndOptions) {
   EXPECT_NEAR(parsed.board.square_size_m, 0.02423, 1e-12);
   EXPECT_EQ(*parsed.cam0_calibration_job, "job-a");
   EXPECT_EQ(*parsed.cam1_calibration_job, "job-b");
-  EXPECT_TRUE(parsed.options.refine_intrinsics);
-  EXPECT_EQ(parsed.options.huber_loss_px, 0.5);
-  EXPECT_EQ(parsed.options.sync_test.false_alarm_rate, 0.05);
+  EXPECT_EQ(parsed.options.intrinsics_model, "free");
+  EXPECT_EQ(parsed.options.relpose.huber_loss_px, 0.5);
+  EXPECT_EQ(parsed.options.relpose.sync_test.false_alarm_rate, 0.05);
+  EXPECT_EQ(parsed.options.relpose.fixed_intrinsics, DefaultFixedIntrinsics());
   const RelativePoseParams self_calibrating = RelativePoseParamsFromJson({{"board", Board()}});
   EXPECT_FALSE(self_calibrating.cam0_calibration_job);
-  EXPECT_TRUE(self_calibrating.options.refine_intrinsics);
-  EXPECT_FALSE(RelativePoseParamsFromJson(
-                   {{"board", Board()}, {"calibrations", {{"cam0", "a"}, {"cam1", "b"}}}})
-                   .options.refine_intrinsics);
 }
 
-TEST(RelposeJson, FixedIntrinsicsReplaceTheDefaultSet) {
-  const RelativePoseParams by_default = RelativePoseParamsFromJson({{"board", Board()}});
-  EXPECT_EQ(by_default.options.fixed_intrinsics, DefaultFixedIntrinsics());
-  const RelativePoseParams fisheye = RelativePoseParamsFromJson(
-      {{"board", Board()}, {"fixed_intrinsics", {"alpha", "k5", "tangential"}}});
-  std::array<bool, UnifiedIntrinsics::kNumParams> expected = DefaultFixedIntrinsics();
-  expected[UnifiedIntrinsics::kK3] = expected[UnifiedIntrinsics::kK4] = true;
-  EXPECT_EQ(fisheye.options.fixed_intrinsics, expected);
-  const RelativePoseParams none =
-      RelativePoseParamsFromJson({{"board", Board()}, {"fixed_intrinsics", json::array()}});
-  for (bool fixed : none.options.fixed_intrinsics) EXPECT_FALSE(fixed);
-  const std::string unknown_name = ErrorOf([] {
-    RelativePoseParamsFromJson({{"board", Board()}, {"fixed_intrinsics", {"k9"}}});
-  });
-  EXPECT_NE(unknown_name.find("k9"), std::string::npos);
-  EXPECT_NE(unknown_name.find("params.fixed_intrinsics"), std::string::npos) << unknown_name;
-  EXPECT_NE(ErrorOf([] {
-              RelativePoseParamsFromJson({{"board", Board()}, {"fixed_intrinsics", "k5"}});
-            }).find("fixed_intrinsics"),
-            std::string::npos);
+// The intrinsics the rig refines are chosen by intrinsics_model alone: a request that names
+// them another way gets an error that points to it.
+TEST(RelposeJson, IntrinsicsOptionsOtherThanTheModelAreRefusedNamingIt) {
+  for (const json& params :
+       {json{{"board", Board()}, {"refine_intrinsics", true}},
+        json{{"board", Board()}, {"fixed_intrinsics", {"alpha", "k5", "tangential"}}},
+        json{{"board", Board()}, {"intrinsics_model", "free"}, {"refine_intrinsics", true}}}) {
+    const std::string message = ErrorOf([&] { RelativePoseParamsFromJson(params); });
+    EXPECT_NE(message.find("params.intrinsics_model"), std::string::npos) << message;
+    EXPECT_NE(message.find(params.contains("fixed_intrinsics") ? "params.fixed_intrinsics"
+                                                               : "params.refine_intrinsics"),
+              std::string::npos)
+        << message;
+  }
 }
 
-// "auto" is the default when no intrinsics option was given (with given calibrations too: it
-// then chooses between keeping them and refining them with their own views); a
-// named model sets the options it stands for, on top of fixed_intrinsics.
+// "auto" is the default (with given calibrations too: it then chooses between keeping them and
+// refining them with their own views); every candidate can be named.
 TEST(RelposeJson, IntrinsicsModelDefaultsAndNamedModels) {
-  EXPECT_EQ(RelativePoseParamsFromJson({{"board", Board()}}).intrinsics_model, "auto");
+  EXPECT_EQ(RelativePoseParamsFromJson({{"board", Board()}}).options.intrinsics_model, "auto");
   const json calibrations = {{"cam0", "a"}, {"cam1", "b"}};
   EXPECT_EQ(RelativePoseParamsFromJson({{"board", Board()}, {"calibrations", calibrations}})
-                .intrinsics_model,
+                .options.intrinsics_model,
             "auto");
-  EXPECT_EQ(RelativePoseParamsFromJson({{"board", Board()}, {"refine_intrinsics", false}})
-                .intrinsics_model,
-            "");
-  EXPECT_EQ(RelativePoseParamsFromJson({{"board", Board()}, {"fixed_intrinsics", {"alpha"}}})
-                .intrinsics_model,
-            "");
-  const RelativePoseParams tangential = RelativePoseParamsFromJson(
-      {{"board", Board()}, {"intrinsics_model", "tangential_fixed"}});
-  EXPECT_TRUE(tangential.options.refine_intrinsics);
-  EXPECT_TRUE(tangential.options.fixed_intrinsics[UnifiedIntrinsics::kK3]);
-  EXPECT_TRUE(tangential.options.fixed_intrinsics[UnifiedIntrinsics::kK4]);
-  EXPECT_TRUE(tangential.options.fixed_intrinsics[UnifiedIntrinsics::kK5]);
-  EXPECT_EQ(tangential.base_fixed_intrinsics, DefaultFixedIntrinsics());
-  const RelativePoseParams fixed = RelativePoseParamsFromJson(
-      {{"board", Board()}, {"intrinsics_model", "fixed"}});
-  EXPECT_FALSE(fixed.options.refine_intrinsics);
-  const RelativePoseParams free_with_calibrations = RelativePoseParamsFromJson(
-      {{"board", Board()}, {"calibrations", calibrations}, {"intrinsics_model", "free"}});
-  EXPECT_TRUE(free_with_calibrations.options.refine_intrinsics);
-  const RelativePoseParams auto_u0 = RelativePoseParamsFromJson(
-      {{"board", Board()}, {"intrinsics_model", "auto"}, {"fixed_intrinsics", {"u0", "k5"}}});
-  EXPECT_TRUE(auto_u0.base_fixed_intrinsics[UnifiedIntrinsics::kU0]);
-  EXPECT_FALSE(auto_u0.base_fixed_intrinsics[UnifiedIntrinsics::kAlpha]);
+  for (const char* name :
+       {"fixed", "tangential_fixed", "tangential_free_cam0", "tangential_free_cam1", "free"}) {
+    EXPECT_EQ(RelativePoseParamsFromJson({{"board", Board()}, {"intrinsics_model", name}})
+                  .options.intrinsics_model,
+              name);
+  }
+  for (const char* name : {"fixed", "free"}) {
+    EXPECT_EQ(RelativePoseParamsFromJson(
+                  {{"board", Board()}, {"calibrations", calibrations}, {"intrinsics_model", name}})
+                  .options.intrinsics_model,
+              name);
+  }
 }
 
-// One camera's tangential terms free (the auto candidates tangential_free_cam0 / _cam1) can be
-// named too: the other camera's k3, k4 fixed (at 0 in its own calibration), the rest as free.
-TEST(RelposeJson, PerCameraTangentialModelsCanBeNamed) {
-  for (int camera = 0; camera < 2; ++camera) {
-    const std::string name = "tangential_free_cam" + std::to_string(camera);
-    const RelativePoseParams params =
-        RelativePoseParamsFromJson({{"board", Board()}, {"intrinsics_model", name}});
-    EXPECT_EQ(params.intrinsics_model, name);
-    EXPECT_TRUE(params.options.refine_intrinsics) << name;
-    ASSERT_TRUE(params.options.cam1_fixed_intrinsics.has_value()) << name;
-    const auto& cam0_fixed = params.options.fixed_intrinsics;
-    const auto& cam1_fixed = *params.options.cam1_fixed_intrinsics;
-    const auto& free_camera = camera == 0 ? cam0_fixed : cam1_fixed;
-    const auto& other_camera = camera == 0 ? cam1_fixed : cam0_fixed;
-    EXPECT_EQ(free_camera, DefaultFixedIntrinsics()) << name;
-    EXPECT_TRUE(other_camera[UnifiedIntrinsics::kK3]) << name;
-    EXPECT_TRUE(other_camera[UnifiedIntrinsics::kK4]) << name;
-    EXPECT_TRUE(other_camera[UnifiedIntrinsics::kK5]) << name;
-    EXPECT_FALSE(other_camera[UnifiedIntrinsics::kK1]) << name;
-    // Like tangential_fixed, it needs the job's own calibrations (k3 = k4 = 0 in one camera).
-    EXPECT_NE(ErrorOf([&name] {
+// The models that recalibrate a camera with k3 = k4 = 0 need the job's own calibrations.
+TEST(RelposeJson, TangentialModelsNeedTheJobsOwnCalibrations) {
+  for (const char* name : {"tangential_fixed", "tangential_free_cam0", "tangential_free_cam1"}) {
+    EXPECT_NE(ErrorOf([name] {
                 RelativePoseParamsFromJson({{"board", Board()},
                                             {"calibrations", {{"cam0", "a"}, {"cam1", "b"}}},
                                             {"intrinsics_model", name}});
@@ -139,9 +101,6 @@ TEST(RelposeJson, PerCameraTangentialModelsCanBeNamed) {
               std::string::npos)
         << name;
   }
-  // The standard models leave cam1's set to cam0's.
-  EXPECT_FALSE(RelativePoseParamsFromJson({{"board", Board()}, {"intrinsics_model", "free"}})
-                   .options.cam1_fixed_intrinsics.has_value());
 }
 
 TEST(RelposeJson, IntrinsicsModelConflictsAreRefused) {
@@ -157,20 +116,6 @@ TEST(RelposeJson, IntrinsicsModelConflictsAreRefused) {
               RelativePoseParamsFromJson({{"board", Board()}, {"intrinsics_model", 1}});
             }).find("intrinsics_model"),
             std::string::npos);
-  EXPECT_NE(ErrorOf([] {
-              RelativePoseParamsFromJson(
-                  {{"board", Board()}, {"intrinsics_model", "free"}, {"refine_intrinsics", true}});
-            }).find("not both"),
-            std::string::npos);
-  for (const char* model : {"tangential_fixed"}) {
-    EXPECT_NE(ErrorOf([model] {
-                RelativePoseParamsFromJson({{"board", Board()},
-                                            {"calibrations", {{"cam0", "a"}, {"cam1", "b"}}},
-                                            {"intrinsics_model", model}});
-              }).find("calibrate the cameras itself"),
-              std::string::npos)
-        << model;
-  }
 }
 
 TEST(RelposeJson, ParamsRefuseUnknownFieldsAndWrongTypesNamingTheField) {
@@ -197,8 +142,8 @@ TEST(RelposeJson, ParamsRefuseUnknownFieldsAndWrongTypesNamingTheField) {
             }).find("calibrations.cam1"),
             std::string::npos);
   EXPECT_NE(ErrorOf([] {
-              RelativePoseParamsFromJson({{"board", Board()}, {"refine_intrinsics", "yes"}});
-            }).find("refine_intrinsics"),
+              RelativePoseParamsFromJson({{"board", Board()}, {"resolve_corner_order", "yes"}});
+            }).find("resolve_corner_order"),
             std::string::npos);
   EXPECT_NE(ErrorOf([] {
               RelativePoseParamsFromJson({{"board", Board()}, {"huber_loss_px", -1}});
@@ -212,9 +157,9 @@ TEST(RelposeJson, ParamsRefuseUnknownFieldsAndWrongTypesNamingTheField) {
 }
 
 TEST(RelposeJson, JobTypeIsRegisteredAndNamesItsCalibrations) {
-  RegisterRelativePoseJobType();
-  const JobType* type = FindJobType("relative_pose");
-  ASSERT_NE(type, nullptr);
+  const JobType job_type = RelativePoseJobType();
+  EXPECT_EQ(job_type.name, "relative_pose");
+  const JobType* type = &job_type;
   const json params = {{"board", Board()}, {"calibrations", {{"cam0", "c0"}, {"cam1", "c1"}}}};
   EXPECT_NO_THROW(type->validate(params));
   EXPECT_EQ(type->referenced_jobs(params),
@@ -222,21 +167,6 @@ TEST(RelposeJson, JobTypeIsRegisteredAndNamesItsCalibrations) {
                                        {"c1", "calibration", "calibrations.cam1"}}));
   EXPECT_TRUE(type->referenced_jobs({{"board", Board()}}).empty());
   EXPECT_THROW(type->validate({{"board", Board()}, {"extra", 1}}), InvalidArgument);
-}
-
-TEST(RelposeJson, PairsMatchByNameAndMissingPartnersAreRefused) {
-  const auto pairs = MatchImagePairs({"cam0/b.png", "cam1/a.png", "cam0/a.png", "cam1/b.png",
-                                      "notes.txt", "cam2/a.png"});
-  ASSERT_EQ(pairs.size(), 2u);
-  EXPECT_EQ(pairs[0].name, "a.png");
-  EXPECT_EQ(pairs[0].cam0, "cam0/a.png");
-  EXPECT_EQ(pairs[0].cam1, "cam1/a.png");
-  const std::string missing =
-      ErrorOf([] { MatchImagePairs({"cam0/a.png", "cam1/a.png", "cam0/c.png", "cam1/d.png"}); });
-  EXPECT_NE(missing.find("cam0/c.png has no cam1/c.png"), std::string::npos) << missing;
-  EXPECT_NE(missing.find("cam1/d.png has no cam0/d.png"), std::string::npos) << missing;
-  EXPECT_NE(ErrorOf([] { MatchImagePairs({"cam0/a.png", "left/a.png"}); }).find("cam1/"),
-            std::string::npos);
 }
 
 TEST(RelposeJson, ResultHasTheIssueKeys) {

@@ -7,17 +7,16 @@
 #include <set>
 #include <sstream>
 
-#include <opencv2/imgcodecs.hpp>
-
 #include "api/camera_json.h"
 #include "api/json_fields.h"
-#include "api/relpose_job.h"
 #include "api/stereo_job.h"
 #include "engine/calib/calibrate.h"
 #include "engine/geometry/ply.h"
 #include "engine/slam/evaluation.h"
+#include "engine/slam/image_source.h"
 #include "engine/slam/map_io.h"
 #include "engine/util/check.h"
+#include "engine/util/image_pairs.h"
 #include "engine/util/timer.h"
 
 namespace omnirig::api {
@@ -442,10 +441,10 @@ SlamInput PrepareImageInput(const fs::path& dataset_dir,
                                   << " stereo frames (one pose per frame, in order)");
   }
   const std::vector<double> all_stamps = Timestamps(all, gt);
-  auto pairs = std::make_shared<std::vector<ImagePairNames>>();
+  std::vector<ImagePairNames> pairs;
   SlamInput input;
   for (size_t i = 0; i < all.size(); i += frame_step) {
-    pairs->push_back(all[i]);
+    pairs.push_back(all[i]);
     input.names.push_back(all[i].name);
     input.timestamps_s.push_back(all_stamps[i]);
     if (!gt.empty()) input.ground_truth.push_back(gt[i]);
@@ -454,14 +453,7 @@ SlamInput PrepareImageInput(const fs::path& dataset_dir,
                   {"frame_step", frame_step},
                   {"num_frames", input.names.size()},
                   {"num_image_pairs", all.size()}};
-  input.load = [pairs, dataset_dir](int i) {
-    return slam::ReadBoth([&](int c) {
-      const std::string& name = c == 0 ? (*pairs)[i].cam0 : (*pairs)[i].cam1;
-      cv::Mat image = cv::imread((dataset_dir / name).string(), cv::IMREAD_COLOR);
-      OMNIRIG_CHECK(!image.empty(), "image " << name << " cannot be read");
-      return image;
-    });
-  };
+  input.load = slam::StereoImageLoader(dataset_dir, std::move(pairs));
   return input;
 }
 
@@ -654,7 +646,7 @@ json RunSlamJob(const json& params, const JobContext& context) {
                           parsed.frames);
 }
 
-void RegisterSlamJobType() {
+JobType SlamJobType() {
   JobType type;
   type.name = "slam";
   type.validate = [](const json& params) { SlamParamsFromJson(params); };
@@ -663,7 +655,7 @@ void RegisterSlamJobType() {
   };
   type.check_inputs = CheckSlamInputs;
   type.run = RunSlamJob;
-  RegisterJobType(std::move(type));
+  return type;
 }
 
 }  // namespace omnirig::api

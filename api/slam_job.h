@@ -133,7 +133,7 @@ nlohmann::json RunSlamOnDataset(
 
 nlohmann::json RunSlamJob(const nlohmann::json& params, const JobContext& context);
 
-// Registers `slam` with api/job_types.h.
-void RegisterSlamJobType();
+// The job type (its validation, references and run), for JobTypes::Add.
+JobType SlamJobType();
 
 }  // namespace omnirig::api

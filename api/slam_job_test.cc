@@ -82,9 +82,9 @@ TEST_F(SlamJob, TracksTheSequenceWithSmallDriftAndWritesArtifacts) {
   context_.progress.report = [&](double f, const std::string&, const std::string&) {
     fractions.push_back(f);
   };
-  RegisterSlamJobType();
-  const JobType* type = FindJobType("slam");
-  ASSERT_NE(type, nullptr);
+  const JobType job_type = SlamJobType();
+  EXPECT_EQ(job_type.name, "slam");
+  const JobType* type = &job_type;
   const json params = {{"rig", "rig-job"}, {"ground_truth", "gt.tum"}};
   type->validate(params);
   const json result = type->run(params, context_);
@@ -158,9 +158,9 @@ TEST_F(SlamJob, TracksTheSequenceWithSmallDriftAndWritesArtifacts) {
 }
 
 TEST_F(SlamJob, DenseMapFusesKeyframesAndWritesAnOccupancyGrid) {
-  RegisterSlamJobType();
-  const JobType* type = FindJobType("slam");
-  ASSERT_NE(type, nullptr);
+  const JobType job_type = SlamJobType();
+  EXPECT_EQ(job_type.name, "slam");
+  const JobType* type = &job_type;
   // Keyframes 0.5 m apart on this short sequence, on the full-resolution grid (the defaults,
   // 1.5 m and 1.25, are chosen for 1024x768; at 640x480 a coarser grid leaves few points under
   // the map's 2 % range std: 6,609 instead of 40,569).
@@ -202,9 +202,9 @@ TEST_F(SlamJob, RefinesAWrongFocalLengthAndReportsTheCalibrationBeforeAndAfter) 
   }
   const json rig = RigToJson(given);
   context_.load_result = [rig](const std::string&) { return rig; };
-  RegisterSlamJobType();
-  const JobType* type = FindJobType("slam");
-  ASSERT_NE(type, nullptr);
+  const JobType job_type = SlamJobType();
+  EXPECT_EQ(job_type.name, "slam");
+  const JobType* type = &job_type;
   const json params = {{"rig", "rig-job"}, {"options", {{"refine_calibration", "intrinsics"}}}};
   type->validate(params);
   const json result = type->run(params, context_);

@@ -300,9 +300,9 @@ TEST_F(TempDataset, FrameSelectionOnImagesAndVideos) {
 }
 
 TEST(SlamJobType, IsRegisteredAndValidates) {
-  RegisterSlamJobType();
-  const JobType* type = FindJobType("slam");
-  ASSERT_NE(type, nullptr);
+  const JobType job_type = SlamJobType();
+  EXPECT_EQ(job_type.name, "slam");
+  const JobType* type = &job_type;
   EXPECT_THROW(type->validate(json::object()), InvalidArgument);
   EXPECT_EQ(type->referenced_jobs({{"rig", "r1"}}),
             (std::vector<JobReference>{{"r1", "relative_pose", "rig"}}));

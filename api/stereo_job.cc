@@ -14,17 +14,13 @@
 #include <utility>
 #include <vector>
 
-#include <opencv2/imgcodecs.hpp>
-
 #include "api/camera_json.h"
 #include "api/json_fields.h"
-#include "api/relpose_job.h"
-#include "engine/dense/range_io.h"
+#include "engine/dense/pipeline.h"
 #include "engine/estimators/epipolar.h"
-#include "engine/geometry/ply.h"
 #include "engine/slam/map_io.h"
-#include "engine/util/background_task.h"
 #include "engine/util/check.h"
+#include "engine/util/image_pairs.h"
 
 namespace omnirig::api {
 namespace {
@@ -69,22 +65,10 @@ OptionTable DenseTable(dense::DenseStereoOptions* o) {
 // image shifted by 4 px about 0.3.
 constexpr double kFewConfidentFraction = 0.5;
 
-cv::Mat ReadImage(const JobContext& context, const std::string& name) {
-  const cv::Mat image = cv::imread((context.dataset_dir / name).string(), cv::IMREAD_COLOR);
-  OMNIRIG_CHECK(!image.empty(), "cannot read image '" << name << "'");
-  return image;
-}
-
 double Median(std::vector<double> values) {
   if (values.empty()) return 0.0;
   std::nth_element(values.begin(), values.begin() + values.size() / 2, values.end());
   return values[values.size() / 2];
-}
-
-std::string SafeArtifactName(const std::string& pair_name) {
-  std::string out = "cloud_";
-  for (char c : pair_name) out += (c == '/' || c == '.' || c == '\\') ? '_' : c;
-  return out + ".ply";
 }
 
 // A pair's "median_range_m" and "median_range_std_m" over its points (either method's).
@@ -162,27 +146,12 @@ json DenseStereoOptionsToJson(const dense::DenseStereoOptions& options) {
 
 namespace {
 
-// NAME of a pair's range panoramas (NAME_range.tiff): the pair's name without its extension,
-// '/' and '\\' replaced by '_'.
-std::string RangeBaseName(const std::string& pair_name) {
-  std::string out = std::filesystem::path(pair_name).replace_extension().string();
-  for (char& c : out) {
-    if (c == '/' || c == '\\') c = '_';
-  }
-  return out;
-}
-
 // Each pair's cam0 pose in one world, when a trajectory gives it: a slam job's (frames named as
 // the pairs) or the dataset's .tum file (by timestamp when the pairs are named by time, else one
 // pose per pair in order, as slam's ground truth).
-struct PairPlacement {
-  std::string source;                                   // "slam job ID" or "NAME.tum"
-  std::vector<std::optional<Rigid3d>> world_from_cam0;  // per pair
-  std::string warning;  // why some or all pairs could not be placed
-};
-
-PairPlacement PlaceBySlamJob(const std::string& job_id, const std::vector<ImagePairNames>& pairs,
-                             const JobContext& context) {
+dense::PairPlacement PlaceBySlamJob(const std::string& job_id,
+                                    const std::vector<ImagePairNames>& pairs,
+                                    const JobContext& context) {
   const json slam = context.load_result(job_id);
   OMNIRIG_CHECK(slam.contains("frames") && slam["frames"].is_array(),
                 "job " << job_id << " holds no trajectory (is it a slam job?)");
@@ -193,7 +162,7 @@ PairPlacement PlaceBySlamJob(const std::string& job_id, const std::vector<ImageP
     by_name[frame["name"].get<std::string>()] =
         pose.is_null() ? std::nullopt : std::optional<Rigid3d>(PoseFromJson(pose));
   }
-  PairPlacement placement{"slam job " + job_id, {}, ""};
+  dense::PairPlacement placement{"slam job " + job_id, {}, ""};
   int num_unknown = 0;
   for (const ImagePairNames& pair : pairs) {
     const auto it = by_name.find(pair.name);
@@ -207,9 +176,9 @@ PairPlacement PlaceBySlamJob(const std::string& job_id, const std::vector<ImageP
   return placement;
 }
 
-PairPlacement PlaceByTum(const std::string& file, const std::vector<ImagePairNames>& pairs,
-                         const JobContext& context) {
-  PairPlacement placement{file, std::vector<std::optional<Rigid3d>>(pairs.size()), ""};
+dense::PairPlacement PlaceByTum(const std::string& file, const std::vector<ImagePairNames>& pairs,
+                                const JobContext& context) {
+  dense::PairPlacement placement{file, std::vector<std::optional<Rigid3d>>(pairs.size()), ""};
   const std::vector<slam::StampedPose> poses = slam::ReadTum(context.dataset_dir / file);
   int num_by_time = 0;
   for (size_t k = 0; k < pairs.size(); ++k) {
@@ -235,9 +204,9 @@ PairPlacement PlaceByTum(const std::string& file, const std::vector<ImagePairNam
   return placement;
 }
 
-std::optional<PairPlacement> PlacePairs(const StereoReconstructParams& parsed,
-                                        const std::vector<ImagePairNames>& pairs,
-                                        const JobContext& context) {
+std::optional<dense::PairPlacement> PlacePairs(const StereoReconstructParams& parsed,
+                                               const std::vector<ImagePairNames>& pairs,
+                                               const JobContext& context) {
   if (parsed.trajectory_job) return PlaceBySlamJob(*parsed.trajectory_job, pairs, context);
   std::vector<std::string> tum;
   for (const std::string& name : context.image_names) {
@@ -245,125 +214,11 @@ std::optional<PairPlacement> PlacePairs(const StereoReconstructParams& parsed,
   }
   if (tum.empty()) return std::nullopt;
   if (tum.size() > 1) {
-    return PairPlacement{tum[0], std::vector<std::optional<Rigid3d>>(pairs.size()),
-                         "the dataset holds " + std::to_string(tum.size()) +
-                             " .tum trajectories: name a slam job in 'trajectory' instead"};
+    return dense::PairPlacement{tum[0], std::vector<std::optional<Rigid3d>>(pairs.size()),
+                                "the dataset holds " + std::to_string(tum.size()) +
+                                    " .tum trajectories: name a slam job in 'trajectory' instead"};
   }
   return PlaceByTum(tum[0], pairs, context);
-}
-
-// Where the pairs' clouds go. Without a trajectory: one pair writes cloud.ply, in its
-// cam0 frame; several write cloud_NAME.ply each in its own cam0 frame and no merged cloud (the
-// pairs of a moving rig share no frame). With one: cloud_NAME.ply per pair as well, and
-// cloud.ply with every placed pair moved into the trajectory's world.
-class CloudOutputs {
- public:
-  CloudOutputs(const std::filesystem::path& dir, size_t num_pairs,
-               std::optional<PairPlacement> placement)
-      : dir_(dir), num_pairs_(num_pairs), placement_(std::move(placement)),
-        merged_(dir / "cloud.ply") {}
-
-  // Pair k's keys in the result ("artifact", "placed"), on the job's thread.
-  void Describe(size_t k, const std::string& pair_name, json* pair) {
-    if (num_pairs_ == 1 && !placement_) return;
-    (*pair)["artifact"] = SafeArtifactName(pair_name);
-    if (!placement_) return;
-    const bool placed = placement_->world_from_cam0[k].has_value();
-    (*pair)["placed"] = placed;
-    num_placed_ += placed;
-  }
-
-  // Writes pair k's cloud, and appends it to the merged cloud when it is placed. Dense jobs
-  // call it on their writer thread (one pair at a time, in pair order) while the next pair is
-  // matched; Finish() only once the last Write() has returned.
-  void Write(size_t k, const std::string& pair_name, const PlyCloud& cloud) {
-    if (num_pairs_ == 1 && !placement_) {
-      WritePly(dir_ / "cloud.ply", cloud);
-      return;
-    }
-    WritePly(dir_ / SafeArtifactName(pair_name), cloud);
-    if (!placement_ || !placement_->world_from_cam0[k]) return;
-    const Rigid3d& world_from_cam0 = *placement_->world_from_cam0[k];
-    PlyCloud in_world = cloud;
-    in_world.comment = "omnirig stereo_reconstruct: all placed pairs in the world of " +
-                       placement_->source + ", metres";
-    for (Eigen::Vector3f& p : in_world.positions) {
-      p = (world_from_cam0 * p.cast<double>()).cast<float>();
-    }
-    merged_.Append(in_world);
-  }
-
-  void Add(size_t k, const std::string& pair_name, const PlyCloud& cloud, json* pair) {
-    Describe(k, pair_name, pair);
-    Write(k, pair_name, cloud);
-  }
-
-  void Finish(json* result) {
-    if (placement_) {
-      json trajectory = {{"source", placement_->source}, {"num_pairs_placed", num_placed_}};
-      if (num_placed_ < static_cast<int>(num_pairs_) && placement_->warning.empty()) {
-        placement_->warning = std::to_string(num_pairs_ - num_placed_) +
-                              " pair(s) have no pose in the trajectory and are not in cloud.ply";
-      }
-      if (!placement_->warning.empty()) trajectory["warning"] = placement_->warning;
-      (*result)["trajectory"] = trajectory;
-    }
-    if (num_placed_ > 0) {
-      merged_.Finish();
-      (*result)["artifact"] = "cloud.ply";
-      (*result)["clouds_merged"] = true;
-    } else if (num_pairs_ == 1) {
-      (*result)["artifact"] = "cloud.ply";
-    } else if (num_pairs_ > 1) {
-      (*result)["artifact"] = (*result)["pairs"][0]["artifact"];
-      (*result)["clouds_merged"] = false;
-    }
-  }
-
- private:
-  std::filesystem::path dir_;
-  size_t num_pairs_;
-  std::optional<PairPlacement> placement_;
-  PlyAppender merged_;
-  int num_placed_ = 0;
-};
-
-size_t RunSparse(const StereoReconstructParams& parsed, const StereoRig& rig,
-                 const std::vector<ImagePairNames>& pairs, const JobContext& context,
-                 CloudOutputs* outputs, json* result) {
-  size_t num_points = 0;
-  for (size_t k = 0; k < pairs.size(); ++k) {
-    context.progress.ThrowIfCancelled();
-    const cv::Mat image0 = ReadImage(context, pairs[k].cam0);
-    const cv::Mat image1 = ReadImage(context, pairs[k].cam1);
-    const StereoPairReport report = WithErrorPrefix("pair '" + pairs[k].name + "': ", [&] {
-      return ReconstructStereoPair(rig, image0, image1, parsed.options,
-                                   SubRange(context.progress, static_cast<double>(k) / pairs.size(),
-                                            static_cast<double>(k + 1) / pairs.size()));
-    });
-    json pair = PairJson(pairs[k].name, report);
-    outputs->Add(k, pairs[k].name, SparseCloud(report.points), &pair);
-    context.Log("pair " + pairs[k].name + ": " + std::to_string(report.num_matches) +
-                " matches, " + std::to_string(report.points.size()) + " points");
-    (*result)["pairs"].push_back(pair);
-    num_points += report.points.size();
-  }
-  return num_points;
-}
-
-PlyCloud DenseCloud(const std::vector<dense::DensePoint>& points) {
-  PlyCloud cloud;
-  cloud.comment = "omnirig stereo_reconstruct (dense): points in cam0's frame, metres";
-  cloud.has_confidence = true;
-  cloud.positions.reserve(points.size());
-  cloud.colours.reserve(points.size());
-  cloud.confidence.reserve(points.size());
-  for (const dense::DensePoint& p : points) {
-    cloud.positions.push_back(p.point_in_cam0);
-    cloud.colours.push_back(p.rgb);
-    cloud.confidence.push_back(p.confidence);
-  }
-  return cloud;
 }
 
 json DensePairJson(const std::string& name, const dense::DensePairResult& r) {
@@ -396,71 +251,6 @@ json DensePairJson(const std::string& name, const dense::DensePairResult& r) {
   return pair;
 }
 
-// Writes pair `name`'s panoramas and cloud (on RunDense's writer thread). An error names the
-// pair, as the matching's do.
-void WriteDensePair(size_t k, const std::string& name, const dense::DensePairResult& pair_result,
-                    const std::filesystem::path& dir, CloudOutputs* outputs) {
-  try {
-    const std::string base = RangeBaseName(name);
-    dense::WriteRangeTiff(dir / (base + "_range.tiff"), pair_result.range_m);
-    dense::WriteRangePng(dir / (base + "_range.png"), pair_result.range_m);
-    outputs->Write(k, name, DenseCloud(pair_result.points));
-  } catch (const InvalidArgument& e) {
-    throw InvalidArgument("pair '" + name + "': " + e.what());
-  } catch (const std::exception& e) {
-    throw std::runtime_error("pair '" + name + "': " + e.what());
-  }
-}
-
-// Pair k's files are written on a background thread while pair k + 1 is read and matched (the
-// writing, 0.09 CPU s per 1024x768 pair, runs on one thread, the matching on all: bench_dense).
-// At most one pair waits to be written; a failed write stops the job at the next pair, naming
-// the pair, and nothing is written twice.
-size_t RunDense(const StereoReconstructParams& parsed, const StereoRig& rig,
-                const std::vector<ImagePairNames>& pairs, const JobContext& context,
-                CloudOutputs* outputs, json* result) {
-  context.progress.Report(0.0, "rectify", "building the rectification tables");
-  const dense::DenseStereo dense(rig, parsed.dense);
-  size_t num_points = 0;
-  int num_bad_pairs = 0;
-  BackgroundTask writer;
-  for (size_t k = 0; k < pairs.size(); ++k) {
-    context.progress.ThrowIfCancelled();
-    const cv::Mat image0 = ReadImage(context, pairs[k].cam0);
-    const cv::Mat image1 = ReadImage(context, pairs[k].cam1);
-    auto pair_result = std::make_shared<dense::DensePairResult>(
-        WithErrorPrefix("pair '" + pairs[k].name + "': ", [&] {
-          return dense.Reconstruct(image0, image1,
-                                   SubRange(context.progress, static_cast<double>(k) / pairs.size(),
-                                            static_cast<double>(k + 1) / pairs.size()));
-        }));
-    json pair = DensePairJson(pairs[k].name, *pair_result);
-    num_bad_pairs += pair.contains("warning");
-    const std::string base = RangeBaseName(pairs[k].name);
-    pair["range_tiff"] = base + "_range.tiff";
-    pair["range_png"] = base + "_range.png";
-    outputs->Describe(k, pairs[k].name, &pair);
-    context.Log("pair " + pairs[k].name + ": " + std::to_string(pair_result->num_points) +
-                " points of " + std::to_string(pair_result->num_mirror_cells) + " mirror cells" +
-                (pair.contains("warning") ? " (" + pair["warning"].get<std::string>() + ")" : ""));
-    (*result)["pairs"].push_back(pair);
-    num_points += pair_result->points.size();
-    writer.Run([k, name = pairs[k].name, pair_result, &context, outputs] {
-      WriteDensePair(k, name, *pair_result, context.output_dir, outputs);
-    });
-  }
-  writer.Wait();
-  (*result)["grid"] = {{"rows", dense.rectifier().rows()},
-                       {"cols", dense.rectifier().cols()},
-                       {"step_rad", dense.rectifier().theta_step_rad()},
-                       {"num_disparities", dense.num_disparities()}};
-  if (num_bad_pairs > 0) {
-    (*result)["warning"] = std::to_string(num_bad_pairs) + " of " + std::to_string(pairs.size()) +
-                           " pairs gave few confident pixels (see each pair's warning)";
-  }
-  return num_points;
-}
-
 }  // namespace
 
 json RunStereoReconstructJob(const json& params, const JobContext& context) {
@@ -473,14 +263,54 @@ json RunStereoReconstructJob(const json& params, const JobContext& context) {
                  {"options", parsed.method == "dense" ? DenseStereoOptionsToJson(parsed.dense)
                                                       : StereoReconstructOptionsToJson(parsed.options)},
                  {"pairs", json::array()}};
-  CloudOutputs outputs(context.output_dir, pairs.size(), PlacePairs(parsed, pairs, context));
-  const size_t num_points = parsed.method == "dense"
-                                ? RunDense(parsed, rig, pairs, context, &outputs, &result)
-                                : RunSparse(parsed, rig, pairs, context, &outputs, &result);
-  result["num_points"] = num_points;
-  outputs.Finish(&result);
-  context.progress.Report(1.0, "done", std::to_string(num_points) + " points from " +
-                                           std::to_string(pairs.size()) + " pair(s)");
+  dense::StereoPairsOptions options;
+  options.use_dense = parsed.method == "dense";
+  options.dense = parsed.dense;
+  options.sparse = parsed.options;
+  int num_bad_pairs = 0;
+  const auto on_pair = [&](const dense::StereoPairOutcome& outcome) {
+    const std::string& name = outcome.names->name;
+    json pair;
+    if (outcome.sparse) {
+      pair = PairJson(name, *outcome.sparse);
+      context.Log("pair " + name + ": " + std::to_string(outcome.sparse->num_matches) +
+                  " matches, " + std::to_string(outcome.sparse->points.size()) + " points");
+    } else {
+      pair = DensePairJson(name, *outcome.dense);
+      num_bad_pairs += pair.contains("warning");
+      pair["range_tiff"] = outcome.range_tiff;
+      pair["range_png"] = outcome.range_png;
+      context.Log(
+          "pair " + name + ": " + std::to_string(outcome.dense->num_points) + " points of " +
+          std::to_string(outcome.dense->num_mirror_cells) + " mirror cells" +
+          (pair.contains("warning") ? " (" + pair["warning"].get<std::string>() + ")" : ""));
+    }
+    if (!outcome.cloud_file.empty()) pair["artifact"] = outcome.cloud_file;
+    if (outcome.placed) pair["placed"] = *outcome.placed;
+    result["pairs"].push_back(pair);
+  };
+  const dense::StereoPairsReport report = dense::ReconstructStereoPairs(
+      rig, context.dataset_dir, pairs, PlacePairs(parsed, pairs, context), options,
+      context.output_dir, on_pair, context.progress);
+  result["num_points"] = report.num_points;
+  if (report.trajectory) {
+    json trajectory = {{"source", report.trajectory->source},
+                       {"num_pairs_placed", report.trajectory->num_pairs_placed}};
+    if (!report.trajectory->warning.empty()) trajectory["warning"] = report.trajectory->warning;
+    result["trajectory"] = trajectory;
+  }
+  if (!report.artifact.empty()) result["artifact"] = report.artifact;
+  if (report.clouds_merged) result["clouds_merged"] = *report.clouds_merged;
+  if (report.grid) {
+    result["grid"] = {{"rows", report.grid->rows},
+                      {"cols", report.grid->cols},
+                      {"step_rad", report.grid->step_rad},
+                      {"num_disparities", report.grid->num_disparities}};
+  }
+  if (num_bad_pairs > 0) {
+    result["warning"] = std::to_string(num_bad_pairs) + " of " + std::to_string(pairs.size()) +
+                        " pairs gave few confident pixels (see each pair's warning)";
+  }
   return result;
 }
 
@@ -514,7 +344,7 @@ void CheckImagesFitRig(const json& params, const SubmissionInputs& inputs) {
                                          "upload images of the calibrated size)");
 }
 
-void RegisterStereoReconstructJobType() {
+JobType StereoReconstructJobType() {
   JobType type;
   type.name = "stereo_reconstruct";
   type.validate = [](const json& params) { StereoReconstructParamsFromJson(params); };
@@ -526,7 +356,7 @@ void RegisterStereoReconstructJobType() {
   };
   type.check_inputs = CheckImagesFitRig;
   type.run = RunStereoReconstructJob;
-  RegisterJobType(std::move(type));
+  return type;
 }
 
 json EpipolarCurveJson(const json& relative_pose_result, int from_camera, double u, double v) {

@@ -82,8 +82,8 @@ nlohmann::json RunStereoReconstructJob(const nlohmann::json& params, const JobCo
 // parse is left to the job, which reports it when it runs.
 void CheckImagesFitRig(const nlohmann::json& params, const SubmissionInputs& inputs);
 
-// Registers `stereo_reconstruct` with api/job_types.h.
-void RegisterStereoReconstructJobType();
+// The job type (its validation, references and run), for JobTypes::Add.
+JobType StereoReconstructJobType();
 
 // The epipolar curve of pixel (u, v) of camera `from_camera` (0 or 1) in the other camera, for
 // the rig of a relative_pose result (GET /api/v1/jobs/{id}/epipolar?from=cam0&u=U&v=V):

@@ -90,9 +90,9 @@ TEST(StereoJson, DenseIsTheDefaultMethod) {
 }
 
 TEST(StereoJson, RegistersTheJobType) {
-  RegisterStereoReconstructJobType();
-  const JobType* type = FindJobType("stereo_reconstruct");
-  ASSERT_NE(type, nullptr);
+  const JobType job_type = StereoReconstructJobType();
+  EXPECT_EQ(job_type.name, "stereo_reconstruct");
+  const JobType* type = &job_type;
   EXPECT_EQ(type->referenced_jobs({{"rig", "abc"}}),
             (std::vector<JobReference>{{"abc", "relative_pose", "rig"}}));
   EXPECT_EQ(type->referenced_jobs({{"rig", "abc"}, {"trajectory", "s1"}}),

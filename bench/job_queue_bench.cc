@@ -118,7 +118,10 @@ Figures RunSqlite(int workers, int jobs, int probes) {
   storage::DataDir data(dir.path());
   storage::SqliteJobStore store(data.DatabasePath().string());
   server::Metrics metrics;
-  server::WorkerPool pool(store, data, metrics, PoolOptions(workers));
+  omnirig::api::JobTypes job_types;
+  omnirig::api::AddBuiltinJobTypes(&job_types);
+  job_types.Add(omnirig::testing::SleepJobType());
+  server::WorkerPool pool(store, data, job_types, metrics, PoolOptions(workers));
   pool.Start();
   const Figures figures = Measure(store, jobs, probes, [&pool] { pool.Notify(); });
   pool.Drain(10);
@@ -179,8 +182,8 @@ std::vector<int> ParseList(const std::string& text) {
 
 int main(int argc, char** argv) {
   if (argc >= 2 && std::string(argv[1]) == "--worker") {
-    omnirig::testing::RegisterSleepJobType();
-    return server::WorkerCommand(std::vector<std::string>(argv + 2, argv + argc));
+    return server::WorkerCommand(std::vector<std::string>(argv + 2, argv + argc),
+                                 {omnirig::testing::SleepJobType()});
   }
   int jobs = 1000, probes = 200;
   std::vector<int> worker_counts = {1, 2, 4};
@@ -190,8 +193,6 @@ int main(int argc, char** argv) {
     if (flag == "--probes") probes = std::atoi(argv[i + 1]);
     if (flag == "--workers") worker_counts = ParseList(argv[i + 1]);
   }
-  omnirig::api::RegisterBuiltinJobTypes();
-  omnirig::testing::RegisterSleepJobType();
   storage::testing::PostgresTestServerOptions options;
   options.fsync = true;  // what a deployment runs
   storage::testing::PostgresTestServer postgres(options);

@@ -25,13 +25,18 @@ int WaitThenDrain(const std::string& who, double timeout_s,
 
 // Runs the service until SIGTERM or SIGINT, then drains. Prints "omnirig listening on
 // http://HOST:PORT" on stdout once the port is bound (with --port 0 the line names the port the
-// system chose).
+// system chose). `extra_job_types`: ServiceOptions::extra_job_types (a test's own).
 int ServeCommand(const std::vector<std::string>& args);
+int ServeCommand(const std::vector<std::string>& args,
+                 const std::vector<api::JobType>& extra_job_types);
 
 // Runs jobs from a shared PostgreSQL job store, with no HTTP (see docs/multi-machine.md); waits
 // for SIGTERM/SIGINT, then drains like `omnirig serve`. Prints "omnirig worker ID running N
-// job(s) at a time" on stdout once it takes jobs.
+// job(s) at a time" on stdout once it takes jobs. It runs the built-in job types and
+// `extra_job_types` (a test's own).
 int WorkerCommand(const std::vector<std::string>& args);
+int WorkerCommand(const std::vector<std::string>& args,
+                  const std::vector<api::JobType>& extra_job_types);
 
 // `omnirig store copy --from sqlite:DIR --to postgresql://...`: moves a one-machine service's
 // records (datasets, jobs, results, artifact records) into a shared PostgreSQL store (or back),

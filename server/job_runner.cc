@@ -219,9 +219,9 @@ storage::JobOutcome Failed(const std::string& code, const std::string& message) 
   return outcome;
 }
 
-storage::JobOutcome RunJobType(const storage::JobRecord& job, const api::JobContext& context,
-                               const fs::path& output_dir, const fs::path& data_root) {
-  const api::JobType* type = api::FindJobType(job.type);
+storage::JobOutcome RunJobType(const storage::JobRecord& job, const api::JobType* type,
+                               const api::JobContext& context, const fs::path& output_dir,
+                               const fs::path& data_root) {
   if (!type) return Failed("unknown_type", "no job type '" + job.type + "' in this server");
   const nlohmann::json params = nlohmann::json::parse(job.params);
   context.progress.ThrowIfCancelled();
@@ -237,8 +237,8 @@ storage::JobOutcome RunJobType(const storage::JobRecord& job, const api::JobCont
 }  // namespace
 
 storage::JobOutcome RunJobAttempt(const storage::JobRecord& job, storage::JobStore& store,
-                                  const storage::DataDir& data_dir, const JobRunOptions& options,
-                                  const JobRunFlags& flags) {
+                                  const storage::DataDir& data_dir, const api::JobTypes& job_types,
+                                  const JobRunOptions& options, const JobRunFlags& flags) {
   const fs::path output_dir = data_dir.AttemptDir(job.id, job.attempts);
   std::error_code ignored;
   fs::remove_all(output_dir, ignored);
@@ -251,7 +251,7 @@ storage::JobOutcome RunJobAttempt(const storage::JobRecord& job, storage::JobSto
   try {
     const api::JobContext context =
         BuildContext(job, store, data_dir, options, flags, output_dir, progress, log);
-    outcome = RunJobType(job, context, output_dir, data_dir.root());
+    outcome = RunJobType(job, job_types.Find(job.type), context, output_dir, data_dir.root());
     if (outcome.state == JobState::kSucceeded) progress.Succeeded();
   } catch (const Cancelled&) {
     outcome.state = JobState::kCanceled;

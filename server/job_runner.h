@@ -7,6 +7,7 @@
 #include <functional>
 #include <string>
 
+#include "api/job_types.h"
 #include "storage/data_dir.h"
 #include "storage/job_store.h"
 
@@ -27,10 +28,11 @@ struct JobRunOptions {
   std::function<void(const std::string&)> on_progress;
 };
 
-// Runs `job` (already claimed: state running, attempts counted). Never throws.
+// Runs `job` (already claimed: state running, attempts counted) with its type from
+// `job_types`. Never throws.
 storage::JobOutcome RunJobAttempt(const storage::JobRecord& job, storage::JobStore& store,
-                                  const storage::DataDir& data_dir, const JobRunOptions& options,
-                                  const JobRunFlags& flags);
+                                  const storage::DataDir& data_dir, const api::JobTypes& job_types,
+                                  const JobRunOptions& options, const JobRunFlags& flags);
 
 // Removes the output folders of the job's other attempts (interrupted by a crash, a drain or a
 // lost lease): they hold nothing the records point to. Called only once the store accepted this

@@ -98,9 +98,9 @@ void CheckInputs(ServiceState& state, const api::JobType& type,
 
 void CreateJob(ServiceState& state, const HttpRequest& request, HttpResponse& response) {
   const api::CreateJobRequest parsed = api::ParseCreateJobRequest(request.body);
-  const api::JobType* type = api::FindJobType(parsed.type);
+  const api::JobType* type = state.job_types.Find(parsed.type);
   if (!type) {
-    const auto known = api::JobTypeNames();
+    const auto known = state.job_types.Names();
     std::string list;
     for (const auto& name : known) list += (list.empty() ? "" : ", ") + name;
     throw HttpError(

@@ -17,7 +17,7 @@ void AddSystemRoutes(HttpServer& http, ServiceState& state) {
                         {"busy_workers", state.workers->busy()},
                         {"threads_per_job", state.options.workers.threads_per_job},
                         {"queue_depth", counts.at(storage::JobState::kQueued)},
-                        {"job_types", api::JobTypeNames()},
+                        {"job_types", state.job_types.Names()},
                         {"auth_required", !state.options.token.empty()},
                         {"integrity", state.consistency.integrity}});
   });

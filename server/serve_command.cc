@@ -150,13 +150,15 @@ int WaitThenDrain(const std::string& who, double timeout_s,
   return 0;
 }
 
-int ServeCommand(const std::vector<std::string>& args) {
+int ServeCommand(const std::vector<std::string>& args,
+                 const std::vector<api::JobType>& extra_job_types) {
   cli::ArgParser parser("serve",
                         "Runs the omnirig HTTP service: REST API under /api/v1, job workers, "
                         "/metrics and the web page.");
   DeclareOptions(parser);
   if (!parser.Parse(args)) return parser.exit_code();
-  const ServiceOptions options = ToOptions(parser);
+  ServiceOptions options = ToOptions(parser);
+  options.extra_job_types = extra_job_types;
   const double drain_timeout_s = parser.GetDouble("drain-timeout");
 
   // SIGTERM/SIGINT write to a pipe that this thread waits on. A handler (rather than a blocked
@@ -171,5 +173,7 @@ int ServeCommand(const std::vector<std::string>& args) {
   return WaitThenDrain("omnirig", drain_timeout_s,
                        [&service](double timeout_s) { return service.Drain(timeout_s); });
 }
+
+int ServeCommand(const std::vector<std::string>& args) { return ServeCommand(args, {}); }
 
 }  // namespace omnirig::server

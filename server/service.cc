@@ -3,9 +3,13 @@
 #include <iostream>
 #include <thread>
 
+#include <algorithm>
+#include <mutex>
+
 #include "api/job_types.h"
+#include "api/sample_job.h"
 #include "engine/util/check.h"
-#include "server/sample_job.h"
+#include "storage/atomic_file.h"
 #include "storage/postgres_job_store.h"
 #include "storage/sqlite_job_store.h"
 
@@ -58,6 +62,35 @@ std::unique_ptr<storage::JobStore> OpenJobStore(const std::string& database,
   return std::make_unique<storage::SqliteJobStore>(data_dir.DatabasePath().string());
 }
 
+// The "sample" job's files (api/sample_job.h) moved into the dataset with their records, under
+// the lock that dataset deletion takes; returns how many were added.
+size_t AddSampleFiles(ServiceState& state, const std::string& dataset_id,
+                      const std::filesystem::path& dir) {
+  namespace fs = std::filesystem;
+  std::vector<std::pair<fs::path, std::string>> files;  // rendered path, name in the dataset
+  for (const auto& entry : fs::recursive_directory_iterator(dir)) {
+    if (!entry.is_regular_file()) continue;
+    const std::string extension = entry.path().extension().string();
+    if (extension != ".png" && extension != ".tum") continue;
+    files.emplace_back(entry.path(), fs::relative(entry.path(), dir).generic_string());
+  }
+  std::sort(files.begin(), files.end());
+  std::lock_guard<std::mutex> lock(state.files_mutex);
+  if (!state.store->GetDataset(dataset_id)) {
+    throw InvalidArgument("dataset " + dataset_id + " was deleted while the sample rendered");
+  }
+  const fs::path images_dir = state.data_dir->ImagesDir(dataset_id);
+  std::vector<storage::ImageRecord> records;
+  for (const auto& [path, name] : files) {
+    records.push_back(CheckCompleteFile(name, path));  // as an upload records it
+    fs::create_directories((images_dir / name).parent_path());
+    fs::rename(path, images_dir / name);
+    storage::FsyncPath((images_dir / name).parent_path());
+  }
+  state.store->PutImages(dataset_id, records);
+  return records.size();
+}
+
 void PrintStartupReport(const ServiceState& state) {
   const auto& consistency = state.consistency;
   const auto& recovery = state.recovery;
@@ -77,9 +110,13 @@ void PrintStartupReport(const ServiceState& state) {
 
 Service::Service(const ServiceOptions& options) : state_(std::make_unique<ServiceState>()) {
   options.Check();
-  api::RegisterBuiltinJobTypes();
   ServiceState& state = *state_;
-  RegisterSampleJobType(state);
+  api::AddBuiltinJobTypes(&state.job_types);
+  state.job_types.Add(
+      api::SampleJobType([&state](const std::string& dataset_id, const std::filesystem::path& dir) {
+        return AddSampleFiles(state, dataset_id, dir);
+      }));
+  for (const api::JobType& type : options.extra_job_types) state.job_types.Add(type);
   state.options = options;
   state.started_at = storage::NowSeconds();
   state.data_dir = std::make_unique<storage::DataDir>(options.data_dir);
@@ -109,8 +146,8 @@ Service::Service(const ServiceOptions& options) : state_(std::make_unique<Servic
   // NOTIFY wakes idle workers at once; the poll only covers a lost notification.
   if (state.store->NotifiesQueueChanges()) pool_options.idle_poll_s = 5;
   state.metrics.SetWorkerAliveWindow(options.workers.lease_s);
-  state.workers =
-      std::make_unique<WorkerPool>(*state.store, *state.data_dir, state.metrics, pool_options);
+  state.workers = std::make_unique<WorkerPool>(*state.store, *state.data_dir, state.job_types,
+                                               state.metrics, pool_options);
 
   HttpServerOptions http_options;
   http_options.num_threads = options.http_threads;

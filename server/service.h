@@ -6,7 +6,9 @@
 #include <memory>
 #include <mutex>
 #include <string>
+#include <vector>
 
+#include "api/job_types.h"
 #include "server/events.h"
 #include "server/http.h"
 #include "server/metrics.h"
@@ -39,6 +41,9 @@ struct ServiceOptions {
   int64_t max_images_per_dataset = 20000;
   int64_t max_queued_jobs = 1000;
   int64_t min_free_bytes = 256LL << 20;  // uploads leaving less free disk get 507
+  // Job types added after the built-in ones (a type of the same name replaces it), e.g. a
+  // test's own.
+  std::vector<api::JobType> extra_job_types;
   void Check() const;  // throws InvalidArgument
 };
 
@@ -50,6 +55,9 @@ int DefaultThreadsPerJob(int num_workers);
 // Shared by the route files.
 struct ServiceState {
   ServiceOptions options;
+  // The job types this service accepts and its workers run: the built-in ones, "sample", and
+  // options.extra_job_types.
+  api::JobTypes job_types;
   std::unique_ptr<storage::DataDir> data_dir;
   std::unique_ptr<storage::JobStore> store;
   std::unique_ptr<JobEvents> events;  // GET /api/v1/events

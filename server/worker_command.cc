@@ -12,7 +12,8 @@
 
 namespace omnirig::server {
 
-int WorkerCommand(const std::vector<std::string>& args) {
+int WorkerCommand(const std::vector<std::string>& args,
+                  const std::vector<api::JobType>& extra_job_types) {
   cli::ArgParser parser("worker",
                         "Runs jobs from a PostgreSQL job store shared with `omnirig serve "
                         "--database` and other workers, on this or other machines. Serves no "
@@ -49,16 +50,20 @@ int WorkerCommand(const std::vector<std::string>& args) {
   const double drain_timeout_s = parser.GetDouble("drain-timeout");
 
   InstallStopSignalHandlers();
-  api::RegisterBuiltinJobTypes();
+  api::JobTypes job_types;
+  api::AddBuiltinJobTypes(&job_types);
+  for (const api::JobType& type : extra_job_types) job_types.Add(type);
   const storage::DataDir data_dir(parser.Get("data"));
   storage::PostgresJobStore store(database);
   Metrics metrics;
-  WorkerPool pool(store, data_dir, metrics, options);
+  WorkerPool pool(store, data_dir, job_types, metrics, options);
   pool.Start();
   std::cout << "omnirig worker " << pool.worker_id() << " running " << options.num_workers
             << " job(s) at a time" << std::endl;
   return WaitThenDrain("omnirig worker", drain_timeout_s,
                        [&pool](double timeout_s) { return pool.Drain(timeout_s); });
 }
+
+int WorkerCommand(const std::vector<std::string>& args) { return WorkerCommand(args, {}); }
 
 }  // namespace omnirig::server

@@ -33,9 +33,14 @@ std::string DefaultWorkerId() {
 
 }  // namespace
 
-WorkerPool::WorkerPool(storage::JobStore& store, const storage::DataDir& data_dir, Metrics& metrics,
+WorkerPool::WorkerPool(storage::JobStore& store, const storage::DataDir& data_dir,
+                       const api::JobTypes& job_types, Metrics& metrics,
                        const WorkerPoolOptions& options)
-    : store_(store), data_dir_(data_dir), metrics_(metrics), options_(options) {
+    : store_(store),
+      data_dir_(data_dir),
+      job_types_(job_types),
+      metrics_(metrics),
+      options_(options) {
   options_.Check();
   if (options_.worker_id.empty()) options_.worker_id = DefaultWorkerId();
 }
@@ -211,8 +216,9 @@ void WorkerPool::RunJob(const storage::JobRecord& job) {
   run_options.num_threads = options_.threads_per_job;
   run_options.progress_interval_s = options_.progress_interval_s;
   run_options.on_progress = options_.on_job_changed;
-  const storage::JobOutcome outcome = RunJobAttempt(
-      job, store_, data_dir_, run_options, JobRunFlags{&running->cancel, &running->interrupt});
+  const storage::JobOutcome outcome =
+      RunJobAttempt(job, store_, data_dir_, job_types_, run_options,
+                    JobRunFlags{&running->cancel, &running->interrupt});
   bool handed_back =
       outcome.state == storage::JobState::kCanceled && running->interrupt && !running->cancel;
   if (handed_back) {

@@ -25,6 +25,7 @@
 #include <thread>
 #include <vector>
 
+#include "api/job_types.h"
 #include "server/metrics.h"
 #include "storage/data_dir.h"
 #include "storage/job_store.h"
@@ -51,8 +52,10 @@ struct WorkerPoolOptions {
 
 class WorkerPool {
  public:
-  WorkerPool(storage::JobStore& store, const storage::DataDir& data_dir, Metrics& metrics,
-             const WorkerPoolOptions& options);
+  // `job_types`: the types the pool runs (a job of another type fails as unknown_type); it
+  // must outlive the pool.
+  WorkerPool(storage::JobStore& store, const storage::DataDir& data_dir,
+             const api::JobTypes& job_types, Metrics& metrics, const WorkerPoolOptions& options);
   ~WorkerPool();  // Drain(0)
 
   void Start();
@@ -86,6 +89,7 @@ class WorkerPool {
 
   storage::JobStore& store_;
   const storage::DataDir& data_dir_;
+  const api::JobTypes& job_types_;
   Metrics& metrics_;
   WorkerPoolOptions options_;
   std::vector<std::thread> threads_;

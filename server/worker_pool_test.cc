@@ -37,7 +37,7 @@ struct Gate {
 };
 Gate gate;
 
-void RegisterGateJobType() {
+api::JobType GateJobType() {
   api::JobType type;
   type.name = "pool_test_gate";
   type.reads_images = false;
@@ -56,7 +56,7 @@ void RegisterGateJobType() {
                 {"sched_other", ::sched_getscheduler(0) == SCHED_OTHER},
                 {"threads", context.num_threads}};
   };
-  api::RegisterJobType(type);
+  return type;
 }
 
 class WorkerPoolTest : public ::testing::Test {
@@ -67,7 +67,7 @@ class WorkerPoolTest : public ::testing::Test {
                std::to_string(std::random_device()()))),
         data_dir_(root_),
         store_(data_dir_.DatabasePath().string()) {
-    RegisterGateJobType();
+    job_types_.Add(GateJobType());
     SetGate(false);
     dataset_ = store_.CreateDataset("pool").id;
   }
@@ -95,7 +95,7 @@ class WorkerPoolTest : public ::testing::Test {
                              : "deleted");
       changed_.notify_all();
     };
-    pool_ = std::make_unique<WorkerPool>(store_, data_dir_, metrics_, options);
+    pool_ = std::make_unique<WorkerPool>(store_, data_dir_, job_types_, metrics_, options);
     pool_->Start();
     return *pool_;
   }
@@ -120,6 +120,7 @@ class WorkerPoolTest : public ::testing::Test {
   storage::DataDir data_dir_;
   storage::SqliteJobStore store_;
   Metrics metrics_;
+  api::JobTypes job_types_;
   std::string dataset_;
   std::unique_ptr<WorkerPool> pool_;
   std::mutex mutex_;

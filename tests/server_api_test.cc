@@ -36,7 +36,6 @@ using nlohmann::json;
 class ServerApiTest : public ::testing::Test {
  protected:
   void SetUp() override {
-    RegisterSleepJobType();
     std::filesystem::create_directories(dir_.path() / "web");
     std::ofstream(dir_.path() / "web" / "index.html") << "<html>omnirig test page</html>";
   }
@@ -52,6 +51,7 @@ class ServerApiTest : public ::testing::Test {
     options.http_threads = 8;
     options.min_free_bytes = 0;
     options.workers.progress_interval_s = 0.02;
+    options.extra_job_types = {SleepJobType()};
     return options;
   }
 
@@ -617,7 +617,7 @@ TEST_F(ServerApiTest, ResultIs409UntilSucceededAndProgressIsStored) {
   ASSERT_EQ(done["state"], "succeeded");
   // A reference of the wrong type (here a test_sleep job given as a slam job's rig) is refused
   // at submission, naming the type it needs, even though it succeeded.
-  ASSERT_NE(api::FindJobType("slam"), nullptr);  // registered by the service
+  ASSERT_NE(service_->state().job_types.Find("slam"), nullptr);  // registered by the service
   const auto wrong = client.Post(
       "/api/v1/jobs",
       json{{"type", "slam"}, {"dataset", dataset}, {"params", {{"rig", id}}}}.dump(),
@@ -818,8 +818,8 @@ TEST_F(ServerApiTest, EpipolarRouteRefusesWrongJobs) {
 TEST_F(ServerApiTest, EpipolarCurveOfARelativePoseResult) {
   auto& client = Start();
   const std::string dataset = CreateDataset(client);
-  const std::string id =
-      SubmitFakeRelativePose(client, port_, dataset, api::RigToJson(TinyTestRig(640, 480)));
+  const std::string id = SubmitFakeRelativePose(service_->state().job_types, client, port_, dataset,
+                                                api::RigToJson(TinyTestRig(640, 480)));
   const std::string url = "/api/v1/jobs/" + id + "/epipolar";
   const auto curve = client.Get((url + "?from=cam0&u=400&v=250").c_str());
   ASSERT_EQ(curve->status, 200) << curve->body;
@@ -904,7 +904,7 @@ TEST_F(ServerApiTest, ErrorsCarryNoSourceLocations) {
       json{{"type", "calibration"}, {"dataset", dataset}, {"params", {{"x", 1}}}}.dump(),
       "application/json");
   ASSERT_TRUE(bad);
-  ASSERT_NE(api::FindJobType("calibration"), nullptr);  // registered by the service
+  ASSERT_NE(service_->state().job_types.Find("calibration"), nullptr);  // registered by the service
   ExpectError(bad, 400, "invalid_params");
   const std::string message = JsonOf(bad)["error"]["message"];
   EXPECT_EQ(message.find(".cc:"), std::string::npos) << message;
@@ -914,7 +914,7 @@ TEST_F(ServerApiTest, ErrorsCarryNoSourceLocations) {
   fake.validate = [](const json&) {};
   fake.reads_images = false;
   fake.run = [](const json&, const api::JobContext&) { return json{{"not", "a rig"}}; };
-  api::RegisterJobType(fake);
+  service_->state().job_types.Add(fake);
   const std::string id = JsonOf(
       client.Post("/api/v1/jobs", json{{"type", "relative_pose"}, {"dataset", dataset}}.dump(),
                   "application/json"))["id"];
@@ -931,7 +931,7 @@ TEST_F(ServerApiTest, RealCalibrationJob) {
   options.workers.num_workers = 1;
   options.workers.threads_per_job = 2;
   auto& client = Start(options);
-  ASSERT_NE(api::FindJobType("calibration"), nullptr);  // registered by the service
+  ASSERT_NE(service_->state().job_types.Find("calibration"), nullptr);  // registered by the service
   const char* source = std::getenv("OMNIRIG_SOURCE_DIR");
   const std::filesystem::path data = std::filesystem::path(source ? source : ".") / ".." /
                                      "shared" / "data" / "real" / "ocamcalib-vmr";

@@ -79,7 +79,7 @@ nlohmann::json RunSleep(const nlohmann::json& params, const api::JobContext& con
 
 }  // namespace
 
-void RegisterSleepJobType() {
+api::JobType SleepJobType() {
   api::JobType type;
   type.name = "test_sleep";
   type.validate = ValidateSleep;
@@ -92,7 +92,7 @@ void RegisterSleepJobType() {
   };
   type.run = RunSleep;
   type.reads_images = false;  // the service's tests queue sleeps on empty datasets
-  api::RegisterJobType(type);
+  return type;
 }
 
 std::string SleepJobOutput(int output_kb) {
@@ -198,14 +198,14 @@ nlohmann::json WaitForJob(int port, const std::string& id, double timeout_s,
   return job.value("state", "") == "" ? current() : job;
 }
 
-std::string SubmitFakeRelativePose(httplib::Client& client, int port, const std::string& dataset,
-                                   const nlohmann::json& rig_json) {
+std::string SubmitFakeRelativePose(api::JobTypes& job_types, httplib::Client& client, int port,
+                                   const std::string& dataset, const nlohmann::json& rig_json) {
   api::JobType fake;
   fake.name = "relative_pose";
   fake.validate = [](const nlohmann::json&) {};
   fake.reads_images = false;
   fake.run = [rig_json](const nlohmann::json&, const api::JobContext&) { return rig_json; };
-  api::RegisterJobType(fake);
+  job_types.Add(fake);
   const auto created = client.Post(
       "/api/v1/jobs", nlohmann::json{{"type", "relative_pose"}, {"dataset", dataset}}.dump(),
       "application/json");
@@ -278,8 +278,8 @@ int ServerProcess::Wait() {
 
 bool ServeIfRequested(int argc, char** argv, int& exit_code) {
   if (argc < 2 || std::string(argv[1]) != "--serve") return false;
-  RegisterSleepJobType();
-  exit_code = server::ServeCommand(std::vector<std::string>(argv + 2, argv + argc));
+  exit_code =
+      server::ServeCommand(std::vector<std::string>(argv + 2, argv + argc), {SleepJobType()});
   return true;
 }
 

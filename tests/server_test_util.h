@@ -19,9 +19,12 @@
 
 #include <nlohmann/json.hpp>
 
+#include "api/job_types.h"
+
 namespace omnirig::testing {
 
-void RegisterSleepJobType();
+// The test_sleep job type (add it with ServiceOptions::extra_job_types).
+api::JobType SleepJobType();
 // The bytes test_sleep writes to out.bin for `output_kb`.
 std::string SleepJobOutput(int output_kb);
 
@@ -52,12 +55,12 @@ bool FollowEvents(
 nlohmann::json WaitForJob(int port, const std::string& id, double timeout_s,
                           const std::string& until_state = "");
 
-// Registers a relative_pose job type whose result is `rig_json` (api::RigToJson; after the
-// service started, it replaces the real type in this test binary only: what reads a rig job
-// depends on its JSON, not on the solver), submits one on `dataset` and waits for it to
-// succeed; returns the job's id.
-std::string SubmitFakeRelativePose(httplib::Client& client, int port, const std::string& dataset,
-                                   const nlohmann::json& rig_json);
+// Adds to `job_types` (a running service's) a relative_pose job type whose result is
+// `rig_json` (api::RigToJson; it replaces the real type: what reads a rig job depends on its
+// JSON, not on the solver), submits one on `dataset` and waits for it to succeed; returns the
+// job's id.
+std::string SubmitFakeRelativePose(api::JobTypes& job_types, httplib::Client& client, int port,
+                                   const std::string& dataset, const nlohmann::json& rig_json);
 
 // `omnirig serve` in a child process: this test binary re-executed with "--serve ARGS..."
 // (see ServeIfRequested), so the child has the test job type registered.

@@ -310,8 +310,8 @@ TEST_F(ServerVideoTest, SlamJobOnAVideoPair) {
     ASSERT_TRUE(stored);
     ASSERT_EQ(stored->status, 201) << name << ": " << stored->body;
   }
-  const std::string rig =
-      SubmitFakeRelativePose(client, port_, dataset, api::RigToJson(sequence.rig));
+  const std::string rig = SubmitFakeRelativePose(service_->state().job_types, client, port_,
+                                                 dataset, api::RigToJson(sequence.rig));
   const auto run = [&](const json& extra) {
     json params = {{"rig", rig}, {"ground_truth", "trajectory.tum"}};
     params.update(extra);
@@ -353,7 +353,8 @@ TEST_F(ServerVideoTest, SlamJobOnAVideoPair) {
 TEST_F(ServerVideoTest, BadVideosAreRefusedAtSubmission) {
   auto& client = Start();
   const std::string rig_job =
-      SubmitFakeRelativePose(client, port_, CreateDataset(), api::RigToJson(TinyTestRig(64, 48)));
+      SubmitFakeRelativePose(service_->state().job_types, client, port_, CreateDataset(),
+                             api::RigToJson(TinyTestRig(64, 48)));
   const auto submit = [&](const std::map<std::string, std::string>& files,
                           const json& extra = json::object()) {
     const std::string dataset = CreateDataset();

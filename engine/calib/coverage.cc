@@ -8,6 +8,7 @@
 
 #include <Eigen/Dense>
 #include <Eigen/Geometry>
+#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "engine/geometry/rigid3.h"
@@ -399,6 +400,30 @@ CoverageReport AnalyseCoverage(const CalibrationReport& report, const BoardSpec&
   const cv::Mat sigma = Uncertainty(report, board, options, &coverage);
   if (!sigma.empty()) coverage.uncertainty_image = DrawUncertainty(sigma, report, coverage);
   return coverage;
+}
+
+CoverageReport AnalyseCoverageOfImages(const CalibrationReport& report, const BoardSpec& board,
+                                       const std::filesystem::path& images_dir,
+                                       const CoverageOptions& options) {
+  cv::Mat background;
+  for (const CalibrationImageReport& image : report.images) {
+    if (!image.used) continue;
+    background = cv::imread((images_dir / image.name).string(), cv::IMREAD_COLOR);
+    break;
+  }
+  const Eigen::Vector3d* rim =
+      report.svp && report.svp->found_circle_px ? &*report.svp->found_circle_px : nullptr;
+  return AnalyseCoverage(report, board, background, rim, options);
+}
+
+void WriteCoverageImages(const CoverageReport& coverage, const std::filesystem::path& coverage_png,
+                         const std::filesystem::path& uncertainty_png) {
+  const auto write = [](const std::filesystem::path& path, const cv::Mat& image) {
+    std::filesystem::create_directories(path.parent_path());
+    cv::imwrite(path.string(), image);
+  };
+  write(coverage_png, coverage.coverage_image);
+  if (coverage.uncertainty_valid) write(uncertainty_png, coverage.uncertainty_image);
 }
 
 }  // namespace omnirig

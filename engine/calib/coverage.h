@@ -16,6 +16,7 @@
 // rim") whose coverage is below min_sector_coverage. Azimuth is measured in the image around the
 // disk's centre, 0 deg along +u (right), 90 deg along +v (down).
 
+#include <filesystem>
 #include <string>
 #include <vector>
 
@@ -59,5 +60,17 @@ struct CoverageReport {
 CoverageReport AnalyseCoverage(const CalibrationReport& report, const BoardSpec& board,
                                const cv::Mat& background, const Eigen::Vector3d* rim_circle_px,
                                const CoverageOptions& options);
+
+// AnalyseCoverage of a calibration of the images in `images_dir`, drawn over its first used
+// image (grey when that cannot be read), with the rim the single-viewpoint check found (when
+// it ran and found one).
+CoverageReport AnalyseCoverageOfImages(const CalibrationReport& report, const BoardSpec& board,
+                                       const std::filesystem::path& images_dir,
+                                       const CoverageOptions& options);
+
+// Writes coverage.coverage_image as `coverage_png` and, when the uncertainty is valid,
+// coverage.uncertainty_image as `uncertainty_png` (creating their folders).
+void WriteCoverageImages(const CoverageReport& coverage, const std::filesystem::path& coverage_png,
+                         const std::filesystem::path& uncertainty_png);
 
 }  // namespace omnirig

@@ -10,6 +10,7 @@
 
 #include "engine/util/option_check.h"
 #include "engine/util/parallel.h"
+#include "engine/util/progress_range.h"
 #include "engine/util/timer.h"
 
 namespace omnirig {
@@ -46,16 +47,6 @@ void CheckImageSizes(const std::vector<cv::Size>& sizes, std::vector<Calibration
       (*views)[i].detection.reason = os.str();
     }
   }
-}
-
-ProgressSink ScaledSink(const ProgressSink& progress, double from, double to) {
-  ProgressSink scaled;
-  scaled.is_cancelled = progress.is_cancelled;
-  scaled.report = [&progress, from, to](double fraction, const std::string& stage,
-                                        const std::string& message) {
-    progress.Report(from + (to - from) * fraction, stage, message);
-  };
-  return scaled;
 }
 
 // Reads each image and detects the board in it, on options.calibrate.num_threads threads
@@ -355,14 +346,14 @@ CalibrationReport CalibrateImages(const std::filesystem::path& dir,
     throw InvalidArgument(os.str());
   }
   CalibrationReport report =
-      Calibrate(views, width, height, board, options.calibrate, ScaledSink(progress, 0.5, 0.8));
+      Calibrate(views, width, height, board, options.calibrate, SubRange(progress, 0.5, 0.8));
   timer.Restart();
   if (options.redetect_with_model &&
       DetectMissed(dir, board, options, &report.camera, !every_variant_tried, width, height,
                    progress, &views)) {
     const double redetect_s = timer.ElapsedSeconds();
     report =
-        Calibrate(views, width, height, board, options.calibrate, ScaledSink(progress, 0.85, 0.95));
+        Calibrate(views, width, height, board, options.calibrate, SubRange(progress, 0.85, 0.95));
     report.timings.redetect_s = redetect_s;
   } else {
     report.timings.redetect_s = timer.ElapsedSeconds();

@@ -72,16 +72,10 @@ void DeclareOptions(ArgParser* parser) {
   parser->AddOption("calib1", "",
                     "cam1's calibration JSON; without both, each camera is "
                     "calibrated from its own images first");
-  parser->AddFlag("refine-intrinsics", "refine both cameras' intrinsics with the rig");
-  parser->AddOption("fixed-intrinsics", "alpha,k5",
-                    "comma-separated intrinsics held fixed (names, or skew, tangential, "
-                    "principal_point, gamma); alpha,k5,tangential suits fisheye lenses");
   parser->AddOption("intrinsics-model", "auto",
                     "auto, fixed, tangential_fixed, tangential_free_cam0, tangential_free_cam1 "
-                    "or free: which intrinsics the joint refinement "
-                    "frees (auto: chosen by leave-one-pair-out cross-validation; the default "
-                    "when the cameras are calibrated here and neither --refine-intrinsics nor "
-                    "--fixed-intrinsics is given)");
+                    "or free: which intrinsics the joint refinement frees (auto: chosen by "
+                    "leave-one-pair-out cross-validation)");
   parser->AddOption("threads", "1", "solver threads");
   parser->AddOption("o", "", "write the result JSON here (also --output); default: stdout");
   parser->AddOption("output", "", "the same as -o");
@@ -97,11 +91,7 @@ json ParamsFromArgs(const ArgParser& parser) {
   if (parser.Has("calib0")) {
     params["calibrations"] = {{"cam0", parser.Get("calib0")}, {"cam1", parser.Get("calib1")}};
   }
-  if (parser.Has("refine-intrinsics")) params["refine_intrinsics"] = true;
   if (parser.Has("intrinsics-model")) params["intrinsics_model"] = parser.Get("intrinsics-model");
-  if (parser.Has("fixed-intrinsics")) {
-    params["fixed_intrinsics"] = SplitList(parser.Get("fixed-intrinsics"), ',');
-  }
   return params;
 }
 

@@ -97,18 +97,6 @@ TEST_F(RelposeCli, LongOutputOptionWritesTheSameResult) {
   EXPECT_EQ(ReadJson(out_short).at("baseline_m"), ReadJson(out_long).at("baseline_m"));
 }
 
-TEST_F(RelposeCli, FixedIntrinsicsKeepTheGivenCamerasValues) {
-  const fs::path out = *dir_ / "rig_fixed.json";
-  Args args = BaseArgs();
-  args.insert(args.end(), {"--refine-intrinsics", "--fixed-intrinsics", "alpha,k5,tangential",
-                           "-o", out.string()});
-  ASSERT_EQ(RunRelpose(args), 0);
-  const json intrinsics = ReadJson(out).at("cameras").at("cam0").at("intrinsics");
-  EXPECT_EQ(intrinsics.at("k3").get<double>(), set_->rig.cam0.intrinsics.params[8]);
-  EXPECT_EQ(intrinsics.at("k4").get<double>(), set_->rig.cam0.intrinsics.params[9]);
-  EXPECT_NE(intrinsics.at("u0").get<double>(), set_->rig.cam0.intrinsics.params[3]);
-}
-
 // --intrinsics-model names a model; with given calibrations "free" refines them, and "auto"
 // chooses between keeping them ("fixed") and "free".
 TEST_F(RelposeCli, IntrinsicsModelOptionReachesTheJob) {
