@@ -192,7 +192,7 @@ json CalibrationReportToJson(const CalibrationReport& report) {
       {"images", images},
       {"solver",
        {{"num_rounds", s.num_rounds},
-        {"iterations", s.iterations},
+        {"iterations", s.num_iterations},
         {"initial_cost", s.initial_cost},
         {"final_cost", s.final_cost},
         {"termination", s.termination},

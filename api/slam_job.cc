@@ -28,10 +28,10 @@ namespace fs = std::filesystem;
 json BundleAdjustmentToJson(const slam::BundleAdjustmentReport& r) {
   return {{"num_free_poses", r.num_free_poses},     {"num_constant_poses", r.num_constant_poses},
           {"num_points", r.num_points},             {"num_residuals", r.num_residuals},
-          {"iterations", r.iterations},             {"initial_rms_px", r.initial_rms_px},
+          {"iterations", r.solver.num_iterations},    {"initial_rms_px", r.initial_rms_px},
           {"final_rms_px", r.final_rms_px},         {"num_observations_pruned", r.num_observations_pruned},
           {"num_points_pruned", r.num_points_pruned}, {"linear_solver", r.linear_solver},
-          {"termination", r.termination},           {"time_s", r.time_s}};
+          {"termination", r.solver.termination},      {"time_s", r.solver.time_s}};
 }
 
 json CalibrationRefinementToJson(const slam::CalibrationRefinementReport& r,

@@ -229,7 +229,7 @@ void CompareOnRealSet(const std::string& label, const std::vector<CalibrationVie
   });
   std::printf("   %-24s %4d %4d %9.4f %9.4f %9.4f %5d %8.4f %8.4f %8.4f %6.1fx %6.1fx %6.1fx\n",
               label.c_str(), plain.num_views_used, omnidir.views_used, plain.rms_px, omnidir.rms_px,
-              rejected.rms_px, plain.solver.iterations, solve_1t, solve_2t, cv_s,
+              rejected.rms_px, plain.solver.num_iterations, solve_1t, solve_2t, cv_s,
               cv_s / std::max(1e-9, solve_1t), cv_s / std::max(1e-9, solve_2t),
               cv_s / std::max(1e-9, solve_1t + init_1t));
 }

@@ -194,14 +194,16 @@ void CalibrationRuns(const Args& args, const synth::StereoSequence& sequence,
     const bool applied = result.calibration_refinement && result.calibration_refinement->applied;
     const slam::SequenceAccuracy accuracy = slam::EvaluateOnSequence(
         sequence, result, applied ? result.calibration_refinement->after : given);
-    std::printf("%-10s %9s %9.3f %9.3f %9.4f %9.3f %9.3f %9.4f %9.3f %8.3f %6d\n",
-                slam::CalibrationRefinementName(refine), applied ? "yes" : "no",
-                accuracy.calibration_rms_px[0], accuracy.calibration_rms_px[1],
-                accuracy.rig_rotation_error_deg,
-                result.global_bundle_adjustment ? result.global_bundle_adjustment->final_rms_px : 0.0,
-                accuracy.trajectory.final_drift_percent, accuracy.trajectory.ate_rmse_m,
-                accuracy.map_median_percent_of_range, result.global_ba_s,
-                result.global_bundle_adjustment ? result.global_bundle_adjustment->iterations : 0);
+    std::printf(
+        "%-10s %9s %9.3f %9.3f %9.4f %9.3f %9.3f %9.4f %9.3f %8.3f %6d\n",
+        slam::CalibrationRefinementName(refine), applied ? "yes" : "no",
+        accuracy.calibration_rms_px[0], accuracy.calibration_rms_px[1],
+        accuracy.rig_rotation_error_deg,
+        result.global_bundle_adjustment ? result.global_bundle_adjustment->final_rms_px : 0.0,
+        accuracy.trajectory.final_drift_percent, accuracy.trajectory.ate_rmse_m,
+        accuracy.map_median_percent_of_range, result.global_ba_s,
+        result.global_bundle_adjustment ? result.global_bundle_adjustment->solver.num_iterations
+                                        : 0);
     if (result.calibration_refinement && !applied) {
       std::printf("  not refined: %s\n", result.calibration_refinement->reason.c_str());
     }
@@ -338,11 +340,12 @@ int Run(const Args& args) {
   std::printf("%-44s %12.3f %12s\n", "global bundle adjustment (s)", result.global_ba_s, "< 1");
   if (result.global_bundle_adjustment) {
     const auto& ba = *result.global_bundle_adjustment;
-    std::printf("  global BA: %d poses, %d points, %d residuals, %d iterations, rms %.3f -> %.3f px, "
-                "%d observations pruned, %s, %s\n",
-                ba.num_free_poses, ba.num_points, ba.num_residuals, ba.iterations,
-                ba.initial_rms_px, ba.final_rms_px, ba.num_observations_pruned,
-                ba.linear_solver.c_str(), ba.termination.c_str());
+    std::printf(
+        "  global BA: %d poses, %d points, %d residuals, %d iterations, rms %.3f -> %.3f px, "
+        "%d observations pruned, %s, %s\n",
+        ba.num_free_poses, ba.num_points, ba.num_residuals, ba.solver.num_iterations,
+        ba.initial_rms_px, ba.final_rms_px, ba.num_observations_pruned, ba.linear_solver.c_str(),
+        ba.solver.termination.c_str());
   }
   const slam::StageTimes& t = result.stage_totals;
   const slam::StageTimes& c = result.cpu_stage_totals;

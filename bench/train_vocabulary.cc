@@ -33,9 +33,8 @@ void AddSequence(synth::StereoSequenceOptions::Environment environment, std::uin
   const synth::StereoSequence sequence = synth::MakeStereoSequence(options);
   const FeatureOptions features;
   const CameraModel& camera = sequence.rig.cam0;
-  const MirrorAnnulus annulus =
-      EstimateMirrorAnnulus(camera, sequence.images[0][0], features.dark_level);
-  const cv::Mat mask = MirrorMask(camera, annulus, features.mask_margin_px);
+  const cv::Mat mask =
+      MirrorMask(sequence.images[0][0], PrincipalPoint(camera), features.mirror_mask);
   for (const cv::Mat& image : sequence.images[0]) {
     images->push_back(DetectFeatures(camera, image, mask, features).descriptors);
   }

@@ -370,10 +370,10 @@ void Evaluate(const std::vector<ViewState>& views, CalibrationReport* report) {
 // plain one), so its line is written from the totals in the shape Ceres uses.
 std::string SolverBrief(const CalibrationSolverSummary& solver) {
   std::ostringstream os;
-  os << "Ceres Solver Report: Iterations: " << solver.iterations << " over " << solver.num_rounds
-     << (solver.num_rounds == 1 ? " solve" : " solves") << ", Initial cost: " << std::scientific
-     << solver.initial_cost << ", Final cost: " << solver.final_cost
-     << ", Termination: " << solver.termination;
+  os << "Ceres Solver Report: Iterations: " << solver.num_iterations << " over "
+     << solver.num_rounds << (solver.num_rounds == 1 ? " solve" : " solves")
+     << ", Initial cost: " << std::scientific << solver.initial_cost
+     << ", Final cost: " << solver.final_cost << ", Termination: " << solver.termination;
   return os.str();
 }
 
@@ -454,7 +454,7 @@ CalibrationReport Calibrate(const std::vector<CalibrationView>& views, int width
     const bool robust = round < options.max_rejection_rounds;
     summary = Solve(options, robust, round, progress, &intrinsics, &states, problem.get());
     if (round == 0) report.solver.initial_cost = summary.initial_cost;
-    report.solver.iterations += static_cast<int>(summary.iterations.size()) - 1;
+    report.solver.num_iterations += static_cast<int>(summary.iterations.size()) - 1;
     report.solver.num_rounds = round + 1;
     if (!robust) break;
     if (!RejectOutliers(intrinsics, options, &states, &report.images, &report.solver)) {
@@ -467,6 +467,8 @@ CalibrationReport Calibrate(const std::vector<CalibrationView>& views, int width
   report.timings.solve_s = timer.ElapsedSeconds();
   report.solver.final_cost = summary.final_cost;
   report.solver.termination = ceres::TerminationTypeToString(summary.termination_type);
+  report.solver.time_s = report.timings.solve_s;
+  report.solver.usable = summary.IsSolutionUsable();
   report.solver.num_residuals = summary.num_residuals;
   report.solver.num_parameters = summary.num_effective_parameters;
   report.solver.brief = SolverBrief(report.solver);

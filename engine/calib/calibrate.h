@@ -16,6 +16,7 @@
 #include "engine/geometry/camera_model.h"
 #include "engine/geometry/rigid3.h"
 #include "engine/util/progress.h"
+#include "engine/util/solver_summary.h"
 
 namespace omnirig {
 
@@ -76,18 +77,18 @@ struct CalibrationImageReport {
   std::vector<bool> inlier;                     // false for corners rejected as outliers
 };
 
-struct CalibrationSolverSummary {
+// The solver summary of the calibration's rounds: num_iterations counts the Levenberg-Marquardt
+// steps over every round (each round's iteration 0, the initial evaluation, not counted);
+// initial_cost is the first round's, final_cost, termination and usable the last's, time_s
+// the solve's wall clock (CalibrationTimings::solve_s).
+struct CalibrationSolverSummary : SolverSummary {
   int num_rounds = 0;  // solves (1 + re-solves after rejection)
-  int iterations = 0;  // LM iterations over every round
-  double initial_cost = 0.0;
-  double final_cost = 0.0;
-  std::string termination;
   int num_residuals = 0;
   int num_parameters = 0;
   int num_rejected_corners = 0;
   int num_rejected_views = 0;
   // One line in the shape of Ceres' BriefReport(), over every round (the counts above), so that
-  // its "Iterations" agrees with `iterations`.
+  // its "Iterations" agrees with `num_iterations`.
   std::string brief;
 };
 

@@ -119,7 +119,7 @@ TEST(Calibrate, RejectsOutlierCorners) {
   // Several solves (robust rounds, then a plain one): the brief counts them all, as the
   // report's iterations do.
   ASSERT_GT(report.solver.num_rounds, 1);
-  EXPECT_NE(report.solver.brief.find("Iterations: " + std::to_string(report.solver.iterations) +
+  EXPECT_NE(report.solver.brief.find("Iterations: " + std::to_string(report.solver.num_iterations) +
                                      " over " + std::to_string(report.solver.num_rounds)),
             std::string::npos)
       << report.solver.brief;

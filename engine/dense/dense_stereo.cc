@@ -9,19 +9,13 @@
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "engine/features/image.h"
 #include "engine/util/check.h"
 #include "engine/util/option_check.h"
 #include "engine/util/timer.h"
 
 namespace omnirig::dense {
 namespace {
-
-cv::Mat Grey(const cv::Mat& image) {
-  if (image.channels() == 1) return image;
-  cv::Mat grey;
-  cv::cvtColor(image, grey, cv::COLOR_BGR2GRAY);
-  return grey;
-}
 
 // The columns [first, last] where either mask holds a cell; empty (first > last) when none.
 std::pair<int, int> UsedColumns(const cv::Mat& mask0, const cv::Mat& mask1) {
@@ -90,10 +84,8 @@ cv::Mat MatchedGrey(const cv::Mat& right, const cv::Mat& disparity16) {
 
 void CheckPairImages(const StereoRig& rig, const cv::Mat& image0, const cv::Mat& image1) {
   CheckPairSizes(rig, image0.cols, image0.rows, image1.cols, image1.rows);
-  OMNIRIG_CHECK(image0.depth() == CV_8U && image1.depth() == CV_8U &&
-                    (image0.channels() == 1 || image0.channels() == 3) &&
-                    (image1.channels() == 1 || image1.channels() == 3),
-                "images must be 8-bit grey or BGR");
+  CheckGreyOrBgr8(image0);
+  CheckGreyOrBgr8(image1);
 }
 
 }  // namespace
@@ -122,24 +114,11 @@ void DenseStereoOptions::Check() const {
   OMNIRIG_CHECK_POSITIVE(max_epipolar_offset_cells);
 }
 
-cv::Mat GridMirrorMask(const cv::Mat& grey_on_grid, const cv::Mat& valid,
-                       const DenseStereoOptions& options) {
-  cv::Mat blurred;
-  cv::GaussianBlur(grey_on_grid, blurred, cv::Size(5, 5), 0.0);
-  cv::Mat mask = valid.clone();
-  const auto outside = [&](int r, int c) {
-    return !valid.at<uint8_t>(r, c) || blurred.at<uint8_t>(r, c) <= options.dark_level;
-  };
-  for (int r = 0; r < mask.rows; ++r) {
-    uint8_t* out = mask.ptr<uint8_t>(r);
-    for (int c = 0; c < mask.cols && outside(r, c); ++c) out[c] = 0;
-    for (int c = mask.cols - 1; c >= 0 && outside(r, c); --c) out[c] = 0;
-  }
-  if (options.mask_margin_cells > 0) {
-    const int k = 2 * options.mask_margin_cells + 1;
-    cv::erode(mask, mask, cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(k, k)),
-              cv::Point(-1, -1), 1, cv::BORDER_CONSTANT, cv::Scalar(0));
-  }
+MirrorMaskOptions DenseStereoOptions::MaskOptions() const {
+  MirrorMaskOptions mask;
+  mask.shape = MirrorMaskOptions::Shape::kDarkRowEnds;
+  mask.dark_level = dark_level;
+  mask.margin_px = mask_margin_cells;
   return mask;
 }
 
@@ -271,6 +250,7 @@ DenseStereo::DenseStereo(const StereoRig& rig, const DenseStereoOptions& options
 DenseStereo::RectifiedPair DenseStereo::RectifyPair(const cv::Mat& image0,
                                                     const cv::Mat& image1) const {
   RectifiedPair pair;
+  const MirrorMaskOptions mask = options_.MaskOptions();
   // The cameras are independent: one on each thread (OpenCV runs the remaps, blurs and
   // erosions nested in this loop serially; the masks' row scans are serial anyway).
   cv::parallel_for_(
@@ -279,11 +259,13 @@ DenseStereo::RectifiedPair DenseStereo::RectifyPair(const cv::Mat& image0,
         for (int camera = cameras.start; camera < cameras.end; ++camera) {
           if (camera == 0) {
             pair.colour0 = rectifier_->Rectify(image0, 0);
-            pair.grey0 = Grey(pair.colour0);
-            pair.mask0 = GridMirrorMask(pair.grey0, rectifier_->ValidMask(0), options_);
+            pair.grey0 = ToGreyscale8(pair.colour0);
+            pair.mask0 =
+                MirrorMask(pair.grey0, Eigen::Vector2d::Zero(), mask, rectifier_->ValidMask(0));
           } else {
-            pair.grey1 = rectifier_->Rectify(Grey(image1), 1);
-            pair.mask1 = GridMirrorMask(pair.grey1, rectifier_->ValidMask(1), options_);
+            pair.grey1 = rectifier_->Rectify(ToGreyscale8(image1), 1);
+            pair.mask1 =
+                MirrorMask(pair.grey1, Eigen::Vector2d::Zero(), mask, rectifier_->ValidMask(1));
           }
         }
       },

@@ -18,6 +18,7 @@
 #include <opencv2/core.hpp>
 
 #include "engine/dense/spherical_rectification.h"
+#include "engine/features/mirror_mask.h"
 #include "engine/geometry/camera_model.h"
 #include "engine/util/progress.h"
 
@@ -55,11 +56,13 @@ struct DenseStereoOptions {
   double disparity_std_cells = 0.25;
   // Points whose range std exceeds this fraction of their range are not reported.
   double max_relative_range_std = 0.1;
-  // Mirror mask: along each grid row, cells whose 5x5-blurred grey level is at or below
-  // dark_level and that connect to either end of the row (beyond the mirror's rim, inside its
-  // central hole) are masked, then the mask is eroded by mask_margin_cells.
+  // Mirror mask (engine/features/mirror_mask.h, shape kDarkRowEnds): along each grid row,
+  // cells whose 5x5-blurred grey level is at or below dark_level and that connect to either end
+  // of the row (beyond the mirror's rim, inside its central hole) are masked, then the mask is
+  // eroded by mask_margin_cells.
   double dark_level = 20.0;
   int mask_margin_cells = 4;
+  MirrorMaskOptions MaskOptions() const;
   // Pair-level check that the images fit the rig: a shift of one image, or a rig that does not
   // fit, moves every match along the epipolar line too, a disparity offset no per-cell test can
   // see; but it also moves matches across the lines (grid rows) at most azimuths. About
@@ -125,7 +128,7 @@ class DenseStereo {
   // Both cameras' images on the grid and their mirror masks (RectifyPair).
   struct RectifiedPair {
     cv::Mat colour0, grey0, grey1;  // cam0 as given (grey or BGR), both grey
-    cv::Mat mask0, mask1;           // GridMirrorMask of each
+    cv::Mat mask0, mask1;           // MirrorMask of each
   };
   // The panoramas' cells in the grid's layout (transposed at the end of Reconstruct).
   struct GridCells {
@@ -157,11 +160,6 @@ class DenseStereo {
   // Per grid column: sin and cos of the angle from the baseline.
   std::vector<double> sin_theta_, cos_theta_;
 };
-
-// The mirror mask on the grid (CV_8U, 255 inside): see DenseStereoOptions::dark_level. `valid`
-// is the rectifier's ValidMask of the camera.
-cv::Mat GridMirrorMask(const cv::Mat& grey_on_grid, const cv::Mat& valid,
-                       const DenseStereoOptions& options);
 
 // The median distance (grid cells) of cam0's textured cells' best matches in cam1 from their
 // grid row, and how many samples matched (see DenseStereoOptions::epipolar_samples); -1 when

@@ -6,102 +6,30 @@
 #include <opencv2/features2d.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "engine/features/image.h"
 #include "engine/features/sift_bias.h"
 #include "engine/util/check.h"
 #include "engine/util/option_check.h"
 
 namespace omnirig {
-namespace {
-
-cv::Mat ToGray(const cv::Mat& image) {
-  OMNIRIG_CHECK(!image.empty() && image.depth() == CV_8U &&
-                    (image.channels() == 1 || image.channels() == 3),
-                "SLAM images must be 8-bit grey or BGR");
-  if (image.channels() == 1) return image;
-  cv::Mat gray;
-  cv::cvtColor(image, gray, cv::COLOR_BGR2GRAY);
-  return gray;
-}
-
-}  // namespace
 
 void FeatureOptions::Check() const {
   OMNIRIG_CHECK_NON_NEGATIVE(max_features);
   OMNIRIG_CHECK_IN(contrast_threshold, '(', 0, 1, ')');
-  OMNIRIG_CHECK_IN(dark_level, '[', 0, 255, ')');
-  OMNIRIG_CHECK_NON_NEGATIVE(mask_margin_px);
+  mirror_mask.Check();
   OMNIRIG_CHECK_IN(detection_scale, '(', 0.1, 1, ']');
 }
 
-MirrorAnnulus EstimateMirrorAnnulus(const CameraModel& camera, const cv::Mat& image,
-                                    double dark_level) {
-  const cv::Mat gray = ToGray(image);
-  MirrorAnnulus annulus;
-  annulus.centre_px = Eigen::Vector2d(camera.intrinsics.u0(), camera.intrinsics.v0());
-  const double max_radius = std::hypot(std::max(annulus.centre_px.x(), gray.cols - annulus.centre_px.x()),
-                                       std::max(annulus.centre_px.y(), gray.rows - annulus.centre_px.y()));
-  const int num_bins = static_cast<int>(max_radius) + 2;
-  std::vector<int> dark(num_bins, 0), total(num_bins, 0);
-  for (int v = 0; v < gray.rows; v += 2) {  // every other row and column is plenty
-    const std::uint8_t* row = gray.ptr<std::uint8_t>(v);
-    for (int u = 0; u < gray.cols; u += 2) {
-      const int bin = static_cast<int>(std::hypot(u - annulus.centre_px.x(), v - annulus.centre_px.y()));
-      ++total[bin];
-      if (row[u] < dark_level) ++dark[bin];
-    }
-  }
-  // Share of dark pixels per radius, smoothed over 3 px so single rings do not decide.
-  auto dark_share = [&](int bin) {
-    int d = 0, t = 0;
-    for (int b = std::max(0, bin - 1); b <= std::min(num_bins - 1, bin + 1); ++b) {
-      d += dark[b];
-      t += total[b];
-    }
-    return t > 0 ? static_cast<double>(d) / t : 1.0;
-  };
-  int brightest = 0;
-  for (int bin = 0; bin < num_bins; ++bin) {
-    if (total[bin] >= 8 && dark_share(bin) < dark_share(brightest)) brightest = bin;
-  }
-  annulus.rim_radius_px = max_radius + 1;
-  for (int bin = brightest; bin < num_bins; ++bin) {
-    if (total[bin] >= 8 && dark_share(bin) > 0.8) {
-      annulus.rim_radius_px = bin;
-      break;
-    }
-  }
-  for (int bin = brightest; bin >= 0; --bin) {
-    if (total[bin] >= 4 && dark_share(bin) > 0.8) {
-      annulus.hole_radius_px = bin + 1;
-      break;
-    }
-  }
-  return annulus;
-}
-
-cv::Mat MirrorMask(const CameraModel& camera, const MirrorAnnulus& annulus, double margin_px) {
-  OMNIRIG_CHECK(camera.width > 0 && camera.height > 0, "camera without an image size");
-  cv::Mat mask(camera.height, camera.width, CV_8U, cv::Scalar(0));
-  const double inner = annulus.hole_radius_px + margin_px;
-  const double outer = annulus.rim_radius_px - margin_px;
-  for (int v = 0; v < mask.rows; ++v) {
-    std::uint8_t* row = mask.ptr<std::uint8_t>(v);
-    for (int u = 0; u < mask.cols; ++u) {
-      const double r = std::hypot(u - annulus.centre_px.x(), v - annulus.centre_px.y());
-      if (r >= inner && r <= outer) row[u] = 255;
-    }
-  }
-  return mask;
-}
-
 double MeanIntensity(const cv::Mat& image, const cv::Mat& mask) {
-  return cv::mean(ToGray(image), mask)[0];
+  CheckGreyOrBgr8(image);
+  return cv::mean(ToGreyscale8(image), mask)[0];
 }
 
 CameraFeatures DetectFeatures(const CameraModel& camera, const cv::Mat& image, const cv::Mat& mask,
                               const FeatureOptions& options) {
   options.Check();
-  const cv::Mat gray = ToGray(image);
+  CheckGreyOrBgr8(image);
+  const cv::Mat gray = ToGreyscale8(image);
   OMNIRIG_CHECK(mask.empty() || mask.size() == gray.size(), "mask and image sizes differ");
   // Only the mask's bounding box is searched: the mirror's disk leaves the corners dark.
   const cv::Rect roi = mask.empty() ? cv::Rect(0, 0, gray.cols, gray.rows) : cv::boundingRect(mask);
@@ -130,6 +58,14 @@ CameraFeatures DetectFeatures(const CameraModel& camera, const cv::Mat& image, c
     keypoint.pt.y = static_cast<float>((keypoint.pt.y - kSiftUpscaleBias + 0.5) / scale - 0.5 +
                                        roi.y);
   }
+  return LiftKeypoints(camera, image, keypoints, descriptors);
+}
+
+CameraFeatures LiftKeypoints(const CameraModel& camera, const cv::Mat& image,
+                             const std::vector<cv::KeyPoint>& keypoints,
+                             const cv::Mat& descriptors) {
+  OMNIRIG_CHECK(descriptors.rows == static_cast<int>(keypoints.size()),
+                "one descriptor row per keypoint");
   CameraFeatures features;
   std::vector<int> kept_rows;
   for (size_t i = 0; i < keypoints.size(); ++i) {

@@ -1,5 +1,5 @@
 #pragma once
-// Per-image features for SLAM: the mirror disk mask, SIFT keypoints and descriptors (OpenCV),
+// Per-image features for SLAM: SIFT keypoints and descriptors (OpenCV),
 // each keypoint lifted to its unit bearing through the unified model (eq. 6).
 
 #include <array>
@@ -8,7 +8,9 @@
 
 #include <Eigen/Core>
 #include <opencv2/core.hpp>
+#include <opencv2/features2d.hpp>
 
+#include "engine/features/mirror_mask.h"
 #include "engine/geometry/camera_model.h"
 
 namespace omnirig {
@@ -21,11 +23,9 @@ struct FeatureOptions {
   // ATE 0.0103 % either way) for 12-18 % less CPU per frame end to end (docs/accuracy.md).
   int max_features = 800;
   double contrast_threshold = 0.03; // SIFT's, on the [0, 1] intensity scale
-  // Grey level below which a pixel counts as outside the mirror (rim, central hole).
-  double dark_level = 24.0;
-  // Keypoints closer than this to the mirror's rim or hole are dropped: the rim's edge is
-  // not a scene feature.
-  double mask_margin_px = 8.0;
+  // The mirror's mask, made once per sequence on the first usable images: keypoints closer
+  // than margin_px to the rim or the hole are dropped.
+  MirrorMaskOptions mirror_mask = {MirrorMaskOptions::Shape::kAnnulus, 24.0, 8.0};
   // SIFT runs on the image resized by this factor (1 = full resolution). OpenCV's SIFT first
   // doubles its input, so 0.5 detects at the full image's own resolution for a quarter of the
   // work; keypoints are mapped back to full-resolution pixels.
@@ -33,25 +33,8 @@ struct FeatureOptions {
   void Check() const;
 };
 
-// The mirror's image: pixels between hole_radius_px and rim_radius_px around centre_px.
-struct MirrorAnnulus {
-  Eigen::Vector2d centre_px = Eigen::Vector2d::Zero();
-  double hole_radius_px = 0.0;
-  double rim_radius_px = 0.0;
-};
-
-// Finds the annulus of `image` around the calibration's principal point: the rim is where the
-// share of dark pixels on a circle first exceeds 80% going outwards from the brightest radius,
-// the hole where it does so going inwards. An image with no dark border (a fisheye) gives
-// hole 0 and a rim beyond the image corners.
-MirrorAnnulus EstimateMirrorAnnulus(const CameraModel& camera, const cv::Mat& image,
-                                    double dark_level);
-
-// CV_8U mask (255 inside): the annulus shrunk by margin_px on both sides. Pixels that do not
-// lift are not excluded here (lifting every pixel is slow); DetectFeatures drops such keypoints.
-cv::Mat MirrorMask(const CameraModel& camera, const MirrorAnnulus& annulus, double margin_px);
-
-// Mean grey level of `image` inside `mask` (a black image or a covered lens is near 0).
+// Mean grey level of `image` (8-bit grey or BGR) inside `mask` (a black image or a covered
+// lens is near 0).
 double MeanIntensity(const cv::Mat& image, const cv::Mat& mask);
 
 struct CameraFeatures {
@@ -65,5 +48,12 @@ struct CameraFeatures {
 // SIFT inside `mask` on an 8-bit BGR or grey image; keypoints that do not lift are dropped.
 CameraFeatures DetectFeatures(const CameraModel& camera, const cv::Mat& image,
                               const cv::Mat& mask, const FeatureOptions& options);
+
+// The keypoints (full-resolution pixels, bias corrected) that lift through `camera`, with their
+// unit bearings, the colour of `image` (8-bit grey or BGR) at each and their rows of
+// `descriptors` (CV_32F, one row per keypoint).
+CameraFeatures LiftKeypoints(const CameraModel& camera, const cv::Mat& image,
+                             const std::vector<cv::KeyPoint>& keypoints,
+                             const cv::Mat& descriptors);
 
 }  // namespace omnirig

@@ -2,6 +2,8 @@
 
 #include <opencv2/imgproc.hpp>
 
+#include "engine/util/check.h"
+
 namespace omnirig {
 
 cv::Mat ToGreyscale8(const cv::Mat& image) {
@@ -19,6 +21,12 @@ cv::Mat ToGreyscale8(const cv::Mat& image) {
     grey = converted;
   }
   return grey;
+}
+
+void CheckGreyOrBgr8(const cv::Mat& image) {
+  OMNIRIG_CHECK(
+      !image.empty() && image.depth() == CV_8U && (image.channels() == 1 || image.channels() == 3),
+      "images must be 8-bit grey or BGR");
 }
 
 }  // namespace omnirig

@@ -10,4 +10,8 @@ namespace omnirig {
 // feature detectors.
 cv::Mat ToGreyscale8(const cv::Mat& image);
 
+// Throws InvalidArgument unless `image` is 8-bit grey or BGR: what SLAM and dense stereo take
+// (they read colours as BGR bytes).
+void CheckGreyOrBgr8(const cv::Mat& image);
+
 }  // namespace omnirig

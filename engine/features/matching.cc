@@ -1,5 +1,6 @@
 #include "engine/features/matching.h"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <unordered_map>
@@ -22,6 +23,21 @@ bool Passes(const BestTwo& best, double ratio, double max_distance) {
   return best.best >= 0 && best.d1 <= max_distance * max_distance && best.PassesRatio(ratio);
 }
 
+// The pairs (i, best_a[i].best) that pass the ratio test and max_distance both ways.
+std::vector<std::pair<int, int>> MutualBest(const std::vector<BestTwo>& best_a,
+                                            const std::vector<BestTwo>& best_b, double ratio,
+                                            double max_distance) {
+  std::vector<std::pair<int, int>> matches;
+  for (int i = 0; i < static_cast<int>(best_a.size()); ++i) {
+    const int j = best_a[i].best;
+    if (Passes(best_a[i], ratio, max_distance) && best_b[j].best == i &&
+        Passes(best_b[j], ratio, max_distance)) {
+      matches.emplace_back(i, j);
+    }
+  }
+  return matches;
+}
+
 // OpenCV's vectorised kernel: the compiler may not reorder a float sum into SIMD lanes.
 float SquaredDistance(const float* a, const float* b, int n) {
   return cv::hal::normL2Sqr_(a, b, n);
@@ -29,65 +45,171 @@ float SquaredDistance(const float* a, const float* b, int n) {
 
 }  // namespace
 
-void StereoMatchOptions::Check() const {
+void EpipolarMatchOptions::Check() const {
   OMNIRIG_CHECK_POSITIVE(max_epipolar_error_rad);
   OMNIRIG_CHECK_IN(max_descriptor_ratio, '(', 0, 1, ']');
-  OMNIRIG_CHECK_POSITIVE(max_descriptor_distance);
-  OMNIRIG_CHECK_NON_NEGATIVE(min_parallax_rad);
-  OMNIRIG_CHECK_POSITIVE(max_range_m);
+  // Infinity (no bound) passes: these are upper bounds.
+  OMNIRIG_CHECK(max_descriptor_distance > 0,
+                "max_descriptor_distance must be positive, got " << max_descriptor_distance);
 }
 
-std::vector<StereoPoint> MatchStereo(const StereoRig& rig, const CameraFeatures& features0,
-                                     const CameraFeatures& features1,
-                                     const StereoMatchOptions& options) {
-  options.Check();
-  // Camera 1 of the epipolar convention is cam0, camera 2 is cam1.
-  const Rigid3d cam1_from_cam0 = rig.cam0_from_cam1.Inverse();
-  const Eigen::Matrix3d E = EssentialFromPose(cam1_from_cam0);
-  const Eigen::Vector3d cam1_centre_in_cam0 = rig.cam0_from_cam1.translation;
+void StereoTriangulationOptions::Check() const {
+  triangulation.Check();
+  OMNIRIG_CHECK(max_range_m > 0, "max_range_m must be positive, got " << max_range_m);
+  OMNIRIG_CHECK(max_relative_range_std > 0,
+                "max_relative_range_std must be positive, got " << max_relative_range_std);
+}
+
+namespace {
+
+// The pairs on each other's epipolar curves, as each feature's best two candidates by
+// descriptor distance, with the epipolar error (its sine) of each cam0 feature's best.
+struct EpipolarCandidates {
+  std::vector<BestTwo> best0, best1;
+  std::vector<double> best0_sine;
+  int count = 0;
+};
+
+// True when the rays from cam0's centre along d0 and from c1 along d1 (cam0 frame) meet in
+// front of both cameras; nearly parallel rays (a point at infinity) count as meeting in front
+// when they point the same way.
+bool MeetInFront(const Eigen::Vector3d& c1, const Eigen::Vector3d& d0, const Eigen::Vector3d& d1) {
+  const double b = d0.dot(d1);
+  const double denom = 1.0 - b * b;
+  if (denom < 1e-12) return b > 0.0;
+  const double e = d0.dot(c1);
+  const double f = d1.dot(c1);
+  return (e - b * f) / denom > 0.0 && (b * e - f) / denom > 0.0;
+}
+
+Eigen::Vector3d UnitOrZero(const Eigen::Vector3d& v) {
+  const double n = v.norm();
+  return n > 1e-9 ? Eigen::Vector3d(v / n) : Eigen::Vector3d::Zero();
+}
+
+EpipolarCandidates FindEpipolarCandidates(const Rigid3d& cam0_from_cam1,
+                                          const CameraFeatures& features0,
+                                          const CameraFeatures& features1,
+                                          const EpipolarMatchOptions& options) {
   const int n0 = features0.size(), n1 = features1.size();
-  // The epipolar plane normal of each cam0 bearing, in cam1: |b1 . n| is the sine of the
-  // angle between b1 and the plane (eq. 16).
-  std::vector<Eigen::Vector3d> normals(n0);
-  for (int i = 0; i < n0; ++i) normals[i] = (E * features0.bearings[i]).normalized();
-  const double max_sine = std::sin(options.max_epipolar_error_rad);
+  EpipolarCandidates candidates;
+  candidates.best0.resize(n0);
+  candidates.best1.resize(n1);
+  candidates.best0_sine.resize(n0);
+  // Unit normals of the epipolar planes: of b0 in cam1 (E b0) and of b1 in cam0 (E^T b1); |b .
+  // n| is the sine of the angle between a bearing and the plane (eq. 16). A bearing along the
+  // baseline has no plane (and no depth): it gets a zero normal and no candidates.
+  const Eigen::Matrix3d e = EssentialFromPose(cam0_from_cam1.Inverse());
+  std::vector<Eigen::Vector3d> normals_in1(n0), normals_in0(n1), rays1_in0(n1);
+  for (int i = 0; i < n0; ++i) normals_in1[i] = UnitOrZero(e * features0.bearings[i]);
+  for (int j = 0; j < n1; ++j) {
+    normals_in0[j] = UnitOrZero(e.transpose() * features1.bearings[j]);
+    rays1_in0[j] = cam0_from_cam1.rotation * features1.bearings[j];
+  }
+  const Eigen::Vector3d& c1_in0 = cam0_from_cam1.translation;
+  const double sin_max = std::sin(options.max_epipolar_error_rad);
   const int dims = features0.descriptors.cols;
-  std::vector<BestTwo> best0(n0), best1(n1);
   for (int i = 0; i < n0; ++i) {
-    const float* d0 = features0.descriptors.ptr<float>(i);
+    if (normals_in1[i].isZero()) continue;
     const Eigen::Vector3d& b0 = features0.bearings[i];
+    const float* desc0 = features0.descriptors.ptr<float>(i);
     for (int j = 0; j < n1; ++j) {
-      if (std::abs(features1.bearings[j].dot(normals[i])) > max_sine) continue;
-      // On the curve's right half: the cam1 ray, seen from cam0, must turn towards b0 from
-      // the baseline (rays that meet behind a camera are on the other half of the circle).
-      const Eigen::Vector3d b1_in_cam0 = rig.cam0_from_cam1.rotation * features1.bearings[j];
-      if (b0.cross(b1_in_cam0).dot(b0.cross(cam1_centre_in_cam0)) > 0 &&
-          b0.cross(b1_in_cam0).norm() > 1e-3) {
-        continue;
+      const double s1 = std::abs(normals_in1[i].dot(features1.bearings[j]));
+      if (s1 > sin_max) continue;
+      double sine = s1;
+      if (options.check_both_cameras) {
+        const double s0 = std::abs(normals_in0[j].dot(b0));
+        if (s0 > sin_max || normals_in0[j].isZero()) continue;
+        if (!MeetInFront(c1_in0, b0, rays1_in0[j])) continue;
+        sine = std::max(s0, s1);
+      } else {
+        // On the curve's near half: cam1's ray, seen from cam0, must turn towards b0 from the
+        // baseline (rays that meet behind a camera are on the other half of the circle).
+        const Eigen::Vector3d turn = b0.cross(rays1_in0[j]);
+        if (turn.dot(b0.cross(c1_in0)) > 0 && turn.norm() > 1e-3) continue;
       }
-      const float d = SquaredDistance(d0, features1.descriptors.ptr<float>(j), dims);
-      best0[i].Add(j, d);
-      best1[j].Add(i, d);
+      const float d = SquaredDistance(desc0, features1.descriptors.ptr<float>(j), dims);
+      candidates.best0[i].Add(j, d);
+      candidates.best1[j].Add(i, d);
+      if (candidates.best0[i].best == j) candidates.best0_sine[i] = sine;
+      ++candidates.count;
     }
   }
-  TriangulationOptions triangulation;
-  triangulation.min_parallax_rad = options.min_parallax_rad;
-  triangulation.max_angular_error_rad = 2 * options.max_epipolar_error_rad;
-  triangulation.bearing_std_rad = 0.5 / rig.cam0.intrinsics.gamma_u();
-  std::vector<StereoPoint> points;
-  for (int i = 0; i < n0; ++i) {
-    const int j = best0[i].best;
-    if (!Passes(best0[i], options.max_descriptor_ratio, options.max_descriptor_distance) ||
-        best1[j].best != i ||
-        !Passes(best1[j], options.max_descriptor_ratio, options.max_descriptor_distance)) {
+  return candidates;
+}
+
+// Triangulates feature0 i with feature1 j into report->points, or counts why not.
+void AddStereoPoint(const Rigid3d& cam1_from_cam0, const CameraFeatures& features0,
+                    const CameraFeatures& features1, int i, int j, double epipolar_error_rad,
+                    const StereoTriangulationOptions& options, StereoMatchReport* report) {
+  const TriangulatedPoint t =
+      options.optimal_angular
+          ? TriangulateOptimalAngular(cam1_from_cam0, features0.bearings[i], features1.bearings[j],
+                                      options.triangulation)
+          : TriangulateMidpoint(cam1_from_cam0, features0.bearings[i], features1.bearings[j],
+                                options.triangulation);
+  if (!t.valid) {
+    (t.reason == "parallax" ? report->num_rejected_parallax : report->num_rejected_reprojection)++;
+    return;
+  }
+  const double range_m = t.point_in_cam1.norm();
+  if (range_m > options.max_range_m || t.range_std_m > options.max_relative_range_std * range_m) {
+    ++report->num_rejected_range;
+    return;
+  }
+  StereoPoint point;
+  point.feature0 = i;
+  point.feature1 = j;
+  point.point_in_cam0 = t.point_in_cam1;  // the triangulation's camera 1 is cam0
+  point.range_std_m = t.range_std_m;
+  point.parallax_rad = t.parallax_rad;
+  point.epipolar_error_rad = epipolar_error_rad;
+  point.pixel0 = features0.pixels[i];
+  point.rgb = features0.rgb[i];
+  report->points.push_back(point);
+}
+
+void CheckFeatures(const CameraFeatures& features) {
+  const size_t n = features.bearings.size();
+  OMNIRIG_CHECK(features.pixels.size() == n && features.rgb.size() == n &&
+                    static_cast<size_t>(features.descriptors.rows) == n &&
+                    (n == 0 || features.descriptors.type() == CV_32F),
+                "features need one pixel, colour and float descriptor row per bearing");
+}
+
+}  // namespace
+
+StereoMatchReport MatchStereo(const Rigid3d& cam0_from_cam1, const CameraFeatures& features0,
+                              const CameraFeatures& features1, const EpipolarMatchOptions& matching,
+                              const StereoTriangulationOptions& triangulation) {
+  matching.Check();
+  triangulation.Check();
+  CheckFeatures(features0);
+  CheckFeatures(features1);
+  StereoMatchReport report;
+  if (features0.size() == 0 || features1.size() == 0) return report;
+  OMNIRIG_CHECK(features0.descriptors.cols == features1.descriptors.cols,
+                "descriptor sizes differ between the two images");
+  const EpipolarCandidates candidates =
+      FindEpipolarCandidates(cam0_from_cam1, features0, features1, matching);
+  report.num_candidates = candidates.count;
+  const Rigid3d cam1_from_cam0 = cam0_from_cam1.Inverse();
+  for (int i = 0; i < features0.size(); ++i) {
+    const int j = candidates.best0[i].best;
+    if (!Passes(candidates.best0[i], matching.max_descriptor_ratio,
+                matching.max_descriptor_distance)) {
       continue;
     }
-    const TriangulatedPoint point = TriangulateMidpoint(cam1_from_cam0, features0.bearings[i],
-                                                        features1.bearings[j], triangulation);
-    if (!point.valid || point.point_in_cam1.norm() > options.max_range_m) continue;
-    points.push_back({i, j, point.point_in_cam1, point.range_std_m});
+    if (matching.mutual_check && (candidates.best1[j].best != i ||
+                                  !Passes(candidates.best1[j], matching.max_descriptor_ratio,
+                                          matching.max_descriptor_distance))) {
+      continue;
+    }
+    ++report.num_matches;
+    AddStereoPoint(cam1_from_cam0, features0, features1, i, j, std::asin(candidates.best0_sine[i]),
+                   triangulation, &report);
   }
-  return points;
+  return report;
 }
 
 std::vector<std::pair<int, int>> MatchDescriptors(const cv::Mat& descriptors_a,
@@ -142,14 +264,7 @@ std::vector<std::pair<int, int>> MatchDescriptorsGated(const CameraFeatures& a,
       best_b[j].Add(i, d);
     }
   }
-  for (int i = 0; i < na; ++i) {
-    const int j = best_a[i].best;
-    if (Passes(best_a[i], max_ratio, max_distance) && best_b[j].best == i &&
-        Passes(best_b[j], max_ratio, max_distance)) {
-      matches.emplace_back(i, j);
-    }
-  }
-  return matches;
+  return MutualBest(best_a, best_b, max_ratio, max_distance);
 }
 
 std::vector<std::pair<int, int>> MatchDescriptorsInGroups(const cv::Mat& descriptors_a,
@@ -177,15 +292,7 @@ std::vector<std::pair<int, int>> MatchDescriptorsInGroups(const cv::Mat& descrip
       best_b[j].Add(i, d);
     }
   }
-  std::vector<std::pair<int, int>> matches;
-  for (int i = 0; i < descriptors_a.rows; ++i) {
-    const int j = best_a[i].best;
-    if (Passes(best_a[i], max_ratio, max_distance) && best_b[j].best == i &&
-        Passes(best_b[j], max_ratio, max_distance)) {
-      matches.emplace_back(i, j);
-    }
-  }
-  return matches;
+  return MutualBest(best_a, best_b, max_ratio, max_distance);
 }
 
 }  // namespace omnirig

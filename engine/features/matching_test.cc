@@ -19,6 +19,19 @@ StereoRig VerticalRig() {
   return rig;
 }
 
+// The SLAM front end's policy: the epipolar angle in cam1, a descriptor distance bound, the
+// rays' midpoint.
+StereoMatchReport Match(const StereoRig& rig, const CameraFeatures& f0, const CameraFeatures& f1) {
+  EpipolarMatchOptions matching;
+  matching.max_epipolar_error_rad = 3e-3;
+  matching.max_descriptor_distance = 250.0;
+  StereoTriangulationOptions triangulation;
+  triangulation.triangulation.min_parallax_rad = 0.004;
+  triangulation.triangulation.max_angular_error_rad = 6e-3;
+  triangulation.max_range_m = 30.0;
+  return MatchStereo(rig.cam0_from_cam1, f0, f1, matching, triangulation);
+}
+
 // Features of random points around the rig seen by both cameras, with distinct random
 // descriptors; cam1's features are shuffled.
 void MakeFeatures(const StereoRig& rig, int n, CameraFeatures* f0, CameraFeatures* f1,
@@ -32,6 +45,8 @@ void MakeFeatures(const StereoRig& rig, int n, CameraFeatures* f0, CameraFeature
   f1->descriptors.create(n, 128, CV_32F);
   f1->bearings.resize(n);
   f1->pixels.resize(n);
+  f0->rgb.assign(n, {0, 0, 0});
+  f1->rgb.assign(n, {0, 0, 0});
   cam1_of_point->resize(n);
   const Rigid3d cam1_from_cam0 = rig.cam0_from_cam1.Inverse();
   for (int i = 0; i < n; ++i) {
@@ -58,11 +73,12 @@ TEST(MatchStereo, FindsTheTrueMatchesAndTriangulatesThem) {
   std::vector<Eigen::Vector3d> points;
   std::vector<int> cam1_of_point;
   MakeFeatures(rig, 300, &f0, &f1, &points, &cam1_of_point);
-  const std::vector<StereoPoint> matches = MatchStereo(rig, f0, f1, StereoMatchOptions());
+  const std::vector<StereoPoint> matches = Match(rig, f0, f1).points;
   EXPECT_GT(matches.size(), 280u);
   for (const StereoPoint& m : matches) {
     EXPECT_EQ(m.feature1, cam1_of_point[m.feature0]);
-    EXPECT_LT((m.point_in_rig - points[m.feature0]).norm(), 1e-6 * points[m.feature0].norm() + 1e-6);
+    EXPECT_LT((m.point_in_cam0 - points[m.feature0]).norm(),
+              1e-6 * points[m.feature0].norm() + 1e-6);
   }
 }
 
@@ -76,7 +92,7 @@ TEST(MatchStereo, RefusesDescriptorTwinsOffTheEpipolarCurve) {
   MakeFeatures(rig, 200, &f0, &f1, &points, &cam1_of_point);
   const Eigen::AngleAxisd turn(1.0, Eigen::Vector3d::UnitZ());
   for (Eigen::Vector3d& b : f1.bearings) b = turn * b;
-  EXPECT_LT(MatchStereo(rig, f0, f1, StereoMatchOptions()).size(), 5u);
+  EXPECT_LT(Match(rig, f0, f1).points.size(), 5u);
 }
 
 TEST(MatchDescriptors, MutualRatioMatchesAndGatedAgree) {

@@ -1,6 +1,7 @@
 #pragma once
 // The geometry's Ceres layer, shared by calibration, relative pose and bundle adjustment: the
-// pose manifold, the rotated point's Jacobian, the one solver set-up and its progress callback.
+// pose manifold, the rotated point's Jacobian, the one solver set-up, its summary and its
+// progress callback.
 //
 // Parameter blocks hold a Rigid3d as 7 doubles in Eigen's order [qx, qy, qz, qw, tx, ty, tz]
 // (Rigid3d::ToParams).
@@ -14,6 +15,7 @@
 
 #include "engine/geometry/rigid3.h"
 #include "engine/util/progress.h"
+#include "engine/util/solver_summary.h"
 
 namespace omnirig {
 
@@ -87,6 +89,19 @@ inline ceres::Solver::Options MakeSolverOptions(const SolverSetup& setup) {
   options.logging_type = ceres::SILENT;
   options.minimizer_progress_to_stdout = false;
   return options;
+}
+
+// The engine's summary of one Ceres solve: every iteration counted (iteration 0 included),
+// time from Ceres' own total.
+inline SolverSummary Summarize(const ceres::Solver::Summary& summary) {
+  SolverSummary out;
+  out.num_iterations = static_cast<int>(summary.iterations.size());
+  out.initial_cost = summary.initial_cost;
+  out.final_cost = summary.final_cost;
+  out.termination = ceres::TerminationTypeToString(summary.termination_type);
+  out.time_s = summary.total_time_in_seconds;
+  out.usable = summary.IsSolutionUsable();
+  return out;
 }
 
 // Aborts a solve as soon as `progress` is cancelled (Ceres calls this after every iteration,

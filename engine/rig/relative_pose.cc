@@ -327,10 +327,9 @@ bool SolveJoint(UsedPairs* used, const RigRefinementOptions& refine, bool warm_s
   }
   // The uncertainty only of the last round's fit (EstimateRelativePose): each fit before it
   // is refitted without one pair.
-  const RigRefinementSummary summary =
+  const SolverSummary summary =
       RefineRig(used->corners, refine, &rig, &used->cam0_from_board, nullptr, progress);
-  report->solver = {summary.initial_cost, summary.final_cost, summary.num_iterations,
-                    summary.termination, summary.time_s};
+  report->solver = summary;
   if (!summary.usable) {
     report->message = "the joint refinement failed (" + summary.termination + ")";
     return false;

@@ -114,14 +114,6 @@ struct RelativePosePairReport {
   double board_rotation_deg = -1.0;
 };
 
-struct RelativePoseSolverSummary {
-  double initial_cost = 0.0;
-  double final_cost = 0.0;
-  int num_iterations = 0;
-  std::string termination;
-  double time_s = 0.0;
-};
-
 struct RelativePoseReport {
   // False when no rig could be estimated; `message` says why (too few pairs, degenerate
   // geometry). Per-pair reasons are in `pairs` either way.
@@ -156,7 +148,7 @@ struct RelativePoseReport {
   // pairs it left out).
   SyncTestReport sync_test;
   int sync_rounds = 0;
-  RelativePoseSolverSummary solver;
+  SolverSummary solver;
   std::vector<RelativePosePairReport> pairs;
 };
 

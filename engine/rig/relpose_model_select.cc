@@ -129,7 +129,7 @@ std::pair<double, int> FoldError(const BoardSpec& board,
     cam0_from_board.push_back(fit.pairs[i].cam0_from_board);
   }
   StereoRig rig = fit.rig;
-  const RigRefinementSummary summary = RefineRig(corners, refine, &rig, &cam0_from_board, nullptr);
+  const SolverSummary summary = RefineRig(corners, refine, &rig, &cam0_from_board, nullptr);
   const RigPairCorners test =
       CornersOf(board, symmetries, pairs[held_out], fit.pairs[held_out].cam1_order);
   if (!summary.usable) {

@@ -232,10 +232,10 @@ RigUncertainty EstimateRigUncertainty(const std::vector<RigPairCorners>& pairs,
   return EstimateUncertainty(&problem, &blocks, pair_residuals);
 }
 
-RigRefinementSummary RefineRig(const std::vector<RigPairCorners>& pairs,
-                               const RigRefinementOptions& options, StereoRig* rig,
-                               std::vector<Rigid3d>* cam0_from_board, RigUncertainty* uncertainty,
-                               const ProgressSink& progress) {
+SolverSummary RefineRig(const std::vector<RigPairCorners>& pairs,
+                        const RigRefinementOptions& options, StereoRig* rig,
+                        std::vector<Rigid3d>* cam0_from_board, RigUncertainty* uncertainty,
+                        const ProgressSink& progress) {
   OMNIRIG_CHECK(cam0_from_board->size() == pairs.size(), "one board pose per pair expected");
   RigBlocks blocks = BlocksOf(*rig, *cam0_from_board);
 
@@ -256,13 +256,7 @@ RigRefinementSummary RefineRig(const std::vector<RigPairCorners>& pairs,
   ceres::Solve(solver_options, &problem, &summary);
   progress.ThrowIfCancelled();
 
-  RigRefinementSummary result;
-  result.initial_cost = summary.initial_cost;
-  result.final_cost = summary.final_cost;
-  result.num_iterations = static_cast<int>(summary.iterations.size());
-  result.termination = ceres::TerminationTypeToString(summary.termination_type);
-  result.time_s = summary.total_time_in_seconds;
-  result.usable = summary.IsSolutionUsable();
+  const SolverSummary result = Summarize(summary);
   if (!result.usable) return result;
 
   rig->cam0_from_cam1 = Rigid3d::FromParams(blocks.cam0_from_cam1.data());

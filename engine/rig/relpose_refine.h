@@ -11,6 +11,7 @@
 #include "engine/geometry/camera_model.h"
 #include "engine/geometry/rigid3.h"
 #include "engine/util/progress.h"
+#include "engine/util/solver_summary.h"
 
 namespace omnirig {
 
@@ -41,15 +42,6 @@ struct RigRefinementOptions {
   int num_threads = 1;
 };
 
-struct RigRefinementSummary {
-  double initial_cost = 0.0;
-  double final_cost = 0.0;
-  int num_iterations = 0;
-  std::string termination;
-  double time_s = 0.0;
-  bool usable = false;  // the solver ended with a usable solution
-};
-
 // The standard deviations of cam0_from_cam1 from the inverse of the Gauss-Newton Hessian,
 // scaled by the residuals' variance (sum of squares / degrees of freedom).
 struct RigUncertainty {
@@ -70,10 +62,10 @@ struct RigUncertainty {
 
 // Refines `rig` (cam0_from_cam1, and intrinsics when asked) and `cam0_from_board` (one per
 // pair) in place. Cancellable between solver iterations (throws Cancelled).
-RigRefinementSummary RefineRig(const std::vector<RigPairCorners>& pairs,
-                               const RigRefinementOptions& options, StereoRig* rig,
-                               std::vector<Rigid3d>* cam0_from_board, RigUncertainty* uncertainty,
-                               const ProgressSink& progress = {});
+SolverSummary RefineRig(const std::vector<RigPairCorners>& pairs,
+                        const RigRefinementOptions& options, StereoRig* rig,
+                        std::vector<Rigid3d>* cam0_from_board, RigUncertainty* uncertainty,
+                        const ProgressSink& progress = {});
 
 // The uncertainty RefineRig reports, of a solution it returned (the same problem, evaluated at
 // `rig` and `cam0_from_board`): for a caller that refits several times and needs only the last

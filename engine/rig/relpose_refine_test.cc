@@ -80,7 +80,7 @@ TEST(RigRefinement, ExactCornersConvergeToTheTruthFromAPerturbedStart) {
     cam0_from_board.push_back(Perturbed(pose, 2.0, Eigen::Vector3d(-0.01, 0.01, 0.02)));
   }
   RigUncertainty uncertainty;
-  const RigRefinementSummary summary =
+  const SolverSummary summary =
       RefineRig(problem.pairs, RigRefinementOptions(), &rig, &cam0_from_board, &uncertainty);
   ASSERT_TRUE(summary.usable) << summary.termination;
   EXPECT_LT(summary.final_cost, 1e-12 * summary.initial_cost);

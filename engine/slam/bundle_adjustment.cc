@@ -362,20 +362,23 @@ BundleAdjustmentReport Adjust(const CalibrationRefinementOptions* refinement,
   ceres::Solver::Summary summary =
       SolveOnce(refinement, free_set, candidates, options, options.max_iterations, progress, 0,
                 rig, map, &report);
-  report.iterations = static_cast<int>(summary.iterations.size());
+  report.solver = Summarize(summary);
   RmsAndPrune(*rig, free_set, candidates, options.max_reprojection_error_px, true, map, &report);
   // A second, shorter solve without the pruned outliers' pull, when they were more than a few:
   // under the robust loss a handful of outliers barely moves the solution.
   const int num_observations = report.num_residuals / 2;
   if (report.num_observations_pruned > std::max(10, num_observations / 500)) {
     summary = SolveOnce(refinement, free_set, candidates, options, SecondSolveIterations(options),
-                        progress, report.iterations, rig, map, &report);
-    report.iterations += static_cast<int>(summary.iterations.size());
+                        progress, report.solver.num_iterations, rig, map, &report);
+    const SolverSummary second = Summarize(summary);
+    report.solver.num_iterations += second.num_iterations;
+    report.solver.final_cost = second.final_cost;
+    report.solver.usable = second.usable;
   }
   report.final_rms_px = RmsAndPrune(*rig, free_set, candidates, 0, false, map, &report);
   report.linear_solver = ceres::LinearSolverTypeToString(summary.linear_solver_type_used);
-  report.termination = ceres::TerminationTypeToString(summary.termination_type);
-  report.time_s = timer.ElapsedSeconds();
+  report.solver.termination = ceres::TerminationTypeToString(summary.termination_type);
+  report.solver.time_s = timer.ElapsedSeconds();  // both solves and the RMS passes
   return report;
 }
 

@@ -16,6 +16,7 @@
 #include "engine/geometry/camera_model.h"
 #include "engine/slam/map.h"
 #include "engine/util/progress.h"
+#include "engine/util/solver_summary.h"
 
 namespace omnirig::slam {
 
@@ -35,15 +36,15 @@ struct BundleAdjustmentReport {
   int num_free_poses = 0;
   int num_constant_poses = 0;
   int num_points = 0;
-  int num_residuals = 0;  // 2 per observation
-  int iterations = 0;
+  int num_residuals = 0;        // 2 per observation
   double initial_rms_px = 0.0;  // before the first solve, over every observation used
   double final_rms_px = 0.0;    // after pruning and the final solve, over the inliers
   int num_observations_pruned = 0;
   int num_points_pruned = 0;
   std::string linear_solver;
-  std::string termination;
-  double time_s = 0.0;
+  // Over both solves (the second without the pruned outliers) when there are two; time_s
+  // includes the RMS and pruning passes.
+  SolverSummary solver;
 };
 
 // Adjusts the poses of `free_frames` and every valid landmark they observe from at least two

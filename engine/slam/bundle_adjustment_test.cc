@@ -147,7 +147,7 @@ TEST(BundleAdjust, ReportsIterationsAndAbortsWhenCancelled) {
                                 nullptr};
     const BundleAdjustmentReport report =
         BundleAdjust(rig, {0, 1, 2, 3, 4, 5}, options, &scene.map, progress);
-    EXPECT_GE(static_cast<int>(fractions.size()), report.iterations);
+    EXPECT_GE(static_cast<int>(fractions.size()), report.solver.num_iterations);
     EXPECT_GT(fractions.size(), 1u);
     EXPECT_TRUE(std::is_sorted(fractions.begin(), fractions.end()));
   }

@@ -85,10 +85,7 @@ PoseGraphReport OptimisePoseGraph(const std::vector<PoseGraphEdge>& edges,
   }
   PoseGraphReport report;
   report.num_poses = static_cast<int>(params.size());
-  report.iterations = static_cast<int>(summary.iterations.size());
-  report.initial_cost = summary.initial_cost;
-  report.final_cost = summary.final_cost;
-  report.termination = ceres::TerminationTypeToString(summary.termination_type);
+  report.solver = Summarize(summary);
   return report;
 }
 

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "engine/geometry/rigid3.h"
+#include "engine/util/solver_summary.h"
 
 namespace omnirig::slam {
 
@@ -24,10 +25,7 @@ struct PoseGraphEdge {
 
 struct PoseGraphReport {
   int num_poses = 0;
-  int iterations = 0;
-  double initial_cost = 0.0;
-  double final_cost = 0.0;
-  std::string termination;
+  SolverSummary solver;
 };
 
 // Adjusts `rig_from_world` (keyframe -> pose) to the edges, holding the poses in `fixed`

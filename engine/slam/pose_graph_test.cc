@@ -47,7 +47,7 @@ TEST(PoseGraph, ALoopEdgeRemovesTheDriftOfASquare) {
   const double after = (rig_from_world[15].Inverse().translation - truth[15].translation).norm();
   EXPECT_GT(before, 0.5);
   EXPECT_LT(after, 0.05);
-  EXPECT_LT(report.final_cost, report.initial_cost);
+  EXPECT_LT(report.solver.final_cost, report.solver.initial_cost);
   EXPECT_EQ(report.num_poses, 16);
   EXPECT_LT((rig_from_world[0].Inverse().translation - truth[0].translation).norm(), 1e-12);
 }

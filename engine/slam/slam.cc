@@ -22,6 +22,34 @@ EssentialRansacOptions SlamOptions::DefaultEssentialOptions() {
   return options;
 }
 
+EpipolarMatchOptions StereoMatchOptions::Matching() const {
+  EpipolarMatchOptions matching;
+  matching.max_epipolar_error_rad = max_epipolar_error_rad;
+  matching.check_both_cameras = false;
+  matching.max_descriptor_ratio = max_descriptor_ratio;
+  matching.max_descriptor_distance = max_descriptor_distance;
+  matching.mutual_check = true;
+  return matching;
+}
+
+StereoTriangulationOptions StereoMatchOptions::Triangulation(const StereoRig& rig) const {
+  StereoTriangulationOptions triangulation;
+  triangulation.optimal_angular = false;
+  triangulation.triangulation.min_parallax_rad = min_parallax_rad;
+  triangulation.triangulation.max_angular_error_rad = 2 * max_epipolar_error_rad;
+  triangulation.triangulation.bearing_std_rad = 0.5 / rig.cam0.intrinsics.gamma_u();
+  triangulation.max_range_m = max_range_m;
+  return triangulation;
+}
+
+void StereoMatchOptions::Check() const {
+  OMNIRIG_CHECK_POSITIVE(max_epipolar_error_rad);
+  OMNIRIG_CHECK_IN(max_descriptor_ratio, '(', 0, 1, ']');
+  OMNIRIG_CHECK_POSITIVE(max_descriptor_distance);
+  OMNIRIG_CHECK_NON_NEGATIVE(min_parallax_rad);
+  OMNIRIG_CHECK_POSITIVE(max_range_m);
+}
+
 void SlamOptions::Check() const {
   features.Check();
   stereo.Check();

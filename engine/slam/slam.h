@@ -56,6 +56,25 @@
 
 namespace omnirig::slam {
 
+// The cam0-cam1 matches of a frame (MatchStereo): on the epipolar curve as seen in cam1,
+// triangulated at the rays' midpoint.
+struct StereoMatchOptions {
+  // Largest angle between a cam1 bearing and the epipolar plane of its cam0 partner; the
+  // triangulated point must lie within twice this angle of both bearings.
+  double max_epipolar_error_rad = 3e-3;
+  double max_descriptor_ratio = 0.8;  // Lowe's, among the candidates on the curve
+  // Largest L2 distance between matched descriptors (OpenCV's SIFT scale, descriptors of norm
+  // ~512): a lone candidate on the curve passes any ratio test, not this. Also bounds the
+  // temporal and loop matches.
+  double max_descriptor_distance = 250.0;
+  double min_parallax_rad = 0.004;  // ~0.25 degrees: 100 mm baseline seen from ~25 m
+  double max_range_m = 30.0;
+  EpipolarMatchOptions Matching() const;
+  // Range std for ~0.5 px of keypoint noise on cam0's focal length.
+  StereoTriangulationOptions Triangulation(const StereoRig& rig) const;
+  void Check() const;
+};
+
 struct SlamOptions {
   FeatureOptions features;
   StereoMatchOptions stereo;

@@ -40,9 +40,7 @@ bool Tracker::CheckImages(const StereoImages& images, FrameReport* report) {
   for (int c = 0; c < 2; ++c) {
     // The mirror's disk does not move on a rig: find it once, on the first usable image.
     if (masks_[c].empty() && cv::mean(*image[c])[0] >= options_.min_mean_intensity) {
-      const MirrorAnnulus annulus =
-          EstimateMirrorAnnulus(*camera[c], *image[c], options_.features.dark_level);
-      masks_[c] = MirrorMask(*camera[c], annulus, options_.features.mask_margin_px);
+      masks_[c] = MirrorMask(*image[c], PrincipalPoint(*camera[c]), options_.features.mirror_mask);
     }
     const double mean = masks_[c].empty() ? cv::mean(*image[c])[0]
                                           : MeanIntensity(*image[c], masks_[c]);
@@ -100,7 +98,9 @@ bool Tracker::DetectAndMatchStereo(const StereoImages& images, bool parallel_cam
     }
   }
   timer.Restart();
-  frame->stereo = MatchStereo(rig_, frame->features[0], frame->features[1], options_.stereo);
+  frame->stereo = MatchStereo(rig_.cam0_from_cam1, frame->features[0], frame->features[1],
+                              options_.stereo.Matching(), options_.stereo.Triangulation(rig_))
+                      .points;
   frame->stereo_of_feature0.assign(frame->features[0].size(), -1);
   for (size_t s = 0; s < frame->stereo.size(); ++s) {
     frame->stereo_of_feature0[frame->stereo[s].feature0] = static_cast<int>(s);
@@ -131,7 +131,7 @@ bool Tracker::EstimateMotion(const Frame& reference, const Frame& frame,
     const int sa = reference.stereo_of_feature0[matches[m].first];
     const int sb = frame.stereo_of_feature0[matches[m].second];
     if (sa < 0 || sb < 0) continue;
-    const PointPair pair{reference.stereo[sa].point_in_rig, frame.stereo[sb].point_in_rig,
+    const PointPair pair{reference.stereo[sa].point_in_cam0, frame.stereo[sb].point_in_cam0,
                          reference.stereo[sa].range_std_m, frame.stereo[sb].range_std_m};
     pairs.push_back(pair);
     if (e.success && e.inlier_mask[m]) inlier_pairs.push_back(pair);
@@ -378,7 +378,7 @@ void Tracker::AddNewLandmarks(Frame* frame, FrameReport* report) {
       continue;
     }
     Landmark landmark;
-    landmark.point_in_world = world_from_rig * sp.point_in_rig;
+    landmark.point_in_world = world_from_rig * sp.point_in_cam0;
     landmark.rgb = frame->features[0].rgb[sp.feature0];
     landmark.observations.push_back(
         {frame->index, 0, sp.feature0, frame->features[0].pixels[sp.feature0]});

@@ -6,13 +6,15 @@
 //
 // Frames: points are returned in cam0's frame, in metres (the rig's baseline unit).
 
-#include <array>
 #include <string>
 #include <vector>
 
 #include <Eigen/Core>
 #include <opencv2/core.hpp>
 
+#include "engine/features/features.h"
+#include "engine/features/matching.h"
+#include "engine/features/mirror_mask.h"
 #include "engine/geometry/camera_model.h"
 #include "engine/geometry/ply.h"
 #include "engine/util/progress.h"
@@ -39,35 +41,22 @@ struct StereoReconstructOptions {
   // Points whose range std exceeds this fraction of their range are dropped (far points seen
   // with little parallax).
   double max_relative_range_std = 0.1;
-  // Mirror-disk mask: pixels whose 5x5-blurred grey level is at or below dark_level are outside
-  // the mirror (rim, central hole, housing); the mask is then eroded by mask_margin_px so that
-  // the disk's edge does not produce features.
+  // The mirror mask (engine/features/mirror_mask.h, shape kDarkRegions): pixels whose
+  // 5x5-blurred grey level is at or below dark_level are outside the mirror (rim, central hole,
+  // housing) when they touch the border or the principal point; the mask is then eroded by
+  // mask_margin_px so that the disk's edge does not produce features.
   double dark_level = 20.0;
   int mask_margin_px = 6;
+  MirrorMaskOptions MaskOptions() const;
+  // Matching on the epipolar curves (engine/features/matching.h): the larger of both
+  // cameras' epipolar angles, rays meeting in front of both cameras, no descriptor distance
+  // bound.
+  EpipolarMatchOptions Matching() const;
+  // The optimal angular triangulation with the limits above, the keypoint noise turned into a
+  // bearing noise with the rig's mean focal length.
+  StereoTriangulationOptions Triangulation(const StereoRig& rig) const;
 
   void Check() const;
-};
-
-// Keypoints of one image with their lifted unit bearings (keypoints that do not lift are
-// dropped); descriptors row i belongs to keypoints[i].
-struct LiftedFeatures {
-  std::vector<cv::KeyPoint> keypoints;
-  cv::Mat descriptors;  // CV_32F, one row per keypoint
-  std::vector<Eigen::Vector3d> bearings;
-};
-
-struct StereoMatch {
-  int index0 = -1;  // into cam0's LiftedFeatures
-  int index1 = -1;  // into cam1's
-  double epipolar_error_rad = 0.0;  // the larger of the two cameras' eq. (16) angles
-};
-
-struct SparsePoint {
-  Eigen::Vector3d point_in_cam0 = Eigen::Vector3d::Zero();
-  std::array<uint8_t, 3> rgb{0, 0, 0};  // colour at the cam0 keypoint
-  Eigen::Vector2d pixel0 = Eigen::Vector2d::Zero();
-  double parallax_rad = 0.0;
-  double range_std_m = 0.0;
 };
 
 struct StereoPairReport {
@@ -78,30 +67,13 @@ struct StereoPairReport {
   int num_rejected_parallax = 0;
   int num_rejected_reprojection = 0;  // includes rays meeting behind a camera
   int num_rejected_uncertain = 0;     // range std above max_relative_range_std
-  std::vector<StereoMatch> matches;
-  std::vector<SparsePoint> points;  // one per accepted match
+  std::vector<StereoPoint> points;    // one per accepted match, in cam0's keypoint order
 };
 
-// The mirror disk of an omnidirectional image (CV_8U, 255 inside). Dark regions (see the
-// options) that touch the image border (outside the rim) or contain the principal point (the
-// central hole) are masked out; dark patches of the scene inside the mirror are kept.
-cv::Mat MirrorMask(const cv::Mat& image, const CameraModel& camera,
-                   const StereoReconstructOptions& options);
-
-// SIFT (OpenCV) inside `mask`, lifted through the camera model.
-LiftedFeatures DetectAndLift(const cv::Mat& image, const cv::Mat& mask, const CameraModel& camera,
+// SIFT (OpenCV) at full resolution inside `mask`, lifted through the camera model
+// (LiftKeypoints).
+CameraFeatures DetectAndLift(const cv::Mat& image, const cv::Mat& mask, const CameraModel& camera,
                              const StereoReconstructOptions& options);
-
-// Descriptor matching restricted to each feature's epipolar curve: a pair (i, j) is a candidate
-// when its bearings lie within max_epipolar_error_rad of each other's epipolar planes and the
-// rays meet in front of both cameras (on the epipolar arc, not its antipodal half). Then Lowe's
-// ratio test among each feature's candidates and the mutual check. cam1_from_cam0 maps cam0's
-// frame into cam1's. Writes the number of candidates when num_candidates is not null.
-std::vector<StereoMatch> MatchAlongEpipolarCurves(const LiftedFeatures& features0,
-                                                  const LiftedFeatures& features1,
-                                                  const Rigid3d& cam1_from_cam0,
-                                                  const StereoReconstructOptions& options,
-                                                  int* num_candidates = nullptr);
 
 // The whole pipeline for one pair. Images are 8-bit BGR or grey, of the rig's image sizes
 // (throws InvalidArgument otherwise). Calls progress.ThrowIfCancelled() between steps.
@@ -112,6 +84,6 @@ StereoPairReport ReconstructStereoPair(const StereoRig& rig, const cv::Mat& imag
 
 // The points as a PLY cloud (engine/geometry/ply.h, WritePly): positions in cam0's frame
 // (metres) and colours.
-PlyCloud SparseCloud(const std::vector<SparsePoint>& points);
+PlyCloud SparseCloud(const std::vector<StereoPoint>& points);
 
 }  // namespace omnirig

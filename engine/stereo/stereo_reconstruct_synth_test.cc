@@ -110,7 +110,7 @@ TEST(StereoReconstructSynth, RangesMatchTheRoomWithinTheirUncertainty) {
   const Rigid3d& world_from_cam0 = sequence.world_from_rig[0];
   std::vector<double> relative_errors;
   int within_3_sigma = 0, gross = 0;
-  for (const SparsePoint& point : report.points) {
+  for (const StereoPoint& point : report.points) {
     const Eigen::Vector3d bearing = *Lift(sequence.rig.cam0.intrinsics, point.pixel0);
     const double true_range =
         CastRay(sequence.scene, world_from_cam0.translation, world_from_cam0.rotation * bearing);

@@ -33,7 +33,7 @@ StereoRig Rig() {
 // Features of points around the rig, each with a random descriptor seen (with a little noise)
 // by both cameras, in shuffled order; returns the true cam0 -> cam1 index map.
 struct SyntheticFeatures {
-  LiftedFeatures f0, f1;
+  CameraFeatures f0, f1;
   std::vector<int> true_match_of0;  // -1 when the point is not seen by cam1
 };
 
@@ -59,7 +59,8 @@ SyntheticFeatures MakeFeatures(const StereoRig& rig, int n, uint64_t seed) {
     const Eigen::Vector3d p0 = range(rng) * dir;
     const cv::Mat desc = RandomDescriptor(rng);
     s.f0.bearings.push_back(p0.normalized());
-    s.f0.keypoints.emplace_back(cv::Point2f(0, 0), 1.f);
+    s.f0.pixels.emplace_back(0, 0);
+    s.f0.rgb.push_back({0, 0, 0});
     s.f0.descriptors.push_back(desc);
     s.true_match_of0.push_back(-1);
     if (k % 5 == 4) continue;  // every fifth point is occluded in cam1
@@ -73,29 +74,35 @@ SyntheticFeatures MakeFeatures(const StereoRig& rig, int n, uint64_t seed) {
   std::shuffle(order.begin(), order.end(), rng);
   for (size_t pos = 0; pos < order.size(); ++pos) {
     s.f1.bearings.push_back(seen_by_1[order[pos]].first);
-    s.f1.keypoints.emplace_back(cv::Point2f(0, 0), 1.f);
+    s.f1.pixels.emplace_back(0, 0);
+    s.f1.rgb.push_back({0, 0, 0});
     s.f1.descriptors.push_back(seen_by_1[order[pos]].second);
     s.true_match_of0[owner[order[pos]]] = static_cast<int>(pos);
   }
   return s;
 }
 
+// MatchStereo (engine/features/matching.h) with the sparse reconstruction's options.
+StereoMatchReport Match(const StereoRig& rig, const CameraFeatures& f0, const CameraFeatures& f1,
+                        const StereoReconstructOptions& options = {}) {
+  return MatchStereo(rig.cam0_from_cam1, f0, f1, options.Matching(), options.Triangulation(rig));
+}
+
 TEST(StereoMatching, MatchesFollowTheEpipolarConstraint) {
   const StereoRig rig = Rig();
   const SyntheticFeatures s = MakeFeatures(rig, 500, 1);
   StereoReconstructOptions options;
-  int candidates = 0;
-  const std::vector<StereoMatch> matches =
-      MatchAlongEpipolarCurves(s.f0, s.f1, rig.cam0_from_cam1.Inverse(), options, &candidates);
+  const StereoMatchReport report = Match(rig, s.f0, s.f1, options);
   int correct = 0;
-  for (const StereoMatch& m : matches) {
-    correct += s.true_match_of0[m.index0] == m.index1;
-    EXPECT_LE(m.epipolar_error_rad, options.max_epipolar_error_rad);
+  for (const StereoPoint& p : report.points) {
+    correct += s.true_match_of0[p.feature0] == p.feature1;
+    EXPECT_LE(p.epipolar_error_rad, options.max_epipolar_error_rad);
   }
-  EXPECT_EQ(correct, static_cast<int>(matches.size()));  // no wrong match
-  EXPECT_GT(correct, 390);                               // of 400 visible points
+  EXPECT_EQ(correct, static_cast<int>(report.points.size()));  // no wrong match
+  EXPECT_GT(report.num_matches, 390);                          // of 400 visible points
+  EXPECT_GT(correct, 350);  // triangulated within the parallax and uncertainty limits
   // The constraint prunes: far fewer candidates than all 500 x 400 pairs.
-  EXPECT_LT(candidates, 500 * 400 / 20);
+  EXPECT_LT(report.num_candidates, 500 * 400 / 20);
 }
 
 TEST(StereoMatching, EpipolarConstraintResolvesRepeatedTexture) {
@@ -106,46 +113,30 @@ TEST(StereoMatching, EpipolarConstraintResolvesRepeatedTexture) {
   std::mt19937_64 rng(2);
   const cv::Mat desc = RandomDescriptor(rng);
   const Eigen::Vector3d point(1.5, 0.4, 0.2);
-  LiftedFeatures f0, f1;
+  CameraFeatures f0, f1;
   f0.bearings = {point.normalized()};
-  f0.keypoints = {cv::KeyPoint(cv::Point2f(0, 0), 1.f)};
+  f0.pixels = {Eigen::Vector2d(0, 0)};
+  f0.rgb = {{0, 0, 0}};
   f0.descriptors = desc.clone();
   const Eigen::Vector3d elsewhere = Eigen::AngleAxisd(0.5, Eigen::Vector3d::UnitZ()) * point;
   f1.bearings = {(cam1_from_cam0 * elsewhere).normalized(), (cam1_from_cam0 * point).normalized()};
-  f1.keypoints = {cv::KeyPoint(cv::Point2f(0, 0), 1.f), cv::KeyPoint(cv::Point2f(0, 0), 1.f)};
+  f1.pixels = {Eigen::Vector2d(0, 0), Eigen::Vector2d(0, 0)};
+  f1.rgb = {{0, 0, 0}, {0, 0, 0}};
   f1.descriptors.push_back(desc);
   f1.descriptors.push_back(desc);
-  const std::vector<StereoMatch> matches =
-      MatchAlongEpipolarCurves(f0, f1, cam1_from_cam0, StereoReconstructOptions{});
-  ASSERT_EQ(matches.size(), 1u);
-  EXPECT_EQ(matches[0].index1, 1);
+  const StereoMatchReport report = Match(rig, f0, f1);
+  ASSERT_EQ(report.points.size(), 1u);
+  EXPECT_EQ(report.points[0].feature1, 1);
+  EXPECT_LT((report.points[0].point_in_cam0 - point).norm(), 1e-6);
   // The antipodal half of the epipolar great circle is not the curve: a feature there does
   // not match (the rays would meet behind the cameras).
   f1.bearings = {-(cam1_from_cam0 * point).normalized()};
   f1.descriptors = desc.clone();
-  f1.keypoints.resize(1);
-  EXPECT_TRUE(MatchAlongEpipolarCurves(f0, f1, cam1_from_cam0, StereoReconstructOptions{}).empty());
+  f1.pixels.resize(1);
+  f1.rgb.resize(1);
+  EXPECT_EQ(Match(rig, f0, f1).num_candidates, 0);
   // Empty inputs give no matches.
-  EXPECT_TRUE(
-      MatchAlongEpipolarCurves(LiftedFeatures{}, f1, cam1_from_cam0, StereoReconstructOptions{})
-          .empty());
-}
-
-TEST(MirrorMask, MasksRimAndHoleButKeepsDarkSceneInside) {
-  const CameraModel camera = Camera(512, 384);
-  cv::Mat image(768, 1024, CV_8UC3, cv::Scalar(6, 6, 6));
-  cv::circle(image, cv::Point(512, 384), 360, cv::Scalar(150, 160, 170), cv::FILLED);
-  cv::circle(image, cv::Point(512, 384), 80, cv::Scalar(6, 6, 6), cv::FILLED);
-  cv::rectangle(image, cv::Rect(700, 300, 40, 40), cv::Scalar(3, 3, 3), cv::FILLED);  // dark object
-  StereoReconstructOptions options;
-  const cv::Mat mask = MirrorMask(image, camera, options);
-  EXPECT_EQ(mask.at<uint8_t>(5, 5), 0);           // outside the rim
-  EXPECT_EQ(mask.at<uint8_t>(384, 512), 0);       // the hole
-  EXPECT_EQ(mask.at<uint8_t>(384, 512 + 83), 0);  // hole edge + margin
-  EXPECT_EQ(mask.at<uint8_t>(384, 512 + 200), 255);
-  EXPECT_EQ(mask.at<uint8_t>(320, 720), 255);      // the dark object inside the mirror
-  EXPECT_EQ(mask.at<uint8_t>(384, 512 + 357), 0);  // within the margin of the rim
-  EXPECT_EQ(mask.at<uint8_t>(384, 512 + 350), 255);
+  EXPECT_TRUE(Match(rig, CameraFeatures{}, f1).points.empty());
 }
 
 TEST(StereoReconstruct, ImageSizeMismatchIsAnError) {
@@ -170,7 +161,7 @@ TEST(StereoReconstruct, ImageSizeMismatchIsAnError) {
 
 // The points as a PLY cloud (the file format: engine/geometry/ply_test.cc).
 TEST(StereoReconstruct, SparseCloudHoldsPositionsAndColours) {
-  std::vector<SparsePoint> points(2);
+  std::vector<StereoPoint> points(2);
   points[0].point_in_cam0 = Eigen::Vector3d(1.5, -2.25, 3.0);
   points[0].rgb = {10, 20, 30};
   points[1].point_in_cam0 = Eigen::Vector3d(0.0, 0.5, -1.0);
