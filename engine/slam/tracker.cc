@@ -665,6 +665,23 @@ void GlobalBundleAdjustment(const StereoRig& rig, const SlamOptions& options,
 
 }  // namespace
 
+std::vector<std::optional<Rigid3d>> Tracker::CurrentWorldFromRig() const {
+  std::vector<std::optional<Rigid3d>> poses(map_.has_pose.size());
+  for (size_t f = 0; f < poses.size(); ++f) {
+    if (!map_.has_pose[f]) continue;
+    const int keyframe = keyframe_of_frame_[f];
+    const Rigid3d rig_from_world = keyframe < 0
+                                       ? map_.rig_from_world[f]
+                                       : rig_from_keyframe_[f] * map_.rig_from_world[keyframe];
+    poses[f] = rig_from_world.Inverse();
+  }
+  return poses;
+}
+
+std::vector<MapPoint> Tracker::CurrentMap() const {
+  return ExportMap(map_, options_.min_map_point_frames);
+}
+
 void Tracker::Finish(const ProgressSink& progress, SlamResult* result) {
   GlobalBundleAdjustment(rig_, options_, keyframe_order_, progress, &map_, result);
   PlaceNonKeyframes();

@@ -144,6 +144,12 @@ class Tracker {
   // The end of the run: the global adjustment over the keyframes (into `result`), the other
   // frames placed relative to their keyframes, the loops and per-frame links into `result`.
   void Finish(const ProgressSink& progress, SlamResult* result);
+  // The run so far without changing it: each frame's world_from_rig as the map holds it now (a
+  // non-keyframe placed by its keyframe, as Finish() will), nullopt for a frame without a pose,
+  // and the map points as Finish() would export them. For a live run's artifacts.
+  std::vector<std::optional<Rigid3d>> CurrentWorldFromRig() const;
+  std::vector<MapPoint> CurrentMap() const;
+  int num_keyframes() const { return static_cast<int>(keyframe_order_.size()); }
   SlamMap& map() { return map_; }
 
  private:

@@ -1,0 +1,77 @@
+#include "engine/slam/session.h"
+
+#include <ctime>
+
+#include "engine/slam/tracker.h"
+#include "engine/util/check.h"
+
+namespace omnirig::slam {
+namespace {
+
+double WallSeconds() {
+  timespec now{};
+  clock_gettime(CLOCK_MONOTONIC, &now);
+  return static_cast<double>(now.tv_sec) + 1e-9 * static_cast<double>(now.tv_nsec);
+}
+
+}  // namespace
+
+Session::Session(const StereoRig& rig, const SlamOptions& options, const ProgressSink& progress)
+    : rig_(rig), options_(options), progress_(progress) {
+  options_.Check();
+  tracker_ = std::make_unique<internal::Tracker>(rig_, options_, progress_);
+  start_wall_s_ = WallSeconds();
+  start_cpu_s_ = internal::CpuSeconds(CLOCK_PROCESS_CPUTIME_ID);
+}
+
+Session::~Session() = default;
+
+FrameReport Session::Track(const std::string& name, const StereoImages& images, bool last_frame) {
+  OMNIRIG_CHECK(!finished_, "the SLAM session has finished");
+  const CameraModel* camera[2] = {&rig_.cam0, &rig_.cam1};
+  const cv::Mat* image[2] = {&images.cam0, &images.cam1};
+  // Checked before the tracker sees the frame: a frame refused here leaves no trace, so the
+  // session goes on with the next one.
+  for (int c = 0; c < 2; ++c) {
+    OMNIRIG_CHECK(image[c]->cols == camera[c]->width && image[c]->rows == camera[c]->height,
+                  "frame " << name << ": cam" << c << " image is " << image[c]->cols << "x"
+                           << image[c]->rows << " but the rig's calibration is " << camera[c]->width
+                           << "x" << camera[c]->height);
+  }
+  const int index = num_frames();
+  internal::Tracker::FrontEndResult front = tracker_->FrontEnd(
+      index, name, [&images](int) { return images; },
+      /*parallel_cameras=*/options_.num_threads >= 2);
+  FrameReport report = tracker_->BackEnd(std::move(front), last_frame);
+  result_.stage_totals.Add(report.times);
+  result_.cpu_stage_totals.Add(report.cpu_times);
+  result_.frames.push_back(report);
+  if (tracker_->map().has_pose[index]) {
+    report.world_from_rig = tracker_->map().rig_from_world[index].Inverse();
+  }
+  return report;
+}
+
+SlamSnapshot Session::Snapshot() const {
+  SlamSnapshot snapshot;
+  for (const FrameReport& frame : result_.frames) {
+    snapshot.names.push_back(frame.name);
+    snapshot.states.push_back(frame.state);
+  }
+  snapshot.world_from_rig = tracker_->CurrentWorldFromRig();
+  snapshot.map = tracker_->CurrentMap();
+  snapshot.num_keyframes = tracker_->num_keyframes();
+  return snapshot;
+}
+
+SlamResult Session::Finish() {
+  OMNIRIG_CHECK(!finished_, "the SLAM session has finished");
+  OMNIRIG_CHECK(!result_.frames.empty(), "SLAM needs at least one stereo frame");
+  finished_ = true;
+  tracker_->Finish(progress_, &result_);
+  result_.total_s = WallSeconds() - start_wall_s_;
+  result_.total_cpu_s = internal::CpuSeconds(CLOCK_PROCESS_CPUTIME_ID) - start_cpu_s_;
+  return std::move(result_);
+}
+
+}  // namespace omnirig::slam
