@@ -147,15 +147,17 @@ RecoveryReport Recover(SqlSession& db, const std::vector<RunningJob>& running, i
 
 }  // namespace
 
-std::vector<std::string> SchemaMigrations(const SqlDialect& dialect) {
+namespace {
+
+// Version 1: datasets, images, jobs and artifacts.
+std::string SchemaVersion1(const SqlDialect& dialect) {
   const std::string& real = dialect.real_type;
   const std::string& int64 = dialect.int64_type;
   const std::string insertion_column =
       dialect.insertion_order_column.empty() ? "" : "\n  " + dialect.insertion_order_column + ",";
   const std::string insertion_key =
       dialect.insertion_order_column.empty() ? "" : ", " + dialect.insertion_order;
-  return {
-      R"sql(
+  return R"sql(
 CREATE TABLE datasets(
   id TEXT PRIMARY KEY,
   name TEXT NOT NULL,
@@ -198,9 +200,13 @@ CREATE TABLE artifacts(
   sha256 TEXT NOT NULL,
   content_type TEXT NOT NULL,
   PRIMARY KEY(job_id, name));
-)sql",
-      // 2: leases (who runs a job, until when) and worker heartbeats.
-      R"sql(
+)sql";
+}
+
+// Version 2: leases (who runs a job, until when) and worker heartbeats.
+std::string SchemaVersion2(const SqlDialect& dialect) {
+  const std::string& real = dialect.real_type;
+  return R"sql(
 ALTER TABLE jobs ADD COLUMN worker_id TEXT NOT NULL DEFAULT '';
 ALTER TABLE jobs ADD COLUMN lease_token TEXT NOT NULL DEFAULT '';
 ALTER TABLE jobs ADD COLUMN lease_expires_at )sql" + real + R"sql(;
@@ -209,8 +215,13 @@ CREATE TABLE workers(
   started_at )sql" + real + R"sql( NOT NULL,
   last_seen_at )sql" + real + R"sql( NOT NULL,
   running_jobs TEXT NOT NULL DEFAULT '');
-)sql",
-  };
+)sql";
+}
+
+}  // namespace
+
+std::vector<std::string> SchemaMigrations(const SqlDialect& dialect) {
+  return {SchemaVersion1(dialect), SchemaVersion2(dialect)};
 }
 
 const char SqlJobStore::kInsertJob[] =
