@@ -174,9 +174,11 @@ void PostgresTestServer::KillServer() {
       ::usleep(1000);  // a hang guard is ctest's timeout; the kernel ends a SIGKILLed process fast
     }
   }
-  // A zombie's pid still answers kill(pid, 0): PostgreSQL would take its lock file as live.
+  // A zombie's pid still answers kill(pid, 0): PostgreSQL would take its lock files (the data
+  // folder's and the socket's) as a live server's.
   std::error_code ignored;
   fs::remove(lock_file, ignored);
+  fs::remove(dir_ / (".s.PGSQL." + std::to_string(port_) + ".lock"), ignored);
 }
 
 void PostgresTestServer::StartServer() {
