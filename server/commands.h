@@ -15,8 +15,12 @@ namespace omnirig::server {
 // SIGTERM and SIGINT, from any thread, wake WaitThenDrain; SIGPIPE is ignored. Shared by
 // `omnirig serve` and `omnirig worker`.
 void InstallStopSignalHandlers();
-// The job threads' options `omnirig serve` and `omnirig worker` both take (--threads-per-job,
-// --lease-seconds, --max-attempts, --worker-nice) for `num_workers` workers.
+// Declares the job threads' options `omnirig serve` and `omnirig worker` both take
+// (--threads-per-job, --lease-seconds, --max-attempts, --worker-nice, --min-free-mb,
+// --drain-timeout); `count_option` names the command's own count of jobs run at once (serve's
+// --workers, worker's --threads), which --threads-per-job divides the cores by.
+void DeclareWorkerOptions(cli::ArgParser& parser, const std::string& count_option);
+// Those options (DeclareWorkerOptions) for `num_workers` workers.
 WorkerPoolOptions WorkerOptionsFromArgs(const cli::ArgParser& parser, int num_workers);
 // Waits for SIGTERM or SIGINT, then calls `drain` with `timeout_s` (it returns the running jobs
 // it handed back to the queue), logging both on stderr as `who`. Returns the exit code, 0.

@@ -18,6 +18,8 @@
 
 #include "api/service_json.h"
 #include "engine/util/check.h"
+#include "storage/data_dir.h"
+#include "storage/job_store.h"
 
 namespace omnirig::server {
 namespace {
@@ -281,7 +283,9 @@ void ShutDownConnectionReads(int port) {
 }
 
 // What `handle` answers; each exception becomes a JSON error instead: an HttpError as it says,
-// an InvalidArgument 400 (its check's location to the log only), anything else a logged 500.
+// an InvalidArgument 400 (its check's location to the log only), a store that cannot be reached
+// 503 with Retry-After (the client tries again; nothing was changed), a store whose disk is full
+// 507, anything else a logged 500.
 HttpResponse AnswerOrError(const std::string& route_label,
                            const std::function<void(HttpResponse&)>& handle) {
   HttpResponse response;
@@ -291,6 +295,14 @@ HttpResponse AnswerOrError(const std::string& route_label,
     response = HttpResponse{};
     response.headers = e.headers;
     response.Json(e.status, api::ErrorJson(e.code, e.what(), e.details));
+  } catch (const storage::StoreUnavailable& e) {
+    constexpr int kRetryAfterS = 1;
+    response = HttpResponse{};
+    response.headers.emplace("Retry-After", std::to_string(kRetryAfterS));
+    response.Json(503, api::ErrorJson("database_unavailable",
+                                      "the job database cannot be reached right now; nothing "
+                                      "was changed: try again in a moment",
+                                      {{"reason", e.what()}, {"retry_after_s", kRetryAfterS}}));
   } catch (const InvalidArgument& e) {
     if (!e.where().empty()) {
       std::cerr << "omnirig: " << route_label << ": 400: " << e.what() << " (check at " << e.where()
@@ -299,9 +311,17 @@ HttpResponse AnswerOrError(const std::string& route_label,
     response = HttpResponse{};
     response.Json(400, api::ErrorJson("invalid_argument", e.what()));
   } catch (const std::exception& e) {
-    std::cerr << "omnirig: " << route_label << ": 500: " << e.what() << std::endl;
     response = HttpResponse{};
-    response.Json(500, api::ErrorJson("internal", e.what()));
+    if (storage::IsDiskFull(e)) {
+      std::cerr << "omnirig: " << route_label << ": 507: " << e.what() << std::endl;
+      response.Json(507, api::ErrorJson("insufficient_storage",
+                                        "the disk holding the data folder is full; nothing of "
+                                        "this request was stored: free some space and try again",
+                                        {{"reason", e.what()}}));
+    } else {
+      std::cerr << "omnirig: " << route_label << ": 500: " << e.what() << std::endl;
+      response.Json(500, api::ErrorJson("internal", e.what()));
+    }
   } catch (...) {
     std::cerr << "omnirig: " << route_label << ": 500: unknown exception" << std::endl;
     response = HttpResponse{};

@@ -116,25 +116,41 @@ class ProgressWriter {
   std::string summary_;
 };
 
+// Lets one caller through per interval, whichever thread asks first after it has passed: engine
+// threads ask often. Thread-safe and lock-free.
+class IntervalGate {
+ public:
+  explicit IntervalGate(double interval_s)
+      : interval_ns_(static_cast<int64_t>(interval_s * 1e9)), next_ns_(NowNs() + interval_ns_) {}
+
+  // False always when the interval is 0 or less.
+  bool Due() {
+    if (interval_ns_ <= 0) return false;
+    const int64_t now = NowNs();
+    int64_t next = next_ns_.load(std::memory_order_relaxed);
+    return now >= next && next_ns_.compare_exchange_strong(next, now + interval_ns_);
+  }
+
+ private:
+  static int64_t NowNs() {
+    return std::chrono::duration_cast<std::chrono::nanoseconds>(
+               std::chrono::steady_clock::now().time_since_epoch())
+        .count();
+  }
+  int64_t interval_ns_;
+  std::atomic<int64_t> next_ns_;
+};
+
 // A cancel recorded in the store by another process (a server on another machine sharing the
-// queue): engine threads ask often, so the store is read at most once per interval, by
-// whichever thread asks first after it has passed. Thread-safe and lock-free.
+// queue), read from the store at most once per interval.
 class StoreCancelWatcher {
  public:
   StoreCancelWatcher(storage::JobStore& store, std::string job_id, double interval_s)
-      : store_(store),
-        job_id_(std::move(job_id)),
-        interval_ns_(static_cast<int64_t>(interval_s * 1e9)),
-        next_check_ns_(NowNs() + interval_ns_) {}
+      : store_(store), job_id_(std::move(job_id)), gate_(interval_s) {}
 
   bool CancelRequested() {
     if (seen_.load(std::memory_order_relaxed)) return true;
-    if (interval_ns_ <= 0) return false;
-    const int64_t now = NowNs();
-    int64_t next = next_check_ns_.load(std::memory_order_relaxed);
-    if (now < next || !next_check_ns_.compare_exchange_strong(next, now + interval_ns_)) {
-      return false;
-    }
+    if (!gate_.Due()) return false;
     try {
       const auto job = store_.GetJob(job_id_);
       if (job && job->cancel_requested) seen_ = true;
@@ -145,22 +161,42 @@ class StoreCancelWatcher {
   }
 
  private:
-  static int64_t NowNs() {
-    return std::chrono::duration_cast<std::chrono::nanoseconds>(
-               std::chrono::steady_clock::now().time_since_epoch())
-        .count();
-  }
   storage::JobStore& store_;
   std::string job_id_;
-  int64_t interval_ns_;
-  std::atomic<int64_t> next_check_ns_;
+  IntervalGate gate_;
   std::atomic<bool> seen_{false};
+};
+
+// The data folder's disk while a job runs: full once its free space is below the reserve. The
+// run then stops at its next cancellation check, before it takes the last of the disk from the
+// store and the uploads.
+class DiskWatcher {
+ public:
+  DiskWatcher(const storage::DataDir& data_dir, int64_t min_free_bytes, double interval_s)
+      : data_dir_(data_dir), min_free_bytes_(min_free_bytes), gate_(interval_s) {}
+
+  // Throttled: reads the free space at most once per interval.
+  bool Full() {
+    if (full_.load(std::memory_order_relaxed)) return true;
+    return gate_.Due() && FullNow();
+  }
+  bool FullNow() {
+    if (data_dir_.FreeBytes() < min_free_bytes_) full_ = true;
+    return full_.load();
+  }
+  bool full() const { return full_.load(); }
+
+ private:
+  const storage::DataDir& data_dir_;
+  int64_t min_free_bytes_;
+  IntervalGate gate_;
+  std::atomic<bool> full_{false};
 };
 
 api::JobContext BuildContext(const storage::JobRecord& job, storage::JobStore& store,
                              const storage::DataDir& data_dir, const JobRunOptions& options,
                              const JobRunFlags& flags, const fs::path& output_dir,
-                             ProgressWriter& progress, JobLog& log) {
+                             ProgressWriter& progress, JobLog& log, DiskWatcher& disk) {
   api::JobContext context;
   context.job_id = job.id;
   context.dataset_id = job.dataset_id;
@@ -175,9 +211,10 @@ api::JobContext BuildContext(const storage::JobRecord& job, storage::JobStore& s
     progress.Report(fraction, stage, message);
   };
   auto watcher = std::make_shared<StoreCancelWatcher>(store, job.id, options.store_cancel_check_s);
-  context.progress.is_cancelled = [flags, watcher] {
+  context.progress.is_cancelled = [flags, watcher, &disk] {
     return (flags.cancel && flags.cancel->load()) ||
-           (flags.interrupt && flags.interrupt->load()) || watcher->CancelRequested();
+           (flags.interrupt && flags.interrupt->load()) || watcher->CancelRequested() ||
+           disk.Full();
   };
   context.log = [&log](const std::string& line) { log.Write(line); };
   context.load_result = [&store](const std::string& job_id) {
@@ -219,6 +256,31 @@ storage::JobOutcome Failed(const std::string& code, const std::string& message) 
   return outcome;
 }
 
+// The failure of a run that found the disk full; its outputs are already removed.
+storage::JobOutcome DiskFull(const storage::JobRecord& job, const storage::DataDir& data_dir,
+                             int64_t min_free_bytes) {
+  const auto megabytes = [](int64_t bytes) {
+    char text[32];
+    std::snprintf(text, sizeof(text), "%.1f MB", static_cast<double>(bytes) / (1 << 20));
+    return std::string(text);
+  };
+  return Failed("disk_full",
+                "the disk holding the data folder is full (" + megabytes(data_dir.FreeBytes()) +
+                    " free, the server keeps " + megabytes(min_free_bytes) +
+                    "): this run's outputs were removed; free some space, then retry the job "
+                    "(POST /api/v1/jobs/" +
+                    job.id + "/retry)");
+}
+
+// Removes what the run wrote, except its log: on a full disk, so that the store has room to
+// record the failure (and the uploads room again).
+void RemoveOutputsButLog(const fs::path& output_dir) {
+  std::error_code error;
+  for (const auto& entry : fs::directory_iterator(output_dir, error)) {
+    if (entry.path().filename() != "log.txt") fs::remove_all(entry.path(), error);
+  }
+}
+
 storage::JobOutcome RunJobType(const storage::JobRecord& job, const api::JobType* type,
                                const api::JobContext& context, const fs::path& output_dir,
                                const fs::path& data_root) {
@@ -234,40 +296,10 @@ storage::JobOutcome RunJobType(const storage::JobRecord& job, const api::JobType
   return outcome;
 }
 
-}  // namespace
-
-storage::JobOutcome RunJobAttempt(const storage::JobRecord& job, storage::JobStore& store,
-                                  const storage::DataDir& data_dir, const api::JobTypes& job_types,
-                                  const JobRunOptions& options, const JobRunFlags& flags) {
-  const fs::path output_dir = data_dir.AttemptDir(job.id, job.attempts);
-  std::error_code ignored;
-  fs::remove_all(output_dir, ignored);
-  fs::create_directories(output_dir);
-  JobLog log(output_dir / "log.txt");
-  log.Write("job " + job.id + " (" + job.type + ") attempt " + std::to_string(job.attempts) +
-            " with " + std::to_string(options.num_threads) + " thread(s)");
-  ProgressWriter progress(store, job.id, options.progress_interval_s, log, options.on_progress);
-  storage::JobOutcome outcome;
-  try {
-    const api::JobContext context =
-        BuildContext(job, store, data_dir, options, flags, output_dir, progress, log);
-    outcome = RunJobType(job, job_types.Find(job.type), context, output_dir, data_dir.root());
-    if (outcome.state == JobState::kSucceeded) progress.Succeeded();
-  } catch (const Cancelled&) {
-    outcome.state = JobState::kCanceled;
-  } catch (const InvalidArgument& e) {
-    outcome = Failed("invalid_input", e.what());
-    if (!e.where().empty()) log.Write("check failed at " + e.where());  // the log, not the API
-  } catch (const std::exception& e) {
-    log.Write(std::string("error: ") + e.what());
-    outcome = Failed("job_failed", e.what());
-  } catch (...) {
-    outcome = Failed("job_failed", "unknown error");
-  }
-  log.Write(
-      std::string("finished: ") + storage::JobStateName(outcome.state) +
-      (outcome.error ? " (" + outcome.error->code + ": " + outcome.error->message + ")" : ""));
-  log.Close();
+// The closed log's artifact record: a failed run's only artifact; a succeeded run's, collected
+// before the log's last lines, gets its final size and hash.
+void RecordLog(const fs::path& output_dir, const storage::DataDir& data_dir,
+               storage::JobOutcome& outcome) {
   if (outcome.state != JobState::kSucceeded) {
     try {
       outcome.artifacts.clear();
@@ -290,6 +322,57 @@ storage::JobOutcome RunJobAttempt(const storage::JobRecord& job, storage::JobSto
       outcome = Failed("job_failed", std::string("cannot record the log: ") + e.what());
     }
   }
+}
+
+}  // namespace
+
+storage::JobOutcome RunJobAttempt(const storage::JobRecord& job, storage::JobStore& store,
+                                  const storage::DataDir& data_dir, const api::JobTypes& job_types,
+                                  const JobRunOptions& options, const JobRunFlags& flags) {
+  const fs::path output_dir = data_dir.AttemptDir(job.id, job.attempts);
+  std::error_code ignored;
+  fs::remove_all(output_dir, ignored);
+  fs::create_directories(output_dir);
+  JobLog log(output_dir / "log.txt");
+  log.Write("job " + job.id + " (" + job.type + ") attempt " + std::to_string(job.attempts) +
+            " with " + std::to_string(options.num_threads) + " thread(s)");
+  ProgressWriter progress(store, job.id, options.progress_interval_s, log, options.on_progress);
+  DiskWatcher disk(data_dir, options.min_free_bytes, options.disk_check_s);
+  storage::JobOutcome outcome;
+  bool no_space = false;  // a write failed for want of space
+  try {
+    const api::JobContext context =
+        BuildContext(job, store, data_dir, options, flags, output_dir, progress, log, disk);
+    outcome = RunJobType(job, job_types.Find(job.type), context, output_dir, data_dir.root());
+    if (outcome.state == JobState::kSucceeded) progress.Succeeded();
+  } catch (const Cancelled&) {
+    outcome.state = JobState::kCanceled;
+  } catch (const storage::StoreUnavailable& e) {
+    // Not the job's fault: it goes back to the queue and runs again once the store is back.
+    log.Write(std::string("the job store cannot be reached: ") + e.what());
+    outcome.state = JobState::kQueued;
+  } catch (const InvalidArgument& e) {
+    outcome = Failed("invalid_input", e.what());
+    if (!e.where().empty()) log.Write("check failed at " + e.where());  // the log, not the API
+  } catch (const std::exception& e) {
+    log.Write(std::string("error: ") + e.what());
+    no_space = storage::IsDiskFull(e);
+    outcome = Failed("job_failed", e.what());
+  } catch (...) {
+    outcome = Failed("job_failed", "unknown error");
+  }
+  // A run a user or a drain stopped is not the disk's; any other that left the disk full may
+  // have lost a write the job type did not check, so it fails, whatever it returned.
+  const bool stopped = outcome.state == JobState::kCanceled && !disk.full();
+  if (outcome.state != JobState::kQueued && !stopped && (no_space || disk.FullNow())) {
+    RemoveOutputsButLog(output_dir);
+    outcome = DiskFull(job, data_dir, options.min_free_bytes);
+  }
+  log.Write(
+      std::string("finished: ") + storage::JobStateName(outcome.state) +
+      (outcome.error ? " (" + outcome.error->code + ": " + outcome.error->message + ")" : ""));
+  log.Close();
+  RecordLog(output_dir, data_dir, outcome);
   return outcome;
 }
 

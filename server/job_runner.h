@@ -26,10 +26,17 @@ struct JobRunOptions {
   double store_cancel_check_s = 0.2;
   // Called after each progress write with the job's id (e.g. JobEvents::Changed); may be empty.
   std::function<void(const std::string&)> on_progress;
+  // Free space to keep on the data folder's disk: a run that leaves less fails with
+  // "disk_full" (its outputs removed, so the store can record that); 0: only a write that
+  // failed for want of space does.
+  int64_t min_free_bytes = 0;
+  // How often a running job reads the disk's free space.
+  double disk_check_s = 0.2;
 };
 
 // Runs `job` (already claimed: state running, attempts counted) with its type from
-// `job_types`. Never throws.
+// `job_types`. Never throws. An outcome in state kQueued means the store could not be reached
+// during the run (StoreUnavailable): the job is to be handed back to the queue, not failed.
 storage::JobOutcome RunJobAttempt(const storage::JobRecord& job, storage::JobStore& store,
                                   const storage::DataDir& data_dir, const api::JobTypes& job_types,
                                   const JobRunOptions& options, const JobRunFlags& flags);

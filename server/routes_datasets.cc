@@ -523,7 +523,15 @@ void PutImage(ServiceState& state, const HttpRequest& request, HttpResponse& res
   } catch (HttpError& e) {
     e.details["stored"] = stored_names;
     throw;
+  } catch (const storage::StoreUnavailable&) {
+    throw;  // 503: the client sends the request again, as a whole
   } catch (const std::exception& e) {
+    if (storage::IsDiskFull(e)) {
+      throw HttpError(507, "insufficient_storage",
+                      "the disk holding the data folder is full; free some space and send the "
+                      "files not stored again",
+                      {{"stored", stored_names}, {"reason", e.what()}});
+    }
     throw HttpError(500, "internal", e.what(), {{"stored", stored_names}});
   }
 }

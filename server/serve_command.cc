@@ -34,7 +34,6 @@ void DeclareOptions(cli::ArgParser& parser) {
   parser.AddOption("workers", std::to_string(DefaultWorkers()),
                    "jobs run at the same time (half the cores by default; 0: API only, jobs "
                    "run by `omnirig worker` processes)");
-  parser.AddOption("threads-per-job", "", "solver threads per job (default: cores / workers)");
   parser.AddOption("http-threads", "256",
                    "HTTP threads: one per open connection (keep-alive clients and event streams "
                    "each hold one); connections beyond wait for a thread");
@@ -42,14 +41,9 @@ void DeclareOptions(cli::ArgParser& parser) {
                    "open HTTP connections at most; beyond, a new one gets 503 and is closed "
                    "(default: the open-file limit, raised to its hard limit at start, less a "
                    "reserve for SQLite, uploads and artifacts; at most 4096; 0: no cap)");
-  parser.AddOption("worker-nice", "0", "niceness of job threads (0-19)");
   parser.AddOption("worker-sched", "normal",
                    "scheduling of job threads: 'normal' or 'idle' (SCHED_IDLE: jobs run only "
                    "when nothing else on the machine wants the CPU)");
-  parser.AddOption("max-attempts", "3",
-                   "runs a job may start before crashes make it fail ('interrupted')");
-  parser.AddOption("lease-seconds", "30",
-                   "a running job's lease: a worker silent this long loses the job to another");
   parser.AddOption("max-file-mb", "256", "largest image upload, MB");
   parser.AddOption("max-video-mb", "8192", "largest video upload, MB");
   parser.AddOption("max-chunk-mb", "64",
@@ -57,9 +51,7 @@ void DeclareOptions(cli::ArgParser& parser) {
   parser.AddOption("max-dataset-mb", "8192", "largest dataset, MB");
   parser.AddOption("max-images", "20000", "most images in one dataset");
   parser.AddOption("max-queued-jobs", "1000", "most jobs waiting in the queue (then 503)");
-  parser.AddOption("min-free-mb", "256", "free disk space to keep; uploads beyond get 507");
-  parser.AddOption("drain-timeout", "20",
-                   "seconds SIGTERM waits for running jobs before re-queuing them");
+  DeclareWorkerOptions(parser, "workers");
 }
 
 int64_t Megabytes(const cli::ArgParser& parser, const std::string& name) {
@@ -107,6 +99,25 @@ extern "C" void OnStopSignal(int signal_number) {
 
 }  // namespace
 
+void DeclareWorkerOptions(cli::ArgParser& parser, const std::string& count_option) {
+  parser.AddOption("threads-per-job", "",
+                   "solver threads per job (default: cores / --" + count_option + ")");
+  parser.AddOption("lease-seconds", "30",
+                   "a running job's lease, renewed every third of it; a worker silent this long "
+                   "loses the job to another");
+  parser.AddOption("max-attempts", "3",
+                   "runs a job may start before crashes or expired leases make it fail "
+                   "('interrupted')");
+  // Normal priority: a job's thread that yields to every other process on a busy machine
+  // crawls (docs/http.md, Workers), and a worker process has no HTTP threads to yield to.
+  parser.AddOption("worker-nice", "0", "niceness of job threads (0-19)");
+  parser.AddOption("min-free-mb", "256",
+                   "free disk space to keep under --data: uploads beyond get 507, a job that "
+                   "leaves less fails with 'disk_full' and its outputs are removed");
+  parser.AddOption("drain-timeout", "20",
+                   "seconds SIGTERM waits for running jobs before re-queuing them");
+}
+
 WorkerPoolOptions WorkerOptionsFromArgs(const cli::ArgParser& parser, int num_workers) {
   WorkerPoolOptions options;
   options.num_workers = num_workers;
@@ -116,6 +127,7 @@ WorkerPoolOptions WorkerOptionsFromArgs(const cli::ArgParser& parser, int num_wo
   options.lease_s = parser.GetDouble("lease-seconds");
   options.max_attempts = parser.GetInt("max-attempts");
   options.nice = parser.GetInt("worker-nice");
+  options.min_free_bytes = Megabytes(parser, "min-free-mb");
   return options;
 }
 

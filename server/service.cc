@@ -140,6 +140,7 @@ Service::Service(const ServiceOptions& options) : state_(std::make_unique<Servic
   state.events = std::make_unique<JobEvents>(*state.store);
   PrintStartupReport(state);
   WorkerPoolOptions pool_options = options.workers;
+  pool_options.min_free_bytes = options.min_free_bytes;  // one reserve for uploads and jobs
   pool_options.on_job_changed = [events = state.events.get()](const std::string& id) {
     events->Changed(id);
   };

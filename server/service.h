@@ -40,7 +40,8 @@ struct ServiceOptions {
   int64_t max_dataset_bytes = 8LL << 30;
   int64_t max_images_per_dataset = 20000;
   int64_t max_queued_jobs = 1000;
-  int64_t min_free_bytes = 256LL << 20;  // uploads leaving less free disk get 507
+  // Free disk space to keep: uploads leaving less get 507, jobs leaving less fail (disk_full).
+  int64_t min_free_bytes = 256LL << 20;
   // Job types added after the built-in ones (a type of the same name replaces it), e.g. a
   // test's own.
   std::vector<api::JobType> extra_job_types;

@@ -23,16 +23,8 @@ int WorkerCommand(const std::vector<std::string>& args,
                    "the shared data folder, mounted at the same path on every machine");
   parser.AddOption("threads", std::to_string(DefaultWorkers()),
                    "jobs run at the same time (half the cores by default)");
-  parser.AddOption("threads-per-job", "", "solver threads per job (default: cores / --threads)");
   parser.AddOption("worker-id", "", "name in leases, heartbeats and /metrics (default: HOST:PID)");
-  parser.AddOption("lease-seconds", "30",
-                   "a running job's lease, renewed every third of it; a worker silent this long "
-                   "loses the job to another");
-  parser.AddOption("max-attempts", "3",
-                   "runs a job may start before expired leases make it fail ('interrupted')");
-  parser.AddOption("worker-nice", "10", "niceness of job threads (0-19)");
-  parser.AddOption("drain-timeout", "20",
-                   "seconds SIGTERM waits for running jobs before re-queuing them");
+  DeclareWorkerOptions(parser, "threads");
   if (!parser.Parse(args)) return parser.exit_code();
   const std::string database = parser.Get("database");
   if (!storage::IsPostgresUrl(database)) {

@@ -20,6 +20,7 @@ void WorkerPoolOptions::Check() const {
   OMNIRIG_CHECK(progress_interval_s >= 0 && idle_poll_s > 0, "invalid worker intervals");
   OMNIRIG_CHECK(lease_s > 0, "--lease-seconds must be positive, got " << lease_s);
   OMNIRIG_CHECK(max_attempts >= 1, "--max-attempts must be at least 1");
+  OMNIRIG_CHECK(min_free_bytes >= 0, "--min-free-mb must not be negative");
 }
 
 namespace {
@@ -199,6 +200,41 @@ void WorkerPool::WorkerLoop() {
   }
 }
 
+bool WorkerPool::RecordEnd(const storage::JobRecord& job, RunningJob& running, bool hand_back,
+                           const storage::JobOutcome& outcome) {
+  if (running.lease_lost) {
+    // Another worker owns the job now; FinishJob would be refused anyway.
+    std::cerr << "omnirig: job " << job.id << " stopped after losing its lease" << std::endl;
+    return false;
+  }
+  double pause_s = 0.1;
+  while (true) {
+    try {
+      const bool accepted = hand_back ? store_.RequeueJob(job.id, job.lease_token)
+                                      : store_.FinishJob(job.id, job.lease_token, outcome);
+      if (accepted) {
+        RemoveOtherAttempts(data_dir_, job);
+      } else if (!hand_back) {
+        // The lease ran out before the heartbeat saw it (or the job is no longer running).
+        std::cerr << "omnirig: the end of job " << job.id
+                  << " was refused: its lease went to another run" << std::endl;
+      }
+      return accepted;
+    } catch (const std::exception& e) {
+      std::cerr << "omnirig: cannot record the end of job " << job.id << " yet: " << e.what()
+                << std::endl;
+    }
+    std::unique_lock<std::mutex> lock(mutex_);
+    if (wake_.wait_for(lock, std::chrono::duration<double>(pause_s), [this] { return stopping_; })) {
+      // Stopping: the job stays `running` in the store; its lease expires and it is re-queued.
+      std::cerr << "omnirig: gave up recording the end of job " << job.id << " (stopping)"
+                << std::endl;
+      return false;
+    }
+    pause_s = std::min(2 * pause_s, std::max(0.1, options_.lease_s / 6));
+  }
+}
+
 void WorkerPool::RunJob(const storage::JobRecord& job) {
   auto running = std::make_shared<RunningJob>();
   running->lease_token = job.lease_token;
@@ -216,6 +252,7 @@ void WorkerPool::RunJob(const storage::JobRecord& job) {
   run_options.num_threads = options_.threads_per_job;
   run_options.progress_interval_s = options_.progress_interval_s;
   run_options.on_progress = options_.on_job_changed;
+  run_options.min_free_bytes = options_.min_free_bytes;
   const storage::JobOutcome outcome =
       RunJobAttempt(job, store_, data_dir_, job_types_, run_options,
                     JobRunFlags{&running->cancel, &running->interrupt});
@@ -229,27 +266,13 @@ void WorkerPool::RunJob(const storage::JobRecord& job) {
     } catch (const std::exception&) {
     }
   }
+  // The store was away during the run (RunJobAttempt): queued again, not failed.
+  handed_back = handed_back || outcome.state == storage::JobState::kQueued;
   running->ending = true;
-  try {
-    if (running->lease_lost) {
-      // Another worker owns the job now; FinishJob would be refused anyway.
-      std::cerr << "omnirig: job " << job.id << " stopped after losing its lease" << std::endl;
-    } else if (handed_back) {
-      if (store_.RequeueJob(job.id, job.lease_token)) RemoveOtherAttempts(data_dir_, job);
-    } else if (!store_.FinishJob(job.id, job.lease_token, outcome)) {
-      // The lease ran out before the heartbeat saw it (or the job is no longer running).
-      std::cerr << "omnirig: the end of job " << job.id
-                << " was refused: its lease went to another run" << std::endl;
-    } else {
-      RemoveOtherAttempts(data_dir_, job);
-      metrics_.ObserveJobDuration(
-          job.type, storage::JobStateName(outcome.state),
-          std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
-    }
-  } catch (const std::exception& e) {
-    // The job stays `running` in the store; its lease expires and it is re-queued.
-    std::cerr << "omnirig: cannot record the end of job " << job.id << ": " << e.what()
-              << std::endl;
+  if (RecordEnd(job, *running, handed_back, outcome) && !handed_back) {
+    metrics_.ObserveJobDuration(
+        job.type, storage::JobStateName(outcome.state),
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
   }
   if (options_.on_job_changed) options_.on_job_changed(job.id);
   --busy_;

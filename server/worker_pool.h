@@ -14,6 +14,10 @@
 // (the process was stopped past it) is interrupted and its end is not written: the run that took
 // the job over owns it. With a store that notifies (PostgreSQL), a listener thread wakes idle
 // workers on jobs queued by any process; the idle poll is only the fallback.
+//
+// A store that goes away (PostgreSQL stopped, restarted, killed) stops nothing: claims,
+// heartbeats and a job's end are tried again until it is back, and a run that needed the store
+// while it was gone is handed back to the queue rather than failed.
 
 #include <atomic>
 #include <condition_variable>
@@ -47,6 +51,9 @@ struct WorkerPoolOptions {
   std::string worker_id;  // in leases and heartbeats; empty: HOST:PID
   double lease_s = 30;    // a claim's lease, renewed every lease_s / 3 while the job runs
   int max_attempts = 3;   // runs started before a job whose lease keeps expiring fails
+  // Free space to keep on the data folder's disk: a job that leaves less fails with
+  // "disk_full" (JobRunOptions::min_free_bytes).
+  int64_t min_free_bytes = 0;
   void Check() const;
 };
 
@@ -85,6 +92,12 @@ class WorkerPool {
   void Heartbeat();
   void ListenLoop();
   void RunJob(const storage::JobRecord& job);
+  // Writes the end of a run to the store (its outcome, or the job handed back); returns whether
+  // the store accepted it. A store that cannot be reached or whose disk is full is asked again,
+  // with a growing pause, until it answers or the pool stops: a job never stays `running` for
+  // a store that was away for a while. Given up, the job's lease expires and it is queued again.
+  bool RecordEnd(const storage::JobRecord& job, RunningJob& running, bool hand_back,
+                 const storage::JobOutcome& outcome);
   void WaitForWork(uint64_t seen_generation);
 
   storage::JobStore& store_;

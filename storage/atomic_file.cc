@@ -6,6 +6,7 @@
 #include <cerrno>
 #include <cstring>
 #include <stdexcept>
+#include <system_error>
 #include <vector>
 
 #include "storage/records.h"
@@ -14,7 +15,8 @@ namespace omnirig::storage {
 namespace {
 
 [[noreturn]] void ThrowErrno(const std::string& what, const std::filesystem::path& path) {
-  throw std::runtime_error(what + " " + path.string() + ": " + std::strerror(errno));
+  // system_error: its code tells a full disk (IsDiskFull) from other failures.
+  throw std::system_error(errno, std::generic_category(), what + " " + path.string());
 }
 
 }  // namespace

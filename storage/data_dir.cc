@@ -2,7 +2,9 @@
 
 #include <sys/statvfs.h>
 
+#include <cerrno>
 #include <set>
+#include <system_error>
 
 #include "storage/atomic_file.h"
 
@@ -26,6 +28,13 @@ fs::path DataDir::JobDir(const std::string& job_id) const { return root_ / "jobs
 
 fs::path DataDir::AttemptDir(const std::string& job_id, int attempt) const {
   return JobDir(job_id) / ("attempt-" + std::to_string(attempt));
+}
+
+bool IsDiskFull(const std::exception& error) {
+  if (dynamic_cast<const StoreFull*>(&error)) return true;
+  const auto* system = dynamic_cast<const std::system_error*>(&error);
+  return system && (system->code() == std::errc::no_space_on_device ||
+                    system->code() == std::error_code(EDQUOT, std::generic_category()));
 }
 
 int64_t DataDir::FreeBytes() const {

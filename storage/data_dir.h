@@ -5,6 +5,7 @@
 //   DATA/datasets/{dataset}/images/{name}        uploaded images (name may hold one folder)
 //   DATA/jobs/{job}/attempt-{n}/...              each run's output folder (artifacts)
 
+#include <exception>
 #include <filesystem>
 #include <string>
 #include <vector>
@@ -30,6 +31,10 @@ class DataDir {
  private:
   std::filesystem::path root_;
 };
+
+// Whether `error` says the disk is full: StoreFull, or a file write that failed with ENOSPC or
+// EDQUOT (a std::system_error, as storage/'s file writers throw).
+bool IsDiskFull(const std::exception& error);
 
 // What the consistency check found and repaired.
 struct ConsistencyReport {

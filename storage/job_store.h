@@ -14,12 +14,28 @@
 
 #include <map>
 #include <optional>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
 #include "storage/records.h"
 
 namespace omnirig::storage {
+
+// The store cannot be reached right now (PostgreSQL stopped, restarting after a crash, or cut
+// off): the call changed nothing it reports, and the same call may succeed once the database is
+// back. The API answers 503 with Retry-After; workers wait and try again.
+class StoreUnavailable : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+// The disk holding the store is full: the call's transaction was rolled back. The API answers
+// 507.
+class StoreFull : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
 
 class JobStore {
  public:

@@ -594,7 +594,7 @@ TEST(PostgresJobStoreTest, UnreachableServerIsAClearError) {
   try {
     PostgresJobStore store("postgresql://postgres@127.0.0.1:1/none");
     FAIL() << "connected to nothing";
-  } catch (const PostgresError& e) {
+  } catch (const StoreUnavailable& e) {
     EXPECT_NE(std::string(e.what()).find("cannot connect to PostgreSQL"), std::string::npos);
   }
 }

@@ -11,71 +11,18 @@
 namespace omnirig::storage {
 namespace {
 
-// Schema migrations, the same versions as SqliteJobStore's (kMigrations there), in PostgreSQL's
-// dialect. Never edit a shipped entry: append a new one. `seq` orders jobs queued in the same
-// instant (SQLite's rowid).
-const char* const kMigrations[] = {
-    R"sql(
-CREATE TABLE datasets(
-  id TEXT PRIMARY KEY,
-  name TEXT NOT NULL,
-  created_at DOUBLE PRECISION NOT NULL);
-CREATE TABLE images(
-  dataset_id TEXT NOT NULL REFERENCES datasets(id) ON DELETE CASCADE,
-  name TEXT NOT NULL,
-  size BIGINT NOT NULL,
-  sha256 TEXT NOT NULL,
-  width INTEGER NOT NULL,
-  height INTEGER NOT NULL,
-  content_type TEXT NOT NULL,
-  PRIMARY KEY(dataset_id, name));
-CREATE TABLE jobs(
-  seq BIGSERIAL UNIQUE,
-  id TEXT PRIMARY KEY,
-  type TEXT NOT NULL,
-  dataset_id TEXT NOT NULL,
-  params TEXT NOT NULL,
-  state TEXT NOT NULL CHECK(state IN ('queued','running','succeeded','failed','canceled')),
-  progress_fraction DOUBLE PRECISION NOT NULL DEFAULT 0,
-  progress_stage TEXT NOT NULL DEFAULT '',
-  progress_message TEXT NOT NULL DEFAULT '',
-  eta_s DOUBLE PRECISION,
-  created_at DOUBLE PRECISION NOT NULL,
-  queued_at DOUBLE PRECISION NOT NULL,
-  started_at DOUBLE PRECISION,
-  finished_at DOUBLE PRECISION,
-  attempts INTEGER NOT NULL DEFAULT 0,
-  error_code TEXT,
-  error_message TEXT,
-  result TEXT,
-  cancel_requested INTEGER NOT NULL DEFAULT 0);
-CREATE INDEX jobs_by_state ON jobs(state, queued_at, seq);
-CREATE INDEX jobs_by_dataset ON jobs(dataset_id);
-CREATE TABLE artifacts(
-  job_id TEXT NOT NULL REFERENCES jobs(id) ON DELETE CASCADE,
-  name TEXT NOT NULL,
-  path TEXT NOT NULL,
-  size BIGINT NOT NULL,
-  sha256 TEXT NOT NULL,
-  content_type TEXT NOT NULL,
-  PRIMARY KEY(job_id, name));
-)sql",
-    // 2: leases (who runs a job, until when) and worker heartbeats.
-    R"sql(
-ALTER TABLE jobs ADD COLUMN worker_id TEXT NOT NULL DEFAULT '';
-ALTER TABLE jobs ADD COLUMN lease_token TEXT NOT NULL DEFAULT '';
-ALTER TABLE jobs ADD COLUMN lease_expires_at DOUBLE PRECISION;
-CREATE TABLE workers(
-  id TEXT PRIMARY KEY,
-  started_at DOUBLE PRECISION NOT NULL,
-  last_seen_at DOUBLE PRECISION NOT NULL,
-  running_jobs TEXT NOT NULL DEFAULT '');
-)sql",
-};
-
 constexpr char kChannel[] = "omnirig_jobs";
 // The database server's clock, in epoch seconds: lease expiry is compared on one clock.
 constexpr char kDbNow[] = "EXTRACT(EPOCH FROM clock_timestamp())::DOUBLE PRECISION";
+
+// PostgreSQL's dialect; `seq` orders jobs queued in the same instant (SQLite's rowid).
+SqlDialect Dialect() {
+  return SqlDialect{/*byte_order=*/" COLLATE \"C\"", /*lock_row=*/" FOR UPDATE",
+                    /*insertion_order=*/"seq", /*skip_locked=*/" FOR UPDATE SKIP LOCKED",
+                    /*now=*/kDbNow, /*real_type=*/"DOUBLE PRECISION", /*int64_type=*/"BIGINT",
+                    /*insertion_order_column=*/"seq BIGSERIAL UNIQUE"};
+}
+
 // Serialises migrations of processes starting together (an arbitrary constant).
 constexpr char kMigrationLock[] = "SELECT pg_advisory_xact_lock(7210418309)";
 
@@ -138,11 +85,24 @@ class Result {
   PGresult* result_;
 };
 
+// Whether a failed call failed because the server is gone rather than because of the call: the
+// connection broke, or the server refused it as shutting down, starting or in crash recovery
+// (SQLSTATE class 08, connection exception; 57P01-57P03, operator intervention).
+bool ServerGone(PGconn* db, PGresult* result) {
+  if (PQstatus(db) != CONNECTION_OK) return true;
+  const char* state = result ? PQresultErrorField(result, PG_DIAG_SQLSTATE) : nullptr;
+  if (!state) return result == nullptr;
+  const std::string code = state;
+  return code.rfind("08", 0) == 0 || code == "57P01" || code == "57P02" || code == "57P03";
+}
+
 void Check(PGconn* db, PGresult* result) {
   const ExecStatusType status = PQresultStatus(result);
   if (status == PGRES_COMMAND_OK || status == PGRES_TUPLES_OK) return;
-  throw PostgresError(std::string("PostgreSQL: ") +
-                      (result ? PQresultErrorMessage(result) : PQerrorMessage(db)));
+  const std::string message =
+      std::string("PostgreSQL: ") + (result ? PQresultErrorMessage(result) : PQerrorMessage(db));
+  if (ServerGone(db, result)) throw StoreUnavailable(message);
+  throw PostgresError(message);
 }
 
 // Runs `sql` with text parameters $1..$n; throws PostgresError unless it succeeded.
@@ -216,7 +176,7 @@ PGconn* Connect(const std::string& url) {
   if (PQstatus(db) != CONNECTION_OK) {
     const std::string message = PQerrorMessage(db);
     PQfinish(db);
-    throw PostgresError("cannot connect to PostgreSQL: " + message);
+    throw StoreUnavailable("cannot connect to PostgreSQL: " + message);
   }
   // Notices (e.g. "relation already exists, skipping") are not errors; keep stderr quiet.
   PQsetNoticeProcessor(
@@ -257,9 +217,7 @@ class PostgresJobStore::Lease {
 };
 
 PostgresJobStore::PostgresJobStore(const std::string& url, int max_connections)
-    : SqlJobStore(SqlDialect{/*byte_order=*/" COLLATE \"C\"", /*lock_row=*/" FOR UPDATE",
-                             /*insertion_order=*/"seq", /*skip_locked=*/" FOR UPDATE SKIP LOCKED",
-                             /*now=*/kDbNow}),
+    : SqlJobStore(Dialect()),
       url_(url),
       max_connections_(std::max(1, max_connections)) {
   try {
@@ -282,16 +240,21 @@ void PostgresJobStore::CloseConnections() {
 }
 
 int PostgresJobStore::SchemaVersion() {
-  return static_cast<int>(sizeof(kMigrations) / sizeof(kMigrations[0]));
+  return static_cast<int>(SchemaMigrations(Dialect()).size());
 }
 
 PostgresJobStore::Lease PostgresJobStore::Borrow() {
   std::unique_lock<std::mutex> lock(pool_mutex_);
   pool_available_.wait(lock, [this] { return !idle_.empty() || open_ < max_connections_; });
-  if (!idle_.empty()) {
+  while (!idle_.empty()) {
     PGconn* db = idle_.back();
     idle_.pop_back();
-    return Lease(*this, db);
+    // A server that stopped or restarted since this connection was last used closed it (and
+    // said so): reading what is waiting finds out without a round trip, and a fresh
+    // connection replaces it instead of failing the call.
+    if (PQconsumeInput(db) != 0 && PQstatus(db) == CONNECTION_OK) return Lease(*this, db);
+    PQfinish(db);
+    --open_;
   }
   ++open_;
   lock.unlock();
@@ -321,8 +284,9 @@ void PostgresJobStore::Migrate() {
     throw PostgresError("database " + url_ + " has schema version " + std::to_string(version) +
                         ", newer than this build's " + std::to_string(SchemaVersion()));
   }
+  const std::vector<std::string> migrations = SchemaMigrations(Dialect());
   for (int next = version; next < SchemaVersion(); ++next) {
-    PGresult* raw = PQexec(db.get(), kMigrations[next]);  // several statements: no parameters
+    PGresult* raw = PQexec(db.get(), migrations[next].c_str());  // several statements: no parameters
     Result result(raw);
     Check(db.get(), raw);
     Run(db.get(), "UPDATE omnirig_schema SET version = $1", {next + 1});

@@ -4,9 +4,9 @@
 // SELECT ... FOR UPDATE SKIP LOCKED (two claims never wait on or share a row), and every change
 // that queues a job sends NOTIFY omnirig_jobs, so idle workers wake at once instead of polling.
 //
-// The schema has the same versions and migrations as the SQLite store (sqlite_job_store.cc),
-// written in PostgreSQL's dialect; the version lives in the table omnirig_schema and
-// migrations run under an advisory lock, so processes starting together migrate once.
+// The schema has the same versions and migrations as the SQLite store (SchemaMigrations in
+// sql_job_store.h, in PostgreSQL's type names); the version lives in the table omnirig_schema
+// and migrations run under an advisory lock, so processes starting together migrate once.
 // Lease expiry is compared with the database server's clock, so the machines' clocks need not
 // agree. The methods whose SQL SQLite runs as written are SqlJobStore's (sql_job_store.h).
 
@@ -23,6 +23,8 @@ typedef struct pg_conn PGconn;
 
 namespace omnirig::storage {
 
+// A statement the server refused. A server that cannot be reached (stopped, restarting, cut
+// off) throws StoreUnavailable (job_store.h) instead.
 class PostgresError : public std::runtime_error {
  public:
   using std::runtime_error::runtime_error;

@@ -147,6 +147,83 @@ RecoveryReport Recover(SqlSession& db, const std::vector<RunningJob>& running, i
 
 }  // namespace
 
+namespace {
+
+// Version 1: datasets, images, jobs and artifacts.
+std::string SchemaVersion1(const SqlDialect& dialect) {
+  const std::string& real = dialect.real_type;
+  const std::string& int64 = dialect.int64_type;
+  const std::string insertion_column =
+      dialect.insertion_order_column.empty() ? "" : "\n  " + dialect.insertion_order_column + ",";
+  const std::string insertion_key =
+      dialect.insertion_order_column.empty() ? "" : ", " + dialect.insertion_order;
+  return R"sql(
+CREATE TABLE datasets(
+  id TEXT PRIMARY KEY,
+  name TEXT NOT NULL,
+  created_at )sql" + real + R"sql( NOT NULL);
+CREATE TABLE images(
+  dataset_id TEXT NOT NULL REFERENCES datasets(id) ON DELETE CASCADE,
+  name TEXT NOT NULL,
+  size )sql" + int64 + R"sql( NOT NULL,
+  sha256 TEXT NOT NULL,
+  width INTEGER NOT NULL,
+  height INTEGER NOT NULL,
+  content_type TEXT NOT NULL,
+  PRIMARY KEY(dataset_id, name));
+CREATE TABLE jobs()sql" + insertion_column + R"sql(
+  id TEXT PRIMARY KEY,
+  type TEXT NOT NULL,
+  dataset_id TEXT NOT NULL,
+  params TEXT NOT NULL,
+  state TEXT NOT NULL CHECK(state IN ('queued','running','succeeded','failed','canceled')),
+  progress_fraction )sql" + real + R"sql( NOT NULL DEFAULT 0,
+  progress_stage TEXT NOT NULL DEFAULT '',
+  progress_message TEXT NOT NULL DEFAULT '',
+  eta_s )sql" + real + R"sql(,
+  created_at )sql" + real + R"sql( NOT NULL,
+  queued_at )sql" + real + R"sql( NOT NULL,
+  started_at )sql" + real + R"sql(,
+  finished_at )sql" + real + R"sql(,
+  attempts INTEGER NOT NULL DEFAULT 0,
+  error_code TEXT,
+  error_message TEXT,
+  result TEXT,
+  cancel_requested INTEGER NOT NULL DEFAULT 0);
+CREATE INDEX jobs_by_state ON jobs(state, queued_at)sql" + insertion_key + R"sql();
+CREATE INDEX jobs_by_dataset ON jobs(dataset_id);
+CREATE TABLE artifacts(
+  job_id TEXT NOT NULL REFERENCES jobs(id) ON DELETE CASCADE,
+  name TEXT NOT NULL,
+  path TEXT NOT NULL,
+  size )sql" + int64 + R"sql( NOT NULL,
+  sha256 TEXT NOT NULL,
+  content_type TEXT NOT NULL,
+  PRIMARY KEY(job_id, name));
+)sql";
+}
+
+// Version 2: leases (who runs a job, until when) and worker heartbeats.
+std::string SchemaVersion2(const SqlDialect& dialect) {
+  const std::string& real = dialect.real_type;
+  return R"sql(
+ALTER TABLE jobs ADD COLUMN worker_id TEXT NOT NULL DEFAULT '';
+ALTER TABLE jobs ADD COLUMN lease_token TEXT NOT NULL DEFAULT '';
+ALTER TABLE jobs ADD COLUMN lease_expires_at )sql" + real + R"sql(;
+CREATE TABLE workers(
+  id TEXT PRIMARY KEY,
+  started_at )sql" + real + R"sql( NOT NULL,
+  last_seen_at )sql" + real + R"sql( NOT NULL,
+  running_jobs TEXT NOT NULL DEFAULT '');
+)sql";
+}
+
+}  // namespace
+
+std::vector<std::string> SchemaMigrations(const SqlDialect& dialect) {
+  return {SchemaVersion1(dialect), SchemaVersion2(dialect)};
+}
+
 const char SqlJobStore::kInsertJob[] =
     "INSERT INTO jobs(id, type, dataset_id, params, state, created_at, queued_at) "
     "VALUES(?1, ?2, ?3, ?4, 'queued', ?5, ?5)";

@@ -4,8 +4,10 @@
 // connections (SqlSession) and how it takes them: SqliteJobStore reads through a pool of reader
 // connections and writes through one writer; PostgresJobStore borrows a pooled connection and
 // announces queued jobs with NOTIFY (OnJobsQueued). Where their SQL differs in a phrase (the
-// clock leases are compared on, SKIP LOCKED, the insertion order) the SqlDialect names it; job
-// creation (NOTIFY in the insert), migrations and the integrity check stay in each store.
+// clock leases are compared on, SKIP LOCKED, the insertion order, the schema's type names) the
+// SqlDialect names it. The schema's migrations are written once (SchemaMigrations); where each
+// store keeps its version, job creation (NOTIFY in the insert) and the integrity check stay in
+// each store.
 
 #include <cstdint>
 #include <functional>
@@ -106,7 +108,18 @@ struct SqlDialect {
   // The clock, in epoch seconds, that lease expiry is written and compared on: one clock for
   // every process sharing the store (PostgreSQL's server; SQLite's is this machine's).
   std::string now;
+  // The schema's type names: a double (REAL, DOUBLE PRECISION) and a 64-bit integer (SQLite's
+  // INTEGER is 64 bits; PostgreSQL's is 32).
+  std::string real_type;
+  std::string int64_type;
+  // The jobs table's column that `insertion_order` names, declared (empty where the database
+  // has one of its own, SQLite's rowid).
+  std::string insertion_order_column;
 };
+
+// The schema's migrations in `dialect`, applied in order; a store records how many it applied.
+// Never edit a shipped entry: append a new one.
+std::vector<std::string> SchemaMigrations(const SqlDialect& dialect);
 
 class SqlJobStore : public JobStore {
  public:

@@ -4,7 +4,9 @@ namespace omnirig::storage {
 namespace {
 
 [[noreturn]] void Throw(sqlite3* db, const std::string& what) {
-  throw SqliteError(what + ": " + (db ? sqlite3_errmsg(db) : "out of memory"));
+  const std::string message = what + ": " + (db ? sqlite3_errmsg(db) : "out of memory");
+  if (db && sqlite3_errcode(db) == SQLITE_FULL) throw StoreFull(message);
+  throw SqliteError(message);
 }
 
 sqlite3_stmt* Prepare(sqlite3* db, const std::string& sql) {
@@ -114,9 +116,10 @@ Connection::~Connection() {
 void Connection::Exec(const std::string& sql) {
   char* error = nullptr;
   if (sqlite3_exec(db_, sql.c_str(), nullptr, nullptr, &error) != SQLITE_OK) {
-    const std::string message = error ? error : "unknown error";
+    const std::string message = "'" + sql.substr(0, 80) + "' failed: " + (error ? error : "unknown error");
     sqlite3_free(error);
-    throw SqliteError("'" + sql.substr(0, 80) + "' failed: " + message);
+    if (sqlite3_errcode(db_) == SQLITE_FULL) throw StoreFull(message);
+    throw SqliteError(message);
   }
 }
 
@@ -128,7 +131,7 @@ Transaction::~Transaction() {
   if (!done_) {
     try {
       connection_.Exec("ROLLBACK");
-    } catch (const SqliteError&) {
+    } catch (const std::exception&) {  // SqliteError or StoreFull
       // The transaction is already gone (e.g. SQLite rolled it back on an I/O error).
     }
   }

@@ -1,6 +1,6 @@
 #pragma once
 // A thin RAII layer over the SQLite C API: connections, prepared statements, transactions.
-// Errors throw SqliteError; nothing here knows the schema.
+// Errors throw SqliteError (StoreFull when the disk is full); nothing here knows the schema.
 
 #include <sqlite3.h>
 
@@ -8,6 +8,8 @@
 #include <stdexcept>
 #include <string>
 #include <unordered_map>
+
+#include "storage/job_store.h"
 
 namespace omnirig::storage {
 

@@ -5,65 +5,14 @@
 namespace omnirig::storage {
 namespace {
 
-// Schema migrations, applied in order; user_version counts the applied ones. Never edit a
-// shipped entry: append a new one.
-const char* const kMigrations[] = {
-    R"sql(
-CREATE TABLE datasets(
-  id TEXT PRIMARY KEY,
-  name TEXT NOT NULL,
-  created_at REAL NOT NULL);
-CREATE TABLE images(
-  dataset_id TEXT NOT NULL REFERENCES datasets(id) ON DELETE CASCADE,
-  name TEXT NOT NULL,
-  size INTEGER NOT NULL,
-  sha256 TEXT NOT NULL,
-  width INTEGER NOT NULL,
-  height INTEGER NOT NULL,
-  content_type TEXT NOT NULL,
-  PRIMARY KEY(dataset_id, name));
-CREATE TABLE jobs(
-  id TEXT PRIMARY KEY,
-  type TEXT NOT NULL,
-  dataset_id TEXT NOT NULL,
-  params TEXT NOT NULL,
-  state TEXT NOT NULL CHECK(state IN ('queued','running','succeeded','failed','canceled')),
-  progress_fraction REAL NOT NULL DEFAULT 0,
-  progress_stage TEXT NOT NULL DEFAULT '',
-  progress_message TEXT NOT NULL DEFAULT '',
-  eta_s REAL,
-  created_at REAL NOT NULL,
-  queued_at REAL NOT NULL,
-  started_at REAL,
-  finished_at REAL,
-  attempts INTEGER NOT NULL DEFAULT 0,
-  error_code TEXT,
-  error_message TEXT,
-  result TEXT,
-  cancel_requested INTEGER NOT NULL DEFAULT 0);
-CREATE INDEX jobs_by_state ON jobs(state, queued_at);
-CREATE INDEX jobs_by_dataset ON jobs(dataset_id);
-CREATE TABLE artifacts(
-  job_id TEXT NOT NULL REFERENCES jobs(id) ON DELETE CASCADE,
-  name TEXT NOT NULL,
-  path TEXT NOT NULL,
-  size INTEGER NOT NULL,
-  sha256 TEXT NOT NULL,
-  content_type TEXT NOT NULL,
-  PRIMARY KEY(job_id, name));
-)sql",
-    // 2: leases (who runs a job, until when) and worker heartbeats.
-    R"sql(
-ALTER TABLE jobs ADD COLUMN worker_id TEXT NOT NULL DEFAULT '';
-ALTER TABLE jobs ADD COLUMN lease_token TEXT NOT NULL DEFAULT '';
-ALTER TABLE jobs ADD COLUMN lease_expires_at REAL;
-CREATE TABLE workers(
-  id TEXT PRIMARY KEY,
-  started_at REAL NOT NULL,
-  last_seen_at REAL NOT NULL,
-  running_jobs TEXT NOT NULL DEFAULT '');
-)sql",
-};
+// SQLite's dialect; the jobs' insertion order is the rowid.
+SqlDialect Dialect() {
+  return SqlDialect{/*byte_order=*/"", /*lock_row=*/"", /*insertion_order=*/"rowid",
+                    /*skip_locked=*/"",
+                    /*now=*/"((julianday('now') - 2440587.5) * 86400.0)",
+                    /*real_type=*/"REAL", /*int64_type=*/"INTEGER",
+                    /*insertion_order_column=*/""};
+}
 
 // SqlSession on one SQLite connection; statements come from its cache.
 class SqliteSession : public SqlSession {
@@ -118,9 +67,7 @@ class SqliteSession : public SqlSession {
 }  // namespace
 
 SqliteJobStore::SqliteJobStore(const std::string& path, int num_readers)
-    : SqlJobStore(SqlDialect{/*byte_order=*/"", /*lock_row=*/"", /*insertion_order=*/"rowid",
-                             /*skip_locked=*/"",
-                             /*now=*/"((julianday('now') - 2440587.5) * 86400.0)"}),
+    : SqlJobStore(Dialect()),
       path_(path) {
   writer_ = std::make_unique<Connection>(path);
   Migrate();
@@ -132,7 +79,7 @@ SqliteJobStore::SqliteJobStore(const std::string& path, int num_readers)
 SqliteJobStore::~SqliteJobStore() = default;
 
 int SqliteJobStore::SchemaVersion() {
-  return static_cast<int>(sizeof(kMigrations) / sizeof(kMigrations[0]));
+  return static_cast<int>(SchemaMigrations(Dialect()).size());
 }
 
 // On a reader connection borrowed from the pool, given back however `work` ends.
@@ -178,9 +125,10 @@ void SqliteJobStore::Migrate() {
     throw SqliteError("database " + path_ + " has schema version " + std::to_string(version) +
                       ", newer than this build's " + std::to_string(SchemaVersion()));
   }
+  const std::vector<std::string> migrations = SchemaMigrations(Dialect());
   for (int next = version; next < SchemaVersion(); ++next) {
     Transaction transaction(*writer_);
-    writer_->Exec(kMigrations[next]);
+    writer_->Exec(migrations[next]);
     writer_->Exec("PRAGMA user_version = " + std::to_string(next + 1));
     transaction.Commit();
   }

@@ -7,6 +7,7 @@
 
 #include <cerrno>
 #include <cstring>
+#include <system_error>
 #include <vector>
 
 #include "storage/atomic_file.h"
@@ -17,7 +18,8 @@ namespace {
 namespace fs = std::filesystem;
 
 [[noreturn]] void ThrowErrno(const std::string& what, const fs::path& path) {
-  throw std::runtime_error(what + " " + path.string() + ": " + std::strerror(errno));
+  // system_error: its code tells a full disk (IsDiskFull) from other failures.
+  throw std::system_error(errno, std::generic_category(), what + " " + path.string());
 }
 
 // The totals (folder names) under uploads_dir.

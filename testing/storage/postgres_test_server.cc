@@ -5,6 +5,7 @@
 #include <libpq-fe.h>
 #include <netinet/in.h>
 #include <pwd.h>
+#include <signal.h>
 #include <sys/socket.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -118,22 +119,73 @@ PostgresTestServer::PostgresTestServer(const PostgresTestServerOptions& options)
     Stop();
     throw std::runtime_error("initdb failed:\n" + text);
   }
+  fsync_ = options.fsync;
   for (int attempt = 0; attempt < 5; ++attempt) {
     port_ = FreeLoopbackPort();
-    const std::string server_options =
-        "-p " + std::to_string(port_) + " -k " + dir_.string() +
-        " -c listen_addresses=127.0.0.1 -c max_connections=200 -c fsync=" +
-        (options.fsync ? "on" : "off") + (options.fsync ? "" : " -c synchronous_commit=off");
-    if (RunLogged(
-            AsServerUser({(bin_dir_ / "pg_ctl").string(), "-D", data.string(), "-l",
-                          server_log.string(), "-o", server_options, "-w", "-t", "60", "start"}),
-            log) == 0) {
-      return;
-    }
+    if (PgCtlStart() == 0) return;
   }
   const std::string text = ReadFile(log) + ReadFile(server_log);
   Stop();
   throw std::runtime_error("PostgreSQL did not start:\n" + text);
+}
+
+int PostgresTestServer::PgCtlStart() {
+  const std::string server_options =
+      "-p " + std::to_string(port_) + " -k " + dir_.string() +
+      " -c listen_addresses=127.0.0.1 -c max_connections=200 -c fsync=" + (fsync_ ? "on" : "off") +
+      (fsync_ ? "" : " -c synchronous_commit=off");
+  return RunLogged(AsServerUser({(bin_dir_ / "pg_ctl").string(), "-D", (dir_ / "data").string(),
+                                 "-l", (dir_ / "server.log").string(), "-o", server_options, "-w",
+                                 "-t", "60", "start"}),
+                   dir_ / "commands.log");
+}
+
+void PostgresTestServer::StopServer() {
+  if (RunLogged(AsServerUser({(bin_dir_ / "pg_ctl").string(), "-D", (dir_ / "data").string(),
+                              "-m", "fast", "-w", "stop"}),
+                dir_ / "commands.log") != 0) {
+    throw std::runtime_error("pg_ctl stop failed:\n" + ReadFile(dir_ / "commands.log"));
+  }
+}
+
+void PostgresTestServer::KillServer() {
+  const fs::path lock_file = dir_ / "data" / "postmaster.pid";
+  const pid_t postmaster = static_cast<pid_t>(std::atol(ReadFile(lock_file).c_str()));
+  if (postmaster <= 0) throw std::runtime_error("no running PostgreSQL to kill");
+  // The back-ends first (read while the postmaster still parents them), then the postmaster.
+  std::vector<pid_t> victims;
+  for (const auto& entry : fs::directory_iterator("/proc")) {
+    const pid_t pid = static_cast<pid_t>(std::atol(entry.path().filename().c_str()));
+    if (pid <= 0) continue;
+    std::istringstream stat(ReadFile(entry.path() / "stat"));
+    std::string skip;
+    pid_t parent = 0;
+    // "PID (COMM) STATE PPID ...": COMM holds no spaces for postgres processes.
+    if (stat >> skip >> skip >> skip >> parent && parent == postmaster) victims.push_back(pid);
+  }
+  victims.push_back(postmaster);
+  for (const pid_t pid : victims) ::kill(pid, SIGKILL);
+  // Gone once reaped, or a zombie where nothing reaps orphans: either way it holds nothing.
+  for (const pid_t pid : victims) {
+    while (true) {
+      std::istringstream stat(ReadFile("/proc/" + std::to_string(pid) + "/stat"));
+      std::string skip, state;
+      if (!(stat >> skip >> skip >> state) || state == "Z") break;
+      ::usleep(1000);  // a hang guard is ctest's timeout; the kernel ends a SIGKILLed process fast
+    }
+  }
+  // A zombie's pid still answers kill(pid, 0): PostgreSQL would take its lock files (the data
+  // folder's and the socket's) as a live server's.
+  std::error_code ignored;
+  fs::remove(lock_file, ignored);
+  fs::remove(dir_ / (".s.PGSQL." + std::to_string(port_) + ".lock"), ignored);
+}
+
+void PostgresTestServer::StartServer() {
+  if (PgCtlStart() != 0) {
+    throw std::runtime_error("PostgreSQL did not start again:\n" +
+                             ReadFile(dir_ / "commands.log") + ReadFile(dir_ / "server.log"));
+  }
 }
 
 PostgresTestServer::~PostgresTestServer() { Stop(); }

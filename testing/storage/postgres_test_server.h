@@ -32,13 +32,22 @@ class PostgresTestServer {
   // Creates a new, empty database and returns its URL.
   std::string CreateDatabase();
 
+  // Outages for fault tests. StopServer: `pg_ctl stop -m fast` (clients are told and
+  // disconnected). KillServer: SIGKILL to the server and every back-end, as a crash would; the
+  // next start recovers from the write-ahead log. StartServer: back on the same port and data.
+  void StopServer();
+  void KillServer();
+  void StartServer();
+
  private:
   void StartReaper();
   void Stop();
+  int PgCtlStart();  // exit status of `pg_ctl start` on port_
 
   std::filesystem::path dir_;
   std::filesystem::path bin_dir_;
   int port_ = 0;
+  bool fsync_ = false;
   int databases_ = 0;
   pid_t reaper_pid_ = -1;
   int reaper_pipe_ = -1;  // the write end; the reaper acts when it closes

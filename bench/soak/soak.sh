@@ -1,0 +1,101 @@
+#!/usr/bin/env bash
+# Soak benchmark: a day of use, compressed, against one `omnirig serve` (SQLite, its default
+# worker count) on this machine:
+#   - 200 clients following jobs: wrk connections polling GET /api/v1/jobs/{id} of the newest
+#     jobs at about 1,000 requests/s in all (bench/soak/poll.lua);
+#   - job churn and uploads: bench/soak/churn.py keeps the worker busy with real calibrations
+#     (bench's real image set), cancels, retries and deletes jobs, and uploads, reads back and
+#     deletes a dataset every 10 s;
+#   - every SOAK_SAMPLE_S seconds the server's resident memory, open file descriptors and threads
+#     are sampled from /proc.
+# After SOAK_MINUTES the churn stops and accounts for every job; then the figures: memory and
+# descriptors after the warm-up (SOAK_WARMUP_MINUTES) against their highest later reading
+# (target: within 10 %), the polls' p99 (target: under 10 ms), answers of 500 or more (target:
+# none), jobs lost (target: none).
+# Usage: bench/soak/soak.sh [BUILD_DIR]   (default: build). Needs wrk, curl, python3.
+set -euo pipefail
+ROOT=$(cd "$(dirname "$0")/../.." && pwd)
+BUILD=$(cd "${1:-$ROOT/build}" && pwd)
+OMNIRIG=$BUILD/server/omnirig
+MINUTES=${SOAK_MINUTES:-30}
+WARMUP_MINUTES=${SOAK_WARMUP_MINUTES:-5}
+CLIENTS=${SOAK_CLIENTS:-200}
+DELAY_MS=${SOAK_DELAY_MS:-199}
+SAMPLE_S=${SOAK_SAMPLE_S:-30}
+IMAGES=${SOAK_IMAGES:-$ROOT/../shared/data/real/ocamcalib-vmr}
+WORK=$(mktemp -d /tmp/omnirig-soak-XXXXXX)
+SERVER_PID=
+CHURN_PID=
+cleanup() {
+  # SOAK_KEEP=DIR keeps the raw readings (samples, wrk's and the churn's output, server log).
+  [[ -n ${SOAK_KEEP:-} ]] && mkdir -p "$SOAK_KEEP" && cp -r "$WORK"/*.txt "$WORK"/*.err "$SOAK_KEEP"/ 2>/dev/null
+  [[ -n $CHURN_PID ]] && kill "$CHURN_PID" 2>/dev/null || true
+  [[ -n $SERVER_PID ]] && kill "$SERVER_PID" 2>/dev/null && wait "$SERVER_PID" 2>/dev/null || true
+  rm -rf "$WORK"
+}
+trap cleanup EXIT
+for tool in wrk curl python3; do
+  command -v $tool >/dev/null || { echo "soak: $tool is required" >&2; exit 2; }
+done
+[[ -d $IMAGES ]] || { echo "soak: no images in $IMAGES (SOAK_IMAGES)" >&2; exit 2; }
+
+"$OMNIRIG" serve --port 0 --data "$WORK/data" --web "" > "$WORK/serve.out" 2> "$WORK/serve.err" &
+SERVER_PID=$!
+for _ in $(seq 100); do
+  PORT=$(sed -n 's/^omnirig listening on http:\/\/[^:]*:\([0-9]*\)$/\1/p' "$WORK/serve.out" || true)
+  [[ -n $PORT ]] && break
+  sleep 0.1
+done
+[[ -n $PORT ]] || { cat "$WORK/serve.err" >&2; exit 1; }
+URL=http://127.0.0.1:$PORT
+
+echo "== omnirig soak ($(nproc) cores, $(date -u +%FT%TZ)): $MINUTES min, warm-up $WARMUP_MINUTES min," \
+     "$CLIENTS clients at a mean pause of $DELAY_MS ms"
+echo "load_average_start $(cut -d' ' -f1-3 /proc/loadavg)"
+python3 "$ROOT/bench/soak/churn.py" "$URL" "$IMAGES" "$WORK/ids.txt" "$WORK/stop" \
+  > "$WORK/churn.txt" 2> "$WORK/churn.err" &
+CHURN_PID=$!
+while [[ ! -s $WORK/ids.txt ]]; do sleep 0.2; done
+
+sample() {  # elapsed_s
+  local rss fds threads
+  rss=$(awk '/^VmRSS/ {print $2}' "/proc/$SERVER_PID/status")
+  threads=$(awk '/^Threads/ {print $2}' "/proc/$SERVER_PID/status")
+  fds=$(find "/proc/$SERVER_PID/fd" -mindepth 1 | wc -l)
+  echo "$1 $rss $fds $threads $(cut -d' ' -f1 /proc/loadavg)"
+}
+echo "elapsed_s rss_kb fds threads load1" > "$WORK/samples.txt"
+START=$(date +%s)
+( while kill -0 "$SERVER_PID" 2>/dev/null && [[ ! -e $WORK/stop ]]; do
+    sample $(( $(date +%s) - START )) >> "$WORK/samples.txt"
+    sleep "$SAMPLE_S"
+  done ) &
+SAMPLER_PID=$!
+
+IDS_FILE=$WORK/ids.txt DELAY_MS=$DELAY_MS wrk -t2 -c"$CLIENTS" -d"$((MINUTES * 60))s" --timeout 10s \
+  -s "$ROOT/bench/soak/poll.lua" "$URL/" > "$WORK/wrk.txt" 2>&1
+sample $(( $(date +%s) - START )) >> "$WORK/samples.txt"
+touch "$WORK/stop"
+wait "$SAMPLER_PID" || true
+wait "$CHURN_PID"
+CHURN_PID=
+kill -0 "$SERVER_PID" || { echo "soak: the server exited" >&2; exit 1; }
+
+cat "$WORK/samples.txt"
+grep -E '^poll_' "$WORK/wrk.txt"
+cat "$WORK/churn.txt"
+echo "load_average_end $(cut -d' ' -f1-3 /proc/loadavg)"
+echo "server_5xx_logged $(grep -c ': 5[0-9][0-9]: ' "$WORK/serve.err" || true)"
+python3 - "$WORK/samples.txt" "$WARMUP_MINUTES" <<'PY'
+import sys
+rows = [line.split() for line in open(sys.argv[1]).read().splitlines()[1:]]
+rows = [(int(t), int(rss), int(fds), int(threads)) for t, rss, fds, threads, _ in rows]
+warm = [r for r in rows if r[0] >= float(sys.argv[2]) * 60]
+if not warm:
+    sys.exit("soak: no sample after the warm-up")
+base, later = warm[0], warm[1:] or warm
+for name, i in (("rss_kb", 1), ("fds", 2), ("threads", 3)):
+    top = max(r[i] for r in later)
+    print(f"{name}_after_warmup {base[i]} max_later {top} final {rows[-1][i]} "
+          f"growth_pct {100.0 * (top - base[i]) / max(1, base[i]):.1f}")
+PY
