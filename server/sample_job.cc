@@ -5,6 +5,7 @@
 
 #include "api/job_types.h"
 #include "api/synth_json.h"
+#include "server/sample_params.h"
 #include "engine/synth/presets.h"
 #include "engine/util/check.h"
 #include "storage/atomic_file.h"
@@ -17,19 +18,6 @@ namespace {
 constexpr int kWidth = 640;
 constexpr int kHeight = 480;
 constexpr int kSupersampling = 2;
-
-std::string PresetOf(const nlohmann::json& params) {
-  if (!params.is_object()) throw InvalidArgument("params must be an object");
-  for (const auto& [key, value] : params.items()) {
-    if (key != "preset") throw InvalidArgument("unknown field params." + key + " (only 'preset')");
-  }
-  const std::string preset = params.value("preset", std::string());
-  if (preset != "mono-calib" && preset != "stereo-board" && preset != "stereo-sequence") {
-    throw InvalidArgument(
-        "params.preset must be mono-calib, stereo-board or stereo-sequence, got '" + preset + "'");
-  }
-  return preset;
-}
 
 // A preset's options at the small size.
 template <typename Options>
@@ -95,11 +83,11 @@ size_t AddToDataset(ServiceState& state, const std::string& dataset_id, const fs
 void RegisterSampleJobType(ServiceState& state) {
   api::JobType type;
   type.name = "sample";
-  type.validate = [](const nlohmann::json& params) { PresetOf(params); };
+  type.validate = [](const nlohmann::json& params) { SamplePresetFromJson(params); };
   type.reads_images = false;
   ServiceState* service = &state;
   type.run = [service](const nlohmann::json& params, const api::JobContext& context) {
-    const std::string preset = PresetOf(params);
+    const std::string preset = SamplePresetFromJson(params);
     // Rendered beside the artifacts; the images then move into the dataset, and
     // ground_truth.json stays as the job's artifact.
     const fs::path dir = context.output_dir / "sample";
