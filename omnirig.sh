@@ -99,7 +99,7 @@ cmd_test() {
   # -O1: sanitizer builds only need to run the unit tests, and compile much faster than -O3.
   configure_and_build build-asan -DOMNIRIG_SANITIZE=ON -DCMAKE_CXX_FLAGS_RELEASE="-O1 -DNDEBUG"
   (cd build-asan && ctest --output-on-failure -j "$JOBS" -L unit)
-  log "fuzz targets over their seed corpora, then 2000 mutations each (libFuzzer, ASan + UBSan)"
+  log "fuzz targets: their seed corpora, then mutations up to 2000 inputs each (libFuzzer, ASan + UBSan)"
   # build-fuzz/ (clang) holds the fuzz targets and the libraries they link only.
   OMNIRIG_JOBS=$JOBS scripts/fuzz.sh --runs 2000
   log "all tests passed"

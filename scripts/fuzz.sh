@@ -11,17 +11,19 @@
 # repository's corpus grows only with --merge (then the new inputs that add coverage are merged
 # back with -merge=1). Inputs that fail are kept in fuzz-out/TARGET/ (crash-*, leak-*,
 # timeout-*); reproduce one with build-fuzz/fuzz/fuzz_TARGET FILE. TARGET defaults to all.
+# fuzz/dict/TARGET.dict, when present, is the target's libFuzzer dictionary. --no-build runs
+# the executables in $OMNIRIG_FUZZ_BUILD_DIR/fuzz/ (default build-fuzz) as they are.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$(pwd)
 export CCACHE_BASEDIR="$ROOT"
 
 usage() {
-  echo "usage: $0 SECONDS [--merge] [TARGET...] | $0 --runs N [TARGET...]" >&2
+  echo "usage: $0 SECONDS [--merge] [--no-build] [TARGET...] | $0 --runs N [--no-build] [TARGET...]" >&2
   exit 2
 }
 
-seconds="" runs="" merge=0 targets=()
+seconds="" runs="" merge=0 build=1 targets=()
 case "${1:-}" in
   --runs)
     [[ ${2:-} =~ ^[0-9]+$ ]] || usage
@@ -37,6 +39,7 @@ esac
 for arg in "$@"; do
   case $arg in
     --merge) merge=1 ;;
+    --no-build) build=0 ;;
     -*) usage ;;
     *) targets+=("$arg") ;;
   esac
@@ -46,14 +49,14 @@ if [[ ${#targets[@]} -eq 0 ]]; then
 fi
 
 BUILD=${OMNIRIG_FUZZ_BUILD_DIR:-build-fuzz}
-if [[ ! -f $BUILD/build.ninja ]]; then
+if [[ $build -eq 1 && ! -f $BUILD/build.ninja ]]; then
   # -O1: enough for the sanitizers, and a much faster build than -O3.
   CC=clang CXX=clang++ cmake -S . -B "$BUILD" -G Ninja -DCMAKE_BUILD_TYPE=Release \
     -DOMNIRIG_WERROR=ON -DOMNIRIG_FUZZ=ON -DCMAKE_CXX_FLAGS_RELEASE="-O1 -DNDEBUG" >/dev/null
 fi
 build_targets=()
 for target in "${targets[@]}"; do build_targets+=("fuzz_$target"); done
-cmake --build "$BUILD" -j "${OMNIRIG_JOBS:-$(nproc)}" --target "${build_targets[@]}"
+[[ $build -eq 0 ]] || cmake --build "$BUILD" -j "${OMNIRIG_JOBS:-$(nproc)}" --target "${build_targets[@]}"
 
 OUT=$ROOT/fuzz-out
 scratch=$(mktemp -d)
@@ -74,6 +77,8 @@ for target in "${targets[@]}"; do
   # New inputs go to the first folder ($work); the seeds are read, not written.
   args=(-timeout=1 -detect_leaks=1 -rss_limit_mb=2048 -print_final_stats=1
     -artifact_prefix="$OUT/$target/")
+  # JSON targets: the tokens and field names mutations would hardly spell out byte by byte.
+  [[ -f fuzz/dict/$target.dict ]] && args+=(-dict="fuzz/dict/$target.dict")
   if [[ -n $runs ]]; then
     args+=(-runs="$runs" -seed=1)
   else

@@ -9,7 +9,13 @@ std::string SamplePresetFromJson(const nlohmann::json& params) {
   for (const auto& [key, value] : params.items()) {
     if (key != "preset") throw InvalidArgument("unknown field params." + key + " (only 'preset')");
   }
-  const std::string preset = params.value("preset", std::string());
+  // Not params.value("preset", ...): a preset of another type than a string would throw
+  // nlohmann's type_error, answered as a 500.
+  const auto it = params.find("preset");
+  if (it != params.end() && !it->is_string()) {
+    throw InvalidArgument("field 'params.preset' must be a string");
+  }
+  const std::string preset = it != params.end() ? it->get<std::string>() : std::string();
   if (preset != "mono-calib" && preset != "stereo-board" && preset != "stereo-sequence") {
     throw InvalidArgument(
         "params.preset must be mono-calib, stereo-board or stereo-sequence, got '" + preset + "'");
