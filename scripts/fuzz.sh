@@ -66,7 +66,8 @@ export ASAN_OPTIONS=${ASAN_OPTIONS:-detect_leaks=1}
 export UBSAN_OPTIONS=${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}
 
 failed=0
-rows=()
+# Each row as its target ends, so that a long run stopped half-way keeps what it measured.
+printf '%-32s %12s %8s %10s %9s\n' target executions inputs bytes failures
 for target in "${targets[@]}"; do
   binary=$BUILD/fuzz/fuzz_$target
   seeds=fuzz/corpus/$target
@@ -98,11 +99,8 @@ for target in "${targets[@]}"; do
   if [[ $merge -eq 1 && $found -eq 0 ]]; then
     "$binary" -merge=1 "$seeds" "$work" >>"$log" 2>&1
   fi
-  rows+=("$(printf '%-32s %12s %8s %10s %9s' "$target" "${executions:-0}" "$corpus_files" \
-    "$corpus_bytes" "$found")")
+  printf '%-32s %12s %8s %10s %9s\n' "$target" "${executions:-0}" "$corpus_files" \
+    "$corpus_bytes" "$found"
   [[ $found -eq 0 ]] || echo "$target: failed, see $log and $OUT/$target/" >&2
 done
-
-printf '%-32s %12s %8s %10s %9s\n' target executions inputs bytes failures
-printf '%s\n' "${rows[@]}"
 exit "$failed"
