@@ -7,7 +7,8 @@
 #                                      build/server/omnirig serve --help).
 #   ./omnirig.sh test                  install what is missing, build everything (tests and
 #                                      benchmarks too), run every test (unit, sanitizer,
-#                                      integration, browser)
+#                                      integration, browser) and every fuzz
+#                                      target briefly over its corpus
 # Re-running either on a set-up machine only rebuilds what changed.
 set -euo pipefail
 cd "$(dirname "$0")"
@@ -17,8 +18,9 @@ APT_PACKAGES=(build-essential cmake ninja-build ccache pkg-config git
   libeigen3-dev libopencv-dev libopencv-contrib-dev libceres-dev libcpp-httplib-dev
   nlohmann-json3-dev libsqlite3-dev sqlite3 googletest libgtest-dev libbenchmark-dev
   libssl-dev libpq-dev libopengv-dev nodejs npm curl jq)
-# Only the tests need these: the browser they drive, and a PostgreSQL server they start themselves.
-TEST_APT_PACKAGES=(chromium postgresql)
+# Only the tests need these: the browser they drive, a PostgreSQL server they start themselves,
+# and clang with its libFuzzer and sanitizer runtimes for the fuzz targets (fuzz/).
+TEST_APT_PACKAGES=(chromium postgresql clang libclang-rt-14-dev)
 JOBS=${OMNIRIG_JOBS:-$(nproc)}
 # Cache compiles by paths relative to the checkout, so that a second clone reuses them.
 export CCACHE_BASEDIR="$ROOT"
@@ -97,6 +99,9 @@ cmd_test() {
   # -O1: sanitizer builds only need to run the unit tests, and compile much faster than -O3.
   configure_and_build build-asan -DOMNIRIG_SANITIZE=ON -DCMAKE_CXX_FLAGS_RELEASE="-O1 -DNDEBUG"
   (cd build-asan && ctest --output-on-failure -j "$JOBS" -L unit)
+  log "fuzz targets: their seed corpora, then mutations up to 2000 inputs each (libFuzzer, ASan + UBSan)"
+  # build-fuzz/ (clang) holds the fuzz targets and the libraries they link only.
+  OMNIRIG_JOBS=$JOBS scripts/fuzz.sh --runs 2000
   log "all tests passed"
 }
 

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <utility>
 
+#include "api/sample_params.h"
 #include "api/synth_json.h"
 #include "engine/synth/presets.h"
 #include "engine/util/check.h"
@@ -15,19 +16,6 @@ namespace {
 constexpr int kWidth = 640;
 constexpr int kHeight = 480;
 constexpr int kSupersampling = 2;
-
-std::string PresetOf(const nlohmann::json& params) {
-  if (!params.is_object()) throw InvalidArgument("params must be an object");
-  for (const auto& [key, value] : params.items()) {
-    if (key != "preset") throw InvalidArgument("unknown field params." + key + " (only 'preset')");
-  }
-  const std::string preset = params.value("preset", std::string());
-  if (preset != "mono-calib" && preset != "stereo-board" && preset != "stereo-sequence") {
-    throw InvalidArgument(
-        "params.preset must be mono-calib, stereo-board or stereo-sequence, got '" + preset + "'");
-  }
-  return preset;
-}
 
 // A preset's options at the small size.
 template <typename Options>
@@ -65,11 +53,11 @@ void RenderPreset(const std::string& preset, const JobContext& context, const fs
 JobType SampleJobType(AddFilesToDataset add_files) {
   JobType type;
   type.name = "sample";
-  type.validate = [](const nlohmann::json& params) { PresetOf(params); };
+  type.validate = [](const nlohmann::json& params) { SamplePresetFromJson(params); };
   type.reads_images = false;
   type.run = [add_files = std::move(add_files)](const nlohmann::json& params,
                                                 const JobContext& context) {
-    const std::string preset = PresetOf(params);
+    const std::string preset = SamplePresetFromJson(params);
     // Rendered beside the artifacts; the images then move into the dataset, and
     // ground_truth.json stays as the job's artifact.
     const fs::path dir = context.output_dir / "sample";

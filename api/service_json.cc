@@ -12,7 +12,8 @@ nlohmann::json ParseJsonBody(const std::string& body) {
   nlohmann::json json;
   try {
     json = nlohmann::json::parse(body);
-  } catch (const nlohmann::json::parse_error& e) {
+  } catch (const nlohmann::json::exception& e) {
+    // parse_error, and out_of_range for a number beyond a double's range (1e999).
     throw InvalidArgument(std::string("malformed JSON body: ") + e.what());
   }
   if (!json.is_object()) throw InvalidArgument("the request body must be a JSON object");
@@ -45,6 +46,10 @@ CreateJobRequest ParseCreateJobRequest(const std::string& body) {
 nlohmann::json ErrorJson(const std::string& code, const std::string& message,
                          const nlohmann::json& details) {
   return {{"error", {{"code", code}, {"message", message}, {"details", details}}}};
+}
+
+std::string JsonText(const nlohmann::json& json) {
+  return json.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 
 nlohmann::json TimeJson(std::optional<double> seconds_since_epoch) {

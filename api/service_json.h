@@ -35,6 +35,11 @@ CreateJobRequest ParseCreateJobRequest(const std::string& body);
 nlohmann::json ErrorJson(const std::string& code, const std::string& message,
                          const nlohmann::json& details = nlohmann::json::object());
 
+// `json` as a response body's text. Strings holding invalid UTF-8 (a request's bytes quoted in
+// an error message: a header, a file name, a path) have those bytes replaced by U+FFFD, where
+// nlohmann's dump() would throw.
+std::string JsonText(const nlohmann::json& json);
+
 // ISO 8601 UTC with milliseconds ("2026-11-21T14:43:49.123Z") for seconds since the epoch;
 // null when absent.
 nlohmann::json TimeJson(std::optional<double> seconds_since_epoch);

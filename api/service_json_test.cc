@@ -32,6 +32,22 @@ TEST(ServiceJson, RefusesBadJobRequests) {
   ExpectRefused(R"({"type": 3, "dataset": "d"})", "'type'");
   ExpectRefused(R"({"type": "t"})", "'dataset'");
   ExpectRefused(R"({"type": "t", "dataset": "d", "params": [1]})", "'params'");
+  // A number beyond a double's range is nlohmann's out_of_range, not a parse_error (found by
+  // fuzz/service_json_fuzzer.cc): refused as malformed, not escaping as a 500.
+  ExpectRefused(R"({"type": "t", "dataset": "d", "params": {"x": 1e999}})", "malformed JSON");
+  EXPECT_THROW(ParseCreateDatasetRequest(R"({"name": -1e999})"), InvalidArgument);
+}
+
+TEST(ServiceJson, JsonTextReplacesInvalidUtf8) {
+  // An error message quoting a request's bytes (here a Content-Range header of Latin-1 bytes):
+  // dump() throws on them, which would turn the 400 into a 500 without a JSON body.
+  const nlohmann::json error = ErrorJson("invalid_argument", "got 'bytes \xff-\xe9/1'");
+  EXPECT_THROW((void)error.dump(), nlohmann::json::type_error);
+  const std::string text = JsonText(error);
+  EXPECT_EQ(text.find('\xff'), std::string::npos);
+  EXPECT_NE(text.find("bytes \xef\xbf\xbd-\xef\xbf\xbd/1"), std::string::npos) << text;
+  EXPECT_EQ(nlohmann::json::parse(text)["error"]["code"], "invalid_argument");
+  EXPECT_EQ(JsonText({{"a", 1}}), R"({"a":1})");
 }
 
 TEST(ServiceJson, DatasetRequest) {

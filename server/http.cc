@@ -150,9 +150,9 @@ void SetFile(const httplib::Request& req, const HttpResponse& response, httplib:
       res.status = 416;
       res.set_header("Content-Range", "bytes */" + std::to_string(size));
       SetBody(req, res,
-              api::ErrorJson("range_not_satisfiable", "the requested range lies outside the file",
-                             {{"size", size}})
-                  .dump(),
+              api::JsonText(api::ErrorJson("range_not_satisfiable",
+                                           "the requested range lies outside the file",
+                                           {{"size", size}})),
               "application/json", false);
       return;
     }
@@ -364,7 +364,7 @@ std::optional<std::string> HttpRequest::Query(const std::string& name) const {
 void HttpResponse::Json(int status_code, const nlohmann::json& json) {
   status = status_code;
   content_type = "application/json";
-  body = json.dump();
+  body = api::JsonText(json);
   file.reset();
 }
 
@@ -521,7 +521,7 @@ void HttpServer::Impl::DispatchOrNotFound(const httplib::Request& req, httplib::
   bool body_read = reader == nullptr || DiscardBody(req, *reader);
   res.status = 404;
   SetBody(req, res,
-          api::ErrorJson("not_found", "no route for " + req.method + " " + req.path).dump(),
+          api::JsonText(api::ErrorJson("not_found", "no route for " + req.method + " " + req.path)),
           "application/json", !body_read);
 }
 
@@ -543,9 +543,9 @@ httplib::Server::HandlerResponse HttpServer::Impl::PreRoute(const httplib::Reque
     res.set_header("Retry-After", std::to_string(kRetryAfterS));
     const int cap = options.max_connections;
     SetBody(req, res,
-            api::ErrorJson("unavailable", "too many open connections (" + std::to_string(cap) + ")",
-                           {{"max_connections", cap}, {"retry_after_s", kRetryAfterS}})
-                .dump(),
+            api::JsonText(api::ErrorJson(
+                "unavailable", "too many open connections (" + std::to_string(cap) + ")",
+                {{"max_connections", cap}, {"retry_after_s", kRetryAfterS}})),
             "application/json", true);
     return Result::Handled;
   }
@@ -555,7 +555,8 @@ httplib::Server::HandlerResponse HttpServer::Impl::PreRoute(const httplib::Reque
     current_route = "auth";
     res.status = 401;
     res.set_header("WWW-Authenticate", "Bearer");
-    SetBody(req, res, api::ErrorJson("unauthorized", "a valid bearer token is required").dump(),
+    SetBody(req, res,
+            api::JsonText(api::ErrorJson("unauthorized", "a valid bearer token is required")),
             "application/json", HasBody(req));
     return Result::Handled;
   }
@@ -611,7 +612,7 @@ void HttpServer::Impl::Install() {
     const std::string message =
         res.status == 404 ? "no route for " + req.method + " " + req.path
                           : "request refused with HTTP status " + std::to_string(res.status);
-    res.set_content(api::ErrorJson(DefaultErrorCode(res.status), message).dump(),
+    res.set_content(api::JsonText(api::ErrorJson(DefaultErrorCode(res.status), message)),
                     "application/json");
   });
   server.set_logger([this](const httplib::Request&, const httplib::Response& res) {

@@ -10,8 +10,10 @@
 #include <set>
 
 #include "api/service_json.h"
+#include "server/content_range.h"
 #include "server/json_views.h"
 #include "server/service.h"
+#include "server/upload_check.h"
 #include "storage/atomic_file.h"
 #include "storage/image_header.h"
 #include "storage/names.h"
@@ -76,26 +78,6 @@ storage::DatasetRecord CurrentDataset(ServiceState& state, const std::string& id
   return *dataset;
 }
 
-// Images, and one kind of text file: a ground-truth trajectory in TUM format (NAME.tum) that a
-// slam job can evaluate against; the job parses it and names any bad line.
-storage::ImageHeader ProbeUpload(const std::string& name, const std::string& head) {
-  const std::string suffix = ".tum";
-  if (name.size() > suffix.size() &&
-      name.compare(name.size() - suffix.size(), suffix.size(), suffix) == 0) {
-    storage::ImageHeader header;
-    const bool text = std::all_of(head.begin(), head.end(), [](char c) {
-      return c == '\n' || c == '\r' || c == '\t' || (c >= 32 && c < 127);
-    });
-    header.status =
-        text ? storage::ImageHeader::Status::kOk : storage::ImageHeader::Status::kNotAnImage;
-    header.format = "tum";
-    header.content_type = "text/plain";
-    header.problem = text ? "" : "a .tum trajectory must be plain text";
-    return header;
-  }
-  return storage::ProbeImageHeader(head);
-}
-
 // The largest upload of a file of this name: videos have their own limit.
 int64_t MaxFileBytes(const ServiceState& state, const std::string& name) {
   return storage::IsVideoName(name) ? state.options.max_video_bytes : state.options.max_file_bytes;
@@ -125,40 +107,6 @@ void CheckImageLimit(ServiceState& state, const std::string& dataset_id, const s
     TooManyImages(current, state.options.max_images_per_dataset);
   }
 }
-
-// The checks of an image's (or a .tum's) bytes as they arrive: its first bytes for the header,
-// the whole for completeness (storage/image_header.h).
-class ImageCheck {
- public:
-  void Append(const char* data, size_t size) {
-    if (head_.size() < storage::kImageProbeBytes) {
-      head_.append(data, std::min(size, storage::kImageProbeBytes - head_.size()));
-    }
-    completeness_.Append(data, size);
-  }
-
-  // After the last byte: the header, or 415 (not an image) or 422 (a corrupt header, or a file
-  // cut short or damaged in transfer, which is refused whole: its header alone looks fine).
-  storage::ImageHeader Finish(const std::string& name) {
-    const storage::ImageHeader header = ProbeUpload(name, head_);
-    if (header.status == storage::ImageHeader::Status::kNotAnImage) {
-      throw HttpError(415, "unsupported_media_type", name + ": " + header.problem,
-                      {{"name", name}});
-    }
-    std::string problem =
-        header.status == storage::ImageHeader::Status::kCorrupt ? header.problem : "";
-    if (problem.empty() && header.format != "tum") problem = completeness_.Finish(header, head_);
-    if (!problem.empty()) {
-      throw HttpError(422, "corrupt_image", name + ": " + problem, {{"name", name}});
-    }
-    std::string().swap(head_);  // a batch holds many sealed uploads
-    return header;
-  }
-
- private:
-  std::string head_;
-  storage::ImageCompletenessCheck completeness_;
-};
 
 // One image on its way to disk: streamed into an atomic temporary file while the first bytes
 // are kept for the header check; sealed (fsynced under its temporary name) once it passed, and
@@ -319,29 +267,6 @@ std::vector<storage::ImageRecord> ImageBatch::Commit(std::vector<std::string>& o
 }
 
 // ---- resumable uploads (PUT with Content-Range; storage/upload_part.h) -----------------------
-
-struct ContentRange {
-  int64_t first = 0, last = 0, total = 0;
-  int64_t length() const { return last - first + 1; }
-};
-
-// "bytes FIRST-LAST/TOTAL", with 0 <= FIRST <= LAST < TOTAL; 400 otherwise.
-ContentRange ParseContentRange(const std::string& text) {
-  ContentRange range;
-  long long first = -1, last = -1, total = -1;
-  int consumed = 0;
-  if (std::sscanf(text.c_str(), "bytes %lld-%lld/%lld%n", &first, &last, &total, &consumed) != 3 ||
-      consumed != static_cast<int>(text.size()) || first < 0 || last < first || total <= last) {
-    throw HttpError(400, "invalid_argument",
-                    "Content-Range must be 'bytes FIRST-LAST/TOTAL' with 0 <= FIRST <= LAST < "
-                    "TOTAL, got '" +
-                        text + "'");
-  }
-  range.first = first;
-  range.last = last;
-  range.total = total;
-  return range;
-}
 
 std::filesystem::path UploadsDir(const ServiceState& state, const std::string& dataset_id) {
   return state.data_dir->DatasetDir(dataset_id) / "uploads";
