@@ -17,8 +17,9 @@ APT_PACKAGES=(build-essential cmake ninja-build ccache pkg-config git
   libeigen3-dev libopencv-dev libopencv-contrib-dev libceres-dev libcpp-httplib-dev
   nlohmann-json3-dev libsqlite3-dev sqlite3 googletest libgtest-dev libbenchmark-dev
   libssl-dev libpq-dev libopengv-dev nodejs npm curl jq)
-# Only the tests need these: the browser they drive, and a PostgreSQL server they start themselves.
-TEST_APT_PACKAGES=(chromium postgresql)
+# Only the tests need these: the browser they drive, a PostgreSQL server they start themselves,
+# and unzip, which checks the job archives the server streams.
+TEST_APT_PACKAGES=(chromium postgresql unzip)
 JOBS=${OMNIRIG_JOBS:-$(nproc)}
 # Cache compiles by paths relative to the checkout, so that a second clone reuses them.
 export CCACHE_BASEDIR="$ROOT"

@@ -5,6 +5,7 @@
 
 #include "api/job_types.h"
 #include "engine/util/check.h"
+#include "server/log_line.h"
 #include "server/sample_job.h"
 #include "storage/postgres_job_store.h"
 #include "storage/sqlite_job_store.h"
@@ -102,6 +103,8 @@ Service::Service(const ServiceOptions& options) : state_(std::make_unique<Servic
                        : state.store->RecoverExpiredLeases(options.workers.max_attempts);
   state.events = std::make_unique<JobEvents>(*state.store);
   PrintStartupReport(state);
+  LogRecovery(*state.store, state.recovery,
+              options.database.empty() ? "interrupted" : "lease_expired");
   WorkerPoolOptions pool_options = options.workers;
   pool_options.on_job_changed = [events = state.events.get()](const std::string& id) {
     events->Changed(id);

@@ -5,12 +5,14 @@
 #include <unistd.h>
 
 #include <cerrno>
+#include <cstdio>
 #include <chrono>
 #include <cstring>
 #include <iostream>
 
 #include "engine/util/check.h"
 #include "server/job_runner.h"
+#include "server/log_line.h"
 
 namespace omnirig::server {
 
@@ -130,7 +132,9 @@ void WorkerPool::Heartbeat() {
   }
   try {
     store_.RecordHeartbeat(self);
-    if (!store_.RecoverExpiredLeases(options_.max_attempts).requeued.empty()) Notify();
+    const storage::RecoveryReport recovered = store_.RecoverExpiredLeases(options_.max_attempts);
+    LogRecovery(store_, recovered, "lease_expired");
+    if (!recovered.requeued.empty()) Notify();
   } catch (const std::exception& e) {
     std::cerr << "omnirig: heartbeat not recorded: " << e.what() << std::endl;
   }
@@ -205,6 +209,7 @@ void WorkerPool::RunJob(const storage::JobRecord& job) {
     if (stopping_) running->interrupt = true;
   }
   ++busy_;
+  LogJobState(job, {{"worker", options_.worker_id}});
   if (options_.on_job_changed) options_.on_job_changed(job.id);
   const auto start = std::chrono::steady_clock::now();
   JobRunOptions run_options;
@@ -229,16 +234,24 @@ void WorkerPool::RunJob(const storage::JobRecord& job) {
       // Another worker owns the job now; FinishJob would be refused anyway.
       std::cerr << "omnirig: job " << job.id << " stopped after losing its lease" << std::endl;
     } else if (handed_back) {
-      if (store_.RequeueJob(job.id, job.lease_token)) RemoveOtherAttempts(data_dir_, job);
+      if (store_.RequeueJob(job.id, job.lease_token)) {
+        RemoveOtherAttempts(data_dir_, job);
+        LogJobState(job.id, job.type, "queued", job.attempts, {{"reason", "drain"}});
+      }
     } else if (!store_.FinishJob(job.id, job.lease_token, outcome)) {
       // The lease ran out before the heartbeat saw it (or the job is no longer running).
       std::cerr << "omnirig: the end of job " << job.id
                 << " was refused: its lease went to another run" << std::endl;
     } else {
       RemoveOtherAttempts(data_dir_, job);
-      metrics_.ObserveJobDuration(
-          job.type, storage::JobStateName(outcome.state),
-          std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+      const double duration_s =
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+      metrics_.ObserveJobDuration(job.type, storage::JobStateName(outcome.state), duration_s);
+      char duration[32];
+      std::snprintf(duration, sizeof(duration), "%.3f", duration_s);
+      LogFields detail = {{"duration_s", duration}};
+      if (outcome.error) detail.push_back({"error_code", outcome.error->code});
+      LogJobState(job.id, job.type, storage::JobStateName(outcome.state), job.attempts, detail);
     }
   } catch (const std::exception& e) {
     // The job stays `running` in the store; its lease expires and it is re-queued.
