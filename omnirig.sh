@@ -19,8 +19,9 @@ APT_PACKAGES=(build-essential cmake ninja-build ccache pkg-config git
   nlohmann-json3-dev libsqlite3-dev sqlite3 googletest libgtest-dev libbenchmark-dev
   libssl-dev libpq-dev libopengv-dev nodejs npm curl jq)
 # Only the tests need these: the browser they drive, a PostgreSQL server they start themselves,
-# and clang with its libFuzzer and sanitizer runtimes for the fuzz targets (fuzz/).
-TEST_APT_PACKAGES=(chromium postgresql clang libclang-rt-14-dev)
+# clang with its libFuzzer and sanitizer runtimes for the fuzz targets (fuzz/), and unzip, which
+# checks the job archives the server streams.
+TEST_APT_PACKAGES=(chromium postgresql clang libclang-rt-14-dev unzip)
 JOBS=${OMNIRIG_JOBS:-$(nproc)}
 # Cache compiles by paths relative to the checkout, so that a second clone reuses them.
 export CCACHE_BASEDIR="$ROOT"

@@ -9,6 +9,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdio>
 #include <cstring>
 #include <fstream>
 #include <iostream>
@@ -18,6 +19,7 @@
 
 #include "api/service_json.h"
 #include "engine/util/check.h"
+#include "server/log_line.h"
 #include "storage/data_dir.h"
 #include "storage/job_store.h"
 
@@ -339,12 +341,20 @@ void WriteResponse(const httplib::Request& req, HttpResponse response, bool clos
   if (response.file && response.status == 200) {
     SetFile(req, response, res);
   } else if (response.stream) {
-    res.set_chunked_content_provider(response.content_type, [stream = std::move(response.stream)](
+    res.set_chunked_content_provider(response.content_type, [stream = std::move(response.stream),
+                                                             path = req.path](
                                                                 size_t, httplib::DataSink& sink) {
       std::string chunk;
-      if (!stream(chunk)) {
-        sink.done();
-        return true;
+      try {
+        if (!stream(chunk)) {
+          sink.done();
+          return true;
+        }
+      } catch (const std::exception& e) {
+        // The status went out long ago: the connection drops without the last chunk, so that
+        // the client sees a broken transfer rather than a short body that looks whole.
+        LogEvent("stream_failed", {{"path", path}, {"message", e.what()}});
+        return false;
       }
       return chunk.empty() || sink.write(chunk.data(), chunk.size());
     });
@@ -615,10 +625,18 @@ void HttpServer::Impl::Install() {
     res.set_content(api::JsonText(api::ErrorJson(DefaultErrorCode(res.status), message)),
                     "application/json");
   });
-  server.set_logger([this](const httplib::Request&, const httplib::Response& res) {
+  server.set_logger([this](const httplib::Request& req, const httplib::Response& res) {
     const double seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - request_start).count();
     if (counter) counter(current_route, res.status, seconds);
+    char duration_ms[32];
+    std::snprintf(duration_ms, sizeof(duration_ms), "%.3f", seconds * 1e3);
+    LogEvent("request", {{"method", req.method},
+                         {"path", req.path},
+                         {"status", std::to_string(res.status)},
+                         {"duration_ms", duration_ms},
+                         {"route", current_route},
+                         {"remote", req.remote_addr}});
   });
 }
 

@@ -72,7 +72,8 @@ struct HttpResponse {
   int64_t file_size = 0;
   // When set, the body is streamed instead of `body` (chunked; e.g. Server-Sent Events): called
   // again and again on the serving thread, it may block, appends what to send next to `chunk`
-  // (nothing is fine) and returns false to end the response.
+  // (nothing is fine) and returns false to end the response. When it throws, the connection
+  // closes without the terminating chunk (the client sees an incomplete transfer).
   std::function<bool(std::string& chunk)> stream;
 
   void Json(int status_code, const nlohmann::json& json);

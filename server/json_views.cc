@@ -22,8 +22,19 @@ nlohmann::json DatasetJson(const storage::DatasetRecord& dataset,
 }
 
 nlohmann::json ImageJson(const storage::ImageRecord& image) {
-  return {{"name", image.name},     {"size", image.size},     {"width", image.width},
-          {"height", image.height}, {"sha256", image.sha256}, {"content_type", image.content_type}};
+  const size_t slash = image.name.find('/');
+  // Only a header read at upload knows the size: videos and .tum files have none.
+  const auto pixels = [&image](int value) {
+    return image.width > 0 ? nlohmann::json(value) : nlohmann::json(nullptr);
+  };
+  return {{"name", image.name},
+          {"camera", slash == std::string::npos ? nlohmann::json(nullptr)
+                                                : nlohmann::json(image.name.substr(0, slash))},
+          {"size", image.size},
+          {"width", pixels(image.width)},
+          {"height", pixels(image.height)},
+          {"sha256", image.sha256},
+          {"content_type", image.content_type}};
 }
 
 nlohmann::json JobJson(const storage::JobRecord& job) {

@@ -1,7 +1,9 @@
 #pragma once
 // JSON forms of the stored records, with the names the API promises:
 //   dataset:  {"id", "name", "created_at", "image_count", "total_bytes"[, "images": [image]]}
-//   image:    {"name", "size", "width", "height", "sha256", "content_type"}
+//   image:    {"name", "camera" (its folder, e.g. "cam0", or null), "size" (bytes), "width",
+//              "height" (pixels, null when no header tells them: videos, .tum), "sha256",
+//              "content_type"}
 //   job:      {"id", "type", "dataset", "params", "state", "progress": {"fraction", "stage",
 //              "message", "eta_s"}, "created_at", "started_at", "finished_at", "attempts",
 //              "cancel_requested", "error": null | {"code", "message"}, "worker": null |

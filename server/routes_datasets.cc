@@ -535,6 +535,44 @@ void GetImage(ServiceState& state, const HttpRequest& request, HttpResponse& res
   response.file_size = image->size;
 }
 
+// GET .../images: every file of the dataset by name, with its camera folder.
+void ListImages(ServiceState& state, const HttpRequest& request, HttpResponse& response) {
+  const storage::DatasetRecord dataset = RequireDataset(state, request.Param("id"));
+  nlohmann::json list = nlohmann::json::array();
+  for (const auto& image : state.store->ListImages(dataset.id)) list.push_back(ImageJson(image));
+  response.Json(200, list);
+}
+
+// DELETE .../images/{name} (a name may hold its camera folder: cam0/x.png): the record goes
+// first, so that no listing or job sees a record without its file; a crash before the file
+// goes leaves a file no record names, which an upload of that name replaces. 409 while a
+// queued or running job uses the dataset (it reads the images it listed when it started).
+void DeleteImage(ServiceState& state, const HttpRequest& request, HttpResponse& response) {
+  const storage::DatasetRecord dataset = RequireDataset(state, request.Param("id"));
+  const std::string name = CheckedName(request.Param("name"));
+  // Uploads commit under this lock: none lands between the checks and the removal.
+  std::lock_guard<std::mutex> lock(state.files_mutex);
+  if (!state.store->GetImage(dataset.id, name)) {
+    throw HttpError(404, "image_not_found", "dataset " + dataset.id + " has no file " + name,
+                    {{"dataset", dataset.id}, {"name", name}});
+  }
+  if (const int64_t active = state.store->CountActiveJobs(dataset.id); active > 0) {
+    throw HttpError(409, "dataset_in_use",
+                    "dataset " + dataset.id + " has " + std::to_string(active) +
+                        " queued or running job(s): remove " + name + " once they ended",
+                    {{"active_jobs", active}, {"name", name}});
+  }
+  state.store->DeleteImage(dataset.id, name);
+  const std::filesystem::path images = state.data_dir->ImagesDir(dataset.id);
+  std::error_code ignored;
+  std::filesystem::remove(images / name, ignored);
+  // An emptied camera folder goes too (remove() leaves a folder that still holds files).
+  if (const auto folder = (images / name).parent_path(); folder != images) {
+    std::filesystem::remove(folder, ignored);
+  }
+  response.status = 204;
+}
+
 void DeleteDataset(ServiceState& state, const HttpRequest& request, HttpResponse& response) {
   const std::string& id = request.Param("id");
   RequireDataset(state, id);
@@ -579,7 +617,9 @@ void AddDatasetRoutes(HttpServer& http, ServiceState& state) {
              /*streaming=*/true);
   http.Route("GET", "/api/v1/datasets/{id}/uploads/{name+}", WithState(state, GetUpload));
   http.Route("DELETE", "/api/v1/datasets/{id}/uploads/{name+}", WithState(state, DeleteUpload));
+  http.Route("GET", "/api/v1/datasets/{id}/images", WithState(state, ListImages));
   http.Route("GET", "/api/v1/datasets/{id}/images/{name+}", WithState(state, GetImage));
+  http.Route("DELETE", "/api/v1/datasets/{id}/images/{name+}", WithState(state, DeleteImage));
 }
 
 }  // namespace omnirig::server

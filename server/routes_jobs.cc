@@ -12,7 +12,9 @@
 #include "api/stereo_job.h"
 #include "engine/util/check.h"
 #include "server/json_views.h"
+#include "server/log_line.h"
 #include "server/service.h"
+#include "server/zip_stream.h"
 #include "storage/image_header.h"
 
 namespace omnirig::server {
@@ -136,6 +138,7 @@ void CreateJob(ServiceState& state, const HttpRequest& request, HttpResponse& re
   }
   const storage::JobRecord job =
       state.store->CreateJob(parsed.type, parsed.dataset, parsed.params.dump());
+  LogJobState(job, {{"dataset", job.dataset_id}});
   state.workers->Notify();
   state.events->Changed(job.id);
   response.headers.emplace("Location", "/api/v1/jobs/" + job.id);
@@ -177,6 +180,9 @@ void CancelJob(ServiceState& state, const HttpRequest& request, HttpResponse& re
   }
   const auto after = state.store->RequestCancel(id);
   if (after == storage::JobState::kRunning) state.workers->Cancel(id);
+  if (after == storage::JobState::kCanceled) {
+    LogJobState(id, before.type, "canceled", before.attempts, {{"reason", "canceled while queued"}});
+  }
   state.events->Changed(id);
   response.Json(after == storage::JobState::kRunning ? 202 : 200, JobJson(RequireJob(state, id)));
 }
@@ -189,6 +195,7 @@ void DeleteJob(ServiceState& state, const HttpRequest& request, HttpResponse& re
   }
   std::error_code ignored;
   std::filesystem::remove_all(state.data_dir->JobDir(id), ignored);
+  LogJobState(id, job.type, "deleted", job.attempts);
   state.events->Changed(id);
   response.status = 204;
 }
@@ -210,6 +217,7 @@ void RetryJob(ServiceState& state, const HttpRequest& request, HttpResponse& res
   // Read before the workers are told: the reply shows the job back in the queue (a worker of
   // another process, or one polling, may still claim it first: then it says "running").
   const storage::JobRecord requeued = RequireJob(state, id);
+  LogJobState(id, requeued.type, "queued", requeued.attempts, {{"reason", "retry"}});
   state.workers->Notify();
   state.events->Changed(id);
   response.Json(202, JobJson(requeued));
@@ -258,6 +266,30 @@ void GetArtifact(ServiceState& state, const HttpRequest& request, HttpResponse& 
   }
   if (name == "log.txt" && ServeLiveLog(state, job, response)) return;
   throw HttpError(404, "artifact_not_found", "job " + id + " has no artifact " + name);
+}
+
+// GET .../artifacts.zip: every artifact of a job that ended, in one archive streamed as it is
+// read from disk (server/zip_stream.h); 409 while the job has not ended (its artifacts are
+// recorded when it does).
+void GetArtifactsZip(ServiceState& state, const HttpRequest& request, HttpResponse& response) {
+  const storage::JobRecord job = RequireJob(state, request.Param("id"));
+  if (!storage::IsTerminal(job.state)) {
+    throw HttpError(409, "job_not_finished",
+                    "job " + job.id + " is " + storage::JobStateName(job.state) +
+                        ": its artifacts are recorded when it ends",
+                    {{"state", storage::JobStateName(job.state)}});
+  }
+  std::vector<ZipEntry> entries;
+  for (const storage::ArtifactRecord& artifact : state.store->ListArtifacts(job.id)) {
+    entries.push_back(
+        {artifact.name, state.data_dir->root() / artifact.path, artifact.size, artifact.sha256});
+  }
+  auto zip = std::make_shared<ZipStream>(std::move(entries));
+  response.content_type = "application/zip";
+  response.headers.emplace("Content-Disposition",
+                           "attachment; filename=\"" + job.type + "-" + job.id + ".zip\"");
+  response.headers.emplace("Cache-Control", "no-store");
+  response.stream = [zip](std::string& chunk) { return zip->Next(chunk); };
 }
 
 double RequiredNumber(const HttpRequest& request, const std::string& name) {
@@ -363,6 +395,7 @@ void AddJobRoutes(HttpServer& http, ServiceState& state) {
                }
                response.Json(200, list);
              });
+  http.Route("GET", "/api/v1/jobs/{id}/artifacts.zip", WithState(state, GetArtifactsZip));
   http.Route("GET", "/api/v1/jobs/{id}/artifacts/{name+}", WithState(state, GetArtifact));
   http.Route("GET", "/api/v1/jobs/{id}/epipolar", WithState(state, GetEpipolar));
 }

@@ -9,6 +9,7 @@
 #include "api/job_types.h"
 #include "api/sample_job.h"
 #include "engine/util/check.h"
+#include "server/log_line.h"
 #include "storage/atomic_file.h"
 #include "storage/postgres_job_store.h"
 #include "storage/sqlite_job_store.h"
@@ -139,6 +140,8 @@ Service::Service(const ServiceOptions& options) : state_(std::make_unique<Servic
                        : state.store->RecoverExpiredLeases(options.workers.max_attempts);
   state.events = std::make_unique<JobEvents>(*state.store);
   PrintStartupReport(state);
+  LogRecovery(*state.store, state.recovery,
+              options.database.empty() ? "interrupted" : "lease_expired");
   WorkerPoolOptions pool_options = options.workers;
   pool_options.min_free_bytes = options.min_free_bytes;  // one reserve for uploads and jobs
   pool_options.on_job_changed = [events = state.events.get()](const std::string& id) {

@@ -5,12 +5,14 @@
 #include <unistd.h>
 
 #include <cerrno>
+#include <cstdio>
 #include <chrono>
 #include <cstring>
 #include <iostream>
 
 #include "engine/util/check.h"
 #include "server/job_runner.h"
+#include "server/log_line.h"
 
 namespace omnirig::server {
 
@@ -136,7 +138,9 @@ void WorkerPool::Heartbeat() {
   }
   try {
     store_.RecordHeartbeat(self);
-    if (!store_.RecoverExpiredLeases(options_.max_attempts).requeued.empty()) Notify();
+    const storage::RecoveryReport recovered = store_.RecoverExpiredLeases(options_.max_attempts);
+    LogRecovery(store_, recovered, "lease_expired");
+    if (!recovered.requeued.empty()) Notify();
   } catch (const std::exception& e) {
     std::cerr << "omnirig: heartbeat not recorded: " << e.what() << std::endl;
   }
@@ -246,6 +250,7 @@ void WorkerPool::RunJob(const storage::JobRecord& job) {
     if (stopping_) running->interrupt = true;
   }
   ++busy_;
+  LogJobState(job, {{"worker", options_.worker_id}});
   if (options_.on_job_changed) options_.on_job_changed(job.id);
   const auto start = std::chrono::steady_clock::now();
   JobRunOptions run_options;
@@ -269,10 +274,21 @@ void WorkerPool::RunJob(const storage::JobRecord& job) {
   // The store was away during the run (RunJobAttempt): queued again, not failed.
   handed_back = handed_back || outcome.state == storage::JobState::kQueued;
   running->ending = true;
-  if (RecordEnd(job, *running, handed_back, outcome) && !handed_back) {
-    metrics_.ObserveJobDuration(
-        job.type, storage::JobStateName(outcome.state),
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+  if (RecordEnd(job, *running, handed_back, outcome)) {
+    if (handed_back) {
+      LogJobState(job.id, job.type, "queued", job.attempts,
+                  {{"reason", outcome.state == storage::JobState::kQueued ? "store_unavailable"
+                                                                         : "drain"}});
+    } else {
+      const double duration_s =
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+      metrics_.ObserveJobDuration(job.type, storage::JobStateName(outcome.state), duration_s);
+      char duration[32];
+      std::snprintf(duration, sizeof(duration), "%.3f", duration_s);
+      LogFields detail = {{"duration_s", duration}};
+      if (outcome.error) detail.push_back({"error_code", outcome.error->code});
+      LogJobState(job.id, job.type, storage::JobStateName(outcome.state), job.attempts, detail);
+    }
   }
   if (options_.on_job_changed) options_.on_job_changed(job.id);
   --busy_;

@@ -12,9 +12,13 @@
 
 #include <algorithm>
 #include <chrono>
+#include <csignal>
+#include <cstdio>
 #include <cstdlib>
 #include <fstream>
 #include <map>
+#include <regex>
+#include <sstream>
 #include <set>
 #include <thread>
 #include <vector>
@@ -32,6 +36,7 @@ namespace omnirig::testing {
 namespace {
 
 using nlohmann::json;
+namespace fs = std::filesystem;
 
 class ServerApiTest : public ::testing::Test {
  protected:
@@ -235,6 +240,56 @@ TEST_F(ServerApiTest, DatasetLifecycleAndIdempotentUpload) {
   EXPECT_EQ(client.Delete(("/api/v1/datasets/" + id).c_str())->status, 204);
   ExpectError(client.Get(("/api/v1/datasets/" + id).c_str()), 404, "dataset_not_found");
   EXPECT_FALSE(std::filesystem::exists(dir_.path() / "data" / "datasets" / id));
+}
+
+TEST_F(ServerApiTest, ListsImagesAndRemovesOneWhenNoJobUsesTheDataset) {
+  auto& client = Start();
+  const std::string id = CreateDataset(client);
+  const std::string base = "/api/v1/datasets/" + id + "/images";
+  const std::string a = PngBytes(64, 48, 1), b = PngBytes(32, 24, 2);
+  ASSERT_EQ(client.Put((base + "/cam0/a.png").c_str(), a, "image/png")->status, 201);
+  ASSERT_EQ(client.Put((base + "/cam1/a.png").c_str(), b, "image/png")->status, 201);
+  ASSERT_EQ(client.Put((base + "/trajectory.tum").c_str(), "1 0 0 0 0 0 0 1\n", "text/plain")
+                ->status,
+            201);
+  const json listed = JsonOf(client.Get(base.c_str()));
+  ASSERT_EQ(listed.size(), 3u) << listed.dump();
+  EXPECT_EQ(listed[0]["name"], "cam0/a.png");
+  EXPECT_EQ(listed[0]["camera"], "cam0");
+  EXPECT_EQ(listed[0]["size"], a.size());
+  EXPECT_EQ(listed[0]["width"], 64);
+  EXPECT_EQ(listed[0]["height"], 48);
+  EXPECT_EQ(listed[1]["camera"], "cam1");
+  EXPECT_EQ(listed[2]["name"], "trajectory.tum");
+  EXPECT_TRUE(listed[2]["camera"].is_null());
+  EXPECT_TRUE(listed[2]["width"].is_null());
+  ExpectError(client.Get("/api/v1/datasets/0000000000000000/images"), 404, "dataset_not_found");
+
+  // While a job uses the dataset, nothing of it goes.
+  const std::string job = SubmitSleep(client, id, {{"steps", 100000}, {"step_ms", 10}})["id"];
+  ExpectError(client.Delete((base + "/cam1/a.png").c_str()), 409, "dataset_in_use");
+  ExpectError(client.Delete((base + "/cam1/none.png").c_str()), 404, "image_not_found");
+  ASSERT_EQ(client.Post(("/api/v1/jobs/" + job + "/cancel").c_str())->status / 100, 2);
+  ASSERT_EQ(WaitForJob(port_, job, 20)["state"], "canceled");
+
+  // The camera folder sent URL-encoded, as a browser's encodeURIComponent writes it.
+  const auto removed = client.Delete((base + "/cam1%2Fa.png").c_str());
+  ASSERT_EQ(removed->status, 204) << removed->body;
+  ExpectError(client.Delete((base + "/cam1/a.png").c_str()), 404, "image_not_found");
+  ExpectError(client.Get((base + "/cam1/a.png").c_str()), 404, "image_not_found");
+  ExpectError(client.Delete((base + "/../x.png").c_str()), 400, "invalid_name");
+  const fs::path images = dir_.path() / "data" / "datasets" / id / "images";
+  EXPECT_FALSE(fs::exists(images / "cam1" / "a.png"));
+  EXPECT_FALSE(fs::exists(images / "cam1"));  // the emptied camera folder
+  EXPECT_TRUE(fs::exists(images / "cam0" / "a.png"));
+  const json dataset = JsonOf(client.Get(("/api/v1/datasets/" + id).c_str()));
+  EXPECT_EQ(dataset["image_count"], 2);
+  EXPECT_EQ(dataset["total_bytes"], a.size() + 16);
+  ASSERT_EQ(JsonOf(client.Get(base.c_str())).size(), 2u);
+  // The name is free again.
+  EXPECT_EQ(client.Put((base + "/cam1/a.png").c_str(), b, "image/png")->status, 201);
+  EXPECT_EQ(client.Delete((base + "/trajectory.tum").c_str())->status, 204);
+  EXPECT_EQ(JsonOf(client.Get(("/api/v1/datasets/" + id).c_str()))["image_count"], 2);
 }
 
 TEST_F(ServerApiTest, MultipartUpload) {
@@ -523,6 +578,112 @@ TEST_F(ServerApiTest, JobRunsAndServesResultAndArtifacts) {
               "artifact_not_found");
   const auto log = client.Get(("/api/v1/jobs/" + id + "/artifacts/log.txt").c_str());
   EXPECT_NE(log->body.find("slept 5 steps"), std::string::npos) << log->body;
+}
+
+// Runs a shell command; returns its stdout and stderr, and its exit status in `status`.
+std::string RunCommand(const std::string& command, int* status) {
+  std::string output;
+  FILE* pipe = ::popen((command + " 2>&1").c_str(), "r");
+  char buffer[4096];
+  size_t got;
+  while ((got = std::fread(buffer, 1, sizeof(buffer), pipe)) > 0) output.append(buffer, got);
+  *status = ::pclose(pipe);
+  return output;
+}
+
+TEST_F(ServerApiTest, ArtifactsZipHoldsEveryArtifactAsRecorded) {
+  auto& client = Start();
+  const std::string dataset = CreateDataset(client);
+  client.Put(("/api/v1/datasets/" + dataset + "/images/a.png").c_str(), PngBytes(8, 8),
+             "image/png");
+  const std::string id = SubmitSleep(client, dataset, {{"steps", 2}, {"step_ms", 5}, {"output_kb", 700}})["id"];
+  ASSERT_EQ(WaitForJob(port_, id, 20)["state"], "succeeded");
+  const auto zip = client.Get(("/api/v1/jobs/" + id + "/artifacts.zip").c_str());
+  ASSERT_EQ(zip->status, 200) << zip->body;
+  EXPECT_EQ(zip->get_header_value("Content-Type"), "application/zip");
+  EXPECT_EQ(zip->get_header_value("Content-Disposition"),
+            "attachment; filename=\"test_sleep-" + id + ".zip\"");
+  EXPECT_EQ(zip->get_header_value("Transfer-Encoding"), "chunked");  // streamed, not buffered
+  const fs::path archive = dir_.path() / "artifacts.zip";
+  std::ofstream(archive, std::ios::binary) << zip->body;
+  int status = 0;
+  const std::string tested = RunCommand("unzip -t " + archive.string(), &status);
+  ASSERT_EQ(status, 0) << tested;
+  EXPECT_NE(tested.find("No errors detected"), std::string::npos) << tested;
+
+  const json artifacts = JsonOf(client.Get(("/api/v1/jobs/" + id + "/artifacts").c_str()));
+  std::set<std::string> recorded, archived;
+  for (const auto& artifact : artifacts) recorded.insert(artifact["name"].get<std::string>());
+  std::istringstream names(RunCommand("unzip -Z1 " + archive.string(), &status));
+  for (std::string line; std::getline(names, line);) archived.insert(line);
+  EXPECT_EQ(archived, recorded);
+  for (const auto& artifact : artifacts) {
+    const std::string name = artifact["name"];
+    const std::string bytes = RunCommand("unzip -p " + archive.string() + " " + name, &status);
+    EXPECT_EQ(storage::Sha256Hex(bytes), artifact["sha256"]) << name;
+  }
+
+  // A job that has not ended has no recorded artifacts yet.
+  const std::string running =
+      SubmitSleep(client, dataset, {{"steps", 100000}, {"step_ms", 10}})["id"];
+  ExpectError(client.Get(("/api/v1/jobs/" + running + "/artifacts.zip").c_str()), 409,
+              "job_not_finished");
+  client.Post(("/api/v1/jobs/" + running + "/cancel").c_str());
+  ExpectError(client.Get("/api/v1/jobs/0000000000000000/artifacts.zip"), 404, "job_not_found");
+}
+
+// The server's own stderr, from a child process that ran requests and jobs and then stopped.
+TEST_F(ServerApiTest, LogsOneLinePerRequestAndPerJobStateChange) {
+  const fs::path log = dir_.path() / "server.log";
+  ServerProcess server;
+  const int port =
+      server.Start({"--port", "0", "--data", (dir_.path() / "data").string(), "--workers", "1",
+                    "--threads-per-job", "1", "--web", ""},
+                   log);
+  auto client = MakeClient(port);
+  ASSERT_EQ(client->Get("/api/v1/health")->status, 200);
+  ASSERT_EQ(client->Get("/api/v1/jobs/0000000000000000")->status, 404);
+  const std::string dataset = CreateDataset(*client);
+  client->Put(("/api/v1/datasets/" + dataset + "/images/a b.png").c_str(), PngBytes(8, 8),
+              "image/png");
+  client->Put(("/api/v1/datasets/" + dataset + "/images/a.png").c_str(), PngBytes(8, 8),
+              "image/png");
+  const std::string done = SubmitSleep(*client, dataset, {{"steps", 2}, {"step_ms", 5}})["id"];
+  ASSERT_EQ(WaitForJob(port, done, 20)["state"], "succeeded");
+  const std::string failed =
+      SubmitSleep(*client, dataset, {{"steps", 1}, {"step_ms", 5}, {"fail", true}})["id"];
+  ASSERT_EQ(WaitForJob(port, failed, 20)["state"], "failed");
+  server.Kill(SIGTERM);
+  ASSERT_EQ(server.Wait(), 0);  // every line written before it exits
+
+  std::ifstream in(log);
+  std::vector<std::string> lines;
+  for (std::string line; std::getline(in, line);) lines.push_back(line);
+  const auto count = [&lines](const std::string& pattern) {
+    const std::regex re(pattern);
+    return std::count_if(lines.begin(), lines.end(),
+                         [&re](const std::string& line) { return std::regex_search(line, re); });
+  };
+  const std::string ts = R"(^omnirig: ts=\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d\.\d{3}Z )";
+  EXPECT_EQ(count(ts + R"(event=request method=GET path=/api/v1/health status=200 )"
+                       R"(duration_ms=\d+\.\d{3} route="GET /api/v1/health" remote=127\.0\.0\.1$)"),
+            1);
+  EXPECT_EQ(count(ts + R"(event=request method=GET path=/api/v1/jobs/0000000000000000 status=404 )"),
+            1);
+  // A value with a space is quoted (and the name refused).
+  EXPECT_EQ(count(ts + R"(event=request method=PUT path="/api/v1/datasets/\w+/images/a b\.png" )"
+                       R"(status=400 )"),
+            1);
+  const std::string job = "event=job job=" + done + " type=test_sleep ";
+  EXPECT_EQ(count(ts + job + "state=queued attempt=0 dataset=" + dataset + "$"), 1);
+  EXPECT_EQ(count(ts + job + R"(state=running attempt=1 worker=\S+:\d+$)"), 1);
+  EXPECT_EQ(count(ts + job + R"(state=succeeded attempt=1 duration_s=\d+\.\d{3}$)"), 1);
+  EXPECT_EQ(count(ts + "event=job job=" + failed +
+                  R"( type=test_sleep state=failed attempt=1 duration_s=\S+ error_code=\w+$)"),
+            1);
+  // One line per change: progress writes log nothing.
+  EXPECT_EQ(count("event=job job=" + done + " "), 3);
+  for (const std::string& line : lines) EXPECT_EQ(line.find('\r'), std::string::npos);
 }
 
 TEST_F(ServerApiTest, RefusesBadJobs) {
@@ -967,3 +1128,10 @@ TEST_F(ServerApiTest, RealCalibrationJob) {
 
 }  // namespace
 }  // namespace omnirig::testing
+
+int main(int argc, char** argv) {
+  int exit_code = 0;
+  if (omnirig::testing::ServeIfRequested(argc, argv, exit_code)) return exit_code;
+  ::testing::InitGoogleTest(&argc, argv);
+  return RUN_ALL_TESTS();
+}

@@ -27,6 +27,7 @@
 // --url runs against an already running server instead of starting one (for development).
 
 import { spawn, spawnSync } from 'node:child_process';
+import crypto from 'node:crypto';
 import fs from 'node:fs';
 import os from 'node:os';
 import path from 'node:path';
@@ -219,7 +220,8 @@ async function launchBrowser() {
   const context = await chromium.launchPersistentContext(userDataDir, {
     executablePath: CHROMIUM,
     headless: true,
-    viewport: { width: 1366, height: 900 },
+    viewport: { width: WIDTHS[0], height: 900 },
+    acceptDownloads: true,
     args: ['--headless', '--no-sandbox', '--disable-gpu', '--disable-quic', '--no-first-run',
       '--disable-background-networking', '--disable-component-update', '--disable-sync'],
   });
@@ -273,6 +275,80 @@ async function imagesLoaded(page, selector, what) {
   return page.$$eval(selector, (images) => images.map((i) => [i.naturalWidth, i.naturalHeight]));
 }
 
+// ---- what a user sees at a glance ----------------------------------------------------------------
+
+// The page is read at these widths: a laptop, and a narrow window (half a screen, a tablet).
+const WIDTHS = [1280, 800];
+
+// Runs `fn(width)` at each width with the page scrolled to `selector`, taking a screenshot
+// `name-WIDTH` each time; the page does not overflow the window sideways.
+async function atWidths(page, name, selector, fn) {
+  const results = [];
+  for (const width of WIDTHS) {
+    await page.setViewportSize({ width, height: 900 });
+    if (selector) await page.$eval(selector, (n) => n.scrollIntoView());
+    const overflow = await page.evaluate(() => document.documentElement.scrollWidth - window.innerWidth);
+    check(overflow <= 0, `at ${width} px the page fits the window's width (${overflow} px too wide)`);
+    results.push(await fn(width));
+    await screenshot(page, `${name}-${width}`);
+  }
+  await page.setViewportSize({ width: WIDTHS[0], height: 900 });
+  return results;
+}
+
+const FULL_ID = /\b[0-9a-f]{16}\b/;
+
+// The text under `selector` names things and shows no 16-digit id.
+async function checkNoIds(page, selector, what) {
+  const text = await page.$eval(selector, (n) => n.innerText || n.textContent);
+  const id = FULL_ID.exec(text);
+  check(!id, `${what} shows names, not ids (found ${id && id[0]} in "${text.replace(/\s+/g, ' ').slice(0, 200)}")`);
+  return text;
+}
+
+// Every value image under `scope` (figure.value-image) carries its colour bar: a continuous one
+// with its unit and a finite range, or a key of its categories. Returns the bars' descriptions.
+async function checkColourBars(page, scope, expected) {
+  await page.waitForFunction(({ sel, n }) => {
+    const figures = [...document.querySelectorAll(`${sel} figure.value-image`)];
+    return figures.length >= n && figures.every((f) => f.querySelector('.colour-bar'));
+  }, { sel: scope, n: expected }, { timeout: 60000 }).catch(() => check(false, `${expected} value image(s) under ${scope} with colour bars`));
+  const bars = await page.$$eval(`${scope} figure.value-image .colour-bar`, (list) => list.map((b) => ({
+    unit: b.dataset.unit, min: Number(b.dataset.min), max: Number(b.dataset.max), caption: b.querySelector('figcaption')?.textContent || '',
+    drawn: b.querySelector('canvas') ? b.querySelector('canvas').width : b.querySelectorAll('li').length,
+    visible: b.getBoundingClientRect().width > 0 })));
+  for (const bar of bars) {
+    check(bar.visible && bar.drawn > 0, `the colour bar "${bar.caption}" is drawn`);
+    if (bar.unit === 'category') continue;
+    check(bar.unit && Number.isFinite(bar.min) && Number.isFinite(bar.max) && bar.max > bar.min,
+      `the colour bar "${bar.caption}" has a unit and a scale (${bar.unit}, ${bar.min} to ${bar.max})`);
+    check(bar.caption.includes(bar.unit), `the colour bar's caption states its unit (${bar.caption})`);
+  }
+  return bars.map((b) => (b.unit === 'category' ? b.caption : `${b.caption}: ${b.min.toPrecision(3)} to ${b.max.toPrecision(3)}`));
+}
+
+// The job page's "Download all as zip": the browser's download is a zip that unzip tests whole,
+// holding exactly the job's artifacts, each with its recorded SHA-256. Kept in the output folder.
+async function checkZipDownload(page, server, jobId) {
+  const link = await page.waitForSelector('#download-zip');
+  const [download] = await Promise.all([page.waitForEvent('download'), link.click()]);
+  fs.mkdirSync(ARGS.out, { recursive: true });
+  const file = path.join(ARGS.out, download.suggestedFilename());
+  await download.saveAs(file);
+  const tested = spawnSync('unzip', ['-t', file], { encoding: 'utf8' });
+  check(tested.status === 0 && /No errors detected/.test(tested.stdout), `unzip -t passes on ${file} (${tested.stdout}${tested.stderr})`);
+  const listed = spawnSync('unzip', ['-Z1', file], { encoding: 'utf8' }).stdout.split('\n').filter(Boolean).sort();
+  const artifacts = await (await fetch(`${server.url}/api/v1/jobs/${jobId}/artifacts`)).json();
+  check(JSON.stringify(listed) === JSON.stringify(artifacts.map((a) => a.name).sort()),
+    `the zip holds the job's artifacts (${listed.join(', ')})`);
+  for (const a of artifacts) {
+    const bytes = spawnSync('unzip', ['-p', file, a.name], { maxBuffer: 1 << 30 }).stdout;
+    check(crypto.createHash('sha256').update(bytes).digest('hex') === a.sha256, `${a.name} in the zip has its recorded SHA-256`);
+  }
+  log(`zip download: ${path.basename(file)}, ${listed.length} entries, ${fs.statSync(file).size} bytes, checked`);
+  return `the zip (${listed.length} artifacts) downloads whole`;
+}
+
 // ---- steps --------------------------------------------------------------------------------------
 
 // Creates a dataset from the page and uploads `dir` with the folder picker; returns its id.
@@ -320,8 +396,11 @@ async function submitJob(page, server, datasetId, type, fill) {
     }
     throw new Error(`the server refused the ${type} job: ${message.trim()}`);
   }
-  log(`submitted ${type} job ${text}`);
-  return text.trim();
+  const id = await outcome.getAttribute('data-job-id');
+  check(id && text.includes(id.slice(0, 8)), `the notice names the job by what it runs on, with its short id (${text})`);
+  check(!text.includes(id), `the notice shows no full id (${text})`);
+  log(`submitted ${type} job ${id}: "${text.trim()}"`);
+  return id;
 }
 
 async function fillBoard(page, board) {
@@ -400,6 +479,14 @@ async function stepDatasets(page, server) {
   await page.waitForSelector(`.upload-row.done[data-name="${path.basename(extra)}"]`);
   await page.waitForFunction((n) => document.querySelector('#image-count')?.textContent === String(n), count + 1);
 
+  // An image uploaded by mistake goes again with its Remove button (its camera folder kept in the name).
+  const mistake = names.find((n) => n.startsWith('cam1/'));
+  page.once('dialog', (dialog) => dialog.accept());
+  await page.click(`.thumb button.remove-image[data-name="${mistake}"]`);
+  await page.waitForFunction((n) => document.querySelector('#image-count')?.textContent === String(n), count);
+  const afterRemoval = (await (await fetch(`${server.url}/api/v1/datasets/${id}/images`)).json()).map((i) => i.name);
+  check(!afterRemoval.includes(mistake) && afterRemoval.length === count, `${mistake} was removed (${afterRemoval.length} files left)`);
+
   // A file that is not an image, named like one: the server refuses it, the page shows its message.
   const fake = path.join(TEMP, 'fake', 'not-an-image.png');
   fs.mkdirSync(path.dirname(fake), { recursive: true });
@@ -414,7 +501,8 @@ async function stepDatasets(page, server) {
   await page.waitForSelector(`tr[data-dataset-id="${id}"]`);
   await screenshot(page, 'datasets-list');
   const errors = await jobErrors(page, server, id);
-  return `uploaded ${count} images (${s.source}), resume skipped all, one dropped, non-image refused: ${errorText.trim()}; ${video}; ${errors}`;
+  return `uploaded ${count} images (${s.source}), resume skipped all, one dropped, ${mistake} removed, ` +
+    `non-image refused: ${errorText.trim()}; ${video}; ${errors}`;
 }
 
 // A video larger than one chunk (16 MiB), whose first chunk an earlier session sent: the page
@@ -511,10 +599,14 @@ async function stepCalibration(page, server) {
   await page.waitForSelector('#artifacts tr[data-artifact]');
   await screenshot(page, 'calibration-report');
   const coverage = await checkCoverage(page, server, jobId);
+  await checkNoIds(page, '#job-title', 'the job\'s title');
+  const bars = await atWidths(page, 'calibration-colour-bars', '#coverage', () => checkColourBars(page, '#coverage', 1));
+  const zipped = await checkZipDownload(page, server, jobId);
   const hinted = await rerunWithHint(page, server, jobId, s.board);
   const retried = await retryAndDelete(page, server, second);
   const advised = await checkAdvice(page, server, s);
-  return `calibration job on ${s.source}: RMS ${rms} px, ${used} images used; ${coverage}; ${advised}; ${hinted}; ${retried}`;
+  return `calibration job on ${s.source}: RMS ${rms} px, ${used} images used; ${coverage}; colour bars ${bars[0].join(' | ')}; ${zipped}; ` +
+    `${advised}; ${hinted}; ${retried}`;
 }
 
 // Advice in words: a calibration from only three of the views leaves sectors of the mirror disk
@@ -584,9 +676,9 @@ async function cancelFromList(page, first) {
   await page.click('#job-form button[type=submit]');
   await page.waitForFunction((f) => {
     const link = document.querySelector('#job-form .notice a');
-    return link && link.textContent !== f;
+    return link && link.dataset.jobId !== f;
   }, first);
-  const id = (await page.textContent('#job-form .notice a')).trim();
+  const id = await page.getAttribute('#job-form .notice a', 'data-job-id');
   const row = `#job-list tr[data-job-id="${id}"]`;
   await page.waitForSelector(row);
   await screenshot(page, 'jobs-list');
@@ -893,8 +985,11 @@ async function checkReconstructPairs(page, server, jobId) {
     log(`pair ${pair.name}: range preview ${w}x${h}, ${pair.num_points} points, ${(100 * pair.confident_fraction).toFixed(1)} % confident` +
       `${pair.warning ? `, warning "${pair.warning}"` : ''}`);
   }
-  await page.$eval('#reconstruct-pairs', (c) => c.scrollIntoView());
-  await screenshot(page, 'reconstruct-pairs');
+  let bars = [];
+  if (dense.length) {
+    [bars] = await atWidths(page, 'reconstruct-pairs', '#reconstruct-pairs', () => checkColourBars(page, '#reconstruct-pairs', dense.length));
+    check(bars.every((b) => b.startsWith('Range')), `each range panorama has a range colour bar in metres (${bars.join(' | ')})`);
+  }
   // The last pair's "show in 3D" button swaps the viewer's cloud.
   const last = pairs[pairs.length - 1];
   const button = await page.$(`#reconstruct-pairs .range-pair[data-pair="${last.name}"] button.view-cloud`);
@@ -906,7 +1001,8 @@ async function checkReconstructPairs(page, server, jobId) {
     check(drawn.n > 50, `the cloud of pair ${last.name} was drawn (${drawn.n} pixels)`);
     log(`"Show this pair in the 3D viewer" on ${last.name}: ${last.artifact} drawn, ${drawn.n} pixels`);
   }
-  return `${pairs.length} pair(s) shown${dense.length ? `, ${dense.length} range preview(s) loaded` : ''}, range TIFF and PLY downloads answer 200`;
+  return `${pairs.length} pair(s) shown${dense.length ? `, ${dense.length} range preview(s) loaded with colour bars (${bars[0]})` : ''}, ` +
+    'range TIFF and PLY downloads answer 200';
 }
 
 // SLAM on a synthetic sequence: the rig from a stereo-board set, the sequence uploaded with its
@@ -1102,8 +1198,20 @@ async function stepFirstHour(page, server) {
   await page.click('#first-run li[data-step=sequence] a.step-link');
   await page.waitForSelector('#job-form select[name=rig]');
   await page.selectOption('#job-form select[name=rig]', rigJob);
+  // The pickers name the jobs: type, dataset name, time and a short id, never a full id.
+  const rigChoice = await page.$eval('#job-form select[name=rig]', (s) => s.selectedOptions[0].textContent);
+  check(!FULL_ID.test(rigChoice) && rigChoice.includes('sample: stereo rig') && rigChoice.includes(rigJob.slice(0, 8)),
+    `the rig picker names the job (${rigChoice})`);
+  await checkNoIds(page, '#job-form select[name=dataset]', 'the dataset picker');
+  check(await page.getAttribute('#job-form input[name=ground_truth]', 'placeholder').then((t) => t.includes('trajectory.tum')),
+    'the ground truth\'s placeholder names the sample\'s trajectory.tum');
   await page.fill('#job-form input[name=ground_truth]', 'trajectory.tum');
+  // The dense map is a checkbox with its voxel size (params.dense_map.voxel_m).
+  await page.check('#job-form input[name=dense_map]');
+  await page.fill('#job-form input[name=voxel_m]', '0.05');
   const slamJob = await submitFromForm(page);
+  const slamParams = (await api(`/jobs/${slamJob}`)).params;
+  check(slamParams.dense_map && slamParams.dense_map.voxel_m === 0.05, `the checkbox asked for a dense map (${JSON.stringify(slamParams)})`);
   await followJob(page, server, slamJob, 'first-hour-08-slam', FIRST_HOUR_JOB_MS);
   await page.waitForFunction(() => Number(document.querySelector('#viewer')?.dataset.frames || 0) > 0, null, { timeout: 60000 });
   const drawn = await drawnPixels(page);
@@ -1112,9 +1220,63 @@ async function stepFirstHour(page, server) {
   check(/^done\b/.test(summary), `a succeeded job ends on "done" and its summary (${summary})`);
   await screenshot(page, 'first-hour-09-slam-viewer');
   notes.push(`slam: ${summary}`);
+  notes.push(await checkSlamAtAGlance(page, server, slamJob));
 
   notes.push(await firstHourBadInputs(page, server, { mono, rigJob }));
   return notes.join('; ');
+}
+
+// The slam job's page as a robotics user reads it: the headline (frames tracked, keyframes, loops,
+// ATE and RPE with units, frame rate) agreeing with the result, the occupancy grid over the
+// trajectory with its key, names instead of ids, and every artifact in one zip.
+async function checkSlamAtAGlance(page, server, jobId) {
+  const result = await (await fetch(`${server.url}/api/v1/jobs/${jobId}/result`)).json();
+  await page.waitForSelector('#slam-headline');
+  await checkNoIds(page, '#job-title', 'the slam job\'s title');
+  await checkNoIds(page, '#job-status', 'the slam job\'s status');
+  const item = (key) => page.$eval(`#slam-headline [data-key=${key}] dd`, (n) => n.textContent.trim()).catch(() => '');
+  const [headline] = await atWidths(page, 'first-hour-09b-slam-headline', '#slam-headline', async () => {
+    const shown = {};
+    for (const key of ['frames-tracked', 'keyframes', 'loops', 'ate', 'rpe', 'frame-rate']) shown[key] = await item(key);
+    check(shown['frames-tracked'].startsWith(`${result.num_tracked} of ${result.frames.length}`), `frames tracked (${shown['frames-tracked']})`);
+    check(shown.keyframes === String(result.num_keyframes), `keyframes (${shown.keyframes})`);
+    check(shown.loops === String(result.loops.length), `loop closures (${shown.loops})`);
+    check(result.evaluation, 'the sample sequence has a ground truth: the result has an evaluation');
+    check(/^[0-9.]+ (m|cm|mm)$/.test(shown.ate), `ATE with its unit (${shown.ate})`);
+    check(/^[0-9.]+ (m|cm|mm), [0-9.]+°$/.test(shown.rpe), `RPE with its units (${shown.rpe})`);
+    check(/^[0-9.]+ frames\/s$/.test(shown['frame-rate']), `the frame rate with its unit (${shown['frame-rate']})`);
+    const visible = await page.$eval('#slam-headline', (n) => n.getBoundingClientRect().width > 0);
+    check(visible, 'the headline is visible');
+    return shown;
+  });
+  // The per-frame table and the summary speak in words: no raw keys such as num_scale_inliers.
+  const headers = await page.$$eval('#frame-stats thead th', (ths) => ths.map((t) => t.textContent));
+  check(headers.includes('scale inliers') && !headers.some((h) => /_/.test(h)), `the per-frame columns are named in words (${headers.join(', ')})`);
+  const summaryKeys = await page.$$eval('#result-summary dt', (dts) => dts.map((d) => d.textContent));
+  check(!summaryKeys.some((k) => /_/.test(k)), `the summary is named in words (${summaryKeys.join(', ')})`);
+  // The occupancy grid of the dense map, over the trajectory, with its key.
+  await page.waitForSelector('#occupancy-key');
+  const key = await page.textContent('#occupancy-key');
+  check(/occupied/.test(key) && /free/.test(key) && /unknown/.test(key) && /cells of [0-9.]+ (cm|mm|m)/.test(key), `the occupancy key (${key})`);
+  const grid = await page.$eval('#top-view', (c) => {
+    const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+    let unknown = 0;
+    for (let i = 0; i < d.length; i += 4) if (d[i] === 203 && d[i + 1] === 213 && d[i + 2] === 225) unknown += 1;
+    return unknown;
+  });
+  check(grid > 100, `the occupancy grid is drawn on the top view (${grid} pixels of unknown cells)`);
+  await atWidths(page, 'first-hour-09c-slam-occupancy', '#top-view-card', async () => null);
+  const zipped = await checkZipDownload(page, server, jobId);
+  // The 3D viewer page lists the job with its clouds and their sizes before any download.
+  await page.goto(`${server.url}/#/viewer`);
+  const row = await page.waitForSelector(`#cloud-jobs tr[data-job-id="${jobId}"]`);
+  const clouds = await row.$$eval('a.cloud-link', (links) => links.map((a) => `${a.dataset.artifact} ${a.nextSibling.textContent.trim()}`));
+  check(clouds.some((c) => /^map\.ply [0-9.]+ (B|kB|MB|GB)$/.test(c)) && clouds.some((c) => /^dense_map\.ply /.test(c)),
+    `the viewer lists the slam job's clouds with their sizes (${clouds.join(', ')})`);
+  await checkNoIds(page, '#cloud-jobs', 'the viewer\'s list of jobs');
+  await atWidths(page, 'first-hour-09d-viewer-list', '#cloud-jobs', async () => null);
+  return `slam headline: ${Object.entries(headline).map(([k, v]) => `${k} ${v}`).join(', ')}; occupancy grid drawn; ${zipped}; ` +
+    `viewer lists ${clouds.join(', ')}`;
 }
 
 // Submits the job form as it is; returns the new job's id.
@@ -1123,7 +1285,7 @@ async function submitFromForm(page) {
   const outcome = await page.waitForSelector('#job-form .notice a, #job-form .error');
   const text = (await outcome.textContent()).trim();
   check(await outcome.evaluate((n) => n.closest('.error') === null), `the form's job was accepted (${text})`);
-  return text;
+  return outcome.getAttribute('data-job-id');
 }
 
 // The bad inputs of a first hour: an empty dataset, a file that is not an image, a file the page

@@ -1,13 +1,47 @@
-// Unit tests of the web page's pure modules (no browser): the PLY reader and the trajectory
-// helpers. Run by ctest as browser/web_modules: node web_modules_test.mjs
+// Unit tests of the web page's pure modules (no browser): the PLY reader, the trajectory
+// helpers, the colour bars' readers and scales, the result keys in words. Run by ctest as browser/web_modules: node web_modules_test.mjs
 import assert from 'node:assert/strict';
 import path from 'node:path';
 import { fileURLToPath } from 'node:url';
 
 const WEB_JS = path.resolve(path.dirname(fileURLToPath(import.meta.url)), '../../web/js');
 const { parsePly } = await import(path.join(WEB_JS, 'ply.js'));
-const { inversePose, loopSegments, parseTum, stateColour, STATE_COLOURS, trajectoryFromJson, transformTrajectory } =
+const { inversePose, loopSegments, parsePgm, parseTum, stateColour, STATE_COLOURS, trajectoryFromJson, transformTrajectory } =
   await import(path.join(WEB_JS, 'topview.js'));
+const { JET, parseFloatTiff, rangePreviewScale, ticks, TURBO } = await import(path.join(WEB_JS, 'colorbar.js'));
+const { describeKey, formatWithUnit, shortId } = await import(path.join(WEB_JS, 'labels.js'));
+
+// A TIFF laid out as OpenCV writes a CV_32FC1 image: little-endian, uncompressed, the pixels in
+// strips of `rowsPerStrip` rows, strip offsets (LONG) and byte counts (SHORT) in arrays.
+function floatTiff(width, height, values, rowsPerStrip) {
+  const strips = Math.ceil(height / rowsPerStrip);
+  const tags = [[256, 3, 1, width], [257, 3, 1, height], [258, 3, 1, 32], [259, 3, 1, 1], [262, 3, 1, 1],
+    [273, 4, strips, null], [277, 3, 1, 1], [278, 3, 1, rowsPerStrip], [279, 3, strips, null], [339, 3, 1, 3]];
+  const dataAt = 8;
+  const ifdAt = dataAt + 4 * values.length;
+  const arraysAt = ifdAt + 2 + 12 * tags.length + 4;
+  const bytes = new Uint8Array(arraysAt + 6 * strips);
+  const view = new DataView(bytes.buffer);
+  bytes.set([0x49, 0x49, 42, 0]);
+  view.setUint32(4, ifdAt, true);
+  values.forEach((v, i) => view.setFloat32(dataAt + 4 * i, v, true));
+  view.setUint16(ifdAt, tags.length, true);
+  tags.forEach(([tag, type, count, value], i) => {
+    const at = ifdAt + 2 + 12 * i;
+    view.setUint16(at, tag, true);
+    view.setUint16(at + 2, type, true);
+    view.setUint32(at + 4, count, true);
+    if (tag === 273) view.setUint32(at + 8, arraysAt, true);
+    else if (tag === 279) view.setUint32(at + 8, arraysAt + 4 * strips, true);
+    else view.setUint16(at + 8, value, true);
+  });
+  for (let s = 0; s < strips; s += 1) {
+    const rows = Math.min(rowsPerStrip, height - s * rowsPerStrip);
+    view.setUint32(arraysAt + 4 * s, dataAt + 4 * width * rowsPerStrip * s, true);
+    view.setUint16(arraysAt + 4 * strips + 2 * s, 4 * width * rows, true);
+  }
+  return bytes;
+}
 
 // A binary little-endian PLY as omnirig's SLAM writes it, preceded by an element the reader skips.
 function binaryPly(points) {
@@ -31,6 +65,53 @@ function binaryPly(points) {
 }
 
 const tests = {
+  'float TIFF in strips, as OpenCV writes range panoramas'() {
+    const values = Array.from({ length: 5 * 7 }, (_, i) => i * 0.5);
+    const tiff = parseFloatTiff(floatTiff(5, 7, values, 3));
+    assert.equal(tiff.width, 5);
+    assert.equal(tiff.height, 7);
+    assert.deepEqual([...tiff.data], values);
+    const compressed = floatTiff(1, 1, [1], 1);
+    new DataView(compressed.buffer).setUint16(8 + 4 + 2 + 12 * 3 + 8, 5, true);  // LZW
+    assert.throws(() => parseFloatTiff(compressed), /compressed/);
+  },
+  'range scale: 2nd and 98th percentiles of every 8th known cell, as the engine draws them'() {
+    // 0 is unknown; the known cells are 1..1000 m, every 8th of them kept: 1, 9, 17, ...
+    const ranges = [];
+    for (let r = 1; r <= 1000; r += 1) ranges.push(0, r);
+    const scale = rangePreviewScale(Float32Array.from(ranges));
+    const kept = Array.from({ length: 125 }, (_, i) => 1 + 8 * i);
+    assert.equal(scale.near_m.toFixed(6), kept[Math.floor(0.02 * 124)].toFixed(6));
+    assert.equal(scale.far_m.toFixed(6), kept[Math.floor(0.98 * 124)].toFixed(6));
+    assert.equal(rangePreviewScale(new Float32Array(4)), null);
+  },
+  'colour maps are OpenCV\'s: 256 entries, TURBO from dark blue to dark red, JET from blue to red'() {
+    assert.equal(TURBO.length, 256);
+    assert.deepEqual(TURBO[0], [0x30, 0x12, 0x3b]);
+    assert.deepEqual(JET[0], [0, 0, 128]);
+    assert.deepEqual(JET[255], [128, 0, 0]);
+  },
+  'ticks: round values inside the range, logarithmic at 1, 2, 5 x 10^k'() {
+    assert.deepEqual(ticks(0.8, 30, true), [1, 2, 5, 10, 20]);
+    assert.deepEqual(ticks(0, 0.5, false), [0, 0.1, 0.2, 0.3, 0.4, 0.5]);
+  },
+  'binary PGM of an occupancy grid, with a comment'() {
+    const bytes = new Uint8Array([...new TextEncoder().encode('P5\n# map\n3 2\n255\n'), 0, 254, 205, 205, 0, 254]);
+    const grid = parsePgm(bytes);
+    assert.equal(grid.cols, 3);
+    assert.equal(grid.rows, 2);
+    assert.deepEqual([...grid.cells], [0, 254, 205, 205, 0, 254]);
+  },
+  'result keys in words with their units'() {
+    assert.deepEqual(describeKey('num_scale_inliers'), { label: 'scale inliers', unit: '' });
+    assert.deepEqual(describeKey('median_range_std_m'), { label: 'median range std', unit: 'm' });
+    assert.deepEqual(describeKey('ate_rmse_m'), { label: 'ATE (RMSE)', unit: 'm' });
+    assert.equal(formatWithUnit('frames_per_second', 8.5), '8.5000 frames/s');
+    assert.equal(formatWithUnit('final_drift_percent', 1.5), '1.5000 %');
+    assert.equal(formatWithUnit('rotation_std_deg', 2), '2°');
+    assert.equal(formatWithUnit('num_keyframes', 12), '12');
+    assert.equal(shortId('f4ba8870de2b7a2e'), 'f4ba8870');
+  },
   'binary PLY: positions, colours and extra properties'() {
     const cloud = parsePly(binaryPly([[1, 2, 3, 10, 20, 30, 4], [-1.5, 0.25, 7, 255, 0, 1, 9]]));
     assert.equal(cloud.count, 2);

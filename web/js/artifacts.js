@@ -1,13 +1,24 @@
 // A job's artifacts: every file downloadable, with its size and type.
 
-import { artifactUrl, asList, downloadLink, get } from './api.js';
+import { API, artifactUrl, asList, downloadLink, get } from './api.js';
 import { clear, el, errorBox, formatBytes } from './ui.js';
 
 export async function listArtifacts(jobId) {
   return asList(await get(`/jobs/${encodeURIComponent(jobId)}/artifacts`), 'artifacts');
 }
 
-export async function renderArtifacts(container, jobId) {
+// Every artifact of the job in one zip (GET .../artifacts.zip, streamed by the server).
+export function zipLink(jobId, artifacts, jobType) {
+  const total = artifacts.reduce((s, a) => s + (a.size || 0), 0);
+  const link = downloadLink(`${API}/jobs/${encodeURIComponent(jobId)}/artifacts.zip`,
+    `${jobType ? `${jobType}-` : ''}${jobId}.zip`,
+    `Download all as zip (${artifacts.length} file${artifacts.length === 1 ? '' : 's'}, ${formatBytes(total)})`);
+  link.className = 'button primary download-zip';
+  link.id = 'download-zip';
+  return link;
+}
+
+export async function renderArtifacts(container, jobId, jobType) {
   let artifacts;
   try {
     artifacts = await listArtifacts(jobId);
@@ -17,6 +28,7 @@ export async function renderArtifacts(container, jobId) {
   }
   const total = artifacts.reduce((s, a) => s + (a.size || 0), 0);
   clear(container, el('h2', `Artifacts (${artifacts.length}, ${formatBytes(total)})`),
+    artifacts.length ? el('p', zipLink(jobId, artifacts, jobType)) : null,
     artifacts.length ? el('div.table-scroll', el('table',
       el('thead', el('tr', el('th', 'File'), el('th.num', 'Size'), el('th', 'Type'), el('th', 'sha256'))),
       el('tbody', artifacts.map((a) => el('tr', { dataset: { artifact: a.name } },

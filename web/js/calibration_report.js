@@ -8,6 +8,8 @@ import { downloadList, listArtifacts } from './artifacts.js';
 import { apiImage, clear, el, errorBox, formatNumber, formatSignificant } from './ui.js';
 import { drawBarChart } from './chart.js';
 import { clickableImage } from './image_overlay.js';
+import { colourKey, uncertaintyColourBar } from './colorbar.js';
+import { formatWithUnit, labelOf } from './labels.js';
 
 const INTRINSICS = ['xi', 'gamma_u', 'gamma_v', 'u0', 'v0', 'alpha', 'k1', 'k2', 'k3', 'k4', 'k5'];
 // Artifacts of the mirror-rim check: svp or rim as a word of the name (not the "rim" in "VMRImage").
@@ -16,10 +18,14 @@ const SVP_NAME = /(^|[_\-/.])(svp|rim)([_\-/.]|$)/i;
 const REPORT_IMAGES = /^(coverage|uncertainty)\.png$/i;
 const UNITS = { gamma_u: 'px', gamma_v: 'px', u0: 'px', v0: 'px' };
 
-export async function renderJobReport(container, job) {
+export async function renderJobReport(container, job, setSummary) {
   const [result, artifacts] = await Promise.all([
     get(`/jobs/${encodeURIComponent(job.id)}/result`), listArtifacts(job.id).catch(() => [])]);
   renderCalibration(container, job, result, artifacts);
+  const images = result.images || [];
+  if (setSummary) {
+    setSummary(`RMS ${formatNumber(result.rms_px, 3)} px from ${images.filter((i) => i.used).length} of ${images.length} images`);
+  }
   return null;
 }
 
@@ -85,9 +91,9 @@ function coverageCard(job, coverage) {
   const near = Number.isFinite(coverage.near_px) ? formatNumber(coverage.near_px, 0) : '?';
   const disk = coverage.disk_from === 'svp_rim' ? 'the mirror rim found in the image'
     : 'a circle about the principal point (the mirror rim was not measured)';
-  const figure = (name, caption, id) => name ? el(`figure#${id}`,
+  const figure = (name, caption, id, bar) => name ? el(`figure.value-image#${id}`,
     el('a', { href: artifactUrl(job.id, name), target: '_blank', title: 'full size' },
-      apiImage(artifactUrl(job.id, name), { alt: caption })), el('figcaption', caption)) : null;
+      apiImage(artifactUrl(job.id, name), { alt: caption })), el('figcaption', caption), bar) : null;
   const advice = coverage.advice || [];
   const hasUncertainty = Number.isFinite(coverage.max_uncertainty_px);
   return el('div.card#coverage', el('h2', 'Coverage and what to do next'),
@@ -106,8 +112,23 @@ function coverageCard(job, coverage) {
     advice.length ? el('ul.advice#coverage-advice', advice.map((a) => el('li', a, whereInImage(a))))
       : el('p.muted#coverage-advice', 'The service gave no advice for this calibration.'),
     el('div.overlays',
-      figure(coverage.image, 'Where the board was seen: used corners on the mirror disk', 'coverage-image'),
-      figure(coverage.uncertainty_image, 'Uncertainty of a projected point across the image (1 σ, px)', 'uncertainty-image')));
+      figure(coverage.image, 'Where the board was seen: used corners on the mirror disk', 'coverage-image',
+        coverageKey(near)),
+      figure(coverage.uncertainty_image, 'Uncertainty of a projected point across the image (1 σ, px)', 'uncertainty-image',
+        hasUncertainty ? uncertaintyColourBar(coverage.max_uncertainty_px) : null)));
+}
+
+// The coverage image's colours (engine/calib/coverage.cc: DrawCoverage).
+function coverageKey(nearPx) {
+  return colourKey({
+    title: 'Coverage',
+    items: [
+      { colour: 'rgb(40, 160, 40)', label: `within ${nearPx} px of a used corner` },
+      { colour: 'rgba(200, 40, 40, 0.55)', label: `farther than ${nearPx} px: no board seen there` },
+      { colour: '#fff', label: 'a used corner', dot: true },
+      { colour: 'rgb(0, 255, 255)', label: 'the mirror disk\'s edge' },
+    ],
+  });
 }
 
 // The image region an advice's azimuth range names (azimuth about the disk's centre, 0 deg to
@@ -122,8 +143,11 @@ function whereInImage(advice) {
 
 function solverCard(solver) {
   if (!solver) return null;
-  return el('div.card', el('details', el('summary', 'Solver summary'),
-    el('pre.mono', JSON.stringify(solver, null, 2))));
+  const scalars = Object.entries(solver).filter(([, v]) => typeof v !== 'object' || v === null);
+  const nested = Object.entries(solver).filter(([, v]) => v && typeof v === 'object');
+  return el('div.card', el('details#solver-summary', el('summary', 'Solver summary'),
+    el('dl.kv', scalars.map(([k, v]) => [el('dt', labelOf(k)), el('dd', formatWithUnit(k, v))])),
+    nested.length ? el('details', el('summary', 'Solver details (raw)'), el('pre.mono', JSON.stringify(Object.fromEntries(nested), null, 2))) : null));
 }
 
 function svpCard(job, artifacts, result) {

@@ -2,8 +2,9 @@
 // files or whole folders (cam0/ and cam1/ kept), with per-file progress, resume of an interrupted
 // upload (names already on the server with the same size are skipped) and thumbnails.
 
-import { asList, del, get, imageUrl, post, putFileInChunks, putImage } from './api.js';
+import { asList, del, encodeName, get, imageUrl, post, putFileInChunks, putImage } from './api.js';
 import { apiImage, clear, el, errorBox, formatBytes, formatTime, progressBar, showError } from './ui.js';
+import { shortId } from './labels.js';
 
 // What a dataset holds: the images the server decodes, TUM trajectories (a SLAM job's optional
 // ground truth is a file of its dataset) and videos (a SLAM job reads cam0.mp4 + cam1.mp4, or
@@ -76,7 +77,7 @@ async function refreshList(container) {
     const apart = trajectories.concat(videos);
     return el('tr', { dataset: { datasetId: d.id } },
       el('td', el('a', { href: `#/datasets/${encodeURIComponent(d.id)}` }, d.name || d.id)),
-      el('td.mono', d.id), el('td.num', { dataset: { images: count } }, String(count),
+      el('td.mono', { title: d.id }, shortId(d.id)), el('td.num', { dataset: { images: count } }, String(count),
         apart.length ? el('span.muted', ` + ${apart.join(', ')}`) : null),
       el('td.num', formatBytes(bytes)),
       el('td', formatTime(d.created_at)),
@@ -112,7 +113,7 @@ async function renderDataset(view, id) {
       const dataset = await get(`/datasets/${encodeURIComponent(id)}`);
       state.listed = new Map((dataset.images || []).map((i) => [i.name, i.size]));
       renderSummary(summary, dataset);
-      renderThumbnails(thumbs, dataset);
+      renderThumbnails(thumbs, dataset, false, refresh);
     } catch (err) {
       clear(summary, errorBox(err, 'Could not load the dataset'));
     }
@@ -161,7 +162,8 @@ function renderSummary(container, dataset) {
       el('dt', 'Created'), el('dd', formatTime(dataset.created_at))));
 }
 
-function renderThumbnails(container, dataset, showAll = false) {
+// `onChange` runs after a file was removed.
+function renderThumbnails(container, dataset, showAll = false, onChange = null) {
   const images = dataset.images || [];
   if (!images.length) {
     clear(container, el('p.muted', 'No images yet.'));
@@ -173,11 +175,24 @@ function renderThumbnails(container, dataset, showAll = false) {
       ? apiImage(imageUrl(dataset.id, image.name), { loading: 'lazy', alt: image.name })
       : el('div.file-icon', image.name.split('.').pop())),
     el('figcaption', el('div', image.name),
-      el('div.muted', `${image.width ? `${image.width}×${image.height}, ` : ''}${formatBytes(image.size)}`)))));
+      el('div.muted', `${image.width ? `${image.width}×${image.height}, ` : ''}${formatBytes(image.size)}`),
+      el('button.danger.remove-image', { type: 'button', dataset: { name: image.name }, onclick: () => removeImage(container, dataset, image, onChange) },
+        'Remove')))));
   const more = images.length > shown.length
-    ? el('button', { onclick: () => renderThumbnails(container, dataset, true) }, `Show all ${images.length}`)
+    ? el('button', { onclick: () => renderThumbnails(container, dataset, true, onChange) }, `Show all ${images.length}`)
     : null;
   clear(container, grid, more);
+}
+
+// Removes one file of the dataset (refused with 409 while a job uses the dataset: the message says so).
+async function removeImage(container, dataset, image, onChange) {
+  if (!confirm(`Remove ${image.name} from dataset "${dataset.name || dataset.id}"?`)) return;
+  try {
+    await del(`/datasets/${encodeURIComponent(dataset.id)}/images/${encodeName(image.name)}`);
+    if (onChange) await onChange();
+  } catch (err) {
+    showError(container, err, `Could not remove ${image.name}`);
+  }
 }
 
 // The name an image gets on the server: its file name, kept under its camera folder when it is in

@@ -4,6 +4,7 @@
 import { API, asList, del, get, getToken, post } from './api.js';
 import { clear, el, errorBox, errorLines, explainJobError, formatDuration, formatTime, poll, progressBar, shortJobError, showError } from './ui.js';
 import { renderArtifacts } from './artifacts.js';
+import { shortId } from './labels.js';
 
 export const JOB_TYPES = {
   calibration: 'Calibration of one camera (unified model)',
@@ -82,17 +83,45 @@ function boardFields() {
       el('label', 'ArUco dictionary (OpenCV id) ', el('input', { name: 'aruco_dictionary', type: 'number', min: 0, value: 0, style: 'width:5em' }))));
 }
 
-function jobOption(job) {
-  const label = `${job.id} · ${job.type} · dataset ${job.dataset ?? job.dataset_id ?? ''} · ${formatTime(job.finished_at || job.created_at)}`;
-  return el('option', { value: job.id }, label);
+// A dataset as people name it: its name with a short id to tell namesakes apart.
+export function datasetLabel(dataset, id) {
+  const name = dataset && dataset.name;
+  return name ? `${name} · ${shortId(id ?? dataset.id)}` : shortId(id ?? (dataset && dataset.id));
+}
+
+// An earlier job in a picker: what it ran on and when, its short id last.
+export function jobLabel(job, datasetNames) {
+  const datasetId = job.dataset ?? job.dataset_id ?? '';
+  const name = datasetNames && datasetNames.get(datasetId);
+  return `${job.type} of “${name || shortId(datasetId)}” · ${formatTime(job.finished_at || job.created_at)} · ${shortId(job.id)}`;
+}
+
+function jobOption(job, datasetNames) {
+  return el('option', { value: job.id, title: job.id }, jobLabel(job, datasetNames));
+}
+
+// The slam job's ground truth: one of the dataset's .tum files (offered as suggestions), and
+// the dense map with its voxel size (params.dense_map.voxel_m, api/slam_job.cc).
+function slamFields() {
+  return [
+    el('label', 'Ground truth'),
+    el('span', el('input', { name: 'ground_truth', list: 'tum-files', size: 28,
+      placeholder: 'optional: a TUM file of the dataset, e.g. trajectory.tum' }), el('datalist#tum-files')),
+    el('label', 'Dense map'),
+    el('span.dense-map-fields',
+      el('label', el('input', { name: 'dense_map', type: 'checkbox' }),
+        ' fuse a dense map (dense_map.ply) and an occupancy grid for navigation'), ' ',
+      el('label', 'voxel size ', el('input', { name: 'voxel_m', type: 'number', min: 0.005, max: 1, step: 'any',
+        value: 0.02, style: 'width:6em' }), ' m')),
+  ];
 }
 
 // The fields that depend on the job type; earlier results are offered from succeeded jobs.
-function typeFields(type, succeeded) {
+function typeFields(type, succeeded, datasetNames) {
   const calibrations = succeeded.filter((j) => j.type === 'calibration');
   const rigs = succeeded.filter((j) => j.type === 'relative_pose');
   const pick = (name, jobs, optional) => el('select', { name },
-    optional ? el('option', { value: '' }, optional) : null, jobs.map(jobOption));
+    optional ? el('option', { value: '' }, optional) : null, jobs.map((j) => jobOption(j, datasetNames)));
   const none = (what) => el('span.muted', `no succeeded ${what} job yet`);
   switch (type) {
     case 'calibration':
@@ -104,8 +133,7 @@ function typeFields(type, succeeded) {
     case 'stereo_reconstruct':
       return [el('label', 'Rig (relative pose)'), rigs.length ? pick('rig', rigs) : none('relative_pose')];
     case 'slam':
-      return [el('label', 'Rig (relative pose)'), rigs.length ? pick('rig', rigs) : none('relative_pose'),
-        el('label', 'Ground truth'), el('input', { name: 'ground_truth', placeholder: 'optional: a TUM file of the dataset, e.g. ground_truth.tum' })];
+      return [el('label', 'Rig (relative pose)'), rigs.length ? pick('rig', rigs) : none('relative_pose'), ...slamFields()];
     default:
       return [];
   }
@@ -128,6 +156,9 @@ export function paramsFromForm(type, form) {
   }
   if ((type === 'stereo_reconstruct' || type === 'slam') && value('rig')) params.rig = value('rig');
   if (type === 'slam' && value('ground_truth')) params.ground_truth = value('ground_truth');
+  if (type === 'slam' && form.elements.dense_map && form.elements.dense_map.checked) {
+    params.dense_map = { voxel_m: Number(value('voxel_m')) };
+  }
   const extra = value('extra');
   if (extra) Object.assign(params, JSON.parse(extra));
   return params;
@@ -135,10 +166,11 @@ export function paramsFromForm(type, form) {
 
 async function renderForm(container, datasets, jobs, preselectedDataset, onSubmitted, preselectedType) {
   const succeeded = jobs.filter((j) => j.state === 'succeeded');
+  const datasetNames = new Map(datasets.map((d) => [d.id, d.name]));
   const typeSelect = el('select', { name: 'type' },
     Object.entries(JOB_TYPES).map(([value, label]) => el('option', { value, selected: value === preselectedType }, `${value} — ${label}`)));
   const datasetSelect = el('select', { name: 'dataset', required: true },
-    datasets.map((d) => el('option', { value: d.id, selected: d.id === preselectedDataset }, `${d.name || d.id} (${d.id})`)));
+    datasets.map((d) => el('option', { value: d.id, title: d.id, selected: d.id === preselectedDataset }, datasetLabel(d))));
   const specific = el('div.full.type-fields', { style: 'display:contents' });
   const messages = el('div.full');
   const form = el('form.grid#job-form', { onsubmit: submit },
@@ -149,8 +181,21 @@ async function renderForm(container, datasets, jobs, preselectedDataset, onSubmi
       el('textarea', { name: 'extra', placeholder: EXTRA_PLACEHOLDERS[typeSelect.value] || '{}' })),
     el('div.full', el('button.primary', { type: 'submit' }, 'Submit job')),
     messages);
+  // The chosen dataset's .tum files, offered as the slam job's ground truth.
+  const offerTrajectories = async () => {
+    const list = form.querySelector('#tum-files');
+    if (!list || !datasetSelect.value) return;
+    try {
+      const files = asList(await get(`/datasets/${encodeURIComponent(datasetSelect.value)}/images`), 'images');
+      clear(list, files.filter((f) => /\.tum$/i.test(f.name)).map((f) => el('option', { value: f.name })));
+    } catch (_) {
+      clear(list);  // the suggestions are a help only
+    }
+  };
+  datasetSelect.addEventListener('change', offerTrajectories);
   const showType = () => {
-    clear(specific, typeFields(typeSelect.value, succeeded));
+    clear(specific, typeFields(typeSelect.value, succeeded, datasetNames));
+    offerTrajectories();
     form.elements.extra.placeholder = `e.g. ${EXTRA_PLACEHOLDERS[typeSelect.value] || '{}'}`;
     const boardType = form.elements.board_type;
     const charuco = specific.querySelector('.charuco');
@@ -176,7 +221,8 @@ async function renderForm(container, datasets, jobs, preselectedDataset, onSubmi
     }
     try {
       const job = await post('/jobs', { type: typeSelect.value, dataset: datasetSelect.value, params });
-      messages.append(el('p.notice', 'Submitted job ', el('a', { href: `#/jobs/${encodeURIComponent(job.id)}` }, job.id), '.'));
+      messages.append(el('p.notice', 'Submitted ', el('a', { href: `#/jobs/${encodeURIComponent(job.id)}`, title: job.id, dataset: { jobId: job.id } },
+        jobLabel(job, datasetNames)), '.'));
       onSubmitted(job);
     } catch (err) {
       messages.append(errorBox(err, 'The server refused the job'));
@@ -246,15 +292,15 @@ export function jobActions(job, onChange, errorTarget, editor) {
       ? (editor ? el('button.plain', { dataset: { action: 'retry' }, onclick: () => editor(job) }, 'Retry…')
         : act('Retry', 'plain', () => post(`/jobs/${id}/retry`))) : null,
     job.state === 'running' ? null : act('Delete', 'danger', async () => {
-      if (confirm(`Delete job ${job.id} and its results?`)) await del(`/jobs/${id}`);
+      if (confirm(`Delete the ${job.type} job ${shortId(job.id)} and its results?`)) await del(`/jobs/${id}`);
     }));
 }
 
 function jobRow(job, refresh, errorTarget) {
   return el('tr', { dataset: { jobId: job.id, state: job.state } },
-    el('td', el('a.mono', { href: `#/jobs/${encodeURIComponent(job.id)}` }, job.id)),
+    el('td', el('a.mono', { href: `#/jobs/${encodeURIComponent(job.id)}`, title: job.id }, shortId(job.id))),
     el('td', job.type),
-    el('td', { title: job.dataset ?? job.dataset_id ?? '' }, job.dataset_name || el('span.mono', job.dataset ?? job.dataset_id ?? '')),
+    el('td', { title: job.dataset ?? job.dataset_id ?? '' }, datasetLabel({ name: job.dataset_name }, job.dataset ?? job.dataset_id)),
     el('td', stateBadge(job.state), job.attempts > 1 ? el('span.muted', ` (attempt ${job.attempts})`) : null),
     el('td', { style: 'min-width:150px' }, progressCell(job)),
     el('td', stageText(job)),
@@ -322,17 +368,20 @@ async function renderJobs(view, query) {
 
 // ---- one job ----------------------------------------------------------------------------------
 
-function statusCard(job, refresh, container) {
-  const p = job.progress || {};
+function statusCard(job, refresh, container, datasetName, summary) {
+  const datasetId = job.dataset ?? job.dataset_id ?? '';
   return el('div.card#job-status', { dataset: { state: job.state } },
     el('div.row',
       el('div.grow',
         el('div.big', stateBadge(job.state), ' ', el('span.muted', job.type)),
         el('div', { style: 'margin:0.5rem 0' }, progressCell(job)),
-        el('div', stageText(job, false)),
+        // A succeeded job's report states its figures here in the words of the report below.
+        el('div#job-stage', summary && job.state === 'succeeded' ? [el('strong', 'done'), ` ${summary}`] : stageText(job, false)),
         etaText(job) ? el('div.muted', `about ${etaText(job)} left`) : null),
       el('dl.kv',
-        el('dt', 'Dataset'), el('dd', el('a.mono', { href: `#/datasets/${encodeURIComponent(job.dataset ?? job.dataset_id ?? '')}` }, job.dataset ?? job.dataset_id ?? '')),
+        el('dt', 'Job'), el('dd.mono', { title: job.id }, shortId(job.id)),
+        el('dt', 'Dataset'), el('dd', el('a', { href: `#/datasets/${encodeURIComponent(datasetId)}`, title: datasetId },
+          datasetLabel({ name: datasetName }, datasetId))),
         el('dt', 'Created'), el('dd', formatTime(job.created_at)),
         el('dt', 'Started'), el('dd', formatTime(job.started_at) || '–'),
         el('dt', 'Finished'), el('dd', formatTime(job.finished_at) || '–'),
@@ -387,8 +436,9 @@ function retryEditor(container, job, refresh) {
   }
 }
 
-// The report shown under a succeeded job, by type.
-async function renderReport(container, job) {
+// The report shown under a succeeded job, by type; `setSummary(text)` puts the report's
+// one-line summary into the status card.
+async function renderReport(container, job, setSummary) {
   const loaders = {
     calibration: () => import('./calibration_report.js'),
     relative_pose: () => import('./stereo_report.js'),
@@ -398,17 +448,20 @@ async function renderReport(container, job) {
   const loader = loaders[job.type];
   if (!loader) return null;
   const module = await loader();
-  return module.renderJobReport(container, job);
+  return module.renderJobReport(container, job, setSummary);
 }
 
 async function renderJob(view, id, openRetry = false) {
   const status = el('div');
   const report = el('div#report');
   const artifacts = el('div.card#artifacts');
-  clear(view, el('p', el('a', { href: '#/jobs' }, '← all jobs')), el('h1', `Job ${id}`), status, report, artifacts);
+  const title = el('h1#job-title', `Job ${shortId(id)}`);
+  clear(view, el('p', el('a', { href: '#/jobs' }, '← all jobs')), title, status, report, artifacts);
   let shownState = null;
   let shownJob = '';
   let reportCleanup = null;
+  let datasetName = null;
+  let summary = null;
   const refresh = async () => {
     let job;
     try {
@@ -417,8 +470,14 @@ async function renderJob(view, id, openRetry = false) {
       clear(status, errorBox(err, 'Could not load the job'));
       return;
     }
+    if (datasetName === null) {
+      const datasetId = job.dataset ?? job.dataset_id;
+      datasetName = await get(`/datasets/${encodeURIComponent(datasetId)}`).then((d) => d.name || '', () => '');
+      title.textContent = `${JOB_TYPES[job.type] || job.type}: “${datasetName || shortId(datasetId)}” · ${shortId(id)}`;
+      title.title = `job ${id}`;
+    }
     const snapshot = JSON.stringify(job);
-    if (snapshot !== shownJob) clear(status, statusCard(job, refresh, status));
+    if (snapshot !== shownJob) clear(status, statusCard(job, refresh, status, datasetName, summary));
     if (openRetry && !shownJob && (job.state === 'failed' || job.state === 'canceled')) retryEditor(status, job, refresh);
     shownJob = snapshot;
     if (job.state === shownState) return;
@@ -429,12 +488,16 @@ async function renderJob(view, id, openRetry = false) {
     clear(artifacts);
     if (job.state === 'succeeded') {
       try {
-        reportCleanup = await renderReport(report, job);
+        reportCleanup = await renderReport(report, job, (text) => {
+          summary = text;
+          const stage = status.querySelector('#job-stage');
+          if (stage) clear(stage, el('strong', 'done'), ` ${text}`);
+        });
       } catch (err) {
         clear(report, errorBox(err, 'Could not show the report'));
       }
     }
-    if (TERMINAL.has(job.state)) await renderArtifacts(artifacts, job.id);
+    if (TERMINAL.has(job.state)) await renderArtifacts(artifacts, job.id, job.type);
   };
   const events = subscribeJobEvents(() => {
     if (!TERMINAL.has(shownState)) refresh();

@@ -2,9 +2,10 @@
 // dense range panorama (range_png), how much of the mirror gave confident depth, the median
 // range, the pair's warning in words, and one-click downloads of the range TIFF and the PLY.
 
-import { artifactUrl, imageUrl } from './api.js';
+import { artifactUrl, fetchArtifactBytes, imageUrl } from './api.js';
 import { downloadList } from './artifacts.js';
-import { apiImage, el, formatNumber } from './ui.js';
+import { parseFloatTiff, rangeColourBar, rangePreviewScale } from './colorbar.js';
+import { apiImage, clear, el, errorBox, formatNumber } from './ui.js';
 
 // The pair's base name: pairs are matched by NAME in cam0/NAME and cam1/NAME.
 const pairBase = (name) => name.replace(/^cam\d+\//, '');
@@ -20,6 +21,7 @@ export function reconstructPairsCard(job, result, onView) {
   if (!pairs.length) return null;
   const datasetId = job.dataset ?? job.dataset_id;
   const dense = result.method === 'dense' || pairs.some((p) => p.range_png);
+  const scales = rangeScaleQueue(job.id);
   return el('div.card#reconstruct-pairs',
     el('h2', `${dense ? 'Dense' : 'Sparse'} reconstruction: ${pairs.length} pair${pairs.length === 1 ? '' : 's'}, ` +
       `${Number(result.num_points || 0).toLocaleString('en-US')} points`),
@@ -33,10 +35,26 @@ export function reconstructPairsCard(job, result, onView) {
         'View the merged cloud') : null) : null,
     result.trajectory && result.trajectory.warning
       ? el('div.warning#reconstruct-trajectory-warning', result.trajectory.warning) : null,
-    pairs.map((pair) => pairBlock(job, datasetId, pair, result, onView)));
+    pairs.map((pair) => pairBlock(job, datasetId, pair, result, onView, scales)));
 }
 
-function pairBlock(job, datasetId, pair, result, onView) {
+// The range panoramas' colour bars, one pair after the other: each needs the pair's float TIFF
+// (the colours' scale is computed from the ranges, as the engine did when it drew the PNG).
+function rangeScaleQueue(jobId) {
+  let chain = Promise.resolve();
+  return (holder, tiffName) => {
+    chain = chain.then(async () => {
+      try {
+        const scale = rangePreviewScale(parseFloatTiff(await fetchArtifactBytes(jobId, tiffName)).data);
+        clear(holder, scale ? rangeColourBar(scale) : el('p.muted', 'No cell of this panorama has a range.'));
+      } catch (err) {
+        clear(holder, errorBox(err, 'Could not read the range scale'));
+      }
+    });
+  };
+}
+
+function pairBlock(job, datasetId, pair, result, onView, scales) {
   const base = pairBase(pair.name);
   const cloud = pairCloud(pair, result);
   const rows = [['Points', Number(pair.num_points || 0).toLocaleString('en-US')]];
@@ -50,9 +68,14 @@ function pairBlock(job, datasetId, pair, result, onView) {
   }
   if (Array.isArray(pair.num_keypoints)) rows.push(['Features (cam0 / cam1)', pair.num_keypoints.join(' / ')]);
   if (Number.isFinite(pair.num_matches)) rows.push(['Matches', String(pair.num_matches)]);
-  const figure = (url, caption, attrs = {}) => el('figure', attrs,
+  const figure = (url, caption, attrs = {}, extra = null) => el('figure', attrs,
     el('a', { href: url, target: '_blank', title: 'full size' }, apiImage(url, { loading: 'lazy', alt: caption })),
-    el('figcaption', caption));
+    el('figcaption', caption), extra);
+  let scaleHolder = null;
+  if (pair.range_png && pair.range_tiff) {
+    scaleHolder = el('div.range-scale', el('p.muted', 'Reading the range scale…'));
+    scales(scaleHolder, pair.range_tiff);
+  }
   return el('div.range-pair', { dataset: { pair: pair.name } },
     el('h3.mono', pair.name),
     pair.warning ? el('div.warning.pair-warning', pair.warning) : null,
@@ -62,7 +85,7 @@ function pairBlock(job, datasetId, pair, result, onView) {
       figure(imageUrl(datasetId, `cam1/${base}`), `cam1/${base}`),
       pair.range_png ? figure(artifactUrl(job.id, pair.range_png),
         'Range panorama (from cam0\'s centre): columns are the azimuth over 360°, rows the angle from the baseline',
-        { class: 'range-preview' }) : null),
+        { class: 'range-preview value-image' }, scaleHolder) : null),
     el('div.row',
       downloadList(job.id, [
         { name: pair.range_tiff, label: 'range TIFF (32-bit float metres)' },

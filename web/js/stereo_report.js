@@ -7,11 +7,32 @@ import { downloadList } from './artifacts.js';
 import { clear, el, errorBox, formatNumber, formatSignificant, quaternionToAxisAngle, quaternionToRpyDeg } from './ui.js';
 import { clickableImage } from './image_overlay.js';
 import { drawBarChart } from './chart.js';
+import { describeKey } from './labels.js';
 
-export async function renderJobReport(container, job) {
+export async function renderJobReport(container, job, setSummary) {
   const result = await get(`/jobs/${encodeURIComponent(job.id)}/result`);
   renderStereo(container, job, result);
+  if (setSummary) setSummary(rigSummary(result));
   return null;
+}
+
+// What the joint fit used, counted once for the whole page (status, report and panels): the
+// stereo pairs, and the given calibrations' single-camera views when there were any.
+export function usedCount(result) {
+  const pairs = result.pairs || [];
+  const o = result.observations || {
+    pairs_given: pairs.length, pairs_used: pairs.filter((p) => p.used).length, single_camera_views_given: 0,
+  };
+  const views = o.single_camera_views_given
+    ? ` and ${o.single_camera_views_used} of ${o.single_camera_views_given} single-camera views` : '';
+  return `${o.pairs_used} of ${o.pairs_given} stereo pairs${views}`;
+}
+
+// The status line of a succeeded relative_pose job.
+export function rigSummary(result) {
+  const std = Number.isFinite(result.baseline_std_m) ? ` ± ${formatSignificant(result.baseline_std_m * 1000, 2)}` : '';
+  return `baseline ${formatNumber(result.baseline_m * 1000, 2)}${std} mm, RMS ${formatNumber(result.rms_px, 3)} px, ` +
+    `from ${usedCount(result)}`;
 }
 
 export function renderStereo(container, job, result) {
@@ -35,8 +56,7 @@ export function renderStereo(container, job, result) {
           el('dt', 'Roll, pitch, yaw'), el('dd', rpy.map((a) => `${formatNumber(a, 4)}°`).join(', ')),
           el('dt', 'Quaternion (w, x, y, z)'), el('dd.mono', q.map((x) => formatNumber(x, 6)).join(', ')),
           el('dt', 'RMS reprojection error'), el('dd', `${formatNumber(result.rms_px, 3)} px`),
-          el('dt', 'Pairs used'), el('dd', `${pairs.filter((p) => p.used).length} of ${pairs.length}`),
-          observationsRows(result.observations)),
+          el('dt', 'Observations used'), el('dd#observations', usedCount(result))),
         el('div.grow', uncertaintyList(result))),
       rigExports(job, result.exports)),
     el('div.card', el('h2', 'Per-pair RMS error'), chart),
@@ -45,16 +65,6 @@ export function renderStereo(container, job, result) {
     camerasCard(result.cameras));
   drawBarChart(chart, pairs.map((p) => ({ label: p.name, value: p.used ? p.rms_px : 0, muted: !p.used, note: p.used ? '' : '×' })),
     { reference: result.rms_px, unit: 'px' });
-}
-
-// What the joint fit used: the stereo pairs and the calibrations' single-camera views.
-function observationsRows(observations) {
-  if (!observations) return null;
-  const o = observations;
-  return [el('dt', 'Observations used'), el('dd#observations',
-    `${o.pairs_used} of ${o.pairs_given} stereo pairs` +
-    (o.single_camera_views_given ? `, ${o.single_camera_views_used} of ${o.single_camera_views_given} single-camera views`
-      : ', no single-camera views'))];
 }
 
 // The rig for other tools: the Kalibr camchain (both cameras and cam1's pose), one click.
@@ -87,18 +97,37 @@ function withStd(std, unit) {
   return el('span.muted', ` ± ${text}${unit}`);
 }
 
-// The rig's uncertainties: top-level keys holding "std" or "sigma" (baseline_std_m,
-// translation_std_m, rotation_std_deg, ...), and those inside cam0_from_cam1.
-function uncertaintyList(result) {
+// The rig's uncertainties (1 sigma) in the headline's units: lengths in mm, angles in degrees.
+const UNCERTAINTY_LABELS = {
+  baseline_std_m: 'Baseline',
+  baseline_std_robust_m: 'Baseline, cluster-robust over pairs',
+  translation_std_m: 'Translation x, y, z',
+  rotation_std_deg: 'Rotation angle',
+  rotation_std_robust_deg: 'Rotation, cluster-robust over pairs',
+};
+
+// One row per uncertainty of the result (keys holding "std" or "sigma", at the top level or in
+// cam0_from_cam1): its label and its value with unit; metres become millimetres.
+export function uncertaintyRows(result) {
   const rows = [];
-  const add = (key, value) => {
-    if (!/std|sigma/i.test(key) || value === null || typeof value === 'object' && !Array.isArray(value)) return;
-    rows.push([key, Array.isArray(value) ? value.map((x) => formatSignificant(x, 3)).join(', ') : formatSignificant(value, 3)]);
+  const add = (key, value, prefix = '') => {
+    if (!/std|sigma/i.test(key) || value === null || value === undefined || (typeof value === 'object' && !Array.isArray(value))) return;
+    const { label, unit } = describeKey(key);
+    const metres = unit === 'm';
+    const shown = (x) => formatSignificant(metres ? x * 1000 : x, 2);
+    const text = Array.isArray(value) ? value.map(shown).join(', ') : shown(value);
+    const suffix = metres ? ' mm' : unit === '°' ? '°' : unit ? ` ${unit}` : '';
+    rows.push([UNCERTAINTY_LABELS[key] || `${prefix}${label.replace(/\b(std|sigma)\b/g, '').trim()}`, `± ${text}${suffix}`]);
   };
   for (const [k, v] of Object.entries(result)) add(k, v);
-  for (const [k, v] of Object.entries(result.cam0_from_cam1 || {})) add(`cam0_from_cam1.${k}`, v);
+  for (const [k, v] of Object.entries(result.cam0_from_cam1 || {})) add(k, v, 'cam0_from_cam1 ');
+  return rows;
+}
+
+function uncertaintyList(result) {
+  const rows = uncertaintyRows(result);
   if (!rows.length) return el('p.muted', 'No uncertainties in this result.');
-  return el('div', el('h3', 'Uncertainties (1 σ)'), el('dl.kv#uncertainties', rows.map(([k, v]) => [el('dt.mono', k), el('dd', v)])));
+  return el('div', el('h3', 'Uncertainties (1 σ)'), el('dl.kv#uncertainties', rows.map(([k, v]) => [el('dt', k), el('dd', v)])));
 }
 
 function camerasCard(cameras) {

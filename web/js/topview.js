@@ -85,6 +85,27 @@ export function parseTum(text) {
   }).filter((p) => p.t.every(Number.isFinite));
 }
 
+// A binary PGM (P5, 8-bit): {cols, rows, cells}.
+export function parsePgm(bytes) {
+  let at = 0;
+  const token = () => {
+    for (;;) {
+      while (at < bytes.length && /\s/.test(String.fromCharCode(bytes[at]))) at += 1;
+      if (bytes[at] !== 35) break;  // '#': a comment to the end of the line
+      while (at < bytes.length && bytes[at] !== 10) at += 1;
+    }
+    let text = '';
+    while (at < bytes.length && !/\s/.test(String.fromCharCode(bytes[at]))) text += String.fromCharCode(bytes[at++]);
+    return text;
+  };
+  if (token() !== 'P5') throw new Error('not a binary PGM');
+  const cols = Number(token());
+  const rows = Number(token());
+  if (Number(token()) > 255) throw new Error('a 16-bit PGM');
+  at += 1;  // the single whitespace after the header
+  return { cols, rows, cells: bytes.subarray(at, at + cols * rows) };
+}
+
 // The two axes along which the trajectories spread most: the "ground plane" whatever the
 // convention (y down for camera frames, z up for a robot).
 function planeAxes(poses) {
@@ -95,20 +116,29 @@ function planeAxes(poses) {
   return [0, 1, 2].sort((a, b) => spread[b] - spread[a]).slice(0, 2).sort((a, b) => a - b);
 }
 
-export function drawTopView(canvas, estimate, groundTruth, loops = []) {
+// `occupancy` (optional): the dense map's grid in the world's x-y plane ({cols, rows, cells,
+// cell_m, origin_m}, ROS map_server conventions), drawn under the trajectories in `colours`
+// ({occupied, free, unknown}: [r, g, b]); the view is then the x-y plane whatever the spread.
+export function drawTopView(canvas, estimate, groundTruth, loops = [], occupancy = null, colours = null) {
   const ctx = canvas.getContext('2d');
   const w = canvas.width;
   const h = canvas.height;
   ctx.clearRect(0, 0, w, h);
   const all = [...estimate, ...(groundTruth || [])];
   if (!all.length) return;
-  const [a, b] = planeAxes(all);
+  const [a, b] = occupancy ? [0, 1] : planeAxes(all);
   const us = all.map((p) => p.t[a]);
   const vs = all.map((p) => p.t[b]);
+  if (occupancy) {
+    const [ox, oy] = occupancy.origin_m;
+    us.push(ox, ox + occupancy.cols * occupancy.cell_m);
+    vs.push(oy, oy + occupancy.rows * occupancy.cell_m);
+  }
   const [uMin, uMax, vMin, vMax] = [Math.min(...us), Math.max(...us), Math.min(...vs), Math.max(...vs)];
   const span = Math.max(uMax - uMin, vMax - vMin, 1e-6);
   const scale = (Math.min(w, h) - 60) / span;
   const toCanvas = (p) => [w / 2 + (p.t[a] - (uMin + uMax) / 2) * scale, h / 2 - (p.t[b] - (vMin + vMax) / 2) * scale];
+  if (occupancy) drawOccupancy(ctx, occupancy, colours, toCanvas, scale);
   drawScaleBar(ctx, w, h, scale, 'xyz'[a], 'xyz'[b]);
   const line = (poses, color, width) => {
     ctx.strokeStyle = color;
@@ -144,6 +174,27 @@ export function drawTopView(canvas, estimate, groundTruth, loops = []) {
       ctx.fill();
     }
   }
+}
+
+// The grid as an image under everything else: its upper-left corner is (origin x, origin y +
+// rows x cell), row 0 being the largest y.
+function drawOccupancy(ctx, grid, colours, toCanvas, scale) {
+  const image = new ImageData(grid.cols, grid.rows);
+  for (let i = 0; i < grid.cols * grid.rows; i += 1) {
+    const v = grid.cells[i];
+    const [r, g, b] = v === 0 ? colours.occupied : v === 254 ? colours.free : colours.unknown;
+    image.data.set([r, g, b, 255], 4 * i);
+  }
+  const bitmap = document.createElement('canvas');
+  bitmap.width = grid.cols;
+  bitmap.height = grid.rows;
+  bitmap.getContext('2d').putImageData(image, 0, 0);
+  const [ox, oy] = grid.origin_m;
+  const [x, y] = toCanvas({ t: [ox, oy + grid.rows * grid.cell_m, 0] });
+  ctx.save();
+  ctx.imageSmoothingEnabled = false;
+  ctx.drawImage(bitmap, x, y, grid.cols * grid.cell_m * scale, grid.rows * grid.cell_m * scale);
+  ctx.restore();
 }
 
 // The estimate segment by segment, each in the colour of the state of the frame it leads to;

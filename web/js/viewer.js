@@ -8,25 +8,34 @@
 
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
-import { fetchArtifactBytes, fetchArtifactJson, fetchArtifactText, fetchWithAuth, get, imageUrl } from './api.js';
+import { asList, fetchArtifactBytes, fetchArtifactJson, fetchArtifactText, fetchWithAuth, get, imageUrl } from './api.js';
 import { listArtifacts, renderArtifacts } from './artifacts.js';
 import { parsePly } from './ply.js';
 import { reconstructPairsCard } from './reconstruct_report.js';
 import {
-  drawTopView, GROUND_TRUTH_COLOUR, inversePose, LOOP_COLOUR, loopSegments, parseTum, STATE_COLOURS,
+  drawTopView, GROUND_TRUTH_COLOUR, inversePose, LOOP_COLOUR, loopSegments, parsePgm, parseTum, STATE_COLOURS,
   trajectoryFromJson, transformTrajectory,
 } from './topview.js';
-import { clear, el, errorBox, formatBytes, formatNumber, progressBar } from './ui.js';
+import { colourKey } from './colorbar.js';
+import { describeKey, formatWithUnit, shortId } from './labels.js';
+import { clear, el, errorBox, formatBytes, formatNumber, formatTime, progressBar } from './ui.js';
 
-export async function render(view, id) {
+// Clouds larger than this wait for a click (their size shown) instead of loading with the page.
+const AUTO_LOAD_BYTES = 20e6;
+const CLOUD_JOB_TYPES = ['slam', 'stereo_reconstruct'];
+
+export async function render(view, id, query) {
   if (id) {
     const job = await get(`/jobs/${encodeURIComponent(id)}`);
+    const datasetId = job.dataset ?? job.dataset_id;
+    const dataset = await get(`/datasets/${encodeURIComponent(datasetId)}`).catch(() => ({}));
     const report = el('div');
     const artifacts = el('div.card#artifacts');
-    clear(view, el('p', el('a', { href: `#/jobs/${encodeURIComponent(id)}` }, `← job ${id}`)),
-      el('h1', `3D viewer: job ${id} (${job.type})`), report, artifacts);
-    const cleanup = await renderJobReport(report, job);
-    await renderArtifacts(artifacts, id);
+    clear(view, el('p', el('a', { href: `#/jobs/${encodeURIComponent(id)}` }, `← the ${job.type} job ${shortId(id)}`)),
+      el('h1', { title: `job ${id}` }, `3D viewer: ${job.type} of “${dataset.name || shortId(datasetId)}” · ${shortId(id)}`),
+      report, artifacts);
+    const cleanup = await renderJobReport(report, job, null, query && query.get('cloud'));
+    await renderArtifacts(artifacts, id, job.type);
     return cleanup;
   }
   return renderLocal(view);
@@ -49,10 +58,46 @@ function renderLocal(view) {
     }
   };
   const input = el('input#ply-file', { type: 'file', accept: '.ply', onchange: (e) => e.target.files[0] && open(e.target.files[0]) });
+  const jobs = el('div.table-scroll#cloud-jobs', el('p.muted', 'Looking for jobs with point clouds…'));
   clear(view, el('h1', '3D viewer'),
-    el('div.card', el('p', 'Open a job\'s 3D results from its page (Jobs → a slam or stereo_reconstruct job), ' +
-      'or a PLY point cloud from this computer: ', input)), holder);
+    el('div.card', el('h2', 'Point clouds of the jobs'), jobs),
+    el('div.card', el('p', 'Or open a PLY point cloud from this computer: ', input)), holder);
+  listCloudJobs(jobs);
   return () => scene && scene.dispose();
+}
+
+// The succeeded slam and stereo_reconstruct jobs with their PLY clouds and sizes, newest first;
+// each cloud opens in the viewer page of its job.
+async function listCloudJobs(container) {
+  try {
+    const [datasets, ...lists] = await Promise.all([get('/datasets'),
+      ...CLOUD_JOB_TYPES.map((type) => get(`/jobs?state=succeeded&type=${type}&limit=30`))]);
+    const names = new Map(asList(datasets, 'datasets').map((d) => [d.id, d.name]));
+    const jobs = lists.flatMap((l) => asList(l, 'jobs'))
+      .sort((a, b) => String(b.finished_at || b.created_at).localeCompare(String(a.finished_at || a.created_at))).slice(0, 30);
+    const withClouds = await Promise.all(jobs.map(async (job) =>
+      ({ job, clouds: (await listArtifacts(job.id).catch(() => [])).filter((a) => /\.ply$/i.test(a.name)) })));
+    const rows = withClouds.filter((j) => j.clouds.length);
+    if (!rows.length) {
+      clear(container, el('p.muted', 'No slam or stereo_reconstruct job has a point cloud yet.'));
+      return;
+    }
+    clear(container, el('table',
+      el('thead', el('tr', ['Job', 'Dataset', 'Finished', 'Clouds (size before download)'].map((h) => el('th', h)))),
+      el('tbody', rows.map(({ job, clouds }) => {
+        const datasetId = job.dataset ?? job.dataset_id;
+        const href = (name) => `#/viewer/${encodeURIComponent(job.id)}?cloud=${encodeURIComponent(name)}`;
+        return el('tr', { dataset: { jobId: job.id } },
+          el('td', el('a', { href: `#/viewer/${encodeURIComponent(job.id)}`, title: job.id }, `${job.type} · ${shortId(job.id)}`)),
+          el('td', { title: datasetId }, names.get(datasetId) || shortId(datasetId)),
+          el('td', formatTime(job.finished_at)),
+          el('td', el('ul.cloud-list', clouds.map((a) => el('li',
+            el('a.cloud-link', { href: href(a.name), dataset: { artifact: a.name, size: String(a.size) } }, a.name),
+            el('span.muted', ` ${formatBytes(a.size)}`))))));
+      }))));
+  } catch (err) {
+    clear(container, errorBox(err, 'Could not list the jobs'));
+  }
 }
 
 // ---- a job's results -------------------------------------------------------------------------
@@ -69,8 +114,9 @@ function mainCloud(artifacts, result) {
     artifacts.find((a) => /\.ply$/i.test(a.name) && !/pose|rig|camera/i.test(a.name)) || pick(artifacts, /\.ply$/i);
 }
 
-// Shown under a succeeded slam or stereo_reconstruct job. Returns a cleanup function.
-export async function renderJobReport(container, job) {
+// Shown under a succeeded slam or stereo_reconstruct job (`preferred`: the cloud to show
+// first). Returns a cleanup function.
+export async function renderJobReport(container, job, setSummary, preferred) {
   const artifacts = await listArtifacts(job.id);
   const result = await get(`/jobs/${encodeURIComponent(job.id)}/result`).catch(() => ({}));
   const clouds = artifacts.filter((a) => /\.ply$/i.test(a.name));
@@ -79,27 +125,38 @@ export async function renderJobReport(container, job) {
   const below = el('div');
   const cloudSelect = clouds.length > 1 ? el('select#cloud-select', clouds.map((a) =>
     el('option', { value: a.name }, `${a.name} (${formatBytes(a.size)})`))) : null;
-  clear(container, el('div.card', el('h2', 'Point cloud and trajectory'),
+  const headline = job.type === 'slam' ? slamHeadline(result) : null;
+  if (headline && setSummary) setSummary(headline.text);
+  clear(container, headline ? headline.card : null, el('div.card', el('h2', 'Point cloud and trajectory'),
     cloudSelect ? el('p', 'Cloud: ', cloudSelect) : null, status, sceneHolder), below);
 
-  const [trajectory, groundTruth, report] = await Promise.all([
-    loadTrajectory(job, artifacts, result), loadGroundTruth(job, artifacts, result), Promise.resolve(loadReport(job.id, artifacts, result))]);
+  const [trajectory, groundTruth, report, occupancy] = await Promise.all([
+    loadTrajectory(job, artifacts, result), loadGroundTruth(job, artifacts, result),
+    Promise.resolve(loadReport(job.id, artifacts, result)), loadOccupancy(job.id, artifacts)]);
   let scene = null;
   let shown = 0;  // the latest request: an earlier load that finishes later is dropped
-  const show = async (artifact) => {
+  const show = async (artifact, confirmed = false) => {
     const request = ++shown;
     if (scene) scene.dispose();
     scene = null;
     clear(sceneHolder);
+    if (artifact && !confirmed && artifact.size > AUTO_LOAD_BYTES) {
+      // A large cloud is fetched on request only, its size stated first.
+      clear(status, el('p#cloud-size-note', `${artifact.name} is ${formatBytes(artifact.size)}. `,
+        el('button.primary#load-cloud', { type: 'button', dataset: { artifact: artifact.name }, onclick: () => show(artifact, true) },
+          `Load ${artifact.name} (${formatBytes(artifact.size)})`)));
+      if (trajectory) scene = createScene(sceneHolder, { cloud: null, trajectory, title: 'trajectory' });
+      return;
+    }
     const cloud = artifact ? await loadCloud(job.id, artifact, status) : null;
     if (request !== shown) return;
     if (cloud || trajectory) scene = createScene(sceneHolder, { cloud, trajectory, title: artifact && artifact.name });
   };
-  const main = mainCloud(artifacts, result);
+  const main = (preferred && clouds.find((a) => a.name === preferred)) || mainCloud(artifacts, result);
   if (cloudSelect && main) cloudSelect.value = main.name;
   if (cloudSelect) cloudSelect.addEventListener('change', () => show(clouds.find((a) => a.name === cloudSelect.value)));
   if (!main) clear(status, el('p.muted', 'This job has no PLY point cloud.'));
-  await show(main);
+  await show(main, Boolean(preferred && main && main.name === preferred));
   // A pair's "show in 3D" button: that pair's cloud in the viewer above.
   const viewCloud = (name) => {
     const artifact = clouds.find((a) => a.name === name);
@@ -110,11 +167,78 @@ export async function renderJobReport(container, job) {
   };
   clear(below,
     job.type === 'stereo_reconstruct' ? reconstructPairsCard(job, result, viewCloud) : null,
-    trajectory && job.type === 'slam' ? el('div.card#top-view-card', el('h2', 'Top view of the trajectory'), topView(trajectory, groundTruth, result)) : null,
+    trajectory && job.type === 'slam' ? el('div.card#top-view-card',
+      el('h2', occupancy ? 'Top view: the trajectory over the occupancy grid' : 'Top view of the trajectory'),
+      topView(trajectory, groundTruth, result, occupancy)) : null,
     summaryCard(result),
     await report ? statsCard(await report) : null);
   return () => scene && scene.dispose();
 }
+
+// Lengths as people read them: metres, centimetres or millimetres by size.
+export function formatLength(metres) {
+  if (!Number.isFinite(metres)) return '–';
+  const a = Math.abs(metres);
+  if (a >= 1) return `${formatNumber(metres, 2)} m`;
+  if (a >= 0.01) return `${Number((metres * 100).toPrecision(3))} cm`;
+  return `${Number((metres * 1000).toPrecision(2))} mm`;
+}
+
+// The slam report's headline (the result's own figures): frames tracked, keyframes, loops, the
+// errors against the ground truth when there is one, the frame rate. {card, text}.
+export function slamHeadline(result) {
+  const frames = Array.isArray(result.frames) ? result.frames.length : result.num_frames;
+  if (!Number.isFinite(frames)) return null;
+  const tracked = result.num_tracked;
+  const loops = Array.isArray(result.loops) ? result.loops.length : null;
+  const evaluation = result.evaluation;
+  const rows = [
+    ['frames-tracked', 'Frames tracked', `${tracked} of ${frames}` + (frames ? ` (${Math.round((100 * tracked) / frames)} %)` : '')],
+    ['keyframes', 'Keyframes', String(result.num_keyframes ?? '–')],
+    ['loops', 'Loop closures', loops === null ? '–' : String(loops)],
+  ];
+  if (evaluation) {
+    rows.push(['ate', 'ATE (RMSE)', formatLength(evaluation.ate_rmse_m)]);
+    rows.push(['rpe', 'RPE per frame (RMSE)', `${formatLength(evaluation.rpe_translation_rmse_m)}, ` +
+      `${Number(evaluation.rpe_rotation_rmse_deg).toFixed(3)}°`]);
+    if (Number.isFinite(evaluation.final_drift_percent)) {
+      rows.push(['drift', 'Final drift', `${formatNumber(evaluation.final_drift_percent, 2)} % of ${formatLength(evaluation.path_length_m)} travelled`]);
+    }
+  }
+  rows.push(['frame-rate', 'Frame rate', `${formatNumber(result.frames_per_second, 2)} frames/s`]);
+  const card = el('div.card#slam-headline', el('h2', 'SLAM'),
+    el('dl.headline', rows.map(([key, label, value]) => el('div.headline-item', { dataset: { key } },
+      el('dt', label), el('dd', value)))),
+    evaluation ? null : el('p.muted#no-ground-truth', 'No ground truth was given: ATE and RPE need one (a .tum file of the dataset).'));
+  const text = `${tracked} of ${frames} frames tracked, ${result.num_keyframes ?? '?'} keyframes, ` +
+    `${loops ?? '?'} loop closure${loops === 1 ? '' : 's'}` +
+    (evaluation ? `, ATE ${formatLength(evaluation.ate_rmse_m)}` : '') +
+    `, ${formatNumber(result.frames_per_second, 2)} frames/s`;
+  return { card, text };
+}
+
+// The occupancy grid of a slam job's dense map (ROS map_server: occupancy.pgm and its yaml), or
+// null: {cols, rows, cells (0 occupied, 254 free, 205 unknown; row 0 the largest y), cell_m,
+// origin_m: [x, y] of the lower-left corner}.
+async function loadOccupancy(jobId, artifacts) {
+  const pgm = pick(artifacts, /(^|\/)occupancy\.pgm$/i);
+  const yaml = pick(artifacts, /(^|\/)occupancy\.yaml$/i);
+  if (!pgm || !yaml) return null;
+  try {
+    const [bytes, text] = await Promise.all([fetchArtifactBytes(jobId, pgm.name), fetchArtifactText(jobId, yaml.name)]);
+    const grid = parsePgm(bytes);
+    const resolution = /resolution:\s*([-\d.eE+]+)/.exec(text);
+    const origin = /origin:\s*\[\s*([-\d.eE+]+)\s*,\s*([-\d.eE+]+)/.exec(text);
+    if (!resolution || !origin) return null;
+    return { ...grid, cell_m: Number(resolution[1]), origin_m: [Number(origin[1]), Number(origin[2])] };
+  } catch (err) {
+    console.warn('occupancy', err);
+    return null;
+  }
+}
+
+// The occupancy grid's colours on the top view, as map_server's viewers show them.
+export const OCCUPANCY_COLOURS = { occupied: [17, 24, 39], free: [255, 255, 255], unknown: [203, 213, 225] };
 
 // Downloads and parses a PLY artifact with a progress bar in `status`; null (and the error
 // shown) when it cannot be read.
@@ -141,6 +265,10 @@ async function loadTrajectory(job, artifacts, result) {
     if (json) return trajectoryFromJson(await fetchArtifactJson(job.id, json.name));
     const tum = pick(artifacts, /trajectory\.tum$/i);
     if (tum) return parseTum(await fetchArtifactText(job.id, tum.name));
+    if (job.type === 'stereo_reconstruct' && result.clouds_merged && result.trajectory) {
+      const placed = await placedPairPoses(job, result);
+      if (placed && placed.length) return placed;
+    }
     const rigJob = result.rig || (job.params && job.params.rig);
     if (job.type === 'stereo_reconstruct' && rigJob) {
       const rig = await get(`/jobs/${encodeURIComponent(rigJob)}/result`);
@@ -151,6 +279,32 @@ async function loadTrajectory(job, artifacts, result) {
     console.warn('trajectory', err);
   }
   return null;
+}
+
+// The poses at which a stereo_reconstruct job placed its pairs in the merged cloud (api/stereo_job.h):
+// from its slam job's trajectory, by frame name; or from the dataset's .tum file, by timestamp when
+// the pairs are named by time, else one pose per pair in order. Each pose is named after its pair.
+async function placedPairPoses(job, result) {
+  const pairs = (result.pairs || []).filter((p) => p.placed);
+  const source = String(result.trajectory.source || '');
+  const base = (name) => String(name).replace(/^cam\d+\//, '').replace(/\.[^./]+$/, '');
+  let poses;
+  const sourceJob = /^[0-9a-f]{16}$/.exec(source.split(' ').pop());
+  if (sourceJob) {
+    const artifacts = await listArtifacts(sourceJob[0]);
+    const json = pick(artifacts, /trajectory\.json$/i);
+    if (!json) return null;
+    const byName = new Map(trajectoryFromJson(await fetchArtifactJson(sourceJob[0], json.name)).map((p) => [base(p.name), p]));
+    poses = pairs.map((pair) => byName.get(base(pair.name)));
+  } else {
+    const response = await fetchWithAuth(imageUrl(job.dataset ?? job.dataset_id, source));
+    const stamped = parseTum(await response.text());
+    const times = pairs.map((p) => Number(base(p.name)));
+    poses = times.every(Number.isFinite)
+      ? times.map((t) => stamped.reduce((best, p) => (Math.abs(Number(p.name) - t) < Math.abs(Number(best.name) - t) ? p : best), stamped[0]))
+      : pairs.map((_, i) => stamped[i]);
+  }
+  return poses.map((p, i) => p && { ...p, name: pairs[i].name, pairPose: true }).filter(Boolean);
 }
 
 // The ground truth: the dataset's TUM file named by params.ground_truth, else an artifact.
@@ -191,9 +345,20 @@ async function loadReport(jobId, artifacts, result) {
 // The top view with its legend: the estimate coloured by each frame's state (lost frames leave a
 // gap), a line per loop closure between its two keyframes, the ground truth when given. Results
 // from before loops and states were reported draw as one tracked line.
-function topView(trajectory, groundTruth, result) {
+function topView(trajectory, groundTruth, result, occupancy) {
   const canvas = el('canvas.topview#top-view', { width: 560, height: 560 });
-  requestAnimationFrame(() => drawTopView(canvas, trajectory, groundTruth, result.loops));
+  requestAnimationFrame(() => drawTopView(canvas, trajectory, groundTruth, result.loops, occupancy, OCCUPANCY_COLOURS));
+  const rgb = ([r, g, b]) => `rgb(${r}, ${g}, ${b})`;
+  const cell = occupancy ? formatLength(occupancy.cell_m) : '';
+  const occupancyKey = occupancy ? colourKey({
+    id: 'occupancy-key',
+    title: `Occupancy grid (cells of ${cell}, ${occupancy.cols} × ${occupancy.rows}), seen from above in the world's x-y plane`,
+    items: [
+      { colour: rgb(OCCUPANCY_COLOURS.occupied), label: 'occupied: an obstacle' },
+      { colour: rgb(OCCUPANCY_COLOURS.free), label: 'free: floor seen, nothing in the way' },
+      { colour: rgb(OCCUPANCY_COLOURS.unknown), label: 'unknown: not seen' },
+    ],
+  }) : null;
   const frames = (n) => `${n} frame${n === 1 ? '' : 's'}`;
   const count = (state) => trajectory.filter((p) => (p.state === 'initialised' ? 'tracked' : p.state || 'tracked') === state).length;
   // Frames without a pose: those the trajectory skips, and any after its last pose.
@@ -202,7 +367,7 @@ function topView(trajectory, groundTruth, result) {
   const item = (key, colour, text, line = true) => el('li.legend-item', { dataset: { key } },
     el(line ? 'span.swatch' : 'span.swatch.gap', { style: line ? `background: ${colour}` : undefined }), text);
   const loops = Array.isArray(result.loops) ? loopSegments(trajectory, result.loops).length : null;
-  return el('div', canvas, el('ul.legend#top-view-legend',
+  return el('div', canvas, occupancyKey, el('ul.legend#top-view-legend',
     Object.entries(STATE_COLOURS).map(([state, colour]) => item(state, colour, `${state} (${frames(count(state))})`)),
     item('lost', '', `lost: a gap in the line (${frames(lost)})`, false),
     loops === null ? null : item('loop', LOOP_COLOUR, `loop closure: joins its two keyframes (${loops})`),
@@ -211,15 +376,39 @@ function topView(trajectory, groundTruth, result) {
     : el('p.muted', 'No ground truth was given.'));
 }
 
-// The scalar metrics of the result (ATE, RPE, drift, counts) as a list.
+// A result object's plain values as a list of labels and values with units; `unit` is the unit
+// its parent key names (timings_s: every entry in seconds). Poses and lists are left to the
+// views that draw them.
+function valueList(object, unit = '') {
+  const rows = Object.entries(object || {}).filter(([, v]) => v !== null && (typeof v !== 'object' ||
+    (Array.isArray(v) && v.length <= 3 && v.every((x) => typeof x === 'number'))));
+  return el('dl.kv', rows.map(([k, v]) => {
+    const described = describeKey(k);
+    const key = unit && !described.unit ? `${k}_${unit}` : k;
+    const text = Array.isArray(v) ? `${v.map((x) => formatNumber(x, 3)).join(' × ')}${described.unit ? ` ${described.unit}` : ''}`
+      : typeof v === 'boolean' ? (v ? 'yes' : 'no') : formatWithUnit(key, v);
+    return [el('dt', described.label), el('dd', { dataset: { key: k } }, text)];
+  }));
+}
+
+// The result's own figures, labelled, with units: counts and rates, then each group (the
+// evaluation, the dense map, the input, the timings) in its own list.
+const GROUPS = {
+  evaluation: ['Evaluation against the ground truth', ''],
+  dense_map: ['Dense map and occupancy grid', ''],
+  input: ['Input', ''],
+  timings_s: ['Time per stage (wall)', 's'],
+  cpu_timings_s: ['Time per stage (CPU)', 's'],
+  global_bundle_adjustment: ['Global bundle adjustment', ''],
+  options: ['Options', ''],
+  grid: ['Dense grid', ''],
+};
 function summaryCard(result) {
-  const rows = Object.entries(result || {}).filter(([, v]) => typeof v === 'number' || typeof v === 'string');
-  const nested = Object.entries(result || {}).filter(([k, v]) => v && typeof v === 'object' && !Array.isArray(v) &&
-    /eval|metric|ate|rpe|drift|summary/i.test(k));
-  if (!rows.length && !nested.length) return null;
-  return el('div.card#result-summary', el('h2', 'Summary'),
-    el('dl.kv', rows.map(([k, v]) => [el('dt.mono', k), el('dd', typeof v === 'number' && !Number.isInteger(v) ? formatNumber(v, 4) : String(v))])),
-    nested.map(([k, v]) => el('details', el('summary', k), el('pre.mono', JSON.stringify(v, null, 2)))));
+  const top = Object.fromEntries(Object.entries(result || {}).filter(([, v]) => typeof v === 'number' || typeof v === 'string'));
+  const groups = Object.entries(GROUPS).filter(([k]) => result && result[k] && typeof result[k] === 'object' && !Array.isArray(result[k]));
+  if (!Object.keys(top).length && !groups.length) return null;
+  return el('div.card#result-summary', el('h2', 'Summary'), valueList(top),
+    groups.map(([k, [title, unit]]) => el('details', { dataset: { group: k } }, el('summary', title), valueList(result[k], unit))));
 }
 
 // Per-frame (or per-pair) statistics: a table with the scalar fields of report.frames (pairs).
@@ -240,7 +429,11 @@ function statsCard(report) {
   const shown = frames.slice(0, 1000);
   return el('div.card#frame-stats', el('h2', `Per-${what} statistics (${frames.length} ${what}s)`),
     el('div.table-scroll', { style: 'max-height: 420px; overflow-y: auto' }, el('table',
-      el('thead', el('tr', columns.map((c) => el(frames.some((f) => typeof f[c] === 'number' || Array.isArray(f[c])) ? 'th.num' : 'th', c)))),
+      el('thead', el('tr', columns.map((c) => {
+        const { label, unit } = describeKey(c);
+        return el(frames.some((f) => typeof f[c] === 'number' || Array.isArray(f[c])) ? 'th.num' : 'th', { title: c },
+          unit ? `${label} (${unit})` : label);
+      }))),
       el('tbody', shown.map((f) => el('tr', columns.map((c) => frameCell(f[c], c))))))),
     frames.length > shown.length ? el('p.muted', `First ${shown.length} ${what}s shown.`) : null);
 }
@@ -356,8 +549,12 @@ function hudControls(view, { points, preview, path }, trajectory) {
       path.visible = e.target.checked;
       view.requestDraw();
     } });
+  // What the poses are: a slam trajectory, the pairs a reconstruction placed, or the rig alone.
+  const poses = !trajectory ? '' : trajectory.some((p) => p.pairPose) ? `pair poses (${trajectory.length} placed)`
+    : trajectory.length === 2 && trajectory[0].name === 'cam0' && trajectory[1].name === 'cam1' ? 'the rig: cam0 and cam1'
+      : `trajectory (${trajectory.length} poses)`;
   return [el('label', 'point size', sizeInput), el('label', 'up', upSelect),
-    path ? el('label', pathToggle, `trajectory and rig poses (${trajectory.length})`) : null,
+    path ? el('label#pose-toggle', pathToggle, poses) : null,
     el('span.muted', 'drag: orbit · right-drag: pan · wheel: zoom')].filter(Boolean);
 }
 
