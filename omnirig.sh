@@ -16,9 +16,11 @@ ROOT=$(pwd)
 APT_PACKAGES=(build-essential cmake ninja-build ccache pkg-config git
   libeigen3-dev libopencv-dev libopencv-contrib-dev libceres-dev libcpp-httplib-dev
   nlohmann-json3-dev libsqlite3-dev sqlite3 googletest libgtest-dev libbenchmark-dev
-  libssl-dev libpq-dev libopengv-dev nodejs npm curl jq)
-# Only the tests need these: the browser they drive, and a PostgreSQL server they start themselves.
-TEST_APT_PACKAGES=(chromium postgresql)
+  libssl-dev libpq-dev libopengv-dev libbz2-dev liblz4-dev libzstd-dev zlib1g-dev nodejs npm
+  curl jq)
+# Only the tests need these: the browser they drive, a PostgreSQL server they start themselves,
+# and ROS's own bag writer (ROS 1 bags with bz2 and lz4 chunks) for the recordings they read.
+TEST_APT_PACKAGES=(chromium postgresql python3-rosbag python3-sensor-msgs python3-roslz4)
 JOBS=${OMNIRIG_JOBS:-$(nproc)}
 # Cache compiles by paths relative to the checkout, so that a second clone reuses them.
 export CCACHE_BASEDIR="$ROOT"

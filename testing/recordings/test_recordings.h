@@ -27,7 +27,7 @@ constexpr int64_t kRecordingStartS = 1700000000;
 constexpr int64_t kRecordingPeriodNs = 50000000;  // 20 Hz
 constexpr int64_t kRecordingReceiveDelayNs = 5000000;
 
-// Channel c of pixel (x, y) in the mono and colour images (mono8: c = 0; mono16: value * 257 + 3).
+// Channel c of pixel (x, y) in the mono and colour images (mono8: c = 0; mono16: (value * 257 + 3) mod 65536).
 inline int RecordingChannelValue(int x, int y, int c) { return (x * 7 + y * 13 + c * 50) % 256; }
 // The colour scene behind the bayer mosaics and the compressed images: RGB, linear in x and y.
 inline int RecordingGradient(int x, int y, int c) {
