@@ -56,8 +56,7 @@ Bytes MapWhole(const fs::path& path, const std::string& label) {
 }
 
 void Fail(const Bytes& bytes, uint64_t offset, const std::string& problem) {
-  throw RecordingError(bytes.label + ": byte " + std::to_string(bytes.file_offset + offset) +
-                       ": " + problem);
+  throw RecordingError(bytes.label, bytes.file_offset + offset, problem);
 }
 
 namespace {
@@ -313,11 +312,12 @@ void Recording::ReadMessages(const std::set<std::string>& topics,
   Read(wanted, on_message);
 }
 
-std::unique_ptr<Recording> Recording::Open(const std::filesystem::path& path) {
+std::unique_ptr<Recording> Recording::Open(const std::filesystem::path& path,
+                                           const std::string& label_or_empty) {
   using namespace recording;
   if (std::filesystem::is_directory(path)) return OpenFolder(path);
-  const std::string label = path.filename().string();
-  if (label == "metadata.yaml") return OpenFolder(path.parent_path());
+  const std::string label = label_or_empty.empty() ? path.filename().string() : label_or_empty;
+  if (path.filename() == "metadata.yaml") return OpenFolder(path.parent_path());
   Bytes bytes = MapWhole(path, label);
   const auto starts = [&](std::string_view magic) {
     return bytes.size >= magic.size() && std::memcmp(bytes.data, magic.data(), magic.size()) == 0;
@@ -338,6 +338,25 @@ std::unique_ptr<Recording> Recording::Open(const std::filesystem::path& path) {
   Fail(bytes, 0, "not a recording omnirig reads: a ROS 1 bag begins with '#ROSBAG V2.0', an MCAP "
                  "file with its magic \\x89MCAP0, a ROS 2 bag is a folder (or .tar) with "
                  "metadata.yaml");
+}
+
+std::optional<RecordingIndex> CheckRecordingFile(const std::string& name,
+                                                 const std::filesystem::path& path) {
+  using namespace recording;
+  const std::string lower = Lower(name);
+  if (EndsWith(lower, ".db3")) {
+    Bytes bytes = MapWhole(path, name);
+    if (bytes.size < 16 || std::memcmp(bytes.data, "SQLite format 3", 16) != 0) {
+      Fail(bytes, 0, "not an SQLite file (a ROS 2 bag's .db3 begins with 'SQLite format 3')");
+    }
+    OpenDb3(std::move(bytes));
+    return std::nullopt;
+  }
+  if (std::filesystem::path(lower).filename() == "metadata.yaml") {
+    CheckRos2Metadata(MapWhole(path, name));
+    return std::nullopt;
+  }
+  return Recording::Open(path, name)->index();
 }
 
 }  // namespace omnirig::storage

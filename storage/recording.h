@@ -30,6 +30,7 @@
 #include <filesystem>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <set>
 #include <stdexcept>
 #include <string>
@@ -43,6 +44,17 @@ namespace omnirig::storage {
 class RecordingError : public std::runtime_error {
  public:
   using std::runtime_error::runtime_error;
+  RecordingError(const std::string& file, uint64_t byte_offset, const std::string& problem)
+      : std::runtime_error(file + ": byte " + std::to_string(byte_offset) + ": " + problem),
+        file_(file),
+        byte_offset_(byte_offset) {}
+  // The file (or archive member) and byte where a structural fault lies, when one does.
+  const std::string& file() const { return file_; }
+  const std::optional<uint64_t>& byte_offset() const { return byte_offset_; }
+
+ private:
+  std::string file_;
+  std::optional<uint64_t> byte_offset_;
 };
 
 // True for names the service stores as (parts of) recordings: .bag, .mcap, .db3, .tar, and a
@@ -80,12 +92,22 @@ struct RecordingMessage {
   std::string_view data;  // the serialized message
 };
 
+// The check of one uploaded file of a recording, at `path`, by the role its `name` gives it
+// (see IsRecordingName): a .bag, .mcap or .tar is a whole recording, opened and indexed (its
+// index returned); a .db3 must be SQLite with rosbag2's tables, intact; a metadata.yaml must be
+// a ROS 2 bag's, listing its files (nullopt for these parts: the folder is indexed when whole).
+// Throws RecordingError naming `name`, what is wrong and where.
+std::optional<RecordingIndex> CheckRecordingFile(const std::string& name,
+                                                 const std::filesystem::path& path);
+
 class Recording {
  public:
   // Opens and indexes (one pass) a .bag, .mcap or .tar file, a ROS 2 bag's folder, or its
   // metadata.yaml. Throws RecordingError when it is no recording omnirig reads, is damaged or
-  // is cut short (a ROS 1 bag cut short by its recorder is read, see above).
-  static std::unique_ptr<Recording> Open(const std::filesystem::path& path);
+  // is cut short (a ROS 1 bag cut short by its recorder is read, see above). Errors name the
+  // file `label` (its file name when empty).
+  static std::unique_ptr<Recording> Open(const std::filesystem::path& path,
+                                         const std::string& label = "");
   virtual ~Recording() = default;
 
   const RecordingIndex& index() const { return index_; }

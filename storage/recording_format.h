@@ -108,6 +108,8 @@ void AddTopics(const std::map<int64_t, RecordingTopic>& topics, RecordingIndex& 
 std::unique_ptr<Recording> OpenRos1Bag(Bytes bytes);
 std::unique_ptr<Recording> OpenMcap(Bytes bytes);
 std::unique_ptr<Recording> OpenDb3(Bytes bytes);
+// Throws unless `metadata` is a ROS 2 bag's metadata.yaml listing its files.
+void CheckRos2Metadata(const Bytes& metadata);
 // A ROS 2 bag from its metadata.yaml's text and a way to find the files it lists.
 std::unique_ptr<Recording> OpenRos2Bag(const Bytes& metadata,
                                        const std::function<Bytes(const std::string&)>& file);

@@ -257,6 +257,8 @@ class Ros2Bag : public Recording {
 
 std::unique_ptr<Recording> OpenDb3(Bytes bytes) { return std::make_unique<Db3>(std::move(bytes)); }
 
+void CheckRos2Metadata(const Bytes& metadata) { ParseMetadata(metadata); }
+
 std::unique_ptr<Recording> OpenRos2Bag(const Bytes& metadata_bytes,
                                        const std::function<Bytes(const std::string&)>& file) {
   const Metadata metadata = ParseMetadata(metadata_bytes);
