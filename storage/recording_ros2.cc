@@ -82,12 +82,7 @@ class Db3 : public Recording {
   explicit Db3(Bytes bytes) : bytes_(std::move(bytes)), db_(bytes_) {
     index_.format = "rosbag2";
     index_.storage = "sqlite3";
-    db_.Query("PRAGMA quick_check", [&](sqlite3_stmt* row) {
-      if (Column(row, 0) != "ok") {
-        throw RecordingError(bytes_.label + ": SQLite's check fails: " + Column(row, 0));
-      }
-      return false;
-    });
+    CheckSize();
     int tables = 0;
     db_.Query("SELECT name FROM sqlite_master WHERE type = 'table' AND name IN ('topics', "
               "'messages')",
@@ -148,6 +143,28 @@ class Db3 : public Recording {
   }
 
  private:
+  // A file cut short (in transfer, or by a recorder killed before SQLite synced) holds fewer
+  // pages than its header declares. Checked from the header alone: SQLite's own quick_check
+  // reads every page (the whole file, at a fifth of the speed of indexing); damage inside the
+  // tables shows when the queries below walk them.
+  void CheckSize() const {
+    if (bytes_.size < 100) Fail(bytes_, bytes_.size, "the file ends inside SQLite's header");
+    const uint8_t* header = bytes_.data;
+    uint64_t page_size = (uint64_t{header[16]} << 8) | header[17];
+    if (page_size == 1) page_size = 65536;
+    const uint64_t pages = (uint64_t{header[28]} << 24) | (uint64_t{header[29]} << 16) |
+                           (uint64_t{header[30]} << 8) | header[31];
+    // The page count is valid when the change counter (24) equals version-valid-for (92):
+    // SQLite before 3.7 left it stale.
+    if (page_size < 512 || pages == 0 || std::memcmp(header + 24, header + 92, 4) != 0) return;
+    if (pages * page_size > bytes_.size) {
+      Fail(bytes_, bytes_.size,
+           "the file ends here, but its header declares " + std::to_string(pages) + " pages of " +
+               std::to_string(page_size) + " bytes (" + std::to_string(pages * page_size) +
+               "): it was cut short");
+    }
+  }
+
   Bytes bytes_;
   Db3Connection db_;
   std::map<int64_t, const RecordingTopic*> topic_of_id_;

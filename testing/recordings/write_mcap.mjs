@@ -114,9 +114,62 @@ async function writeMcap(file, options) {
   fs.writeFileSync(file, Buffer.concat(writable.chunks));
 }
 
+// Large files for bench/recording_index_bench.cc (--bench SIZE_MB): two topics of 1280x1024
+// mono8 images at 20 Hz (a gradient with 3 bits of noise), written straight to the file.
+class FileWritable {
+  constructor(file) { this.fd = fs.openSync(file, "w"); this.size = 0n; }
+  position() { return this.size; }
+  async write(buffer) {
+    fs.writeSync(this.fd, buffer);
+    this.size += BigInt(buffer.byteLength);
+  }
+}
+
+async function writeBenchMcap(file, sizeMb, compressChunk) {
+  const W = 1280, H = 1024;
+  const pool = [];
+  for (let k = 0; k < 8; ++k) {
+    const data = new Uint8Array(W * H);
+    for (let p = 0; p < data.length; ++p) data[p] = (p & 0xf8) | ((Math.random() * 8) | 0);
+    pool.push(data);
+  }
+  const writable = new FileWritable(file);
+  // Chunks under lz4js's 4 MiB block: its frames of several blocks do not decompress (with
+  // liblz4's reference decoder either), so one chunk holds one or two images.
+  const writer = new McapWriter({ writable, chunkSize: 1 << 20, compressChunk });
+  await writer.start({ profile: "ros2", library: "omnirig bench" });
+  const schemaId = await writer.registerSchema(
+    { name: "sensor_msgs/msg/Image", encoding: "ros2msg", data: new TextEncoder().encode(IMAGE_DEF) });
+  const channels = [];
+  for (const topic of ["/cam0/image_raw", "/cam1/image_raw"]) {
+    channels.push(await writer.registerChannel({ topic, schemaId, messageEncoding: "cdr", metadata: new Map() }));
+  }
+  const count = Math.max(2, Math.floor(sizeMb * 1048576 / (W * H) / 2));
+  for (let i = 0; i < count; ++i) {
+    const logTime = BigInt(T0_S) * 1000000000n + BigInt(i * PERIOD_NS);
+    for (let c = 0; c < 2; ++c) {
+      const cdr = new CdrWriter();
+      writeHeader(cdr, i);
+      cdr.uint32(H); cdr.uint32(W); cdr.string("mono8"); cdr.uint8(0); cdr.uint32(W);
+      cdr.uint8Array(pool[(i + 3 * c) % 8], true);
+      await writer.addMessage({ channelId: channels[c], sequence: i, logTime, publishTime: logTime, data: cdr.data });
+    }
+  }
+  await writer.end();
+  fs.closeSync(writable.fd);
+}
+
 const out = process.argv[2];
 fs.mkdirSync(path.join(out, "messages"), { recursive: true });
 await zstd.isLoaded;
+if (process.argv[3] === "--bench") {
+  const sizeMb = Number(process.argv[4]);
+  await writeBenchMcap(path.join(out, "bench_lz4.mcap"), sizeMb,
+                       (data) => ({ compression: "lz4", compressedData: lz4.compress(data) }));
+  await writeBenchMcap(path.join(out, "bench_zstd.mcap"), sizeMb,
+                       (data) => ({ compression: "zstd", compressedData: zstd.compress(data, 3) }));
+  process.exit(0);
+}
 const lz4Chunk = (data) => ({ compression: "lz4", compressedData: lz4.compress(data) });
 const zstdChunk = (data) => ({ compression: "zstd", compressedData: zstd.compress(data, 3) });
 await writeMcap(path.join(out, "images_lz4.mcap"), { compressChunk: lz4Chunk });
