@@ -45,7 +45,8 @@ install_apt_packages() {  # package...
 }
 
 install_npm_packages() {
-  # web/package.json carries three.js (the 3D viewer) and playwright-core (browser tests).
+  # web/package.json carries three.js (the 3D viewer), playwright-core (browser tests) and, for
+  # the tests' recordings, the MCAP writer @mcap/core with @foxglove/cdr, lz4js, wasm-zstd.
   [[ -f web/package.json ]] || return 0
   local stamp=web/node_modules/.omnirig-installed
   if [[ ! -f $stamp || web/package.json -nt $stamp || web/package-lock.json -nt $stamp ]]; then
