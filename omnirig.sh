@@ -17,11 +17,14 @@ ROOT=$(pwd)
 APT_PACKAGES=(build-essential cmake ninja-build ccache pkg-config git
   libeigen3-dev libopencv-dev libopencv-contrib-dev libceres-dev libcpp-httplib-dev
   nlohmann-json3-dev libsqlite3-dev sqlite3 googletest libgtest-dev libbenchmark-dev
-  libssl-dev libpq-dev libopengv-dev nodejs npm curl jq)
+  libssl-dev libpq-dev libopengv-dev libbz2-dev liblz4-dev libzstd-dev zlib1g-dev nodejs npm
+  curl jq)
 # Only the tests need these: the browser they drive, a PostgreSQL server they start themselves,
-# clang with its libFuzzer and sanitizer runtimes for the fuzz targets (fuzz/), and unzip, which
-# checks the job archives the server streams.
-TEST_APT_PACKAGES=(chromium postgresql clang libclang-rt-14-dev unzip)
+# clang with its libFuzzer and sanitizer runtimes for the fuzz targets (fuzz/), unzip, which
+# checks the job archives the server streams, and ROS's own bag writer (ROS 1 bags with bz2 and
+# lz4 chunks) for the recordings they read.
+TEST_APT_PACKAGES=(chromium postgresql clang libclang-rt-14-dev unzip python3-rosbag
+  python3-sensor-msgs python3-roslz4)
 JOBS=${OMNIRIG_JOBS:-$(nproc)}
 # Cache compiles by paths relative to the checkout, so that a second clone reuses them.
 export CCACHE_BASEDIR="$ROOT"
@@ -46,7 +49,8 @@ install_apt_packages() {  # package...
 }
 
 install_npm_packages() {
-  # web/package.json carries three.js (the 3D viewer) and playwright-core (browser tests).
+  # web/package.json carries three.js (the 3D viewer), playwright-core (browser tests) and, for
+  # the tests' recordings, the MCAP writer @mcap/core with @foxglove/cdr, lz4js, wasm-zstd.
   [[ -f web/package.json ]] || return 0
   local stamp=web/node_modules/.omnirig-installed
   if [[ ! -f $stamp || web/package.json -nt $stamp || web/package-lock.json -nt $stamp ]]; then

@@ -18,6 +18,7 @@ nlohmann::json DatasetJson(const storage::DatasetRecord& dataset,
   nlohmann::json json = DatasetJson(dataset);
   json["images"] = nlohmann::json::array();
   for (const auto& image : images) json["images"].push_back(ImageJson(image));
+  json["recordings"] = nlohmann::json::array();  // filled by GET /datasets/{id}
   return json;
 }
 

@@ -1,4 +1,5 @@
-// Datasets and their files (images, videos, .tum trajectories): create, list, get, delete;
+// Datasets and their files (images, videos, recordings, .tum trajectories): create, list, get,
+// delete;
 // idempotent PUT of one file, resumable PUT of a large one in chunks (Content-Range), and
 // multipart POST of many, streamed to disk with limits checked before the body is read.
 
@@ -11,12 +12,14 @@
 
 #include "api/service_json.h"
 #include "server/content_range.h"
+#include "server/dataset_recordings.h"
 #include "server/json_views.h"
 #include "server/service.h"
 #include "server/upload_check.h"
 #include "storage/atomic_file.h"
 #include "storage/image_header.h"
 #include "storage/names.h"
+#include "storage/recording.h"
 #include "storage/upload_part.h"
 #include "storage/video_container.h"
 
@@ -78,9 +81,14 @@ storage::DatasetRecord CurrentDataset(ServiceState& state, const std::string& id
   return *dataset;
 }
 
-// The largest upload of a file of this name: videos have their own limit.
+// Videos and recordings: files that take no place among the dataset's images.
+bool IsStreamName(const std::string& name) {
+  return storage::IsVideoName(name) || storage::IsRecordingName(name);
+}
+
+// The largest upload of a file of this name: videos and recordings (gigabytes) have their own.
 int64_t MaxFileBytes(const ServiceState& state, const std::string& name) {
-  return storage::IsVideoName(name) ? state.options.max_video_bytes : state.options.max_file_bytes;
+  return IsStreamName(name) ? state.options.max_video_bytes : state.options.max_file_bytes;
 }
 
 // The record of a video whose bytes are at `path` (415 when it is no container omnirig reads,
@@ -98,11 +106,11 @@ storage::ImageRecord VideoRecord(const std::string& name, const std::filesystem:
   return storage::ImageRecord{name, digest.size, digest.sha256, 0, 0, video.content_type};
 }
 
-// Under files_mutex: 413 when a new image would exceed the dataset's image limit (videos and
-// files replacing one of the same name take no new place).
+// Under files_mutex: 413 when a new image would exceed the dataset's image limit (videos,
+// recordings and files replacing one of the same name take no new place).
 void CheckImageLimit(ServiceState& state, const std::string& dataset_id, const std::string& name) {
   const storage::DatasetRecord current = CurrentDataset(state, dataset_id);
-  if (!storage::IsVideoName(name) && current.image_count >= state.options.max_images_per_dataset &&
+  if (!IsStreamName(name) && current.image_count >= state.options.max_images_per_dataset &&
       !state.store->GetImage(dataset_id, name)) {
     TooManyImages(current, state.options.max_images_per_dataset);
   }
@@ -125,12 +133,18 @@ class ImageUpload {
       TooLarge(name_ + " is larger than " + std::to_string(limit) + " bytes", limit);
     }
     writer_.Append(data, size);
-    if (!video_) check_.Append(data, size);
+    if (!video_ && !recording_) check_.Append(data, size);
   }
 
   // Checks the header (415 or 422 for what is not an image) and seals the file: written and
   // fsynced under its temporary name, holding no descriptor. Returns the record it will have.
   const storage::ImageRecord& Seal() {
+    if (recording_) {
+      const storage::FileDigest digest = writer_.Seal();
+      checked_recording_ = CheckRecordingUpload(name_, writer_.temp_path(), digest);
+      record_ = checked_recording_.record;
+      return record_;
+    }
     if (video_) {
       const storage::FileDigest digest = writer_.Seal();
       record_ = VideoRecord(name_, writer_.temp_path(), digest);
@@ -152,7 +166,12 @@ class ImageUpload {
     CheckImageLimit(state_, dataset_.id, name_);
     Publish(/*sync_folder=*/true);
     state_.store->PutImage(dataset_.id, record_);
+    KeepIndex();
     return record_;
+  }
+  // After the record is stored: a recording's index (under files_mutex).
+  void KeepIndex() {
+    if (recording_) KeepRecordingIndex(state_, dataset_.id, name_, checked_recording_);
   }
 
   const std::string& name() const { return name_; }
@@ -165,6 +184,8 @@ class ImageUpload {
   std::string name_;
   storage::AtomicFileWriter writer_;
   bool video_ = storage::IsVideoName(name_);
+  bool recording_ = storage::IsRecordingName(name_);
+  CheckedRecording checked_recording_;  // set by Seal() for recordings
   ImageCheck check_;
   storage::ImageRecord record_;  // set by Seal()
 };
@@ -218,7 +239,7 @@ std::set<std::string> ImageBatch::KeepWhatFits(std::vector<std::string>& over_li
   for (; fitting < sealed_.size(); ++fitting) {
     const std::string& name = sealed_[fitting]->name();
     if (new_names.count(name) || state_.store->GetImage(dataset_.id, name)) continue;
-    if (!storage::IsVideoName(name)) {
+    if (!IsStreamName(name)) {
       if (count >= state_.options.max_images_per_dataset) break;
       ++count;
     }
@@ -245,6 +266,7 @@ std::vector<storage::ImageRecord> ImageBatch::Commit(std::vector<std::string>& o
     }
     for (const auto& folder : folders) storage::FsyncPath(folder);
     state_.store->PutImages(dataset_.id, records);
+    for (const auto& upload : sealed_) upload->KeepIndex();
   } catch (...) {
     // No record may describe another file than its own: the new files go, and the records of
     // the files this batch replaced go with them (the client uploads those again).
@@ -287,6 +309,7 @@ nlohmann::json UploadStatusJson(const std::string& name, const storage::UploadPa
 storage::ImageRecord CheckCompleteFile(const std::string& name, const std::filesystem::path& path) {
   const storage::FileDigest digest = storage::DigestFile(path);
   if (storage::IsVideoName(name)) return VideoRecord(name, path, digest);
+  if (storage::IsRecordingName(name)) return CheckRecordingUpload(name, path, digest).record;
   std::ifstream in(path, std::ios::binary);
   std::string block(1 << 20, '\0');
   ImageCheck check;
@@ -336,9 +359,15 @@ void CheckChunk(ServiceState& state, const storage::DatasetRecord& dataset, cons
 void CompleteUpload(ServiceState& state, const std::string& dataset_id, const std::string& name,
                     storage::UploadPartWriter& part, HttpResponse& response) {
   part.Sync();
+  CheckedRecording checked;
   storage::ImageRecord record;
   try {
-    record = CheckCompleteFile(name, part.path());
+    if (storage::IsRecordingName(name)) {
+      checked = CheckRecordingUpload(name, part.path(), storage::DigestFile(part.path()));
+      record = checked.record;
+    } else {
+      record = CheckCompleteFile(name, part.path());
+    }
   } catch (const HttpError&) {
     part.Remove();  // refused content: the client starts over
     throw;
@@ -348,6 +377,7 @@ void CompleteUpload(ServiceState& state, const std::string& dataset_id, const st
   const bool replaced = state.store->GetImage(dataset_id, name).has_value();
   part.Publish(state.data_dir->ImagesDir(dataset_id) / name);
   state.store->PutImage(dataset_id, record);
+  if (storage::IsRecordingName(name)) KeepRecordingIndex(state, dataset_id, name, checked);
   response.Json(replaced ? 200 : 201, ImageJson(record));
 }
 
@@ -608,7 +638,10 @@ void AddDatasetRoutes(HttpServer& http, ServiceState& state) {
   http.Route("GET", "/api/v1/datasets/{id}",
              [&state](const HttpRequest& request, HttpResponse& response) {
                const storage::DatasetRecord dataset = RequireDataset(state, request.Param("id"));
-               response.Json(200, DatasetJson(dataset, state.store->ListImages(dataset.id)));
+               const auto images = state.store->ListImages(dataset.id);
+               nlohmann::json json = DatasetJson(dataset, images);
+               json["recordings"] = RecordingsJson(state, dataset.id, images);
+               response.Json(200, json);
              });
   http.Route("DELETE", "/api/v1/datasets/{id}", WithState(state, DeleteDataset));
   http.Route("PUT", "/api/v1/datasets/{id}/images/{name+}", WithState(state, PutImage),

@@ -150,7 +150,10 @@ ImageHeader ProbeImageHeader(std::string_view head) {
     return ProbePnm(head);
   }
   ImageHeader header;
-  header.problem = "not a supported image (PNG, JPEG, BMP, PGM/PPM)";
+  header.problem =
+      "not a file omnirig takes: images (PNG, JPEG, BMP, PGM/PPM), videos (.mp4, .m4v, .mov, "
+      ".mkv, .webm, .avi), recordings (a ROS 1 .bag, an .mcap, a ROS 2 bag's folder: its "
+      "metadata.yaml with its .db3 or .mcap files, or one .tar of it) and .tum trajectories";
   return header;
 }
 

@@ -28,7 +28,7 @@ struct DatasetRecord {
   std::string id;
   std::string name;
   double created_at = 0;
-  int64_t image_count = 0;  // files that are not videos (images, .tum trajectories)
+  int64_t image_count = 0;  // files neither videos nor recordings (images, .tum trajectories)
   int64_t total_bytes = 0;  // of every file
   int64_t video_count = 0;  // files whose content type is video/*
 };

@@ -7,7 +7,8 @@ namespace {
 
 constexpr char kDatasetSelect[] =
     "SELECT d.id, d.name, d.created_at, "
-    "COUNT(i.name) - COUNT(CASE WHEN i.content_type LIKE 'video/%' THEN 1 END), "
+    "COUNT(i.name) - COUNT(CASE WHEN i.content_type LIKE 'video/%' OR i.content_type LIKE "
+    "'application/%' THEN 1 END), "
     "COALESCE(SUM(i.size), 0), COUNT(CASE WHEN i.content_type LIKE 'video/%' THEN 1 END) "
     "FROM datasets d LEFT JOIN images i ON i.dataset_id = d.id ";
 constexpr char kImageSelect[] =

@@ -20,6 +20,7 @@
 #include "server/cli/args.h"
 #include "server/cli/commands.h"
 #include "storage/atomic_file.h"
+#include "storage/recording.h"
 #include "storage/video_container.h"
 
 namespace omnirig::cli {
@@ -37,10 +38,11 @@ std::string Extension(const fs::path& path) {
 bool IsUploadFile(const fs::path& path) {
   const std::string ext = Extension(path);
   return ext == ".png" || ext == ".jpg" || ext == ".jpeg" || ext == ".bmp" || ext == ".pgm" ||
-         ext == ".ppm" || ext == ".tum" || storage::IsVideoName(path.string());
+         ext == ".ppm" || ext == ".tum" || storage::IsVideoName(path.string()) ||
+         storage::IsRecordingName(path.string());
 }
 
-// Image and video files (and .tum trajectories, a slam job's ground truth) of `folder` and of
+// Image, video and recording files (and .tum trajectories, a slam job's ground truth) of `folder` and of
 // its direct sub-folders (e.g. cam0/, cam1/), by upload name.
 std::map<std::string, fs::path> CollectImages(const fs::path& folder) {
   if (!fs::is_directory(folder)) throw InvalidArgument(folder.string() + " is not a folder");
@@ -179,7 +181,7 @@ int SyncImages(httplib::Client& client, const std::string& dataset,
       if (local.size == it->second.first && local.sha256 == it->second.second) continue;
     }
     const std::string url = "/api/v1/datasets/" + dataset + "/images/" + name;
-    if (storage::IsVideoName(path.string()) ||
+    if (storage::IsVideoName(path.string()) || storage::IsRecordingName(path.string()) ||
         static_cast<int64_t>(fs::file_size(path)) > chunk_bytes) {
       UploadInChunks(client, dataset, name, path, chunk_bytes);
     } else {

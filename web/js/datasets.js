@@ -8,9 +8,11 @@ import { shortId } from './labels.js';
 
 // What a dataset holds: the images the server decodes, TUM trajectories (a SLAM job's optional
 // ground truth is a file of its dataset) and videos (a SLAM job reads cam0.mp4 + cam1.mp4, or
-// one stacked.mp4).
-const DATASET_FILES = /\.(png|jpe?g|bmp|pgm|ppm|pnm|tum|mp4|m4v|mov|mkv|webm|avi)$/i;
+// one stacked.mp4) and robot recordings (a ROS 1 .bag, an .mcap, a ROS 2 bag's folder: its
+// metadata.yaml with its .db3 or .mcap files, or one .tar of it).
+const DATASET_FILES = /(\.(png|jpe?g|bmp|pgm|ppm|pnm|tum|mp4|m4v|mov|mkv|webm|avi|bag|mcap|db3|tar)|(^|\/)metadata\.yaml)$/i;
 const VIDEO = /\.(mp4|m4v|mov|mkv|webm|avi)$/i;
+const RECORDING = /(\.(bag|mcap|db3|tar)|(^|\/)metadata\.yaml)$/i;
 // Videos and files above this go up in chunks that resume (the server takes 64 MiB at most).
 const CHUNK_BYTES = 16 << 20;
 const PARALLEL_UPLOADS = 3;
@@ -30,7 +32,8 @@ function datasetStats(dataset) {
   const files = Array.isArray(dataset.images) ? dataset.images : null;
   const trajectories = files ? files.filter((i) => TRAJECTORY.test(i.name)) : [];
   const videos = files ? files.filter((i) => VIDEO.test(i.name)) : [];
-  const count = files ? files.length - trajectories.length - videos.length : dataset.image_count ?? dataset.num_images ?? 0;
+  const recordingFiles = files ? files.filter((i) => RECORDING.test(i.name)) : [];
+  const count = files ? files.length - trajectories.length - videos.length - recordingFiles.length : dataset.image_count ?? dataset.num_images ?? 0;
   const bytes = files ? files.reduce((s, i) => s + (i.size || 0), 0) : dataset.total_bytes ?? dataset.size;
   return { count, bytes, trajectories: trajectories.map((t) => t.name), videos: videos.map((v) => v.name) };
 }
@@ -120,7 +123,7 @@ async function renderDataset(view, id) {
   };
   state.refresh = refresh;
 
-  const fileInput = el('input', { type: 'file', multiple: true, accept: 'image/*,video/*,.tum', name: 'files',
+  const fileInput = el('input', { type: 'file', multiple: true, accept: 'image/*,video/*,.tum,.bag,.mcap,.db3,.tar,.yaml', name: 'files',
     onchange: (e) => enqueueFiles(state, [...e.target.files].map((f) => ({ file: f, path: f.name })), uploads, status) });
   const folderInput = el('input', { type: 'file', multiple: true, webkitdirectory: true, name: 'folder',
     onchange: (e) => enqueueFiles(state, [...e.target.files].map((f) => ({ file: f, path: f.webkitRelativePath || f.name })), uploads, status) });
@@ -141,7 +144,7 @@ async function renderDataset(view, id) {
 }
 
 function renderSummary(container, dataset) {
-  const images = (dataset.images || []).filter((i) => !TRAJECTORY.test(i.name) && !VIDEO.test(i.name));
+  const images = (dataset.images || []).filter((i) => !TRAJECTORY.test(i.name) && !VIDEO.test(i.name) && !RECORDING.test(i.name));
   const { trajectories, videos } = datasetStats(dataset);
   const byFolder = new Map();
   for (const image of images) {
@@ -156,10 +159,21 @@ function renderSummary(container, dataset) {
       el('dt', 'Images'), el('dd#image-count', String(images.length)),
       el('dt', 'Trajectories'), el('dd#trajectories', trajectories.join(', ') || '–'),
       el('dt', 'Videos'), el('dd#videos', videos.join(', ') || '–'),
+      el('dt', 'Recordings'), el('dd#recordings', recordingsList(dataset.recordings || [])),
       el('dt', 'Folders'), el('dd', [...byFolder].map(([f, n]) => `${f}: ${n}`).join(', ') || '–'),
       el('dt', 'Total size'), el('dd', formatBytes(bytes)),
       el('dt', 'Image sizes'), el('dd', [...sizes].join(', ') || '–'),
       el('dt', 'Created'), el('dd', formatTime(dataset.created_at))));
+}
+
+// Each recording with its topics (type, messages, rate), or what is wrong with it.
+function recordingsList(recordings) {
+  if (!recordings.length) return '–';
+  return el('ul.recordings', recordings.map((r) => el('li',
+    el('strong.mono', r.name), r.problem ? el('span.error', ` ${r.problem}`) : ` (${r.format}${r.cut_short ? ', cut short' : ''})`,
+    r.note ? el('div.muted', r.note) : '',
+    el('ul', (r.topics || []).map((t) => el('li.mono',
+      `${t.name}  ${t.type}  ${t.message_count} msgs  ${Number(t.rate_hz).toFixed(1)} Hz`))))));
 }
 
 // `onChange` runs after a file was removed.
@@ -296,7 +310,7 @@ function pump(state, status) {
   while (!state.stopped && state.running < PARALLEL_UPLOADS && state.queue.length) {
     const item = state.queue.shift();
     state.running += 1;
-    const upload = VIDEO.test(item.name) || item.file.size > CHUNK_BYTES
+    const upload = VIDEO.test(item.name) || RECORDING.test(item.name) || item.file.size > CHUNK_BYTES
       ? (onProgress) => putFileInChunks(state.id, item.name, item.file, onProgress, CHUNK_BYTES)
       : (onProgress) => putImage(state.id, item.name, item.file, onProgress);
     upload((sent, total) =>
