@@ -6,7 +6,7 @@
 #include <fstream>
 #include <map>
 
-#include "storage/test_util.h"
+#include "testing/storage/test_util.h"
 #include "testing/recordings/test_recordings.h"
 
 namespace omnirig::storage {

@@ -19,7 +19,7 @@
 #include <thread>
 
 #include "server/commands.h"
-#include "storage/postgres_test_server.h"
+#include "testing/storage/postgres_test_server.h"
 #include "storage/sha256.h"
 #include "tests/server_test_util.h"
 
