@@ -238,10 +238,10 @@ async function launchBrowser() {
   return { context, page };
 }
 
-async function screenshot(page, name) {
+async function screenshot(page, name, fullPage = true) {
   fs.mkdirSync(ARGS.out, { recursive: true });
   const file = path.join(ARGS.out, `${name}.png`);
-  await page.screenshot({ path: file, fullPage: true });
+  await page.screenshot({ path: file, fullPage });
   log('screenshot', file);
 }
 
@@ -281,7 +281,8 @@ async function imagesLoaded(page, selector, what) {
 const WIDTHS = [1280, 800];
 
 // Runs `fn(width)` at each width with the page scrolled to `selector`, taking a screenshot
-// `name-WIDTH` each time; the page does not overflow the window sideways.
+// `name-WIDTH` of the window (what a person sees there) each time; the page does not overflow
+// the window sideways.
 async function atWidths(page, name, selector, fn) {
   const results = [];
   for (const width of WIDTHS) {
@@ -290,7 +291,8 @@ async function atWidths(page, name, selector, fn) {
     const overflow = await page.evaluate(() => document.documentElement.scrollWidth - window.innerWidth);
     check(overflow <= 0, `at ${width} px the page fits the window's width (${overflow} px too wide)`);
     results.push(await fn(width));
-    await screenshot(page, `${name}-${width}`);
+    if (selector) await page.$eval(selector, (n) => n.scrollIntoView());
+    await screenshot(page, `${name}-${width}`, false);
   }
   await page.setViewportSize({ width: WIDTHS[0], height: 900 });
   return results;

@@ -119,7 +119,7 @@ export function rangeColourBar(scale, id) {
     log: true,
     title: 'Range from cam0\'s centre',
     id,
-    ends: ['near', 'black: no depth', 'far'],
+    ends: [`near: ${Number(scale.near_m.toPrecision(3))} m`, 'black: no depth', `far: ${Number(scale.far_m.toPrecision(3))} m`],
   });
 }
 

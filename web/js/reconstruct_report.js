@@ -4,7 +4,7 @@
 
 import { artifactUrl, fetchArtifactBytes, imageUrl } from './api.js';
 import { downloadList } from './artifacts.js';
-import { parseFloatTiff, rangeColourBar, rangePreviewScale } from './colorbar.js';
+import { colourKey, parseFloatTiff, rangeColourBar, rangePreviewScale } from './colorbar.js';
 import { apiImage, clear, el, errorBox, formatNumber } from './ui.js';
 
 // The pair's base name: pairs are matched by NAME in cam0/NAME and cam1/NAME.
@@ -46,7 +46,10 @@ function rangeScaleQueue(jobId) {
     chain = chain.then(async () => {
       try {
         const scale = rangePreviewScale(parseFloatTiff(await fetchArtifactBytes(jobId, tiffName)).data);
-        clear(holder, scale ? rangeColourBar(scale) : el('p.muted', 'No cell of this panorama has a range.'));
+        clear(holder, scale ? rangeColourBar(scale) : colourKey({
+          title: 'Range from cam0\'s centre',
+          items: [{ colour: '#000', label: 'black: no cell of this panorama has a range' }],
+        }));
       } catch (err) {
         clear(holder, errorBox(err, 'Could not read the range scale'));
       }
