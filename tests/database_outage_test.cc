@@ -203,12 +203,20 @@ class DatabaseOutageTest : public ::testing::Test {
       }
     }
     EXPECT_TRUE(names.count("out.bin") && names.count("log.txt")) << artifacts.dump();
+    // The worker removes the other attempts' folders once the store has accepted the end, so
+    // just after the state reads succeeded: wait for that (the deadline guards a hang only).
+    const std::set<std::string> expected = {"attempt-" + std::to_string(job["attempts"].get<int>())};
     std::set<std::string> folders;
-    for (const auto& entry : fs::directory_iterator(data_ / "jobs" / id)) {
-      folders.insert(entry.path().filename().string());
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+    while (true) {
+      folders.clear();
+      for (const auto& entry : fs::directory_iterator(data_ / "jobs" / id)) {
+        folders.insert(entry.path().filename().string());
+      }
+      if (folders == expected || std::chrono::steady_clock::now() > deadline) break;
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));  // the next look
     }
-    const int attempts = job["attempts"];
-    EXPECT_EQ(folders, std::set<std::string>{"attempt-" + std::to_string(attempts)}) << id;
+    EXPECT_EQ(folders, expected) << id;
   }
 
   storage::testing::PostgresTestServer pg_;  // this test's own: it stops and kills it
