@@ -242,8 +242,8 @@ int main(int argc, char** argv) {
   int exit_code = 0;
   if (omnirig::testing::ServeIfRequested(argc, argv, exit_code)) return exit_code;
   if (argc >= 2 && std::string(argv[1]) == "--worker") {
-    omnirig::testing::RegisterSleepJobType();
-    return omnirig::server::WorkerCommand(std::vector<std::string>(argv + 2, argv + argc));
+    return omnirig::server::WorkerCommand(std::vector<std::string>(argv + 2, argv + argc),
+                                          {omnirig::testing::SleepJobType()});
   }
   ::testing::InitGoogleTest(&argc, argv);
   return RUN_ALL_TESTS();
