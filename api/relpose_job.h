@@ -96,8 +96,9 @@ struct ImagePairNames {
 // Pairs a dataset's images by NAME. Throws InvalidArgument listing images without a partner,
 // and when there are no cam0/ or cam1/ images at all. Other images are ignored.
 std::vector<ImagePairNames> MatchImagePairs(const std::vector<std::string>& image_names);
-// NAME read as a number, as datasets often name frames by their time ("1403636579.763.png");
-// nullopt when it is not one.
+// NAME read as a number, as datasets often name frames by their time ("1403636579.763.png"),
+// or "t" and a number as recordings do ("t000012.345.png", slam::FrameName); nullopt when it is
+// not one.
 std::optional<double> NameAsTimestamp(const std::string& name);
 
 // The result JSON. camera0/camera1: the `camera` objects to report (the calibration results'

@@ -220,12 +220,14 @@ storage::JobOutcome Failed(const std::string& code, const std::string& message) 
 }
 
 storage::JobOutcome RunJobType(const storage::JobRecord& job, const api::JobContext& context,
-                               const fs::path& output_dir, const fs::path& data_root) {
+                               const JobRunOptions& options, const fs::path& output_dir,
+                               const fs::path& data_root) {
   const api::JobType* type = api::FindJobType(job.type);
   if (!type) return Failed("unknown_type", "no job type '" + job.type + "' in this server");
   const nlohmann::json params = nlohmann::json::parse(job.params);
   context.progress.ThrowIfCancelled();
-  const nlohmann::json result = type->run(params, context);
+  const nlohmann::json result =
+      options.run ? options.run(params, context) : type->run(params, context);
   storage::JobOutcome outcome;
   outcome.state = JobState::kSucceeded;
   outcome.result = result.dump();
@@ -251,7 +253,7 @@ storage::JobOutcome RunJobAttempt(const storage::JobRecord& job, storage::JobSto
   try {
     const api::JobContext context =
         BuildContext(job, store, data_dir, options, flags, output_dir, progress, log);
-    outcome = RunJobType(job, context, output_dir, data_dir.root());
+    outcome = RunJobType(job, context, options, output_dir, data_dir.root());
     if (outcome.state == JobState::kSucceeded) progress.Succeeded();
   } catch (const Cancelled&) {
     outcome.state = JobState::kCanceled;

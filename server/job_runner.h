@@ -7,6 +7,7 @@
 #include <functional>
 #include <string>
 
+#include "api/job_types.h"
 #include "storage/data_dir.h"
 #include "storage/job_store.h"
 
@@ -25,6 +26,9 @@ struct JobRunOptions {
   double store_cancel_check_s = 0.2;
   // Called after each progress write with the job's id (e.g. JobEvents::Changed); may be empty.
   std::function<void(const std::string&)> on_progress;
+  // Runs the job instead of its type's `run` (a live job, fed by this process's HTTP routes);
+  // empty: the type's.
+  std::function<nlohmann::json(const nlohmann::json& params, const api::JobContext& context)> run;
 };
 
 // Runs `job` (already claimed: state running, attempts counted). Never throws.
