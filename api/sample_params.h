@@ -1,5 +1,5 @@
 #pragma once
-// The params of the "sample" job (server/sample_job.h): {"preset": "mono-calib" |
+// The params of the "sample" job (api/sample_job.h): {"preset": "mono-calib" |
 // "stereo-board" | "stereo-sequence"}.
 
 #include <string>

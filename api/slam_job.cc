@@ -296,7 +296,9 @@ SlamParams SlamParamsFromJson(const json& params) {
                               {"end_s", &parsed.frames.end_s},
                               {"pair_tolerance_s", &parsed.frames.pair_tolerance_s}};
   std::set<std::string> known = KeysOf(frames);
-  known.insert({"rig", "ground_truth", "options", "dense_map"});
+  // "live" and "live_idle_timeout_s" are the live job's (api/live_slam.h): a live job whose
+  // server stopped runs again as a batch job over the frames it stored.
+  known.insert({"rig", "ground_truth", "options", "dense_map", "live", "live_idle_timeout_s"});
   CheckKnownFields(params, "params", known);
   parsed.rig_job = RigJobField(params);
   if (params.contains("ground_truth")) {
@@ -616,16 +618,23 @@ json RunSlamOnDataset(const StereoRig& rig, const fs::path& dataset_dir,
       },
       progress.is_cancelled};
   const slam::SlamResult result = slam::RunSlam(rig, input.names, load, options, frame_progress);
+  return WriteSlamReport(rig, result, input.timestamps_s, input.ground_truth, input.source, load,
+                         dense_map, options.num_threads, output_dir, progress);
+}
 
+json WriteSlamReport(const StereoRig& rig, const slam::SlamResult& result,
+                     const std::vector<double>& timestamps_s,
+                     const std::vector<slam::StampedPose>& ground_truth, const json& input,
+                     const slam::StereoFrameLoader& load,
+                     const std::optional<dense::DenseMapOptions>& dense_map, int num_threads,
+                     const fs::path& output_dir, const ProgressSink& progress) {
   json report = SlamResultToJson(result);
-  report["artifacts"] = WriteArtifacts(rig, result, input.timestamps_s, output_dir);
-  report["input"] = input.source;
-  if (!input.ground_truth.empty()) {
-    report["evaluation"] = EvaluateTracked(result, input.ground_truth);
-  }
+  report["artifacts"] = WriteArtifacts(rig, result, timestamps_s, output_dir);
+  report["input"] = input;
+  if (!ground_truth.empty()) report["evaluation"] = EvaluateTracked(result, ground_truth);
   if (dense_map) {
-    report["dense_map"] = FuseDenseMap(rig, result, load, *dense_map, options.num_threads,
-                                       output_dir, progress);
+    report["dense_map"] =
+        FuseDenseMap(rig, result, load, *dense_map, num_threads, output_dir, progress);
     report["artifacts"]["dense_map_ply"] = "dense_map.ply";
     report["artifacts"]["occupancy_pgm"] = "occupancy.pgm";
     report["artifacts"]["occupancy_yaml"] = "occupancy.yaml";

@@ -131,6 +131,18 @@ nlohmann::json RunSlamOnDataset(
     const std::optional<dense::DenseMapOptions>& dense_map = std::nullopt,
     const slam::VideoFrameOptions& frame_options = {});
 
+// The end of a run, as RunSlamOnDataset ends one: the artifacts (trajectory, map, report and,
+// with `dense_map`, the dense map and occupancy grid fused from the frames `load` reads) into
+// output_dir; returns the result JSON. `timestamps_s` per frame; `ground_truth` one pose per
+// frame or empty; `input` is the result's "input".
+nlohmann::json WriteSlamReport(const StereoRig& rig, const slam::SlamResult& result,
+                               const std::vector<double>& timestamps_s,
+                               const std::vector<slam::StampedPose>& ground_truth,
+                               const nlohmann::json& input, const slam::StereoFrameLoader& load,
+                               const std::optional<dense::DenseMapOptions>& dense_map,
+                               int num_threads, const std::filesystem::path& output_dir,
+                               const ProgressSink& progress);
+
 nlohmann::json RunSlamJob(const nlohmann::json& params, const JobContext& context);
 
 // The job type (its validation, references and run), for JobTypes::Add.

@@ -27,6 +27,20 @@ void JobEvents::Changed(const std::string& id) {
     std::cerr << "omnirig: no event for job " << id << ": " << e.what() << std::endl;
     return;
   }
+  Queue(id, type, data);
+}
+
+void JobEvents::Publish(const std::string& id, const std::string& type,
+                        const nlohmann::json& data) {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (streams_ == 0 || closed_) return;
+  }
+  std::lock_guard<std::mutex> publish(publish_mutex_);
+  Queue(id, type, data.dump());
+}
+
+void JobEvents::Queue(const std::string& id, const std::string& type, const std::string& data) {
   std::lock_guard<std::mutex> lock(mutex_);
   const uint64_t event_id = next_id_++;
   events_.push_back(

@@ -20,6 +20,8 @@
 #include <optional>
 #include <string>
 
+#include <nlohmann/json.hpp>
+
 #include "storage/job_store.h"
 
 namespace omnirig::server {
@@ -32,6 +34,10 @@ class JobEvents {
 
   // Job `id` changed (or was deleted): queues its event when a stream is open. Never throws.
   void Changed(const std::string& id);
+
+  // An event of job `id` other than its record's change (e.g. a live job's tracked frame:
+  // `event: frame`), with `data` as its data line. Never throws.
+  void Publish(const std::string& id, const std::string& type, const nlohmann::json& data);
 
   // One open stream. Next() waits up to `timeout_ms` for events after the ones it returned
   // before and appends them, SSE-encoded, to `text` (those of job `only_job` alone when set);
@@ -59,6 +65,9 @@ class JobEvents {
     std::string job_id;
     std::string text;  // SSE-encoded, ending in the blank line
   };
+
+  // Under publish_mutex_: appends the event and wakes the streams.
+  void Queue(const std::string& id, const std::string& type, const std::string& data);
 
   storage::JobStore& store_;
   // Held while a change is read and queued, so that two changes of one job queue in order.

@@ -282,12 +282,13 @@ void RemoveOutputsButLog(const fs::path& output_dir) {
 }
 
 storage::JobOutcome RunJobType(const storage::JobRecord& job, const api::JobType* type,
-                               const api::JobContext& context, const fs::path& output_dir,
-                               const fs::path& data_root) {
+                               const api::JobContext& context, const JobRunOptions& options,
+                               const fs::path& output_dir, const fs::path& data_root) {
   if (!type) return Failed("unknown_type", "no job type '" + job.type + "' in this server");
   const nlohmann::json params = nlohmann::json::parse(job.params);
   context.progress.ThrowIfCancelled();
-  const nlohmann::json result = type->run(params, context);
+  const nlohmann::json result =
+      options.run ? options.run(params, context) : type->run(params, context);
   storage::JobOutcome outcome;
   outcome.state = JobState::kSucceeded;
   outcome.result = result.dump();
@@ -343,7 +344,8 @@ storage::JobOutcome RunJobAttempt(const storage::JobRecord& job, storage::JobSto
   try {
     const api::JobContext context =
         BuildContext(job, store, data_dir, options, flags, output_dir, progress, log, disk);
-    outcome = RunJobType(job, job_types.Find(job.type), context, output_dir, data_dir.root());
+    outcome = RunJobType(job, job_types.Find(job.type), context, options, output_dir,
+                         data_dir.root());
     if (outcome.state == JobState::kSucceeded) progress.Succeeded();
   } catch (const Cancelled&) {
     outcome.state = JobState::kCanceled;

@@ -32,6 +32,9 @@ struct JobRunOptions {
   int64_t min_free_bytes = 0;
   // How often a running job reads the disk's free space.
   double disk_check_s = 0.2;
+  // Runs the job instead of its type's `run` (a live job, fed by this process's HTTP routes);
+  // empty: the type's.
+  std::function<nlohmann::json(const nlohmann::json& params, const api::JobContext& context)> run;
 };
 
 // Runs `job` (already claimed: state running, attempts counted) with its type from

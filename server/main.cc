@@ -34,6 +34,8 @@ const Command kCommands[] = {
      omnirig::cli::RunStereo},
     {"submit", "upload a folder to a running server, run a job, download its results",
      omnirig::cli::RunSubmit},
+    {"live", "play a recording against a server as a robot would (live slam job)",
+     omnirig::cli::RunLive},
 };
 
 void PrintHelp() {

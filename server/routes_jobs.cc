@@ -12,6 +12,7 @@
 #include "api/stereo_job.h"
 #include "engine/util/check.h"
 #include "server/json_views.h"
+#include "server/live_jobs.h"
 #include "server/log_line.h"
 #include "server/service.h"
 #include "server/zip_stream.h"
@@ -99,6 +100,7 @@ void CheckInputs(ServiceState& state, const api::JobType& type,
 }
 
 void CreateJob(ServiceState& state, const HttpRequest& request, HttpResponse& response) {
+  if (CreateLiveJob(state, request, response)) return;  // runs here, fed by its frames route
   const api::CreateJobRequest parsed = api::ParseCreateJobRequest(request.body);
   const api::JobType* type = state.job_types.Find(parsed.type);
   if (!type) {
@@ -265,6 +267,7 @@ void GetArtifact(ServiceState& state, const HttpRequest& request, HttpResponse& 
     return;
   }
   if (name == "log.txt" && ServeLiveLog(state, job, response)) return;
+  if (state.live->ServeArtifact(id, name, response)) return;  // a live job's map so far
   throw HttpError(404, "artifact_not_found", "job " + id + " has no artifact " + name);
 }
 

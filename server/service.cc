@@ -9,6 +9,7 @@
 #include "api/job_types.h"
 #include "api/sample_job.h"
 #include "engine/util/check.h"
+#include "server/live_jobs.h"
 #include "server/log_line.h"
 #include "storage/atomic_file.h"
 #include "storage/postgres_job_store.h"
@@ -152,6 +153,7 @@ Service::Service(const ServiceOptions& options) : state_(std::make_unique<Servic
   state.metrics.SetWorkerAliveWindow(options.workers.lease_s);
   state.workers = std::make_unique<WorkerPool>(*state.store, *state.data_dir, state.job_types,
                                                state.metrics, pool_options);
+  state.live = std::make_unique<LiveJobs>(state);
 
   HttpServerOptions http_options;
   http_options.num_threads = options.http_threads;
@@ -166,11 +168,15 @@ Service::Service(const ServiceOptions& options) : state_(std::make_unique<Servic
   AddSystemRoutes(*http_, state);
   AddDatasetRoutes(*http_, state);
   AddJobRoutes(*http_, state);
+  AddLiveRoutes(*http_, state);
 }
+
+ServiceState::~ServiceState() = default;
 
 Service::~Service() {
   if (state_ && state_->events) state_->events->Close();
   if (http_) http_->Stop();
+  if (state_ && state_->live) state_->live->Drain();
   if (state_ && state_->workers) state_->workers->Drain(0);
 }
 
@@ -184,7 +190,8 @@ int Service::Start() {
 int Service::Drain(double timeout_s) {
   state_->events->Close();  // ends the event streams, which would hold the HTTP threads
   http_->Stop();
-  return state_->workers->Drain(timeout_s);
+  const int live = state_->live->Drain();  // live jobs go back to the queue as batch jobs
+  return live + state_->workers->Drain(timeout_s);
 }
 
 }  // namespace omnirig::server

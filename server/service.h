@@ -18,6 +18,8 @@
 
 namespace omnirig::server {
 
+class LiveJobs;  // live_jobs.h
+
 struct ServiceOptions {
   std::string host = "127.0.0.1";
   int port = 8080;  // 0 picks a free port
@@ -64,9 +66,12 @@ struct ServiceState {
   std::unique_ptr<JobEvents> events;  // GET /api/v1/events
   Metrics metrics;
   std::unique_ptr<WorkerPool> workers;
+  std::unique_ptr<LiveJobs> live;  // live slam jobs running in this process (live_jobs.h)
   storage::ConsistencyReport consistency;
   storage::RecoveryReport recovery;
   double started_at = 0;
+  ~ServiceState();  // service.cc, where LiveJobs is complete
+
   // Serialises the commit of an uploaded file (rename + record) with dataset deletion, so a
   // file and its record always describe the same upload.
   std::mutex files_mutex;
@@ -109,5 +114,6 @@ inline HttpHandler WithState(ServiceState& state,
 void AddSystemRoutes(HttpServer& http, ServiceState& state);
 void AddDatasetRoutes(HttpServer& http, ServiceState& state);
 void AddJobRoutes(HttpServer& http, ServiceState& state);
+void AddLiveRoutes(HttpServer& http, ServiceState& state);  // routes_live.cc
 
 }  // namespace omnirig::server

@@ -66,6 +66,12 @@ class JobStore {
   // Takes the oldest queued job: running, started_at now, attempts + 1, leased to
   // `request.worker_id` with a new lease token until now + `request.lease_s`.
   virtual std::optional<JobRecord> ClaimNextJob(const ClaimRequest& request) = 0;
+  // A new job claimed at once by `request.worker_id` (running, attempts 1, leased as
+  // ClaimNextJob leases): a job that only this process can run (a live job, fed by its HTTP
+  // routes), which no other worker may take from the queue. Its lease expiring (the process
+  // died) queues it like any other.
+  virtual JobRecord CreateClaimedJob(const std::string& type, const std::string& dataset_id,
+                                     const std::string& params, const ClaimRequest& request) = 0;
   // Extends a running job's lease to now + `lease_s`; false when the job is no longer running
   // under `lease_token` (the lease was lost: the worker must stop the job).
   virtual bool RenewLease(const std::string& id, const std::string& lease_token,

@@ -345,6 +345,22 @@ std::optional<JobRecord> SqlJobStore::ClaimNextJob(const ClaimRequest& request) 
   });
 }
 
+JobRecord SqlJobStore::CreateClaimedJob(const std::string& type, const std::string& dataset_id,
+                                        const std::string& params, const ClaimRequest& request) {
+  const JobRecord job = NewJob(type, dataset_id, params);
+  return Write([&](SqlSession& db) {
+    db.Execute(
+        "INSERT INTO jobs(id, type, dataset_id, params, state, created_at, queued_at, started_at, "
+        "attempts, progress_fraction, progress_stage, progress_message, worker_id, lease_token, "
+        "lease_expires_at) VALUES(?1, ?2, ?3, ?4, 'running', ?5, ?5, ?5, 1, 0, 'starting', '', "
+        "?6, ?7, " +
+            dialect_.now + " + ?8)",
+        {job.id, type, dataset_id, params, job.created_at, request.worker_id, NewId(),
+         request.lease_s});
+    return *SelectJob(db, job.id);
+  });
+}
+
 bool SqlJobStore::RenewLease(const std::string& id, const std::string& lease_token,
                              double lease_s) {
   return Write([&](SqlSession& db) {

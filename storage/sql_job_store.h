@@ -139,6 +139,8 @@ class SqlJobStore : public JobStore {
   std::optional<JobRecord> GetJob(const std::string& id) override;
   std::vector<JobRecord> ListJobs(const JobFilter& filter) override;
   std::optional<JobRecord> ClaimNextJob(const ClaimRequest& request) override;
+  JobRecord CreateClaimedJob(const std::string& type, const std::string& dataset_id,
+                             const std::string& params, const ClaimRequest& request) override;
   bool RenewLease(const std::string& id, const std::string& lease_token, double lease_s) override;
   void UpdateProgress(const std::string& id, const JobProgress& progress) override;
   std::optional<JobState> RequestCancel(const std::string& id) override;

@@ -41,12 +41,6 @@ cv::VideoCapture Open(const fs::path& path) {
   return capture;
 }
 
-std::string FrameName(double timestamp_s) {
-  char name[32];
-  std::snprintf(name, sizeof(name), "t%010.3f", timestamp_s);
-  return name;
-}
-
 // cam0's and cam1's timestamps up to `last_s` (inclusive), in seconds, read by grabbing every
 // frame. Throws when a file yields no frame or its timestamps go backwards.
 std::vector<double> ReadTimestamps(const fs::path& path, double last_s, int64_t expected_frames,
@@ -80,6 +74,12 @@ std::vector<double> ReadTimestamps(const fs::path& path, double last_s, int64_t 
 }
 
 }  // namespace
+
+std::string FrameName(double timestamp_s) {
+  char name[32];
+  std::snprintf(name, sizeof(name), "t%010.3f", timestamp_s);
+  return name;
+}
 
 VideoInfo ProbeVideo(const fs::path& path) {
   cv::VideoCapture capture = Open(path);

@@ -71,6 +71,10 @@ struct VideoFrameOptions {
   void Check() const;
 };
 
+// A frame's name from its capture time: "t%010.3f", e.g. "t000012.345" (recordings' frames, as
+// read from videos or stored by a live run; api's NameAsTimestamp reads it back).
+std::string FrameName(double timestamp_s);
+
 // One selected stereo frame: where it lies in each video.
 struct StereoVideoFrame {
   std::string name;           // "t%010.3f" of the timestamp, e.g. "t000012.345"

@@ -37,7 +37,9 @@ std::vector<ImagePairNames> MatchImagePairs(const std::vector<std::string>& imag
 }
 
 std::optional<double> NameAsTimestamp(const std::string& name) {
-  const std::string stem = std::filesystem::path(name).stem().string();
+  std::string stem = std::filesystem::path(name).stem().string();
+  // A recording's frames are named "t" and the time (slam::FrameName, e.g. "t000012.345").
+  if (stem.size() > 1 && stem[0] == 't') stem.erase(0, 1);
   char* end = nullptr;
   const double value = std::strtod(stem.c_str(), &end);
   if (stem.empty() || end != stem.c_str() + stem.size()) return std::nullopt;

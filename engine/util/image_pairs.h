@@ -19,8 +19,9 @@ struct ImagePairNames {
 // ignored.
 std::vector<ImagePairNames> MatchImagePairs(const std::vector<std::string>& image_names);
 
-// NAME read as a number, as datasets often name frames by their time ("1403636579.763.png");
-// nullopt when it is not one.
+// NAME read as a number, as datasets often name frames by their time ("1403636579.763.png"),
+// or "t" and a number as recordings do ("t000012.345.png", slam::FrameName); nullopt when it is
+// not one.
 std::optional<double> NameAsTimestamp(const std::string& name);
 
 }  // namespace omnirig

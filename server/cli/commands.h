@@ -15,5 +15,6 @@ int RunRelpose(const Args& args);    // server/cli/relpose.cc
 int RunSlam(const Args& args);       // server/cli/slam.cc
 int RunStereo(const Args& args);     // server/cli/stereo.cc
 int RunSubmit(const Args& args);     // server/cli/submit.cc
+int RunLive(const Args& args);       // server/cli/live.cc
 
 }  // namespace omnirig::cli

@@ -1,0 +1,286 @@
+#include "api/live_slam.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include <opencv2/imgcodecs.hpp>
+
+#include "api/camera_json.h"
+#include "api/json_fields.h"
+#include "api/slam_job.h"
+#include "engine/slam/map_io.h"
+#include "engine/slam/session.h"
+#include "engine/util/check.h"
+#include "engine/util/timer.h"
+
+namespace omnirig::api {
+namespace {
+
+using nlohmann::json;
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+
+double MillisecondsSince(Clock::time_point start) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
+}
+
+double Percentile(std::vector<double> values, double p) {
+  if (values.empty()) return 0.0;
+  std::sort(values.begin(), values.end());
+  const size_t rank = static_cast<size_t>(std::ceil(p / 100.0 * values.size()));
+  return values[std::clamp<size_t>(rank, 1, values.size()) - 1];
+}
+
+cv::Mat Decode(const std::string& bytes, const std::string& what) {
+  const cv::Mat buffer(1, static_cast<int>(bytes.size()), CV_8U, const_cast<char*>(bytes.data()));
+  cv::Mat image = cv::imdecode(buffer, cv::IMREAD_COLOR);
+  OMNIRIG_CHECK(!image.empty(), what << " cannot be decoded");
+  return image;
+}
+
+slam::StereoImages Images(const LiveFrame& frame) {
+  slam::StereoImages images;
+  images.cam0 =
+      frame.decoded[0].empty() ? Decode(frame.encoded[0], frame.name + " cam0") : frame.decoded[0];
+  images.cam1 =
+      frame.decoded[1].empty() ? Decode(frame.encoded[1], frame.name + " cam1") : frame.decoded[1];
+  return images;
+}
+
+// trajectory.json and map.ply of the run so far, each written whole under a temporary name
+// and renamed: a client reading them while they are refreshed sees the old or the new file.
+void WriteSnapshot(const StereoRig& rig, const slam::SlamSnapshot& snapshot,
+                   const std::vector<double>& stamps, const fs::path& output_dir) {
+  json frames = json::array();
+  for (size_t i = 0; i < snapshot.names.size(); ++i) {
+    frames.push_back(
+        {{"name", snapshot.names[i]},
+         {"state", snapshot.states[i]},
+         {"timestamp_s", stamps[i]},
+         {"world_from_rig",
+          snapshot.world_from_rig[i] ? PoseToJson(*snapshot.world_from_rig[i]) : json(nullptr)}});
+  }
+  const json trajectory = {
+      {"world_frame", "the rig frame (cam0's frame) of the first tracked frame"},
+      {"live", true},
+      {"num_keyframes", snapshot.num_keyframes},
+      {"frames", frames},
+      {"rig", RigToJson(rig)}};
+  // Each written under a temporary name (".NAME.part-live": the artifact collector and the
+  // start-up check skip such names), then renamed into place.
+  const fs::path trajectory_temp = output_dir / ".trajectory.json.part-live";
+  WriteTextFile(trajectory_temp, trajectory.dump(2) + "\n");
+  fs::rename(trajectory_temp, output_dir / "trajectory.json");
+  const fs::path map_temp = output_dir / ".map.ply.part-live";
+  slam::WritePly(map_temp, snapshot.map);
+  fs::rename(map_temp, output_dir / "map.ply");
+}
+
+json TrackedFrameJson(const slam::FrameReport& report, const LiveFrame& frame, int index,
+                      int num_skipped) {
+  return {{"frame_index", index},
+          {"name", frame.name},
+          {"stamp_s", frame.stamp_s},
+          {"state", report.state},
+          {"reason", report.reason},
+          {"keyframe", report.keyframe},
+          {"world_from_rig",
+           report.world_from_rig ? PoseToJson(*report.world_from_rig) : json(nullptr)},
+          {"latency_ms", MillisecondsSince(frame.received)},
+          {"num_skipped", num_skipped}};
+}
+
+}  // namespace
+
+bool IsLiveSlam(const json& params) {
+  if (!params.is_object() || !params.contains("live")) return false;
+  OMNIRIG_CHECK(params["live"].is_boolean(), "field 'params.live' must be true or false");
+  return params["live"].get<bool>();
+}
+
+LiveSlamParams LiveSlamParamsFromJson(const json& params) {
+  LiveSlamParams live;
+  ReadOptions(params, "params", {{"live_idle_timeout_s", &live.idle_timeout_s}});
+  OMNIRIG_CHECK(std::isfinite(live.idle_timeout_s) && live.idle_timeout_s > 0,
+                "field 'params.live_idle_timeout_s' must be positive");
+  const SlamParams slam = SlamParamsFromJson(params);
+  OMNIRIG_CHECK(!slam.ground_truth,
+                "field 'params.ground_truth' is for a recording: a live job "
+                "has none yet (omnirig live compares with a ground truth)");
+  OMNIRIG_CHECK(!slam.video_only_fields && slam.frames.frame_step == 1,
+                "'frame_step', 'start_s', 'end_s' and 'pair_tolerance_s' select frames of a "
+                "recording: a live job tracks the frames as they are sent");
+  return live;
+}
+
+bool LiveMailbox::Put(std::shared_ptr<LiveFrame> frame) {
+  std::shared_ptr<LiveFrame> displaced;
+  int skipped = 0;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (closed_) return false;
+    displaced = std::move(waiting_);
+    if (displaced) skipped = ++num_skipped_;
+    waiting_ = std::move(frame);
+    last_put_ = Clock::now();
+  }
+  wake_.notify_all();
+  if (displaced) displaced->answer.set_value({200, SkippedFrameJson(*displaced, skipped)});
+  return true;
+}
+
+std::shared_ptr<LiveFrame> LiveMailbox::Take(double timeout_s, bool* finish) {
+  std::unique_lock<std::mutex> lock(mutex_);
+  wake_.wait_for(lock, std::chrono::duration<double>(timeout_s),
+                 [this] { return waiting_ || finish_ || closed_; });
+  *finish = finish_ && !waiting_;
+  return std::move(waiting_);
+}
+
+void LiveMailbox::RequestFinish() {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    finish_ = true;
+  }
+  wake_.notify_all();
+}
+
+void LiveMailbox::Close(const LiveAnswer& answer) {
+  std::shared_ptr<LiveFrame> waiting;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    closed_ = true;
+    waiting = std::move(waiting_);
+  }
+  wake_.notify_all();
+  if (waiting) waiting->answer.set_value(answer);
+}
+
+int LiveMailbox::num_skipped() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return num_skipped_;
+}
+
+double LiveMailbox::IdleSeconds() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return std::chrono::duration<double>(Clock::now() - last_put_).count();
+}
+
+json SkippedFrameJson(const LiveFrame& frame, int num_skipped) {
+  return {{"frame_index", nullptr},
+          {"name", frame.name},
+          {"stamp_s", frame.stamp_s},
+          {"state", "skipped"},
+          {"reason", "a newer frame arrived before this one could be tracked"},
+          {"keyframe", false},
+          {"world_from_rig", nullptr},
+          {"latency_ms", MillisecondsSince(frame.received)},
+          {"num_skipped", num_skipped}};
+}
+
+json RunLiveSlam(const json& params, const JobContext& context, const StereoRig& rig,
+                 LiveMailbox& mailbox, const std::function<void(const json&)>& on_frame) {
+  const LiveSlamParams live = LiveSlamParamsFromJson(params);
+  const SlamParams parsed = SlamParamsFromJson(params);
+  slam::SlamOptions options = parsed.options;
+  options.num_threads = std::max(1, context.num_threads);
+  slam::Session session(rig, options, context.progress);
+  std::vector<double> stamps;
+  std::vector<std::string> names;
+  std::vector<double> latencies_ms;
+  int num_received = 0;
+  std::string ended_by = "finish";
+  Timer since_snapshot, since_frame;
+  bool snapshot_due = false;
+  context.progress.Report(0.0, "live", "waiting for frames");
+  while (true) {
+    bool finish = false;
+    std::shared_ptr<LiveFrame> frame = mailbox.Take(0.1, &finish);
+    context.progress.ThrowIfCancelled();
+    if (frame) {
+      ++num_received;
+      LiveAnswer answer;
+      try {
+        const slam::StereoImages images = Images(*frame);
+        const slam::FrameReport report = session.Track(frame->name, images);
+        answer.body =
+            TrackedFrameJson(report, *frame, session.num_frames() - 1, mailbox.num_skipped());
+        stamps.push_back(frame->stamp_s);
+        names.push_back(frame->name);
+        latencies_ms.push_back(answer.body["latency_ms"].get<double>());
+        snapshot_due = true;
+      } catch (const InvalidArgument& e) {
+        answer = {422,
+                  {{"error",
+                    {{"code", "invalid_frame"},
+                     {"message", e.what()},
+                     {"details", {{"name", frame->name}}}}}}};
+      } catch (const std::exception& e) {
+        // The job fails (the runner records why); the frame's sender hears it first.
+        frame->answer.set_value({500,
+                                 {{"error",
+                                   {{"code", "job_failed"},
+                                    {"message", e.what()},
+                                    {"details", {{"name", frame->name}}}}}}});
+        throw;
+      }
+      frame->answer.set_value(answer);
+      since_frame.Restart();
+      if (answer.status == 200) {
+        if (on_frame) on_frame(answer.body);
+        context.progress.Report(0.0, "live",
+                                std::to_string(session.num_frames()) + " frames tracked, " +
+                                    std::to_string(mailbox.num_skipped()) + " skipped");
+      }
+    }
+    // The first frame's snapshot at once, then at most one per interval: a snapshot exports the
+    // whole map, which grows with the run.
+    if (snapshot_due &&
+        (stamps.size() == 1 || since_snapshot.ElapsedSeconds() >= kLiveArtifactInterval_s)) {
+      WriteSnapshot(rig, session.Snapshot(), stamps, context.output_dir);
+      since_snapshot.Restart();
+      snapshot_due = false;
+    }
+    if (finish) break;
+    // Idle: no frame received, nor one being tracked, for the timeout.
+    if (!frame &&
+        std::min(mailbox.IdleSeconds(), since_frame.ElapsedSeconds()) >= live.idle_timeout_s) {
+      ended_by = "idle_timeout";
+      context.Log("no frame for " + std::to_string(live.idle_timeout_s) + " s: finishing");
+      break;
+    }
+  }
+  mailbox.Close({409,
+                 {{"error",
+                   {{"code", "job_finished"},
+                    {"message", "the live job is finishing: it takes no more frames"},
+                    {"details", json::object()}}}}});
+  OMNIRIG_CHECK(session.num_frames() > 0,
+                "the live job ended (" << ended_by << ") before any frame was tracked");
+  const slam::SlamResult result = session.Finish();
+  const fs::path dataset_dir = context.dataset_dir;
+  // The dense map (with "dense_map") reads the tracked frames back from the dataset.
+  const slam::StereoFrameLoader load = [&](int i) {
+    return slam::ReadBoth([&](int c) {
+      const std::string name = "cam" + std::to_string(c) + "/" + names[i];
+      cv::Mat image = cv::imread((dataset_dir / name).string(), cv::IMREAD_COLOR);
+      OMNIRIG_CHECK(!image.empty(), "image " << name << " cannot be read");
+      return image;
+    });
+  };
+  const json input = {{"kind", "live"}, {"num_frames", stamps.size()}};
+  json report = WriteSlamReport(rig, result, stamps, {}, input, load, parsed.dense_map,
+                                options.num_threads, context.output_dir, context.progress);
+  report["live"] = {{"num_received", num_received + mailbox.num_skipped()},
+                    {"num_tracked_frames", session.num_frames()},
+                    {"num_skipped", mailbox.num_skipped()},
+                    {"latency_ms",
+                     {{"p50", Percentile(latencies_ms, 50)},
+                      {"p95", Percentile(latencies_ms, 95)},
+                      {"p99", Percentile(latencies_ms, 99)},
+                      {"max", Percentile(latencies_ms, 100)}}},
+                    {"ended_by", ended_by}};
+  return report;
+}
+
+}  // namespace omnirig::api

@@ -1,0 +1,189 @@
+// bench_live: a robot's recording played in real time through `omnirig live` against a server
+// in this process. The recording is a loop around the synthetic city block (engine/synth/
+// city_block.h; by default 600 stereo frames at 1024x768, 2 laps of a 50 m loop, each lap under
+// its own light, image noise 1 grey level), rendered once into a cache folder and read from
+// there later; the rig is the render's calibration (a relative_pose job whose result is that
+// rig). Each rate plays the whole recording as a new live job and prints: frames tracked and
+// skipped (newest wins when tracking falls behind), latency from receipt to pose as the server
+// measures it (p50/p95/p99) and the client's round trip, the loops closed, the ATE after the
+// live job's finish (SE(3)-aligned against the render's poses, and as % of the path).
+//
+// usage: bench_live [--rates 10,20,30] [--frames 600] [--laps 2] [--loop-length 50]
+//                   [--width 1024] [--height 768] [--threads 2] [--supersampling 4] [--dir DIR]
+
+#include <cstdio>
+#include <cstdlib>
+#include <ctime>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <unistd.h>
+
+#include <nlohmann/json.hpp>
+
+#include "api/camera_json.h"
+#include "api/job_types.h"
+#include "engine/slam/map_io.h"
+#include "engine/synth/presets.h"
+#include "engine/util/timer.h"
+#include "server/cli/commands.h"
+#include "server/service.h"
+
+namespace omnirig {
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+struct BenchArgs {
+  std::vector<double> rates = {10, 20, 30};
+  int frames = 600, laps = 2, width = 1024, height = 768, threads = 2, supersampling = 4;
+  double loop_length_m = 50.0;
+  std::string dir;
+};
+
+BenchArgs Parse(int argc, char** argv) {
+  BenchArgs args;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    auto next = [&]() -> std::string { return i + 1 < argc ? argv[++i] : ""; };
+    if (a == "--rates") {
+      args.rates.clear();
+      std::stringstream list(next());
+      for (std::string item; std::getline(list, item, ',');)
+        args.rates.push_back(std::atof(item.c_str()));
+    } else if (a == "--frames")
+      args.frames = std::atoi(next().c_str());
+    else if (a == "--laps")
+      args.laps = std::atoi(next().c_str());
+    else if (a == "--loop-length")
+      args.loop_length_m = std::atof(next().c_str());
+    else if (a == "--width")
+      args.width = std::atoi(next().c_str());
+    else if (a == "--height")
+      args.height = std::atoi(next().c_str());
+    else if (a == "--threads")
+      args.threads = std::atoi(next().c_str());
+    else if (a == "--supersampling")
+      args.supersampling = std::atoi(next().c_str());
+    else if (a == "--dir")
+      args.dir = next();
+  }
+  if (args.dir.empty()) {
+    std::ostringstream dir;
+    dir << "/tmp/omnirig-live-loop-" << args.loop_length_m << "m-" << args.laps << "laps-"
+        << args.frames << "f-" << args.width << "x" << args.height << "-ss" << args.supersampling;
+    args.dir = dir.str();
+  }
+  return args;
+}
+
+// Renders the loop into args.dir (cam0/, cam1/, trajectory.tum, rig.json) unless it is there;
+// returns the rig.
+json RenderOrLoad(const BenchArgs& args) {
+  const fs::path dir(args.dir);
+  if (fs::exists(dir / "rig.json")) {
+    std::printf("read the rendered loop from %s (delete it to render again)\n", args.dir.c_str());
+    return json::parse(std::ifstream(dir / "rig.json"));
+  }
+  synth::StereoSequenceOptions options;
+  options.environment = synth::StereoSequenceOptions::Environment::kCityBlock;
+  options.path_length_m = args.loop_length_m;
+  options.num_laps = args.laps;
+  options.num_frames = args.frames;
+  options.lighting_change = true;
+  options.width = args.width;
+  options.height = args.height;
+  options.render.noise_sigma = 1.0;
+  options.render.supersampling = args.supersampling;
+  options.render.num_threads = args.threads;
+  const Timer timer;
+  const synth::StereoSequence sequence = synth::RenderStereoSequence(
+      options,
+      [&dir](int frame, const std::string& name, const cv::Mat& cam0, const cv::Mat& cam1) {
+        synth::WritePng(cam0, (dir / "cam0" / (name + ".png")).string());
+        synth::WritePng(cam1, (dir / "cam1" / (name + ".png")).string());
+        if (frame % 100 == 0) std::fprintf(stderr, "rendered %s\n", name.c_str());
+      });
+  std::vector<slam::StampedPose> poses;
+  for (size_t i = 0; i < sequence.world_from_rig.size(); ++i) {
+    poses.push_back({sequence.timestamps_s[i], sequence.world_from_rig[i]});
+  }
+  slam::WriteTum(dir / "trajectory.tum", poses);
+  const json rig = api::RigToJson(sequence.rig);
+  std::ofstream(dir / "rig.json") << rig.dump(2);
+  std::printf("rendered %d stereo frames %dx%d into %s in %.0f s (not part of the figures)\n",
+              args.frames, args.width, args.height, args.dir.c_str(), timer.ElapsedSeconds());
+  return rig;
+}
+
+// A relative_pose job whose result is `rig`: the render's calibration stands for a measured one.
+std::string SubmitRig(server::Service& service, const json& rig) {
+  api::JobType type;
+  type.name = "relative_pose";
+  type.validate = [](const json&) {};
+  type.reads_images = false;
+  type.run = [rig](const json&, const api::JobContext&) { return rig; };
+  api::RegisterJobType(type);
+  auto& store = *service.state().store;
+  const std::string dataset = store.CreateDataset("rig").id;
+  const std::string id = store.CreateJob("relative_pose", dataset, "{}").id;
+  service.state().workers->Notify();
+  for (;;) {
+    const auto job = store.GetJob(id);
+    if (job && job->state == storage::JobState::kSucceeded) return id;
+    if (job && storage::IsTerminal(job->state)) throw std::runtime_error("the rig job failed");
+    store.WaitForQueueChange(0.05);  // SQLite cannot notify: a short wait between reads
+  }
+}
+
+}  // namespace
+}  // namespace omnirig
+
+int main(int argc, char** argv) {
+  using namespace omnirig;
+  const BenchArgs args = Parse(argc, argv);
+  const json rig = RenderOrLoad(args);
+  const fs::path data =
+      fs::temp_directory_path() / ("omnirig-live-bench-" + std::to_string(::getpid()));
+  server::ServiceOptions options;
+  options.port = 0;
+  options.data_dir = data;
+  options.workers.num_workers = 1;
+  options.workers.threads_per_job = args.threads;
+  options.min_free_bytes = 0;
+  server::Service service(options);
+  const int port = service.Start();
+  const std::string rig_job = SubmitRig(service, rig);
+  const std::time_t now = std::time(nullptr);
+  char date[32];
+  std::strftime(date, sizeof(date), "%Y-%m-%d", std::gmtime(&now));
+  std::printf(
+      "live slam through `omnirig live`, %d frames %dx%d, %d laps of %.0f m, job threads "
+      "%d, measured %s\n",
+      args.frames, args.width, args.height, args.laps, args.loop_length_m, args.threads, date);
+  std::printf("%6s %8s %8s %9s %9s %9s %10s %6s %9s %8s\n", "rate", "tracked", "skipped", "p50 ms",
+              "p95 ms", "p99 ms", "rt p95 ms", "loops", "ATE m", "ATE %");
+  for (const double rate : args.rates) {
+    const fs::path out = data / ("live-" + std::to_string(static_cast<int>(rate)) + ".json");
+    const int code =
+        cli::RunLive({"--server", "http://127.0.0.1:" + std::to_string(port), "--rig", rig_job,
+                      "--rate", std::to_string(rate), "--json", out.string(), args.dir});
+    const json s = json::parse(std::ifstream(out));
+    const json e = s.value("evaluation", json());
+    std::printf("%6.0f %8d %8d %9.1f %9.1f %9.1f %10.1f %6d %9.4f %8.3f%s\n", rate,
+                s["frames_tracked"].get<int>(), s["frames_skipped"].get<int>(),
+                s["latency_ms"]["p50"].get<double>(), s["latency_ms"]["p95"].get<double>(),
+                s["latency_ms"]["p99"].get<double>(), s["round_trip_ms"]["p95"].get<double>(),
+                s.value("loops", 0), e.is_object() ? e["ate_rmse_m"].get<double>() : -1.0,
+                e.is_object() ? e["ate_percent_of_path"].get<double>() : -1.0,
+                code == 0 ? "" : "  (job did not succeed)");
+    std::fflush(stdout);
+  }
+  std::error_code ignored;
+  fs::remove_all(data, ignored);
+  return 0;
+}

@@ -1,0 +1,326 @@
+// Live slam jobs end to end (server/live_jobs.h): a real server on a loopback port, frames of a
+// rendered sequence posted as a robot sends them, each answered with its pose; the frame
+// events, the map and trajectory served while the job runs, finish, idle timeout, cancel, the
+// bad inputs refused while the job goes on, newest-wins skipping, two live jobs at once, and a
+// live job that its server stopped running again as a batch job over the frames it stored.
+
+#include <atomic>
+#include <future>
+#include <mutex>
+#include <set>
+#include <thread>
+
+#include <gtest/gtest.h>
+#include <opencv2/imgcodecs.hpp>
+
+#include "api/camera_json.h"
+#include "engine/slam/video_source.h"
+#include "server/service.h"
+#include "testing/slam/sequence_accuracy.h"
+#include "tests/server_test_util.h"
+
+namespace omnirig {
+namespace {
+
+using nlohmann::json;
+using namespace omnirig::testing;
+namespace fs = std::filesystem;
+
+std::string Png(const cv::Mat& image) {
+  std::vector<uchar> bytes;
+  cv::imencode(".png", image, bytes);
+  return std::string(bytes.begin(), bytes.end());
+}
+
+class ServerLiveTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    sequence_ = new synth::StereoSequence(synth::MakeStereoSequence(slam::ShortSequenceOptions(8)));
+  }
+  static void TearDownTestSuite() { delete sequence_; }
+
+  void SetUp() override { Start(); }
+
+  void Start() {
+    server::ServiceOptions options;
+    options.port = 0;
+    options.data_dir = dir_.path() / "data";
+    options.workers.num_workers = 1;
+    options.workers.threads_per_job = 1;
+    options.http_threads = 16;
+    options.min_free_bytes = 0;
+    service_ = std::make_unique<server::Service>(options);
+    port_ = service_->Start();
+    client_ = MakeClient(port_);
+    if (rig_.empty()) {
+      const json dataset = JsonOf(
+          client_->Post("/api/v1/datasets", json{{"name", "rig"}}.dump(), "application/json"));
+      rig_ = SubmitFakeRelativePose(*client_, port_, dataset["id"], api::RigToJson(sequence_->rig));
+    }
+  }
+
+  json CreateLive(const json& extra = json::object(), const std::string& dataset = "") {
+    json params = {{"rig", rig_}, {"live", true}};
+    params.update(extra);
+    const auto created = client_->Post(
+        "/api/v1/jobs", json{{"type", "slam"}, {"dataset", dataset}, {"params", params}}.dump(),
+        "application/json");
+    EXPECT_EQ(created->status, 202) << created->body;
+    return JsonOf(created);
+  }
+
+  static httplib::Result PostFrame(httplib::Client& client, const std::string& job, double stamp_s,
+                                   const cv::Mat& cam0, const cv::Mat& cam1) {
+    const httplib::MultipartFormDataItems items = {{"cam0", Png(cam0), "cam0.png", "image/png"},
+                                                   {"cam1", Png(cam1), "cam1.png", "image/png"},
+                                                   {"stamp", std::to_string(stamp_s), "", ""}};
+    return client.Post(("/api/v1/jobs/" + job + "/frames").c_str(), items);
+  }
+  static httplib::Result PostFrame(httplib::Client& client, const std::string& job, int i) {
+    return PostFrame(client, job, 0.1 * i, sequence_->images[0][i], sequence_->images[1][i]);
+  }
+
+  json Finish(const std::string& job) {
+    const auto finished = client_->Post(("/api/v1/jobs/" + job + "/finish").c_str());
+    EXPECT_EQ(finished->status, 202) << finished->body;
+    return WaitForJob(port_, job, 240);
+  }
+
+  json Result(const std::string& job) {
+    return JsonOf(client_->Get(("/api/v1/jobs/" + job + "/result").c_str()));
+  }
+
+  static synth::StereoSequence* sequence_;
+  TempDir dir_;
+  std::unique_ptr<server::Service> service_;
+  std::unique_ptr<httplib::Client> client_;
+  int port_ = 0;
+  std::string rig_;
+};
+
+synth::StereoSequence* ServerLiveTest::sequence_ = nullptr;
+
+TEST_F(ServerLiveTest, TracksEachFrameAsItComesAndFinishesAsTheBatchJob) {
+  const json job = CreateLive();
+  EXPECT_EQ(job["state"], "running");
+  const std::string id = job["id"];
+  const std::string dataset = job["dataset"];
+  ASSERT_FALSE(dataset.empty());  // a dataset of its own
+
+  // The frame events, followed while the frames are sent.
+  std::promise<void> opened;
+  std::atomic<int> frame_events{0};
+  std::thread events([&] {
+    FollowEvents(
+        port_, id, 120,
+        [&] {
+          opened.set_value();
+          return false;
+        },
+        [&](const std::string& type, const json& data) {
+          if (type == "frame") ++frame_events;
+          return type == "job" && data["state"] == "succeeded";
+        });
+  });
+  opened.get_future().wait();
+
+  const int n = static_cast<int>(sequence_->names.size());
+  for (int i = 0; i < n; ++i) {
+    const auto answer = PostFrame(*client_, id, i);
+    ASSERT_EQ(answer->status, 200) << answer->body;
+    const json frame = JsonOf(answer);
+    EXPECT_EQ(frame["frame_index"], i);
+    EXPECT_EQ(frame["name"], slam::FrameName(0.1 * i) + ".png");
+    EXPECT_EQ(frame["state"], i == 0 ? "initialised" : "tracked") << frame.dump();
+    EXPECT_TRUE(frame["keyframe"].is_boolean());
+    ASSERT_TRUE(frame["world_from_rig"].is_object()) << frame.dump();
+    EXPECT_EQ(frame["world_from_rig"]["rotation_wxyz"].size(), 4u);
+    EXPECT_GT(frame["latency_ms"].get<double>(), 0.0);
+    // Tracking gives the metric motion as the robot drives (the rendered path, to 3 cm).
+    const Eigen::Vector3d moved(frame["world_from_rig"]["translation_m"][0],
+                                frame["world_from_rig"]["translation_m"][1],
+                                frame["world_from_rig"]["translation_m"][2]);
+    const double true_m =
+        (sequence_->world_from_rig[i].translation - sequence_->world_from_rig[0].translation)
+            .norm();
+    EXPECT_NEAR(moved.norm(), true_m, 0.03) << "frame " << i;
+  }
+  // The map and trajectory so far, while the job runs (the first frame's snapshot is written
+  // before its answer: one exists now).
+  const auto trajectory =
+      client_->Get(("/api/v1/jobs/" + id + "/artifacts/trajectory.json").c_str());
+  ASSERT_EQ(trajectory->status, 200) << trajectory->body;
+  EXPECT_GE(JsonOf(trajectory)["frames"].size(), 1u);
+  const auto map = client_->Get(("/api/v1/jobs/" + id + "/artifacts/map.ply").c_str());
+  ASSERT_EQ(map->status, 200);
+  EXPECT_EQ(map->body.rfind("ply", 0), 0u);
+
+  const json finished = Finish(id);
+  ASSERT_EQ(finished["state"], "succeeded") << finished.dump();
+  events.join();
+  EXPECT_EQ(frame_events.load(), n);
+  const json result = Result(id);
+  EXPECT_EQ(result["num_frames"], n);
+  EXPECT_EQ(result["num_tracked"], n);
+  EXPECT_EQ(result["live"]["num_skipped"], 0);
+  EXPECT_EQ(result["live"]["ended_by"], "finish");
+  for (const char* name : {"trajectory.json", "trajectory.tum", "map.ply", "report.json"}) {
+    EXPECT_EQ(client_->Get(("/api/v1/jobs/" + id + "/artifacts/" + name).c_str())->status, 200)
+        << name;
+  }
+  // Nothing sent is lost: the frames are the dataset's, named by their stamps.
+  const json images = JsonOf(client_->Get(("/api/v1/datasets/" + dataset).c_str()))["images"];
+  ASSERT_EQ(images.size(), 2u * n) << images.dump();
+  EXPECT_EQ(images[0]["name"], "cam0/t000000.000.png");
+  // A frame to the ended job: 409.
+  EXPECT_EQ(PostFrame(*client_, id, 9.0, sequence_->images[0][0], sequence_->images[1][0])->status,
+            409);
+
+  // The batch job over the same frames gives the same trajectory (the live run's last frame is
+  // no keyframe: not bit for bit, within a millimetre).
+  const auto batch = client_->Post(
+      "/api/v1/jobs",
+      json{{"type", "slam"}, {"dataset", dataset}, {"params", {{"rig", rig_}}}}.dump(),
+      "application/json");
+  ASSERT_EQ(batch->status, 202) << batch->body;
+  const std::string batch_id = JsonOf(batch)["id"];
+  ASSERT_EQ(WaitForJob(port_, batch_id, 240)["state"], "succeeded");
+  const json batch_result = Result(batch_id);
+  ASSERT_EQ(batch_result["frames"].size(), result["frames"].size());
+  for (int i = 0; i < n; ++i) {
+    EXPECT_EQ(batch_result["frames"][i]["name"], result["frames"][i]["name"]);
+    for (int k = 0; k < 3; ++k) {
+      EXPECT_NEAR(batch_result["frames"][i]["world_from_rig"]["translation_m"][k].get<double>(),
+                  result["frames"][i]["world_from_rig"]["translation_m"][k].get<double>(), 1e-3)
+          << "frame " << i;
+    }
+  }
+}
+
+TEST_F(ServerLiveTest, RefusesBadFramesAndGoesOn) {
+  const std::string id = CreateLive()["id"];
+  ASSERT_EQ(PostFrame(*client_, id, 0)->status, 200);
+  // Another size than the rig's: 422 naming both.
+  const cv::Mat small(240, 320, CV_8UC3, cv::Scalar(90, 90, 90));
+  const auto wrong = PostFrame(*client_, id, 0.15, small, small);
+  ASSERT_EQ(wrong->status, 422) << wrong->body;
+  const std::string message = JsonOf(wrong)["error"]["message"];
+  EXPECT_NE(message.find("320x240"), std::string::npos) << message;
+  EXPECT_NE(message.find("640x480"), std::string::npos) << message;
+  // A stamp not after the last one: 409 with the last stamp.
+  const auto early = PostFrame(*client_, id, 0.0, sequence_->images[0][1], sequence_->images[1][1]);
+  ASSERT_EQ(early->status, 409) << early->body;
+  EXPECT_EQ(JsonOf(early)["error"]["code"], "stamp_not_increasing");
+  EXPECT_DOUBLE_EQ(JsonOf(early)["error"]["details"]["last_stamp_s"].get<double>(), 0.0);
+  // Neither pair nor stacked: 400.
+  const auto lone = client_->Post(
+      ("/api/v1/jobs/" + id + "/frames").c_str(),
+      httplib::MultipartFormDataItems{{"cam0", Png(sequence_->images[0][1]), "a.png", "image/png"},
+                                      {"stamp", "0.2", "", ""}});
+  EXPECT_EQ(lone->status, 400) << lone->body;
+  // The job goes on: the next frame, stacked this time (cam0 on top), is tracked.
+  cv::Mat stacked;
+  cv::vconcat(sequence_->images[0][1], sequence_->images[1][1], stacked);
+  const auto next =
+      client_->Post(("/api/v1/jobs/" + id + "/frames").c_str(),
+                    httplib::MultipartFormDataItems{{"stacked", Png(stacked), "s.png", "image/png"},
+                                                    {"stamp", "0.1", "", ""}});
+  ASSERT_EQ(next->status, 200) << next->body;
+  EXPECT_EQ(JsonOf(next)["state"], "tracked");
+  EXPECT_EQ(JsonOf(next)["frame_index"], 1);
+  // Frames to a job that is not live: 409.
+  EXPECT_EQ(PostFrame(*client_, rig_, 5)->status, 409);
+  ASSERT_EQ(Finish(id)["state"], "succeeded");
+  EXPECT_EQ(Result(id)["num_frames"], 2);
+}
+
+TEST_F(ServerLiveTest, SkipsOlderFramesWaitingAndTwoJobsBothAdvance) {
+  // Two robots sending every frame at once, as fast as the server stores them: each job tracks
+  // the newest and skips the older ones waiting, and counts its own.
+  const std::string jobs[2] = {CreateLive()["id"], CreateLive()["id"]};
+  const int n = static_cast<int>(sequence_->names.size());
+  std::mutex mutex;
+  std::map<std::string, std::vector<json>> answers;
+  std::vector<std::thread> senders;
+  for (const std::string& job : jobs) {
+    senders.emplace_back([&, job] {
+      // Each frame from its own connection, sent once the previous one is stored (posted in
+      // stamp order), none waiting for the previous one's pose.
+      std::vector<std::future<json>> pending;
+      for (int i = 0; i < n; ++i) {
+        pending.push_back(std::async(std::launch::async, [&, job, i] {
+          auto client = MakeClient(port_);
+          const auto answer = PostFrame(*client, job, i);
+          return answer ? JsonOf(answer) : json{{"status", "no answer"}};
+        }));
+        const std::string dataset =
+            JsonOf(MakeClient(port_)->Get(("/api/v1/jobs/" + job).c_str()))["dataset"];
+        while (JsonOf(MakeClient(port_)->Get(
+                   ("/api/v1/datasets/" + dataset).c_str()))["image_count"] < 2 * (i + 1)) {
+          std::this_thread::yield();
+        }
+      }
+      for (auto& answer : pending) {
+        const json frame = answer.get();
+        std::lock_guard<std::mutex> lock(mutex);
+        answers[job].push_back(frame);
+      }
+    });
+  }
+  for (auto& sender : senders) sender.join();
+  for (const std::string& job : jobs) {
+    int tracked = 0, skipped = 0;
+    for (const json& frame : answers[job]) {
+      ASSERT_TRUE(frame.contains("state")) << frame.dump();
+      (frame["state"] == "skipped" ? skipped : tracked)++;
+      if (frame["state"] == "skipped") {
+        EXPECT_TRUE(frame["frame_index"].is_null());
+        EXPECT_TRUE(frame["world_from_rig"].is_null());
+      }
+    }
+    EXPECT_EQ(tracked + skipped, n);
+    EXPECT_GE(tracked, 2) << job;  // the first frame and the last are always tracked
+    ASSERT_EQ(Finish(job)["state"], "succeeded");
+    const json result = Result(job);
+    EXPECT_EQ(result["num_frames"], tracked);
+    EXPECT_EQ(result["live"]["num_skipped"], skipped);
+    EXPECT_EQ(result["live"]["num_received"], n);
+  }
+}
+
+TEST_F(ServerLiveTest, IdleTimeoutFinishesAndCancelEnds) {
+  const std::string idle = CreateLive({{"live_idle_timeout_s", 3.0}})["id"];
+  ASSERT_EQ(PostFrame(*client_, idle, 0)->status, 200);
+  ASSERT_EQ(PostFrame(*client_, idle, 1)->status, 200);
+  const json done = WaitForJob(port_, idle, 120);
+  ASSERT_EQ(done["state"], "succeeded") << done.dump();
+  EXPECT_EQ(Result(idle)["live"]["ended_by"], "idle_timeout");
+
+  const std::string canceled = CreateLive()["id"];
+  ASSERT_EQ(PostFrame(*client_, canceled, 0)->status, 200);
+  EXPECT_EQ(client_->Post(("/api/v1/jobs/" + canceled + "/cancel").c_str())->status, 202);
+  EXPECT_EQ(WaitForJob(port_, canceled, 60)["state"], "canceled");
+  EXPECT_EQ(PostFrame(*client_, canceled, 1)->status, 409);
+}
+
+TEST_F(ServerLiveTest, AStoppedServersLiveJobRunsAgainAsABatchJobOverItsFrames) {
+  const json job = CreateLive();
+  const std::string id = job["id"];
+  for (int i = 0; i < 4; ++i) ASSERT_EQ(PostFrame(*client_, id, i)->status, 200);
+  // The server stops (drain): the job goes back to the queue; the next server's worker runs
+  // it over the 4 frames its dataset holds.
+  EXPECT_EQ(service_->Drain(0), 1);
+  client_.reset();
+  service_.reset();
+  Start();
+  const json rerun = WaitForJob(port_, id, 240);
+  ASSERT_EQ(rerun["state"], "succeeded") << rerun.dump();
+  const json result = Result(id);
+  EXPECT_EQ(result["num_frames"], 4);
+  EXPECT_EQ(result["num_tracked"], 4);
+  EXPECT_EQ(result["frames"][3]["name"], "t000000.300.png");
+  EXPECT_FALSE(result.contains("live"));  // a batch run
+}
+
+}  // namespace
+}  // namespace omnirig
