@@ -50,9 +50,11 @@ fi
 
 BUILD=${OMNIRIG_FUZZ_BUILD_DIR:-build-fuzz}
 if [[ $build -eq 1 && ! -f $BUILD/build.ninja ]]; then
-  # -O1: enough for the sanitizers, and a much faster build than -O3.
+  # -O1: enough for the sanitizers, and a much faster build than -O3. Warnings are errors in
+  # the GCC builds that ship; here they stay warnings, so that clang's other set of warnings
+  # cannot keep the fuzzers from running.
   CC=clang CXX=clang++ cmake -S . -B "$BUILD" -G Ninja -DCMAKE_BUILD_TYPE=Release \
-    -DOMNIRIG_WERROR=ON -DOMNIRIG_FUZZ=ON -DCMAKE_CXX_FLAGS_RELEASE="-O1 -DNDEBUG" >/dev/null
+    -DOMNIRIG_FUZZ=ON -DCMAKE_CXX_FLAGS_RELEASE="-O1 -DNDEBUG" >/dev/null
 fi
 build_targets=()
 for target in "${targets[@]}"; do build_targets+=("fuzz_$target"); done

@@ -1,7 +1,10 @@
 // `omnirig live`: plays a recording against a server as the robot that captured it would send
-// it, and reports what the robot would have met. Starts a live slam job, posts every stereo frame
-// at its capture time (the recording's stamps, or --rate), each on a connection of its own so
-// that a slow answer never delays the next frame, then finishes the job and prints the latency
+// it, and reports what the robot would have met. Starts a live slam job, captures every stereo
+// frame at its time (the recording's stamps, or --rate) and sends them in order on one
+// connection, as a camera driver with a queue of one does: while the server is still tracking
+// the last frame sent, the frames captured meanwhile wait, and only the newest of them goes next
+// (the others are counted skipped by the client). A frame's stamp is then always after the last
+// one the server heard. Then it finishes the job and prints the latency
 // percentiles (receipt to pose, as the server measures it, and the round trip the client saw),
 // the frames tracked and skipped, the loops, and the trajectory against a ground truth (a .tum
 // beside the images, one pose per frame, as the batch slam job reads it) when there is one.
@@ -12,6 +15,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <condition_variable>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
@@ -21,6 +25,7 @@
 #include <iostream>
 #include <map>
 #include <mutex>
+#include <optional>
 #include <thread>
 
 #include <nlohmann/json.hpp>
@@ -242,27 +247,40 @@ int RunLive(const Args& args) {
             << (rate_hz > 0 ? std::to_string(rate_hz) + " Hz" : std::string("capture rate"))
             << "\n";
 
-  // Each frame at its time, on its own thread and connection.
+  // Capture (this thread) and send (the sender thread) meet in a slot of one frame, the newest.
+  struct Captured {
+    size_t index = 0;
+    Clock::time_point due;
+  };
+  std::mutex mutex;
+  std::condition_variable changed;
+  std::optional<Captured> slot;
+  bool captured_all = false;
+  std::vector<FrameOutcome> outcomes(frames.size());
+  for (FrameOutcome& outcome : outcomes) {
+    outcome.answer = {{"state", "skipped"}, {"skipped_by", "client"}};
+  }
   const Clock::time_point start = Clock::now();
-  std::vector<std::future<FrameOutcome>> pending;
-  for (size_t i = 0; i < frames.size(); ++i) {
-    const double at_s =
-        rate_hz > 0 ? static_cast<double>(i) / rate_hz : frames[i].stamp_s - frames[0].stamp_s;
-    auto bytes = std::make_shared<std::pair<std::string, std::string>>(frames[i].read());
-    const Clock::time_point due =
-        start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(at_s));
-    std::this_thread::sleep_until(due);
-    const std::string format = frames[i].format;
-    const double stamp_s = frames[i].stamp_s;
-    pending.push_back(std::async(std::launch::async, [&, bytes, due, format, stamp_s] {
-      FrameOutcome outcome;
+  std::thread sender([&] {
+    auto connection = Connect(server, token);
+    while (true) {
+      Captured frame;
+      {
+        std::unique_lock<std::mutex> lock(mutex);
+        changed.wait(lock, [&] { return slot.has_value() || captured_all; });
+        if (!slot) return;
+        frame = *slot;
+        slot.reset();
+      }
+      FrameOutcome& outcome = outcomes[frame.index];
+      const auto bytes = frames[frame.index].read();
       const Clock::time_point sent = Clock::now();
-      outcome.late_ms = std::chrono::duration<double, std::milli>(sent - due).count();
-      auto connection = Connect(server, token);
+      outcome.late_ms = std::chrono::duration<double, std::milli>(sent - frame.due).count();
       char stamp[32];
-      std::snprintf(stamp, sizeof(stamp), "%.6f", stamp_s);
-      const httplib::MultipartFormDataItems items = {{"cam0", bytes->first, "cam0" + format, ""},
-                                                     {"cam1", bytes->second, "cam1" + format, ""},
+      std::snprintf(stamp, sizeof(stamp), "%.6f", frames[frame.index].stamp_s);
+      const std::string& format = frames[frame.index].format;
+      const httplib::MultipartFormDataItems items = {{"cam0", bytes.first, "cam0" + format, ""},
+                                                     {"cam1", bytes.second, "cam1" + format, ""},
                                                      {"stamp", stamp, "", ""}};
       const auto result = connection->Post(("/api/v1/jobs/" + id + "/frames").c_str(), items);
       outcome.round_trip_ms =
@@ -270,13 +288,27 @@ int RunLive(const Args& args) {
       outcome.answer = result ? json::parse(result->body, nullptr, false)
                               : json{{"error", {{"message", httplib::to_string(result.error())}}}};
       if (result && result->status != 200) outcome.answer["status"] = result->status;
-      return outcome;
-    }));
+    }
+  });
+  for (size_t i = 0; i < frames.size(); ++i) {
+    const double at_s =
+        rate_hz > 0 ? static_cast<double>(i) / rate_hz : frames[i].stamp_s - frames[0].stamp_s;
+    const Clock::time_point due =
+        start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(at_s));
+    std::this_thread::sleep_until(due);  // the camera's next exposure
+    std::lock_guard<std::mutex> lock(mutex);
+    slot = Captured{i, due};  // a frame still waiting here is superseded: skipped by the client
+    changed.notify_one();
   }
+  {
+    std::lock_guard<std::mutex> lock(mutex);
+    captured_all = true;
+    changed.notify_one();
+  }
+  sender.join();
   std::vector<double> latency_ms, round_trip_ms, late_ms;
   int tracked = 0, skipped = 0, refused = 0, lost = 0;
-  for (auto& future : pending) {
-    const FrameOutcome outcome = future.get();
+  for (const FrameOutcome& outcome : outcomes) {
     late_ms.push_back(outcome.late_ms);
     const std::string state = outcome.answer.value("state", "");
     if (state.empty()) {
