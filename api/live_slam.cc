@@ -3,11 +3,12 @@
 #include <algorithm>
 #include <cmath>
 
-#include <opencv2/imgcodecs.hpp>
 
 #include "api/camera_json.h"
 #include "api/json_fields.h"
 #include "api/slam_job.h"
+#include "engine/features/image.h"
+#include "engine/slam/image_source.h"
 #include "engine/slam/map_io.h"
 #include "engine/slam/session.h"
 #include "engine/util/check.h"
@@ -32,8 +33,7 @@ double Percentile(std::vector<double> values, double p) {
 }
 
 cv::Mat Decode(const std::string& bytes, const std::string& what) {
-  const cv::Mat buffer(1, static_cast<int>(bytes.size()), CV_8U, const_cast<char*>(bytes.data()));
-  cv::Mat image = cv::imdecode(buffer, cv::IMREAD_COLOR);
+  cv::Mat image = DecodeImageBgr(bytes);
   OMNIRIG_CHECK(!image.empty(), what << " cannot be decoded");
   return image;
 }
@@ -260,14 +260,9 @@ json RunLiveSlam(const json& params, const JobContext& context, const StereoRig&
   const slam::SlamResult result = session.Finish();
   const fs::path dataset_dir = context.dataset_dir;
   // The dense map (with "dense_map") reads the tracked frames back from the dataset.
-  const slam::StereoFrameLoader load = [&](int i) {
-    return slam::ReadBoth([&](int c) {
-      const std::string name = "cam" + std::to_string(c) + "/" + names[i];
-      cv::Mat image = cv::imread((dataset_dir / name).string(), cv::IMREAD_COLOR);
-      OMNIRIG_CHECK(!image.empty(), "image " << name << " cannot be read");
-      return image;
-    });
-  };
+  std::vector<ImagePairNames> pairs;
+  for (const std::string& name : names) pairs.push_back({name, "cam0/" + name, "cam1/" + name});
+  const slam::StereoFrameLoader load = slam::StereoImageLoader(dataset_dir, pairs);
   const json input = {{"kind", "live"}, {"num_frames", stamps.size()}};
   json report = WriteSlamReport(rig, result, stamps, {}, input, load, parsed.dense_map,
                                 options.num_threads, context.output_dir, context.progress);

@@ -1,5 +1,6 @@
 #include "engine/features/image.h"
 
+#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "engine/util/check.h"
@@ -27,6 +28,13 @@ void CheckGreyOrBgr8(const cv::Mat& image) {
   OMNIRIG_CHECK(
       !image.empty() && image.depth() == CV_8U && (image.channels() == 1 || image.channels() == 3),
       "images must be 8-bit grey or BGR");
+}
+
+cv::Mat DecodeImageBgr(std::string_view bytes) {
+  if (bytes.empty()) return cv::Mat();
+  const cv::Mat buffer(1, static_cast<int>(bytes.size()), CV_8U,
+                       const_cast<char*>(bytes.data()));
+  return cv::imdecode(buffer, cv::IMREAD_COLOR);
 }
 
 }  // namespace omnirig
