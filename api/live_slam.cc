@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <cmath>
 
-
 #include "api/camera_json.h"
 #include "api/json_fields.h"
 #include "api/slam_job.h"
