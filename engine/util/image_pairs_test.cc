@@ -43,6 +43,11 @@ TEST(ImagePairs, NamesReadAsTimestampsWhenTheyAreNumbers) {
   EXPECT_DOUBLE_EQ(*NameAsTimestamp("1403636579.763.png"), 1403636579.763);
   EXPECT_FALSE(NameAsTimestamp("frame_001.png").has_value());
   EXPECT_FALSE(NameAsTimestamp(".png").has_value());
+  // A recording's frames: "t" and the time.
+  ASSERT_TRUE(NameAsTimestamp("t000012.345.png").has_value());
+  EXPECT_DOUBLE_EQ(*NameAsTimestamp("t000012.345.png"), 12.345);
+  EXPECT_FALSE(NameAsTimestamp("t.png").has_value());
+  EXPECT_FALSE(NameAsTimestamp("top.png").has_value());
 }
 
 }  // namespace
