@@ -127,7 +127,7 @@ std::string SubmitRig(server::Service& service, const json& rig) {
   type.validate = [](const json&) {};
   type.reads_images = false;
   type.run = [rig](const json&, const api::JobContext&) { return rig; };
-  api::RegisterJobType(type);
+  service.state().job_types.Add(type);
   auto& store = *service.state().store;
   const std::string dataset = store.CreateDataset("rig").id;
   const std::string id = store.CreateJob("relative_pose", dataset, "{}").id;

@@ -79,8 +79,9 @@ void LiveJobs::Run(const std::shared_ptr<LiveJob>& job) {
                             });
   };
   events->Changed(id);
-  const storage::JobOutcome outcome = RunJobAttempt(job->record, *state_.store, *state_.data_dir,
-                                                    options, {&job->cancel, &job->interrupt});
+  const storage::JobOutcome outcome =
+      RunJobAttempt(job->record, *state_.store, *state_.data_dir, state_.job_types, options,
+                    {&job->cancel, &job->interrupt});
   // A run that ended early (canceled, failed) has not closed the mailbox: a frame waiting in it
   // gets its answer here.
   job->mailbox.Close({409,

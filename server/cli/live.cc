@@ -33,6 +33,7 @@
 
 #include "api/camera_json.h"
 #include "api/relpose_job.h"
+#include "engine/util/image_pairs.h"
 #include "api/slam_job.h"
 #include "engine/slam/evaluation.h"
 #include "engine/slam/map_io.h"
@@ -88,12 +89,12 @@ std::vector<RecordedFrame> ReadRecording(const std::vector<std::string>& inputs,
     std::sort(names.begin(), names.end());
     const auto videos = api::FindStereoVideos(dir, names);
     if (!videos) {
-      const std::vector<api::ImagePairNames> pairs = api::MatchImagePairs(names);
+      const std::vector<ImagePairNames> pairs = MatchImagePairs(names);
       bool stamped = rate_hz <= 0;
-      for (const auto& pair : pairs) stamped = stamped && api::NameAsTimestamp(pair.name);
+      for (const auto& pair : pairs) stamped = stamped && NameAsTimestamp(pair.name);
       for (size_t i = 0; i < pairs.size(); ++i) {
         RecordedFrame frame;
-        frame.stamp_s = stamped ? *api::NameAsTimestamp(pairs[i].name)
+        frame.stamp_s = stamped ? *NameAsTimestamp(pairs[i].name)
                                 : static_cast<double>(i) / (rate_hz > 0 ? rate_hz : 10.0);
         frame.format = fs::path(pairs[i].cam0).extension().string();
         const fs::path cam0 = dir / pairs[i].cam0, cam1 = dir / pairs[i].cam1;
