@@ -55,7 +55,8 @@ class ServerLiveTest : public ::testing::Test {
     if (rig_.empty()) {
       const json dataset = JsonOf(
           client_->Post("/api/v1/datasets", json{{"name", "rig"}}.dump(), "application/json"));
-      rig_ = SubmitFakeRelativePose(*client_, port_, dataset["id"], api::RigToJson(sequence_->rig));
+      rig_ = SubmitFakeRelativePose(service_->state().job_types, *client_, port_, dataset["id"],
+                                    api::RigToJson(sequence_->rig));
     }
   }
 
