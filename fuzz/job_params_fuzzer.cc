@@ -16,8 +16,18 @@
 
 namespace {
 
+// The service's built-in job types, as a server holds them.
+omnirig::api::JobTypes& Types() {
+  static omnirig::api::JobTypes* types = [] {
+    auto* built_in = new omnirig::api::JobTypes;
+    omnirig::api::AddBuiltinJobTypes(built_in);
+    return built_in;
+  }();
+  return *types;
+}
+
 void Validate(const nlohmann::json& params) {
-  const omnirig::api::JobType* type = omnirig::api::FindJobType(OMNIRIG_FUZZ_JOB_TYPE);
+  const omnirig::api::JobType* type = Types().Find(OMNIRIG_FUZZ_JOB_TYPE);
   FUZZ_CHECK(type != nullptr && type->validate);
   type->validate(params);
   if (type->referenced_jobs) {
@@ -30,7 +40,7 @@ void Validate(const nlohmann::json& params) {
 }  // namespace
 
 extern "C" int LLVMFuzzerInitialize(int*, char***) {
-  omnirig::api::RegisterBuiltinJobTypes();
+  Types();
   return 0;
 }
 

@@ -137,7 +137,8 @@ void Decompress(const std::string& compression, std::string_view input, uint64_t
 }
 
 void AddTopics(const std::map<int64_t, RecordingTopic>& topics, RecordingIndex& index) {
-  for (const auto& [id, topic] : topics) {
+  for (const auto& entry : topics) {
+    const RecordingTopic& topic = entry.second;
     auto same = std::find_if(index.topics.begin(), index.topics.end(),
                              [&](const RecordingTopic& t) { return t.name == topic.name; });
     if (same == index.topics.end()) {
