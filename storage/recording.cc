@@ -118,6 +118,14 @@ void DecompressZstd(std::string_view input, std::string& output, const Bytes& by
 
 void Decompress(const std::string& compression, std::string_view input, uint64_t expected_size,
                 std::string& output, const Bytes& bytes, uint64_t offset) {
+  // Recorders write chunks of about a megabyte (ROS 1: 768 KiB, MCAP: 4 MiB by default); a
+  // header that declares more than this is damaged, and believing it would reserve the memory.
+  constexpr uint64_t kMaxChunkBytes = 256ull << 20;
+  if (expected_size > kMaxChunkBytes) {
+    Fail(bytes, offset,
+         "chunk declares " + std::to_string(expected_size) +
+             " bytes uncompressed, more than any recorder writes in one chunk (256 MiB)");
+  }
   output.resize(expected_size);
   if (compression == "bz2") {
     DecompressBz2(input, output, bytes, offset);

@@ -34,7 +34,11 @@ cv::Mat DecodeImageBgr(std::string_view bytes) {
   if (bytes.empty()) return cv::Mat();
   const cv::Mat buffer(1, static_cast<int>(bytes.size()), CV_8U,
                        const_cast<char*>(bytes.data()));
-  return cv::imdecode(buffer, cv::IMREAD_COLOR);
+  try {
+    return cv::imdecode(buffer, cv::IMREAD_COLOR);
+  } catch (const cv::Exception&) {
+    return cv::Mat();  // bytes OpenCV's decoders refuse by throwing: no image either
+  }
 }
 
 }  // namespace omnirig

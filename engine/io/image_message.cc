@@ -174,8 +174,16 @@ void DecodeRaw(FieldReader& reader, ImageMessage& message) {
 void DecodeCompressed(FieldReader& reader, ImageMessage& message) {
   message.encoding = reader.String("format");
   const std::string_view data = reader.Bytes("data");
+  if (data.empty()) {
+    throw InvalidArgument("sensor_msgs/CompressedImage (format '" + message.encoding +
+                          "') holds no data");
+  }
   const cv::Mat bytes(1, static_cast<int>(data.size()), CV_8UC1, const_cast<char*>(data.data()));
-  message.image = cv::imdecode(bytes, cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR);
+  try {
+    message.image = cv::imdecode(bytes, cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR);
+  } catch (const cv::Exception&) {
+    message.image.release();  // refused below as any data that does not decode
+  }
   if (message.image.empty()) {
     throw InvalidArgument("sensor_msgs/CompressedImage (format '" + message.encoding + "', " +
                           std::to_string(data.size()) +
