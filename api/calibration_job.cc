@@ -227,6 +227,18 @@ json WriteCameraExports(const CameraModel& camera, const std::filesystem::path& 
           {"warnings", warnings}};
 }
 
+json RegionsToJson(const std::vector<CoverageReport::Region>& regions) {
+  json out = json::array();
+  for (const CoverageReport::Region& region : regions) {
+    out.push_back({{"ring", region.ring},
+                   {"from_hour", region.from_hour},
+                   {"to_hour", region.to_hour},
+                   {"covered_fraction", region.covered_fraction},
+                   {"median_uncertainty_px", region.median_uncertainty_px}});
+  }
+  return out;
+}
+
 json WriteCoverageReport(const CalibrationReport& report, const BoardSpec& board,
                          const std::filesystem::path& dataset_dir,
                          const std::filesystem::path& dir) {
@@ -243,7 +255,16 @@ json WriteCoverageReport(const CalibrationReport& report, const BoardSpec& board
                  {"uncertainty_image", nullptr},
                  {"max_uncertainty_px", nullptr},
                  {"median_uncertainty_px", nullptr},
-                 {"advice", coverage.advice}};
+                 {"advice", coverage.advice},
+                 {"uncovered_regions", RegionsToJson(coverage.uncovered_regions)},
+                 {"uncertain_regions", RegionsToJson(coverage.uncertain_regions)},
+                 {"uncertainty_flat", coverage.uncertainty_flat},
+                 {"missing_poses", coverage.missing_poses},
+                 {"board_poses",
+                  {{"max_tilt_deg", coverage.max_tilt_deg},
+                   {"min_distance_m", coverage.min_board_distance_m},
+                   {"median_distance_m", coverage.median_board_distance_m},
+                   {"max_distance_m", coverage.max_board_distance_m}}}};
   if (coverage.uncertainty_valid) {
     result["uncertainty_image"] = kUncertaintyImageFileName;
     result["max_uncertainty_px"] = coverage.max_uncertainty_px;

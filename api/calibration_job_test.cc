@@ -79,6 +79,17 @@ TEST(CalibrationJob, RunsOnTheVmrSetWithOverlays) {
   EXPECT_GT(coverage["max_uncertainty_px"].get<double>(), 0.0);
   EXPECT_TRUE(fs::exists(out / coverage["uncertainty_image"].get<std::string>()));
   EXPECT_TRUE(coverage["advice"].is_array());
+  // The regions and poses behind the advice, each region named by ring and clock hours.
+  ASSERT_TRUE(coverage["uncovered_regions"].is_array());
+  for (const json& region : coverage["uncovered_regions"]) {
+    EXPECT_TRUE(region["ring"] == "inner" || region["ring"] == "middle" || region["ring"] == "outer");
+    EXPECT_GE(region["from_hour"].get<int>(), 1);
+    EXPECT_LE(region["to_hour"].get<int>(), 12);
+  }
+  EXPECT_TRUE(coverage["uncertain_regions"].is_array());
+  EXPECT_TRUE(coverage["uncertainty_flat"].is_boolean());
+  EXPECT_TRUE(coverage["missing_poses"].is_array());
+  EXPECT_GT(coverage["board_poses"]["median_distance_m"].get<double>(), 0.0);
   fs::remove_all(out);
 }
 

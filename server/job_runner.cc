@@ -10,6 +10,7 @@
 
 #include "api/job_types.h"
 #include "api/service_json.h"
+#include "engine/geometry/ply_preview.h"
 #include "engine/util/check.h"
 #include "storage/atomic_file.h"
 #include "storage/image_header.h"
@@ -293,6 +294,12 @@ storage::JobOutcome RunJobType(const storage::JobRecord& job, const api::JobType
   outcome.state = JobState::kSucceeded;
   outcome.result = result.dump();
   storage::WriteFileAtomically(output_dir / "result.json", result.dump(2));
+  // Every large cloud the job wrote gets a preview the page loads by default.
+  for (const PlyPreview& preview : WritePlyPreviews(output_dir, PlyPreviewOptions())) {
+    context.Log("preview of a large cloud: " + fs::relative(preview.path, output_dir).string() + ", " +
+                std::to_string(preview.preview_points) + " of " +
+                std::to_string(preview.source_points) + " points");
+  }
   outcome.artifacts = CollectArtifacts(output_dir, data_root);
   return outcome;
 }

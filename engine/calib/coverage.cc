@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <functional>
 #include <optional>
 #include <sstream>
 
@@ -163,17 +164,30 @@ bool EstimateCovariance(const CalibrationReport& report, const BoardSpec& board,
   return true;
 }
 
-std::string SectorAdvice(double from_deg, double to_deg, bool rim) {
-  std::ostringstream os;
-  os << "no board seen between azimuth " << from_deg << " and " << to_deg << " deg "
-     << (rim ? "near the rim" : "in the inner half of the disk")
-     << ": add views with the board there";
-  return os.str();
+// The disk's regions: 12 clock sectors of 30 deg (sector k from (k + 3) o'clock, azimuth 30 k
+// deg) times three rings.
+constexpr int kNumSectors = 12;
+constexpr int kNumRings = 3;
+constexpr const char* kRingNames[kNumRings] = {"inner", "middle", "outer"};
+
+// Per region: the grid pixels in it and those near a corner.
+struct RegionCounts {
+  std::array<std::array<int, kNumSectors>, kNumRings> in{}, covered{};
+};
+
+// The region of pixel offset (from the disk's centre) within a disk of `radius`: {ring, sector}.
+std::array<int, 2> RegionOf(const Eigen::Vector2d& offset, double radius) {
+  const double r = offset.norm() / radius;
+  double azimuth = std::atan2(offset.y(), offset.x()) * 180.0 / M_PI;
+  if (azimuth < 0.0) azimuth += 360.0;
+  return {r < 0.4 ? 0 : r < 0.7 ? 1 : 2, std::min(kNumSectors - 1, static_cast<int>(azimuth / 30.0))};
 }
 
-// The coverage map, its fraction and the sector advice.
+int HourOf(int sector) { return (sector + 2) % 12 + 1; }  // sector 0 starts at 3 o'clock
+
+// The coverage map and its fraction; the counts per region into `counts`.
 cv::Mat Coverage(const CalibrationReport& report, const CoverageOptions& options,
-                 CoverageReport* coverage) {
+                 CoverageReport* coverage, RegionCounts* counts) {
   const int width = report.camera.width, height = report.camera.height;
   cv::Mat seeds(height, width, CV_8UC1, cv::Scalar(255));
   for (const CalibrationImageReport& image : report.images) {
@@ -187,39 +201,211 @@ cv::Mat Coverage(const CalibrationReport& report, const CoverageOptions& options
   }
   cv::Mat distance;
   cv::distanceTransform(seeds, distance, cv::DIST_L2, cv::DIST_MASK_PRECISE);
-  const int num_sectors = static_cast<int>(std::ceil(360.0 / options.azimuth_sector_deg));
-  std::vector<std::array<int, 2>> in_sector(num_sectors, {0, 0}), covered_sector(num_sectors, {0, 0});
   const Eigen::Vector2d& c = coverage->disk_centre_px;
   const double radius = coverage->disk_radius_px;
   int in_disk = 0, covered = 0;
   for (int v = 0; v < height; v += options.grid_step_px) {
     for (int u = 0; u < width; u += options.grid_step_px) {
       const Eigen::Vector2d offset(u - c.x(), v - c.y());
-      const double r = offset.norm();
-      if (r > radius) continue;
-      double azimuth = std::atan2(offset.y(), offset.x()) * 180.0 / M_PI;
-      if (azimuth < 0.0) azimuth += 360.0;
-      const int sector = std::min(num_sectors - 1,
-                                  static_cast<int>(azimuth / options.azimuth_sector_deg));
-      const int band = r > 0.5 * radius ? 1 : 0;
+      if (offset.norm() > radius) continue;
+      const auto [ring, sector] = RegionOf(offset, radius);
       const bool near = distance.at<float>(v, u) <= options.near_px;
       ++in_disk;
       covered += near;
-      ++in_sector[sector][band];
-      covered_sector[sector][band] += near;
+      ++counts->in[ring][sector];
+      counts->covered[ring][sector] += near;
     }
   }
   coverage->covered_fraction = in_disk > 0 ? static_cast<double>(covered) / in_disk : 0.0;
-  for (int band : {1, 0}) {
-    for (int sector = 0; sector < num_sectors; ++sector) {
-      const int n = in_sector[sector][band];
-      if (n == 0 || covered_sector[sector][band] >= options.min_sector_coverage * n) continue;
-      coverage->advice.push_back(SectorAdvice(
-          sector * options.azimuth_sector_deg,
-          std::min(360.0, (sector + 1) * options.azimuth_sector_deg), band == 1));
+  return distance;
+}
+
+// The median uncertainty (px) per region of the map, 0 where it has no value.
+std::array<std::array<double, kNumSectors>, kNumRings> RegionUncertainty(
+    const CoverageReport& coverage) {
+  std::array<std::array<std::vector<float>, kNumSectors>, kNumRings> values;
+  const cv::Mat& map = coverage.uncertainty_px;
+  for (int row = 0; row < map.rows; ++row) {
+    for (int col = 0; col < map.cols; ++col) {
+      const float value = map.at<float>(row, col);
+      if (!(value > 0.0f)) continue;
+      const Eigen::Vector2d offset = Eigen::Vector2d(col, row) * coverage.uncertainty_step_px -
+                                     coverage.disk_centre_px;
+      if (offset.norm() > coverage.disk_radius_px) continue;
+      const auto [ring, sector] = RegionOf(offset, coverage.disk_radius_px);
+      values[ring][sector].push_back(value);
     }
   }
-  return distance;
+  std::array<std::array<double, kNumSectors>, kNumRings> medians{};
+  for (int ring = 0; ring < kNumRings; ++ring) {
+    for (int sector = 0; sector < kNumSectors; ++sector) {
+      auto& v = values[ring][sector];
+      if (v.empty()) continue;
+      std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+      medians[ring][sector] = v[v.size() / 2];
+    }
+  }
+  return medians;
+}
+
+// The flagged sectors of each ring as regions, neighbouring sectors (also across 3 o'clock)
+// joined; `value` gives a region's figures from its sectors.
+std::vector<CoverageReport::Region> JoinSectors(
+    const std::array<std::array<bool, kNumSectors>, kNumRings>& flagged,
+    const std::function<void(int ring, const std::vector<int>& sectors,
+                             CoverageReport::Region*)>& value) {
+  std::vector<CoverageReport::Region> regions;
+  for (int ring = kNumRings - 1; ring >= 0; --ring) {
+    const auto& f = flagged[ring];
+    const int first_clear =
+        static_cast<int>(std::find(f.begin(), f.end(), false) - f.begin());
+    std::vector<int> run;
+    const auto close = [&](int end_sector) {
+      if (run.empty()) return;
+      CoverageReport::Region region;
+      region.ring = kRingNames[ring];
+      region.from_hour = HourOf(run.front());
+      region.to_hour = HourOf(end_sector % kNumSectors);
+      value(ring, run, &region);
+      regions.push_back(region);
+      run.clear();
+    };
+    if (first_clear == kNumSectors) {  // all around
+      for (int s = 0; s < kNumSectors; ++s) run.push_back(s);
+      close(0);
+      continue;
+    }
+    // Start after a clear sector so that a run across sector 11 -> 0 stays whole.
+    for (int i = 1; i <= kNumSectors; ++i) {
+      const int s = (first_clear + i) % kNumSectors;
+      if (f[s]) {
+        run.push_back(s);
+      } else {
+        close(s);
+      }
+    }
+  }
+  return regions;
+}
+
+std::string RegionText(const CoverageReport::Region& region) {
+  std::ostringstream os;
+  os << "the " << region.ring << " ring";
+  if (region.ring == "outer") os << " (near the rim)";
+  if (region.from_hour == region.to_hour) {
+    os << ", all around";
+  } else {
+    os << ", " << region.from_hour << " to " << region.to_hour << " o'clock";
+  }
+  return os.str();
+}
+
+// The board poses of the used views: how far and how tilted; the poses missing among tilted,
+// near and far.
+void BoardPoses(const CalibrationReport& report, const BoardSpec& board,
+                const CoverageOptions& options, CoverageReport* coverage) {
+  const std::vector<Eigen::Vector3d> object_points = board.ObjectPoints();
+  Eigen::Vector3d board_centre = Eigen::Vector3d::Zero();
+  for (const Eigen::Vector3d& x : object_points) board_centre += x / object_points.size();
+  std::vector<double> distances;
+  double max_tilt_deg = 0.0;
+  for (const CalibrationImageReport& image : report.images) {
+    if (!image.used) continue;
+    const Eigen::Vector3d centre = image.cam_from_board * board_centre;
+    const Eigen::Vector3d normal = image.cam_from_board.rotation * Eigen::Vector3d::UnitZ();
+    const double cosine = std::abs(normal.dot(centre.normalized()));
+    max_tilt_deg = std::max(max_tilt_deg, std::acos(std::min(1.0, cosine)) * 180.0 / M_PI);
+    distances.push_back(centre.norm());
+  }
+  if (distances.empty()) return;
+  std::sort(distances.begin(), distances.end());
+  coverage->median_board_distance_m = distances[distances.size() / 2];
+  coverage->min_board_distance_m = distances.front();
+  coverage->max_board_distance_m = distances.back();
+  coverage->max_tilt_deg = max_tilt_deg;
+  if (max_tilt_deg < options.tilted_deg) coverage->missing_poses.push_back("tilted");
+  if (distances.front() > options.near_ratio * coverage->median_board_distance_m) {
+    coverage->missing_poses.push_back("near");
+  }
+  if (distances.back() < options.far_ratio * coverage->median_board_distance_m) {
+    coverage->missing_poses.push_back("far");
+  }
+}
+
+std::string PoseAdvice(const std::string& pose, const CoverageReport& coverage,
+                       const CoverageOptions& options) {
+  std::ostringstream os;
+  os.precision(2);
+  if (pose == "tilted") {
+    os << "no tilted board: every used view faces the camera within "
+       << std::lround(coverage.max_tilt_deg) << " deg; add views with the board tilted "
+       << std::lround(options.tilted_deg) << " to 60 deg away from the camera";
+  } else if (pose == "near") {
+    os << "no near board: the nearest is " << coverage.min_board_distance_m
+       << " m away (median " << coverage.median_board_distance_m
+       << " m); add views with the board at " << options.near_ratio * coverage.median_board_distance_m
+       << " m or nearer, filling more of the mirror";
+  } else {
+    os << "no far board: the farthest is " << coverage.max_board_distance_m << " m away (median "
+       << coverage.median_board_distance_m << " m); add views with the board at "
+       << options.far_ratio * coverage.median_board_distance_m
+       << " m or farther, at the distances the camera will work at";
+  }
+  return os.str();
+}
+
+// The regions with no corner, and until the uncertainty map is flat, its highest regions and
+// the missing board poses, as structured lists and sentences.
+void Advise(const CalibrationReport& report, const BoardSpec& board, const RegionCounts& counts,
+            const CoverageOptions& options, CoverageReport* coverage) {
+  std::array<std::array<bool, kNumSectors>, kNumRings> uncovered{};
+  for (int ring = 0; ring < kNumRings; ++ring) {
+    for (int s = 0; s < kNumSectors; ++s) {
+      const int n = counts.in[ring][s];
+      uncovered[ring][s] = n > 0 && counts.covered[ring][s] < options.min_sector_coverage * n;
+    }
+  }
+  const auto medians = coverage->uncertainty_valid
+                           ? RegionUncertainty(*coverage)
+                           : std::array<std::array<double, kNumSectors>, kNumRings>{};
+  const auto figures = [&](int ring, const std::vector<int>& sectors, CoverageReport::Region* r) {
+    int in = 0, covered = 0;
+    for (int s : sectors) {
+      in += counts.in[ring][s];
+      covered += counts.covered[ring][s];
+      r->median_uncertainty_px = std::max(r->median_uncertainty_px, medians[ring][s]);
+    }
+    r->covered_fraction = in > 0 ? static_cast<double>(covered) / in : 0.0;
+  };
+  coverage->uncovered_regions = JoinSectors(uncovered, figures);
+  for (const CoverageReport::Region& region : coverage->uncovered_regions) {
+    coverage->advice.push_back("no corner in " + RegionText(region) +
+                               ": add views with the board there");
+  }
+  std::array<std::array<bool, kNumSectors>, kNumRings> uncertain{};
+  bool any_uncertain = false;
+  for (int ring = 0; ring < kNumRings; ++ring) {
+    for (int s = 0; s < kNumSectors; ++s) {
+      uncertain[ring][s] = medians[ring][s] > options.flat_uncertainty_ratio *
+                                                  coverage->median_uncertainty_px;
+      any_uncertain = any_uncertain || uncertain[ring][s];
+    }
+  }
+  coverage->uncertainty_flat = coverage->uncertainty_valid && !any_uncertain;
+  if (any_uncertain) coverage->uncertain_regions = JoinSectors(uncertain, figures);
+  BoardPoses(report, board, options, coverage);
+  if (coverage->uncertainty_flat) return;
+  for (const CoverageReport::Region& region : coverage->uncertain_regions) {
+    std::ostringstream os;
+    os.precision(2);
+    os << "the uncertainty is highest in " << RegionText(region) << " ("
+       << region.median_uncertainty_px << " px against " << coverage->median_uncertainty_px
+       << " px over the disk): add views with the board there";
+    coverage->advice.push_back(os.str());
+  }
+  for (const std::string& pose : coverage->missing_poses) {
+    coverage->advice.push_back(PoseAdvice(pose, *coverage, options));
+  }
 }
 
 cv::Mat DrawCoverage(const cv::Mat& background, const cv::Mat& distance,
@@ -374,8 +560,11 @@ cv::Mat DrawUncertainty(const cv::Mat& sigma, const CalibrationReport& report,
 void CoverageOptions::Check() const {
   OMNIRIG_CHECK_POSITIVE(near_px);
   OMNIRIG_CHECK_AT_LEAST(grid_step_px, 1);
-  OMNIRIG_CHECK_IN(azimuth_sector_deg, '(', 0, 360, ']');
   OMNIRIG_CHECK_IN(min_sector_coverage, '[', 0, 1, ']');
+  OMNIRIG_CHECK_AT_LEAST(flat_uncertainty_ratio, 1.0);
+  OMNIRIG_CHECK_IN(tilted_deg, '[', 0, 90, ']');
+  OMNIRIG_CHECK_IN(near_ratio, '(', 0, 1, ']');
+  OMNIRIG_CHECK_AT_LEAST(far_ratio, 1.0);
 }
 
 CoverageReport AnalyseCoverage(const CalibrationReport& report, const BoardSpec& board,
@@ -395,10 +584,12 @@ CoverageReport AnalyseCoverage(const CalibrationReport& report, const BoardSpec&
         std::max(1.0, std::min({k.u0(), k.v0(), report.camera.width - 1 - k.u0(),
                                 report.camera.height - 1 - k.v0()}));
   }
-  const cv::Mat distance = Coverage(report, options, &coverage);
+  RegionCounts counts;
+  const cv::Mat distance = Coverage(report, options, &coverage, &counts);
   coverage.coverage_image = DrawCoverage(background, distance, report, options, coverage);
   const cv::Mat sigma = Uncertainty(report, board, options, &coverage);
   if (!sigma.empty()) coverage.uncertainty_image = DrawUncertainty(sigma, report, coverage);
+  Advise(report, board, counts, options, &coverage);
   return coverage;
 }
 

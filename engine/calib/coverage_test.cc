@@ -48,6 +48,20 @@ bool Advises(const CoverageReport& report, const std::string& text) {
   return false;
 }
 
+// Whether a region of `regions` in `ring` holds the clock hour `hour` (the sector from hour to
+// hour + 1).
+bool HoldsHour(const std::vector<CoverageReport::Region>& regions, const std::string& ring,
+               int hour) {
+  for (const CoverageReport::Region& region : regions) {
+    if (region.ring != ring) continue;
+    if (region.from_hour == region.to_hour) return true;
+    for (int h = region.from_hour; h != region.to_hour; h = h % 12 + 1) {
+      if (h == hour) return true;
+    }
+  }
+  return false;
+}
+
 // The median of the uncertainty map over the disk's upper part (v above the centre by more than
 // 0.2 radii) or over the rest.
 float MedianOver(const CoverageReport& report, bool upper) {
@@ -80,11 +94,25 @@ TEST(Coverage, NamesTheMissingSectorsAndPredictsMoreUncertaintyThere) {
   EXPECT_GT(everywhere.covered_fraction, lower.covered_fraction + 0.1);
   EXPECT_GT(lower.covered_fraction, 0.05);
   // Boards only below the centre (image azimuth 0-180 deg, +v down): the advice names the
-  // upper sectors near the rim, and not the lower ones.
-  EXPECT_TRUE(Advises(lower, "between azimuth 180 and 270 deg near the rim"));
-  EXPECT_TRUE(Advises(lower, "between azimuth 180 and 270 deg in the inner half"));
-  EXPECT_FALSE(Advises(lower, "between azimuth 0 and 90 deg near the rim"));
-  EXPECT_FALSE(Advises(everywhere, "near the rim"));
+  // upper regions by ring and clock (12 o'clock up), and not the lower ones.
+  for (const std::string& line : lower.advice) std::printf("lower half: %s\n", line.c_str());
+  for (const std::string& line : everywhere.advice) std::printf("every view: %s\n", line.c_str());
+  EXPECT_TRUE(HoldsHour(lower.uncovered_regions, "outer", 12));
+  EXPECT_TRUE(HoldsHour(lower.uncovered_regions, "middle", 12));
+  EXPECT_FALSE(HoldsHour(lower.uncovered_regions, "outer", 4));
+  EXPECT_FALSE(HoldsHour(lower.uncovered_regions, "outer", 5));
+  EXPECT_TRUE(Advises(lower, "no corner in the outer ring (near the rim), 9 to 2 o'clock"));
+  // Every view still leaves two clock sectors of the rim without a corner (measured: 6 to 7 and
+  // 11 to 12 o'clock), and the upper half's other sectors covered.
+  EXPECT_LT(everywhere.uncovered_regions.size(), lower.uncovered_regions.size());
+  for (int hour : {9, 10, 1}) EXPECT_FALSE(HoldsHour(everywhere.uncovered_regions, "outer", hour));
+  EXPECT_FALSE(HoldsHour(everywhere.uncovered_regions, "middle", 12));
+  // The empty upper half leaves the uncertainty map far from flat there.
+  EXPECT_FALSE(lower.uncertainty_flat);
+  EXPECT_TRUE(HoldsHour(lower.uncertain_regions, "outer", 10));
+  EXPECT_FALSE(HoldsHour(lower.uncertain_regions, "outer", 4));
+  EXPECT_TRUE(everywhere.uncertainty_flat);
+  EXPECT_TRUE(Advises(lower, "the uncertainty is highest in the outer ring"));
 
   ASSERT_TRUE(everywhere.uncertainty_valid);
   ASSERT_TRUE(lower.uncertainty_valid);
