@@ -623,18 +623,38 @@ async function checkAdvice(page, server, s) {
   const result = await (await fetch(`${server.url}/api/v1/jobs/${jobId}/result`)).json();
   const given = result.coverage.advice || [];
   check(given.length > 0, `three views leave part of the disk uncovered: the result gives advice (${JSON.stringify(result.coverage)})`);
-  const shown = await page.$$eval('#coverage-advice li', (items) => items.map((i) => i.textContent.trim()));
-  check(shown.length === given.length && given.every((a, i) => shown[i].startsWith(a)), `the page lists the advice (${shown.length} shown of ${given.length})`);
-  // Azimuths 180-270 deg (from +u towards +v) are the image's upper left.
-  given.forEach((a, i) => {
-    if (/azimuth 180 and 270 deg/.test(a)) check(shown[i].endsWith('(the upper left of the image)'), `the advice says where in the image (${shown[i]})`);
-  });
+  const [shown] = await atWidths(page, 'calibration-advice-low', '#coverage', () => checkAdviceText(page, result.coverage, 'three views'));
   const percent = (await page.textContent('#coverage-percent')).trim();
   check(percent.startsWith(`${Math.round(100 * result.coverage.covered_fraction)} %`), `the three-view coverage is shown (${percent})`);
-  await page.$eval('#coverage', (c) => c.scrollIntoView());
-  await screenshot(page, 'calibration-advice');
   log(`three views: "${percent}"; advice: ${shown.join(' | ')}`);
   return `three views: "${percent}", advice shown: "${shown[0]}"${shown.length > 1 ? ` and ${shown.length - 1} more` : ''}`;
+}
+
+// The advice a person reads under the coverage: the result's sentences, each shown; while part
+// of the disk has no corner (coverage under 80 %), the regions named by ring and clock hours; the
+// board poses stated. Returns the lines shown.
+const REGION_WORDS = /^no corner in the (inner|middle|outer) ring( \(near the rim\))?, (all around|([1-9]|1[0-2]) to ([1-9]|1[0-2]) o'clock): add views with the board there$/;
+async function checkAdviceText(page, coverage, what) {
+  const given = coverage.advice || [];
+  const shown = await page.$$eval('#coverage-advice li', (items) => items.map((i) => i.textContent.trim()));
+  check(shown.length === given.length && given.every((a, i) => shown[i].startsWith(a)),
+    `${what}: the page lists the advice (${shown.length} shown of ${given.length})`);
+  const regions = shown.filter((a) => REGION_WORDS.test(a));
+  check(regions.length === (coverage.uncovered_regions || []).length,
+    `${what}: each region without a corner is named by ring and clock (${regions.length} of ${(coverage.uncovered_regions || []).length}: ${shown.join(' | ')})`);
+  if (coverage.covered_fraction < 0.8) {
+    check(regions.length > 0, `${what}: at ${Math.round(100 * coverage.covered_fraction)} % coverage the advice names the regions without a corner (${shown.join(' | ')})`);
+  }
+  if (!coverage.uncertainty_flat) {
+    for (const pose of coverage.missing_poses || []) {
+      check(shown.some((a) => a.startsWith(`no ${pose} board`)), `${what}: the advice names the missing ${pose} board (${shown.join(' | ')})`);
+    }
+  }
+  const poses = (await page.textContent('#board-poses')).trim();
+  check(/^tilted up to [0-9]+° from facing the camera; [0-9.]+ to [0-9.]+ m away \(median [0-9.]+ m\)$/.test(poses), `${what}: the board poses in words (${poses})`);
+  const visible = await page.$eval('#coverage-advice', (n) => n.getBoundingClientRect().width > 0);
+  check(visible, `${what}: the advice is visible`);
+  return shown;
 }
 
 // The coverage report and the exports as a person reads them: the percentage of the mirror disk
@@ -654,9 +674,7 @@ async function checkCoverage(page, server, jobId) {
     check(Math.abs(shown - coverage.max_uncertainty_px) <= halfUnit * (1 + 1e-9),
       `the largest uncertainty shown (${uncertaintyText}) is the result's ${coverage.max_uncertainty_px} px`);
   }
-  const advice = await page.$$eval('#coverage-advice li', (items) => items.map((i) => i.textContent.trim()));
-  check(advice.length === (coverage.advice || []).length && advice.every((a, i) => a.startsWith(coverage.advice[i])),
-    `each piece of advice is shown in plain words (${advice.length} shown, ${(coverage.advice || []).length} given)`);
+  const [advice] = await atWidths(page, 'calibration-advice-middle', '#coverage', () => checkAdviceText(page, coverage, 'every view'));
   const images = ['#coverage-image img', ...(coverage.uncertainty_image ? ['#uncertainty-image img'] : [])];
   for (const selector of images) {
     const [[w, h]] = await imagesLoaded(page, selector, 'the coverage image');
@@ -807,7 +825,7 @@ async function stepStereo(page, server) {
   log(`cam1 click: ${back.text}`);
   check(back.points.some((n) => n > 1), 'a click on cam1 drew an epipolar curve on cam0');
   await screenshot(page, 'stereo-epipolar-cam1-to-cam0');
-  const instant = await reconstructAndView(page, server, datasetId, jobId);
+  const instant = await reconstructAndView(page, server, datasetId, jobId, s.dir);
   return `relative_pose on ${s.source}: baseline ${baseline}; ${rigReport}; cam0 click -> ${found.text}; cam1 click -> ${back.text}; ${instant}`;
 }
 
@@ -923,7 +941,7 @@ async function stepViewerPly(page, server) {
 }
 
 // Instant 3D: a stereo_reconstruct job with the rig just measured; its page shows the cloud.
-async function reconstructAndView(page, server, datasetId, rigJob) {
+async function reconstructAndView(page, server, datasetId, rigJob, setDir) {
   const jobId = await submitJob(page, server, datasetId, 'stereo_reconstruct', async (p) => {
     await p.selectOption('#job-form select[name=rig]', rigJob);
   });
@@ -936,7 +954,86 @@ async function reconstructAndView(page, server, datasetId, rigJob) {
   await screenshot(page, 'viewer-stereo-reconstruct');
   const pairs = await checkReconstructPairs(page, server, jobId);
   const warned = await checkPairWarnings(page, server, datasetId, rigJob);
-  return `stereo_reconstruct job ${jobId}: ${hud}, ${drawn.n} pixels drawn; ${pairs}; ${warned}`;
+  const preview = await checkCloudPreview(page, server, rigJob, jobId, setDir);
+  return `stereo_reconstruct job ${jobId}: ${hud}, ${drawn.n} pixels drawn; ${preview}; ${pairs}; ${warned}`;
+}
+
+// Clouds as Potree shows them: the job built a preview of its large merged cloud (under 2 M
+// points and 20 MB, the same properties); the page loads the preview by default, states the full
+// cloud's size on a button and loads it on request; the cloud can be coloured by height (a colour
+// bar in metres) and by confidence.
+async function checkCloudPreview(page, server, rigJob, firstJob, setDir) {
+  // One pair on a grid 3 times finer than the default one, confidence down to 0.1: a cloud of
+  // over 20 MB (measured 2026-11-27: 2.5 times finer at the default 0.5 gave 10 MB).
+  const { grid } = await (await fetch(`${server.url}/api/v1/jobs/${firstJob}/result`)).json();
+  check(grid && grid.step_rad > 0, `the reconstruction's result states its grid (${JSON.stringify(grid)})`);
+  const first = fs.readdirSync(path.join(setDir, 'cam0')).sort()[0];
+  const { id: datasetId } = await uploadDataset(page, server, 'browser-stereo-one-pair',
+    copySet('one-pair', Object.fromEntries(['cam0', 'cam1'].map((cam) => [`${cam}/${first}`, path.join(setDir, cam, first)]))));
+  const jobId = await submitJob(page, server, datasetId, 'stereo_reconstruct', async (p) => {
+    await p.selectOption('#job-form select[name=rig]', rigJob);
+    await p.fill('#job-form textarea[name=extra]', JSON.stringify({ grid_step_rad: grid.step_rad / 3, min_confidence: 0.1 }));
+  });
+  await followJob(page, server, jobId, null);
+  await page.waitForFunction(() => Number(document.querySelector('#viewer')?.dataset.frames || 0) > 0, null, { timeout: 60000 });
+  const result = await (await fetch(`${server.url}/api/v1/jobs/${jobId}/result`)).json();
+  const artifacts = await (await fetch(`${server.url}/api/v1/jobs/${jobId}/artifacts`)).json();
+  const full = artifacts.find((a) => a.name === result.artifact);
+  check(full, `the result names its cloud (${result.artifact})`);
+  const preview = artifacts.find((a) => a.name === full.name.replace(/\.ply$/, '.preview.ply'));
+  const headerOf = async (name) => {
+    const bytes = new Uint8Array(await (await fetch(`${server.url}/api/v1/jobs/${jobId}/artifacts/${name}`)).arrayBuffer());
+    const text = new TextDecoder('latin1').decode(bytes.subarray(0, 4096));
+    return { count: Number(/element vertex (\d+)/.exec(text)[1]), properties: [...text.matchAll(/property \w+ (\w+)/g)].map((m) => m[1]), bytes: bytes.length };
+  };
+  const fullHeader = await headerOf(full.name);
+  const large = full.size > 20e6 || fullHeader.count > 2e6;
+  check(large, `the merged cloud of this job is large enough to need a preview (${full.size} bytes, ${fullHeader.count} points)`);
+  check(preview, `a large cloud gets a preview (${full.name}: ${full.size} bytes; artifacts ${artifacts.map((a) => a.name).join(', ')})`);
+  const previewHeader = await headerOf(preview.name);
+  check(preview.size <= 20e6 && previewHeader.count <= 2e6 && previewHeader.count > 0,
+    `the preview is under the bound (${preview.size} bytes, ${previewHeader.count} points)`);
+  check(JSON.stringify(previewHeader.properties) === JSON.stringify(fullHeader.properties),
+    `the preview keeps every property (${previewHeader.properties.join(' ')})`);
+  // By default: the preview, the full size stated on the button.
+  const shownTitle = () => page.$eval('#viewer .hud strong', (n) => n.textContent);
+  check(await shownTitle() === preview.name, `the viewer loaded the preview first (${await shownTitle()})`);
+  const count = (text) => Number((/([0-9,]+) points/.exec(text) || [])[1]?.replace(/,/g, ''));
+  check(count(await page.innerText('#viewer .hud')) === previewHeader.count, 'the viewer shows the preview\'s points');
+  const sizeMb = (full.size / 1e6).toFixed(1);
+  const [note] = await atWidths(page, 'viewer-cloud-preview', '#cloud-size-note', async () => {
+    const text = (await page.innerText('#cloud-size-note')).replace(/\s+/g, ' ').trim();
+    const button = (await page.innerText('#load-cloud')).trim();
+    check(text.startsWith(`A preview: ${previewHeader.count.toLocaleString('en-US')} points`), `the note says a preview is shown (${text})`);
+    check(button === `Load the full cloud ${full.name} (${sizeMb} MB)`, `the button states the full cloud's size (${button})`);
+    return text;
+  });
+  // Colour by height: a colour bar in metres with a range.
+  const modes = await page.$$eval('#colour-by option', (o) => o.map((x) => x.value));
+  check(['height', 'range'].every((m) => modes.includes(m)) && (!fullHeader.properties.includes('confidence') || modes.includes('confidence')),
+    `the cloud can be coloured by height, range and confidence (${modes.join(', ')})`);
+  let frames = Number(await page.$eval('#viewer', (v) => v.dataset.frames));
+  await page.selectOption('#colour-by', 'height');
+  await page.waitForFunction((f) => Number(document.querySelector('#viewer').dataset.frames) > f, frames);
+  const bar = await page.$eval('#cloud-colour-bar', (b) => ({ unit: b.dataset.unit, min: Number(b.dataset.min), max: Number(b.dataset.max), caption: b.querySelector('figcaption').textContent }));
+  check(bar.unit === 'm' && bar.max > bar.min && /height/.test(bar.caption), `colour by height has a bar in metres (${JSON.stringify(bar)})`);
+  await atWidths(page, 'viewer-cloud-by-height', '#viewer', async () => null);
+  if (modes.includes('confidence')) {
+    frames = Number(await page.$eval('#viewer', (v) => v.dataset.frames));
+    await page.selectOption('#colour-by', 'confidence');
+    await page.waitForFunction((f) => Number(document.querySelector('#viewer').dataset.frames) > f, frames);
+    check(/confidence/.test(await page.textContent('#cloud-colour-bar figcaption')), 'colour by confidence has its bar');
+  }
+  // On request: the full cloud.
+  await page.click('#load-cloud');
+  await page.waitForFunction((name) => document.querySelector('#viewer .hud strong')?.textContent === name
+    && Number(document.querySelector('#viewer')?.dataset.frames || 0) > 0, full.name, { timeout: 120000 });
+  check(count(await page.innerText('#viewer .hud')) === fullHeader.count, `the full cloud's ${fullHeader.count} points are shown`);
+  const drawn = await drawnPixels(page);
+  check(drawn.n > 50, `the full cloud is drawn (${drawn.n} pixels)`);
+  await atWidths(page, 'viewer-cloud-full', '#viewer', async () => null);
+  log(`preview: ${preview.name} ${preview.size} bytes, ${previewHeader.count} of ${fullHeader.count} points; "${note}"; full cloud loaded on request`);
+  return `preview ${previewHeader.count} of ${fullHeader.count} points (${(preview.size / 1e6).toFixed(1)} of ${sizeMb} MB) loaded first, the full cloud on request; colour by ${modes.join(', ')}`;
 }
 
 // A pair's warning in words: a confidence threshold above most pixels' confidence leaves fewer
@@ -1048,9 +1145,61 @@ async function stepViewerSlam(page, server) {
   check(['tracked', 'relocalised', 'relinked', 'reinitialised', 'lost'].every((k) => legend.includes(k)),
     `the top view's legend lists the states (${legend.join(', ')})`);
   await screenshot(page, 'viewer-slam');
+  const errors = refused ? `no error plots (${refused})` : await checkSlamErrors(page, server, jobId);
   const loops = await checkLoopsDrawn(page, jobId, sequence.groundTruth.frames.map((f) => f.name));
-  return `slam job ${jobId}: ${hud}; ${drawn.n} pixels drawn; top view ${topInk.blue} estimate / ${topInk.orange} ground-truth pixels; ${rows} frame rows; ${loops}` +
+  return `slam job ${jobId}: ${hud}; ${drawn.n} pixels drawn; top view ${topInk.blue} estimate / ${topInk.orange} ground-truth pixels; ${rows} frame rows; ${errors}; ${loops}` +
     (refused ? `; ground truth not uploaded (${refused})` : '');
+}
+
+// The errors against the ground truth as evo shows them: the headline's ATE and RPE with units,
+// the translation and rotation error plotted against the distance travelled (every frame of the
+// evaluation drawn, axes titled with their units), and the RPE per 1 m and 10 m segment.
+async function checkSlamErrors(page, server, jobId) {
+  const { evaluation } = await (await fetch(`${server.url}/api/v1/jobs/${jobId}/result`)).json();
+  check(evaluation && evaluation.per_frame, 'the slam result has an evaluation with per-frame errors');
+  await page.waitForSelector('#slam-errors');
+  await page.waitForFunction(() => ['#translation-error-plot', '#rotation-error-plot'].every((id) => document.querySelector(id)?.dataset.points));
+  const item = (key) => page.$eval(`#slam-headline [data-key=${key}] dd`, (n) => n.textContent.trim()).catch(() => '');
+  const frames = evaluation.per_frame.distance_m.length;
+  const [seen] = await atWidths(page, 'viewer-slam-errors', '#slam-errors', async () => {
+    const ate = await item('ate');
+    const rpe = await item('rpe');
+    check(/^[0-9.]+ (m|cm|mm)$/.test(ate), `the headline's ATE with its unit (${ate})`);
+    check(/^[0-9.]+ (m|cm|mm), [0-9.]+°$/.test(rpe), `the headline's RPE with its units (${rpe})`);
+    const plots = await page.$$eval('#slam-errors canvas.line-plot', (list) => list.map((c) => {
+      const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+      let ink = 0;
+      for (let i = 0; i < d.length; i += 4) if (d[i + 3] > 200 && (d[i + 2] > 200 && d[i] < 160)) ink += 1;  // the blue and purple lines
+      return { id: c.id, points: Number(c.dataset.points), x: c.dataset.xTitle, y: c.dataset.yTitle, ink, width: c.getBoundingClientRect().width };
+    }));
+    const [translation, rotation] = ['translation-error-plot', 'rotation-error-plot'].map((id) => plots.find((p) => p.id === id));
+    check(translation && rotation, `both error plots are shown (${plots.map((p) => p.id).join(', ')})`);
+    for (const plot of [translation, rotation]) {
+      check(plot.points === frames, `${plot.id} draws every evaluated frame (${plot.points} of ${frames})`);
+      check(plot.x === 'distance travelled (m)', `${plot.id}'s x axis is the distance travelled in m (${plot.x})`);
+      check(plot.ink > 100 && plot.width > 200, `${plot.id} is drawn (${plot.ink} pixels of its line, ${plot.width} px wide)`);
+    }
+    check(/^translation error \((m|cm|mm)\)$/.test(translation.y), `the translation error's axis has its unit (${translation.y})`);
+    check(rotation.y === 'rotation error (°)', `the rotation error's axis is in degrees (${rotation.y})`);
+    const segments = await page.$$eval('#rpe-segments tbody tr', (rows) => rows.map((r) => ({ length: Number(r.dataset.length), text: r.innerText.replace(/\s+/g, ' ').trim() })));
+    check(segments.length === evaluation.rpe_segments.length, `a row per RPE segment length (${segments.length})`);
+    evaluation.rpe_segments.forEach((seg, i) => {
+      const row = segments[i];
+      check(row.length === seg.length_m && row.text.startsWith(`${seg.length_m.toFixed(3)} m`), `the row of ${seg.length_m} m segments (${row.text})`);
+      if (seg.num_segments > 0) {
+        check(new RegExp(`^${seg.length_m.toFixed(3)} m ${seg.num_segments} [0-9.]+ (m|cm|mm) [0-9.]+ % [0-9.]+°$`).test(row.text),
+          `the ${seg.length_m} m RPE with units (${row.text})`);
+      } else {
+        check(/none: the path \([0-9.]+ (m|cm|mm)\) is shorter than/.test(row.text), `no ${seg.length_m} m segment, and why (${row.text})`);
+      }
+    });
+    const metre = evaluation.rpe_segments.find((seg) => seg.length_m === 1 && seg.num_segments > 0);
+    const rpe1 = await item('rpe-1m');
+    if (metre) check(/^[0-9.]+ (m|cm|mm) \([0-9.]+ % mean\), [0-9.]+°$/.test(rpe1), `the headline's RPE per 1 m with its units (${rpe1})`);
+    return { ate, rpe, rpe1, segments: segments.map((r) => r.text) };
+  });
+  log(`slam errors: ATE ${seen.ate}, RPE ${seen.rpe}, per 1 m ${seen.rpe1 || 'none'}; segments ${seen.segments.join(' | ')}`);
+  return `error plots of ${frames} frames; ATE ${seen.ate}; RPE ${seen.rpe}; segments ${seen.segments.join(' | ')}`;
 }
 
 // Loop closures and states in the top view. A loop sequence is too long for this

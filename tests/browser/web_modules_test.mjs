@@ -1,5 +1,5 @@
 // Unit tests of the web page's pure modules (no browser): the PLY reader, the trajectory
-// helpers, the colour bars' readers and scales, the result keys in words. Run by ctest as browser/web_modules: node web_modules_test.mjs
+// helpers, the colour bars' readers and scales, the result keys in words, the cloud colouring. Run by ctest as browser/web_modules: node web_modules_test.mjs
 import assert from 'node:assert/strict';
 import path from 'node:path';
 import { fileURLToPath } from 'node:url';
@@ -9,7 +9,8 @@ const { parsePly } = await import(path.join(WEB_JS, 'ply.js'));
 const { inversePose, loopSegments, parsePgm, parseTum, stateColour, STATE_COLOURS, trajectoryFromJson, transformTrajectory } =
   await import(path.join(WEB_JS, 'topview.js'));
 const { JET, parseFloatTiff, rangePreviewScale, ticks, TURBO } = await import(path.join(WEB_JS, 'colorbar.js'));
-const { describeKey, formatWithUnit, shortId } = await import(path.join(WEB_JS, 'labels.js'));
+const { describeKey, formatLength, formatWithUnit, shortId } = await import(path.join(WEB_JS, 'labels.js'));
+const { colourModes, percentileRange, pointValues, turboColours } = await import(path.join(WEB_JS, 'cloud_colour.js'));
 
 // A TIFF laid out as OpenCV writes a CV_32FC1 image: little-endian, uncompressed, the pixels in
 // strips of `rowsPerStrip` rows, strip offsets (LONG) and byte counts (SHORT) in arrays.
@@ -172,6 +173,33 @@ const tests = {
     const [back] = transformTrajectory([moved], inversePose(aFromB));
     back.t.forEach((v, k) => assert.ok(Math.abs(v - [1, 0, 0][k]) < 1e-12, `back ${back.t}`));
     assert.ok(Math.abs(Math.abs(back.q[0]) - 1) < 1e-12);
+  },
+  'a cloud is coloured by height along the up axis, range from the origin, or confidence'() {
+    const cloud = { count: 3, positions: Float32Array.from([0, -2, 0, 3, 0, 4, 0, 1, 0]), colors: null,
+      extra: { confidence: Float32Array.from([0.1, 0.5, 0.9]) } };
+    assert.deepEqual(colourModes(cloud).map((m) => m.mode), ['height', 'range', 'confidence']);
+    assert.deepEqual(colourModes({ ...cloud, colors: new Uint8Array(9), extra: {} }).map((m) => m.mode), ['rgb', 'height', 'range']);
+    assert.deepEqual([...pointValues(cloud, 'height', [0, -1, 0])].map((v) => v + 0), [2, 0, -1]);
+    assert.deepEqual([...pointValues(cloud, 'range')], [2, 5, 1]);
+    assert.equal(pointValues(cloud, 'confidence'), cloud.extra.confidence);
+    const colours = turboColours(Float32Array.from([-1, 0, 1, 2, NaN]), [0, 1]);
+    assert.deepEqual([...colours.subarray(0, 3)], TURBO[0]);  // clamped below
+    assert.deepEqual([...colours.subarray(6, 9)], TURBO[255]);
+    assert.deepEqual([...colours.subarray(9, 12)], TURBO[255]);  // clamped above
+    assert.deepEqual([...colours.subarray(12, 15)], TURBO[0]);  // no value
+  },
+  'the colour range leaves out the 2 % at either end'() {
+    const values = Float32Array.from({ length: 1001 }, (_, i) => i);
+    values[1000] = 1e9;  // a stray point far away
+    assert.deepEqual(percentileRange(values), [20, 980]);
+    const [lo, hi] = percentileRange(Float32Array.from([3, 3, 3]));
+    assert.ok(lo === 3 && hi > lo);
+  },
+  'lengths in m, cm or mm by size'() {
+    assert.equal(formatLength(1.234), '1.23 m');
+    assert.equal(formatLength(0.0456), '4.56 cm');
+    assert.equal(formatLength(0.0012), '1.2 mm');
+    assert.equal(formatLength(NaN), '–');
   },
 };
 

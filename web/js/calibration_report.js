@@ -107,15 +107,28 @@ function coverageCard(job, coverage) {
       el('dd#max-uncertainty', hasUncertainty
         ? `at most ${formatSignificant(coverage.max_uncertainty_px, 2)} px over the disk` +
           (Number.isFinite(coverage.median_uncertainty_px) ? ` (median ${formatSignificant(coverage.median_uncertainty_px, 2)} px)` : '')
-        : 'not available (the intrinsics\' covariance could not be computed)')),
+        : 'not available (the intrinsics\' covariance could not be computed)',
+      hasUncertainty && coverage.uncertainty_flat === true ? '; flat over the disk'
+        : hasUncertainty && coverage.uncertainty_flat === false ? '; not yet flat over the disk' : ''),
+      boardPoses(coverage.board_poses)),
     el('h3', 'Advice'),
-    advice.length ? el('ul.advice#coverage-advice', advice.map((a) => el('li', a, whereInImage(a))))
-      : el('p.muted#coverage-advice', 'The service gave no advice for this calibration.'),
+    advice.length ? el('ul.advice#coverage-advice', advice.map((a) => el('li', a)))
+      : el('p.muted#coverage-advice', coverage.uncertainty_flat
+        ? 'Nothing to add: every region of the mirror has corners and the uncertainty map is flat.'
+        : 'The service gave no advice for this calibration.'),
     el('div.overlays',
       figure(coverage.image, 'Where the board was seen: used corners on the mirror disk', 'coverage-image',
         coverageKey(near)),
       figure(coverage.uncertainty_image, 'Uncertainty of a projected point across the image (1 σ, px)', 'uncertainty-image',
         hasUncertainty ? uncertaintyColourBar(coverage.max_uncertainty_px) : null)));
+}
+
+// How the used boards were posed: their largest tilt and their distances.
+function boardPoses(poses) {
+  if (!poses || !Number.isFinite(poses.median_distance_m)) return null;
+  return [el('dt', 'Board poses'), el('dd#board-poses',
+    `tilted up to ${formatNumber(poses.max_tilt_deg, 0)}° from facing the camera; ` +
+    `${formatNumber(poses.min_distance_m, 2)} to ${formatNumber(poses.max_distance_m, 2)} m away (median ${formatNumber(poses.median_distance_m, 2)} m)`)];
 }
 
 // The coverage image's colours (engine/calib/coverage.cc: DrawCoverage).
@@ -129,16 +142,6 @@ function coverageKey(nearPx) {
       { colour: 'rgb(0, 255, 255)', label: 'the mirror disk\'s edge' },
     ],
   });
-}
-
-// The image region an advice's azimuth range names (azimuth about the disk's centre, 0 deg to
-// the right, 90 deg down: engine/calib/coverage.h), in words.
-function whereInImage(advice) {
-  const m = /azimuth (\d+(?:\.\d+)?) and (\d+(?:\.\d+)?) deg/.exec(advice);
-  if (!m) return null;
-  const mid = ((Number(m[1]) + Number(m[2])) / 2) % 360;
-  const names = ['right', 'lower right', 'bottom', 'lower left', 'left', 'upper left', 'top', 'upper right'];
-  return el('span.muted', ` (the ${names[Math.round(mid / 45) % 8]} of the image)`);
 }
 
 function solverCard(solver) {

@@ -61,3 +61,12 @@ export function formatWithUnit(key, value, digits = 4) {
 
 // Short, readable ids: the first 8 of the 16 hex digits (unique enough to tell jobs apart on a page).
 export const shortId = (id) => String(id ?? '').slice(0, 8);
+
+// Lengths as people read them: metres, centimetres or millimetres by size.
+export function formatLength(metres) {
+  if (!Number.isFinite(metres)) return '–';
+  const a = Math.abs(metres);
+  if (a >= 1) return `${formatNumber(metres, 2)} m`;
+  if (a >= 0.01) return `${Number((metres * 100).toPrecision(3))} cm`;
+  return `${Number((metres * 1000).toPrecision(2))} mm`;
+}

@@ -16,8 +16,10 @@ import {
   drawTopView, GROUND_TRUTH_COLOUR, inversePose, LOOP_COLOUR, loopSegments, parsePgm, parseTum, STATE_COLOURS,
   trajectoryFromJson, transformTrajectory,
 } from './topview.js';
-import { colourKey } from './colorbar.js';
-import { describeKey, formatWithUnit, shortId } from './labels.js';
+import { colourBar, colourKey, TURBO } from './colorbar.js';
+import { colourModes, percentileRange, pointValues, turboColours } from './cloud_colour.js';
+import { describeKey, formatLength, formatWithUnit, shortId } from './labels.js';
+import { slamErrorsCard } from './slam_report.js';
 import { clear, el, errorBox, formatBytes, formatNumber, formatTime, progressBar } from './ui.js';
 
 // Clouds larger than this wait for a click (their size shown) instead of loading with the page.
@@ -75,8 +77,11 @@ async function listCloudJobs(container) {
     const names = new Map(asList(datasets, 'datasets').map((d) => [d.id, d.name]));
     const jobs = lists.flatMap((l) => asList(l, 'jobs'))
       .sort((a, b) => String(b.finished_at || b.created_at).localeCompare(String(a.finished_at || a.created_at))).slice(0, 30);
-    const withClouds = await Promise.all(jobs.map(async (job) =>
-      ({ job, clouds: (await listArtifacts(job.id).catch(() => [])).filter((a) => /\.ply$/i.test(a.name)) })));
+    const withClouds = await Promise.all(jobs.map(async (job) => {
+      const plys = (await listArtifacts(job.id).catch(() => [])).filter((a) => /\.ply$/i.test(a.name));
+      const previews = new Map(plys.filter((a) => isPreview(a.name)).map((a) => [fullCloudName(a.name), a]));
+      return { job, clouds: plys.filter((a) => !isPreview(a.name)).map((a) => ({ ...a, preview: previews.get(a.name) })) };
+    }));
     const rows = withClouds.filter((j) => j.clouds.length);
     if (!rows.length) {
       clear(container, el('p.muted', 'No slam or stereo_reconstruct job has a point cloud yet.'));
@@ -93,7 +98,8 @@ async function listCloudJobs(container) {
           el('td', formatTime(job.finished_at)),
           el('td', el('ul.cloud-list', clouds.map((a) => el('li',
             el('a.cloud-link', { href: href(a.name), dataset: { artifact: a.name, size: String(a.size) } }, a.name),
-            el('span.muted', ` ${formatBytes(a.size)}`))))));
+            el('span.muted', ` ${formatBytes(a.size)}`),
+            a.preview ? el('span.muted.preview-size', ` (opens as a ${formatBytes(a.preview.size)} preview)`) : null)))));
       }))));
   } catch (err) {
     clear(container, errorBox(err, 'Could not list the jobs'));
@@ -101,6 +107,11 @@ async function listCloudJobs(container) {
 }
 
 // ---- a job's results -------------------------------------------------------------------------
+
+// NAME.preview.ply: the job's preview of NAME.ply (a random subset of at most ~2 M points and
+// ~20 MB, every property kept).
+const isPreview = (name) => /\.preview\.ply$/i.test(name);
+const fullCloudName = (name) => name.replace(/\.preview\.ply$/i, '.ply');
 
 function pick(artifacts, pattern) {
   return artifacts.find((a) => pattern.test(a.name));
@@ -119,7 +130,10 @@ function mainCloud(artifacts, result) {
 export async function renderJobReport(container, job, setSummary, preferred) {
   const artifacts = await listArtifacts(job.id);
   const result = await get(`/jobs/${encodeURIComponent(job.id)}/result`).catch(() => ({}));
-  const clouds = artifacts.filter((a) => /\.ply$/i.test(a.name));
+  // The clouds to choose from are the full ones; each large one's preview (NAME.preview.ply,
+  // built by the job) is what loads first.
+  const clouds = artifacts.filter((a) => /\.ply$/i.test(a.name) && !isPreview(a.name));
+  const previews = new Map(artifacts.filter((a) => isPreview(a.name)).map((a) => [fullCloudName(a.name), a]));
   const status = el('div');
   const sceneHolder = el('div');
   const below = el('div');
@@ -127,8 +141,9 @@ export async function renderJobReport(container, job, setSummary, preferred) {
     el('option', { value: a.name }, `${a.name} (${formatBytes(a.size)})`))) : null;
   const headline = job.type === 'slam' ? slamHeadline(result) : null;
   if (headline && setSummary) setSummary(headline.text);
-  clear(container, headline ? headline.card : null, el('div.card', el('h2', 'Point cloud and trajectory'),
-    cloudSelect ? el('p', 'Cloud: ', cloudSelect) : null, status, sceneHolder), below);
+  clear(container, headline ? headline.card : null, job.type === 'slam' ? slamErrorsCard(result.evaluation) : null,
+    el('div.card', el('h2', 'Point cloud and trajectory'),
+      cloudSelect ? el('p', 'Cloud: ', cloudSelect) : null, status, sceneHolder), below);
 
   const [trajectory, groundTruth, report, occupancy] = await Promise.all([
     loadTrajectory(job, artifacts, result), loadGroundTruth(job, artifacts, result),
@@ -140,23 +155,33 @@ export async function renderJobReport(container, job, setSummary, preferred) {
     if (scene) scene.dispose();
     scene = null;
     clear(sceneHolder);
-    if (artifact && !confirmed && artifact.size > AUTO_LOAD_BYTES) {
-      // A large cloud is fetched on request only, its size stated first.
-      clear(status, el('p#cloud-size-note', `${artifact.name} is ${formatBytes(artifact.size)}. `,
-        el('button.primary#load-cloud', { type: 'button', dataset: { artifact: artifact.name }, onclick: () => show(artifact, true) },
-          `Load ${artifact.name} (${formatBytes(artifact.size)})`)));
+    const preview = artifact && !confirmed ? previews.get(artifact.name) : null;
+    const fullButton = () => el('button.primary#load-cloud', { type: 'button', dataset: { artifact: artifact.name },
+      onclick: () => show(artifact, true) }, `Load the full cloud ${artifact.name} (${formatBytes(artifact.size)})`);
+    if (artifact && !preview && !confirmed && artifact.size > AUTO_LOAD_BYTES) {
+      // A large cloud without a preview is fetched on request only, its size stated first.
+      clear(status, el('p#cloud-size-note', `${artifact.name} is ${formatBytes(artifact.size)}. `, fullButton()));
       if (trajectory) scene = createScene(sceneHolder, { cloud: null, trajectory, title: 'trajectory' });
       return;
     }
-    const cloud = artifact ? await loadCloud(job.id, artifact, status) : null;
+    const loading = preview || artifact;
+    const cloud = loading ? await loadCloud(job.id, loading, status) : null;
     if (request !== shown) return;
-    if (cloud || trajectory) scene = createScene(sceneHolder, { cloud, trajectory, title: artifact && artifact.name });
+    if (preview && cloud) {
+      clear(status, el('p#cloud-size-note', { dataset: { preview: preview.name } },
+        `A preview: ${cloud.count.toLocaleString('en-US')} points (${formatBytes(preview.size)}) picked at random from ` +
+        `${artifact.name} (${formatBytes(artifact.size)}). `, fullButton()));
+    }
+    if (cloud || trajectory) scene = createScene(sceneHolder, { cloud, trajectory, title: loading && loading.name });
   };
-  const main = (preferred && clouds.find((a) => a.name === preferred)) || mainCloud(artifacts, result);
+  const main = (preferred && clouds.find((a) => a.name === (isPreview(preferred) ? fullCloudName(preferred) : preferred))) ||
+    mainCloud(clouds, result);
   if (cloudSelect && main) cloudSelect.value = main.name;
   if (cloudSelect) cloudSelect.addEventListener('change', () => show(clouds.find((a) => a.name === cloudSelect.value)));
   if (!main) clear(status, el('p.muted', 'This job has no PLY point cloud.'));
-  await show(main, Boolean(preferred && main && main.name === preferred));
+  // A cloud named in the address (the viewer page's list) loads in full when it has no preview:
+  // the user chose it, its size stated.
+  await show(main, Boolean(preferred && main && main.name === preferred && !previews.has(main.name)));
   // A pair's "show in 3D" button: that pair's cloud in the viewer above.
   const viewCloud = (name) => {
     const artifact = clouds.find((a) => a.name === name);
@@ -173,15 +198,6 @@ export async function renderJobReport(container, job, setSummary, preferred) {
     summaryCard(result),
     await report ? statsCard(await report) : null);
   return () => scene && scene.dispose();
-}
-
-// Lengths as people read them: metres, centimetres or millimetres by size.
-export function formatLength(metres) {
-  if (!Number.isFinite(metres)) return '–';
-  const a = Math.abs(metres);
-  if (a >= 1) return `${formatNumber(metres, 2)} m`;
-  if (a >= 0.01) return `${Number((metres * 100).toPrecision(3))} cm`;
-  return `${Number((metres * 1000).toPrecision(2))} mm`;
 }
 
 // The slam report's headline (the result's own figures): frames tracked, keyframes, loops, the
@@ -201,6 +217,11 @@ export function slamHeadline(result) {
     rows.push(['ate', 'ATE (RMSE)', formatLength(evaluation.ate_rmse_m)]);
     rows.push(['rpe', 'RPE per frame (RMSE)', `${formatLength(evaluation.rpe_translation_rmse_m)}, ` +
       `${Number(evaluation.rpe_rotation_rmse_deg).toFixed(3)}°`]);
+    const metre = (evaluation.rpe_segments || []).find((seg) => seg.length_m === 1 && seg.num_segments > 0);
+    if (metre) {
+      rows.push(['rpe-1m', 'RPE per 1 m (RMSE)', `${formatLength(metre.translation_rmse_m)} ` +
+        `(${formatNumber(metre.translation_mean_percent, 2)} % mean), ${Number(metre.rotation_rmse_deg).toFixed(3)}°`]);
+    }
     if (Number.isFinite(evaluation.final_drift_percent)) {
       rows.push(['drift', 'Final drift', `${formatNumber(evaluation.final_drift_percent, 2)} % of ${formatLength(evaluation.path_length_m)} travelled`]);
     }
@@ -476,7 +497,7 @@ function subsample(cloud, target) {
     positions.set(cloud.positions.subarray(3 * i, 3 * i + 3), 3 * j);
     if (colors) colors.set(cloud.colors.subarray(3 * i, 3 * i + 3), 3 * j);
   }
-  return { count, positions, colors };
+  return { count, positions, colors, step };
 }
 
 function pointCloudObject(cloud, size) {
@@ -525,8 +546,10 @@ function sceneContent(cloud, trajectory) {
     : { centre: new THREE.Vector3(), radius: 1 };
   const points = cloud ? pointCloudObject(cloud, 2) : null;
   if (points) scene.add(points);
-  const preview = cloud && cloud.count > PREVIEW_POINTS ? pointCloudObject(subsample(cloud, PREVIEW_POINTS), 2) : null;
+  const sub = cloud && cloud.count > PREVIEW_POINTS ? subsample(cloud, PREVIEW_POINTS) : null;
+  const preview = sub ? pointCloudObject(sub, 2) : null;
   if (preview) {
+    preview.userData.step = sub.step;
     preview.visible = false;
     scene.add(preview);
   }
@@ -535,6 +558,56 @@ function sceneContent(cloud, trajectory) {
   return { scene, points, preview, path, centre, radius };
 }
 
+// Gives a cloud object (and its subsample, every `step`-th point) new colours (RGB bytes).
+function setColours(object, colours, step = 1) {
+  if (!object) return;
+  const count = object.geometry.attributes.position.count;
+  const own = step === 1 ? colours : new Uint8Array(3 * count);
+  if (step !== 1) for (let j = 0; j < count; j += 1) own.set(colours.subarray(3 * j * step, 3 * j * step + 3), 3 * j);
+  object.geometry.setAttribute('color', new THREE.BufferAttribute(own, 3, true));
+  object.material.vertexColors = true;
+  object.material.color.set(0xffffff);
+  object.material.needsUpdate = true;
+}
+
+// "Colour by": the cloud's own colours, height along the up axis, range from the origin or
+// confidence (when the PLY has it), with the colour bar of the values shown. Returns
+// {control, setUp}; the bar goes into `barHolder`.
+function colourControl(cloud, { points, preview }, barHolder, requestDraw) {
+  const modes = colourModes(cloud);
+  let up = [0, -1, 0];
+  const select = el('select#colour-by', modes.map((m) => el('option', { value: m.mode }, m.label)));
+  const apply = () => {
+    const mode = modes.find((m) => m.mode === select.value);
+    if (mode.mode === 'rgb') {
+      setColours(points, cloud.colors);
+      setColours(preview, cloud.colors, preview && preview.userData.step);
+      clear(barHolder);
+    } else {
+      const values = pointValues(cloud, mode.mode, up);
+      const range = mode.mode === 'confidence' ? [0, 1] : percentileRange(values);
+      const colours = turboColours(values, range);
+      setColours(points, colours);
+      setColours(preview, colours, preview && preview.userData.step);
+      clear(barHolder, colourBar({ colourAt: (t) => TURBO[Math.round(255 * t)], min: range[0], max: range[1], unit: mode.unit,
+        title: `Points coloured by ${mode.label}${mode.mode === 'height' ? ` (along ${upName(up)})` : ''}`, id: 'cloud-colour-bar' }));
+    }
+    barHolder.dataset.mode = mode.mode;
+    requestDraw();
+  };
+  select.addEventListener('change', apply);
+  if (!cloud.colors) apply();  // no colours of its own: by height from the start
+  return {
+    control: el('label', 'colour by', select),
+    setUp(next) {
+      up = next;
+      if (select.value === 'height') apply();
+    },
+  };
+}
+
+const upName = ([x, y, z]) => `${x + y + z < 0 ? '−' : '+'}${x ? 'x' : y ? 'y' : 'z'}`;
+
 // The controls over the scene: point size, up axis, trajectory on/off.
 function hudControls(view, { points, preview, path }, trajectory) {
   const sizeInput = el('input#point-size', { type: 'range', min: 1, max: 12, step: 0.5, value: 2,
@@ -542,7 +615,7 @@ function hudControls(view, { points, preview, path }, trajectory) {
       for (const cloudObject of [points, preview]) if (cloudObject) cloudObject.material.size = Number(e.target.value);
       view.requestDraw();
     } });
-  const upSelect = el('select', { onchange: (e) => view.setUp(e.target.value.split(',').map(Number)) },
+  const upSelect = el('select#up-axis', { onchange: (e) => view.setUp(e.target.value.split(',').map(Number)) },
     el('option', { value: '0,-1,0' }, '−y (camera frames)'), el('option', { value: '0,0,1' }, '+z'), el('option', { value: '0,1,0' }, '+y'));
   const pathToggle = el('input', { type: 'checkbox', checked: true,
     onchange: (e) => {
@@ -563,8 +636,9 @@ function hudControls(view, { points, preview, path }, trajectory) {
 export function createScene(holder, { cloud, trajectory, title }) {
   const box = el('div.viewer#viewer');
   const hud = el('div.hud');
+  const barHolder = el('div#cloud-colour');
   box.append(hud);
-  holder.append(box);
+  holder.append(box, barHolder);
   const renderer = new THREE.WebGLRenderer({ antialias: false, preserveDrawingBuffer: true });
   renderer.setPixelRatio(Math.min(window.devicePixelRatio || 1, 2));
   renderer.setClearColor(0x0b0f17);
@@ -609,7 +683,9 @@ export function createScene(holder, { cloud, trajectory, title }) {
     controls.update();
   };
   makeControls(centre);
+  const colouring = cloud && cloud.count ? colourControl(cloud, content, barHolder, requestDraw) : null;
   const setUp = ([x, y, z]) => {
+    if (colouring) colouring.setUp([x, y, z]);
     camera.up.set(x, y, z);
     makeControls(controls.target.clone());
     requestDraw();
@@ -625,7 +701,8 @@ export function createScene(holder, { cloud, trajectory, title }) {
   };
   const observer = new ResizeObserver(resize);
   observer.observe(box);
-  hud.append(el('strong', title || 'scene'), stats, ...hudControls({ requestDraw, setUp }, content, trajectory));
+  hud.append(el('strong', title || 'scene'), stats, ...hudControls({ requestDraw, setUp }, content, trajectory),
+    ...(colouring ? [colouring.control] : []));
   resize();
   // For tests and curious users: one synchronous draw, waiting for the GPU to finish it.
   box.measureDrawMs = (moving = false) => {
