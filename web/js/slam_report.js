@@ -115,13 +115,13 @@ function segmentsTable(segments, pathLengthM) {
     el('thead', el('tr', ['Segment', 'Segments', 'Translation (RMSE)', 'Translation (mean, % of the segment)', 'Rotation (RMSE)']
       .map((h, i) => el(i ? 'th.num' : 'th', h)))),
     el('tbody', segments.map((s) => el('tr', { dataset: { length: String(s.length_m) } },
-      el('td', `${formatNumber(s.length_m, 3)} m`),
+      el('td', `${Number(s.length_m.toPrecision(3))} m`),
       s.num_segments > 0 ? [
         el('td.num', String(s.num_segments)),
         el('td.num', formatLength(s.translation_rmse_m)),
-        el('td.num', `${formatNumber(s.translation_mean_percent, 2)} %`),
-        el('td.num', `${formatNumber(s.rotation_rmse_deg, 3)}°`),
-      ] : el('td.muted', { colSpan: 4 }, `none: the path (${formatLength(pathLengthM)}) is shorter than ${formatNumber(s.length_m, 3)} m`))))));
+        el('td.num', `${Number(s.translation_mean_percent.toPrecision(3))} %`),
+        el('td.num', `${Number(s.rotation_rmse_deg.toPrecision(3))}°`),
+      ] : el('td.muted', { colSpan: 4 }, `none: the path (${formatLength(pathLengthM)}) is shorter than ${Number(s.length_m.toPrecision(3))} m`))))));
 }
 
 // The card under the headline, or null without an evaluation (no ground truth).
