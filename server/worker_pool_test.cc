@@ -12,6 +12,7 @@
 #include <chrono>
 #include <condition_variable>
 #include <filesystem>
+#include <map>
 #include <mutex>
 #include <random>
 #include <set>
@@ -21,6 +22,7 @@
 #include <gtest/gtest.h>
 
 #include "api/job_types.h"
+#include "engine/geometry/ply.h"
 #include "storage/sqlite_job_store.h"
 
 namespace omnirig::server {
@@ -59,6 +61,29 @@ api::JobType GateJobType() {
   return type;
 }
 
+// Writes a large cloud (1.5 million points, 22.5 MB) and a small one, as the dense and slam jobs
+// write theirs.
+api::JobType CloudJobType() {
+  api::JobType type;
+  type.name = "pool_test_cloud";
+  type.reads_images = false;
+  type.validate = [](const json&) {};
+  type.run = [](const json&, const api::JobContext& context) {
+    PlyCloud cloud;
+    for (int i = 0; i < 1'500'000; ++i) {
+      cloud.positions.emplace_back(static_cast<float>(i % 1000), static_cast<float>(i / 1000), 0.0f);
+      cloud.colours.push_back({static_cast<uint8_t>(i), 0, 0});
+    }
+    std::filesystem::create_directories(context.output_dir / "pairs");
+    WritePly(context.output_dir / "pairs" / "cloud.ply", cloud);
+    cloud.positions.resize(10);
+    cloud.colours.resize(10);
+    WritePly(context.output_dir / "small.ply", cloud);
+    return json{{"artifact", "pairs/cloud.ply"}};
+  };
+  return type;
+}
+
 class WorkerPoolTest : public ::testing::Test {
  protected:
   WorkerPoolTest()
@@ -68,6 +93,7 @@ class WorkerPoolTest : public ::testing::Test {
         data_dir_(root_),
         store_(data_dir_.DatabasePath().string()) {
     job_types_.Add(GateJobType());
+    job_types_.Add(CloudJobType());
     SetGate(false);
     dataset_ = store_.CreateDataset("pool").id;
   }
@@ -100,8 +126,8 @@ class WorkerPoolTest : public ::testing::Test {
     return *pool_;
   }
 
-  std::string Submit() {
-    const std::string id = store_.CreateJob("pool_test_gate", dataset_, "{}").id;
+  std::string Submit(const std::string& type = "pool_test_gate") {
+    const std::string id = store_.CreateJob(type, dataset_, "{}").id;
     if (pool_) pool_->Notify();
     return id;
   }
@@ -148,6 +174,29 @@ TEST_F(WorkerPoolTest, RunsAJobToItsResultAndReportsEachChange) {
   ASSERT_GE(changes_.size(), 3u);
   EXPECT_EQ(changes_.front(), "running 0.000000");
   EXPECT_EQ(changes_.back(), "succeeded 1.000000");
+}
+
+// Every large cloud a job writes gets a preview beside it (NAME.preview.ply, under 2 M points
+// and 20 MB), recorded as an artifact with its hash; small clouds get none.
+TEST_F(WorkerPoolTest, ALargeCloudGetsAPreviewArtifact) {
+  StartPool();
+  const std::string id = Submit("pool_test_cloud");
+  WaitForChange("succeeded 1.000000");
+  std::map<std::string, storage::ArtifactRecord> artifacts;
+  for (const auto& artifact : store_.ListArtifacts(id)) artifacts[artifact.name] = artifact;
+  ASSERT_TRUE(artifacts.count("pairs/cloud.ply"));
+  ASSERT_TRUE(artifacts.count("pairs/cloud.preview.ply"));
+  EXPECT_FALSE(artifacts.count("small.preview.ply"));
+  const storage::ArtifactRecord& full = artifacts["pairs/cloud.ply"];
+  const storage::ArtifactRecord& preview = artifacts["pairs/cloud.preview.ply"];
+  EXPECT_GT(full.size, 20'000'000);
+  EXPECT_LE(preview.size, 20'000'000);
+  EXPECT_GT(preview.size, 19'000'000);
+  EXPECT_EQ(preview.sha256.size(), 64u);
+  EXPECT_TRUE(std::filesystem::exists(data_dir_.root() / preview.path));
+  for (const auto& [name, artifact] : artifacts) {
+    EXPECT_EQ(name.find(".part-"), std::string::npos) << name;
+  }
 }
 
 TEST_F(WorkerPoolTest, WorkersRunAtNormalPriorityByDefault) {
