@@ -968,8 +968,9 @@ async function reconstructAndView(page, server, datasetId, rigJob, setDir) {
 // cloud's size on a button and loads it on request; the cloud can be coloured by height (a colour
 // bar in metres) and by confidence.
 async function checkCloudPreview(page, server, rigJob, firstJob, setDir) {
-  // One pair on a grid 3 times finer than the default one, confidence down to 0.1: a cloud of
-  // over 20 MB (measured 2026-11-27: 2.5 times finer at the default 0.5 gave 10 MB).
+  // One pair on a grid twice as fine as the default one, confidence down to 0.1: a cloud of over
+  // 20 MB (measured 2026-11-27: 2.5 times finer at the default 0.5 gave 10 MB, 3 times finer at
+  // 0.1 gave 53.7 MB).
   const { grid } = await (await fetch(`${server.url}/api/v1/jobs/${firstJob}/result`)).json();
   check(grid && grid.step_rad > 0, `the reconstruction's result states its grid (${JSON.stringify(grid)})`);
   const first = fs.readdirSync(path.join(setDir, 'cam0')).sort()[0];
@@ -977,7 +978,7 @@ async function checkCloudPreview(page, server, rigJob, firstJob, setDir) {
     copySet('one-pair', Object.fromEntries(['cam0', 'cam1'].map((cam) => [`${cam}/${first}`, path.join(setDir, cam, first)]))));
   const jobId = await submitJob(page, server, datasetId, 'stereo_reconstruct', async (p) => {
     await p.selectOption('#job-form select[name=rig]', rigJob);
-    await p.fill('#job-form textarea[name=extra]', JSON.stringify({ grid_step_rad: grid.step_rad / 3, min_confidence: 0.1 }));
+    await p.fill('#job-form textarea[name=extra]', JSON.stringify({ grid_step_rad: grid.step_rad / 2, min_confidence: 0.1 }));
   });
   await followJob(page, server, jobId, null);
   await page.waitForFunction(() => Number(document.querySelector('#viewer')?.dataset.frames || 0) > 0, null, { timeout: 60000 });
