@@ -82,7 +82,8 @@ TEST(CalibrationJob, RunsOnTheVmrSetWithOverlays) {
   // The regions and poses behind the advice, each region named by ring and clock hours.
   ASSERT_TRUE(coverage["uncovered_regions"].is_array());
   for (const json& region : coverage["uncovered_regions"]) {
-    EXPECT_TRUE(region["ring"] == "inner" || region["ring"] == "middle" || region["ring"] == "outer");
+    EXPECT_TRUE(region["ring"] == "inner" || region["ring"] == "middle" ||
+                region["ring"] == "outer");
     EXPECT_GE(region["from_hour"].get<int>(), 1);
     EXPECT_LE(region["to_hour"].get<int>(), 12);
   }

@@ -296,8 +296,8 @@ storage::JobOutcome RunJobType(const storage::JobRecord& job, const api::JobType
   storage::WriteFileAtomically(output_dir / "result.json", result.dump(2));
   // Every large cloud the job wrote gets a preview the page loads by default.
   for (const PlyPreview& preview : WritePlyPreviews(output_dir, PlyPreviewOptions())) {
-    context.Log("preview of a large cloud: " + fs::relative(preview.path, output_dir).string() + ", " +
-                std::to_string(preview.preview_points) + " of " +
+    context.Log("preview of a large cloud: " + fs::relative(preview.path, output_dir).string() +
+                ", " + std::to_string(preview.preview_points) + " of " +
                 std::to_string(preview.source_points) + " points");
   }
   outcome.artifacts = CollectArtifacts(output_dir, data_root);

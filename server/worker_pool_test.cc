@@ -71,7 +71,8 @@ api::JobType CloudJobType() {
   type.run = [](const json&, const api::JobContext& context) {
     PlyCloud cloud;
     for (int i = 0; i < 1'500'000; ++i) {
-      cloud.positions.emplace_back(static_cast<float>(i % 1000), static_cast<float>(i / 1000), 0.0f);
+      cloud.positions.emplace_back(static_cast<float>(i % 1000), static_cast<float>(i / 1000),
+                                   0.0f);
       cloud.colours.push_back({static_cast<uint8_t>(i), 0, 0});
     }
     std::filesystem::create_directories(context.output_dir / "pairs");

@@ -180,7 +180,8 @@ std::array<int, 2> RegionOf(const Eigen::Vector2d& offset, double radius) {
   const double r = offset.norm() / radius;
   double azimuth = std::atan2(offset.y(), offset.x()) * 180.0 / M_PI;
   if (azimuth < 0.0) azimuth += 360.0;
-  return {r < 0.4 ? 0 : r < 0.7 ? 1 : 2, std::min(kNumSectors - 1, static_cast<int>(azimuth / 30.0))};
+  const int ring = r < 0.4 ? 0 : (r < 0.7 ? 1 : 2);
+  return {ring, std::min(kNumSectors - 1, static_cast<int>(azimuth / 30.0))};
 }
 
 int HourOf(int sector) { return (sector + 2) % 12 + 1; }  // sector 0 starts at 3 o'clock
@@ -229,8 +230,8 @@ std::array<std::array<double, kNumSectors>, kNumRings> RegionUncertainty(
     for (int col = 0; col < map.cols; ++col) {
       const float value = map.at<float>(row, col);
       if (!(value > 0.0f)) continue;
-      const Eigen::Vector2d offset = Eigen::Vector2d(col, row) * coverage.uncertainty_step_px -
-                                     coverage.disk_centre_px;
+      const Eigen::Vector2d offset =
+          Eigen::Vector2d(col, row) * coverage.uncertainty_step_px - coverage.disk_centre_px;
       if (offset.norm() > coverage.disk_radius_px) continue;
       const auto [ring, sector] = RegionOf(offset, coverage.disk_radius_px);
       values[ring][sector].push_back(value);
@@ -252,13 +253,12 @@ std::array<std::array<double, kNumSectors>, kNumRings> RegionUncertainty(
 // joined; `value` gives a region's figures from its sectors.
 std::vector<CoverageReport::Region> JoinSectors(
     const std::array<std::array<bool, kNumSectors>, kNumRings>& flagged,
-    const std::function<void(int ring, const std::vector<int>& sectors,
-                             CoverageReport::Region*)>& value) {
+    const std::function<void(int ring, const std::vector<int>& sectors, CoverageReport::Region*)>&
+        value) {
   std::vector<CoverageReport::Region> regions;
   for (int ring = kNumRings - 1; ring >= 0; --ring) {
     const auto& f = flagged[ring];
-    const int first_clear =
-        static_cast<int>(std::find(f.begin(), f.end(), false) - f.begin());
+    const int first_clear = static_cast<int>(std::find(f.begin(), f.end(), false) - f.begin());
     std::vector<int> run;
     const auto close = [&](int end_sector) {
       if (run.empty()) return;
@@ -341,9 +341,9 @@ std::string PoseAdvice(const std::string& pose, const CoverageReport& coverage,
        << std::lround(coverage.max_tilt_deg) << " deg; add views with the board tilted "
        << std::lround(options.tilted_deg) << " to 60 deg away from the camera";
   } else if (pose == "near") {
-    os << "no near board: the nearest is " << coverage.min_board_distance_m
-       << " m away (median " << coverage.median_board_distance_m
-       << " m); add views with the board at " << options.near_ratio * coverage.median_board_distance_m
+    os << "no near board: the nearest is " << coverage.min_board_distance_m << " m away (median "
+       << coverage.median_board_distance_m << " m); add views with the board at "
+       << options.near_ratio * coverage.median_board_distance_m
        << " m or nearer, filling more of the mirror";
   } else {
     os << "no far board: the farthest is " << coverage.max_board_distance_m << " m away (median "
@@ -386,8 +386,8 @@ void Advise(const CalibrationReport& report, const BoardSpec& board, const Regio
   bool any_uncertain = false;
   for (int ring = 0; ring < kNumRings; ++ring) {
     for (int s = 0; s < kNumSectors; ++s) {
-      uncertain[ring][s] = medians[ring][s] > options.flat_uncertainty_ratio *
-                                                  coverage->median_uncertainty_px;
+      uncertain[ring][s] =
+          medians[ring][s] > options.flat_uncertainty_ratio * coverage->median_uncertainty_px;
       any_uncertain = any_uncertain || uncertain[ring][s];
     }
   }

@@ -26,10 +26,9 @@ struct PlyLayout {
 
 int ScalarBytes(const std::string& type) {
   static const std::map<std::string, int> kBytes = {
-      {"char", 1},  {"int8", 1},   {"uchar", 1},   {"uint8", 1},  {"short", 2},
-      {"int16", 2}, {"ushort", 2}, {"uint16", 2},  {"int", 4},    {"int32", 4},
-      {"uint", 4},  {"uint32", 4}, {"float", 4},   {"float32", 4}, {"double", 8},
-      {"float64", 8}};
+      {"char", 1},   {"int8", 1},    {"uchar", 1},  {"uint8", 1},  {"short", 2}, {"int16", 2},
+      {"ushort", 2}, {"uint16", 2},  {"int", 4},    {"int32", 4},  {"uint", 4},  {"uint32", 4},
+      {"float", 4},  {"float32", 4}, {"double", 8}, {"float64", 8}};
   const auto it = kBytes.find(type);
   return it == kBytes.end() ? 0 : it->second;
 }
@@ -113,7 +112,8 @@ std::filesystem::path PlyPreviewPath(const std::filesystem::path& cloud) {
 bool IsPlyPreviewPath(const std::filesystem::path& path) {
   const std::string name = path.filename().string();
   const std::string suffix = ".preview.ply";
-  return name.size() > suffix.size() && name.compare(name.size() - suffix.size(), suffix.size(), suffix) == 0;
+  return name.size() > suffix.size() &&
+         name.compare(name.size() - suffix.size(), suffix.size(), suffix) == 0;
 }
 
 std::optional<PlyPreview> WritePlyPreview(const std::filesystem::path& cloud,
@@ -135,13 +135,13 @@ std::optional<PlyPreview> WritePlyPreview(const std::filesystem::path& cloud,
                    layout->num_vertices}));
   std::string header;
   for (size_t i = 0; i < layout->lines.size(); ++i) {
-    header += i == layout->vertex_line ? "element vertex " + std::to_string(keep)
-                                       : layout->lines[i];
+    header +=
+        i == layout->vertex_line ? "element vertex " + std::to_string(keep) : layout->lines[i];
     header += "\n";
     if (layout->lines[i].rfind("format ", 0) == 0) {
       header += "comment preview: " + std::to_string(keep) + " of " +
-                std::to_string(layout->num_vertices) + " points of " +
-                cloud.filename().string() + ", a random subset\n";
+                std::to_string(layout->num_vertices) + " points of " + cloud.filename().string() +
+                ", a random subset\n";
     }
   }
   header += "end_header\n";

@@ -30,7 +30,8 @@ PlyCloud Numbered(int n) {
   cloud.has_confidence = true;
   for (int i = 0; i < n; ++i) {
     cloud.positions.emplace_back(static_cast<float>(i), 0.5f * i, -1.0f);
-    cloud.colours.push_back({static_cast<uint8_t>(i % 256), static_cast<uint8_t>(i / 256 % 256), 7});
+    cloud.colours.push_back(
+        {static_cast<uint8_t>(i % 256), static_cast<uint8_t>(i / 256 % 256), 7});
     cloud.confidence.push_back(static_cast<float>(i % 1000) / 1000.0f);
   }
   return cloud;
@@ -58,7 +59,8 @@ TEST(PlyPreview, KeepsARandomSubsetWithEveryPropertyUnderTheBounds) {
   const std::string bytes = ReadAll(preview->path);
   const size_t body = bytes.find("end_header\n") + 11;
   const std::string header = bytes.substr(0, body);
-  EXPECT_EQ(header.rfind("ply\nformat binary_little_endian 1.0\ncomment preview: 1500 of 10000", 0), 0u)
+  EXPECT_EQ(header.rfind("ply\nformat binary_little_endian 1.0\ncomment preview: 1500 of 10000", 0),
+            0u)
       << header;
   EXPECT_NE(header.find("comment frame: test, unit: m\n"), std::string::npos);
   EXPECT_NE(header.find("element vertex 1500\n"), std::string::npos);
