@@ -51,8 +51,8 @@
 #include <filesystem>
 #include <limits>
 #include <map>
-#include <unordered_set>
 #include <string>
+#include <unordered_set>
 #include <vector>
 
 #include <opencv2/ccalib/omnidir.hpp>
@@ -113,8 +113,8 @@ struct Score {
       if (!(range > 1e-6) || !std::isfinite(range)) continue;
       relative.push_back(slam::DistanceToSceneSurface(scene, world_from_cam0 * p) / range);
       if (!range_std_m.empty() && range_std_m[i] > 0.f) {
-        const double truth = slam::RangeToSceneSurface(
-            scene, centre, world_from_cam0.rotation * (p / range));
+        const double truth =
+            slam::RangeToSceneSurface(scene, centre, world_from_cam0.rotation * (p / range));
         z.push_back(std::abs(range - truth) / range_std_m[i]);
       }
       double azimuth = std::atan2(p.y(), p.x()) * 180.0 / M_PI;
@@ -196,11 +196,12 @@ struct SubCellBias {
     double total = 0.0;
     for (double n : estimated_fraction) total += n;
     std::sort(abs_error.begin(), abs_error.end());
-    std::printf("%s: disparity error (cells) median |e| %.3f, 90th percentile %.3f\n",
-                name.c_str(), abs_error.empty() ? NAN : abs_error[abs_error.size() / 2],
+    std::printf("%s: disparity error (cells) median |e| %.3f, 90th percentile %.3f\n", name.c_str(),
+                abs_error.empty() ? NAN : abs_error[abs_error.size() / 2],
                 abs_error.empty() ? NAN : abs_error[abs_error.size() * 9 / 10]);
-    std::printf("  share of points by the estimated disparity's fraction (1/8 bins, 12.5 %% each "
-                "if unbiased):");
+    std::printf(
+        "  share of points by the estimated disparity's fraction (1/8 bins, 12.5 %% each "
+        "if unbiased):");
     for (double n : estimated_fraction) std::printf(" %.1f", 100.0 * n / std::max(1.0, total));
     std::printf("\n  mean error (cells) by the true disparity's fraction (0 if unbiased):    ");
     for (int i = 0; i < 8; ++i) {
@@ -331,9 +332,10 @@ void CalibrateStd(const SubCellBias& bias) {
       }
     }
   }
-  std::printf("std calibration on these pairs: disparity_std_cells %.2f, disparity_std_scale %.1f "
-              "-> %.1f %% within 1 std, %.1f %% within 2 std\n",
-              best_floor, best_scale, 100.0 * best_1, 100.0 * best_2);
+  std::printf(
+      "std calibration on these pairs: disparity_std_cells %.2f, disparity_std_scale %.1f "
+      "-> %.1f %% within 1 std, %.1f %% within 2 std\n",
+      best_floor, best_scale, 100.0 * best_1, 100.0 * best_2);
 }
 
 // The merged cloud of a set's pairs placed by their true poses: fused (MergedCloudOptions, as
@@ -368,13 +370,15 @@ struct MergedScore {
 
   void Print(const char* name) const {
     const auto at = [&](double q) {
-      return relative.empty() ? NAN : relative[std::min(relative.size() - 1,
-                                                        static_cast<size_t>(q * relative.size()))];
+      return relative.empty() ? NAN
+                              : relative[std::min(relative.size() - 1,
+                                                  static_cast<size_t>(q * relative.size()))];
     };
-    std::printf("%s: %zu points, median %.3f %% of range, %.1f %% within 1 %%, 95th percentile "
-                "%.3f %% (layer %.2f %% thick), %.0f points per m^2 of %.1f m^2\n",
-                name, points, 100.0 * at(0.5), 100.0 * Score::FractionAtMost(relative, 0.01),
-                100.0 * at(0.95), 200.0 * at(0.95), points / std::max(area_m2, 1e-9), area_m2);
+    std::printf(
+        "%s: %zu points, median %.3f %% of range, %.1f %% within 1 %%, 95th percentile "
+        "%.3f %% (layer %.2f %% thick), %.0f points per m^2 of %.1f m^2\n",
+        name, points, 100.0 * at(0.5), 100.0 * Score::FractionAtMost(relative, 0.01),
+        100.0 * at(0.95), 200.0 * at(0.95), points / std::max(area_m2, 1e-9), area_m2);
   }
 };
 
@@ -405,17 +409,16 @@ std::vector<PeerSetting> PeerSettings() {
 void PrintTableHeader() {
   std::printf("| %-50s | %11s | %8s | %9s | %9s | %13s | %6s | %6s |\n", "method", "points/pair",
               "azimuth", "median/r", "within 1%", "in 1 / 2 std", "s/pair", "CPU s");
-  std::printf("|%s|%s|%s|%s|%s|%s|%s|%s|\n", std::string(52, '-').c_str(),
-              std::string(13, '-').c_str(), std::string(10, '-').c_str(),
-              std::string(11, '-').c_str(), std::string(11, '-').c_str(),
-              std::string(15, '-').c_str(), std::string(8, '-').c_str(),
-              std::string(8, '-').c_str());
+  std::printf(
+      "|%s|%s|%s|%s|%s|%s|%s|%s|\n", std::string(52, '-').c_str(), std::string(13, '-').c_str(),
+      std::string(10, '-').c_str(), std::string(11, '-').c_str(), std::string(11, '-').c_str(),
+      std::string(15, '-').c_str(), std::string(8, '-').c_str(), std::string(8, '-').c_str());
 }
 
-// The merged cloud's options with the slam dense map's range-std filter, for comparison.
+// The merged cloud's options with a tighter range-std filter (0.9 % of range), for comparison.
 dense::DenseMapOptions TightMergedOptions() {
   dense::DenseMapOptions options = dense::MergedCloudOptions();
-  options.max_relative_range_std = dense::DenseMapOptions().max_relative_range_std;
+  options.max_relative_range_std = 0.009;
   return options;
 }
 
@@ -468,8 +471,7 @@ void RunOmnirig(const BenchSet& set, const dense::DenseStereoOptions& dense_opti
     if (profile) {
       timed("write tiff",
             [&] { dense::WriteRangeTiff(out_dir / "pair_range.tiff", result.range_m); });
-      timed("write png",
-            [&] { dense::WriteRangePng(out_dir / "pair_range.png", result.range_m); });
+      timed("write png", [&] { dense::WriteRangePng(out_dir / "pair_range.png", result.range_m); });
       timed("write ply",
             [&] { WritePly(out_dir / "cloud.ply", dense::ToPlyCloud(result.points)); });
     }
@@ -547,7 +549,7 @@ void RunSet(const BenchSet& set, bool with_peer, bool profile,
   fused_tight.Score(ours.fused_tight.Cloud().positions, set.scene, set.world_from_rig);
   appended.Print("  appended (every pair's points)");
   fused.Print("  fused (MergedCloudOptions: 1 cm voxels, range std <= 2 %)");
-  fused_tight.Print("  fused, range std <= 0.9 % (the slam dense map's filter)");
+  fused_tight.Print("  fused, range std <= 0.9 %");
   if (profile) {
     std::printf("\nomnirig per pair, CPU s by stage (end to end, artifacts written):");
     for (const auto& [name, seconds] : ours.stage_cpu)
@@ -577,8 +579,12 @@ int Run(const BenchFlags& flags, const dense::DenseStereoOptions& dense_options)
   options.seed = 3;
   std::printf("rendering %d pairs of the room at 1024x768...\n", flags.frames);
   const synth::StereoSequence sequence = synth::MakeStereoSequence(options);
-  BenchSet development{"development room (engine/synth MakeRoomScene, PNG, noise 1)", false,
-                       sequence.scene, sequence.rig, sequence.world_from_rig, sequence.images};
+  BenchSet development{"development room (engine/synth MakeRoomScene, PNG, noise 1)",
+                       false,
+                       sequence.scene,
+                       sequence.rig,
+                       sequence.world_from_rig,
+                       sequence.images};
   if (flags.calibrate_std) {
     dense::DenseStereoOptions raw = dense_options;
     raw.disparity_std_cells = 1e-4;
@@ -594,16 +600,18 @@ int Run(const BenchFlags& flags, const dense::DenseStereoOptions& dense_options)
 
   std::printf("\nrendering %d held-out pairs at 1024x768...\n", flags.frames);
   dense::HeldOutSequence lounge = dense::MakeHeldOutLounge(flags.frames);
-  BenchSet held_out{lounge.description, true, std::move(lounge.scene), lounge.rig,
-                    lounge.world_from_rig, std::move(lounge.images)};
+  BenchSet held_out{lounge.description,      true,
+                    std::move(lounge.scene), lounge.rig,
+                    lounge.world_from_rig,   std::move(lounge.images)};
   RunSet(held_out, flags.with_peer, false, dense_options);
   if (flags.floor) {
     // What the images hold: the same lounge without sensor noise and JPEG. The rig is the true
     // one in every set here, so no figure of this bench holds a calibration error.
     std::printf("\nrendering %d clean held-out pairs at 1024x768...\n", flags.frames);
     dense::HeldOutSequence clean = dense::MakeHeldOutLounge(flags.frames, 11, true);
-    BenchSet clean_set{clean.description, true, std::move(clean.scene), clean.rig,
-                       clean.world_from_rig, std::move(clean.images)};
+    BenchSet clean_set{clean.description,      true,
+                       std::move(clean.scene), clean.rig,
+                       clean.world_from_rig,   std::move(clean.images)};
     RunSet(clean_set, false, false, dense_options);
   }
 

@@ -53,14 +53,9 @@ struct DenseMapOptions {
   int min_frames = 2;
   // Points whose range std exceeds this fraction of their range are not fused (far points seen
   // with little parallax would otherwise fill voxels of their own with their larger errors).
-  // The range std is the calibrated one of dense_stereo.h (about 68 % of the points within 1
-  // std on the room); 0.02 was chosen when every point's std assumed 0.25 cells of disparity,
-  // about twice the calibrated std of a well-fitted match, and at 0.02 the calibrated std lets
-  // far, wrongly matched points into the map (dense_map_test, 4 room keyframes, 2026-11-27:
-  // 19,668 observed cells, 98.3 % agreeing). 0.009 keeps the occupancy's agreement at 99.5 %
-  // with 8,099 cells and takes the median from 0.315 % to 0.226 % of range (0.0075: 5,115
-  // cells; 0.01: 10,200 cells, 99.4 %; 0.0125: 99.0 %).
-  double max_relative_range_std = 0.009;
+  // The map's range std is geometric: FuseKeyframes gives every point 0.25 cells of disparity
+  // std, not the calibrated per-point std of dense_stereo.h (see there).
+  double max_relative_range_std = 0.02;
   // Occupancy grid: cell size, and the band of heights above the floor that holds obstacles
   // (the floor is the most populated height below the sensor).
   double occupancy_cell_m = 0.05;

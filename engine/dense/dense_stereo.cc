@@ -360,9 +360,8 @@ DenseStereo::RectifiedPair DenseStereo::RectifyPair(const cv::Mat& image0,
 }
 
 void DenseStereo::TriangulateCells(const cv::Mat& disparity, const cv::Mat& disparity_std,
-                                   const cv::Mat& correlation, int first,
-                                   const RectifiedPair& pair, GridCells* cells,
-                                   DensePairResult* result) const {
+                                   const cv::Mat& correlation, int first, const RectifiedPair& pair,
+                                   GridCells* cells, DensePairResult* result) const {
   const int rows = disparity.rows, width = disparity.cols;
   const int num_values = static_cast<int>(cot_parallax_.size());
   const double baseline = rectifier_->baseline_m();

@@ -93,9 +93,9 @@ TEST(DenseStereo, SubCellRefinementIsMoreAccurateAndItsStdIsCalibrated) {
   const synth::StereoSequence& sequence = RoomPair();
   DenseStereoOptions sgbm_only;
   sgbm_only.refine_subcell = false;
-  const Accuracy before = Measure(
-      DenseStereo(sequence.rig, sgbm_only).Reconstruct(sequence.images[0][0], sequence.images[1][0]),
-      sequence);
+  const Accuracy before = Measure(DenseStereo(sequence.rig, sgbm_only)
+                                      .Reconstruct(sequence.images[0][0], sequence.images[1][0]),
+                                  sequence);
   const DensePairResult refined = DenseStereo(sequence.rig, DenseStereoOptions())
                                       .Reconstruct(sequence.images[0][0], sequence.images[1][0]);
   const Accuracy after = Measure(refined, sequence);
@@ -112,11 +112,12 @@ TEST(DenseStereo, SubCellRefinementIsMoreAccurateAndItsStdIsCalibrated) {
     return std::count_if(z.begin(), z.end(), [k](double v) { return v <= k; }) /
            static_cast<double>(z.size());
   };
-  std::printf("SGBM's sub-pixel: median %.4f%%, within 1%% %.1f%%; refined: median %.4f%%, "
-              "within 1%% %.1f%%; within 1 / 2 range std: %.1f%% / %.1f%%\n",
-              100 * before.median_relative_distance, 100 * before.within_1_percent,
-              100 * after.median_relative_distance, 100 * after.within_1_percent,
-              100 * within(1.0), 100 * within(2.0));
+  std::printf(
+      "SGBM's sub-pixel: median %.4f%%, within 1%% %.1f%%; refined: median %.4f%%, "
+      "within 1%% %.1f%%; within 1 / 2 range std: %.1f%% / %.1f%%\n",
+      100 * before.median_relative_distance, 100 * before.within_1_percent,
+      100 * after.median_relative_distance, 100 * after.within_1_percent, 100 * within(1.0),
+      100 * within(2.0));
   EXPECT_LT(after.median_relative_distance, 0.8 * before.median_relative_distance);
   EXPECT_GT(after.within_1_percent, before.within_1_percent + 0.05);
   EXPECT_GE(within(1.0), 0.60);

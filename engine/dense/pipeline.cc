@@ -107,7 +107,7 @@ class CloudOutputs {
   std::filesystem::path dir_;
   size_t num_pairs_;
   std::optional<PairPlacement> placement_;
-  PlyAppender merged_;                                  // sparse pairs, appended
+  PlyAppender merged_;                    // sparse pairs, appended
   DenseMap fused_{MergedCloudOptions()};  // dense pairs, fused
   int num_placed_ = 0;
   std::string first_cloud_file_;
@@ -146,9 +146,10 @@ void WriteDensePair(size_t k, const std::string& name, const DensePairResult& pa
     const std::string base = RangeBaseName(name);
     WriteRangeTiff(dir / (base + "_range.tiff"), pair_result.range_m);
     WriteRangePng(dir / (base + "_range.png"), pair_result.range_m);
-    outputs->Write(k, name,
-                   ToPlyCloud(pair_result.points,
-                              "omnirig stereo_reconstruct (dense): points in cam0's frame, metres"));
+    outputs->Write(
+        k, name,
+        ToPlyCloud(pair_result.points,
+                   "omnirig stereo_reconstruct (dense): points in cam0's frame, metres"));
   } catch (const InvalidArgument& e) {
     throw InvalidArgument("pair '" + name + "': " + e.what());
   } catch (const std::exception& e) {

@@ -8,8 +8,8 @@
 // cam0 frame). Otherwise each pair writes CloudFileName(NAME) in its own cam0 frame, and with a
 // placement cloud.ply holds every placed pair in the placement's world (no merged cloud
 // without one: the pairs of a moving rig share no frame): dense pairs fused into one surface
-// (a DenseMap with MergedCloudOptions, dense_map.h), sparse pairs' points appended. Dense also writes per pair
-// RangeBaseName(NAME) + "_range.tiff" and "_range.png" (range_io.h).
+// (a DenseMap with MergedCloudOptions, dense_map.h), sparse pairs' points appended. Dense also
+// writes per pair RangeBaseName(NAME) + "_range.tiff" and "_range.png" (range_io.h).
 
 #include <cstddef>
 #include <filesystem>

@@ -55,8 +55,7 @@ std::string Header(const PlyCloud& cloud, size_t count) {
 }
 
 size_t VertexBytes(const PlyCloud& cloud) {
-  return 15 + 4 * cloud.has_confidence + 4 * cloud.has_range_std +
-         4 * cloud.has_num_observations;
+  return 15 + 4 * cloud.has_confidence + 4 * cloud.has_range_std + 4 * cloud.has_num_observations;
 }
 
 // Packs vertices [begin, end) into `out` (VertexBytes each), one memcpy of a fixed size per

@@ -103,7 +103,8 @@ TEST(Ply, AppenderWritesWhatOneWriteWould) {
                                      ("omnirig_ply_parts_" + std::to_string(::getpid()) + ".ply");
   PlyAppender appender(path);
   appender.Append(first);
-  appender.Append(PlyCloud{whole.comment, {}, {}, true, {}, false, {}, false, {}});  // an empty part
+  appender.Append(
+      PlyCloud{whole.comment, {}, {}, true, {}, false, {}, false, {}});  // an empty part
   appender.Append(second);
   EXPECT_EQ(appender.size(), 2u);
   appender.Finish();

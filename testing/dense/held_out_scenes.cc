@@ -56,7 +56,8 @@ synth::Scene MakeLoungeScene(uint64_t seed) {
                  Texture(seed, 13, {0.9, 0.7, 0.7}, 60.0, 0.006), "tilted_panel");
   for (int i = 0; i < 3; ++i) {
     scene.AddCylinder(At(-0.8 + 1.3 * i, 0.9 - 1.1 * i, 0.0), 0.06, h,
-                      Texture(seed, 20 + i, {0.7, 0.7, 0.7}, 300.0, 0.003), "post_" + std::to_string(i));
+                      Texture(seed, 20 + i, {0.7, 0.7, 0.7}, 300.0, 0.003),
+                      "post_" + std::to_string(i));
   }
   scene.AddCylinder(At(0.3, 2.1, 0.0), 0.35, 0.7, Texture(seed, 30, {0.5, 0.7, 0.5}, 40.0, 0.008),
                     "planter");
@@ -100,8 +101,7 @@ HeldOutSequence MakeHeldOutLounge(int num_frames, uint64_t seed, bool clean) {
     for (int k = 0; k < 2; ++k) {
       render.noise_sigma = clean ? 0.0 : 2.0 + 0.5 * ((f + k) % 3);
       render.seed = synth::DeriveSeed(seed, 100 + 2 * static_cast<uint64_t>(f) + k);
-      const cv::Mat rendered =
-          synth::Render(sequence.scene, cameras[k], cam_from_world[k], render);
+      const cv::Mat rendered = synth::Render(sequence.scene, cameras[k], cam_from_world[k], render);
       if (clean) {
         sequence.images[k].push_back(rendered);
         continue;

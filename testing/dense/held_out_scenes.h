@@ -28,8 +28,8 @@ struct HeldOutSequence {
   std::string description;
   synth::Scene scene;  // z-up world, floor at z = 0
   StereoRig rig;       // the default rig of engine/synth/presets.h (100 mm vertical baseline)
-  std::vector<Rigid3d> world_from_rig;  // the rig frame is cam0's
-  std::vector<int> jpeg_quality;        // per frame
+  std::vector<Rigid3d> world_from_rig;         // the rig frame is cam0's
+  std::vector<int> jpeg_quality;               // per frame
   std::array<std::vector<cv::Mat>, 2> images;  // decoded JPEGs, BGR, 1024 x 768
 };
 

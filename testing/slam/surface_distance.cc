@@ -112,8 +112,8 @@ double RangeToSceneSurface(const synth::Scene& scene, const Eigen::Vector3d& ori
         const synth::CheckerboardSpec& board = *primitive.board;
         const double x0 = -board.square_size_m - board.margin_m;
         const Eigen::Vector3d centre(x0 + board.width_m() / 2, x0 + board.height_m() / 2, 0.0);
-        best = std::min(best, RayRectangle(o - centre, d, board.width_m() / 2,
-                                           board.height_m() / 2));
+        best =
+            std::min(best, RayRectangle(o - centre, d, board.width_m() / 2, board.height_m() / 2));
         break;
       }
     }

@@ -51,7 +51,8 @@ TEST(RangeToSceneSurface, FirstHitAlongTheRay) {
   ground.AddPlane(At(0, 0, 0), 4, 2, plain, "ground");
   EXPECT_NEAR(RangeToSceneSurface(ground, origin, Eigen::Vector3d(0, 0, -1)), 1.0, 1e-12);
   // Missing the plane, or looking away from it.
-  EXPECT_TRUE(std::isinf(RangeToSceneSurface(ground, Eigen::Vector3d(3, 0, 1), Eigen::Vector3d(0, 0, -1))));
+  EXPECT_TRUE(
+      std::isinf(RangeToSceneSurface(ground, Eigen::Vector3d(3, 0, 1), Eigen::Vector3d(0, 0, -1))));
   EXPECT_TRUE(std::isinf(RangeToSceneSurface(ground, origin, Eigen::Vector3d(0, 0, 1))));
 }
 
