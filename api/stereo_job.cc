@@ -54,6 +54,7 @@ OptionTable DenseTable(dense::DenseStereoOptions* o) {
           {"image_noise_grey", &o->image_noise_grey},
           {"min_confidence", &o->min_confidence},
           {"disparity_std_cells", &o->disparity_std_cells},
+          {"disparity_std_scale", &o->disparity_std_scale},
           {"max_relative_range_std", &o->max_relative_range_std},
           {"dark_level", &o->dark_level},
           {"mask_margin_cells", &o->mask_margin_cells},
@@ -301,6 +302,7 @@ json RunStereoReconstructJob(const json& params, const JobContext& context) {
   }
   if (!report.artifact.empty()) result["artifact"] = report.artifact;
   if (report.clouds_merged) result["clouds_merged"] = *report.clouds_merged;
+  if (report.merged_points_per_m2) result["merged_points_per_m2"] = *report.merged_points_per_m2;
   if (report.grid) {
     result["grid"] = {{"rows", report.grid->rows},
                       {"cols", report.grid->cols},

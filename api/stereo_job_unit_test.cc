@@ -14,6 +14,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "api/camera_json.h"
+#include "engine/dense/dense_map.h"
 #include "engine/geometry/unified_camera.h"
 #include "engine/slam/map_io.h"
 #include "engine/synth/presets.h"
@@ -216,6 +217,7 @@ TEST_F(StereoJobTest, DenseWritesCloudsAndRangePanoramasAndFlagsBadPairs) {
   std::ifstream ply(context_.output_dir / "cloud_a_png.ply");
   const std::string header((std::istreambuf_iterator<char>(ply)), std::istreambuf_iterator<char>());
   EXPECT_NE(header.find("property float confidence"), std::string::npos);
+  EXPECT_NE(header.find("property float range_std_m"), std::string::npos);
   EXPECT_EQ(last_fraction_, 1.0);
 }
 
@@ -265,17 +267,22 @@ TEST_F(StereoJobTest, RefusesBadInput) {
   EXPECT_NE(RunError({{"rig", "rig"}}, context_).find("without a partner"), std::string::npos);
 }
 
-// Vertex i of a binary PLY with float x y z, uchar rgb and (dense) float confidence.
-Eigen::Vector3f PlyVertex(const std::filesystem::path& path, size_t i, size_t* count) {
+// The vertices of a binary PLY with float x y z, uchar rgb and (dense) float confidence and
+// range_std_m.
+std::vector<Eigen::Vector3f> PlyVertices(const std::filesystem::path& path) {
   std::ifstream in(path, std::ios::binary);
   const std::string data((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   const size_t element = data.find("element vertex ");
-  *count = std::stoul(data.substr(element + 15));
+  const size_t count = std::stoul(data.substr(element + 15));
   const size_t body = data.find("end_header\n") + 11;
-  const size_t stride = data.find("property float confidence") < body ? 19 : 15;
-  float xyz[3];
-  std::memcpy(xyz, data.data() + body + stride * i, sizeof(xyz));
-  return Eigen::Vector3f(xyz[0], xyz[1], xyz[2]);
+  const size_t stride = 15 + 4 * (data.find("property float confidence") < body) +
+                        4 * (data.find("property float range_std_m") < body);
+  EXPECT_EQ(data.size(), body + stride * count) << path;
+  std::vector<Eigen::Vector3f> vertices(count);
+  for (size_t i = 0; i < count && body + stride * (i + 1) <= data.size(); ++i) {
+    std::memcpy(vertices[i].data(), data.data() + body + stride * i, 3 * sizeof(float));
+  }
+  return vertices;
 }
 
 // Two rendered pairs of a moving rig (320x240), their rig and poses.
@@ -309,26 +316,58 @@ class StereoTrajectoryTest : public StereoJobTest {
     };
   }
 
-  // Checks cloud.ply: both pairs, the second's first point moved by its pose.
+  // Checks cloud.ply: both pairs, the second's first point moved by its pose (sparse: the
+  // pairs' points appended).
   void ExpectMerged(const json& result, const std::string& source) {
+    ExpectPlaced(result, source);
+    const size_t first = result["pairs"][0]["num_points"].get<size_t>();
+    const size_t second = result["pairs"][1]["num_points"].get<size_t>();
+    const std::vector<Eigen::Vector3f> merged = PlyVertices(context_.output_dir / "cloud.ply");
+    const std::vector<Eigen::Vector3f> in_cam0 =
+        PlyVertices(context_.output_dir / result["pairs"][1]["artifact"].get<std::string>());
+    ASSERT_EQ(merged.size(), first + second);
+    ASSERT_EQ(in_cam0.size(), second);
+    const Eigen::Vector3d expected = sequence_.world_from_rig[1] * in_cam0[0].cast<double>();
+    EXPECT_LT((merged[first].cast<double>() - expected).norm(), 1e-4);
+  }
+
+  // Checks cloud.ply of dense pairs: fused into 1 cm voxels (engine/dense MergedCloudOptions),
+  // so fewer points than the pairs hold, each the mean of pair points in its voxel: within a
+  // voxel's diagonal of a point of either pair placed by its pose.
+  void ExpectFused(const json& result, const std::string& source) {
+    ExpectPlaced(result, source);
+    std::vector<Eigen::Vector3d> placed;
+    for (int k = 0; k < 2; ++k) {
+      const std::vector<Eigen::Vector3f> pair =
+          PlyVertices(context_.output_dir / result["pairs"][k]["artifact"].get<std::string>());
+      EXPECT_EQ(pair.size(), result["pairs"][k]["num_points"].get<size_t>());
+      for (const Eigen::Vector3f& p : pair) {
+        placed.push_back(sequence_.world_from_rig[k] * p.cast<double>());
+      }
+    }
+    const std::vector<Eigen::Vector3f> merged = PlyVertices(context_.output_dir / "cloud.ply");
+    ASSERT_GT(merged.size(), 20u);
+    EXPECT_LT(merged.size(), placed.size());
+    for (size_t i = 0; i < merged.size(); i += std::max<size_t>(1, merged.size() / 50)) {
+      double nearest = 1e9;
+      for (const Eigen::Vector3d& p : placed) {
+        nearest = std::min(nearest, (p - merged[i].cast<double>()).norm());
+      }
+      EXPECT_LT(nearest, 0.0174) << "fused point " << i;
+    }
+    EXPECT_GT(result["merged_points_per_m2"].get<double>(), 0.0);
+    EXPECT_DOUBLE_EQ(result["merged_points_per_m2"].get<double>(),
+                     dense::PointsPerSquareMetre(merged));
+  }
+
+  void ExpectPlaced(const json& result, const std::string& source) {
     EXPECT_EQ(result["artifact"], "cloud.ply");
     EXPECT_EQ(result["clouds_merged"], true);
     EXPECT_EQ(result["trajectory"]["source"], source);
     EXPECT_EQ(result["trajectory"]["num_pairs_placed"], 2);
     EXPECT_FALSE(result["trajectory"].contains("warning"));
-    const size_t first = result["pairs"][0]["num_points"].get<size_t>();
-    const size_t second = result["pairs"][1]["num_points"].get<size_t>();
-    ASSERT_GT(first, 20u);
-    ASSERT_GT(second, 20u);
-    size_t merged_count = 0, pair_count = 0;
-    const Eigen::Vector3f merged =
-        PlyVertex(context_.output_dir / "cloud.ply", first, &merged_count);
-    const Eigen::Vector3f in_cam0 = PlyVertex(
-        context_.output_dir / result["pairs"][1]["artifact"].get<std::string>(), 0, &pair_count);
-    EXPECT_EQ(merged_count, first + second);
-    EXPECT_EQ(pair_count, second);
-    const Eigen::Vector3d expected = sequence_.world_from_rig[1] * in_cam0.cast<double>();
-    EXPECT_LT((merged.cast<double>() - expected).norm(), 1e-4);
+    ASSERT_GT(result["pairs"][0]["num_points"].get<size_t>(), 20u);
+    ASSERT_GT(result["pairs"][1]["num_points"].get<size_t>(), 20u);
   }
 
   synth::StereoSequence sequence_;
@@ -336,7 +375,7 @@ class StereoTrajectoryTest : public StereoJobTest {
 
 TEST_F(StereoTrajectoryTest, ASlamJobPlacesThePairsInItsWorld) {
   const json result = RunStereoReconstructJob({{"rig", "rig"}, {"trajectory", "slam"}}, context_);
-  ExpectMerged(result, "slam job slam");
+  ExpectFused(result, "slam job slam");
   EXPECT_EQ(result["pairs"][0]["placed"], true);
   // A slam job none of whose frames is a pair of the dataset is refused.
   context_.load_result = [this](const std::string& id) -> json {

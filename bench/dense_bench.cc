@@ -18,23 +18,41 @@
 // it reads the images and writes pair k's artifacts while it matches pair k + 1; once with the
 // pairs' own clouds, once with a .tum trajectory (cloud.ply of all pairs as well).
 //
-// --no-peer runs omnirig only (for profiling).
+// Two sets of renders, each reported in its own table: the development room (the renders the
+// method and its options were developed and tuned on) and the held-out lounge
+// (testing/dense/held_out_scenes.h: other textures and scales, JPEG 85-95, sensor noise 2-3,
+// vignetting, blur, a low warm sun), never used for tuning. Per set: omnirig (the default and,
+// for comparison, SGBM's own sub-pixel disparity without the refinement), the peer, the
+// sub-cell bias (pixel locking), the fraction of points within 1 and 2 of their range std of the
+// true range along their ray, and the merged cloud of the pairs placed by their true poses,
+// fused as the stereo job fuses them.
+//
+// The floor: the held-out lounge again without sensor noise and JPEG (--no-floor skips it).
+//
+// --no-peer runs omnirig only (for profiling); --no-job skips the job's runs;
+// --development-only runs the development room only (tuning); --calibrate-std fits the range
+// std's two parameters (disparity_std_cells, disparity_std_scale) on the development room.
 //
 // --block-size, --step-factor and --max-parallax-deg set DenseStereoOptions' block_size,
 // grid.step_factor and max_parallax_deg (to measure what they cost and give).
 //
-// Usage: bench_dense [--frames N] [--threads N] [--no-peer] [--block-size N] [--step-factor F]
-//                    [--max-parallax-deg D]
+// Usage: bench_dense [--frames N] [--threads N] [--no-peer] [--no-job] [--development-only]
+//                    [--calibrate-std] [--block-size N] [--step-factor F] [--max-parallax-deg D]
+//                    [--no-floor] [--disparity-std-cells C]
+//                    [--disparity-std-scale S]
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <ctime>
 #include <filesystem>
+#include <limits>
 #include <map>
 #include <string>
+#include <unordered_set>
 #include <vector>
 
 #include <opencv2/ccalib/omnidir.hpp>
@@ -43,11 +61,13 @@
 
 #include "api/camera_json.h"
 #include "api/stereo_job.h"
+#include "engine/dense/dense_map.h"
 #include "engine/dense/dense_stereo.h"
 #include "engine/dense/range_io.h"
 #include "engine/geometry/ply.h"
 #include "engine/slam/map_io.h"
 #include "engine/synth/presets.h"
+#include "testing/dense/held_out_scenes.h"
 #include "testing/slam/surface_distance.h"
 
 namespace omnirig {
@@ -61,22 +81,42 @@ double Seconds(std::chrono::steady_clock::time_point start) {
 // other processes' load, the CPU time much less.
 double CpuSeconds() { return static_cast<double>(std::clock()) / CLOCKS_PER_SEC; }
 
+// The scene and poses a set of pairs is scored against.
+struct BenchSet {
+  std::string name;
+  bool held_out = false;  // never used to choose a method or tune an option
+  synth::Scene scene;
+  StereoRig rig;
+  std::vector<Rigid3d> world_from_rig;
+  std::array<std::vector<cv::Mat>, 2> images;
+};
+
 struct Score {
   double points = 0.0;  // summed over pairs
   double coverage = 0.0;
   std::vector<double> relative;  // distance to the surfaces / range, all pairs
+  // |range - true range along the ray| / the point's range std (omnirig only).
+  std::vector<double> z;
   double seconds = 0.0;
   double cpu_seconds = 0.0;
   int pairs = 0;
 
   void Add(const std::vector<Eigen::Vector3d>& points_in_cam0, const synth::Scene& scene,
-           const Rigid3d& world_from_cam0, double seconds_for_pair, double cpu_for_pair) {
+           const Rigid3d& world_from_cam0, double seconds_for_pair, double cpu_for_pair,
+           const std::vector<float>& range_std_m = {}) {
     cpu_seconds += cpu_for_pair;
     std::vector<int> bins(360, 0);
-    for (const Eigen::Vector3d& p : points_in_cam0) {
+    const Eigen::Vector3d centre = world_from_cam0.translation;
+    for (size_t i = 0; i < points_in_cam0.size(); ++i) {
+      const Eigen::Vector3d& p = points_in_cam0[i];
       const double range = p.norm();
       if (!(range > 1e-6) || !std::isfinite(range)) continue;
       relative.push_back(slam::DistanceToSceneSurface(scene, world_from_cam0 * p) / range);
+      if (!range_std_m.empty() && range_std_m[i] > 0.f) {
+        const double truth =
+            slam::RangeToSceneSurface(scene, centre, world_from_cam0.rotation * (p / range));
+        z.push_back(std::abs(range - truth) / range_std_m[i]);
+      }
       double azimuth = std::atan2(p.y(), p.x()) * 180.0 / M_PI;
       if (azimuth < 0) azimuth += 360.0;
       ++bins[std::min(359, static_cast<int>(azimuth))];
@@ -87,18 +127,87 @@ struct Score {
     ++pairs;
   }
 
-  void Print(const char* name) {
+  static double FractionAtMost(const std::vector<double>& sorted, double limit) {
+    if (sorted.empty()) return 0.0;
+    return static_cast<double>(std::upper_bound(sorted.begin(), sorted.end(), limit) -
+                               sorted.begin()) /
+           sorted.size();
+  }
+
+  void Print(const std::string& name) {
     std::sort(relative.begin(), relative.end());
+    std::sort(z.begin(), z.end());
     const double median = relative.empty() ? NAN : relative[relative.size() / 2];
-    const double within =
-        relative.empty()
-            ? 0.0
-            : static_cast<double>(std::upper_bound(relative.begin(), relative.end(), 0.01) -
-                                  relative.begin()) /
-                  relative.size();
-    std::printf("| %-48s | %11.0f | %6.1f %% | %7.3f %% | %7.1f %% | %6.3f | %6.3f |\n", name,
-                points / pairs, 100.0 * coverage / pairs, 100.0 * median, 100.0 * within,
-                seconds / pairs, cpu_seconds / pairs);
+    const double within = FractionAtMost(relative, 0.01);
+    std::string std_fractions = "      -      ";
+    if (!z.empty()) {
+      char buffer[64];
+      std::snprintf(buffer, sizeof(buffer), "%4.1f / %4.1f %%", 100.0 * FractionAtMost(z, 1.0),
+                    100.0 * FractionAtMost(z, 2.0));
+      std_fractions = buffer;
+    }
+    std::printf("| %-50s | %11.0f | %6.1f %% | %7.3f %% | %7.1f %% | %s | %6.3f | %6.3f |\n",
+                name.c_str(), points / pairs, 100.0 * coverage / pairs, 100.0 * median,
+                100.0 * within, std_fractions.c_str(), seconds / pairs, cpu_seconds / pairs);
+  }
+};
+
+// Pixel locking: SGBM's sub-cell disparity drawn towards whole cells. From each point's range,
+// its disparity d = parallax / step (the grid's law of sines inverted) and the true one from the
+// true range along its ray; prints the histogram of d's fractional part (uniform when unbiased)
+// and the mean error d - d_true by the true disparity's fractional part (flat when unbiased).
+struct SubCellBias {
+  std::array<double, 8> estimated_fraction{};
+  std::array<double, 8> error_sum{}, error_count{};
+  std::vector<double> abs_error;
+  // Per point: |disparity error| and the point's range std in disparity cells (its range std
+  // over d range / d disparity), for --calibrate-std.
+  std::vector<std::pair<double, double>> error_and_std_cells;
+
+  void Add(const std::vector<dense::DensePoint>& points, const dense::SphericalRectifier& grid,
+           const synth::Scene& scene, const Rigid3d& world_from_cam0) {
+    const Eigen::Vector3d baseline_dir = grid.cam0_from_grid().col(2);
+    const double b = grid.baseline_m(), step = grid.theta_step_rad();
+    const auto disparity = [&](double range, double theta) {
+      return (std::atan2(range * std::sin(theta), range * std::cos(theta) - b) - theta) / step;
+    };
+    for (const dense::DensePoint& point : points) {
+      const Eigen::Vector3d p = point.point_in_cam0.cast<double>();
+      const double range = p.norm();
+      const double theta = std::acos(std::clamp(p.dot(baseline_dir) / range, -1.0, 1.0));
+      const double truth = slam::RangeToSceneSurface(scene, world_from_cam0.translation,
+                                                     world_from_cam0.rotation * (p / range));
+      if (!std::isfinite(truth)) continue;
+      const double d = disparity(range, theta), d_true = disparity(truth, theta);
+      const double error = d - d_true;
+      abs_error.push_back(std::abs(error));
+      const double parallax = d * step;
+      const double range_per_cell = b * std::sin(theta) / std::pow(std::sin(parallax), 2) * step;
+      error_and_std_cells.emplace_back(std::abs(error), point.range_std_m / range_per_cell);
+      estimated_fraction[std::min(7, static_cast<int>(8 * (d - std::floor(d))))] += 1;
+      if (std::abs(error) > 1.0) continue;  // a wrong match, not a sub-cell bias
+      const int bin = std::min(7, static_cast<int>(8 * (d_true - std::floor(d_true))));
+      error_sum[bin] += error;
+      error_count[bin] += 1;
+    }
+  }
+
+  void Print(const std::string& name) {
+    double total = 0.0;
+    for (double n : estimated_fraction) total += n;
+    std::sort(abs_error.begin(), abs_error.end());
+    std::printf("%s: disparity error (cells) median |e| %.3f, 90th percentile %.3f\n", name.c_str(),
+                abs_error.empty() ? NAN : abs_error[abs_error.size() / 2],
+                abs_error.empty() ? NAN : abs_error[abs_error.size() * 9 / 10]);
+    std::printf(
+        "  share of points by the estimated disparity's fraction (1/8 bins, 12.5 %% each "
+        "if unbiased):");
+    for (double n : estimated_fraction) std::printf(" %.1f", 100.0 * n / std::max(1.0, total));
+    std::printf("\n  mean error (cells) by the true disparity's fraction (0 if unbiased):    ");
+    for (int i = 0; i < 8; ++i) {
+      std::printf(" %+.3f", error_count[i] > 0 ? error_sum[i] / error_count[i] : NAN);
+    }
+    std::printf("\n");
   }
 };
 
@@ -198,28 +307,145 @@ void RunJob(const synth::StereoSequence& sequence, int num_frames,
   std::filesystem::remove_all(root);
 }
 
-int Run(int num_frames, int threads, bool with_peer,
-        const dense::DenseStereoOptions& dense_options) {
-  cv::setNumThreads(threads);
-  synth::StereoSequenceOptions options;
-  options.num_frames = num_frames;
-  options.render.noise_sigma = 1.0;
-  options.seed = 3;
-  std::printf("rendering %d pairs of the room at 1024x768...\n", num_frames);
-  const synth::StereoSequence sequence = synth::MakeStereoSequence(options);
-  std::printf("threads: %d (cv::setNumThreads)\n\n", threads);
+// --calibrate-std: the per-point disparity std is sqrt(floor^2 + (scale * fit_std)^2); run with
+// floor ~0 and scale 1, each point's std in cells is its fit's std. Grid search of (floor, scale)
+// for 68 % of the points within 1 std and 95 % within 2 (squared misses summed).
+void CalibrateStd(const SubCellBias& bias) {
+  double best_cost = 1e9, best_floor = 0, best_scale = 0, best_1 = 0, best_2 = 0;
+  for (double floor = 0.0; floor <= 0.4001; floor += 0.01) {
+    for (double scale = 0.0; scale <= 6.0001; scale += 0.1) {
+      size_t in1 = 0, in2 = 0;
+      for (const auto& [error, fit] : bias.error_and_std_cells) {
+        const double std_cells = std::sqrt(floor * floor + scale * scale * fit * fit);
+        in1 += error <= std_cells;
+        in2 += error <= 2.0 * std_cells;
+      }
+      const double n = std::max<size_t>(1, bias.error_and_std_cells.size());
+      const double f1 = in1 / n, f2 = in2 / n;
+      const double cost = (f1 - 0.68) * (f1 - 0.68) + (f2 - 0.95) * (f2 - 0.95);
+      if (cost < best_cost) {
+        best_cost = cost;
+        best_floor = floor;
+        best_scale = scale;
+        best_1 = f1;
+        best_2 = f2;
+      }
+    }
+  }
+  std::printf(
+      "std calibration on these pairs: disparity_std_cells %.2f, disparity_std_scale %.1f "
+      "-> %.1f %% within 1 std, %.1f %% within 2 std\n",
+      best_floor, best_scale, 100.0 * best_1, 100.0 * best_2);
+}
 
-  auto start = std::chrono::steady_clock::now();
-  const dense::DenseStereo dense(sequence.rig, dense_options);
-  const double setup_s = Seconds(start);
-  // A second job of the same rig finds the tables built (SharedRectifier).
-  start = std::chrono::steady_clock::now();
-  const double again_s = (dense::DenseStereo(sequence.rig, dense_options), Seconds(start));
-  Score ours;
+// The merged cloud of a set's pairs placed by their true poses: fused (MergedCloudOptions, as
+// the stereo job writes cloud.ply) and, for comparison, all the pairs' points appended. Each
+// point's distance to the true surfaces relative to its range from the nearest pair: median,
+// within 1 %, and the 95th percentile (half the thickness of the layer that holds 95 % of the
+// points); points per square metre of surface (the surface area: the 5 cm cells the fused
+// points occupy, times 25 cm^2).
+struct MergedScore {
+  std::vector<double> relative;
+  size_t points = 0;
+  double area_m2 = 0.0;
+
+  void Score(const std::vector<Eigen::Vector3f>& points_in_world, const synth::Scene& scene,
+             const std::vector<Rigid3d>& world_from_rig) {
+    points = points_in_world.size();
+    std::unordered_set<int64_t> cells;
+    for (const Eigen::Vector3f& pf : points_in_world) {
+      const Eigen::Vector3d p = pf.cast<double>();
+      double range = std::numeric_limits<double>::infinity();
+      for (const Rigid3d& pose : world_from_rig) {
+        range = std::min(range, (p - pose.translation).norm());
+      }
+      relative.push_back(slam::DistanceToSceneSurface(scene, p) / range);
+      const Eigen::Vector3i cell = (p / 0.05).array().floor().cast<int>();
+      cells.insert((static_cast<int64_t>(cell.x() + 100000) << 40) ^
+                   (static_cast<int64_t>(cell.y() + 100000) << 20) ^ (cell.z() + 100000));
+    }
+    area_m2 = 0.0025 * cells.size();
+    std::sort(relative.begin(), relative.end());
+  }
+
+  void Print(const char* name) const {
+    const auto at = [&](double q) {
+      return relative.empty() ? NAN
+                              : relative[std::min(relative.size() - 1,
+                                                  static_cast<size_t>(q * relative.size()))];
+    };
+    std::printf(
+        "%s: %zu points, median %.3f %% of range, %.1f %% within 1 %%, 95th percentile "
+        "%.3f %% (layer %.2f %% thick), %.0f points per m^2 of %.1f m^2\n",
+        name, points, 100.0 * at(0.5), 100.0 * Score::FractionAtMost(relative, 0.01),
+        100.0 * at(0.95), 200.0 * at(0.95), points / std::max(area_m2, 1e-9), area_m2);
+  }
+};
+
+// The peer's settings: cv::omnidir::stereoReconstruct's two rectifications.
+struct PeerSetting {
+  const char* name;
+  int flag;
+  cv::Size size;
+  cv::Mat k_new;
+  int disparities, window;
+};
+
+std::vector<PeerSetting> PeerSettings() {
+  const cv::Size perspective(1024, 768), longlati(2048, 768);
+  return {
+      {"cv::omnidir PERSPECTIVE + SGBM (f = w/4, 80, 5)", cv::omnidir::RECTIFY_PERSPECTIVE,
+       perspective, (cv::Mat_<double>(3, 3) << 256, 0, 512, 0, 256, 384, 0, 0, 1), 80, 5},
+      {"cv::omnidir PERSPECTIVE + SGBM (f = w/3, 96, 7)", cv::omnidir::RECTIFY_PERSPECTIVE,
+       perspective, (cv::Mat_<double>(3, 3) << 341, 0, 512, 0, 341, 384, 0, 0, 1), 96, 7},
+      {"cv::omnidir LONGLATI + SGBM (2048x768, 80, 5)", cv::omnidir::RECTIFY_LONGLATI, longlati,
+       (cv::Mat_<double>(3, 3) << 2048 / M_PI, 0, 0, 0, 768 / M_PI, 0, 0, 0, 1), 80, 5},
+      {"cv::omnidir LONGLATI + SGBM (2048x768, 360, 80, 5)", cv::omnidir::RECTIFY_LONGLATI,
+       longlati, (cv::Mat_<double>(3, 3) << 2048 / M_PI, 0, 0, 0, 768 / (2 * M_PI), 0, 0, 0, 1), 80,
+       5},
+  };
+}
+
+void PrintTableHeader() {
+  std::printf("| %-50s | %11s | %8s | %9s | %9s | %13s | %6s | %6s |\n", "method", "points/pair",
+              "azimuth", "median/r", "within 1%", "in 1 / 2 std", "s/pair", "CPU s");
+  std::printf(
+      "|%s|%s|%s|%s|%s|%s|%s|%s|\n", std::string(52, '-').c_str(), std::string(13, '-').c_str(),
+      std::string(10, '-').c_str(), std::string(11, '-').c_str(), std::string(11, '-').c_str(),
+      std::string(15, '-').c_str(), std::string(8, '-').c_str(), std::string(8, '-').c_str());
+}
+
+// The merged cloud's options with a tighter range-std filter (0.9 % of range), for comparison.
+dense::DenseMapOptions TightMergedOptions() {
+  dense::DenseMapOptions options = dense::MergedCloudOptions();
+  options.max_relative_range_std = 0.009;
+  return options;
+}
+
+// One omnirig setting on a set's pairs.
+struct OmnirigRun {
+  Score score;
+  SubCellBias bias;
   dense::DensePairResult::Seconds stages;
   // CPU seconds per stage, summed over the pairs, keyed by the engine's progress stage (the
   // stage that ends at the next report) and the artifact written.
   std::map<std::string, double> stage_cpu;
+  std::vector<Eigen::Vector3f> appended;  // every pair's points in the world
+  dense::DenseMap fused{dense::MergedCloudOptions()};
+  dense::DenseMap fused_tight{TightMergedOptions()};
+  double setup_s = 0.0, again_s = 0.0;
+};
+
+// With `profile`, the artifacts written as the job writes them, timed by stage.
+void RunOmnirig(const BenchSet& set, const dense::DenseStereoOptions& dense_options, bool profile,
+                OmnirigRun* run) {
+  const int num_frames = static_cast<int>(set.world_from_rig.size());
+  auto start = std::chrono::steady_clock::now();
+  const dense::DenseStereo dense(set.rig, dense_options);
+  run->setup_s = Seconds(start);
+  // A second job of the same rig finds the tables built (SharedRectifier).
+  start = std::chrono::steady_clock::now();
+  run->again_s = (dense::DenseStereo(set.rig, dense_options), Seconds(start));
   const std::filesystem::path out_dir =
       std::filesystem::temp_directory_path() / "omnirig_bench_dense";
   std::filesystem::create_directories(out_dir);
@@ -231,102 +457,169 @@ int Run(int num_frames, int threads, bool with_peer,
     ProgressSink progress;
     progress.report = [&](double, const std::string& next, const std::string&) {
       const double now = CpuSeconds();
-      if (!stage.empty()) stage_cpu[stage] += now - stage_start;
+      if (!stage.empty()) run->stage_cpu[stage] += now - stage_start;
       stage = next;
       stage_start = now;
     };
     const dense::DensePairResult result =
-        dense.Reconstruct(sequence.images[0][f], sequence.images[1][f], progress);
+        dense.Reconstruct(set.images[0][f], set.images[1][f], progress);
     const auto timed = [&](const std::string& name, const auto& write) {
       const double before = CpuSeconds();
       write();
-      stage_cpu[name] += CpuSeconds() - before;
+      run->stage_cpu[name] += CpuSeconds() - before;
     };
-    timed("write tiff",
-          [&] { dense::WriteRangeTiff(out_dir / "pair_range.tiff", result.range_m); });
-    timed("write png", [&] { dense::WriteRangePng(out_dir / "pair_range.png", result.range_m); });
-    timed("write ply", [&] {
-      PlyCloud cloud;
-      cloud.has_confidence = true;
-      cloud.positions.reserve(result.points.size());
-      cloud.colours.reserve(result.points.size());
-      cloud.confidence.reserve(result.points.size());
-      for (const dense::DensePoint& p : result.points) {
-        cloud.positions.push_back(p.point_in_cam0);
-        cloud.colours.push_back(p.rgb);
-        cloud.confidence.push_back(p.confidence);
-      }
-      WritePly(out_dir / "cloud.ply", cloud);
-    });
+    if (profile) {
+      timed("write tiff",
+            [&] { dense::WriteRangeTiff(out_dir / "pair_range.tiff", result.range_m); });
+      timed("write png", [&] { dense::WriteRangePng(out_dir / "pair_range.png", result.range_m); });
+      timed("write ply",
+            [&] { WritePly(out_dir / "cloud.ply", dense::ToPlyCloud(result.points)); });
+    }
     const double s = Seconds(start), cpu_s = CpuSeconds() - cpu;
-    stages.rectify += result.seconds.rectify / num_frames;
-    stages.match += result.seconds.match / num_frames;
-    stages.confidence += result.seconds.confidence / num_frames;
-    stages.epipolar += result.seconds.epipolar / num_frames;
-    stages.triangulate += result.seconds.triangulate / num_frames;
+    run->stages.rectify += result.seconds.rectify / num_frames;
+    run->stages.match += result.seconds.match / num_frames;
+    run->stages.confidence += result.seconds.confidence / num_frames;
+    run->stages.epipolar += result.seconds.epipolar / num_frames;
+    run->stages.refine += result.seconds.refine / num_frames;
+    run->stages.triangulate += result.seconds.triangulate / num_frames;
     std::vector<Eigen::Vector3d> points;
+    std::vector<float> range_std;
     points.reserve(result.points.size());
-    for (const dense::DensePoint& p : result.points)
+    range_std.reserve(result.points.size());
+    for (const dense::DensePoint& p : result.points) {
       points.push_back(p.point_in_cam0.cast<double>());
-    ours.Add(points, sequence.scene, sequence.world_from_rig[f], s, cpu_s);
+      range_std.push_back(p.range_std_m);
+      run->appended.push_back((set.world_from_rig[f] * points.back()).cast<float>());
+    }
+    run->score.Add(points, set.scene, set.world_from_rig[f], s, cpu_s, range_std);
+    run->bias.Add(result.points, dense.rectifier(), set.scene, set.world_from_rig[f]);
+    run->fused.Add(set.world_from_rig[f], result.points);
+    run->fused_tight.Add(set.world_from_rig[f], result.points);
+    if (f == 0 && profile) {
+      std::printf(
+          "omnirig: grid %d x %d cells (step %.5f rad), %d disparities; rectification "
+          "tables built once per rig in %.3f s (wall; %.4f s for the next job of the rig)\n\n",
+          dense.rectifier().rows(), dense.rectifier().cols(), dense.rectifier().theta_step_rad(),
+          dense.num_disparities(), run->setup_s, run->again_s);
+    }
   }
   std::filesystem::remove_all(out_dir);
+}
 
-  const PeerRig peer = ToPeer(sequence.rig);
-  struct PeerSetting {
-    const char* name;
-    int flag;
-    cv::Size size;
-    cv::Mat k_new;
-    int disparities, window;
-  };
-  const cv::Size perspective(1024, 768), longlati(2048, 768);
-  const std::vector<PeerSetting> settings = {
-      {"cv::omnidir PERSPECTIVE + SGBM (f = w/4, 80, 5)", cv::omnidir::RECTIFY_PERSPECTIVE,
-       perspective, (cv::Mat_<double>(3, 3) << 256, 0, 512, 0, 256, 384, 0, 0, 1), 80, 5},
-      {"cv::omnidir PERSPECTIVE + SGBM (f = w/3, 96, 7)", cv::omnidir::RECTIFY_PERSPECTIVE,
-       perspective, (cv::Mat_<double>(3, 3) << 341, 0, 512, 0, 341, 384, 0, 0, 1), 96, 7},
-      {"cv::omnidir LONGLATI + SGBM (2048x768, 80, 5)", cv::omnidir::RECTIFY_LONGLATI, longlati,
-       (cv::Mat_<double>(3, 3) << 2048 / M_PI, 0, 0, 0, 768 / M_PI, 0, 0, 0, 1), 80, 5},
-      {"cv::omnidir LONGLATI + SGBM (2048x768, 360, 80, 5)", cv::omnidir::RECTIFY_LONGLATI,
-       longlati, (cv::Mat_<double>(3, 3) << 2048 / M_PI, 0, 0, 0, 768 / (2 * M_PI), 0, 0, 0, 1), 80,
-       5},
-  };
-  std::printf("| %-48s | %11s | %8s | %9s | %9s | %6s | %6s |\n", "method", "points/pair",
-              "azimuth", "median/r", "within 1%", "s/pair", "CPU s");
-  std::printf("|%s|%s|%s|%s|%s|%s|%s|\n", std::string(50, '-').c_str(),
-              std::string(13, '-').c_str(), std::string(10, '-').c_str(),
-              std::string(11, '-').c_str(), std::string(11, '-').c_str(),
-              std::string(8, '-').c_str(), std::string(8, '-').c_str());
-  ours.Print("omnirig dense (spherical grid + SGBM + ZNCC)");
-  for (const PeerSetting& setting : with_peer ? settings : std::vector<PeerSetting>()) {
+// omnirig (the default, and SGBM's own sub-pixel disparity for comparison) and the peer on one
+// set of pairs; with `profile`, CPU per stage and the artifacts written as the job writes them.
+void RunSet(const BenchSet& set, bool with_peer, bool profile,
+            const dense::DenseStereoOptions& dense_options) {
+  const int num_frames = static_cast<int>(set.world_from_rig.size());
+  std::printf("\n## %s%s, %d pairs\n\n", set.name.c_str(),
+              set.held_out ? " [HELD OUT: never used for tuning]" : " [development: tuned on]",
+              num_frames);
+  OmnirigRun ours, unrefined;
+  RunOmnirig(set, dense_options, profile, &ours);
+  dense::DenseStereoOptions sgbm_only = dense_options;
+  sgbm_only.refine_subcell = false;
+  sgbm_only.disparity_std_scale = 0.0;
+  sgbm_only.disparity_std_cells = 0.25;  // the constant std used before the refinement
+  RunOmnirig(set, sgbm_only, false, &unrefined);
+
+  PrintTableHeader();
+  ours.score.Print(std::string("omnirig dense") + (profile ? " (artifacts written)" : ""));
+  unrefined.score.Print("omnirig dense, SGBM's sub-pixel only (no refine)");
+  const PeerRig peer = ToPeer(set.rig);
+  for (const PeerSetting& setting : with_peer ? PeerSettings() : std::vector<PeerSetting>()) {
     Score score;
     for (int f = 0; f < num_frames; ++f) {
-      start = std::chrono::steady_clock::now();
+      const auto start = std::chrono::steady_clock::now();
       const double cpu = CpuSeconds();
       const std::vector<Eigen::Vector3d> points =
-          PeerReconstruct(peer, sequence.images[0][f], sequence.images[1][f], setting.flag,
-                          setting.size, setting.k_new, setting.disparities, setting.window);
+          PeerReconstruct(peer, set.images[0][f], set.images[1][f], setting.flag, setting.size,
+                          setting.k_new, setting.disparities, setting.window);
       const double s = Seconds(start), cpu_s = CpuSeconds() - cpu;
-      score.Add(points, sequence.scene, sequence.world_from_rig[f], s, cpu_s);
+      score.Add(points, set.scene, set.world_from_rig[f], s, cpu_s);
     }
     score.Print(setting.name);
   }
-  std::printf("\nomnirig per pair, CPU s by stage (end to end, artifacts written):");
-  for (const auto& [name, seconds] : stage_cpu)
-    std::printf(" %s %.3f,", name.c_str(), seconds / num_frames);
+  std::printf("\n");
+  ours.bias.Print("omnirig sub-cell disparity, refined (default)");
+  unrefined.bias.Print("omnirig sub-cell disparity, SGBM's sub-pixel only");
+  std::printf("\nmerged cloud of the %d pairs placed by their true poses:\n", num_frames);
+  MergedScore appended, fused, fused_tight;
+  appended.Score(ours.appended, set.scene, set.world_from_rig);
+  fused.Score(ours.fused.Cloud().positions, set.scene, set.world_from_rig);
+  fused_tight.Score(ours.fused_tight.Cloud().positions, set.scene, set.world_from_rig);
+  appended.Print("  appended (every pair's points)");
+  fused.Print("  fused (MergedCloudOptions: 1 cm voxels, range std <= 2 %)");
+  fused_tight.Print("  fused, range std <= 0.9 %");
+  if (profile) {
+    std::printf("\nomnirig per pair, CPU s by stage (end to end, artifacts written):");
+    for (const auto& [name, seconds] : ours.stage_cpu)
+      std::printf(" %s %.3f,", name.c_str(), seconds / num_frames);
+  }
+  const dense::DensePairResult::Seconds& st = ours.stages;
   std::printf(
       "\nomnirig per pair, wall s by stage: rectify + masks %.3f, SGBM %.3f, confidence "
-      "%.3f, epipolar fit check %.3f, triangulate + panoramas %.3f\n",
-      stages.rectify, stages.match, stages.confidence, stages.epipolar, stages.triangulate);
-  std::printf(
-      "omnirig: grid %d x %d cells (step %.5f rad), %d disparities; rectification "
-      "tables built once per rig in %.3f s (wall; %.4f s for the next job of the rig)\n",
-      dense.rectifier().rows(), dense.rectifier().cols(), dense.rectifier().theta_step_rad(),
-      dense.num_disparities(), setup_s, again_s);
-  std::printf("\n");
-  RunJob(sequence, num_frames, dense_options, false);
-  RunJob(sequence, num_frames, dense_options, true);
+      "%.3f, epipolar fit check %.3f, sub-cell refinement %.3f, triangulate + panoramas %.3f\n",
+      st.rectify, st.match, st.confidence, st.epipolar, st.refine, st.triangulate);
+}
+
+struct BenchFlags {
+  int frames = 4, threads = 2;
+  bool with_peer = true, with_job = true;
+  bool development_only = false;  // for tuning: the held-out renders are not even made
+  bool calibrate_std = false;
+  bool floor = true;  // the clean lounge as well
+};
+
+int Run(const BenchFlags& flags, const dense::DenseStereoOptions& dense_options) {
+  cv::setNumThreads(flags.threads);
+  std::printf("threads: %d (cv::setNumThreads)\n", flags.threads);
+  synth::StereoSequenceOptions options;
+  options.num_frames = flags.frames;
+  options.render.noise_sigma = 1.0;
+  options.seed = 3;
+  std::printf("rendering %d pairs of the room at 1024x768...\n", flags.frames);
+  const synth::StereoSequence sequence = synth::MakeStereoSequence(options);
+  BenchSet development{"development room (engine/synth MakeRoomScene, PNG, noise 1)",
+                       false,
+                       sequence.scene,
+                       sequence.rig,
+                       sequence.world_from_rig,
+                       sequence.images};
+  if (flags.calibrate_std) {
+    dense::DenseStereoOptions raw = dense_options;
+    raw.disparity_std_cells = 1e-4;
+    raw.disparity_std_scale = 1.0;
+    raw.max_relative_range_std = 1e9;  // every point, whatever its std
+    OmnirigRun run;
+    RunOmnirig(development, raw, false, &run);
+    CalibrateStd(run.bias);
+    return 0;
+  }
+  RunSet(development, flags.with_peer, true, dense_options);
+  if (flags.development_only) return 0;
+
+  std::printf("\nrendering %d held-out pairs at 1024x768...\n", flags.frames);
+  dense::HeldOutSequence lounge = dense::MakeHeldOutLounge(flags.frames);
+  BenchSet held_out{lounge.description,      true,
+                    std::move(lounge.scene), lounge.rig,
+                    lounge.world_from_rig,   std::move(lounge.images)};
+  RunSet(held_out, flags.with_peer, false, dense_options);
+  if (flags.floor) {
+    // What the images hold: the same lounge without sensor noise and JPEG. The rig is the true
+    // one in every set here, so no figure of this bench holds a calibration error.
+    std::printf("\nrendering %d clean held-out pairs at 1024x768...\n", flags.frames);
+    dense::HeldOutSequence clean = dense::MakeHeldOutLounge(flags.frames, 11, true);
+    BenchSet clean_set{clean.description,      true,
+                       std::move(clean.scene), clean.rig,
+                       clean.world_from_rig,   std::move(clean.images)};
+    RunSet(clean_set, false, false, dense_options);
+  }
+
+  if (flags.with_job) {
+    std::printf("\n");
+    RunJob(sequence, flags.frames, dense_options, false);
+    RunJob(sequence, flags.frames, dense_options, true);
+  }
   return 0;
 }
 
@@ -334,23 +627,30 @@ int Run(int num_frames, int threads, bool with_peer,
 }  // namespace omnirig
 
 int main(int argc, char** argv) {
-  int frames = 4, threads = 2;
-  bool with_peer = true;
+  omnirig::BenchFlags flags;
   omnirig::dense::DenseStereoOptions options;
   for (int i = 1; i < argc; ++i) {
-    if (!std::strcmp(argv[i], "--no-peer")) with_peer = false;
+    if (!std::strcmp(argv[i], "--no-peer")) flags.with_peer = false;
+    if (!std::strcmp(argv[i], "--no-job")) flags.with_job = false;
+    if (!std::strcmp(argv[i], "--development-only")) flags.development_only = true;
+    if (!std::strcmp(argv[i], "--calibrate-std")) flags.calibrate_std = true;
+    if (!std::strcmp(argv[i], "--no-floor")) flags.floor = false;
     if (i + 1 >= argc) continue;
     if (!std::strcmp(argv[i], "--frames"))
-      frames = std::max(1, std::atoi(argv[++i]));
+      flags.frames = std::max(1, std::atoi(argv[++i]));
     else if (!std::strcmp(argv[i], "--threads"))
-      threads = std::max(1, std::atoi(argv[++i]));
+      flags.threads = std::max(1, std::atoi(argv[++i]));
     else if (!std::strcmp(argv[i], "--block-size"))
       options.block_size = std::atoi(argv[++i]);
     else if (!std::strcmp(argv[i], "--step-factor"))
       options.grid.step_factor = std::atof(argv[++i]);
     else if (!std::strcmp(argv[i], "--max-parallax-deg"))
       options.max_parallax_deg = std::atof(argv[++i]);
+    else if (!std::strcmp(argv[i], "--disparity-std-cells"))
+      options.disparity_std_cells = std::atof(argv[++i]);
+    else if (!std::strcmp(argv[i], "--disparity-std-scale"))
+      options.disparity_std_scale = std::atof(argv[++i]);
   }
   options.Check();
-  return omnirig::Run(frames, threads, with_peer, options);
+  return omnirig::Run(flags, options);
 }

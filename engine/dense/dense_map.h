@@ -53,6 +53,8 @@ struct DenseMapOptions {
   int min_frames = 2;
   // Points whose range std exceeds this fraction of their range are not fused (far points seen
   // with little parallax would otherwise fill voxels of their own with their larger errors).
+  // The map's range std is geometric: FuseKeyframes gives every point 0.25 cells of disparity
+  // std, not the calibrated per-point std of dense_stereo.h (see there).
   double max_relative_range_std = 0.02;
   // Occupancy grid: cell size, and the band of heights above the floor that holds obstacles
   // (the floor is the most populated height below the sensor).
@@ -80,9 +82,15 @@ class DenseMap {
 
   // Adds one keyframe's points (in its cam0 frame) at world_from_cam0.
   void Add(const Rigid3d& world_from_cam0, const std::vector<DensePoint>& points);
+  // The same from a dense cloud as written (ToPlyCloud: confidence and range_std_m); throws
+  // InvalidArgument for a cloud without them.
+  void Add(const Rigid3d& world_from_cam0, const PlyCloud& cloud_in_cam0);
 
-  // The kept voxels: weighted mean position and colour, mean confidence.
-  PlyCloud Cloud() const;
+  // The kept voxels: weighted mean position and colour, mean confidence, and range_std_m the
+  // std of the weighted mean (1 / sqrt of the sum of its points' inverse range variances).
+  PlyCloud Cloud(const std::string& comment =
+                     "omnirig dense map: confidence-weighted voxel means in the SLAM world, "
+                     "metres") const;
 
   // Floor from the kept voxels' heights, then per cell: occupied when a kept voxel lies in the
   // obstacle band, free when the floor was seen there and nothing stands in the band, unknown
@@ -99,10 +107,14 @@ class DenseMap {
     Eigen::Vector3d weighted_position = Eigen::Vector3d::Zero();
     Eigen::Vector3d weighted_rgb = Eigen::Vector3d::Zero();
     double confidence_sum = 0.0;
+    double inverse_variance_sum = 0.0;
     int num_points = 0;
     int num_frames = 0;
     int last_frame = -1;
   };
+  // Adds one point (world frame) of the frame being added.
+  void AddPoint(int frame, const Eigen::Vector3d& in_world, const std::array<uint8_t, 3>& rgb,
+                float confidence, float range_std_m);
   bool Kept(const Voxel& voxel) const {
     return voxel.num_points >= options_.min_points && voxel.num_frames >= options_.min_frames;
   }
@@ -111,6 +123,18 @@ class DenseMap {
   std::unordered_map<int64_t, Voxel> voxels_;
   int num_frames_ = 0;
 };
+
+// The options of the stereo job's merged cloud of several pairs placed by a trajectory: a
+// surface seen from several pairs becomes one layer of 1 cm voxels (each the confidence- and
+// precision-weighted mean of the points in it, from any pair: a surface seen by one pair is kept
+// too), and points whose range std exceeds 2 % of their range, which would thicken the layer,
+// are left to the pairs' own clouds.
+DenseMapOptions MergedCloudOptions();
+
+// Points per square metre of the surface `points` sample: their number over the surface's area,
+// taken as the cells of `cell_m` the points occupy times cell_m^2 (a plane at an angle to the
+// cells' axes crosses up to 1.7 times more cells than its area holds, so this errs low).
+double PointsPerSquareMetre(const std::vector<Eigen::Vector3f>& points, double cell_m = 0.05);
 
 // The frames fused into a map: those with a pose, each at least keyframe_spacing_m from the
 // last one kept (the first posed frame is kept).

@@ -11,6 +11,7 @@
 #include <array>
 #include <cstdint>
 #include <memory>
+#include <string>
 #include <utility>
 #include <vector>
 
@@ -20,6 +21,7 @@
 #include "engine/dense/spherical_rectification.h"
 #include "engine/features/mirror_mask.h"
 #include "engine/geometry/camera_model.h"
+#include "engine/geometry/ply.h"
 #include "engine/util/progress.h"
 
 namespace omnirig::dense {
@@ -52,8 +54,24 @@ struct DenseStereoOptions {
   int confidence_window_cells = 7;
   double image_noise_grey = 2.0;
   double min_confidence = 0.5;
-  // Sub-pixel disparity noise (grid cells, 1 sigma) turned into the per-point range std.
-  double disparity_std_cells = 0.25;
+  // Sub-cell refinement of SGBM's disparity (RefineDisparity in dense_stereo.cc): one
+  // Gauss-Newton step of a 1-D Lucas-Kanade fit along the row over 11 x 11-cell windows. SGBM's
+  // own sub-pixel disparity is drawn towards whole cells; bench_dense, 2 pairs each, 2026-11-27:
+  // on the development room the median error fell from 0.530 % to 0.343 % of range, on the
+  // held-out lounge from 0.827 % to 0.801 % (its JPEG and sensor noise dominate), on the same
+  // lounge without noise and JPEG from 0.621 % to 0.364 %. Not a job parameter: `false` only
+  // lets bench_dense and the tests measure SGBM's own disparity beside it.
+  bool refine_subcell = true;
+  // Each point's disparity std (cells, 1 sigma), turned into its range std:
+  // sqrt(disparity_std_cells^2 + (disparity_std_scale * fit_std)^2), where fit_std is the
+  // refinement's least-squares std of the cell (0 without refinement). Calibrated on the
+  // development room (bench_dense --calibrate-std, 2 pairs, 2026-11-27: 69.6 % of the points
+  // within 1 std of the true range along their ray, 91.8 % within 2; the errors' tail is
+  // heavier than a Gaussian's, so no pair of values reaches 95 % at 2 std without overstating
+  // the 1-std share). The fit's std alone underestimates: neighbouring cells of the grid share
+  // image pixels (the grid resamples the images), so the window's samples are not independent.
+  double disparity_std_cells = 0.06;
+  double disparity_std_scale = 3.0;
   // Points whose range std exceeds this fraction of their range are not reported.
   double max_relative_range_std = 0.1;
   // Mirror mask (engine/features/mirror_mask.h, shape kDarkRowEnds): along each grid row,
@@ -106,7 +124,8 @@ struct DensePairResult {
   // Wall seconds of each stage (rectification and masks, semi-global matching, the matched
   // windows' correlation, the pair-level check, triangulation and panoramas).
   struct Seconds {
-    double rectify = 0.0, match = 0.0, confidence = 0.0, epipolar = 0.0, triangulate = 0.0;
+    double rectify = 0.0, match = 0.0, confidence = 0.0, epipolar = 0.0, refine = 0.0,
+           triangulate = 0.0;
   } seconds;
 };
 
@@ -139,11 +158,13 @@ class DenseStereo {
   RectifiedPair RectifyPair(const cv::Mat& image0, const cv::Mat& image1) const;
 
   // Range, its std and the confidence of every matched cell of columns [first, first +
-  // disparity16.cols), from SGBM's disparity (CV_16S, 1/16 cells, negative where none) and the
-  // matched windows' correlation over those columns; counts the mirror and matched cells and
-  // the mean confidence. Confidences are scaled by result->confidence_scale.
-  void TriangulateCells(const cv::Mat& disparity16, const cv::Mat& correlation, int first,
-                        const RectifiedPair& pair, GridCells* cells, DensePairResult* result) const;
+  // disparity.cols), from the disparity (CV_32F cells, not positive where none), its fit's std
+  // (CV_32F cells) and the matched windows' correlation over those columns; counts the mirror
+  // and matched cells and the mean confidence. Confidences are scaled by
+  // result->confidence_scale.
+  void TriangulateCells(const cv::Mat& disparity, const cv::Mat& disparity_std,
+                        const cv::Mat& correlation, int first, const RectifiedPair& pair,
+                        GridCells* cells, DensePairResult* result) const;
 
   // One DensePoint per known range cell, in row-major grid order (cam0's frame).
   void CollectPoints(const GridCells& cells, const cv::Mat& colour0, DensePairResult* result) const;
@@ -152,14 +173,19 @@ class DenseStereo {
   DenseStereoOptions options_;
   std::shared_ptr<const SphericalRectifier> rectifier_;  // SharedRectifier: built once per rig
   int num_disparities_ = 0;
-  // Per SGBM disparity value k (k / 16 cells of parallax p, k in [1, 16 num_disparities)): the
-  // law of sines as range = baseline (sin(theta0) cot(p) + cos(theta0)) and its std
-  // baseline sin(theta0) / sin^2(p) * disparity_std_cells * step, so that a cell costs no
-  // trigonometry (SGBM's sub-pixel disparity has only these values).
+  // Per disparity value k / kDisparitySteps cells of parallax p (k in [1, kDisparitySteps
+  // num_disparities)): the law of sines as range = baseline (sin(theta0) cot(p) + cos(theta0))
+  // and its std per disparity cell baseline sin(theta0) / sin^2(p) * step, so that a cell costs
+  // no trigonometry (1/256 cell rounds a range by at most 0.2 % of its std at 1 cell of std).
+  static constexpr int kDisparitySteps = 256;
   std::vector<double> cot_parallax_, range_std_per_sin_theta_;
   // Per grid column: sin and cos of the angle from the baseline.
   std::vector<double> sin_theta_, cos_theta_;
 };
+
+// The points as a PLY cloud: position, colour, confidence and range_std_m (each point's range
+// standard deviation, metres), with `comment` as the header's comment line.
+PlyCloud ToPlyCloud(const std::vector<DensePoint>& points, const std::string& comment = "");
 
 // The median distance (grid cells) of cam0's textured cells' best matches in cam1 from their
 // grid row, and how many samples matched (see DenseStereoOptions::epipolar_samples); -1 when

@@ -6,6 +6,7 @@
 
 #include <opencv2/imgcodecs.hpp>
 
+#include "engine/dense/dense_map.h"
 #include "engine/dense/range_io.h"
 #include "engine/geometry/ply.h"
 #include "engine/util/background_task.h"
@@ -59,6 +60,10 @@ class CloudOutputs {
     WritePly(dir_ / CloudFileName(pair_name), cloud);
     if (!placement_ || !placement_->world_from_cam0[k]) return;
     const Rigid3d& world_from_cam0 = *placement_->world_from_cam0[k];
+    if (cloud.has_range_std) {  // dense: fused into one surface (dense_map.h)
+      fused_.Add(world_from_cam0, cloud);
+      return;
+    }
     PlyCloud in_world = cloud;
     in_world.comment = "omnirig stereo_reconstruct: all placed pairs in the world of " +
                        placement_->source + ", metres";
@@ -78,7 +83,15 @@ class CloudOutputs {
       }
       report->trajectory = trajectory;
     }
-    if (num_placed_ > 0) {
+    if (num_placed_ > 0 && fused_.num_frames() > 0) {
+      const PlyCloud fused =
+          fused_.Cloud("omnirig stereo_reconstruct: all placed pairs fused in the world of " +
+                       placement_->source + ", metres");
+      WritePly(dir_ / "cloud.ply", fused);
+      report->merged_points_per_m2 = PointsPerSquareMetre(fused.positions);
+      report->artifact = "cloud.ply";
+      report->clouds_merged = true;
+    } else if (num_placed_ > 0) {
       merged_.Finish();
       report->artifact = "cloud.ply";
       report->clouds_merged = true;
@@ -94,7 +107,8 @@ class CloudOutputs {
   std::filesystem::path dir_;
   size_t num_pairs_;
   std::optional<PairPlacement> placement_;
-  PlyAppender merged_;
+  PlyAppender merged_;                    // sparse pairs, appended
+  DenseMap fused_{MergedCloudOptions()};  // dense pairs, fused
   int num_placed_ = 0;
   std::string first_cloud_file_;
 };
@@ -124,21 +138,6 @@ size_t RunSparse(const StereoRig& rig, const std::filesystem::path& dataset_dir,
   return num_points;
 }
 
-PlyCloud DenseCloud(const std::vector<DensePoint>& points) {
-  PlyCloud cloud;
-  cloud.comment = "omnirig stereo_reconstruct (dense): points in cam0's frame, metres";
-  cloud.has_confidence = true;
-  cloud.positions.reserve(points.size());
-  cloud.colours.reserve(points.size());
-  cloud.confidence.reserve(points.size());
-  for (const DensePoint& p : points) {
-    cloud.positions.push_back(p.point_in_cam0);
-    cloud.colours.push_back(p.rgb);
-    cloud.confidence.push_back(p.confidence);
-  }
-  return cloud;
-}
-
 // Writes pair `name`'s panoramas and cloud (on RunDense's writer thread). An error names the
 // pair, as the matching's do.
 void WriteDensePair(size_t k, const std::string& name, const DensePairResult& pair_result,
@@ -147,7 +146,10 @@ void WriteDensePair(size_t k, const std::string& name, const DensePairResult& pa
     const std::string base = RangeBaseName(name);
     WriteRangeTiff(dir / (base + "_range.tiff"), pair_result.range_m);
     WriteRangePng(dir / (base + "_range.png"), pair_result.range_m);
-    outputs->Write(k, name, DenseCloud(pair_result.points));
+    outputs->Write(
+        k, name,
+        ToPlyCloud(pair_result.points,
+                   "omnirig stereo_reconstruct (dense): points in cam0's frame, metres"));
   } catch (const InvalidArgument& e) {
     throw InvalidArgument("pair '" + name + "': " + e.what());
   } catch (const std::exception& e) {

@@ -7,8 +7,9 @@
 // Files written into the output folder: one pair without a placement writes cloud.ply (in its
 // cam0 frame). Otherwise each pair writes CloudFileName(NAME) in its own cam0 frame, and with a
 // placement cloud.ply holds every placed pair in the placement's world (no merged cloud
-// without one: the pairs of a moving rig share no frame). Dense also writes per pair
-// RangeBaseName(NAME) + "_range.tiff" and "_range.png" (range_io.h).
+// without one: the pairs of a moving rig share no frame): dense pairs fused into one surface
+// (a DenseMap with MergedCloudOptions, dense_map.h), sparse pairs' points appended. Dense also
+// writes per pair RangeBaseName(NAME) + "_range.tiff" and "_range.png" (range_io.h).
 
 #include <cstddef>
 #include <filesystem>
@@ -55,6 +56,9 @@ struct StereoPairsReport {
   size_t num_points = 0;
   std::string artifact;               // the cloud to show first: cloud.ply or the first pair's
   std::optional<bool> clouds_merged;  // set for several pairs or a placement
+  // Dense pairs fused into cloud.ply: its points per square metre of the surface they sample
+  // (PointsPerSquareMetre, dense_map.h).
+  std::optional<double> merged_points_per_m2;
   // With a placement: its source, how many pairs it placed, and why not all (empty when all).
   struct Trajectory {
     std::string source;

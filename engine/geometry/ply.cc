@@ -30,6 +30,9 @@ void PlyCloud::Check() const {
   OMNIRIG_CHECK(confidence.size() == (has_confidence ? positions.size() : 0),
                 "PLY cloud: " << confidence.size() << " confidences for " << positions.size()
                               << " positions");
+  OMNIRIG_CHECK(range_std_m.size() == (has_range_std ? positions.size() : 0),
+                "PLY cloud: " << range_std_m.size() << " range stds for " << positions.size()
+                              << " positions");
   OMNIRIG_CHECK(num_observations.size() == (has_num_observations ? positions.size() : 0),
                 "PLY cloud: " << num_observations.size() << " observation counts for "
                               << positions.size() << " positions");
@@ -45,13 +48,14 @@ std::string Header(const PlyCloud& cloud, size_t count) {
   data += "property float x\nproperty float y\nproperty float z\n";
   data += "property uchar red\nproperty uchar green\nproperty uchar blue\n";
   if (cloud.has_confidence) data += "property float confidence\n";
+  if (cloud.has_range_std) data += "property float range_std_m\n";
   if (cloud.has_num_observations) data += "property int num_observations\n";
   data += "end_header\n";
   return data;
 }
 
 size_t VertexBytes(const PlyCloud& cloud) {
-  return 15 + 4 * cloud.has_confidence + 4 * cloud.has_num_observations;
+  return 15 + 4 * cloud.has_confidence + 4 * cloud.has_range_std + 4 * cloud.has_num_observations;
 }
 
 // Packs vertices [begin, end) into `out` (VertexBytes each), one memcpy of a fixed size per
@@ -62,14 +66,21 @@ void PackVertices(const PlyCloud& cloud, size_t begin, size_t end, char* out) {
   for (size_t i = begin; i < end; ++i, out += stride) {
     std::memcpy(out, cloud.positions[i].data(), 12);
     std::memcpy(out + 12, cloud.colours[i].data(), 3);
-    if (cloud.has_confidence) std::memcpy(out + 15, &cloud.confidence[i], 4);
-    if (cloud.has_num_observations) {
-      std::memcpy(out + 15 + 4 * cloud.has_confidence, &cloud.num_observations[i], 4);
+    char* next = out + 15;
+    if (cloud.has_confidence) {
+      std::memcpy(next, &cloud.confidence[i], 4);
+      next += 4;
     }
+    if (cloud.has_range_std) {
+      std::memcpy(next, &cloud.range_std_m[i], 4);
+      next += 4;
+    }
+    if (cloud.has_num_observations) std::memcpy(next, &cloud.num_observations[i], 4);
   }
   if (!HostIsBigEndian()) return;
   out -= stride * (end - begin);
-  const int num_words = 4 + cloud.has_confidence + cloud.has_num_observations;  // 4-byte values
+  const int num_words =  // 4-byte values
+      4 + cloud.has_confidence + cloud.has_range_std + cloud.has_num_observations;
   for (size_t i = begin; i < end; ++i, out += stride) {
     for (int w = 0; w < num_words; ++w) {
       char* value = out + 4 * w + (w >= 3 ? 3 : 0);  // the 3 colour bytes sit before word 3
@@ -119,9 +130,11 @@ void PlyAppender::Append(const PlyCloud& part) {
   if (!started_) {
     header_.comment = part.comment;
     header_.has_confidence = part.has_confidence;
+    header_.has_range_std = part.has_range_std;
     header_.has_num_observations = part.has_num_observations;
   }
   OMNIRIG_CHECK(part.has_confidence == header_.has_confidence &&
+                    part.has_range_std == header_.has_range_std &&
                     part.has_num_observations == header_.has_num_observations,
                 "PLY parts must have the same properties");
   std::ofstream out = OpenForWriting(PartPath(path_), started_ ? std::ios::app : std::ios::trunc);

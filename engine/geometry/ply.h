@@ -15,6 +15,7 @@ namespace omnirig {
 // Vertices with float x y z (metres, in the frame the comment names) and uchar red green blue,
 // then the optional properties, in this order, when their flags are set:
 //   float confidence        (dense stereo: 0 .. 1)
+//   float range_std_m       (dense stereo: the point's range standard deviation, metres)
 //   int num_observations    (SLAM map)
 // A flagged property's vector holds one value per point (an empty cloud still declares it).
 struct PlyCloud {
@@ -25,6 +26,8 @@ struct PlyCloud {
   std::vector<float> confidence;
   bool has_num_observations = false;
   std::vector<std::int32_t> num_observations;
+  bool has_range_std = false;  // written after confidence (the order above)
+  std::vector<float> range_std_m;
 
   size_t size() const { return positions.size(); }
   // Throws InvalidArgument when a vector's length does not match positions (an unflagged

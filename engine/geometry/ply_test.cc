@@ -103,7 +103,8 @@ TEST(Ply, AppenderWritesWhatOneWriteWould) {
                                      ("omnirig_ply_parts_" + std::to_string(::getpid()) + ".ply");
   PlyAppender appender(path);
   appender.Append(first);
-  appender.Append(PlyCloud{whole.comment, {}, {}, true, {}, false, {}});  // an empty part
+  appender.Append(
+      PlyCloud{whole.comment, {}, {}, true, {}, false, {}, false, {}});  // an empty part
   appender.Append(second);
   EXPECT_EQ(appender.size(), 2u);
   appender.Finish();
@@ -141,6 +142,7 @@ PlyCloud ReadPly(const std::filesystem::path& path) {
   }
   for (const auto& [type, name] : properties) {
     cloud.has_confidence |= name == "confidence";
+    cloud.has_range_std |= name == "range_std_m";
     cloud.has_num_observations |= name == "num_observations";
   }
   std::vector<char> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
@@ -167,6 +169,7 @@ PlyCloud ReadPly(const std::filesystem::path& path) {
         colour[name == "red" ? 0 : name == "green" ? 1 : 2] = b[0];
       }
       if (name == "confidence") cloud.confidence.push_back(as_float);
+      if (name == "range_std_m") cloud.range_std_m.push_back(as_float);
       if (name == "num_observations") {
         cloud.num_observations.push_back(static_cast<int32_t>(bits));
       }
@@ -179,18 +182,21 @@ PlyCloud ReadPly(const std::filesystem::path& path) {
 }
 
 // More vertices than the writer packs at once (65,536), so that its chunks' seams are read too.
-PlyCloud RandomCloud(size_t count, bool with_confidence, bool with_observations) {
+PlyCloud RandomCloud(size_t count, bool with_confidence, bool with_observations,
+                     bool with_range_std = false) {
   std::mt19937 random(7);
   std::uniform_real_distribution<float> coordinate(-50.f, 50.f), unit(0.f, 1.f);
   PlyCloud cloud;
   cloud.comment = "random, metres";
   cloud.has_confidence = with_confidence;
   cloud.has_num_observations = with_observations;
+  cloud.has_range_std = with_range_std;
   for (size_t i = 0; i < count; ++i) {
     cloud.positions.emplace_back(coordinate(random), coordinate(random), coordinate(random));
     cloud.colours.push_back({static_cast<uint8_t>(random()), static_cast<uint8_t>(random()),
                              static_cast<uint8_t>(random())});
     if (with_confidence) cloud.confidence.push_back(unit(random));
+    if (with_range_std) cloud.range_std_m.push_back(0.1f * unit(random));
     if (with_observations) cloud.num_observations.push_back(static_cast<int32_t>(random()));
   }
   return cloud;
@@ -199,6 +205,7 @@ PlyCloud RandomCloud(size_t count, bool with_confidence, bool with_observations)
 void ExpectSameCloud(const PlyCloud& read, const PlyCloud& written) {
   EXPECT_EQ(read.comment, written.comment);
   EXPECT_EQ(read.has_confidence, written.has_confidence);
+  EXPECT_EQ(read.has_range_std, written.has_range_std);
   EXPECT_EQ(read.has_num_observations, written.has_num_observations);
   ASSERT_EQ(read.size(), written.size());
   for (size_t i = 0; i < written.size(); ++i) {
@@ -206,6 +213,7 @@ void ExpectSameCloud(const PlyCloud& read, const PlyCloud& written) {
     ASSERT_EQ(read.colours[i], written.colours[i]) << "vertex " << i;
   }
   EXPECT_EQ(read.confidence, written.confidence);
+  EXPECT_EQ(read.range_std_m, written.range_std_m);
   EXPECT_EQ(read.num_observations, written.num_observations);
 }
 
@@ -215,6 +223,12 @@ TEST(Ply, WrittenCloudReadsBackIdentically) {
   for (const auto& [confidence, observations] :
        std::vector<std::pair<bool, bool>>{{true, false}, {false, true}, {false, false}}) {
     const PlyCloud cloud = RandomCloud(150000, confidence, observations);
+    WritePly(path, cloud);
+    ExpectSameCloud(ReadPly(path), cloud);
+  }
+  // The dense clouds' properties: confidence and range std (and all three together).
+  for (const bool observations : {false, true}) {
+    const PlyCloud cloud = RandomCloud(150000, true, observations, true);
     WritePly(path, cloud);
     ExpectSameCloud(ReadPly(path), cloud);
   }

@@ -12,4 +12,10 @@ namespace omnirig::slam {
 // boxes, cylinders with caps, checkerboards as planes).
 double DistanceToSceneSurface(const synth::Scene& scene, const Eigen::Vector3d& point_in_world);
 
+// Distance in metres along the ray origin + t * unit_direction (t > 1e-6) to the first surface of
+// `scene` it meets (planes, boxes, cylinders with caps, checkerboards as planes); infinity when
+// it meets none. The true range of a reconstructed point along its line of sight.
+double RangeToSceneSurface(const synth::Scene& scene, const Eigen::Vector3d& origin_in_world,
+                           const Eigen::Vector3d& unit_direction_in_world);
+
 }  // namespace omnirig::slam

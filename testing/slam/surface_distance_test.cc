@@ -1,5 +1,7 @@
 #include "testing/slam/surface_distance.h"
 
+#include <cmath>
+
 #include <gtest/gtest.h>
 
 namespace omnirig::slam {
@@ -26,6 +28,32 @@ TEST(DistanceToSceneSurface, BoxFromInsideCylinderAndPlane) {
   street.AddPlane(At(0, 0, 0), 4, 2, plain, "ground");
   EXPECT_NEAR(DistanceToSceneSurface(street, Eigen::Vector3d(0.5, 0.5, -0.25)), 0.25, 1e-12);
   EXPECT_NEAR(DistanceToSceneSurface(street, Eigen::Vector3d(3, 0, 0)), 1.0, 1e-12);
+}
+
+TEST(RangeToSceneSurface, FirstHitAlongTheRay) {
+  synth::Scene scene;
+  synth::TextureSpec plain;
+  plain.style = synth::TextureSpec::Style::kPlain;
+  plain.texel_size_m = 0.05;
+  scene.AddBox(At(0, 0, 1.4), Eigen::Vector3d(10, 7, 2.8), plain, "room");
+  scene.AddCylinder(At(1.5, 0, 0), 0.2, 2.8, plain, "pillar");
+  const Eigen::Vector3d origin(0, 0, 1.0);
+  // Straight down to the floor, up to the ceiling, along +y to the wall.
+  EXPECT_NEAR(RangeToSceneSurface(scene, origin, Eigen::Vector3d(0, 0, -1)), 1.0, 1e-12);
+  EXPECT_NEAR(RangeToSceneSurface(scene, origin, Eigen::Vector3d(0, 0, 1)), 1.8, 1e-12);
+  EXPECT_NEAR(RangeToSceneSurface(scene, origin, Eigen::Vector3d(0, 1, 0)), 3.5, 1e-12);
+  // Along +x the pillar's side (1.3 m) comes before the wall (5 m).
+  EXPECT_NEAR(RangeToSceneSurface(scene, origin, Eigen::Vector3d(1, 0, 0)), 1.3, 1e-12);
+  // Obliquely to the floor: 1 / cos(60 deg).
+  const Eigen::Vector3d oblique(0, std::sin(M_PI / 3), -std::cos(M_PI / 3));
+  EXPECT_NEAR(RangeToSceneSurface(scene, origin, oblique), 2.0, 1e-12);
+  synth::Scene ground;
+  ground.AddPlane(At(0, 0, 0), 4, 2, plain, "ground");
+  EXPECT_NEAR(RangeToSceneSurface(ground, origin, Eigen::Vector3d(0, 0, -1)), 1.0, 1e-12);
+  // Missing the plane, or looking away from it.
+  EXPECT_TRUE(
+      std::isinf(RangeToSceneSurface(ground, Eigen::Vector3d(3, 0, 1), Eigen::Vector3d(0, 0, -1))));
+  EXPECT_TRUE(std::isinf(RangeToSceneSurface(ground, origin, Eigen::Vector3d(0, 0, 1))));
 }
 
 }  // namespace
