@@ -49,7 +49,8 @@ storage::ImageHeader ImageCheck::Finish(const std::string& name) {
   }
   std::string problem =
       header.status == storage::ImageHeader::Status::kCorrupt ? header.problem : "";
-  if (problem.empty() && header.format != "tum" && header.format != "yaml") problem = completeness_.Finish(header, head_);
+  const bool text = header.format == "tum" || header.format == "yaml";
+  if (problem.empty() && !text) problem = completeness_.Finish(header, head_);
   if (!problem.empty()) {
     throw HttpError(422, "corrupt_image", name + ": " + problem, {{"name", name}});
   }

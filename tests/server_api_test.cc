@@ -709,7 +709,8 @@ TEST_F(ServerApiTest, AcceptsAKalibrTargetAndRefusesAMissingOne) {
       << missing->body;
   const auto named = client.Post(
       "/api/v1/jobs",
-      R"({"type": "calibration", "dataset": ")" + id + R"(", "params": {"board": "april_6x6.yaml"}})",
+      R"({"type": "calibration", "dataset": ")" + id +
+          R"(", "params": {"board": "april_6x6.yaml"}})",
       "application/json");
   ASSERT_TRUE(named);
   EXPECT_EQ(named->status, 202) << named->body;
