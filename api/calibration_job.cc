@@ -135,7 +135,7 @@ json ImageToJson(const CalibrationImageReport& image) {
 CalibrationRequest CalibrationRequestFromJson(const json& params) {
   CheckKnownFields(params, "params", {"board", "options", "hints", "svp", "camera"});
   CalibrationRequest request;
-  request.board = BoardFromJson(Field(params, "params", "board"));
+  ReadBoardParam(params, &request.board, &request.kalibr_target_file);
   if (params.contains("camera")) {
     const json& camera = params["camera"];
     OMNIRIG_CHECK(camera == "cam0" || camera == "cam1",
@@ -154,6 +154,8 @@ std::vector<std::string> CalibrationImageNames(const std::optional<std::string>&
                                                const std::vector<std::string>& image_names) {
   std::vector<std::string> names, folder[2];
   for (const std::string& name : image_names) {
+    if (IsSideFile(name)) continue;
+    names.push_back(name);
     for (int c = 0; c < 2; ++c) {
       if (name.rfind("cam" + std::to_string(c) + "/", 0) == 0) folder[c].push_back(name);
     }
@@ -169,7 +171,7 @@ std::vector<std::string> CalibrationImageNames(const std::optional<std::string>&
                     << folder[1].size()
                     << " in cam1/), which one calibration would take for one camera: name the "
                        "camera with \"camera\": \"cam0\" or \"cam1\" in the params");
-  return image_names;
+  return names;
 }
 
 json CalibrationReportToJson(const CalibrationReport& report) {
@@ -284,11 +286,16 @@ JobType CalibrationJobType() {
   type.name = "calibration";
   type.validate = [](const json& params) { CalibrationRequestFromJson(params); };
   type.check_inputs = [](const json& params, const SubmissionInputs& inputs) {
-    CalibrationImageNames(CalibrationRequestFromJson(params).camera, inputs.file_names());
+    const CalibrationRequest request = CalibrationRequestFromJson(params);
+    CheckKalibrTargetFileIn(request.kalibr_target_file, inputs.file_names());
+    CalibrationImageNames(request.camera, inputs.file_names());
   };
   type.run = [](const json& params, const JobContext& context) {
     CalibrationRequest request = CalibrationRequestFromJson(params);
     request.options.calibrate.num_threads = std::max(1, context.num_threads);
+    if (!request.kalibr_target_file.empty()) {
+      request.board = ReadKalibrTargetFile(context.dataset_dir, request.kalibr_target_file);
+    }
     const CalibrationReport report =
         CalibrateImages(context.dataset_dir, CalibrationImageNames(request.camera, context.image_names),
                         request.board, request.options, context.output_dir, context.progress);

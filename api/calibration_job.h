@@ -3,7 +3,9 @@
 // (`omnirig calibrate`) builds the same request and returns the same JSON.
 //
 // params: {"board": {"type": "checkerboard" | "charuco", "cols", "rows" (inner corners),
-//                    "square_size_mm", "marker_size_mm" and "aruco_dictionary" (charuco)},
+//                    "square_size_mm", "marker_size_mm" and "aruco_dictionary" (charuco)}
+//                   or {"type": "aprilgrid", "tag_cols", "tag_rows", "tag_size_m", "tag_spacing"}
+//                   or "NAME.yaml" (a Kalibr target file of the dataset; api/board_json.h),
 //          "options": {"fix": [names], "free": [names], "huber_loss_px", "outlier_sigmas",
 //                      "min_outlier_px", "max_rejection_rounds", "max_view_rms_px",
 //                      "min_corners_per_view", "min_views", "max_num_iterations",
@@ -41,6 +43,8 @@ namespace omnirig::api {
 
 struct CalibrationRequest {
   BoardSpec board;
+  // "board": "NAME.yaml": the board is the dataset's Kalibr target file, read when the job runs.
+  std::string kalibr_target_file;
   ImageCalibrationOptions options;
   // "camera": "cam0" or "cam1": calibrate that camera of a stereo dataset from its folder's
   // images only (cam0/..., cam1/...).

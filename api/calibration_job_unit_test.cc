@@ -13,6 +13,7 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 
+#include "api/board_json.h"
 #include "api/camera_json.h"
 #include "api/job_types.h"
 #include "testing/calib/model_import.h"
@@ -121,6 +122,70 @@ TEST(CalibrationJson, ValidationNamesTheField) {
   params["extra"] = 1;
   EXPECT_NE(ValidationError(params).find("params.extra"), std::string::npos);
   EXPECT_EQ(ValidationError(ValidParams()), "");
+}
+
+TEST(CalibrationJson, KalibrsAprilgridAndTargetFiles) {
+  json params = {{"board",
+                  {{"type", "aprilgrid"},
+                   {"tag_cols", 6},
+                   {"tag_rows", 6},
+                   {"tag_size_m", 0.088},
+                   {"tag_spacing", 0.3}}}};
+  const CalibrationRequest grid = CalibrationRequestFromJson(params);
+  EXPECT_EQ(grid.board.type, BoardSpec::Type::kAprilgrid);
+  EXPECT_EQ(grid.board.cols, 12);
+  EXPECT_DOUBLE_EQ(grid.board.square_size_m, 0.088);
+  params["board"]["tag_spacing"] = 0.0;
+  EXPECT_NE(ValidationError(params).find("tag spacing"), std::string::npos);
+  params["board"].erase("tag_spacing");
+  EXPECT_NE(ValidationError(params).find("board.tag_spacing"), std::string::npos);
+  params["board"]["tag_spacing"] = 0.3;
+  params["board"]["square_size_mm"] = 30;
+  EXPECT_NE(ValidationError(params).find("board.square_size_mm"), std::string::npos);
+
+  // A Kalibr target file of the dataset in place of the object: read when the job runs.
+  const CalibrationRequest named = CalibrationRequestFromJson({{"board", "april_6x6.yaml"}});
+  EXPECT_EQ(named.kalibr_target_file, "april_6x6.yaml");
+  EXPECT_NE(ValidationError({{"board", "board.txt"}}).find(".yaml"), std::string::npos);
+  EXPECT_NE(ValidationError({{"board", "../april.yaml"}}).find(".yaml"), std::string::npos);
+  EXPECT_NE(ValidationError({{"board", 5}}).find("'params.board'"), std::string::npos);
+
+  // At submission the file must be in the dataset; the message lists the .yaml files there.
+  const JobType type = CalibrationJobType();
+  SubmissionInputs inputs;
+  inputs.images = {{"a.png", 640, 480}, {"target.yaml", 0, 0}};
+  try {
+    type.check_inputs({{"board", "april_6x6.yaml"}}, inputs);
+    ADD_FAILURE() << "a missing target file was accepted";
+  } catch (const InvalidArgument& e) {
+    EXPECT_NE(std::string(e.what()).find("its .yaml files: target.yaml"), std::string::npos)
+        << e.what();
+  }
+  EXPECT_NO_THROW(type.check_inputs({{"board", "target.yaml"}}, inputs));
+  // The target file and a trajectory are not images of the board.
+  EXPECT_EQ(CalibrationImageNames(std::nullopt, {"a.png", "target.yaml", "run.tum"}),
+            std::vector<std::string>{"a.png"});
+}
+
+TEST(CalibrationJson, ReadsTheKalibrTargetWhenTheJobRuns) {
+  const fs::path dir = fs::temp_directory_path() / ("omnirig_target_" + std::to_string(getpid()));
+  fs::create_directories(dir);
+  std::ofstream(dir / "april.yaml") << "target_type: 'aprilgrid'\ntagCols: 4\ntagRows: 3\n"
+                                       "tagSize: 0.05\ntagSpacing: 0.25\n";
+  std::ofstream(dir / "broken.yaml") << "target_type: 'aprilgrid'\ntagCols: 4\n";
+  const BoardSpec board = ReadKalibrTargetFile(dir, "april.yaml");
+  EXPECT_EQ(board.type, BoardSpec::Type::kAprilgrid);
+  EXPECT_EQ(board.rows, 6);
+  EXPECT_DOUBLE_EQ(board.tag_spacing, 0.25);
+  try {
+    ReadKalibrTargetFile(dir, "broken.yaml");
+    ADD_FAILURE() << "an incomplete target was accepted";
+  } catch (const InvalidArgument& e) {
+    EXPECT_NE(std::string(e.what()).find("board 'broken.yaml': Kalibr target: missing key"),
+              std::string::npos)
+        << e.what();
+  }
+  fs::remove_all(dir);
 }
 
 TEST(CalibrationJson, OneCameraOfAStereoDataset) {

@@ -39,7 +39,7 @@ RelativePoseParams RelativePoseParamsFromJson(const json& params) {
                    {"board", "calibrations", "intrinsics_model", "resolve_corner_order",
                     "huber_loss_px", "max_num_iterations", "sync_false_alarm_rate"});
   RelativePoseParams out;
-  out.board = BoardFromJson(Field(params, "params", "board"));
+  ReadBoardParam(params, &out.board, &out.kalibr_target_file);
   if (params.contains("calibrations")) {
     const json& calibrations = params["calibrations"];
     CheckKnownFields(calibrations, "calibrations", {"cam0", "cam1"});
@@ -220,7 +220,10 @@ json ModelSelectionToJson(const RigModelSelection& selection) {
 }  // namespace
 
 json RunRelativePoseJob(const json& params, const JobContext& context) {
-  const RelativePoseParams parsed = RelativePoseParamsFromJson(params);
+  RelativePoseParams parsed = RelativePoseParamsFromJson(params);
+  if (!parsed.kalibr_target_file.empty()) {
+    parsed.board = ReadKalibrTargetFile(context.dataset_dir, parsed.kalibr_target_file);
+  }
   const std::vector<ImagePairNames> pairs = MatchImagePairs(context.image_names);
   std::array<std::optional<GivenCamera>, 2> given;
   std::array<json, 2> camera_json, provenance;
@@ -268,6 +271,10 @@ JobType RelativePoseJobType() {
       references.push_back({*parsed.cam1_calibration_job, "calibration", "calibrations.cam1"});
     }
     return references;
+  };
+  type.check_inputs = [](const json& params, const SubmissionInputs& inputs) {
+    CheckKalibrTargetFileIn(RelativePoseParamsFromJson(params).kalibr_target_file,
+                            inputs.file_names());
   };
   type.run = [](const json& params, const JobContext& context) {
     json result = RunRelativePoseJob(params, context);

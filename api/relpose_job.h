@@ -5,7 +5,8 @@
 // Dataset: images named cam0/NAME and cam1/NAME, paired by NAME.
 // Params (unknown fields are refused):
 //   {"board": {"type": "checkerboard" | "charuco", "cols", "rows", "square_size_mm",
-//              "marker_size_mm", "aruco_dictionary"},             (api/board_json.h)
+//              "marker_size_mm", "aruco_dictionary"} | {"type": "aprilgrid", ...} | "NAME.yaml",
+//                                                                 (api/board_json.h)
 //    "calibrations": {"cam0": JOB_ID, "cam1": JOB_ID},            (optional: without it both
 //                                                                  cameras are calibrated from
 //                                                                  their own images first)
@@ -61,6 +62,7 @@ namespace omnirig::api {
 
 struct RelativePoseParams {
   BoardSpec board;
+  std::string kalibr_target_file;  // "board": "NAME.yaml", read when the job runs
   std::optional<std::string> cam0_calibration_job;  // both or neither
   std::optional<std::string> cam1_calibration_job;
   RigFromImagesOptions options;  // intrinsics_model and the fit's tunables

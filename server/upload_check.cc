@@ -6,19 +6,29 @@
 
 namespace omnirig::server {
 
+namespace {
+
+bool EndsWith(const std::string& name, const std::string& suffix) {
+  return name.size() > suffix.size() &&
+         name.compare(name.size() - suffix.size(), suffix.size(), suffix) == 0;
+}
+
+}  // namespace
+
 storage::ImageHeader ProbeUpload(const std::string& name, const std::string& head) {
-  const std::string suffix = ".tum";
-  if (name.size() > suffix.size() &&
-      name.compare(name.size() - suffix.size(), suffix.size(), suffix) == 0) {
+  // Text files beside the images: .tum trajectories (ground truth), .yaml Kalibr targets.
+  const bool tum = EndsWith(name, ".tum");
+  if (tum || EndsWith(name, ".yaml") || EndsWith(name, ".yml")) {
     storage::ImageHeader header;
     const bool text = std::all_of(head.begin(), head.end(), [](char c) {
       return c == '\n' || c == '\r' || c == '\t' || (c >= 32 && c < 127);
     });
     header.status =
         text ? storage::ImageHeader::Status::kOk : storage::ImageHeader::Status::kNotAnImage;
-    header.format = "tum";
-    header.content_type = "text/plain";
-    header.problem = text ? "" : "a .tum trajectory must be plain text";
+    header.format = tum ? "tum" : "yaml";
+    header.content_type = tum ? "text/plain" : "application/yaml";
+    header.problem = text ? "" : (tum ? "a .tum trajectory must be plain text"
+                                      : "a .yaml file must be plain text");
     return header;
   }
   return storage::ProbeImageHeader(head);
@@ -39,7 +49,8 @@ storage::ImageHeader ImageCheck::Finish(const std::string& name) {
   }
   std::string problem =
       header.status == storage::ImageHeader::Status::kCorrupt ? header.problem : "";
-  if (problem.empty() && header.format != "tum") problem = completeness_.Finish(header, head_);
+  const bool text = header.format == "tum" || header.format == "yaml";
+  if (problem.empty() && !text) problem = completeness_.Finish(header, head_);
   if (!problem.empty()) {
     throw HttpError(422, "corrupt_image", name + ": " + problem, {{"name", name}});
   }

@@ -12,7 +12,8 @@ namespace omnirig::server {
 
 // The header of an upload named `name` whose first bytes are `head`: an image's
 // (storage::ProbeImageHeader), or for NAME.tum, a ground-truth trajectory in TUM format that a
-// slam job can evaluate against (plain text; the job parses it and names any bad line).
+// slam job can evaluate against, and for NAME.yaml / NAME.yml a Kalibr target a board-detecting
+// job can name (plain text both; the job parses it and says what is wrong).
 storage::ImageHeader ProbeUpload(const std::string& name, const std::string& head);
 
 class ImageCheck {

@@ -686,6 +686,36 @@ TEST_F(ServerApiTest, LogsOneLinePerRequestAndPerJobStateChange) {
   for (const std::string& line : lines) EXPECT_EQ(line.find('\r'), std::string::npos);
 }
 
+// A Kalibr target file goes up beside the images and names the board of a calibration; one the
+// dataset lacks is refused at submission with the .yaml files it has.
+TEST_F(ServerApiTest, AcceptsAKalibrTargetAndRefusesAMissingOne) {
+  auto& client = Start(Options());
+  const std::string id = CreateDataset(client);
+  const std::string base = "/api/v1/datasets/" + id + "/images/";
+  const auto stored = client.Put((base + "april_6x6.yaml").c_str(),
+                                 "target_type: 'aprilgrid'\ntagCols: 6\ntagRows: 6\n"
+                                 "tagSize: 0.088\ntagSpacing: 0.3\n",
+                                 "application/yaml");
+  ASSERT_TRUE(stored);
+  EXPECT_EQ(stored->status, 201) << stored->body;
+  EXPECT_EQ(JsonOf(stored)["content_type"], "application/yaml");
+  ASSERT_EQ(client.Put((base + "view_0.png").c_str(), PngBytes(64, 48), "image/png")->status, 201);
+  const auto missing = client.Post(
+      "/api/v1/jobs",
+      R"({"type": "calibration", "dataset": ")" + id + R"(", "params": {"board": "april.yaml"}})",
+      "application/json");
+  ExpectError(missing, 422, "invalid_input");
+  EXPECT_NE(missing->body.find("its .yaml files: april_6x6.yaml"), std::string::npos)
+      << missing->body;
+  const auto named = client.Post(
+      "/api/v1/jobs",
+      R"({"type": "calibration", "dataset": ")" + id +
+          R"(", "params": {"board": "april_6x6.yaml"}})",
+      "application/json");
+  ASSERT_TRUE(named);
+  EXPECT_EQ(named->status, 202) << named->body;
+}
+
 TEST_F(ServerApiTest, RefusesBadJobs) {
   auto& client = Start();
   const std::string dataset = CreateDataset(client);

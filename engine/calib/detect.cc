@@ -3,8 +3,11 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <map>
 #include <optional>
+#include <set>
 
+#include <opencv2/aruco.hpp>
 #include <opencv2/aruco/charuco.hpp>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
@@ -503,6 +506,158 @@ BoardDetection DetectCharuco(const cv::Mat& grey, const BoardSpec& board,
   return detection;
 }
 
+// The board slots (row offset, column offset within the tag's 2 x 2 corners) of OpenCV's marker
+// corners, which come clockwise from the marker's own top-left: top-left, top-right,
+// bottom-right, bottom-left, with the AprilGrid's y pointing up the tag.
+constexpr int kTagSlots[4][2] = {{1, 0}, {1, 1}, {0, 1}, {0, 0}};
+
+// Which of OpenCV's four corners fills each slot of kTagSlots under one of the eight symmetries
+// of a square: rotations by `turn` quarter turns, mirrored or not. AprilTag implementations and
+// OpenCV disagree on the bit order of 36h11's codes (a rotation or a transposition of the tag),
+// so the labelling of a tag's corners is not taken on trust: the symmetry under which the
+// corners that face each other across the gap between neighbouring tags lie closest wins.
+int CornerForSlot(int slot, int turn, bool mirrored) {
+  return mirrored ? (turn - slot + 8) % 4 : (slot + turn) % 4;
+}
+
+struct DetectedTag {
+  int row = 0, col = 0;
+  std::array<Eigen::Vector2d, 4> corners_px;
+};
+
+// Sum over neighbouring tags of the distance between the corners facing each other across
+// their gap, relative to the tags' size, under one symmetry; -1 without neighbouring tags.
+double FacingCornerScore(const std::vector<DetectedTag>& tags, int turn, bool mirrored) {
+  std::map<std::pair<int, int>, const DetectedTag*> at;
+  for (const DetectedTag& tag : tags) at[{tag.row, tag.col}] = &tag;
+  const auto slot_px = [&](const DetectedTag& tag, int dr, int dc) {
+    for (int slot = 0; slot < 4; ++slot) {
+      if (kTagSlots[slot][0] == dr && kTagSlots[slot][1] == dc) {
+        return tag.corners_px[CornerForSlot(slot, turn, mirrored)];
+      }
+    }
+    return Eigen::Vector2d(Eigen::Vector2d::Zero());
+  };
+  double score = 0.0;
+  int pairs = 0;
+  for (const DetectedTag& tag : tags) {
+    const double side = (tag.corners_px[0] - tag.corners_px[2]).norm() / std::sqrt(2.0);
+    if (const auto right = at.find({tag.row, tag.col + 1}); right != at.end()) {
+      for (int dr = 0; dr < 2; ++dr) {
+        score += (slot_px(tag, dr, 1) - slot_px(*right->second, dr, 0)).norm() / side;
+      }
+      ++pairs;
+    }
+    if (const auto above = at.find({tag.row + 1, tag.col}); above != at.end()) {
+      for (int dc = 0; dc < 2; ++dc) {
+        score += (slot_px(tag, 1, dc) - slot_px(*above->second, 0, dc)).norm() / side;
+      }
+      ++pairs;
+    }
+  }
+  return pairs > 0 ? score : -1.0;
+}
+
+// The board's tags OpenCV aruco finds in `image` (family 36h11, a border of two bits), by id.
+std::map<int, DetectedTag> FindTags(const cv::Mat& image, const BoardSpec& board) {
+  const cv::Ptr<cv::aruco::Dictionary> dictionary =
+      cv::aruco::getPredefinedDictionary(cv::aruco::DICT_APRILTAG_36h11);
+  const cv::Ptr<cv::aruco::DetectorParameters> parameters = cv::aruco::DetectorParameters::create();
+  parameters->markerBorderBits = 2;
+  // A mirror bends a tag's sides, so that a homography of its four corners reads its cells a
+  // little off: they are read from 8 x 8 pixels each and only at their centres (on four renders
+  // of 35-pixel tags through the synthetic mirror, 75 of 80 tags are read, against 66 with
+  // OpenCV's defaults of 4 pixels and a margin of 0.13).
+  parameters->perspectiveRemovePixelPerCell = 8;
+  parameters->perspectiveRemoveIgnoredMarginPerCell = 0.3;
+  std::vector<std::vector<cv::Point2f>> marker_corners;
+  std::vector<int> marker_ids;
+  cv::aruco::detectMarkers(image, dictionary, marker_corners, marker_ids, parameters);
+  const int tag_cols = board.cols / 2, tag_rows = board.rows / 2;
+  std::map<int, DetectedTag> tags;
+  std::set<int> repeated;
+  for (size_t i = 0; i < marker_ids.size(); ++i) {
+    const int id = marker_ids[i];
+    if (id < 0 || id >= tag_cols * tag_rows) continue;  // a tag of another grid
+    DetectedTag tag;
+    tag.row = id / tag_cols;
+    tag.col = id % tag_cols;
+    for (int k = 0; k < 4; ++k) {
+      const cv::Point2f& corner = marker_corners[i][k];
+      tag.corners_px[k] = {corner.x, corner.y};
+    }
+    if (!tags.emplace(id, tag).second) repeated.insert(id);
+  }
+  for (const int id : repeated) tags.erase(id);  // one id seen twice (a reflection): neither
+  return tags;
+}
+
+// Kalibr's AprilGrid: tags of family 36h11 with a border of two bits, found by OpenCV aruco,
+// each tag's four corners refined to sub-pixel (they touch the grid's small black squares, so
+// each is an X-junction) and numbered as Kalibr numbers them. Partial views count.
+BoardDetection DetectAprilgrid(const cv::Mat& grey, const BoardSpec& board,
+                               const DetectOptions& options) {
+  std::vector<DetectedTag> tags;
+  for (const auto& [id, tag] : FindTags(grey, board)) tags.push_back(tag);
+  if (options.refine_subpixel && !tags.empty()) {
+    std::vector<cv::Point2f> corners;
+    double side_px = 0.0;
+    for (const DetectedTag& tag : tags) {
+      side_px += (tag.corners_px[0] - tag.corners_px[2]).norm() / std::sqrt(2.0) / tags.size();
+      for (const Eigen::Vector2d& corner : tag.corners_px) {
+        corners.emplace_back(corner.x(), corner.y());
+      }
+    }
+    // The window stays within the black square beside the corner (0.3 of a tag in Kalibr's
+    // default target).
+    const int half = std::clamp(static_cast<int>(std::lround(0.12 * side_px)), 2, 8);
+    cv::cornerSubPix(grey, corners, cv::Size(half, half), cv::Size(-1, -1),
+                     cv::TermCriteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 40, 0.01));
+    for (size_t t = 0; t < tags.size(); ++t) {
+      for (int k = 0; k < 4; ++k) {
+        tags[t].corners_px[k] = {corners[4 * t + k].x, corners[4 * t + k].y};
+      }
+    }
+  }
+  BoardDetection detection;
+  detection.method = "aprilgrid";
+  if (static_cast<int>(tags.size()) < options.min_aprilgrid_tags) {
+    detection.reason = "found " + std::to_string(tags.size()) + " of the " +
+                       std::to_string(board.NumCorners() / 4) + " tags of the " + board.Describe() +
+                       " (at least " + std::to_string(options.min_aprilgrid_tags) + " needed)";
+    return detection;
+  }
+  int best_turn = 0;
+  bool best_mirrored = false;
+  double best_score = std::numeric_limits<double>::infinity();
+  for (const bool mirrored : {false, true}) {
+    for (int turn = 0; turn < 4; ++turn) {
+      const double score = FacingCornerScore(tags, turn, mirrored);
+      if (score >= 0.0 && score < best_score) {
+        best_score = score;
+        best_turn = turn;
+        best_mirrored = mirrored;
+      }
+    }
+  }
+  std::vector<std::pair<int, Eigen::Vector2d>> corners;
+  for (const DetectedTag& tag : tags) {
+    for (int slot = 0; slot < 4; ++slot) {
+      const int id = (2 * tag.row + kTagSlots[slot][0]) * board.cols + 2 * tag.col +
+                     kTagSlots[slot][1];
+      corners.emplace_back(id, tag.corners_px[CornerForSlot(slot, best_turn, best_mirrored)]);
+    }
+  }
+  std::sort(corners.begin(), corners.end(),
+            [](const auto& a, const auto& b) { return a.first < b.first; });
+  for (const auto& [id, pixel] : corners) {
+    detection.corner_ids.push_back(id);
+    detection.corners_px.push_back(pixel);
+  }
+  detection.found = true;
+  return detection;
+}
+
 // A rough model for the hint path: xi = 1, principal point at the image centre, and the gamma
 // under which a board pose explains the four hinted corners best.
 std::optional<std::pair<CameraModel, Rigid3d>> ModelFromHint(
@@ -746,6 +901,7 @@ std::string ValidateBoardGrid(const cv::Mat& image, const BoardSpec& board,
 
 void DetectOptions::Check() const {
   OMNIRIG_CHECK_AT_LEAST(min_charuco_corners, 4);
+  OMNIRIG_CHECK_AT_LEAST(min_aprilgrid_tags, 1);
   if (outer_corners_hint_px) {
     for (const auto& corner : *outer_corners_hint_px) {
       OMNIRIG_CHECK(corner.allFinite(), "detect: hint corners must be finite");
@@ -765,13 +921,15 @@ BoardDetection DetectBoard(const cv::Mat& image, const BoardSpec& board,
   BoardDetection detection;
   if (board.type == BoardSpec::Type::kCharuco) {
     detection = DetectCharuco(grey, board, options);
+  } else if (board.type == BoardSpec::Type::kAprilgrid) {
+    detection = DetectAprilgrid(grey, board, options);
   } else if (options.outer_corners_hint_px) {
     detection = DetectFromHint(grey, board, options);
   } else {
     detection = DetectCheckerboard(grey, board, options);
   }
   if (detection.found && options.refine_subpixel && detection.method != "hint" &&
-      detection.method != "charuco") {
+      detection.method != "charuco" && detection.method != "aprilgrid") {
     const std::vector<double> square_px =
         RefineGrid(grey, board, options.fit_corner_model, &detection);
     if (options.check_grid) CheckGrid(grey, board, options, square_px, &detection);

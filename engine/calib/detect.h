@@ -9,7 +9,8 @@
 // corner is checked against its grid neighbours (grid_check.h) and a wrong one refined again from
 // their prediction or left out. With a model from an earlier calibration, or with the four outer
 // corners given by the user, every corner is predicted and refined instead (the paper's tool's
-// hint path). ChArUco boards go through OpenCV aruco and may be partial.
+// hint path). ChArUco boards and Kalibr's AprilGrids go through OpenCV aruco and may be
+// partial.
 
 #include <array>
 #include <optional>
@@ -33,7 +34,8 @@ struct BoardDetection {
   // BoardSpec::ObjectPoints().
   std::vector<Eigen::Vector2d> corners_px;
   std::vector<int> corner_ids;
-  std::string method;  // which detector found it ("sb", "classic", "hint", "model", "charuco")
+  std::string method;  // which detector found it ("sb", "classic", "hint", "model", "charuco",
+                       // "aprilgrid")
   // The grid check (DetectOptions::check_grid): corners it refined again from their
   // neighbours' prediction, and the ids it left out because they still disagreed.
   int num_rerefined_corners = 0;
@@ -71,6 +73,9 @@ struct DetectOptions {
   bool allow_exhaustive = false;
   // A ChArUco detection needs at least this many corners.
   int min_charuco_corners = 6;
+  // An AprilGrid detection needs at least this many tags (two: the relative place of two tags
+  // tells how their corners are labelled, see DetectAprilgrid).
+  int min_aprilgrid_tags = 2;
   // The board's four outer corners given by the user, in this order: corner id 0, id cols-1
   // (end of the first row), id rows*cols-1 (last), id (rows-1)*cols (start of the last row).
   std::optional<std::array<Eigen::Vector2d, 4>> outer_corners_hint_px;

@@ -149,7 +149,11 @@ bool DetectMissed(const std::filesystem::path& dir, const BoardSpec& board,
         cv::imread((dir / (*views)[missed[k]].name).string(), cv::IMREAD_COLOR);
     if (image.empty() || image.cols != width || image.rows != height) return;
     BoardDetection detection;
-    if (model) detection = RedetectWithModel(image, board, *model, options.detect);
+    // Growing a partial grid of X-corners with the model finds checkerboards (a ChArUco board
+    // is one); an AprilGrid's detector already takes partial views.
+    if (model && board.type != BoardSpec::Type::kAprilgrid) {
+      detection = RedetectWithModel(image, board, *model, options.detect);
+    }
     if (!detection.found && detect) detection = DetectBoard(image, board, options.detect);
     if (model || detect) found[k] = std::move(detection);
   };

@@ -491,7 +491,7 @@ PairsWithOrder EstimateOrderedPairPoses(const CameraModel& cam0, const CameraMod
                                         const ProgressSink& progress, RelativePoseReport* report) {
   PairsWithOrder ordered;
   ordered.symmetries = BoardGridSymmetries(board);
-  if (!options.resolve_corner_order || board.type == BoardSpec::Type::kCharuco) {
+  if (!options.resolve_corner_order || board.type != BoardSpec::Type::kCheckerboard) {
     ordered.symmetries.resize(1);
   }
   ordered.poses.resize(pairs.size());
