@@ -4,6 +4,7 @@
 #include <sstream>
 
 #include "api/json_fields.h"
+#include "engine/calib/model_io.h"
 #include "engine/util/check.h"
 #include "engine/util/error_prefix.h"
 
@@ -62,41 +63,68 @@ BoardSpec BoardFromJson(const json& board) {
   return spec;
 }
 
+std::string DatasetYamlName(const json& value, const std::string& field, const std::string& what) {
+  const std::string name = value.is_string() ? value.get<std::string>() : std::string();
+  OMNIRIG_CHECK(IsYamlName(name) && name.find("..") == std::string::npos && name[0] != '/',
+                "field '" << field << "' names " << what
+                          << " file of the dataset, which must be a .yaml file, got "
+                          << value.dump());
+  return name;
+}
+
 void ReadBoardParam(const json& params, BoardSpec* board, std::string* kalibr_target_file) {
   const json& value = Field(params, "params", "board");
-  if (!value.is_string()) {
+  if (value.is_string()) {
+    *kalibr_target_file = DatasetYamlName(value, "params.board", "a Kalibr target");
+  } else {
     *board = BoardFromJson(value);
-    return;
   }
-  const std::string name = value.get<std::string>();
-  OMNIRIG_CHECK(IsYamlName(name) && name.find("..") == std::string::npos && name[0] != '/',
-                "field 'params.board' names a Kalibr target file of the dataset, which must be a "
-                ".yaml file, got '"
-                    << name << "'");
-  *kalibr_target_file = name;
 }
 
-BoardSpec ReadKalibrTargetFile(const std::filesystem::path& dataset_dir, const std::string& name) {
+namespace {
+
+std::string ReadDatasetFile(const std::filesystem::path& dataset_dir, const std::string& name) {
   std::ifstream file(dataset_dir / name, std::ios::binary);
-  OMNIRIG_CHECK(file, "board: the dataset has no file '" << name << "'");
+  OMNIRIG_CHECK(file, "the dataset has no file '" << name << "'");
   std::ostringstream text;
   text << file.rdbuf();
-  return WithErrorPrefix("board '" + name + "': ",
-                         [&] { return BoardFromKalibrTarget(text.str()); });
+  return text.str();
 }
 
-void CheckKalibrTargetFileIn(const std::string& name, const std::vector<std::string>& file_names) {
+}  // namespace
+
+BoardSpec ReadKalibrTargetFile(const std::filesystem::path& dataset_dir, const std::string& name) {
+  return WithErrorPrefix("board '" + name + "': ",
+                         [&] { return BoardFromKalibrTarget(ReadDatasetFile(dataset_dir, name)); });
+}
+
+StereoRig ReadKalibrCamchainFile(const std::filesystem::path& dataset_dir,
+                                 const std::string& name) {
+  return WithErrorPrefix("calibrations '" + name + "': ", [&] {
+    const StereoRig rig = FromKalibrCamchain(ReadDatasetFile(dataset_dir, name));
+    OMNIRIG_CHECK(rig.cam0.width > 0 && rig.cam1.width > 0,
+                  "each camera needs its 'resolution' (the images' size in pixels)");
+    return rig;
+  });
+}
+
+void CheckDatasetFileIn(const std::string& name, const std::string& field,
+                        const std::vector<std::string>& file_names) {
   if (name.empty()) return;
   std::string yaml_files;
   for (const std::string& file : file_names) {
     if (file == name) return;
     if (IsYamlName(file)) yaml_files += (yaml_files.empty() ? "" : ", ") + file;
   }
-  OMNIRIG_CHECK(false, "field 'params.board' names '"
-                           << name << "', which the dataset does not hold ("
-                           << (yaml_files.empty() ? "it has no .yaml file"
-                                                  : "its .yaml files: " + yaml_files)
-                           << "); upload the Kalibr target file or give the board as an object");
+  OMNIRIG_CHECK(false, "field '" << field << "' names '" << name
+                                 << "', which the dataset does not hold ("
+                                 << (yaml_files.empty() ? "it has no .yaml file"
+                                                        : "its .yaml files: " + yaml_files)
+                                 << "); upload it beside the images");
+}
+
+void CheckKalibrTargetFileIn(const std::string& name, const std::vector<std::string>& file_names) {
+  CheckDatasetFileIn(name, "params.board", file_names);
 }
 
 bool IsSideFile(const std::string& name) { return IsYamlName(name) || EndsWith(name, ".tum"); }

@@ -14,6 +14,7 @@
 #include <nlohmann/json.hpp>
 
 #include "engine/calib/board.h"
+#include "engine/geometry/camera_model.h"
 
 namespace omnirig::api {
 
@@ -33,6 +34,21 @@ BoardSpec ReadKalibrTargetFile(const std::filesystem::path& dataset_dir, const s
 // At submission: a named target file is among the dataset's files (throws InvalidArgument
 // listing the dataset's .yaml files otherwise). Nothing to check for an empty name.
 void CheckKalibrTargetFileIn(const std::string& name, const std::vector<std::string>& file_names);
+
+// The name of a .yaml file of the dataset given in `field` (e.g. "params.calibrations"), `what`
+// naming what it must hold in the message ("a Kalibr camchain"). Throws InvalidArgument for a
+// value that is not such a name.
+std::string DatasetYamlName(const nlohmann::json& value, const std::string& field,
+                            const std::string& what);
+
+// At submission: `name` (from `field`) is among the dataset's files; throws InvalidArgument
+// listing the dataset's .yaml files otherwise. Nothing to check for an empty name.
+void CheckDatasetFileIn(const std::string& name, const std::string& field,
+                        const std::vector<std::string>& file_names);
+
+// The two cameras and the extrinsic of a Kalibr camchain of the dataset (omni-radtan; throws
+// InvalidArgument naming the file and what is wrong with it).
+StereoRig ReadKalibrCamchainFile(const std::filesystem::path& dataset_dir, const std::string& name);
 
 // True for the dataset's files that are not images of a board (.tum trajectories, .yaml
 // targets and camera chains), which the board-detecting jobs leave out.

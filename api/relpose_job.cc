@@ -40,7 +40,10 @@ RelativePoseParams RelativePoseParamsFromJson(const json& params) {
                     "huber_loss_px", "max_num_iterations", "sync_false_alarm_rate"});
   RelativePoseParams out;
   ReadBoardParam(params, &out.board, &out.kalibr_target_file);
-  if (params.contains("calibrations")) {
+  if (params.contains("calibrations") && params["calibrations"].is_string()) {
+    out.kalibr_camchain_file = DatasetYamlName(params["calibrations"], "params.calibrations",
+                                               "a Kalibr camchain");
+  } else if (params.contains("calibrations")) {
     const json& calibrations = params["calibrations"];
     CheckKnownFields(calibrations, "calibrations", {"cam0", "cam1"});
     out.cam0_calibration_job = JobIdField(calibrations, "calibrations", "cam0");
@@ -55,7 +58,8 @@ RelativePoseParams RelativePoseParamsFromJson(const json& params) {
         "field 'params.intrinsics_model' must be auto, fixed, tangential_fixed, "
         "tangential_free_cam0, tangential_free_cam1 or free, got '"
             << model << "'");
-    OMNIRIG_CHECK(!out.cam0_calibration_job || !RigIntrinsicsModelNeedsOwnCalibration(model),
+    OMNIRIG_CHECK((!out.cam0_calibration_job && out.kalibr_camchain_file.empty()) ||
+                      !RigIntrinsicsModelNeedsOwnCalibration(model),
                   "'params.intrinsics_model' " << model
                                                << " needs the job to calibrate the cameras "
                                                   "itself (no 'params.calibrations')");
@@ -227,6 +231,17 @@ json RunRelativePoseJob(const json& params, const JobContext& context) {
   const std::vector<ImagePairNames> pairs = MatchImagePairs(context.image_names);
   std::array<std::optional<GivenCamera>, 2> given;
   std::array<json, 2> camera_json, provenance;
+  std::optional<Rigid3d> kalibr_cam0_from_cam1;
+  if (!parsed.kalibr_camchain_file.empty()) {
+    const StereoRig chain =
+        ReadKalibrCamchainFile(context.dataset_dir, parsed.kalibr_camchain_file);
+    for (int c = 0; c < 2; ++c) {
+      given[c] = GivenCamera{c == 0 ? chain.cam0 : chain.cam1, {}};
+      camera_json[c] = CameraToJson(given[c]->model);
+      provenance[c] = {{"source", "kalibr_camchain"}, {"file", parsed.kalibr_camchain_file}};
+    }
+    kalibr_cam0_from_cam1 = chain.cam0_from_cam1;
+  }
   if (parsed.cam0_calibration_job) {
     const std::string* jobs[2] = {&*parsed.cam0_calibration_job, &*parsed.cam1_calibration_job};
     for (int c = 0; c < 2; ++c) {
@@ -251,6 +266,13 @@ json RunRelativePoseJob(const json& params, const JobContext& context) {
   json result = RelativePoseResultToJson(report.fit, camera_json[0], camera_json[1],
                                          report.intrinsics_refined);
   result["calibrations"] = {{"cam0", provenance[0]}, {"cam1", provenance[1]}};
+  if (kalibr_cam0_from_cam1) {
+    // The camchain's own extrinsic beside this job's estimate, for comparison.
+    result["kalibr_camchain"] = {
+        {"file", parsed.kalibr_camchain_file},
+        {"cam0_from_cam1", PoseToJson(*kalibr_cam0_from_cam1)},
+        {"baseline_m", kalibr_cam0_from_cam1->translation.norm()}};
+  }
   result["intrinsics_model"] =
       report.selection ? ModelSelectionToJson(*report.selection)
                        : json{{"chosen", report.intrinsics_model}, {"selection", "given"}};
@@ -273,8 +295,9 @@ JobType RelativePoseJobType() {
     return references;
   };
   type.check_inputs = [](const json& params, const SubmissionInputs& inputs) {
-    CheckKalibrTargetFileIn(RelativePoseParamsFromJson(params).kalibr_target_file,
-                            inputs.file_names());
+    const RelativePoseParams parsed = RelativePoseParamsFromJson(params);
+    CheckKalibrTargetFileIn(parsed.kalibr_target_file, inputs.file_names());
+    CheckDatasetFileIn(parsed.kalibr_camchain_file, "params.calibrations", inputs.file_names());
   };
   type.run = [](const json& params, const JobContext& context) {
     json result = RunRelativePoseJob(params, context);

@@ -7,9 +7,10 @@
 //   {"board": {"type": "checkerboard" | "charuco", "cols", "rows", "square_size_mm",
 //              "marker_size_mm", "aruco_dictionary"} | {"type": "aprilgrid", ...} | "NAME.yaml",
 //                                                                 (api/board_json.h)
-//    "calibrations": {"cam0": JOB_ID, "cam1": JOB_ID},            (optional: without it both
-//                                                                  cameras are calibrated from
-//                                                                  their own images first)
+//    "calibrations": {"cam0": JOB_ID, "cam1": JOB_ID} | "NAME.yaml"  (optional: without it
+//        both cameras are calibrated from their own images first; a name is a Kalibr camchain
+//        of the dataset, omni-radtan, whose two cameras are taken as given calibrations
+//        without views, its T_cn_cnm1 reported beside the estimate as `kalibr_camchain`)
 //    "intrinsics_model": "auto" | "fixed" | "tangential_fixed" | "tangential_free_cam0" |
 //                        "tangential_free_cam1" | "free"
 //        (default "auto": each candidate model (each camera's own calibration kept; k3 = k4 = 0
@@ -65,6 +66,7 @@ struct RelativePoseParams {
   std::string kalibr_target_file;  // "board": "NAME.yaml", read when the job runs
   std::optional<std::string> cam0_calibration_job;  // both or neither
   std::optional<std::string> cam1_calibration_job;
+  std::string kalibr_camchain_file;  // "calibrations": "NAME.yaml", read when the job runs
   RigFromImagesOptions options;  // intrinsics_model and the fit's tunables
 };
 

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <fstream>
 #include <iomanip>
 #include <random>
 #include <sstream>
@@ -15,6 +16,7 @@
 #include "api/camera_json.h"
 #include "api/relpose_job.h"
 #include "engine/calib/calibrate.h"
+#include "engine/calib/model_io.h"
 #include "engine/calib/detect.h"
 #include "engine/synth/presets.h"
 #include "testing/synth/calib_board.h"
@@ -125,6 +127,28 @@ TEST_F(RelposeJob, WithCalibrationsRecoversTheRenderedRig) {
   EXPECT_EQ(last_message.rfind(baseline.str(), 0), 0u) << last_message;
   EXPECT_NE(last_message.find(" mm, rotation "), std::string::npos) << last_message;
   EXPECT_NE(last_message.find("8 of 8 pairs used"), std::string::npos) << last_message;
+}
+
+// The cameras given as a Kalibr camchain of the dataset (as a user who calibrated with Kalibr
+// has them): taken as given calibrations, the camchain's own extrinsic reported beside.
+TEST_F(RelposeJob, WithAKalibrCamchainOfTheDataset) {
+  StereoRig chain = set_->rig;
+  chain.cam0_from_cam1.translation *= 1.02;  // Kalibr's extrinsic, not this job's estimate
+  {
+    std::ofstream file(*dir_ / "camchain.yaml");
+    file << ToKalibrCamchain(chain, nullptr);
+  }
+  const json result = RunRelativePoseJob(
+      {{"board", Board()}, {"calibrations", "camchain.yaml"}, {"intrinsics_model", "fixed"}},
+      Context());
+  std::filesystem::remove(*dir_ / "camchain.yaml");
+  const StereoRig rig = RigFromJson(result);
+  const double truth_m = set_->rig.cam0_from_cam1.translation.norm();
+  EXPECT_LT(std::abs(rig.cam0_from_cam1.translation.norm() - truth_m), 1e-4);
+  EXPECT_EQ(result["calibrations"]["cam0"]["source"], "kalibr_camchain");
+  EXPECT_EQ(result["calibrations"]["cam1"]["file"], "camchain.yaml");
+  EXPECT_EQ(result["cameras"]["cam1"], CameraToJson(set_->rig.cam1));
+  EXPECT_NEAR(result["kalibr_camchain"]["baseline_m"].get<double>(), 1.02 * truth_m, 1e-9);
 }
 
 // Given calibrations made from each camera's 8 pair images and 8 views of its own (another

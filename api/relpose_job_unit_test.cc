@@ -169,6 +169,32 @@ TEST(RelposeJson, JobTypeIsRegisteredAndNamesItsCalibrations) {
   EXPECT_THROW(type->validate({{"board", Board()}, {"extra", 1}}), InvalidArgument);
 }
 
+// A Kalibr camchain of the dataset in place of two calibration jobs.
+TEST(RelposeJson, CalibrationsAsAKalibrCamchainOfTheDataset) {
+  const JobType type = RelativePoseJobType();
+  const json params = {{"board", Board()}, {"calibrations", "camchain.yaml"}};
+  EXPECT_EQ(RelativePoseParamsFromJson(params).kalibr_camchain_file, "camchain.yaml");
+  EXPECT_TRUE(type.referenced_jobs(params).empty());
+  EXPECT_NE(ErrorOf([&] {
+              RelativePoseParamsFromJson({{"board", Board()}, {"calibrations", "chain.txt"}});
+            }).find("'params.calibrations' names a Kalibr camchain"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf([&] {
+              RelativePoseParamsFromJson({{"board", Board()},
+                                          {"calibrations", "camchain.yaml"},
+                                          {"intrinsics_model", "tangential_fixed"}});
+            }).find("intrinsics_model"),
+            std::string::npos);
+  SubmissionInputs inputs;
+  inputs.images = {{"cam0/a.png", 640, 480}, {"cam1/a.png", 640, 480}, {"other.yaml", 0, 0}};
+  EXPECT_NE(ErrorOf([&] { type.check_inputs(params, inputs); })
+                .find("'params.calibrations' names 'camchain.yaml', which the dataset does not "
+                      "hold (its .yaml files: other.yaml)"),
+            std::string::npos);
+  inputs.images.push_back({"camchain.yaml", 0, 0});
+  EXPECT_NO_THROW(type.check_inputs(params, inputs));
+}
+
 TEST(RelposeJson, ResultHasTheIssueKeys) {
   RelativePoseReport report;
   report.success = true;

@@ -7,7 +7,8 @@
 //     intrinsics [xi, fu, fv, pu, pv], distortion_coeffs [k1, k2, r1, r2], resolution [w, h].
 // Neither format has k5; Kalibr has no skew. Exports return a warning for each parameter they
 // drop (and write it into the file as a comment); CalibrationOptions fixes k5 and skew at zero
-// by default so that exports are exact. The readers of both formats (for round-trip tests) are
+// by default so that exports are exact. Kalibr camchains are also read (a rig's cameras given as
+// the camchain a user calibrated with Kalibr); the OpenCV reader, for round-trip tests, is
 // testing/calib/model_import.h.
 
 #include <string>
@@ -30,5 +31,13 @@ std::string ToKalibrOmniRadtan(const CameraModel& camera, std::vector<std::strin
 // cam1 with T_cn_cnm1 = cam1_from_cam0 (maps points in cam0's frame into cam1's; translation in
 // metres) as a 4x4 matrix. `warnings` receives what the format drops, per camera.
 std::string ToKalibrCamchain(const StereoRig& rig, std::vector<std::string>* warnings);
+
+// Parses the camera `camera_name` of a Kalibr camchain YAML. Throws InvalidArgument for another
+// camera or distortion model or missing keys.
+CameraModel FromKalibrOmniRadtan(const std::string& text, const std::string& camera_name = "cam0");
+
+// Parses a two-camera Kalibr camchain (cam0, cam1 with T_cn_cnm1; omni-radtan). Throws
+// InvalidArgument for missing keys or a T_cn_cnm1 that is not a rigid transform.
+StereoRig FromKalibrCamchain(const std::string& text);
 
 }  // namespace omnirig

@@ -112,6 +112,9 @@ TEST(ModelIo, KalibrCamchainRoundTripKeepsBothCamerasAndTheExtrinsic) {
   const std::string text = ToKalibrCamchain(rig, &warnings);
   EXPECT_TRUE(warnings.empty());
   EXPECT_NE(text.find("T_cn_cnm1"), std::string::npos) << text;
+  // Each camera names the other as the one it overlaps with, as Kalibr writes them.
+  EXPECT_NE(text.find("cam0:\n  cam_overlaps: [1]\n"), std::string::npos) << text;
+  EXPECT_NE(text.find("  cam_overlaps: [0]\n", text.find("cam1:\n")), std::string::npos) << text;
   const StereoRig back = FromKalibrCamchain(text);
   ExpectSameCamera(rig.cam0, back.cam0);
   ExpectSameCamera(rig.cam1, back.cam1);
@@ -132,6 +135,25 @@ TEST(ModelIo, KalibrCamchainRoundTripKeepsBothCamerasAndTheExtrinsic) {
                InvalidArgument);
 }
 
+// A camchain as Kalibr writes it: 4x4 matrices in block style, cam_overlaps, rostopic.
+TEST(ModelIo, ReadsKalibrsOwnCamchainLayout) {
+  const StereoRig rig = FromKalibrCamchain(
+      "cam0:\n  cam_overlaps: [1]\n  camera_model: omni\n"
+      "  distortion_coeffs: [-0.0617, 0.0125, 0.0004, -0.0003]\n  distortion_model: radtan\n"
+      "  intrinsics: [0.94, 253.4, 254.6, 514.2, 386.1]\n  resolution: [1024, 768]\n"
+      "  rostopic: /rig/cam0/image_raw\n"
+      "cam1:\n  T_cn_cnm1:\n  - [1.0, 0.0, 0.0, 0.001]\n  - [0.0, 1.0, 0.0, 0.0]\n"
+      "  - [0.0, 0.0, 1.0, -0.1]\n  - [0.0, 0.0, 0.0, 1.0]\n  cam_overlaps: [0]\n"
+      "  camera_model: omni\n  distortion_coeffs: [-0.06, 0.012, 0.0003, -0.0002]\n"
+      "  distortion_model: radtan\n  intrinsics: [0.95, 252.0, 253.1, 511.8, 383.9]\n"
+      "  resolution: [1024, 768]\n  rostopic: /rig/cam1/image_raw\n");
+  EXPECT_DOUBLE_EQ(rig.cam0.intrinsics.gamma_u(), 253.4);
+  EXPECT_DOUBLE_EQ(rig.cam1.intrinsics.xi(), 0.95);
+  EXPECT_EQ(rig.cam1.width, 1024);
+  // T_cn_cnm1 is cam1_from_cam0: cam1 0.1 m along cam0's +z (below it), 1 mm along -x.
+  EXPECT_LT((rig.cam0_from_cam1.translation - Eigen::Vector3d(-0.001, 0, 0.1)).norm(), 1e-12);
+}
+
 TEST(ModelIo, MalformedInputsThrow) {
   EXPECT_THROW(FromOpenCvOmnidir("%YAML:1.0\nxi: 1.0\n"), InvalidArgument);
   EXPECT_THROW(FromOpenCvOmnidir("not a document"), InvalidArgument);
@@ -140,6 +162,14 @@ TEST(ModelIo, MalformedInputsThrow) {
       FromKalibrOmniRadtan("cam0:\n  camera_model: omni\n  intrinsics: [1, 2, x, 4, 5]\n"
                            "  distortion_model: radtan\n  distortion_coeffs: [0, 0, 0, 0]\n"),
       InvalidArgument);
+  // A camchain is a file a user uploads: sizes and numbers out of range are refused, not cast.
+  const std::string camera =
+      "cam0:\n  camera_model: omni\n  intrinsics: [0.9, 300, 300, 320, 240]\n"
+      "  distortion_model: radtan\n  distortion_coeffs: [0, 0, 0, 0]\n";
+  EXPECT_NO_THROW(FromKalibrOmniRadtan(camera + "  resolution: [640, 480]\n"));
+  EXPECT_THROW(FromKalibrOmniRadtan(camera + "  resolution: [1e300, 480]\n"), InvalidArgument);
+  EXPECT_THROW(FromKalibrOmniRadtan(camera + "  resolution: [640.5, 480]\n"), InvalidArgument);
+  EXPECT_THROW(FromKalibrOmniRadtan(camera + "  resolution: [-640, 480]\n"), InvalidArgument);
 }
 
 // Writes two views of a 3 x 2 board (spacing 30 mm, stored in mm) as OpenCV FileStorage.

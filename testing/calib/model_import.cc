@@ -1,7 +1,6 @@
 #include "testing/calib/model_import.h"
 
 #include <cmath>
-#include <map>
 #include <sstream>
 
 #include <opencv2/core.hpp>
@@ -36,54 +35,6 @@ cv::Mat ReadMatrix(const cv::FileStorage& fs, const std::vector<std::string>& na
   OMNIRIG_CHECK(false, "opencv omnidir: missing node '" << names.front() << "'");
 }
 
-// The bracketed numbers after "key:" in a YAML flow sequence, e.g. "intrinsics: [1, 2, 3]".
-std::vector<double> ParseFlowSequence(const std::string& value, const std::string& key) {
-  const size_t open = value.find('['), close = value.find(']');
-  OMNIRIG_CHECK(open != std::string::npos && close != std::string::npos && open < close,
-                "kalibr: '" << key << "' must be a [..] list");
-  std::string inner = value.substr(open + 1, close - open - 1);
-  for (char& c : inner) {
-    if (c == ',') c = ' ';
-  }
-  std::istringstream is(inner);
-  std::vector<double> numbers;
-  double x;
-  while (is >> x) numbers.push_back(x);
-  OMNIRIG_CHECK(is.eof(), "kalibr: '" << key << "' holds a non-number");
-  return numbers;
-}
-
-// key -> value text of the camera block `camera_name` (indented lines after "camera_name:").
-std::map<std::string, std::string> KalibrCameraBlock(const std::string& text,
-                                                     const std::string& camera_name) {
-  std::istringstream is(text);
-  std::string line;
-  bool inside = false;
-  std::map<std::string, std::string> block;
-  while (std::getline(is, line)) {
-    const size_t hash = line.find('#');
-    if (hash != std::string::npos) line = line.substr(0, hash);
-    if (line.find_first_not_of(" \t\r") == std::string::npos) continue;
-    const bool indented = line[0] == ' ' || line[0] == '\t';
-    if (!indented) {
-      inside = line.substr(0, line.find(':')) == camera_name;
-      continue;
-    }
-    const size_t colon = line.find(':');
-    if (!inside || colon == std::string::npos) continue;
-    const size_t start = line.find_first_not_of(" \t");
-    block[line.substr(start, colon - start)] = line.substr(colon + 1);
-  }
-  OMNIRIG_CHECK(!block.empty(), "kalibr: no camera '" << camera_name << "'");
-  return block;
-}
-
-std::string Trimmed(const std::string& s) {
-  const size_t a = s.find_first_not_of(" \t\r\"'");
-  const size_t b = s.find_last_not_of(" \t\r\"'");
-  return a == std::string::npos ? "" : s.substr(a, b - a + 1);
-}
-
 }  // namespace
 
 CameraModel FromOpenCvOmnidir(const std::string& text) {
@@ -109,76 +60,6 @@ CameraModel FromOpenCvOmnidir(const std::string& text) {
   if (!fs["image_width"].empty()) camera.width = static_cast<int>(fs["image_width"]);
   if (!fs["image_height"].empty()) camera.height = static_cast<int>(fs["image_height"]);
   in.Check();
-  return camera;
-}
-
-StereoRig FromKalibrCamchain(const std::string& text) {
-  StereoRig rig;
-  rig.cam0 = FromKalibrOmniRadtan(text, "cam0");
-  rig.cam1 = FromKalibrOmniRadtan(text, "cam1");
-  const std::map<std::string, std::string> block = KalibrCameraBlock(text, "cam1");
-  const auto it = block.find("T_cn_cnm1");
-  OMNIRIG_CHECK(it != block.end(), "kalibr: camera 'cam1' has no 'T_cn_cnm1'");
-  std::string numbers = it->second;
-  for (char& c : numbers) {
-    if (c == '[' || c == ']' || c == ',') c = ' ';
-  }
-  std::istringstream is(numbers);
-  std::vector<double> values;
-  double x;
-  while (is >> x) values.push_back(x);
-  OMNIRIG_CHECK(is.eof() && values.size() == 16,
-                "kalibr: T_cn_cnm1 must be a 4x4 matrix in one [[..], ..] list");
-  Eigen::Matrix3d rotation;
-  Eigen::Vector3d translation;
-  for (int r = 0; r < 3; ++r) {
-    for (int c = 0; c < 3; ++c) rotation(r, c) = values[4 * r + c];
-    translation[r] = values[4 * r + 3];
-  }
-  OMNIRIG_CHECK((rotation * rotation.transpose() - Eigen::Matrix3d::Identity()).norm() < 1e-6 &&
-                    rotation.determinant() > 0.0,
-                "kalibr: T_cn_cnm1's rotation is not a rotation");
-  rig.cam0_from_cam1 = Rigid3d(Eigen::Quaterniond(rotation), translation).Inverse();
-  return rig;
-}
-
-CameraModel FromKalibrOmniRadtan(const std::string& text, const std::string& camera_name) {
-  const std::map<std::string, std::string> block = KalibrCameraBlock(text, camera_name);
-  auto get = [&](const std::string& key) -> const std::string& {
-    const auto it = block.find(key);
-    OMNIRIG_CHECK(it != block.end(),
-                  "kalibr: camera '" << camera_name << "' has no '" << key << "'");
-    return it->second;
-  };
-  OMNIRIG_CHECK(Trimmed(get("camera_model")) == "omni",
-                "kalibr: camera_model must be omni, got '" << Trimmed(get("camera_model")) << "'");
-  OMNIRIG_CHECK(
-      Trimmed(get("distortion_model")) == "radtan",
-      "kalibr: distortion_model must be radtan, got '" << Trimmed(get("distortion_model")) << "'");
-  const std::vector<double> intrinsics = ParseFlowSequence(get("intrinsics"), "intrinsics");
-  const std::vector<double> distortion =
-      ParseFlowSequence(get("distortion_coeffs"), "distortion_coeffs");
-  OMNIRIG_CHECK(intrinsics.size() == 5, "kalibr: intrinsics must hold 5 numbers");
-  OMNIRIG_CHECK(distortion.size() == 4, "kalibr: distortion_coeffs must hold 4 numbers");
-  CameraModel camera;
-  camera.intrinsics.params = {intrinsics[0],
-                              intrinsics[1],
-                              intrinsics[2],
-                              intrinsics[3],
-                              intrinsics[4],
-                              0.0,
-                              distortion[0],
-                              distortion[1],
-                              distortion[2],
-                              distortion[3],
-                              0.0};
-  if (block.count("resolution")) {
-    const std::vector<double> resolution = ParseFlowSequence(get("resolution"), "resolution");
-    OMNIRIG_CHECK(resolution.size() == 2, "kalibr: resolution must hold 2 numbers");
-    camera.width = static_cast<int>(resolution[0]);
-    camera.height = static_cast<int>(resolution[1]);
-  }
-  camera.intrinsics.Check();
   return camera;
 }
 

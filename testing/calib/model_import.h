@@ -1,13 +1,14 @@
 #pragma once
-// Readers for tests and benchmarks: the formats engine/calib/model_io.h exports (OpenCV omnidir
-// FileStorage and Kalibr's omni-radtan camchain, for round trips), and board corners stored the
-// way OpenCV's calibration samples store them (the real-data test and bench_calib).
+// Readers for tests and benchmarks: OpenCV omnidir FileStorage, which engine/calib/model_io.h
+// exports (for round trips; its Kalibr camchain reader is the product's), and board corners
+// stored the way OpenCV's calibration samples store them (the real-data test and bench_calib).
 
 #include <string>
 #include <vector>
 
 #include "engine/calib/board.h"
 #include "engine/calib/calibrate.h"
+#include "engine/calib/model_io.h"
 #include "engine/geometry/camera_model.h"
 
 namespace omnirig {
@@ -15,14 +16,6 @@ namespace omnirig {
 // Parses an OpenCV omnidir FileStorage document (YAML or XML text). Throws InvalidArgument
 // naming the missing or malformed node.
 CameraModel FromOpenCvOmnidir(const std::string& text);
-
-// Parses the camera `camera_name` of a Kalibr camchain YAML. Throws InvalidArgument for another
-// camera or distortion model or missing keys.
-CameraModel FromKalibrOmniRadtan(const std::string& text, const std::string& camera_name = "cam0");
-
-// Parses a two-camera Kalibr camchain (cam0, cam1 with T_cn_cnm1; omni-radtan). Throws
-// InvalidArgument for missing keys or a T_cn_cnm1 that is not a rigid transform.
-StereoRig FromKalibrCamchain(const std::string& text);
 
 // The corners of a FileStorage file (YAML or XML) holding the sequences "objectPoints" (per
 // view, board points in the board's plane z = 0, as 3-channel matrices) and "imagePoints" (per
