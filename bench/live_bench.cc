@@ -146,7 +146,6 @@ std::string SubmitRig(server::Service& service, const json& rig) {
   }
 }
 
-
 // The 1, 5 and 15 minute load averages: the machine may be shared while the bench runs.
 std::string LoadAverage() {
   std::ifstream in("/proc/loadavg");

@@ -5,11 +5,11 @@
 // plays a rendered recording against it and prints its figures.
 
 #include <gtest/gtest.h>
-#include <opencv2/imgcodecs.hpp>
 #include <signal.h>
 #include <sys/mount.h>
 #include <sys/statvfs.h>
 #include <sys/wait.h>
+#include <opencv2/imgcodecs.hpp>
 
 #include <cerrno>
 #include <cstdlib>
@@ -103,9 +103,8 @@ class LiveFaultsTest : public ::testing::Test {
   }
 
   void StartServer(const fs::path& data, const std::vector<std::string>& more = {}) {
-    std::vector<std::string> args = {"--port",           "0", "--data", data.string(),
-                                     "--workers",        "1", "--web",  "",
-                                     "--threads-per-job", "1"};
+    std::vector<std::string> args = {"--port", "0",     "--data", data.string(),       "--workers",
+                                     "1",      "--web", "",       "--threads-per-job", "1"};
     args.insert(args.end(), more.begin(), more.end());
     server_ = std::make_unique<ServerProcess>();
     port_ = server_->Start(args, dir_.path() / "server.log");
@@ -114,8 +113,8 @@ class LiveFaultsTest : public ::testing::Test {
 
   // A succeeded relative_pose job (the rendered rig).
   std::string SubmitRig() {
-    const json dataset = JsonOf(
-        client_->Post("/api/v1/datasets", json{{"name", "rig"}}.dump(), "application/json"));
+    const json dataset =
+        JsonOf(client_->Post("/api/v1/datasets", json{{"name", "rig"}}.dump(), "application/json"));
     const auto created = client_->Post(
         "/api/v1/jobs", json{{"type", "relative_pose"}, {"dataset", dataset["id"]}}.dump(),
         "application/json");
@@ -262,7 +261,7 @@ TEST_F(LiveFaultsTest, FramesOnAFullDiskAre507AndTheJobGoesOnWhenSpaceReturns) {
   EXPECT_EQ(Dataset(dataset)["image_count"], 8);
 }
 
-// The figure `label` printed by `omnirig live` (the number after it).
+// The number `omnirig live` printed in the first group of `pattern`.
 double Figure(const std::string& text, const std::string& pattern) {
   std::smatch match;
   if (!std::regex_search(text, match, std::regex(pattern))) {
