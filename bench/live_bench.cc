@@ -8,8 +8,14 @@
 // measures it (p50/p95/p99) and the client's round trip, the loops closed, the ATE after the
 // live job's finish (SE(3)-aligned against the render's poses, and as % of the path).
 //
+// Then it profiles the tracker (slam::Session, no HTTP) over the first --profile-frames frames,
+// every frame and every 10th: the mean wall and CPU milliseconds per frame of decoding and of
+// each tracking stage. The load average is printed with the figures: on a shared machine the
+// wall-clock figures grow with it.
+//
 // usage: bench_live [--rates 10,20,30] [--frames 600] [--laps 2] [--loop-length 50]
 //                   [--width 1024] [--height 768] [--threads 2] [--supersampling 4] [--dir DIR]
+//                   [--profile-frames 120]
 
 #include <cstdio>
 #include <cstdlib>
