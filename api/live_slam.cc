@@ -236,9 +236,18 @@ json RunLiveSlam(const json& params, const JobContext& context, const StereoRig&
     // whole map, which grows with the run.
     if (snapshot_due &&
         (stamps.size() == 1 || since_snapshot.ElapsedSeconds() >= kLiveArtifactInterval_s)) {
-      WriteSnapshot(rig, session.Snapshot(), stamps, context.output_dir);
+      try {
+        WriteSnapshot(rig, session.Snapshot(), stamps, context.output_dir);
+        snapshot_due = false;
+      } catch (const std::exception& e) {
+        // A full disk: the robot still gets its poses; the snapshot is tried again next time.
+        context.Log(std::string("the map and trajectory so far cannot be written: ") + e.what());
+        std::error_code ignored;
+        for (const char* temp : {".trajectory.json.part-live", ".map.ply.part-live"}) {
+          fs::remove(context.output_dir / temp, ignored);
+        }
+      }
       since_snapshot.Restart();
-      snapshot_due = false;
     }
     if (finish) break;
     // Idle: no frame received, nor one being tracked, for the timeout.

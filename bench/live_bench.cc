@@ -8,8 +8,14 @@
 // measures it (p50/p95/p99) and the client's round trip, the loops closed, the ATE after the
 // live job's finish (SE(3)-aligned against the render's poses, and as % of the path).
 //
+// Then it profiles the tracker (slam::Session, no HTTP) over the first --profile-frames frames,
+// every frame and every 10th: the mean wall and CPU milliseconds per frame of decoding and of
+// each tracking stage. The load average is printed with the figures: on a shared machine the
+// wall-clock figures grow with it.
+//
 // usage: bench_live [--rates 10,20,30] [--frames 600] [--laps 2] [--loop-length 50]
 //                   [--width 1024] [--height 768] [--threads 2] [--supersampling 4] [--dir DIR]
+//                   [--profile-frames 120]
 
 #include <cstdio>
 #include <cstdlib>
@@ -22,11 +28,14 @@
 
 #include <unistd.h>
 
+#include <opencv2/imgcodecs.hpp>
+
 #include <nlohmann/json.hpp>
 
 #include "api/camera_json.h"
 #include "api/job_types.h"
 #include "engine/slam/map_io.h"
+#include "engine/slam/session.h"
 #include "engine/synth/presets.h"
 #include "engine/util/timer.h"
 #include "server/cli/commands.h"
@@ -42,6 +51,7 @@ struct BenchArgs {
   std::vector<double> rates = {10, 20, 30};
   int frames = 600, laps = 2, width = 1024, height = 768, threads = 2, supersampling = 4;
   double loop_length_m = 50.0;
+  int profile_frames = 120;
   std::string dir;
 };
 
@@ -71,6 +81,8 @@ BenchArgs Parse(int argc, char** argv) {
       args.supersampling = std::atoi(next().c_str());
     else if (a == "--dir")
       args.dir = next();
+    else if (a == "--profile-frames")
+      args.profile_frames = std::atoi(next().c_str());
   }
   if (args.dir.empty()) {
     std::ostringstream dir;
@@ -140,6 +152,61 @@ std::string SubmitRig(server::Service& service, const json& rig) {
   }
 }
 
+// The 1, 5 and 15 minute load averages: the machine may be shared while the bench runs.
+std::string LoadAverage() {
+  std::ifstream in("/proc/loadavg");
+  std::string one, five, fifteen;
+  in >> one >> five >> fifteen;
+  return one + " " + five + " " + fifteen;
+}
+
+// Where a frame's time goes: the rendered frames tracked by a slam::Session (the live job's
+// tracker) in this thread, no HTTP, each `step`-th frame from the start (1: every frame, as a
+// server that keeps up tracks them; larger: as one that falls behind and skips the frames
+// between). Prints the mean per frame of decoding the two PNGs and of each tracking stage, and
+// the keyframes among the frames.
+void ProfileTracking(const BenchArgs& args, const json& rig_json, int step) {
+  const fs::path dir(args.dir);
+  std::vector<std::string> names;
+  for (const auto& entry : fs::directory_iterator(dir / "cam0")) {
+    names.push_back(entry.path().filename().string());
+  }
+  std::sort(names.begin(), names.end());
+  slam::SlamOptions options;
+  options.num_threads = args.threads;
+  slam::Session session(api::RigFromJson(rig_json), options);
+  slam::StageTimes total, cpu;
+  double decode_s = 0, track_s = 0;
+  int frames = 0, keyframes = 0;
+  for (size_t i = 0; i < names.size() && frames < args.profile_frames; i += step, ++frames) {
+    Timer decode;
+    slam::StereoImages images;
+    images.cam0 = cv::imread((dir / "cam0" / names[i]).string(), cv::IMREAD_COLOR);
+    images.cam1 = cv::imread((dir / "cam1" / names[i]).string(), cv::IMREAD_COLOR);
+    decode_s += decode.ElapsedSeconds();
+    Timer track;
+    const slam::FrameReport report = session.Track(names[i], images);
+    track_s += track.ElapsedSeconds();
+    total.Add(report.times);
+    cpu.Add(report.cpu_times);
+    keyframes += report.keyframe;
+  }
+  const auto ms = [frames](double s) { return 1000.0 * s / std::max(frames, 1); };
+  std::printf(
+      "every %2d. frame: %3d frames, %3d keyframes; ms per frame: decode %.1f, track %.1f = "
+      "detect %.1f + stereo %.1f + match %.1f + motion %.1f + map %.1f + local BA %.1f + "
+      "loop %.1f\n",
+      step, frames, keyframes, ms(decode_s), ms(track_s), ms(total.detect_s), ms(total.stereo_s),
+      ms(total.match_s), ms(total.motion_s), ms(total.map_s), ms(total.local_ba_s),
+      ms(total.loop_s));
+  std::printf(
+      "                 CPU ms per frame (both threads): detect %.1f + stereo %.1f + match %.1f + "
+      "motion %.1f + map %.1f + local BA %.1f + loop %.1f; load average %s\n",
+      ms(cpu.detect_s), ms(cpu.stereo_s), ms(cpu.match_s), ms(cpu.motion_s), ms(cpu.map_s),
+      ms(cpu.local_ba_s), ms(cpu.loop_s), LoadAverage().c_str());
+  std::fflush(stdout);
+}
+
 }  // namespace
 }  // namespace omnirig
 
@@ -165,6 +232,7 @@ int main(int argc, char** argv) {
       "live slam through `omnirig live`, %d frames %dx%d, %d laps of %.0f m, job threads "
       "%d, measured %s\n",
       args.frames, args.width, args.height, args.laps, args.loop_length_m, args.threads, date);
+  std::printf("load average before the runs (1, 5, 15 min): %s\n", LoadAverage().c_str());
   std::printf("%6s %8s %8s %9s %9s %9s %10s %6s %9s %8s\n", "rate", "tracked", "skipped", "p50 ms",
               "p95 ms", "p99 ms", "rt p95 ms", "loops", "ATE m", "ATE %");
   for (const double rate : args.rates) {
@@ -181,8 +249,24 @@ int main(int argc, char** argv) {
                 s.value("loops", 0), e.is_object() ? e["ate_rmse_m"].get<double>() : -1.0,
                 e.is_object() ? e["ate_percent_of_path"].get<double>() : -1.0,
                 code == 0 ? "" : "  (job did not succeed)");
+    // Where the live job's tracking time went, per tracked frame (the job's stage totals).
+    const auto stored = service.state().store->GetResult(s["job"].get<std::string>());
+    if (stored) {
+      const json r = json::parse(*stored);
+      const json t = r["timings_s"];
+      const double n = std::max(1, s["frames_tracked"].get<int>());
+      std::printf(
+          "       %d keyframes; ms per tracked frame: detect %.1f + stereo %.1f + match %.1f + "
+          "motion %.1f + map %.1f + local BA %.1f + loop %.1f; finish %.1f s; load average %s\n",
+          r.value("num_keyframes", 0), 1000 * t.value("detect", 0.0) / n,
+          1000 * t.value("stereo", 0.0) / n, 1000 * t.value("match", 0.0) / n,
+          1000 * t.value("motion", 0.0) / n, 1000 * t.value("map", 0.0) / n,
+          1000 * t.value("local_ba", 0.0) / n, 1000 * t.value("loop", 0.0) / n,
+          t.value("global_ba", 0.0), LoadAverage().c_str());
+    }
     std::fflush(stdout);
   }
+  for (const int step : {1, 10}) ProfileTracking(args, rig, step);
   std::error_code ignored;
   fs::remove_all(data, ignored);
   return 0;

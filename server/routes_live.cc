@@ -17,6 +17,7 @@
 #include "server/live_jobs.h"
 #include "server/service.h"
 #include "storage/atomic_file.h"
+#include "storage/data_dir.h"
 #include "storage/image_header.h"
 
 namespace omnirig::server {
@@ -228,35 +229,69 @@ PreparedFrame PrepareFrame(const std::map<std::string, FramePart>& parts, const 
   return prepared;
 }
 
-// Stores the frame's files in the dataset (written, fsynced, renamed, recorded together).
+// Refuses, before anything is written, a frame the disk cannot hold above the reserve the
+// server keeps (507, as an upload gets): the job goes on and takes frames again once space
+// returns.
+void CheckFrameRoom(ServiceState& state, int64_t incoming) {
+  const int64_t free_bytes = state.data_dir->FreeBytes();
+  if (free_bytes - incoming < state.options.min_free_bytes) {
+    throw HttpError(507, "insufficient_storage",
+                    "not enough free disk space to store this frame: free some space and send "
+                    "the next frames; the job goes on",
+                    {{"free_bytes", free_bytes},
+                     {"reserve_bytes", state.options.min_free_bytes},
+                     {"frame_bytes", incoming}});
+  }
+}
+
+// Stores the frame's files in the dataset (written, fsynced, renamed, recorded together): a
+// frame that cannot be stored whole leaves nothing behind.
 void StoreFrame(ServiceState& state, const std::string& dataset_id,
                 const std::vector<std::pair<std::string, std::string>>& files) {
+  int64_t incoming = 0;
+  for (const auto& file : files) incoming += static_cast<int64_t>(file.second.size());
+  CheckFrameRoom(state, incoming);
   std::vector<std::unique_ptr<storage::AtomicFileWriter>> writers;
   std::vector<storage::ImageRecord> records;
-  for (const auto& [name, bytes] : files) {
-    writers.push_back(
-        std::make_unique<storage::AtomicFileWriter>(state.data_dir->ImagesDir(dataset_id) / name));
-    writers.back()->Append(bytes);
-    const storage::FileDigest digest = writers.back()->Seal();
-    const storage::ImageHeader header = storage::ProbeImageHeader(
-        std::string_view(bytes).substr(0, std::min(bytes.size(), storage::kImageProbeBytes)));
-    records.push_back(
-        {name, digest.size, digest.sha256, header.width, header.height, header.content_type});
+  std::vector<std::filesystem::path> committed;
+  try {
+    for (const auto& [name, bytes] : files) {
+      writers.push_back(std::make_unique<storage::AtomicFileWriter>(
+          state.data_dir->ImagesDir(dataset_id) / name));
+      writers.back()->Append(bytes);
+      const storage::FileDigest digest = writers.back()->Seal();
+      const storage::ImageHeader header = storage::ProbeImageHeader(
+          std::string_view(bytes).substr(0, std::min(bytes.size(), storage::kImageProbeBytes)));
+      records.push_back(
+          {name, digest.size, digest.sha256, header.width, header.height, header.content_type});
+    }
+    std::lock_guard<std::mutex> lock(state.files_mutex);
+    const auto dataset = state.store->GetDataset(dataset_id);
+    if (!dataset) {
+      throw HttpError(409, "dataset_not_found",
+                      "the live job's dataset " + dataset_id + " was deleted");
+    }
+    if (dataset->image_count + 2 > state.options.max_images_per_dataset) {
+      throw HttpError(413, "too_many_images",
+                      "dataset " + dataset_id + " holds the most images a dataset may hold (" +
+                          std::to_string(state.options.max_images_per_dataset) + ")",
+                      {{"limit", state.options.max_images_per_dataset}});
+    }
+    for (size_t i = 0; i < writers.size(); ++i) {
+      writers[i]->Commit(/*sync_folder=*/true);
+      committed.push_back(state.data_dir->ImagesDir(dataset_id) / files[i].first);
+    }
+    state.store->PutImages(dataset_id, records);
+  } catch (const std::exception& e) {
+    // Neither camera's file stays without the other and its record.
+    std::error_code ignored;
+    for (const auto& path : committed) std::filesystem::remove(path, ignored);
+    if (dynamic_cast<const HttpError*>(&e) || !storage::IsDiskFull(e)) throw;
+    throw HttpError(507, "insufficient_storage",
+                    "the disk holding the data folder is full: the frame was not stored; free "
+                    "some space and send the next frames; the job goes on",
+                    {{"reason", e.what()}});
   }
-  std::lock_guard<std::mutex> lock(state.files_mutex);
-  const auto dataset = state.store->GetDataset(dataset_id);
-  if (!dataset) {
-    throw HttpError(409, "dataset_not_found",
-                    "the live job's dataset " + dataset_id + " was deleted");
-  }
-  if (dataset->image_count + 2 > state.options.max_images_per_dataset) {
-    throw HttpError(413, "too_many_images",
-                    "dataset " + dataset_id + " holds the most images a dataset may hold (" +
-                        std::to_string(state.options.max_images_per_dataset) + ")",
-                    {{"limit", state.options.max_images_per_dataset}});
-  }
-  for (auto& writer : writers) writer->Commit(/*sync_folder=*/true);
-  state.store->PutImages(dataset_id, records);
 }
 
 std::shared_ptr<LiveJob> RequireLiveJob(ServiceState& state, const std::string& id) {

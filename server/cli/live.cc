@@ -15,8 +15,8 @@
 
 #include <algorithm>
 #include <chrono>
-#include <condition_variable>
 #include <cmath>
+#include <condition_variable>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -26,6 +26,7 @@
 #include <map>
 #include <mutex>
 #include <optional>
+#include <sstream>
 #include <thread>
 
 #include <nlohmann/json.hpp>
@@ -188,6 +189,13 @@ json Evaluate(const json& trajectory, const fs::path& ground_truth,
           {"final_drift_percent", errors.final_drift_percent}};
 }
 
+// "20 Hz", "12.5 Hz": the rate as the user gave it.
+std::string FormatHz(double rate_hz) {
+  std::ostringstream text;
+  text << rate_hz << " Hz";
+  return text.str();
+}
+
 struct FrameOutcome {
   json answer;
   double round_trip_ms = 0;
@@ -245,8 +253,7 @@ int RunLive(const Args& args) {
   const std::string id = job["id"];
   std::cerr << "live job " << id << " (dataset " << job["dataset"].get<std::string>()
             << "): " << frames.size() << " frames at "
-            << (rate_hz > 0 ? std::to_string(rate_hz) + " Hz" : std::string("capture rate"))
-            << "\n";
+            << (rate_hz > 0 ? FormatHz(rate_hz) : std::string("capture rate")) << "\n";
 
   // Capture (this thread) and send (the sender thread) meet in a slot of one frame, the newest.
   struct Captured {
