@@ -11,6 +11,7 @@
 #include "api/service_json.h"
 #include "api/stereo_job.h"
 #include "engine/util/check.h"
+#include "server/dataset_recordings.h"
 #include "server/json_views.h"
 #include "server/live_jobs.h"
 #include "server/log_line.h"
@@ -92,6 +93,9 @@ void CheckInputs(ServiceState& state, const api::JobType& type,
     if (!result) throw InvalidArgument("job " + id + " has no result");
     return nlohmann::json::parse(*result);
   };
+  inputs.open_recording = [&inputs](const std::string& name) {
+    return OpenDatasetRecording(inputs.dataset_dir, inputs.file_names(), name);
+  };
   try {
     type.check_inputs(request.params, inputs);
   } catch (const InvalidArgument& e) {
@@ -123,8 +127,10 @@ void CreateJob(ServiceState& state, const HttpRequest& request, HttpResponse& re
     throw HttpError(400, "invalid_params", e.what());
   }
   CheckReferencedJobs(state, *type, parsed.params);
-  // A job on an empty dataset would be queued only to fail once it ran.
-  if (type->reads_images && dataset->image_count + dataset->video_count == 0) {
+  // A job on an empty dataset would be queued only to fail once it ran (a job naming a
+  // recording finds out whether the dataset holds it in its own check).
+  if (type->reads_images && dataset->image_count + dataset->video_count == 0 &&
+      !(parsed.params.is_object() && parsed.params.contains("recording"))) {
     throw HttpError(
         422, "dataset_empty",
         "dataset " + parsed.dataset + " has no images: upload them before creating a job",

@@ -5,9 +5,17 @@
 
 #include <gtest/gtest.h>
 
+#include <cstdlib>
 #include <fstream>
+#include <map>
 #include <sstream>
 
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "api/camera_json.h"
+#include "api/synth_json.h"
+#include "engine/synth/presets.h"
 #include "server/service.h"
 #include "testing/recordings/test_recordings.h"
 #include "tests/server_test_util.h"
@@ -46,7 +54,8 @@ class ServerRecordingTest : public ::testing::Test {
     options.min_free_bytes = 0;
     options.max_chunk_bytes = kChunk;
     service_ = std::make_unique<server::Service>(options);
-    client_ = MakeClient(service_->Start());
+    port_ = service_->Start();
+    client_ = MakeClient(port_);
     const auto created =
         client_->Post("/api/v1/datasets", json{{"name", "robot"}}.dump(), "application/json");
     ASSERT_EQ(created->status, 201);
@@ -106,6 +115,7 @@ class ServerRecordingTest : public ::testing::Test {
   std::unique_ptr<server::Service> service_;
   std::unique_ptr<httplib::Client> client_;
   std::string dataset_;
+  int port_ = 0;
 };
 
 void ExpectImageTopic(const json& recording, const std::string& topic, const std::string& type) {
@@ -210,6 +220,126 @@ TEST_F(ServerRecordingTest, UnsupportedFileNamesWhatIsTaken) {
   for (const std::string words : {"images", "videos", "recordings", ".bag", ".mcap", "metadata.yaml"}) {
     EXPECT_NE(message.find(words), std::string::npos) << message;
   }
+}
+
+// A stereo sequence as a robot records it: written as a ROS 1 bag by python3-rosbag
+// (testing/recordings/write_stereo_bag.py: cam0 raw bgr8 Images, cam1 PNG CompressedImages
+// stamped 1 ms later, lz4 chunks), uploaded in chunks beside the same frames as a PNG folder.
+class RecordingJobsTest : public ServerRecordingTest {
+ protected:
+  static constexpr int64_t kStartNs = 1700000000000000000;
+  static constexpr int64_t kPeriodNs = 100000000;  // the sequence's 10 Hz
+
+  // Renders the sequence, writes its frames and the bag, uploads both into the dataset.
+  synth::StereoSequence UploadSequenceAsFolderAndBag(int num_frames) {
+    synth::StereoSequenceOptions options;
+    options.num_frames = num_frames;
+    options.path_length_m = 1.65;
+    options.width = 640;
+    options.height = 480;
+    options.render.noise_sigma = 1.0;
+    options.render.num_threads = 2;
+    synth::StereoSequence sequence = synth::MakeStereoSequence(options);
+    const fs::path folder = dir_.path() / "folder";
+    api::WriteStereoSequence(sequence, "room", folder.string());
+    const fs::path frames = dir_.path() / "frames";
+    fs::create_directories(frames);
+    std::ofstream manifest(frames / "manifest.txt");
+    for (size_t i = 0; i < sequence.names.size(); ++i) {
+      const int64_t stamp_ns = kStartNs + static_cast<int64_t>(i) * kPeriodNs;
+      cv::Mat bgr = sequence.images[0][i];
+      if (bgr.channels() == 1) cv::cvtColor(bgr, bgr, cv::COLOR_GRAY2BGR);
+      bgr = bgr.clone();  // continuous rows
+      std::ofstream(frames / (sequence.names[i] + ".bgr"), std::ios::binary)
+          .write(reinterpret_cast<const char*>(bgr.data), static_cast<std::streamsize>(bgr.total() * 3));
+      fs::copy_file(folder / "cam1" / (sequence.names[i] + ".png"),
+                    frames / (sequence.names[i] + ".png"));
+      manifest << stamp_ns / 1000000000 << " " << stamp_ns % 1000000000 << " " << bgr.cols << " "
+               << bgr.rows << " " << sequence.names[i] << ".bgr " << sequence.names[i] << ".png\n";
+    }
+    manifest.close();
+    const std::string command = std::string(std::getenv("OMNIRIG_SOURCE_DIR")) +
+                                "/testing/recordings/write_stereo_bag.py '" + frames.string() +
+                                "' '" + (dir_.path() / "run.bag").string() + "' >&2";
+    EXPECT_EQ(std::system(command.c_str()), 0) << command;
+    const auto stored = UploadInChunks("run.bag", ReadFile(dir_.path() / "run.bag"));
+    EXPECT_EQ(stored->status, 201) << stored->body;
+    for (const char* camera : {"cam0", "cam1"}) {
+      for (const auto& name : sequence.names) {
+        const std::string file = std::string(camera) + "/" + name + ".png";
+        EXPECT_EQ(PutWhole(file, ReadFile(folder / file))->status, 201) << file;
+      }
+    }
+    return sequence;
+  }
+
+  httplib::Result Submit(const std::string& type, const json& params) {
+    return client_->Post("/api/v1/jobs",
+                         json{{"type", type}, {"dataset", dataset_}, {"params", params}}.dump(),
+                         "application/json");
+  }
+
+  json RunJob(const std::string& type, const json& params, double timeout_s = 240) {
+    const auto created = Submit(type, params);
+    EXPECT_EQ(created->status, 202) << created->body;
+    const std::string id = JsonOf(created)["id"];
+    const json job = WaitForJob(port_, id, timeout_s);
+    EXPECT_EQ(job["state"], "succeeded") << job.dump();
+    json result = JsonOf(client_->Get(("/api/v1/jobs/" + id + "/result").c_str()));
+    result["job_id"] = id;
+    return result;
+  }
+
+};
+
+TEST_F(RecordingJobsTest, SlamOnABagFollowsTheSameTrajectoryAsOnItsPngFolder) {
+  const synth::StereoSequence sequence = UploadSequenceAsFolderAndBag(12);
+  const std::string rig = SubmitFakeRelativePose(service_->state().job_types, *client_, port_,
+                                                 dataset_, api::RigToJson(sequence.rig));
+  const json on_folder = RunJob("slam", {{"rig", rig}});
+  const json topics = {{"cam0", "/cam0/image_raw"}, {"cam1", "/cam1/image_raw/compressed"}};
+  const json on_bag = RunJob("slam", {{"rig", rig}, {"recording", "run.bag"}, {"topics", topics}});
+  ASSERT_EQ(on_folder["num_frames"], 12) << on_folder.dump();
+  ASSERT_EQ(on_bag["num_frames"], 12) << on_bag.dump();
+  EXPECT_EQ(on_bag["num_tracked"], on_folder["num_tracked"]);
+  EXPECT_EQ(on_bag["input"]["kind"], "recording");
+  EXPECT_EQ(on_bag["input"]["topics"], json({"/cam0/image_raw", "/cam1/image_raw/compressed"}));
+  // cam1 is stamped 1 ms after cam0: within the default tolerance (a quarter of 100 ms).
+  EXPECT_NEAR(on_bag["input"]["pair_tolerance_s"].get<double>(), 0.025, 1e-9);
+  EXPECT_EQ(on_bag["input"]["num_unpaired"], json({0, 0}));
+  // Frames are named and timed by cam0's header stamp.
+  EXPECT_EQ(on_bag["frames"][3]["name"], "t1700000000.300");
+  // The bag holds the very pixels of the PNGs (raw bgr8 and lossless PNG), and SLAM is
+  // deterministic on one thread: the trajectories agree to rounding.
+  for (int i = 0; i < 12; ++i) {
+    const json& a = on_folder["frames"][i]["world_from_rig"];
+    const json& b = on_bag["frames"][i]["world_from_rig"];
+    ASSERT_FALSE(a.is_null()) << i;
+    ASSERT_FALSE(b.is_null()) << i;
+    for (int k = 0; k < 3; ++k) {
+      EXPECT_NEAR(a["translation_m"][k].get<double>(), b["translation_m"][k].get<double>(), 1e-9)
+          << "frame " << i;
+    }
+    for (int k = 0; k < 4; ++k) {
+      EXPECT_NEAR(a["rotation_wxyz"][k].get<double>(), b["rotation_wxyz"][k].get<double>(), 1e-9)
+          << "frame " << i;
+    }
+  }
+  // trajectory.tum carries the recording's stamps.
+  const std::string tum = client_->Get(("/api/v1/jobs/" + on_bag["job_id"].get<std::string>() +
+                                        "/artifacts/trajectory.tum").c_str())->body;
+  EXPECT_NE(tum.find("1700000000.7"), std::string::npos) << tum;
+
+  // Every second frame of [0.2, 0.9] s after the first stamp: 0.2, 0.4, 0.6, 0.8.
+  const json stepped = RunJob("slam", {{"rig", rig},
+                                       {"recording", "run.bag"},
+                                       {"topics", topics},
+                                       {"frame_step", 2},
+                                       {"start_s", 0.2},
+                                       {"end_s", 0.9}});
+  ASSERT_EQ(stepped["num_frames"], 4) << stepped.dump();
+  EXPECT_EQ(stepped["frames"][0]["name"], "t1700000000.200");
+  EXPECT_EQ(stepped["frames"][3]["name"], "t1700000000.800");
 }
 
 }  // namespace
