@@ -1,6 +1,11 @@
 #include "api/recording_input.h"
 
 #include <cmath>
+#include <map>
+#include <memory>
+
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "api/json_fields.h"
 #include "engine/util/check.h"
@@ -79,6 +84,74 @@ RecordingFramesRead ReadRecordingFrames(const RecordingInput& input, const OpenR
   read.source = OpenJobRecording(open, input.recording);
   read.frames = io::SelectRecordingFrames(*read.source, input.topics, input.frames, progress);
   return read;
+}
+
+RecordingImages CollectRecordingImages(const RecordingFramesRead& frames,
+                                       const ProgressSink& progress) {
+  const io::RecordingFrames& selected = frames.frames;
+  const size_t num_topics = selected.topics.size();
+  // Per topic: message position -> frame; the frames' serialized messages, by frame.
+  std::vector<std::map<int64_t, size_t>> frame_of(num_topics);
+  for (size_t k = 0; k < selected.frames.size(); ++k) {
+    for (size_t t = 0; t < num_topics; ++t) frame_of[t][selected.frames[k].message[t]] = k;
+  }
+  auto messages = std::make_shared<std::vector<std::vector<std::string>>>(
+      num_topics, std::vector<std::string>(selected.frames.size()));
+  std::vector<const io::RecordedTopic*> topics(num_topics, nullptr);
+  std::vector<int64_t> position(num_topics, 0);
+  size_t remaining = selected.frames.size() * num_topics;
+  frames.source->ReadMessages(
+      std::set<std::string>(selected.topics.begin(), selected.topics.end()),
+      [&](const io::RecordedMessage& message) {
+        for (size_t t = 0; t < num_topics; ++t) {
+          if (message.topic->name != selected.topics[t]) continue;
+          topics[t] = message.topic;
+          const auto it = frame_of[t].find(position[t]++);
+          if (it == frame_of[t].end()) continue;
+          (*messages)[t][it->second] = std::string(message.data);
+          --remaining;
+        }
+        progress.ThrowIfCancelled();
+        return remaining > 0;
+      });
+  RecordingImages images;
+  // Name -> (topic, frame).
+  auto index = std::make_shared<std::map<std::string, std::pair<size_t, size_t>>>();
+  for (size_t k = 0; k < selected.frames.size(); ++k) {
+    const std::string name = selected.frames[k].name + ".msg";
+    if (num_topics == 1) {
+      images.names.push_back(name);
+      (*index)[name] = {0, k};
+    } else {
+      images.pairs.push_back({name, "cam0/" + name, "cam1/" + name});
+      (*index)["cam0/" + name] = {0, k};
+      (*index)["cam1/" + name] = {1, k};
+    }
+  }
+  std::vector<io::RecordedTopic> topic_copies;
+  for (const io::RecordedTopic* topic : topics) topic_copies.push_back(topic ? *topic : io::RecordedTopic{});
+  images.read = [messages, index, topic_copies](const std::string& name, int imread_flags) {
+    const auto it = index->find(name);
+    if (it == index->end()) return cv::Mat();
+    const auto [t, k] = it->second;
+    cv::Mat image;
+    try {
+      image = io::DecodeFrameImage(topic_copies[t], (*messages)[t][k]);
+    } catch (const InvalidArgument&) {
+      return cv::Mat();  // reported as unreadable, as a damaged file is
+    }
+    cv::Mat converted;
+    if (imread_flags == cv::IMREAD_GRAYSCALE && image.channels() == 3) {
+      cv::cvtColor(image, converted, cv::COLOR_BGR2GRAY);
+      return converted;
+    }
+    if (imread_flags == cv::IMREAD_COLOR && image.channels() == 1) {
+      cv::cvtColor(image, converted, cv::COLOR_GRAY2BGR);
+      return converted;
+    }
+    return image;
+  };
+  return images;
 }
 
 json RecordingFramesJson(const RecordingInput& input, const io::RecordingFrames& frames) {

@@ -18,7 +18,10 @@
 #include <nlohmann/json.hpp>
 
 #include "api/job_types.h"
+#include "engine/features/image.h"
 #include "engine/io/recording_frames.h"
+#include "engine/util/image_pairs.h"
+#include "engine/util/progress_range.h"
 
 namespace omnirig::api {
 
@@ -48,6 +51,20 @@ struct RecordingFramesRead {
 };
 RecordingFramesRead ReadRecordingFrames(const RecordingInput& input, const OpenRecording& open,
                                         const ProgressSink& progress);
+
+// A recording's selected frames as images by name, for the pipelines that read images more than
+// once and in parallel (calibration, rig, stereo): the frames' messages are held serialized in
+// memory (a compressed frame its encoded bytes, a raw one its pixels; never written to disk) and
+// decoded when read. Names: FRAME.msg (one topic), cam0/FRAME.msg and cam1/FRAME.msg (two), with
+// FRAME the frame's name ("t1700000000.050"); the ".msg" keeps the stamp's decimals when
+// artifacts take a name's stem (overlays, clouds).
+struct RecordingImages {
+  ImageReader read;
+  std::vector<std::string> names;     // one topic: every frame's
+  std::vector<ImagePairNames> pairs;  // two topics: the pairs'
+};
+RecordingImages CollectRecordingImages(const RecordingFramesRead& frames,
+                                       const ProgressSink& progress);
 
 // The result's "input" of a job on a recording: {"kind": "recording", "recording", "topics",
 // "num_messages" (per topic), "num_unpaired" (per topic), "pair_tolerance_s" (two topics),

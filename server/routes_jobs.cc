@@ -128,13 +128,21 @@ void CreateJob(ServiceState& state, const HttpRequest& request, HttpResponse& re
   }
   CheckReferencedJobs(state, *type, parsed.params);
   // A job on an empty dataset would be queued only to fail once it ran (a job naming a
-  // recording finds out whether the dataset holds it in its own check).
-  if (type->reads_images && dataset->image_count + dataset->video_count == 0 &&
-      !(parsed.params.is_object() && parsed.params.contains("recording"))) {
-    throw HttpError(
-        422, "dataset_empty",
-        "dataset " + parsed.dataset + " has no images: upload them before creating a job",
-        {{"dataset", parsed.dataset}});
+  // recording or its topics finds out whether the dataset holds them in its own check).
+  const bool names_recording =
+      parsed.params.is_object() && (parsed.params.contains("recording") ||
+                                    parsed.params.contains("topic") || parsed.params.contains("topics"));
+  if (type->reads_images && dataset->image_count + dataset->video_count == 0 && !names_recording) {
+    std::vector<std::string> file_names;
+    for (const auto& image : state.store->ListImages(parsed.dataset)) file_names.push_back(image.name);
+    const std::vector<std::string> recordings = RecordingNames(file_names);
+    std::string message = "dataset " + parsed.dataset + " has no images: upload them before creating a job";
+    if (!recordings.empty()) {
+      message = "dataset " + parsed.dataset + " has no images but the recording " + recordings[0] +
+                ": name it with \"recording\" and its image topics (\"topic\" for a calibration, "
+                "\"topics\": {\"cam0\": ..., \"cam1\": ...} for the stereo jobs)";
+    }
+    throw HttpError(422, "dataset_empty", message, {{"dataset", parsed.dataset}});
   }
   CheckInputs(state, *type, parsed);
   const int64_t queued = state.store->CountJobsByState().at(storage::JobState::kQueued);
