@@ -12,7 +12,11 @@
 //                      "overlay_error_scale"},
 //          "hints": {"IMAGE_NAME": [[u, v] x 4]},
 //          "svp": {"mirror": {"rim_radius_mm", "rim_height_mm"}, "image", "search_margin_px",
-//                  "num_profiles", "inlier_px"}}   (all but "board" optional; "svp" runs the
+//                  "num_profiles", "inlier_px"},
+//          "camera": "cam0" | "cam1",
+//          "recording": NAME, "topic": T, "start_s", "end_s", "frame_step"
+//                  (frames of a recording's topic instead of images: api/recording_input.h)}
+//          (all but "board" optional; "svp" runs the
 //          single-viewpoint check, {} to find the rim without the mirror's dimensions)
 // result: {"camera": {"model", "image_size", "intrinsics", "intrinsics_std"}, "rms_px",
 //          "mean_px", "std_px", "rms_all_px", "error_definitions", "num_views_used",
@@ -23,6 +27,7 @@
 //                  "centre_offset_px", "radius_offset_px", "principal_point_px",
 //                  "principal_point_offset_px", "num_edge_points", "overlay"}}  (when asked),
 //          "exports": {"opencv_omnidir", "kalibr", "warnings"} (see WriteCameraExports),
+//          "input": {"kind": "recording", ...} (from a recording: see RecordingFramesJson),
 //          "coverage": {...} (see WriteCoverageReport)}
 
 #include <array>
