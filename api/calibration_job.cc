@@ -7,6 +7,7 @@
 #include "api/camera_json.h"
 #include "api/job_types.h"
 #include "api/json_fields.h"
+#include "api/recording_input.h"
 #include "engine/calib/coverage.h"
 #include "engine/calib/model_io.h"
 #include "engine/util/check.h"
@@ -133,7 +134,11 @@ json ImageToJson(const CalibrationImageReport& image) {
 }  // namespace
 
 CalibrationRequest CalibrationRequestFromJson(const json& params) {
-  CheckKnownFields(params, "params", {"board", "options", "hints", "svp", "camera"});
+  // A recording's topic ("recording", "topic"; api/recording_input.h), checked at submission.
+  std::set<std::string> known = {"board", "options", "hints", "svp", "camera"};
+  const std::set<std::string> recording = RecordingFieldNames();
+  known.insert(recording.begin(), recording.end());
+  CheckKnownFields(params, "params", known);
   CalibrationRequest request;
   ReadBoardParam(params, &request.board, &request.kalibr_target_file);
   if (params.contains("camera")) {
@@ -214,11 +219,13 @@ json CalibrationReportToJson(const CalibrationReport& report) {
   return result;
 }
 
-json WriteCameraExports(const CameraModel& camera, const std::filesystem::path& dir) {
+json WriteCameraExports(const CameraModel& camera, const std::filesystem::path& dir,
+                        const std::string& rostopic) {
   std::vector<std::string> warnings;
   WriteTextFile(dir / kCameraOpenCvFileName, ToOpenCvOmnidir(camera, &warnings));
   std::vector<std::string> kalibr_warnings;
-  WriteTextFile(dir / kCameraKalibrFileName, ToKalibrOmniRadtan(camera, &kalibr_warnings));
+  WriteTextFile(dir / kCameraKalibrFileName,
+                ToKalibrOmniRadtan(camera, &kalibr_warnings, "cam0", rostopic));
   for (const std::string& warning : kalibr_warnings) {
     if (std::find(warnings.begin(), warnings.end(), warning) == warnings.end()) {
       warnings.push_back("kalibr: " + warning);
@@ -242,10 +249,9 @@ json RegionsToJson(const std::vector<CoverageReport::Region>& regions) {
 }
 
 json WriteCoverageReport(const CalibrationReport& report, const BoardSpec& board,
-                         const std::filesystem::path& dataset_dir,
-                         const std::filesystem::path& dir) {
+                         const ImageReader& read, const std::filesystem::path& dir) {
   const CoverageOptions options;
-  const CoverageReport coverage = AnalyseCoverageOfImages(report, board, dataset_dir, options);
+  const CoverageReport coverage = AnalyseCoverageOfImages(report, board, read, options);
   WriteCoverageImages(coverage, dir / kCoverageImageFileName, dir / kUncertaintyImageFileName);
   const bool rim = report.svp && report.svp->found_circle_px;
   json result = {{"image", kCoverageImageFileName},
@@ -275,11 +281,27 @@ json WriteCoverageReport(const CalibrationReport& report, const BoardSpec& board
   return result;
 }
 
-json WriteRigExports(const StereoRig& rig, const std::filesystem::path& dir) {
+json WriteRigExports(const StereoRig& rig, const std::filesystem::path& dir,
+                     const std::array<std::string, 2>& rostopics) {
   std::vector<std::string> warnings;
-  WriteTextFile(dir / kCamchainKalibrFileName, ToKalibrCamchain(rig, &warnings));
+  WriteTextFile(dir / kCamchainKalibrFileName, ToKalibrCamchain(rig, &warnings, rostopics));
   return {{"kalibr_camchain", kCamchainKalibrFileName}, {"warnings", warnings}};
 }
+
+namespace {
+
+// The params' recording and topic, when they name one. "camera" picks a folder of the dataset's
+// images and "recording" a topic of a recording: both at once is refused rather than guessed.
+std::optional<RecordingInput> CalibrationRecording(const json& params,
+                                                   const CalibrationRequest& request) {
+  std::optional<RecordingInput> recording = RecordingInputFromJson(params, 1);
+  OMNIRIG_CHECK(!recording || !request.camera,
+                "\"camera\" picks a folder of the dataset's images and \"recording\" a topic of "
+                "a recording: give one of them (with \"recording\", \"topic\" names the camera)");
+  return recording;
+}
+
+}  // namespace
 
 JobType CalibrationJobType() {
   JobType type;
@@ -288,6 +310,10 @@ JobType CalibrationJobType() {
   type.check_inputs = [](const json& params, const SubmissionInputs& inputs) {
     const CalibrationRequest request = CalibrationRequestFromJson(params);
     CheckKalibrTargetFileIn(request.kalibr_target_file, inputs.file_names());
+    if (const auto recording = CalibrationRecording(params, request)) {
+      CheckRecordingInput(*recording, inputs);
+      return;
+    }
     CalibrationImageNames(request.camera, inputs.file_names());
   };
   type.run = [](const json& params, const JobContext& context) {
@@ -296,15 +322,28 @@ JobType CalibrationJobType() {
     if (!request.kalibr_target_file.empty()) {
       request.board = ReadKalibrTargetFile(context.dataset_dir, request.kalibr_target_file);
     }
-    const CalibrationReport report =
-        CalibrateImages(context.dataset_dir, CalibrationImageNames(request.camera, context.image_names),
-                        request.board, request.options, context.output_dir, context.progress);
+    const auto recording = CalibrationRecording(params, request);
+    std::optional<RecordingFramesRead> frames;
+    ImageReader read = FolderImageReader(context.dataset_dir);
+    std::vector<std::string> names;
+    if (recording) {
+      frames = ReadRecordingFrames(*recording, context.open_recording,
+                                   SubRange(context.progress, 0.0, 0.0));
+      RecordingImages images = CollectRecordingImages(*frames, context.progress);
+      read = std::move(images.read);
+      names = std::move(images.names);
+    } else {
+      names = CalibrationImageNames(request.camera, context.image_names);
+    }
+    const CalibrationReport report = CalibrateImages(read, names, request.board, request.options,
+                                                     context.output_dir, context.progress);
     context.Log("calibration: RMS " + std::to_string(report.rms_px) + " px over " +
                 std::to_string(report.num_views_used) + " views; " + report.solver.brief);
     json result = CalibrationReportToJson(report);
-    result["exports"] = WriteCameraExports(report.camera, context.output_dir);
-    result["coverage"] =
-        WriteCoverageReport(report, request.board, context.dataset_dir, context.output_dir);
+    result["exports"] = WriteCameraExports(report.camera, context.output_dir,
+                                           recording ? recording->topics[0] : std::string());
+    result["coverage"] = WriteCoverageReport(report, request.board, read, context.output_dir);
+    if (recording) result["input"] = RecordingFramesJson(*recording, frames->frames);
     return result;
   };
   return type;

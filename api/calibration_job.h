@@ -14,7 +14,11 @@
 //                      "overlay_error_scale"},
 //          "hints": {"IMAGE_NAME": [[u, v] x 4]},
 //          "svp": {"mirror": {"rim_radius_mm", "rim_height_mm"}, "image", "search_margin_px",
-//                  "num_profiles", "inlier_px"}}   (all but "board" optional; "svp" runs the
+//                  "num_profiles", "inlier_px"},
+//          "camera": "cam0" | "cam1",
+//          "recording": NAME, "topic": T, "start_s", "end_s", "frame_step"
+//                  (frames of a recording's topic instead of images: api/recording_input.h)}
+//          (all but "board" optional; "svp" runs the
 //          single-viewpoint check, {} to find the rim without the mirror's dimensions)
 // result: {"camera": {"model", "image_size", "intrinsics", "intrinsics_std"}, "rms_px",
 //          "mean_px", "std_px", "rms_all_px", "error_definitions", "num_views_used",
@@ -25,8 +29,10 @@
 //                  "centre_offset_px", "radius_offset_px", "principal_point_px",
 //                  "principal_point_offset_px", "num_edge_points", "overlay"}}  (when asked),
 //          "exports": {"opencv_omnidir", "kalibr", "warnings"} (see WriteCameraExports),
+//          "input": {"kind": "recording", ...} (from a recording: see RecordingFramesJson),
 //          "coverage": {...} (see WriteCoverageReport)}
 
+#include <array>
 #include <filesystem>
 #include <optional>
 #include <string>
@@ -71,10 +77,13 @@ nlohmann::json CalibrationReportToJson(const CalibrationReport& report);
 // "exports".
 inline constexpr const char* kCameraOpenCvFileName = "camera_opencv.yaml";
 inline constexpr const char* kCameraKalibrFileName = "camera_kalibr.yaml";
-nlohmann::json WriteCameraExports(const CameraModel& camera, const std::filesystem::path& dir);
+// `rostopic`: the recording's topic the images came from, written into the Kalibr export as
+// Kalibr writes it ("rostopic"); none when empty.
+nlohmann::json WriteCameraExports(const CameraModel& camera, const std::filesystem::path& dir,
+                                  const std::string& rostopic = "");
 
-// The report of what to do next (engine/calib/coverage.h) for a calibration of images in
-// `dataset_dir`: writes kCoverageImageFileName and, when the covariance allows,
+// The report of what to do next (engine/calib/coverage.h) for a calibration of the images
+// `read` reads: writes kCoverageImageFileName and, when the covariance allows,
 // kUncertaintyImageFileName into `dir`, and returns the result's "coverage": {"image",
 // "disk_centre_px", "disk_radius_px", "disk_from", "near_px", "covered_fraction",
 // "uncertainty_image", "max_uncertainty_px", "median_uncertainty_px" (null when singular),
@@ -82,13 +91,14 @@ nlohmann::json WriteCameraExports(const CameraModel& camera, const std::filesyst
 inline constexpr const char* kCoverageImageFileName = "coverage.png";
 inline constexpr const char* kUncertaintyImageFileName = "uncertainty.png";
 nlohmann::json WriteCoverageReport(const CalibrationReport& report, const BoardSpec& board,
-                                   const std::filesystem::path& dataset_dir,
-                                   const std::filesystem::path& dir);
+                                   const ImageReader& read, const std::filesystem::path& dir);
 
 // The export every relative_pose job writes: kCamchainKalibrFileName, a Kalibr camchain of both
-// cameras with cam1's T_cn_cnm1 = cam1_from_cam0. Returns {"kalibr_camchain": NAME, "warnings"}.
+// cameras with cam1's T_cn_cnm1 = cam1_from_cam0, and each camera's "rostopic" when `rostopics`
+// gives it (a rig from a recording). Returns {"kalibr_camchain": NAME, "warnings"}.
 inline constexpr const char* kCamchainKalibrFileName = "camchain_kalibr.yaml";
-nlohmann::json WriteRigExports(const StereoRig& rig, const std::filesystem::path& dir);
+nlohmann::json WriteRigExports(const StereoRig& rig, const std::filesystem::path& dir,
+                               const std::array<std::string, 2>& rostopics = {});
 
 // The job type (its validation, references and run), for JobTypes::Add.
 JobType CalibrationJobType();

@@ -9,8 +9,16 @@
 #include "api/relpose_job.h"
 #include "api/slam_job.h"
 #include "api/stereo_job.h"
+#include "engine/util/check.h"
 
 namespace omnirig::api {
+
+std::shared_ptr<const io::MessageSource> OpenJobRecording(const OpenRecording& open,
+                                                          const std::string& name) {
+  OMNIRIG_CHECK(open, "recordings are read by the service's jobs: upload the recording to a "
+                      "dataset and submit the job there");
+  return open(name);
+}
 
 void WriteTextFile(const std::filesystem::path& path, const std::string& text) {
   std::filesystem::create_directories(path.parent_path());

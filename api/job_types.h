@@ -12,10 +12,22 @@
 
 #include <nlohmann/json.hpp>
 
+#include "engine/io/recording_frames.h"
 #include "engine/util/progress.h"
 #include "engine/util/progress_range.h"
 
 namespace omnirig::api {
+
+// Opens a recording of the job's dataset by the name the dataset lists it under ("run.bag", a
+// ROS 2 bag's folder "run"): the service's storage reads it, the job sees messages only.
+// Throws InvalidArgument naming the dataset's recordings when it holds none of that name.
+using OpenRecording =
+    std::function<std::shared_ptr<const io::MessageSource>(const std::string& name)>;
+
+// Opens `name` through `open`; throws InvalidArgument when the service gave no way to (a
+// context outside the service, e.g. the CLI on a folder).
+std::shared_ptr<const io::MessageSource> OpenJobRecording(const OpenRecording& open,
+                                                          const std::string& name);
 
 // Everything a job run sees of the service.
 struct JobContext {
@@ -30,6 +42,7 @@ struct JobContext {
   // Loads the result JSON of an earlier succeeded job (e.g. the calibrations a relative pose
   // job uses); throws InvalidArgument naming the job when it has none.
   std::function<nlohmann::json(const std::string& job_id)> load_result;
+  OpenRecording open_recording;  // the dataset's recordings (params "recording")
 
   // Appends a line to the job's log when the service gave it one.
   void Log(const std::string& line) const {
@@ -70,6 +83,7 @@ struct SubmissionInputs {
   // The result JSON of a referenced job (found succeeded before check_inputs runs); throws
   // InvalidArgument when it has none.
   std::function<nlohmann::json(const std::string& job_id)> load_result;
+  OpenRecording open_recording;  // the dataset's recordings (params "recording")
 };
 
 struct JobType {

@@ -4,12 +4,14 @@
 #include <array>
 #include <cmath>
 #include <iterator>
+#include <set>
 #include <string>
 
 #include "api/board_json.h"
 #include "api/calibration_job.h"
 #include "api/camera_json.h"
 #include "api/json_fields.h"
+#include "api/recording_input.h"
 #include "engine/util/check.h"
 
 namespace omnirig::api {
@@ -35,9 +37,13 @@ RelativePoseParams RelativePoseParamsFromJson(const json& params) {
                                       "fixed, tangential_fixed, tangential_free_cam0, "
                                       "tangential_free_cam1 or free; default auto)");
   }
-  CheckKnownFields(params, "params",
-                   {"board", "calibrations", "intrinsics_model", "resolve_corner_order",
-                    "huber_loss_px", "max_num_iterations", "sync_false_alarm_rate"});
+  std::set<std::string> known = {"board",         "calibrations",       "intrinsics_model",
+                                 "resolve_corner_order", "huber_loss_px", "max_num_iterations",
+                                 "sync_false_alarm_rate"};
+  // A recording's topics ("recording", "topics"; api/recording_input.h), checked at submission.
+  const std::set<std::string> recording = RecordingFieldNames();
+  known.insert(recording.begin(), recording.end());
+  CheckKnownFields(params, "params", known);
   RelativePoseParams out;
   ReadBoardParam(params, &out.board, &out.kalibr_target_file);
   if (params.contains("calibrations") && params["calibrations"].is_string()) {
@@ -228,7 +234,19 @@ json RunRelativePoseJob(const json& params, const JobContext& context) {
   if (!parsed.kalibr_target_file.empty()) {
     parsed.board = ReadKalibrTargetFile(context.dataset_dir, parsed.kalibr_target_file);
   }
-  const std::vector<ImagePairNames> pairs = MatchImagePairs(context.image_names);
+  const auto recording = RecordingInputFromJson(params, 2);
+  ImageReader read = FolderImageReader(context.dataset_dir);
+  std::vector<ImagePairNames> pairs;
+  std::optional<RecordingFramesRead> frames;
+  if (recording) {
+    frames = ReadRecordingFrames(*recording, context.open_recording,
+                                 SubRange(context.progress, 0.0, 0.0));
+    RecordingImages images = CollectRecordingImages(*frames, context.progress);
+    read = std::move(images.read);
+    pairs = std::move(images.pairs);
+  } else {
+    pairs = MatchImagePairs(context.image_names);
+  }
   std::array<std::optional<GivenCamera>, 2> given;
   std::array<json, 2> camera_json, provenance;
   std::optional<Rigid3d> kalibr_cam0_from_cam1;
@@ -254,7 +272,7 @@ json RunRelativePoseJob(const json& params, const JobContext& context) {
   RigFromImagesOptions options = parsed.options;
   options.relpose.num_threads = std::max(1, context.num_threads);
   const RigFromImagesReport report = EstimateRigFromImages(
-      context.dataset_dir, pairs, parsed.board, given, options, context.progress, context.log);
+      read, pairs, parsed.board, given, options, context.progress, context.log);
   for (int c = 0; c < 2; ++c) {
     const std::optional<CalibrationReport>& calibration = report.cameras[c].calibration;
     if (!calibration) continue;
@@ -276,6 +294,7 @@ json RunRelativePoseJob(const json& params, const JobContext& context) {
   result["intrinsics_model"] =
       report.selection ? ModelSelectionToJson(*report.selection)
                        : json{{"chosen", report.intrinsics_model}, {"selection", "given"}};
+  if (recording) result["input"] = RecordingFramesJson(*recording, frames->frames);
   return result;
 }
 
@@ -298,10 +317,17 @@ JobType RelativePoseJobType() {
     const RelativePoseParams parsed = RelativePoseParamsFromJson(params);
     CheckKalibrTargetFileIn(parsed.kalibr_target_file, inputs.file_names());
     CheckDatasetFileIn(parsed.kalibr_camchain_file, "params.calibrations", inputs.file_names());
+    if (const auto recording = RecordingInputFromJson(params, 2)) {
+      CheckRecordingInput(*recording, inputs);
+    }
   };
   type.run = [](const json& params, const JobContext& context) {
     json result = RunRelativePoseJob(params, context);
-    result["exports"] = WriteRigExports(RigFromJson(result), context.output_dir);
+    std::array<std::string, 2> rostopics;
+    if (const auto recording = RecordingInputFromJson(params, 2)) {
+      rostopics = {recording->topics[0], recording->topics[1]};
+    }
+    result["exports"] = WriteRigExports(RigFromJson(result), context.output_dir, rostopics);
     return result;
   };
   return type;

@@ -2,7 +2,10 @@
 // The `relative_pose` job type: the metric pose between a stereo rig's two cameras from image
 // pairs of a shared board (engine/rig/relative_pose.h).
 //
-// Dataset: images named cam0/NAME and cam1/NAME, paired by NAME.
+// Dataset: images named cam0/NAME and cam1/NAME, paired by NAME; or a robot recording's two
+// image topics, paired by header stamp (params "recording", "topics", "start_s", "end_s",
+// "frame_step", "pair_tolerance_s": api/recording_input.h; the result's "input" says what was
+// read, and the camchain export carries each camera's "rostopic").
 // Params (unknown fields are refused):
 //   {"board": {"type": "checkerboard" | "charuco", "cols", "rows", "square_size_mm",
 //              "marker_size_mm", "aruco_dictionary"} | {"type": "aprilgrid", ...} | "NAME.yaml",

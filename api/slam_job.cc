@@ -9,6 +9,7 @@
 
 #include "api/camera_json.h"
 #include "api/json_fields.h"
+#include "api/recording_input.h"
 #include "api/stereo_job.h"
 #include "engine/calib/calibrate.h"
 #include "engine/geometry/ply.h"
@@ -299,6 +300,9 @@ SlamParams SlamParamsFromJson(const json& params) {
   // "live" and "live_idle_timeout_s" are the live job's (api/live_slam.h): a live job whose
   // server stopped runs again as a batch job over the frames it stored.
   known.insert({"rig", "ground_truth", "options", "dense_map", "live", "live_idle_timeout_s"});
+  // A recording's topics ("recording", "topics"; api/recording_input.h), checked at submission.
+  const std::set<std::string> recording = RecordingFieldNames();
+  known.insert(recording.begin(), recording.end());
   CheckKnownFields(params, "params", known);
   parsed.rig_job = RigJobField(params);
   if (params.contains("ground_truth")) {
@@ -459,6 +463,61 @@ SlamInput PrepareImageInput(const fs::path& dataset_dir,
   return input;
 }
 
+// The frames of a recording's two topics, paired by header stamp, decoded as SLAM reads them.
+SlamInput PrepareRecordingInput(const StereoRig& rig, const RecordingInput& recording,
+                                const OpenRecording& open,
+                                const std::optional<fs::path>& ground_truth,
+                                const ProgressSink& progress) {
+  const double pass_start_s = ProcessCpuSeconds();
+  const Timer pass_timer;
+  RecordingFramesRead read = ReadRecordingFrames(recording, open, SubRange(progress, 0.0, 0.0));
+  SlamInput input;
+  input.source = RecordingFramesJson(recording, read.frames);
+  // The pass that reads every message's header stamp before the first frame (no pixels).
+  input.source["timestamp_pass_s"] = pass_timer.ElapsedSeconds();
+  input.source["timestamp_pass_cpu_s"] = ProcessCpuSeconds() - pass_start_s;
+  for (const io::RecordingFrame& frame : read.frames.frames) {
+    input.names.push_back(frame.name);
+    input.timestamps_s.push_back(frame.timestamp_s);
+  }
+  if (ground_truth) {
+    // Poses are matched to frames as a recording's stereo frames are to each other.
+    const double tolerance_s = read.frames.pair_tolerance_s;
+    input.ground_truth = MatchGroundTruth(*ground_truth, input.timestamps_s, tolerance_s);
+  }
+  auto reader = std::make_shared<io::RecordingFrameReader>(read.source, std::move(read.frames));
+  const CameraModel cameras[2] = {rig.cam0, rig.cam1};
+  input.load = [reader, cameras, recording](int k) {
+    std::vector<cv::Mat> images = reader->Load(k);
+    for (int c = 0; c < 2; ++c) {
+      const cv::Mat& image = images[c];
+      OMNIRIG_CHECK(image.cols == cameras[c].width && image.rows == cameras[c].height,
+                    recording.topics[c] << "'s frames are " << image.cols << "x" << image.rows
+                                        << " but the rig's cam" << c << " is calibrated for "
+                                        << cameras[c].width << "x" << cameras[c].height);
+    }
+    return slam::StereoImages{images[0], images[1]};
+  };
+  return input;
+}
+
+// Runs SLAM over prepared frames and writes its artifacts.
+json RunSlamOnInput(const StereoRig& rig, const SlamInput& input,
+                    const slam::SlamOptions& options, const fs::path& output_dir,
+                    const ProgressSink& progress,
+                    const std::function<void(const std::string&)>& log,
+                    const std::optional<dense::DenseMapOptions>& dense_map) {
+  const ProgressSink frame_progress{
+      [&](double fraction, const std::string& stage, const std::string& message) {
+        progress.Report(fraction, stage, message);
+        if (log && !message.empty()) log(message);
+      },
+      progress.is_cancelled};
+  const slam::SlamResult result = slam::RunSlam(rig, input.names, input.load, options, frame_progress);
+  return WriteSlamReport(rig, result, input.timestamps_s, input.ground_truth, input.source,
+                         input.load, dense_map, options.num_threads, output_dir, progress);
+}
+
 // The report's figures of a SLAM run: counts, timings, bundle adjustment, frames and loops.
 json SlamResultToJson(const slam::SlamResult& result) {
   json report;
@@ -579,9 +638,13 @@ void CheckGroundTruthPresent(const std::string& name, const SubmissionInputs& da
 }  // namespace
 
 void CheckSlamInputs(const json& params, const SubmissionInputs& dataset) {
-  CheckImagesFitRig(params, dataset);
   const SlamParams parsed = SlamParamsFromJson(params);
   if (parsed.ground_truth) CheckGroundTruthPresent(*parsed.ground_truth, dataset);
+  if (const auto recording = RecordingInputFromJson(params, 2)) {
+    CheckRecordingInput(*recording, dataset);
+    return;
+  }
+  CheckImagesFitRig(params, dataset);
   const auto videos = FindStereoVideos(dataset.dataset_dir, dataset.file_names());
   if (!videos) {
     OMNIRIG_CHECK(!parsed.video_only_fields,
@@ -610,16 +673,7 @@ json RunSlamOnDataset(const StereoRig& rig, const fs::path& dataset_dir,
   const SlamInput input =
       videos ? PrepareVideoInput(rig, *videos, frame_options, ground_truth, progress)
              : PrepareImageInput(dataset_dir, image_names, frame_options.frame_step, ground_truth);
-  const slam::StereoFrameLoader& load = input.load;
-  const ProgressSink frame_progress{
-      [&](double fraction, const std::string& stage, const std::string& message) {
-        progress.Report(fraction, stage, message);
-        if (log && !message.empty()) log(message);
-      },
-      progress.is_cancelled};
-  const slam::SlamResult result = slam::RunSlam(rig, input.names, load, options, frame_progress);
-  return WriteSlamReport(rig, result, input.timestamps_s, input.ground_truth, input.source, load,
-                         dense_map, options.num_threads, output_dir, progress);
+  return RunSlamOnInput(rig, input, options, output_dir, progress, log, dense_map);
 }
 
 json WriteSlamReport(const StereoRig& rig, const slam::SlamResult& result,
@@ -650,6 +704,12 @@ json RunSlamJob(const json& params, const JobContext& context) {
   options.num_threads = std::max(1, context.num_threads);
   std::optional<fs::path> ground_truth;
   if (parsed.ground_truth) ground_truth = context.dataset_dir / *parsed.ground_truth;
+  if (const auto recording = RecordingInputFromJson(params, 2)) {
+    const SlamInput input = PrepareRecordingInput(rig, *recording, context.open_recording,
+                                                  ground_truth, context.progress);
+    return RunSlamOnInput(rig, input, options, context.output_dir, context.progress, context.log,
+                          parsed.dense_map);
+  }
   return RunSlamOnDataset(rig, context.dataset_dir, context.image_names, options, ground_truth,
                           context.output_dir, context.progress, context.log, parsed.dense_map,
                           parsed.frames);

@@ -8,6 +8,8 @@
 // every frame (engine/slam/video_source.h; frames paired by container timestamp, named
 // "t000012.345" by it). Optionally a ground-truth trajectory (TUM format): for images one pose
 // per image pair in the same order; for videos poses matched to the frames by timestamp.
+// Or a robot recording's two image topics (api/recording_input.h, docs/recordings.md): frames
+// paired by header stamp, named by cam0's ("t1700000000.050").
 // Params (unknown fields are refused):
 //   {"rig": JOB_ID,                 a succeeded relative_pose job (its cam0_from_cam1, cameras)
 //    "ground_truth": "NAME.tum",    optional, a file of the dataset
@@ -15,8 +17,10 @@
 //    "dense_map": {"voxel_m": 0.02}, optional, see SlamParams::dense_map
 //    "frame_step": 1,               optional, every n-th stereo frame (images or videos)
 //    "start_s": 0, "end_s": 12.5,   optional, videos only: the time range (container time)
-//    "pair_tolerance_s": 0.005}     optional, videos only: pairing tolerance (default a
-//                                   quarter of the frame period)
+//    "pair_tolerance_s": 0.005,     optional, videos and recordings: pairing tolerance
+//                                   (default a quarter of the frame period)
+//    "recording": NAME, "topics": {"cam0": T0, "cam1": T1}}   optional: read a recording
+//                                   (start_s, end_s after cam0's first stamp)
 // Artifacts written to the output folder:
 //   trajectory.json  {"world_frame", "frames": [{"name", "state", "reason", "timestamp_s",
 //                     "world_from_rig": {"rotation_wxyz", "translation_m"} | null}], "rig"}
@@ -30,6 +34,8 @@
 // Result:
 //   {"artifacts": {"trajectory_json", "trajectory_tum", "map_ply", "report_json"},
 //    "input": {"kind": "images", "frame_step", "num_frames", "num_image_pairs"} |
+//             {"kind": "recording", ... (see RecordingFramesJson), "timestamp_pass_s",
+//              "timestamp_pass_cpu_s"} |
 //             {"kind": "video_pair" | "stacked_video", "files", "codec", "fps", "frame_count",
 //              "frame_size", "pair_tolerance_s", "frame_step", "num_frames",
 //              "timestamp_pass_s", "timestamp_pass_cpu_s" (the pass that pairs timestamps)},

@@ -135,7 +135,7 @@ TEST_F(TempDataset, RefusesImagesOfAnotherSizeThanTheRig) {
     names_.clear();
     const StereoRig rig = TinyTestRig(c.rig_width, c.rig_height);
     SubmissionInputs inputs{
-        "dataset-1", dir_, {}, [&](const std::string&) { return RigToJson(rig); }};
+        "dataset-1", dir_, {}, [&](const std::string&) { return RigToJson(rig); }, {}};
     for (const auto& [name, width] : c.images) {
       WriteImage(name, width, 48);
       inputs.images.push_back({name, width, 48});
@@ -152,7 +152,8 @@ TEST_F(TempDataset, RefusesImagesOfAnotherSizeThanTheRig) {
 
 TEST_F(TempDataset, RefusesAtSubmissionWhatTheJobWouldFailOnAtItsStart) {
   const StereoRig rig = TinyTestRig(64, 48);
-  SubmissionInputs inputs{"dataset-1", dir_, {}, [&](const std::string&) { return RigToJson(rig); }};
+  SubmissionInputs inputs{"dataset-1", dir_, {}, [&](const std::string&) { return RigToJson(rig); },
+                          {}};
   WriteImage("cam0/a.png", 64, 48);
   inputs.images.push_back({"cam0/a.png", 64, 48});
   // Images of one camera only.

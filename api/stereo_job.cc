@@ -16,6 +16,7 @@
 
 #include "api/camera_json.h"
 #include "api/json_fields.h"
+#include "api/recording_input.h"
 #include "engine/dense/pipeline.h"
 #include "engine/estimators/epipolar.h"
 #include "engine/slam/map_io.h"
@@ -116,6 +117,7 @@ StereoReconstructParams StereoReconstructParamsFromJson(const json& params) {
   const std::set<std::string>& other = out.method == "dense" ? sparse : dense;
   for (const auto& [key, value] : params.items()) {
     if (key == "rig" || key == "method" || key == "trajectory" || fields.count(key)) continue;
+    if (RecordingFieldNames().count(key)) continue;  // checked at submission
     OMNIRIG_CHECK(other.count(key) == 0, "field 'params." << key << "' applies to method '"
                                                           << (out.method == "dense" ? "sparse" : "dense")
                                                           << "' only (this job's method is '"
@@ -257,7 +259,19 @@ json DensePairJson(const std::string& name, const dense::DensePairResult& r) {
 json RunStereoReconstructJob(const json& params, const JobContext& context) {
   const StereoReconstructParams parsed = StereoReconstructParamsFromJson(params);
   const StereoRig rig = LoadRig(context.load_result, parsed.rig_job);
-  const std::vector<ImagePairNames> pairs = MatchImagePairs(context.image_names);
+  const auto recording = RecordingInputFromJson(params, 2);
+  ImageReader read = FolderImageReader(context.dataset_dir);
+  std::vector<ImagePairNames> pairs;
+  std::optional<RecordingFramesRead> frames;
+  if (recording) {
+    frames = ReadRecordingFrames(*recording, context.open_recording,
+                                 SubRange(context.progress, 0.0, 0.0));
+    RecordingImages images = CollectRecordingImages(*frames, context.progress);
+    read = std::move(images.read);
+    pairs = std::move(images.pairs);
+  } else {
+    pairs = MatchImagePairs(context.image_names);
+  }
 
   json result = {{"rig", parsed.rig_job},
                  {"method", parsed.method},
@@ -290,8 +304,9 @@ json RunStereoReconstructJob(const json& params, const JobContext& context) {
     if (outcome.placed) pair["placed"] = *outcome.placed;
     result["pairs"].push_back(pair);
   };
+  if (recording) result["input"] = RecordingFramesJson(*recording, frames->frames);
   const dense::StereoPairsReport report = dense::ReconstructStereoPairs(
-      rig, context.dataset_dir, pairs, PlacePairs(parsed, pairs, context), options,
+      rig, read, pairs, PlacePairs(parsed, pairs, context), options,
       context.output_dir, on_pair, context.progress);
   result["num_points"] = report.num_points;
   if (report.trajectory) {
@@ -356,7 +371,13 @@ JobType StereoReconstructJobType() {
     if (parsed.trajectory_job) references.push_back({*parsed.trajectory_job, "slam", "trajectory"});
     return references;
   };
-  type.check_inputs = CheckImagesFitRig;
+  type.check_inputs = [](const json& params, const SubmissionInputs& inputs) {
+    if (const auto recording = RecordingInputFromJson(params, 2)) {
+      CheckRecordingInput(*recording, inputs);
+      return;
+    }
+    CheckImagesFitRig(params, inputs);
+  };
   type.run = RunStereoReconstructJob;
   return type;
 }

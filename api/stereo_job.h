@@ -37,6 +37,8 @@
 // Artifacts: one pair: cloud.ply (binary little-endian PLY, float x y z in metres in the pair's
 // cam0 frame, uchar red green blue, and for dense float confidence). More than one pair:
 // cloud_NAME.ply per pair (NAME with '/' and '.' replaced by '_'), each in its own cam0 frame.
+// Or a robot recording's two image topics, paired by header stamp (params "recording",
+// "topics", "start_s", "end_s", "frame_step", "pair_tolerance_s": api/recording_input.h).
 // With a trajectory (params "trajectory", or the dataset's one .tum file: by timestamp when the
 // pairs are named by time, else one pose per pair in order), cloud_NAME.ply per pair as well and
 // cloud.ply holding every placed pair in the trajectory's world ("artifact" is cloud.ply,

@@ -1,8 +1,10 @@
 #include "server/dataset_recordings.h"
 
+#include <algorithm>
 #include <fstream>
 #include <set>
 
+#include "engine/util/check.h"
 #include "server/http.h"
 #include "server/service.h"
 #include "storage/recording.h"
@@ -87,7 +89,71 @@ nlohmann::json IndexFolder(const fs::path& images_dir, const std::string& folder
   }
 }
 
+// A stored recording as the engine reads it.
+class StoredRecording : public io::MessageSource {
+ public:
+  StoredRecording(std::string name, std::unique_ptr<storage::Recording> recording)
+      : name_(std::move(name)), recording_(std::move(recording)) {
+    for (const storage::RecordingTopic& topic : recording_->index().topics) {
+      topics_.push_back({topic.name, topic.type, topic.encoding, topic.message_count});
+    }
+  }
+  const std::string& name() const override { return name_; }
+  const std::vector<io::RecordedTopic>& topics() const override { return topics_; }
+  void ReadMessages(const std::set<std::string>& topics,
+                    const std::function<bool(const io::RecordedMessage&)>& on_message)
+      const override {
+    const storage::RecordingTopic* first = recording_->index().topics.data();
+    try {
+      recording_->ReadMessages(topics, [&](const storage::RecordingMessage& message) {
+        return on_message({&topics_[message.topic - first], message.data});
+      });
+    } catch (const storage::RecordingError& e) {
+      throw InvalidArgument(std::string("recording ") + e.what());
+    }
+  }
+
+ private:
+  std::string name_;
+  std::unique_ptr<storage::Recording> recording_;
+  std::vector<io::RecordedTopic> topics_;
+};
+
 }  // namespace
+
+std::vector<std::string> RecordingNames(const std::vector<std::string>& file_names) {
+  // A file of a ROS 2 bag's folder belongs to the folder's recording, not listed on its own.
+  std::set<std::string> folders;
+  for (const auto& name : file_names) {
+    if (EndsWith(Lower(name), "/metadata.yaml")) folders.insert(BagFolder(name));
+  }
+  std::vector<std::string> names(folders.begin(), folders.end());
+  for (const auto& name : file_names) {
+    const std::string lower = Lower(name);
+    const bool whole = EndsWith(lower, ".bag") || EndsWith(lower, ".mcap") || EndsWith(lower, ".tar");
+    if (whole && !folders.count(BagFolder(name))) names.push_back(name);
+  }
+  return names;
+}
+
+std::shared_ptr<const io::MessageSource> OpenDatasetRecording(
+    const fs::path& images_dir, const std::vector<std::string>& file_names,
+    const std::string& name) {
+  const std::vector<std::string> names = RecordingNames(file_names);
+  if (std::find(names.begin(), names.end(), name) == names.end()) {
+    std::string list;
+    for (const auto& known : names) list += (list.empty() ? "" : ", ") + known;
+    throw InvalidArgument("the dataset holds no recording '" + name + "' (" +
+                          (names.empty() ? "it holds no recording: upload a .bag, .mcap or ROS 2 bag"
+                                         : "its recordings: " + list) +
+                          ")");
+  }
+  try {
+    return std::make_shared<StoredRecording>(name, storage::Recording::Open(images_dir / name, name));
+  } catch (const storage::RecordingError& e) {
+    throw InvalidArgument(std::string("recording ") + e.what());
+  }
+}
 
 CheckedRecording CheckRecordingUpload(const std::string& name, const fs::path& path,
                                       const storage::FileDigest& digest) {
@@ -118,17 +184,9 @@ void KeepRecordingIndex(ServiceState& state, const std::string& dataset_id,
 
 nlohmann::json RecordingsJson(const ServiceState& state, const std::string& dataset_id,
                               const std::vector<storage::ImageRecord>& images) {
-  // A file of a ROS 2 bag's folder belongs to the folder's recording, not listed on its own.
-  std::set<std::string> folders;
-  for (const auto& image : images) {
-    if (EndsWith(Lower(image.name), "/metadata.yaml")) folders.insert(BagFolder(image.name));
-  }
-  std::vector<std::string> names(folders.begin(), folders.end());
-  for (const auto& image : images) {
-    const std::string lower = Lower(image.name);
-    const bool whole = EndsWith(lower, ".bag") || EndsWith(lower, ".mcap") || EndsWith(lower, ".tar");
-    if (whole && !folders.count(BagFolder(image.name))) names.push_back(image.name);
-  }
+  std::vector<std::string> file_names;
+  for (const auto& image : images) file_names.push_back(image.name);
+  const std::vector<std::string> names = RecordingNames(file_names);
   nlohmann::json recordings = nlohmann::json::array();
   for (const auto& name : names) {
     std::ifstream in(IndexPath(state, dataset_id, name));

@@ -8,11 +8,13 @@
 // time in seconds, rate in Hz).
 
 #include <filesystem>
+#include <memory>
 #include <string>
 #include <vector>
 
 #include <nlohmann/json.hpp>
 
+#include "engine/io/recording_frames.h"
 #include "storage/atomic_file.h"
 #include "storage/records.h"
 
@@ -39,5 +41,16 @@ void KeepRecordingIndex(ServiceState& state, const std::string& dataset_id,
 // The dataset's recordings, as the dataset's JSON lists them ("recordings").
 nlohmann::json RecordingsJson(const ServiceState& state, const std::string& dataset_id,
                               const std::vector<storage::ImageRecord>& images);
+
+// The names the dataset lists its recordings under, among its files' names: a .bag, .mcap or
+// .tar by its file name, a ROS 2 bag's folder ("run" for "run/metadata.yaml") by the folder's.
+std::vector<std::string> RecordingNames(const std::vector<std::string>& file_names);
+
+// The dataset's recording `name` for a job (api::JobContext::open_recording): storage's reader
+// behind the engine's MessageSource. Throws InvalidArgument naming the recordings the dataset
+// holds when none has that name, and when the recording cannot be opened.
+std::shared_ptr<const io::MessageSource> OpenDatasetRecording(
+    const std::filesystem::path& images_dir, const std::vector<std::string>& file_names,
+    const std::string& name);
 
 }  // namespace omnirig::server

@@ -12,6 +12,7 @@
 #include "api/service_json.h"
 #include "engine/geometry/ply_preview.h"
 #include "engine/util/check.h"
+#include "server/dataset_recordings.h"
 #include "storage/atomic_file.h"
 #include "storage/image_header.h"
 
@@ -205,6 +206,10 @@ api::JobContext BuildContext(const storage::JobRecord& job, storage::JobStore& s
   for (const storage::ImageRecord& image : store.ListImages(job.dataset_id)) {
     context.image_names.push_back(image.name);
   }
+  context.open_recording = [dir = context.dataset_dir,
+                            names = context.image_names](const std::string& name) {
+    return OpenDatasetRecording(dir, names, name);
+  };
   context.output_dir = output_dir;
   context.num_threads = options.num_threads;
   context.progress.report = [&progress](double fraction, const std::string& stage,

@@ -11,6 +11,7 @@
 #include "api/service_json.h"
 #include "api/stereo_job.h"
 #include "engine/util/check.h"
+#include "server/dataset_recordings.h"
 #include "server/json_views.h"
 #include "server/live_jobs.h"
 #include "server/log_line.h"
@@ -92,6 +93,9 @@ void CheckInputs(ServiceState& state, const api::JobType& type,
     if (!result) throw InvalidArgument("job " + id + " has no result");
     return nlohmann::json::parse(*result);
   };
+  inputs.open_recording = [&inputs](const std::string& name) {
+    return OpenDatasetRecording(inputs.dataset_dir, inputs.file_names(), name);
+  };
   try {
     type.check_inputs(request.params, inputs);
   } catch (const InvalidArgument& e) {
@@ -123,12 +127,22 @@ void CreateJob(ServiceState& state, const HttpRequest& request, HttpResponse& re
     throw HttpError(400, "invalid_params", e.what());
   }
   CheckReferencedJobs(state, *type, parsed.params);
-  // A job on an empty dataset would be queued only to fail once it ran.
-  if (type->reads_images && dataset->image_count + dataset->video_count == 0) {
-    throw HttpError(
-        422, "dataset_empty",
-        "dataset " + parsed.dataset + " has no images: upload them before creating a job",
-        {{"dataset", parsed.dataset}});
+  // A job on an empty dataset would be queued only to fail once it ran (a job naming a
+  // recording or its topics finds out whether the dataset holds them in its own check).
+  const bool names_recording =
+      parsed.params.is_object() && (parsed.params.contains("recording") ||
+                                    parsed.params.contains("topic") || parsed.params.contains("topics"));
+  if (type->reads_images && dataset->image_count + dataset->video_count == 0 && !names_recording) {
+    std::vector<std::string> file_names;
+    for (const auto& image : state.store->ListImages(parsed.dataset)) file_names.push_back(image.name);
+    const std::vector<std::string> recordings = RecordingNames(file_names);
+    std::string message = "dataset " + parsed.dataset + " has no images: upload them before creating a job";
+    if (!recordings.empty()) {
+      message = "dataset " + parsed.dataset + " has no images but the recording " + recordings[0] +
+                ": name it with \"recording\" and its image topics (\"topic\" for a calibration, "
+                "\"topics\": {\"cam0\": ..., \"cam1\": ...} for the stereo jobs)";
+    }
+    throw HttpError(422, "dataset_empty", message, {{"dataset", parsed.dataset}});
   }
   CheckInputs(state, *type, parsed);
   const int64_t queued = state.store->CountJobsByState().at(storage::JobState::kQueued);

@@ -5,9 +5,19 @@
 
 #include <gtest/gtest.h>
 
+#include <array>
+#include <cstdlib>
 #include <fstream>
+#include <map>
 #include <sstream>
 
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "api/camera_json.h"
+#include "api/synth_json.h"
+#include "engine/synth/presets.h"
+#include "testing/synth/calib_board.h"
 #include "server/service.h"
 #include "testing/recordings/test_recordings.h"
 #include "tests/server_test_util.h"
@@ -46,7 +56,8 @@ class ServerRecordingTest : public ::testing::Test {
     options.min_free_bytes = 0;
     options.max_chunk_bytes = kChunk;
     service_ = std::make_unique<server::Service>(options);
-    client_ = MakeClient(service_->Start());
+    port_ = service_->Start();
+    client_ = MakeClient(port_);
     const auto created =
         client_->Post("/api/v1/datasets", json{{"name", "robot"}}.dump(), "application/json");
     ASSERT_EQ(created->status, 201);
@@ -106,6 +117,7 @@ class ServerRecordingTest : public ::testing::Test {
   std::unique_ptr<server::Service> service_;
   std::unique_ptr<httplib::Client> client_;
   std::string dataset_;
+  int port_ = 0;
 };
 
 void ExpectImageTopic(const json& recording, const std::string& topic, const std::string& type) {
@@ -210,6 +222,253 @@ TEST_F(ServerRecordingTest, UnsupportedFileNamesWhatIsTaken) {
   for (const std::string words : {"images", "videos", "recordings", ".bag", ".mcap", "metadata.yaml"}) {
     EXPECT_NE(message.find(words), std::string::npos) << message;
   }
+}
+
+// A stereo sequence as a robot records it: written as a ROS 1 bag by python3-rosbag
+// (testing/recordings/write_stereo_bag.py: cam0 raw bgr8 Images, cam1 PNG CompressedImages
+// stamped 1 ms later, lz4 chunks), uploaded in chunks beside the same frames as a PNG folder.
+class RecordingJobsTest : public ServerRecordingTest {
+ protected:
+  static constexpr int64_t kStartNs = 1700000000000000000;
+  static constexpr int64_t kPeriodNs = 100000000;  // the sequence's 10 Hz
+
+  // Writes each stereo frame as cam0/NAME.png and cam1/NAME.png and, through
+  // write_stereo_bag.py, as the bag `bag_name` (frame i stamped kStartNs + i * kPeriodNs; cam0 a
+  // raw mono8 or bgr8 Image as the image is grey or colour), and uploads both into the dataset.
+  void UploadFramesAsFolderAndBag(const std::vector<std::string>& names,
+                                  const std::array<std::vector<cv::Mat>, 2>& images,
+                                  const std::string& bag_name = "run.bag") {
+    const fs::path frames = dir_.path() / ("frames_" + bag_name);
+    fs::create_directories(frames);
+    std::ofstream manifest(frames / "manifest.txt");
+    for (size_t i = 0; i < names.size(); ++i) {
+      const int64_t stamp_ns = kStartNs + static_cast<int64_t>(i) * kPeriodNs;
+      const cv::Mat cam0 = images[0][i].clone();  // continuous rows
+      ASSERT_TRUE(cam0.depth() == CV_8U && (cam0.channels() == 1 || cam0.channels() == 3));
+      std::ofstream(frames / (names[i] + ".raw"), std::ios::binary)
+          .write(reinterpret_cast<const char*>(cam0.data),
+                 static_cast<std::streamsize>(cam0.total() * cam0.elemSize()));
+      std::vector<uchar> png[2];
+      for (int c = 0; c < 2; ++c) ASSERT_TRUE(cv::imencode(".png", images[c][i], png[c]));
+      std::ofstream(frames / (names[i] + ".png"), std::ios::binary)
+          .write(reinterpret_cast<const char*>(png[1].data()), static_cast<std::streamsize>(png[1].size()));
+      manifest << stamp_ns / 1000000000 << " " << stamp_ns % 1000000000 << " " << cam0.cols << " "
+               << cam0.rows << " " << (cam0.channels() == 1 ? "mono8" : "bgr8") << " " << names[i]
+               << ".raw " << names[i] << ".png\n";
+      for (int c = 0; c < 2; ++c) {
+        const std::string file = "cam" + std::to_string(c) + "/" + names[i] + ".png";
+        const std::string bytes(png[c].begin(), png[c].end());
+        ASSERT_EQ(PutWhole(file, bytes)->status, 201) << file;
+      }
+    }
+    manifest.close();
+    const fs::path bag = dir_.path() / bag_name;
+    const std::string command = std::string(std::getenv("OMNIRIG_SOURCE_DIR")) +
+                                "/testing/recordings/write_stereo_bag.py '" + frames.string() +
+                                "' '" + bag.string() + "' >&2";
+    ASSERT_EQ(std::system(command.c_str()), 0) << command;
+    const auto stored = UploadInChunks(bag_name, ReadFile(bag));
+    ASSERT_EQ(stored->status, 201) << stored->body;
+  }
+
+  synth::StereoSequence UploadSequenceAsFolderAndBag(int num_frames) {
+    synth::StereoSequenceOptions options;
+    options.num_frames = num_frames;
+    options.path_length_m = 1.65;
+    options.width = 640;
+    options.height = 480;
+    options.render.noise_sigma = 1.0;
+    options.render.num_threads = 2;
+    synth::StereoSequence sequence = synth::MakeStereoSequence(options);
+    UploadFramesAsFolderAndBag(sequence.names, sequence.images);
+    return sequence;
+  }
+
+  std::string Artifact(const json& result, const std::string& name) {
+    return client_->Get(("/api/v1/jobs/" + result["job_id"].get<std::string>() + "/artifacts/" +
+                         name).c_str())->body;
+  }
+
+  httplib::Result Submit(const std::string& type, const json& params) {
+    return client_->Post("/api/v1/jobs",
+                         json{{"type", type}, {"dataset", dataset_}, {"params", params}}.dump(),
+                         "application/json");
+  }
+
+  json RunJob(const std::string& type, const json& params, double timeout_s = 240) {
+    const auto created = Submit(type, params);
+    EXPECT_EQ(created->status, 202) << created->body;
+    const std::string id = JsonOf(created)["id"];
+    const json job = WaitForJob(port_, id, timeout_s);
+    EXPECT_EQ(job["state"], "succeeded") << job.dump();
+    json result = JsonOf(client_->Get(("/api/v1/jobs/" + id + "/result").c_str()));
+    result["job_id"] = id;
+    return result;
+  }
+
+};
+
+TEST_F(RecordingJobsTest, SlamOnABagFollowsTheSameTrajectoryAsOnItsPngFolder) {
+  const synth::StereoSequence sequence = UploadSequenceAsFolderAndBag(12);
+  const std::string rig = SubmitFakeRelativePose(service_->state().job_types, *client_, port_,
+                                                 dataset_, api::RigToJson(sequence.rig));
+  const json on_folder = RunJob("slam", {{"rig", rig}});
+  const json topics = {{"cam0", "/cam0/image_raw"}, {"cam1", "/cam1/image_raw/compressed"}};
+  const json on_bag = RunJob("slam", {{"rig", rig}, {"recording", "run.bag"}, {"topics", topics}});
+  ASSERT_EQ(on_folder["num_frames"], 12) << on_folder.dump();
+  ASSERT_EQ(on_bag["num_frames"], 12) << on_bag.dump();
+  EXPECT_EQ(on_bag["num_tracked"], on_folder["num_tracked"]);
+  EXPECT_EQ(on_bag["input"]["kind"], "recording");
+  EXPECT_EQ(on_bag["input"]["topics"], json({"/cam0/image_raw", "/cam1/image_raw/compressed"}));
+  // cam1 is stamped 1 ms after cam0: within the default tolerance (a quarter of 100 ms).
+  EXPECT_NEAR(on_bag["input"]["pair_tolerance_s"].get<double>(), 0.025, 1e-9);
+  EXPECT_EQ(on_bag["input"]["num_unpaired"], json({0, 0}));
+  // Frames are named and timed by cam0's header stamp.
+  EXPECT_EQ(on_bag["frames"][3]["name"], "t1700000000.300");
+  // The bag holds the very pixels of the PNGs (raw bgr8 and lossless PNG), and SLAM is
+  // deterministic on one thread: the trajectories agree to rounding.
+  for (int i = 0; i < 12; ++i) {
+    const json& a = on_folder["frames"][i]["world_from_rig"];
+    const json& b = on_bag["frames"][i]["world_from_rig"];
+    ASSERT_FALSE(a.is_null()) << i;
+    ASSERT_FALSE(b.is_null()) << i;
+    for (int k = 0; k < 3; ++k) {
+      EXPECT_NEAR(a["translation_m"][k].get<double>(), b["translation_m"][k].get<double>(), 1e-9)
+          << "frame " << i;
+    }
+    for (int k = 0; k < 4; ++k) {
+      EXPECT_NEAR(a["rotation_wxyz"][k].get<double>(), b["rotation_wxyz"][k].get<double>(), 1e-9)
+          << "frame " << i;
+    }
+  }
+  // trajectory.tum carries the recording's stamps.
+  const std::string tum = Artifact(on_bag, "trajectory.tum");
+  EXPECT_NE(tum.find("1700000000.7"), std::string::npos) << tum;
+
+  // Every second frame of [0.2, 0.9] s after the first stamp: 0.2, 0.4, 0.6, 0.8.
+  const json stepped = RunJob("slam", {{"rig", rig},
+                                       {"recording", "run.bag"},
+                                       {"topics", topics},
+                                       {"frame_step", 2},
+                                       {"start_s", 0.2},
+                                       {"end_s", 0.9}});
+  ASSERT_EQ(stepped["num_frames"], 4) << stepped.dump();
+  EXPECT_EQ(stepped["frames"][0]["name"], "t1700000000.200");
+  EXPECT_EQ(stepped["frames"][3]["name"], "t1700000000.800");
+}
+
+// A board waved before the rig, recorded: a calibration from cam0's topic and a rig from both
+// topics agree with the same jobs on the PNG folder (the bag holds the same pixels: cam0 raw
+// mono8, cam1 PNG), and their Kalibr exports name the topics.
+TEST_F(RecordingJobsTest, CalibrationAndRigFromTopicsMatchTheFolder) {
+  const synth::StereoBoardSet set = synth::MakeStereoBoardSet(synth::QuickStereoBoardOptions(8, 5));
+  UploadFramesAsFolderAndBag(set.names, set.images);
+  const json board = {{"cols", set.board.cols},
+                      {"rows", set.board.rows},
+                      {"square_size_mm", set.board.square_size_m * 1e3}};
+  const json on_folder = RunJob("calibration", {{"board", board}, {"camera", "cam0"}});
+  const json on_topic =
+      RunJob("calibration", {{"board", board}, {"recording", "run.bag"}, {"topic", "/cam0/image_raw"}});
+  ASSERT_EQ(on_topic["num_views_used"], on_folder["num_views_used"]) << on_topic.dump();
+  EXPECT_EQ(on_topic["num_views_used"], 8);
+  EXPECT_NEAR(on_topic["rms_px"].get<double>(), on_folder["rms_px"].get<double>(), 1e-9);
+  EXPECT_EQ(on_topic["camera"]["intrinsics"], on_folder["camera"]["intrinsics"]);
+  EXPECT_EQ(on_topic["images"][2]["name"], "t1700000000.200.msg");
+  EXPECT_EQ(on_topic["input"]["num_frames"], 8);
+  EXPECT_NE(Artifact(on_topic, "camera_kalibr.yaml").find("  rostopic: /cam0/image_raw\n"),
+            std::string::npos);
+  EXPECT_EQ(Artifact(on_folder, "camera_kalibr.yaml").find("rostopic"), std::string::npos);
+
+  const json topics = {{"cam0", "/cam0/image_raw"}, {"cam1", "/cam1/image_raw/compressed"}};
+  const json rig_on_folder = RunJob("relative_pose", {{"board", board}});
+  const json rig_on_topics =
+      RunJob("relative_pose", {{"board", board}, {"recording", "run.bag"}, {"topics", topics}});
+  EXPECT_NEAR(rig_on_topics["baseline_m"].get<double>(), rig_on_folder["baseline_m"].get<double>(),
+              1e-9);
+  EXPECT_NEAR(rig_on_topics["baseline_m"].get<double>(), set.rig.cam0_from_cam1.translation.norm(),
+              1e-3);
+  EXPECT_EQ(rig_on_topics["input"]["num_unpaired"], json({0, 0}));
+  const std::string camchain = Artifact(rig_on_topics, "camchain_kalibr.yaml");
+  EXPECT_NE(camchain.find("  rostopic: /cam0/image_raw\n"), std::string::npos) << camchain;
+  EXPECT_NE(camchain.find("  rostopic: /cam1/image_raw/compressed\n"), std::string::npos)
+      << camchain;
+
+  // Sparse stereo on two of the recording's pairs with that rig.
+  const json stereo = RunJob("stereo_reconstruct", {{"rig", rig_on_topics["job_id"]},
+                                                    {"method", "sparse"},
+                                                    {"recording", "run.bag"},
+                                                    {"topics", topics},
+                                                    {"end_s", 0.15}});
+  ASSERT_EQ(stereo["pairs"].size(), 2u) << stereo.dump();
+  EXPECT_EQ(stereo["pairs"][1]["name"], "t1700000000.100.msg");
+  EXPECT_GT(stereo["num_points"].get<int>(), 0);
+}
+
+// Every bad recording input is refused at submission, 422 invalid_input, with what to write.
+TEST_F(RecordingJobsTest, BadRecordingInputsAreRefusedAtSubmission) {
+  ASSERT_EQ(UploadInChunks("run.bag", Written("images_none.bag"))->status, 201);
+  const json board = {{"cols", 7}, {"rows", 5}, {"square_size_mm", 30}};
+  const json pair = {{"cam0", "/cam0/image_raw"}, {"cam1", "/cam1/image_raw"}};
+  const auto expect = [&](const std::string& type, json params, const std::string& words) {
+    const auto result = Submit(type, params);
+    ASSERT_TRUE(result);
+    EXPECT_EQ(result->status, 422) << type << " " << params.dump() << ": " << result->body;
+    const json body = JsonOf(result);
+    EXPECT_EQ(body["error"]["code"], "invalid_input") << result->body;
+    EXPECT_NE(body["error"]["message"].get<std::string>().find(words), std::string::npos)
+        << type << " " << params.dump() << ": " << result->body;
+  };
+  const std::string image_topics =
+      "its image topics are /bayer/image_raw, /cam0/image_raw, /cam0/image_raw/compressed, "
+      "/cam1/image_raw";
+  // An unknown recording, a topic it does not hold, a topic of another type.
+  expect("calibration", {{"board", board}, {"recording", "nope.bag"}, {"topic", "/cam0/image_raw"}},
+         "the dataset holds no recording 'nope.bag' (its recordings: run.bag)");
+  expect("calibration", {{"board", board}, {"recording", "run.bag"}, {"topic", "/cam2/image_raw"}},
+         "recording run.bag has no topic /cam2/image_raw: " + image_topics);
+  expect("calibration", {{"board", board}, {"recording", "run.bag"}, {"topic", "/note"}},
+         "topic /note of recording run.bag holds std_msgs/String messages, not images "
+         "(sensor_msgs/Image or CompressedImage): " + image_topics);
+  expect("relative_pose",
+         {{"board", board}, {"recording", "run.bag"}, {"topics", {{"cam0", "/cam0/image_raw"}, {"cam1", "/note"}}}},
+         "topic /note of recording run.bag holds std_msgs/String");
+  // "topics" on a calibration, "topic" on the stereo jobs, topics without a recording.
+  expect("calibration", {{"board", board}, {"recording", "run.bag"}, {"topics", pair}},
+         "a calibration reads one camera: name its topic with \"topic\"");
+  expect("relative_pose", {{"board", board}, {"recording", "run.bag"}, {"topic", "/cam0/image_raw"}},
+         "this job reads two cameras: name their topics with \"topics\"");
+  expect("calibration", {{"board", board}, {"topic", "/cam0/image_raw"}},
+         "'topic' names topics of a recording: add \"recording\"");
+  expect("relative_pose", {{"board", board}, {"recording", "run.bag"}, {"topics", {{"cam0", "/cam0/image_raw"}}}},
+         "field 'params.topics' must be {\"cam0\": TOPIC, \"cam1\": TOPIC}");
+  // A recording and a folder of images at once.
+  expect("calibration",
+         {{"board", board}, {"recording", "run.bag"}, {"topic", "/cam0/image_raw"}, {"camera", "cam0"}},
+         "\"camera\" picks a folder of the dataset's images and \"recording\" a topic of a "
+         "recording: give one of them");
+  // A job on the recording that does not name it is told how to.
+  const auto unnamed = Submit("calibration", {{"board", board}});
+  EXPECT_EQ(unnamed->status, 422) << unnamed->body;
+  EXPECT_NE(unnamed->body.find("has no images but the recording run.bag: name it with"),
+            std::string::npos) << unnamed->body;
+  // The slam and stereo jobs (their rig from a stand-in relative_pose job).
+  const std::string rig = SubmitFakeRelativePose(service_->state().job_types, *client_, port_,
+                                                 dataset_, json{{"baseline_m", 0.1}});
+  expect("slam", {{"rig", rig}, {"recording", "run.bag"}, {"topic", "/cam0/image_raw"}},
+         "this job reads two cameras");
+  expect("slam", {{"rig", rig}, {"recording", "other.mcap"}, {"topics", pair}},
+         "the dataset holds no recording 'other.mcap'");
+  expect("slam", {{"rig", rig}, {"recording", "run.bag"}, {"topics", {{"cam0", "/cam0/image_raw"}, {"cam1", "/cam3"}}}},
+         "recording run.bag has no topic /cam3: " + image_topics);
+  expect("stereo_reconstruct", {{"rig", rig}, {"recording", "run.bag"}, {"topic", "/cam0/image_raw"}},
+         "this job reads two cameras");
+  expect("stereo_reconstruct", {{"rig", rig}, {"recording", "run.bag"}, {"topics", {{"cam0", "/note"}, {"cam1", "/cam1/image_raw"}}}},
+         "topic /note of recording run.bag holds std_msgs/String");
+  // The good params pass (the tiny 32x24 frames fit no rig: canceled once queued).
+  const auto accepted = Submit("slam", {{"rig", rig}, {"recording", "run.bag"}, {"topics", pair}});
+  ASSERT_EQ(accepted->status, 202) << accepted->body;
+  client_->Post(("/api/v1/jobs/" + JsonOf(accepted)["id"].get<std::string>() + "/cancel").c_str(),
+                "", "application/json");
 }
 
 }  // namespace

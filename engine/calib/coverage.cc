@@ -13,6 +13,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "engine/geometry/rigid3.h"
+#include "engine/features/image.h"
 #include "engine/geometry/unified_camera.h"
 #include "engine/util/check.h"
 #include "engine/util/option_check.h"
@@ -596,10 +597,15 @@ CoverageReport AnalyseCoverage(const CalibrationReport& report, const BoardSpec&
 CoverageReport AnalyseCoverageOfImages(const CalibrationReport& report, const BoardSpec& board,
                                        const std::filesystem::path& images_dir,
                                        const CoverageOptions& options) {
+  return AnalyseCoverageOfImages(report, board, FolderImageReader(images_dir), options);
+}
+
+CoverageReport AnalyseCoverageOfImages(const CalibrationReport& report, const BoardSpec& board,
+                                       const ImageReader& read, const CoverageOptions& options) {
   cv::Mat background;
   for (const CalibrationImageReport& image : report.images) {
     if (!image.used) continue;
-    background = cv::imread((images_dir / image.name).string(), cv::IMREAD_COLOR);
+    background = read(image.name, cv::IMREAD_COLOR);
     break;
   }
   const Eigen::Vector3d* rim =

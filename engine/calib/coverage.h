@@ -32,6 +32,7 @@
 
 #include "engine/calib/board.h"
 #include "engine/calib/calibrate.h"
+#include "engine/features/image.h"
 
 namespace omnirig {
 
@@ -94,6 +95,9 @@ CoverageReport AnalyseCoverage(const CalibrationReport& report, const BoardSpec&
 CoverageReport AnalyseCoverageOfImages(const CalibrationReport& report, const BoardSpec& board,
                                        const std::filesystem::path& images_dir,
                                        const CoverageOptions& options);
+// As above, the images read through `read`.
+CoverageReport AnalyseCoverageOfImages(const CalibrationReport& report, const BoardSpec& board,
+                                       const ImageReader& read, const CoverageOptions& options);
 
 // Writes coverage.coverage_image as `coverage_png` and, when the uncertainty is valid,
 // coverage.uncertainty_image as `uncertainty_png` (creating their folders).

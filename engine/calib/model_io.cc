@@ -120,7 +120,7 @@ std::string ToOpenCvOmnidir(const CameraModel& camera, std::vector<std::string>*
 }
 
 std::string ToKalibrOmniRadtan(const CameraModel& camera, std::vector<std::string>* warnings,
-                               const std::string& camera_name) {
+                               const std::string& camera_name, const std::string& rostopic) {
   const UnifiedIntrinsics& in = camera.intrinsics;
   const std::vector<std::string> dropped = ExportWarnings(camera, /*format_has_skew=*/false);
   if (warnings) *warnings = dropped;
@@ -136,13 +136,15 @@ std::string ToKalibrOmniRadtan(const CameraModel& camera, std::vector<std::strin
      << "  distortion_coeffs: [" << in.k(1) << ", " << in.k(2) << ", " << in.k(3) << ", " << in.k(4)
      << "]\n"
      << "  resolution: [" << camera.width << ", " << camera.height << "]\n";
+  if (!rostopic.empty()) os << "  rostopic: " << rostopic << "\n";
   return os.str();
 }
 
-std::string ToKalibrCamchain(const StereoRig& rig, std::vector<std::string>* warnings) {
+std::string ToKalibrCamchain(const StereoRig& rig, std::vector<std::string>* warnings,
+                             const std::array<std::string, 2>& rostopics) {
   std::vector<std::string> dropped[2];
-  const std::string cam0 = ToKalibrOmniRadtan(rig.cam0, &dropped[0], "cam0");
-  const std::string cam1 = ToKalibrOmniRadtan(rig.cam1, &dropped[1], "cam1");
+  const std::string cam0 = ToKalibrOmniRadtan(rig.cam0, &dropped[0], "cam0", rostopics[0]);
+  const std::string cam1 = ToKalibrOmniRadtan(rig.cam1, &dropped[1], "cam1", rostopics[1]);
   std::vector<std::string> all;
   for (int c = 0; c < 2; ++c) {
     for (const std::string& warning : dropped[c]) {

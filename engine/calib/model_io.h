@@ -11,6 +11,7 @@
 // the camchain a user calibrated with Kalibr); the OpenCV reader, for round-trip tests, is
 // testing/calib/model_import.h.
 
+#include <array>
 #include <string>
 #include <vector>
 
@@ -24,13 +25,18 @@ std::vector<std::string> ExportWarnings(const CameraModel& camera, bool format_h
 // The FileStorage document as text (YAML). `warnings` receives what the format drops.
 std::string ToOpenCvOmnidir(const CameraModel& camera, std::vector<std::string>* warnings);
 
+// `rostopic`: the image topic the camera's frames came from, written as Kalibr writes it (Kalibr
+// reads it to find the camera's images in a bag); none when empty.
 std::string ToKalibrOmniRadtan(const CameraModel& camera, std::vector<std::string>* warnings,
-                               const std::string& camera_name = "cam0");
+                               const std::string& camera_name = "cam0",
+                               const std::string& rostopic = "");
 
 // A Kalibr camchain YAML of a stereo rig: cam0 and cam1 as ToKalibrOmniRadtan writes them,
 // cam1 with T_cn_cnm1 = cam1_from_cam0 (maps points in cam0's frame into cam1's; translation in
 // metres) as a 4x4 matrix. `warnings` receives what the format drops, per camera.
-std::string ToKalibrCamchain(const StereoRig& rig, std::vector<std::string>* warnings);
+// `rostopics`: each camera's image topic (see ToKalibrOmniRadtan).
+std::string ToKalibrCamchain(const StereoRig& rig, std::vector<std::string>* warnings,
+                             const std::array<std::string, 2>& rostopics = {});
 
 // Parses the camera `camera_name` of a Kalibr camchain YAML. Throws InvalidArgument for another
 // camera or distortion model or missing keys.

@@ -8,6 +8,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "engine/features/image.h"
 #include "engine/util/option_check.h"
 #include "engine/util/parallel.h"
 #include "engine/util/progress_range.h"
@@ -19,10 +20,10 @@ namespace {
 cv::Point2d ToCv(const Eigen::Vector2d& p) { return cv::Point2d(p.x(), p.y()); }
 
 // Reads one image; an empty Mat (with `reason` set) when it is missing, unreadable or truncated.
-cv::Mat ReadImage(const std::filesystem::path& path, std::string* reason) {
+cv::Mat ReadImage(const ImageReader& read, const std::string& name, std::string* reason) {
   cv::Mat image;
   try {
-    image = cv::imread(path.string(), cv::IMREAD_COLOR);
+    image = read(name, cv::IMREAD_COLOR);
   } catch (const cv::Exception&) {
     image = cv::Mat();
   }
@@ -52,7 +53,7 @@ void CheckImageSizes(const std::vector<cv::Size>& sizes, std::vector<Calibration
 // Reads each image and detects the board in it, on options.calibrate.num_threads threads
 // (images are independent; each worker holds one image at a time). The results are in input
 // order whatever the scheduling.
-std::vector<CalibrationView> DetectAll(const std::filesystem::path& dir,
+std::vector<CalibrationView> DetectAll(const ImageReader& read,
                                        const std::vector<std::string>& names,
                                        const BoardSpec& board,
                                        const ImageCalibrationOptions& options,
@@ -63,7 +64,7 @@ std::vector<CalibrationView> DetectAll(const std::filesystem::path& dir,
   auto detect_one = [&](int i, const ProgressSink& cancellation) {
     cancellation.ThrowIfCancelled();
     views[i].name = names[i];
-    const cv::Mat image = ReadImage(dir / names[i], &views[i].detection.reason);
+    const cv::Mat image = ReadImage(read, names[i], &views[i].detection.reason);
     if (image.empty()) return;
     sizes[i] = image.size();
     DetectOptions detect = detect_options;
@@ -88,7 +89,7 @@ std::vector<CalibrationView> DetectAll(const std::filesystem::path& dir,
 // When no view shows the board at the given size: the first board size near it (one more of
 // both, cols and rows swapped, one more or one less of either) that an image shows, searched on up to three
 // readable images with the cheap detector attempts only. Returns the message for the user.
-std::string DescribeBoardSizeMismatch(const std::filesystem::path& dir,
+std::string DescribeBoardSizeMismatch(const ImageReader& read,
                                       const std::vector<CalibrationView>& views,
                                       const BoardSpec& board) {
   // Largest first: a smaller size is found inside a larger board, not the other way round.
@@ -106,7 +107,7 @@ std::string DescribeBoardSizeMismatch(const std::filesystem::path& dir,
   for (const CalibrationView& view : views) {
     if (tried >= 3) break;
     std::string unused;
-    const cv::Mat image = ReadImage(dir / view.name, &unused);
+    const cv::Mat image = ReadImage(read, view.name, &unused);
     if (image.empty()) continue;
     ++tried;
     for (const auto& [cols, rows] : sizes) {
@@ -133,7 +134,7 @@ std::string DescribeBoardSizeMismatch(const std::filesystem::path& dir,
 // size), in parallel: with the model of a first calibration, a partial grid grown to the whole
 // board (RedetectWithModel); then, with `detect`, the detector with every variant. Returns true
 // when it found any.
-bool DetectMissed(const std::filesystem::path& dir, const BoardSpec& board,
+bool DetectMissed(const ImageReader& read, const BoardSpec& board,
                   const ImageCalibrationOptions& options, const CameraModel* model, bool detect,
                   int width, int height, const ProgressSink& progress,
                   std::vector<CalibrationView>* views) {
@@ -145,8 +146,7 @@ bool DetectMissed(const std::filesystem::path& dir, const BoardSpec& board,
   std::vector<std::optional<BoardDetection>> found(missed.size());
   auto detect_one = [&](int k, const ProgressSink& cancellation) {
     cancellation.ThrowIfCancelled();
-    const cv::Mat image =
-        cv::imread((dir / (*views)[missed[k]].name).string(), cv::IMREAD_COLOR);
+    const cv::Mat image = read((*views)[missed[k]].name, cv::IMREAD_COLOR);
     if (image.empty() || image.cols != width || image.rows != height) return;
     BoardDetection detection;
     // Growing a partial grid of X-corners with the model finds checkerboards (a ChArUco board
@@ -185,14 +185,14 @@ bool DetectMissed(const std::filesystem::path& dir, const BoardSpec& board,
 // a second pass with a model follows (growing a view's partial grid with the model of the other
 // views takes a tenth of their time, bench_calib profile); with too few views for a first model,
 // the costly variants then run on every view missed. Returns whether every variant has run.
-bool DetectFirstPass(const std::filesystem::path& dir, const std::vector<std::string>& names,
+bool DetectFirstPass(const ImageReader& read, const std::vector<std::string>& names,
                      const BoardSpec& board, const ImageCalibrationOptions& options, int* width,
                      int* height, const ProgressSink& progress,
                      std::vector<CalibrationView>* views) {
   DetectOptions first_pass = options.detect;
   first_pass.try_costly_variants =
       options.detect.try_costly_variants && !options.redetect_with_model;
-  *views = DetectAll(dir, names, board, options, first_pass, width, height, progress);
+  *views = DetectAll(read, names, board, options, first_pass, width, height, progress);
   OMNIRIG_CHECK(*width > 0,
                 "calibration: none of the " << names.size() << " images could be read");
   if (first_pass.try_costly_variants == options.detect.try_costly_variants) return true;
@@ -200,12 +200,12 @@ bool DetectFirstPass(const std::filesystem::path& dir, const std::vector<std::st
       std::count_if(views->begin(), views->end(),
                     [](const CalibrationView& view) { return view.detection.found; }));
   if (num_found >= options.calibrate.min_views) return false;
-  DetectMissed(dir, board, options, nullptr, true, *width, *height, progress, views);
+  DetectMissed(read, board, options, nullptr, true, *width, *height, progress, views);
   return true;
 }
 
 // The SVP check on the requested image (or the first used one) with the calibrated model.
-void RunSvpCheck(const std::filesystem::path& dir, const SvpOptions& svp,
+void RunSvpCheck(const ImageReader& read, const SvpOptions& svp,
                  const std::filesystem::path& overlay_dir, CalibrationReport* report) {
   std::string name = svp.image;
   for (const CalibrationImageReport& image : report->images) {
@@ -216,7 +216,7 @@ void RunSvpCheck(const std::filesystem::path& dir, const SvpOptions& svp,
   report->svp->principal_point_px =
       Eigen::Vector2d(report->camera.intrinsics.u0(), report->camera.intrinsics.v0());
   std::string reason;
-  const cv::Mat image = ReadImage(dir / name, &reason);
+  const cv::Mat image = ReadImage(read, name, &reason);
   if (image.empty()) {
     report->svp->reason = name + ": " + reason;
     return;
@@ -313,12 +313,12 @@ void CheckArguments(const std::vector<std::string>& names, const BoardSpec& boar
 }
 
 // One overlay per image of the report (OverlayFileName), in overlay_dir.
-void WriteOverlays(const std::filesystem::path& dir, const CalibrationReport& report,
+void WriteOverlays(const ImageReader& read, const CalibrationReport& report,
                    const ImageCalibrationOptions& options,
                    const std::filesystem::path& overlay_dir) {
   std::filesystem::create_directories(overlay_dir);
   for (const CalibrationImageReport& image_report : report.images) {
-    const cv::Mat image = cv::imread((dir / image_report.name).string(), cv::IMREAD_COLOR);
+    const cv::Mat image = read(image_report.name, cv::IMREAD_COLOR);
     if (image.empty()) continue;
     cv::imwrite((overlay_dir / OverlayFileName(image_report.name)).string(),
                 DrawCalibrationOverlay(image, image_report, options.overlay_error_scale));
@@ -327,7 +327,7 @@ void WriteOverlays(const std::filesystem::path& dir, const CalibrationReport& re
 
 }  // namespace
 
-CalibrationReport CalibrateImages(const std::filesystem::path& dir,
+CalibrationReport CalibrateImages(const ImageReader& read,
                                   const std::vector<std::string>& names, const BoardSpec& board,
                                   const ImageCalibrationOptions& options,
                                   const std::filesystem::path& overlay_dir,
@@ -337,13 +337,13 @@ CalibrationReport CalibrateImages(const std::filesystem::path& dir,
   Timer timer;
   std::vector<CalibrationView> views;
   const bool every_variant_tried =
-      DetectFirstPass(dir, names, board, options, &width, &height, progress, &views);
+      DetectFirstPass(read, names, board, options, &width, &height, progress, &views);
   const double detect_s = timer.ElapsedSeconds();
   if (board.type == BoardSpec::Type::kCheckerboard && options.hints.empty() &&
       std::none_of(views.begin(), views.end(),
                    [](const CalibrationView& view) { return view.detection.found; })) {
     std::ostringstream os;
-    os << DescribeBoardSizeMismatch(dir, views, board) << ":";
+    os << DescribeBoardSizeMismatch(read, views, board) << ":";
     for (const CalibrationView& view : views) {
       os << "\n  " << view.name << ": " << view.detection.reason;
     }
@@ -353,7 +353,7 @@ CalibrationReport CalibrateImages(const std::filesystem::path& dir,
       Calibrate(views, width, height, board, options.calibrate, SubRange(progress, 0.5, 0.8));
   timer.Restart();
   if (options.redetect_with_model &&
-      DetectMissed(dir, board, options, &report.camera, !every_variant_tried, width, height,
+      DetectMissed(read, board, options, &report.camera, !every_variant_tried, width, height,
                    progress, &views)) {
     const double redetect_s = timer.ElapsedSeconds();
     report =
@@ -363,15 +363,23 @@ CalibrationReport CalibrateImages(const std::filesystem::path& dir,
     report.timings.redetect_s = timer.ElapsedSeconds();
   }
   report.timings.detect_s = detect_s;
-  if (!overlay_dir.empty()) WriteOverlays(dir, report, options, overlay_dir);
+  if (!overlay_dir.empty()) WriteOverlays(read, report, options, overlay_dir);
   if (options.svp) {
     progress.Report(0.97, "svp", "single-viewpoint check");
-    RunSvpCheck(dir, *options.svp, overlay_dir, &report);
+    RunSvpCheck(read, *options.svp, overlay_dir, &report);
   }
   progress.Report(1.0, "done",
                   std::to_string(report.num_views_used) + " views, RMS " +
                       std::to_string(report.rms_px) + " px");
   return report;
+}
+
+CalibrationReport CalibrateImages(const std::filesystem::path& dir,
+                                  const std::vector<std::string>& names, const BoardSpec& board,
+                                  const ImageCalibrationOptions& options,
+                                  const std::filesystem::path& overlay_dir,
+                                  const ProgressSink& progress) {
+  return CalibrateImages(FolderImageReader(dir), names, board, options, overlay_dir, progress);
 }
 
 }  // namespace omnirig

@@ -11,6 +11,7 @@
 #include <opencv2/core.hpp>
 
 #include "engine/calib/calibrate.h"
+#include "engine/features/image.h"
 
 namespace omnirig {
 
@@ -57,6 +58,11 @@ inline constexpr const char* kSvpOverlayFileName = "svp_overlay.png";
 CalibrationReport CalibrateImages(const std::filesystem::path& dir,
                                   const std::vector<std::string>& names, const BoardSpec& board,
                                   const ImageCalibrationOptions& options,
+                                  const std::filesystem::path& overlay_dir,
+                                  const ProgressSink& progress);
+// As above, the images read through `read` (e.g. frames of a recording).
+CalibrationReport CalibrateImages(const ImageReader& read, const std::vector<std::string>& names,
+                                  const BoardSpec& board, const ImageCalibrationOptions& options,
                                   const std::filesystem::path& overlay_dir,
                                   const ProgressSink& progress);
 

@@ -8,6 +8,7 @@
 
 #include "engine/dense/dense_map.h"
 #include "engine/dense/range_io.h"
+#include "engine/features/image.h"
 #include "engine/geometry/ply.h"
 #include "engine/util/background_task.h"
 #include "engine/util/check.h"
@@ -17,8 +18,8 @@
 namespace omnirig::dense {
 namespace {
 
-cv::Mat ReadImage(const std::filesystem::path& dir, const std::string& name) {
-  const cv::Mat image = cv::imread((dir / name).string(), cv::IMREAD_COLOR);
+cv::Mat ReadImage(const ImageReader& read, const std::string& name) {
+  const cv::Mat image = read(name, cv::IMREAD_COLOR);
   OMNIRIG_CHECK(!image.empty(), "cannot read image '" << name << "'");
   return image;
 }
@@ -113,15 +114,15 @@ class CloudOutputs {
   std::string first_cloud_file_;
 };
 
-size_t RunSparse(const StereoRig& rig, const std::filesystem::path& dataset_dir,
+size_t RunSparse(const StereoRig& rig, const ImageReader& read,
                  const std::vector<ImagePairNames>& pairs, const StereoReconstructOptions& options,
                  const std::function<void(const StereoPairOutcome&)>& on_pair,
                  const ProgressSink& progress, CloudOutputs* outputs) {
   size_t num_points = 0;
   for (size_t k = 0; k < pairs.size(); ++k) {
     progress.ThrowIfCancelled();
-    const cv::Mat image0 = ReadImage(dataset_dir, pairs[k].cam0);
-    const cv::Mat image1 = ReadImage(dataset_dir, pairs[k].cam1);
+    const cv::Mat image0 = ReadImage(read, pairs[k].cam0);
+    const cv::Mat image1 = ReadImage(read, pairs[k].cam1);
     const StereoPairReport report = WithErrorPrefix("pair '" + pairs[k].name + "': ", [&] {
       return ReconstructStereoPair(rig, image0, image1, options,
                                    PairRange(progress, k, pairs.size()));
@@ -159,7 +160,7 @@ void WriteDensePair(size_t k, const std::string& name, const DensePairResult& pa
 
 // Pair k's files are written on a background thread while pair k + 1 is read and matched (the
 // writing, 0.09 CPU s per 1024x768 pair, runs on one thread, the matching on all: bench_dense).
-size_t RunDense(const StereoRig& rig, const std::filesystem::path& dataset_dir,
+size_t RunDense(const StereoRig& rig, const ImageReader& read,
                 const std::vector<ImagePairNames>& pairs, const DenseStereoOptions& options,
                 const std::filesystem::path& output_dir,
                 const std::function<void(const StereoPairOutcome&)>& on_pair,
@@ -171,8 +172,8 @@ size_t RunDense(const StereoRig& rig, const std::filesystem::path& dataset_dir,
   BackgroundTask writer;
   for (size_t k = 0; k < pairs.size(); ++k) {
     progress.ThrowIfCancelled();
-    const cv::Mat image0 = ReadImage(dataset_dir, pairs[k].cam0);
-    const cv::Mat image1 = ReadImage(dataset_dir, pairs[k].cam1);
+    const cv::Mat image0 = ReadImage(read, pairs[k].cam0);
+    const cv::Mat image1 = ReadImage(read, pairs[k].cam1);
     auto pair_result =
         std::make_shared<DensePairResult>(WithErrorPrefix("pair '" + pairs[k].name + "': ", [&] {
           return dense.Reconstruct(image0, image1, PairRange(progress, k, pairs.size()));
@@ -226,6 +227,15 @@ StereoPairsReport ReconstructStereoPairs(
     const std::vector<ImagePairNames>& pairs, const std::optional<PairPlacement>& placement,
     const StereoPairsOptions& options, const std::filesystem::path& output_dir,
     const std::function<void(const StereoPairOutcome&)>& on_pair, const ProgressSink& progress) {
+  return ReconstructStereoPairs(rig, FolderImageReader(dataset_dir), pairs, placement, options,
+                                output_dir, on_pair, progress);
+}
+
+StereoPairsReport ReconstructStereoPairs(
+    const StereoRig& rig, const ImageReader& read,
+    const std::vector<ImagePairNames>& pairs, const std::optional<PairPlacement>& placement,
+    const StereoPairsOptions& options, const std::filesystem::path& output_dir,
+    const std::function<void(const StereoPairOutcome&)>& on_pair, const ProgressSink& progress) {
   options.Check();
   OMNIRIG_CHECK(!placement || placement->world_from_cam0.size() == pairs.size(),
                 "the placement holds " << placement->world_from_cam0.size() << " poses for "
@@ -234,12 +244,12 @@ StereoPairsReport ReconstructStereoPairs(
   CloudOutputs outputs(output_dir, pairs.size(), placement);
   if (options.use_dense) {
     StereoPairsReport::Grid grid;
-    report.num_points = RunDense(rig, dataset_dir, pairs, options.dense, output_dir, on_pair,
+    report.num_points = RunDense(rig, read, pairs, options.dense, output_dir, on_pair,
                                  progress, &outputs, &grid);
     report.grid = grid;
   } else {
     report.num_points =
-        RunSparse(rig, dataset_dir, pairs, options.sparse, on_pair, progress, &outputs);
+        RunSparse(rig, read, pairs, options.sparse, on_pair, progress, &outputs);
   }
   outputs.Finish(&report);
   progress.Report(1.0, "done",

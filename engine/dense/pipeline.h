@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "engine/dense/dense_stereo.h"
+#include "engine/features/image.h"
 #include "engine/geometry/rigid3.h"
 #include "engine/stereo/stereo_reconstruct.h"
 #include "engine/util/image_pairs.h"
@@ -92,6 +93,12 @@ StereoPairsReport ReconstructStereoPairs(
     const StereoRig& rig, const std::filesystem::path& dataset_dir,
     const std::vector<ImagePairNames>& pairs, const std::optional<PairPlacement>& placement,
     const StereoPairsOptions& options, const std::filesystem::path& output_dir,
+    const std::function<void(const StereoPairOutcome&)>& on_pair, const ProgressSink& progress);
+// As above, the images read through `read` (e.g. frames of a recording).
+StereoPairsReport ReconstructStereoPairs(
+    const StereoRig& rig, const ImageReader& read, const std::vector<ImagePairNames>& pairs,
+    const std::optional<PairPlacement>& placement, const StereoPairsOptions& options,
+    const std::filesystem::path& output_dir,
     const std::function<void(const StereoPairOutcome&)>& on_pair, const ProgressSink& progress);
 
 }  // namespace omnirig::dense

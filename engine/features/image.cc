@@ -41,4 +41,10 @@ cv::Mat DecodeImageBgr(std::string_view bytes) {
   }
 }
 
+ImageReader FolderImageReader(const std::filesystem::path& dir) {
+  return [dir](const std::string& name, int imread_flags) {
+    return cv::imread((dir / name).string(), imread_flags);
+  };
+}
+
 }  // namespace omnirig

@@ -221,6 +221,15 @@ ImageMessage DecodeImageMessage(std::string_view type, Serialization serializati
   return message;
 }
 
+int64_t ImageMessageStamp(std::string_view type, Serialization serialization,
+                          std::string_view data) {
+  FieldReader reader(type, serialization, data);
+  if (serialization == Serialization::kRos1) reader.U32("header.seq");
+  const uint32_t sec = reader.U32("header.stamp.sec");
+  const uint32_t nanosec = reader.U32("header.stamp.nanosec");
+  return static_cast<int64_t>(sec) * 1000000000 + nanosec;
+}
+
 Serialization ParseSerialization(std::string_view encoding) {
   if (encoding == "ros1") return Serialization::kRos1;
   if (encoding == "cdr") return Serialization::kCdr;

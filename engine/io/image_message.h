@@ -45,6 +45,12 @@ bool IsImageMessageType(std::string_view type);
 ImageMessage DecodeImageMessage(std::string_view type, Serialization serialization,
                                 std::string_view data);
 
+// The header's stamp of an image message (nanoseconds since the Unix epoch), read without the
+// pixels: what pairing a recording's frames needs of every message. Throws InvalidArgument
+// when the message ends inside its header.
+int64_t ImageMessageStamp(std::string_view type, Serialization serialization,
+                          std::string_view data);
+
 // "ros1" -> kRos1, "cdr" -> kCdr; InvalidArgument otherwise.
 Serialization ParseSerialization(std::string_view encoding);
 

@@ -21,13 +21,13 @@ void Write(const Log& log, const std::string& line) {
   if (log) log(line);
 }
 
-std::vector<cv::Mat> ReadImages(const std::filesystem::path& dir,
+std::vector<cv::Mat> ReadImages(const ImageReader& read,
                                 const std::vector<std::string>& names,
                                 const ProgressSink& progress) {
   std::vector<cv::Mat> images;
   for (size_t i = 0; i < names.size(); ++i) {
     progress.ThrowIfCancelled();
-    cv::Mat image = cv::imread((dir / names[i]).string(), cv::IMREAD_GRAYSCALE);
+    cv::Mat image = read(names[i], cv::IMREAD_GRAYSCALE);
     OMNIRIG_CHECK(!image.empty(), "image " << names[i]
                                            << " cannot be read (missing, truncated or "
                                               "not an image)");
@@ -53,11 +53,11 @@ void CheckImageSizes(const std::vector<cv::Mat>& images, const std::vector<std::
 
 // Each camera's images, all of its calibration's size (or of its first image's without one).
 std::array<std::vector<cv::Mat>, 2> ReadCheckedImages(
-    const std::filesystem::path& dir, const std::array<std::vector<std::string>, 2>& names,
+    const ImageReader& read, const std::array<std::vector<std::string>, 2>& names,
     const std::array<std::optional<GivenCamera>, 2>& given, const ProgressSink& progress) {
   std::array<std::vector<cv::Mat>, 2> images;
   for (int c = 0; c < 2; ++c) {
-    images[c] = ReadImages(dir, names[c], SubRange(progress, 0.05 * c, 0.05 * (c + 1)));
+    images[c] = ReadImages(read, names[c], SubRange(progress, 0.05 * c, 0.05 * (c + 1)));
     const int width = given[c] ? given[c]->model.width : images[c][0].cols;
     const int height = given[c] ? given[c]->model.height : images[c][0].rows;
     CheckImageSizes(images[c], names[c], width, height,
@@ -234,6 +234,16 @@ RigFromImagesReport EstimateRigFromImages(const std::filesystem::path& dir,
                                           const std::array<std::optional<GivenCamera>, 2>& given,
                                           const RigFromImagesOptions& options,
                                           const ProgressSink& progress, const Log& log) {
+  return EstimateRigFromImages(FolderImageReader(dir), pairs, board, given, options, progress,
+                               log);
+}
+
+RigFromImagesReport EstimateRigFromImages(const ImageReader& read,
+                                          const std::vector<ImagePairNames>& pairs,
+                                          const BoardSpec& board,
+                                          const std::array<std::optional<GivenCamera>, 2>& given,
+                                          const RigFromImagesOptions& options,
+                                          const ProgressSink& progress, const Log& log) {
   options.Check();
   OMNIRIG_CHECK(given[0].has_value() == given[1].has_value(),
                 "give both cameras' calibrations or neither");
@@ -260,7 +270,7 @@ RigFromImagesReport EstimateRigFromImages(const std::filesystem::path& dir,
   }
   // Everything that can refuse the input does so before detection starts.
   const std::array<std::vector<cv::Mat>, 2> images =
-      ReadCheckedImages(dir, data.names, given, progress);
+      ReadCheckedImages(read, data.names, given, progress);
   for (int c = 0; c < 2; ++c) {
     data.sizes[c] = images[c][0].size();
     data.detections[c] = DetectAll(images[c], data.names[c], board,

@@ -17,6 +17,7 @@
 
 #include "engine/calib/board.h"
 #include "engine/calib/calibrate.h"
+#include "engine/features/image.h"
 #include "engine/rig/relative_pose.h"
 #include "engine/rig/relpose_model_select.h"
 #include "engine/util/image_pairs.h"
@@ -73,6 +74,14 @@ struct RigFromImagesReport {
 // Throws InvalidArgument for bad input (before any detection where it can: unreadable images,
 // wrong sizes) and when no rig can be estimated ("no relative pose: ..."), Cancelled.
 RigFromImagesReport EstimateRigFromImages(const std::filesystem::path& dir,
+                                          const std::vector<ImagePairNames>& pairs,
+                                          const BoardSpec& board,
+                                          const std::array<std::optional<GivenCamera>, 2>& given,
+                                          const RigFromImagesOptions& options,
+                                          const ProgressSink& progress,
+                                          const std::function<void(const std::string&)>& log = {});
+// As above, the images read through `read` (e.g. frames of a recording).
+RigFromImagesReport EstimateRigFromImages(const ImageReader& read,
                                           const std::vector<ImagePairNames>& pairs,
                                           const BoardSpec& board,
                                           const std::array<std::optional<GivenCamera>, 2>& given,

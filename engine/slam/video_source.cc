@@ -6,6 +6,7 @@
 #include <sstream>
 
 #include "engine/util/check.h"
+#include "engine/util/image_pairs.h"
 #include "engine/util/option_check.h"
 
 namespace omnirig::slam {
@@ -75,11 +76,7 @@ std::vector<double> ReadTimestamps(const fs::path& path, double last_s, int64_t 
 
 }  // namespace
 
-std::string FrameName(double timestamp_s) {
-  char name[32];
-  std::snprintf(name, sizeof(name), "t%010.3f", timestamp_s);
-  return name;
-}
+std::string FrameName(double timestamp_s) { return omnirig::FrameName(timestamp_s); }
 
 VideoInfo ProbeVideo(const fs::path& path) {
   cv::VideoCapture capture = Open(path);

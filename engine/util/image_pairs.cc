@@ -1,5 +1,6 @@
 #include "engine/util/image_pairs.h"
 
+#include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <map>
@@ -34,6 +35,12 @@ std::vector<ImagePairNames> MatchImagePairs(const std::vector<std::string>& imag
   std::vector<ImagePairNames> pairs;
   for (const auto& [name, path] : cam0) pairs.push_back({name, path, cam1[name]});
   return pairs;
+}
+
+std::string FrameName(double timestamp_s) {
+  char name[40];
+  std::snprintf(name, sizeof(name), "t%010.3f", timestamp_s);
+  return name;
 }
 
 std::optional<double> NameAsTimestamp(const std::string& name) {

@@ -19,6 +19,11 @@ struct ImagePairNames {
 // ignored.
 std::vector<ImagePairNames> MatchImagePairs(const std::vector<std::string>& image_names);
 
+// A frame's name from its capture time: "t%010.3f", e.g. "t000012.345" (videos' frames, their
+// container time) or "t1700000000.050" (recordings' frames, their header stamp);
+// NameAsTimestamp reads it back.
+std::string FrameName(double timestamp_s);
+
 // NAME read as a number, as datasets often name frames by their time ("1403636579.763.png"),
 // or "t" and a number as recordings do ("t000012.345.png", slam::FrameName); nullopt when it is
 // not one.

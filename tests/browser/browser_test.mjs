@@ -1530,7 +1530,46 @@ async function firstHourBadInputs(page, server, { mono, rigJob }) {
   return `bad inputs: "${rowText}", "${skipped}", failed job "${why.slice(0, 120)}"`;
 }
 
-const STEPS = { first_hour: stepFirstHour, datasets: stepDatasets, calibration: stepCalibration, stereo: stepStereo, viewer_ply: stepViewerPly, viewer_slam: stepViewerSlam, auth: stepAuth };
+// A dataset holding a robot's recording (a ROS 1 bag written by python3-rosbag): the job forms
+// offer its image topics (not its other topics), guess cam0's and cam1's from their names, and
+// send them as the params "recording" with "topic" or "topics".
+async function stepRecording(page, server) {
+  const written = path.join(TEMP, 'bags');
+  const writer = spawnSync('/usr/bin/python3', [path.join(SOURCE_DIR, 'testing/recordings/write_ros1_bags.py'), written]);
+  check(writer.status === 0, `python3-rosbag wrote the bags (${writer.stderr})`);
+  const created = await (await fetch(`${server.url}/api/v1/datasets`, {
+    method: 'POST', headers: { 'content-type': 'application/json' }, body: JSON.stringify({ name: 'browser-recording' }),
+  })).json();
+  const put = await fetch(`${server.url}/api/v1/datasets/${created.id}/images/run.bag`, {
+    method: 'PUT', headers: { 'content-type': 'application/octet-stream' }, body: fs.readFileSync(path.join(written, 'images_none.bag')),
+  });
+  check(put.status === 201, `the bag was stored (${put.status})`);
+  const imageTopics = ['/bayer/image_raw', '/cam0/image_raw', '/cam0/image_raw/compressed', '/cam1/image_raw'];
+  // The stereo jobs: cam0's and cam1's topics, guessed from their names.
+  await page.goto(`${server.url}/#/jobs?dataset=${encodeURIComponent(created.id)}`);
+  await page.waitForSelector('#job-form');
+  await page.selectOption('#job-form select[name=type]', 'relative_pose');
+  await page.selectOption('#job-form select[name=dataset]', created.id);
+  await page.waitForSelector('#job-form select[name=topic_cam1]');
+  const offered = await page.$$eval('#job-form select[name=topic_cam0] option', (o) => o.map((x) => x.value));
+  check(JSON.stringify(offered) === JSON.stringify(imageTopics), `the image topics are offered, /note is not (${offered})`);
+  check(await page.inputValue('#job-form select[name=topic_cam0]') === '/cam0/image_raw', 'cam0 topic guessed');
+  check(await page.inputValue('#job-form select[name=topic_cam1]') === '/cam1/image_raw', 'cam1 topic guessed');
+  await screenshot(page, 'recording-topics');
+  // A calibration from one topic: the params the page sends.
+  const id = await submitJob(page, server, created.id, 'calibration', async (p) => {
+    await fillBoard(p, { cols: 7, rows: 5, square_size_mm: 30 });
+    await p.waitForSelector('#job-form select[name=topic]');
+    await p.selectOption('#job-form select[name=topic]', '/cam0/image_raw/compressed');
+  });
+  const job = await (await fetch(`${server.url}/api/v1/jobs/${id}`)).json();
+  check(job.params.recording === 'run.bag' && job.params.topic === '/cam0/image_raw/compressed' && !job.params.topics,
+    `the job reads the chosen topic (${JSON.stringify(job.params)})`);
+  await fetch(`${server.url}/api/v1/jobs/${id}/cancel`, { method: 'POST' });
+  return 'recording topics offered and submitted';
+}
+
+const STEPS = { recording: stepRecording, first_hour: stepFirstHour, datasets: stepDatasets, calibration: stepCalibration, stereo: stepStereo, viewer_ply: stepViewerPly, viewer_slam: stepViewerSlam, auth: stepAuth };
 
 async function main() {
   const step = STEPS[ARGS.step];

@@ -116,6 +116,31 @@ function slamFields() {
   ];
 }
 
+// The job types that can read a recording's image topics instead of the dataset's images, and
+// how many cameras they read (api/recording_input.h: "topic" for one, "topics" for two).
+const RECORDING_CAMERAS = { calibration: 1, relative_pose: 2, stereo_reconstruct: 2, slam: 2 };
+const IMAGE_TYPES = new Set(['sensor_msgs/Image', 'sensor_msgs/msg/Image',
+  'sensor_msgs/CompressedImage', 'sensor_msgs/msg/CompressedImage']);
+
+// The recording fields: filled by offerRecordings when the dataset holds a recording.
+function recordingFields() {
+  return el('fieldset.full.recording', { hidden: true }, el('legend', 'Recording'),
+    el('label', 'frames from ', el('select', { name: 'recording' })), ' ',
+    el('span.recording-topics'));
+}
+
+// The topic pickers of one recording: its image topics only, cam0's and cam1's guessed from
+// their names (cam0/left, cam1/right) for the stereo jobs.
+function topicPickers(recording, cameras) {
+  const topics = (recording.topics || []).filter((t) => IMAGE_TYPES.has(t.type)).map((t) => t.name);
+  const guess = (words, fallback) => topics.find((t) => words.some((w) => t.includes(w))) || topics[fallback] || '';
+  const picker = (name, chosen) => el('select', { name },
+    topics.map((t) => el('option', { value: t, selected: t === chosen }, t)));
+  if (cameras === 1) return [el('label', 'topic ', picker('topic', guess(['cam0', 'left'], 0)))];
+  return [el('label', 'cam0 topic ', picker('topic_cam0', guess(['cam0', 'left'], 0))), ' ',
+    el('label', 'cam1 topic ', picker('topic_cam1', guess(['cam1', 'right'], 1)))];
+}
+
 // The fields that depend on the job type; earlier results are offered from succeeded jobs.
 function typeFields(type, succeeded, datasetNames) {
   const calibrations = succeeded.filter((j) => j.type === 'calibration');
@@ -123,6 +148,11 @@ function typeFields(type, succeeded, datasetNames) {
   const pick = (name, jobs, optional) => el('select', { name },
     optional ? el('option', { value: '' }, optional) : null, jobs.map((j) => jobOption(j, datasetNames)));
   const none = (what) => el('span.muted', `no succeeded ${what} job yet`);
+  const fields = typeFieldsWithoutRecording(type, succeeded, datasetNames, pick, none, calibrations, rigs);
+  return RECORDING_CAMERAS[type] ? [...fields, recordingFields()] : fields;
+}
+
+function typeFieldsWithoutRecording(type, succeeded, datasetNames, pick, none, calibrations, rigs) {
   switch (type) {
     case 'calibration':
       return [boardFields()];
@@ -159,6 +189,11 @@ export function paramsFromForm(type, form) {
   if (type === 'slam' && form.elements.dense_map && form.elements.dense_map.checked) {
     params.dense_map = { voxel_m: Number(value('voxel_m')) };
   }
+  if (RECORDING_CAMERAS[type] && value('recording')) {
+    params.recording = value('recording');
+    if (RECORDING_CAMERAS[type] === 1) params.topic = value('topic');
+    else params.topics = { cam0: value('topic_cam0'), cam1: value('topic_cam1') };
+  }
   const extra = value('extra');
   if (extra) Object.assign(params, JSON.parse(extra));
   return params;
@@ -192,10 +227,37 @@ async function renderForm(container, datasets, jobs, preselectedDataset, onSubmi
       clear(list);  // the suggestions are a help only
     }
   };
+  // The chosen dataset's recordings, offered with their image topics to the job types that read
+  // them; the fields stay hidden when it holds none.
+  const offerRecordings = async () => {
+    const fieldset = form.querySelector('fieldset.recording');
+    if (!fieldset || !datasetSelect.value) return;
+    let recordings = [];
+    try {
+      const dataset = await get(`/datasets/${encodeURIComponent(datasetSelect.value)}`);
+      recordings = (dataset.recordings || []).filter((r) => Array.isArray(r.topics) &&
+        r.topics.some((t) => IMAGE_TYPES.has(t.type)));
+    } catch (_) {
+      recordings = [];  // the offer is a help only
+    }
+    fieldset.hidden = recordings.length === 0;
+    const select = fieldset.querySelector('select[name=recording]');
+    const topics = fieldset.querySelector('.recording-topics');
+    clear(select, el('option', { value: '' }, "the dataset's images"),
+      recordings.map((r, i) => el('option', { value: r.name, selected: i === 0 }, r.name)));
+    const showTopics = () => {
+      const recording = recordings.find((r) => r.name === select.value);
+      clear(topics, recording ? topicPickers(recording, RECORDING_CAMERAS[typeSelect.value]) : []);
+    };
+    select.onchange = showTopics;
+    showTopics();
+  };
   datasetSelect.addEventListener('change', offerTrajectories);
+  datasetSelect.addEventListener('change', offerRecordings);
   const showType = () => {
     clear(specific, typeFields(typeSelect.value, succeeded, datasetNames));
     offerTrajectories();
+    offerRecordings();
     form.elements.extra.placeholder = `e.g. ${EXTRA_PLACEHOLDERS[typeSelect.value] || '{}'}`;
     const boardType = form.elements.board_type;
     const charuco = specific.querySelector('.charuco');
