@@ -19,7 +19,6 @@
 #include <functional>
 #include <optional>
 #include <string>
-#include <unordered_map>
 #include <vector>
 
 #include <Eigen/Core>
@@ -103,6 +102,7 @@ class DenseMap {
 
  private:
   struct Voxel {
+    int64_t key = 0;
     double weight = 0.0;
     Eigen::Vector3d weighted_position = Eigen::Vector3d::Zero();
     Eigen::Vector3d weighted_rgb = Eigen::Vector3d::Zero();
@@ -119,8 +119,19 @@ class DenseMap {
     return voxel.num_points >= options_.min_points && voxel.num_frames >= options_.min_frames;
   }
 
+  // The voxel of `key`, added (zero) if new.
+  Voxel& FindOrAdd(int64_t key);
+  void Grow();
+
   DenseMapOptions options_;
-  std::unordered_map<int64_t, Voxel> voxels_;
+  // The voxels in the order they were first touched, and an open-addressing index of them
+  // (linear probing, at most half full; kEmptyKey marks a free slot). A node-based
+  // std::unordered_map cost about 0.8 CPU s per 930,000-point pair, an allocation and a cache
+  // miss per voxel.
+  std::vector<Voxel> voxels_;
+  std::vector<int64_t> slot_keys_;
+  std::vector<uint32_t> slot_voxels_;
+  int slot_shift_ = 64;  // 64 - log2(number of slots)
   int num_frames_ = 0;
 };
 
