@@ -434,6 +434,7 @@ struct OmnirigRun {
   dense::DenseMap fused{dense::MergedCloudOptions()};
   dense::DenseMap fused_tight{TightMergedOptions()};
   double setup_s = 0.0, again_s = 0.0, from_disk_s = 0.0, from_disk_cpu_s = 0.0;
+  double fuse_cpu_s = 0.0;  // the merged cloud's DenseMap::Add, all pairs
 };
 
 // The tables a later process of the service reads from its cache folder instead of building:
@@ -519,7 +520,9 @@ void RunOmnirig(const BenchSet& set, const dense::DenseStereoOptions& dense_opti
     }
     run->score.Add(points, set.scene, set.world_from_rig[f], s, cpu_s, range_std);
     run->bias.Add(result.points, dense.rectifier(), set.scene, set.world_from_rig[f]);
+    const double fuse_cpu = CpuSeconds();
     run->fused.Add(set.world_from_rig[f], result.points);
+    run->fuse_cpu_s += CpuSeconds() - fuse_cpu;
     run->fused_tight.Add(set.world_from_rig[f], result.points);
     if (f == 0 && profile) {
       std::printf(
@@ -573,11 +576,22 @@ void RunSet(const BenchSet& set, bool with_peer, bool profile,
   std::printf("\nmerged cloud of the %d pairs placed by their true poses:\n", num_frames);
   MergedScore appended, fused, fused_tight;
   appended.Score(ours.appended, set.scene, set.world_from_rig);
-  fused.Score(ours.fused.Cloud().positions, set.scene, set.world_from_rig);
+  double cpu = CpuSeconds();
+  const PlyCloud fused_cloud = ours.fused.Cloud();
+  const double cloud_cpu_s = CpuSeconds() - cpu;
+  cpu = CpuSeconds();
+  dense::PointsPerSquareMetre(fused_cloud.positions);
+  const double density_cpu_s = CpuSeconds() - cpu;
+  fused.Score(fused_cloud.positions, set.scene, set.world_from_rig);
   fused_tight.Score(ours.fused_tight.Cloud().positions, set.scene, set.world_from_rig);
   appended.Print("  appended (every pair's points)");
   fused.Print("  fused (MergedCloudOptions: 1 cm voxels, range std <= 2 %)");
   fused_tight.Print("  fused, range std <= 0.9 %");
+  std::printf(
+      "  the job's fusion, CPU s: %.3f per pair adding its points, %.3f for the cloud of the "
+      "voxels, %.3f for its points per m^2\n",
+      ours.fuse_cpu_s / std::max<size_t>(1, set.world_from_rig.size()), cloud_cpu_s,
+      density_cpu_s);
   if (profile) {
     std::printf("\nomnirig per pair, CPU s by stage (end to end, artifacts written):");
     for (const auto& [name, seconds] : ours.stage_cpu)
