@@ -312,14 +312,17 @@ std::shared_ptr<const SphericalRectifier> SharedRectifier(const StereoRig& rig,
   // Held while building (up to a second): a second job of the same rig waits for the tables
   // instead of building them again; one of another rig waits too, which is rare and short.
   std::lock_guard<std::mutex> lock(mutex);
-  for (auto it = cache.begin(); it != cache.end(); ++it) {
-    if (it->first != key) continue;
-    cache.splice(cache.begin(), cache, it);
-    return cache.front().second;
-  }
   const std::filesystem::path file =
       tables_dir.empty() ? std::filesystem::path()
                          : tables_dir / RectificationTablesFileName(rig, options);
+  for (auto it = cache.begin(); it != cache.end(); ++it) {
+    if (it->first != key) continue;
+    cache.splice(cache.begin(), cache, it);
+    // Built in this process without a folder, or the file removed since: written now.
+    std::error_code error;
+    if (!file.empty() && !std::filesystem::exists(file, error)) it->second->Write(file, key);
+    return cache.front().second;
+  }
   std::shared_ptr<const SphericalRectifier> rectifier;
   if (!file.empty()) rectifier = SphericalRectifier::Read(file, key);
   if (!rectifier) {
