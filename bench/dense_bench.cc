@@ -590,8 +590,7 @@ void RunSet(const BenchSet& set, bool with_peer, bool profile,
   std::printf(
       "  the job's fusion, CPU s: %.3f per pair adding its points, %.3f for the cloud of the "
       "voxels, %.3f for its points per m^2\n",
-      ours.fuse_cpu_s / std::max<size_t>(1, set.world_from_rig.size()), cloud_cpu_s,
-      density_cpu_s);
+      ours.fuse_cpu_s / std::max<size_t>(1, set.world_from_rig.size()), cloud_cpu_s, density_cpu_s);
   if (profile) {
     std::printf("\nomnirig per pair, CPU s by stage (end to end, artifacts written):");
     for (const auto& [name, seconds] : ours.stage_cpu)

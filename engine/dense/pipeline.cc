@@ -234,8 +234,8 @@ StereoPairsReport ReconstructStereoPairs(
   CloudOutputs outputs(output_dir, pairs.size(), placement);
   if (options.use_dense) {
     StereoPairsReport::Grid grid;
-    report.num_points = RunDense(rig, dataset_dir, pairs, options, output_dir, on_pair,
-                                 progress, &outputs, &grid);
+    report.num_points =
+        RunDense(rig, dataset_dir, pairs, options, output_dir, on_pair, progress, &outputs, &grid);
     report.grid = grid;
   } else {
     report.num_points =

@@ -222,8 +222,7 @@ void WriteValue(std::FILE* file, const T& value, bool* ok) {
 
 }  // namespace
 
-std::string RectificationTablesFileName(const StereoRig& rig,
-                                        const SphericalGridOptions& options) {
+std::string RectificationTablesFileName(const StereoRig& rig, const SphericalGridOptions& options) {
   char hash[17];
   std::snprintf(hash, sizeof(hash), "%016llx",
                 static_cast<unsigned long long>(KeyHash(RectifierKey(rig, options))));
@@ -272,8 +271,8 @@ void SphericalRectifier::Write(const std::filesystem::path& path,
   // A hidden ".part-" name: the service's start-up check removes what a crash leaves.
   static std::atomic<int> counter{0};
   const std::filesystem::path temp =
-      path.parent_path() / ("." + path.filename().string() + ".part-" +
-                            std::to_string(::getpid()) + "-" + std::to_string(counter++));
+      path.parent_path() / ("." + path.filename().string() + ".part-" + std::to_string(::getpid()) +
+                            "-" + std::to_string(counter++));
   std::error_code error;
   std::filesystem::create_directories(path.parent_path(), error);
   std::FILE* file = std::fopen(temp.c_str(), "wb");
@@ -312,9 +311,9 @@ std::shared_ptr<const SphericalRectifier> SharedRectifier(const StereoRig& rig,
   // Held while building (up to a second): a second job of the same rig waits for the tables
   // instead of building them again; one of another rig waits too, which is rare and short.
   std::lock_guard<std::mutex> lock(mutex);
-  const std::filesystem::path file =
-      tables_dir.empty() ? std::filesystem::path()
-                         : tables_dir / RectificationTablesFileName(rig, options);
+  const std::filesystem::path file = tables_dir.empty()
+                                         ? std::filesystem::path()
+                                         : tables_dir / RectificationTablesFileName(rig, options);
   for (auto it = cache.begin(); it != cache.end(); ++it) {
     if (it->first != key) continue;
     cache.splice(cache.begin(), cache, it);

@@ -67,8 +67,9 @@ class SphericalRectifier {
   const Eigen::Matrix3d& cam0_from_grid() const { return cam0_from_grid_; }
 
  private:
-  friend std::shared_ptr<const SphericalRectifier> SharedRectifier(
-      const StereoRig&, const SphericalGridOptions&, const std::filesystem::path&);
+  friend std::shared_ptr<const SphericalRectifier> SharedRectifier(const StereoRig&,
+                                                                   const SphericalGridOptions&,
+                                                                   const std::filesystem::path&);
   SphericalRectifier() = default;
   // The tables file (RectificationTablesFileName): `key` (every number the tables depend on),
   // the grid and the tables. Read() returns null for a missing, truncated or other-version file
