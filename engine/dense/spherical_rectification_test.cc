@@ -4,12 +4,14 @@
 #include "engine/dense/spherical_rectification.h"
 
 #include <sys/stat.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <random>
+#include <string>
 
 #include <gtest/gtest.h>
 
@@ -137,7 +139,8 @@ void EvictSharedRectifiers(const StereoRig& rig) {
 
 TEST(SphericalRectification, TablesAreKeptOnDiskAndReadByALaterProcess) {
   const std::filesystem::path dir =
-      std::filesystem::path(::testing::TempDir()) / "omnirig_rectification_tables";
+      std::filesystem::path(::testing::TempDir()) /
+      ("omnirig_rectification_tables_" + std::to_string(::getpid()));
   std::filesystem::remove_all(dir);
   const StereoRig rig = DefaultRig();
   SphericalGridOptions options;
