@@ -138,9 +138,8 @@ void EvictSharedRectifiers(const StereoRig& rig) {
 }
 
 TEST(SphericalRectification, TablesAreKeptOnDiskAndReadByALaterProcess) {
-  const std::filesystem::path dir =
-      std::filesystem::path(::testing::TempDir()) /
-      ("omnirig_rectification_tables_" + std::to_string(::getpid()));
+  const std::filesystem::path dir = std::filesystem::path(::testing::TempDir()) /
+                                    ("omnirig_rectification_tables_" + std::to_string(::getpid()));
   std::filesystem::remove_all(dir);
   const StereoRig rig = DefaultRig();
   SphericalGridOptions options;
