@@ -36,6 +36,9 @@ struct JobContext {
   std::filesystem::path dataset_dir;     // image files, by name (may hold cam0/, cam1/)
   std::vector<std::string> image_names;  // sorted names within dataset_dir
   std::filesystem::path output_dir;      // write artifacts here (files become artifacts)
+  // Files derived from inputs and kept across jobs and processes (e.g. a rig's rectification
+  // tables, cache_dir / "rectification"); empty: none are kept.
+  std::filesystem::path cache_dir;
   int num_threads = 1;                   // the job's share of the cores
   ProgressSink progress;                 // progress + cancellation
   std::function<void(const std::string& line)> log;  // appended to the job's log artifact

@@ -221,6 +221,24 @@ TEST_F(StereoJobTest, DenseWritesCloudsAndRangePanoramasAndFlagsBadPairs) {
   EXPECT_EQ(last_fraction_, 1.0);
 }
 
+// The rig's rectification tables are kept in the cache folder the service gives (one file per
+// rig and grid), not among the job's artifacts.
+TEST_F(StereoJobTest, DenseKeepsTheRigsRectificationTablesInTheCacheFolder) {
+  AddImage("cam0/a.png", 320, 240);
+  AddImage("cam1/a.png", 320, 240);
+  context_.cache_dir = root_ / "cache";
+  RunStereoReconstructJob({{"rig", "rig"}}, context_);
+  std::vector<std::string> tables;
+  for (const auto& entry : std::filesystem::directory_iterator(root_ / "cache" / "rectification")) {
+    tables.push_back(entry.path().filename().string());
+  }
+  ASSERT_EQ(tables.size(), 1u);
+  EXPECT_EQ(tables[0].rfind("rectification-v1-", 0), 0u) << tables[0];
+  for (const auto& entry : std::filesystem::directory_iterator(context_.output_dir)) {
+    EXPECT_EQ(entry.path().filename().string().find("rectification"), std::string::npos);
+  }
+}
+
 // Pair k's files are written while pair k + 1 is matched: a failed write stops the job with an
 // error naming the pair, and the next pair's files are not written.
 TEST_F(StereoJobTest, DenseWriteErrorNamesThePairAndStopsTheJob) {

@@ -211,6 +211,7 @@ api::JobContext BuildContext(const storage::JobRecord& job, storage::JobStore& s
     return OpenDatasetRecording(dir, names, name);
   };
   context.output_dir = output_dir;
+  context.cache_dir = data_dir.CacheDir();
   context.num_threads = options.num_threads;
   context.progress.report = [&progress](double fraction, const std::string& stage,
                                         const std::string& message) {

@@ -4,6 +4,10 @@
 //   DATA/omnirig.db                              SQLite database (WAL: -wal, -shm beside it)
 //   DATA/datasets/{dataset}/images/{name}        uploaded images (name may hold one folder)
 //   DATA/jobs/{job}/attempt-{n}/...              each run's output folder (artifacts)
+//   DATA/cache/...                               files derived from inputs, kept across jobs
+//                                                and restarts, rebuilt when missing (e.g.
+//                                                cache/rectification/: a rig's dense stereo
+//                                                rectification tables, one file per rig)
 
 #include <exception>
 #include <filesystem>
@@ -25,6 +29,7 @@ class DataDir {
   std::filesystem::path ImagesDir(const std::string& dataset_id) const;
   std::filesystem::path JobDir(const std::string& job_id) const;
   std::filesystem::path AttemptDir(const std::string& job_id, int attempt) const;
+  std::filesystem::path CacheDir() const { return root_ / "cache"; }
   // Free bytes on the data folder's file system.
   int64_t FreeBytes() const;
 

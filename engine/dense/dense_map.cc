@@ -22,6 +22,13 @@ int64_t Key(const Eigen::Vector3i& index) {
          (((index.z() + kOffset) & kMask) << 42);
 }
 
+// No voxel has this key: Key() keeps the top bit clear.
+constexpr int64_t kEmptyKey = -1;
+
+size_t SlotOf(int64_t key, int shift) {
+  return static_cast<size_t>((static_cast<uint64_t>(key) * 0x9E3779B97F4A7C15ull) >> shift);
+}
+
 }  // namespace
 
 void DenseMapOptions::Check() const {
@@ -40,10 +47,43 @@ void DenseMapOptions::Check() const {
 
 DenseMap::DenseMap(const DenseMapOptions& options) : options_(options) { options_.Check(); }
 
+void DenseMap::Reserve(size_t num_voxels) {
+  // Geometric growth: each frame's reservation would otherwise copy every voxel.
+  if (num_voxels > voxels_.capacity()) {
+    voxels_.reserve(std::max(num_voxels, voxels_.capacity() * 3 / 2));
+  }
+  if (2 * num_voxels <= slots_.size()) return;
+  size_t num_slots = 1 << 16;
+  while (num_slots < 2 * num_voxels) num_slots *= 2;
+  slot_shift_ = 64;
+  for (size_t n = num_slots; n > 1; n /= 2) --slot_shift_;
+  slots_.assign(num_slots, Slot{kEmptyKey, 0});
+  const size_t mask = num_slots - 1;
+  for (uint32_t v = 0; v < voxels_.size(); ++v) {
+    size_t slot = SlotOf(voxels_[v].key, slot_shift_);
+    while (slots_[slot].key != kEmptyKey) slot = (slot + 1) & mask;
+    slots_[slot] = {voxels_[v].key, v};
+  }
+}
+
+DenseMap::Voxel& DenseMap::FindOrAdd(int64_t key) {
+  if (2 * (voxels_.size() + 1) > slots_.size()) Reserve(2 * (voxels_.size() + 1));
+  const size_t mask = slots_.size() - 1;
+  for (size_t slot = SlotOf(key, slot_shift_);; slot = (slot + 1) & mask) {
+    Slot& s = slots_[slot];
+    if (s.key == key) return voxels_[s.voxel];
+    if (s.key != kEmptyKey) continue;
+    s = {key, static_cast<uint32_t>(voxels_.size())};
+    voxels_.emplace_back();
+    voxels_.back().key = key;
+    return voxels_.back();
+  }
+}
+
 void DenseMap::AddPoint(int frame, const Eigen::Vector3d& in_world,
                         const std::array<uint8_t, 3>& rgb, float confidence, float range_std_m) {
   const Eigen::Vector3i index = (in_world / options_.voxel_m).array().floor().cast<int>();
-  Voxel& voxel = voxels_[Key(index)];
+  Voxel& voxel = FindOrAdd(Key(index));
   const double std_m = std::max(static_cast<double>(range_std_m), 1e-4);
   const double weight = confidence / (std_m * std_m);
   voxel.weight += weight;
@@ -60,13 +100,12 @@ void DenseMap::AddPoint(int frame, const Eigen::Vector3d& in_world,
 
 void DenseMap::Add(const Rigid3d& world_from_cam0, const std::vector<DensePoint>& points) {
   const int frame = num_frames_++;
-  // Rehashing while inserting a keyframe's points costs as much as the lookups; a keyframe adds
-  // about one new voxel for every 4-5 of its points on the room renders.
-  voxels_.reserve(voxels_.size() + points.size() / 4);
+  Reserve(voxels_.size() + points.size());  // at most one new voxel per point
+  const Eigen::Matrix3d rotation = world_from_cam0.rotation.toRotationMatrix();
   for (const DensePoint& point : points) {
     if (point.range_std_m > options_.max_relative_range_std * point.point_in_cam0.norm()) continue;
-    AddPoint(frame, world_from_cam0 * point.point_in_cam0.cast<double>(), point.rgb,
-             point.confidence, point.range_std_m);
+    AddPoint(frame, rotation * point.point_in_cam0.cast<double>() + world_from_cam0.translation,
+             point.rgb, point.confidence, point.range_std_m);
   }
 }
 
@@ -75,12 +114,13 @@ void DenseMap::Add(const Rigid3d& world_from_cam0, const PlyCloud& cloud_in_cam0
   OMNIRIG_CHECK(cloud_in_cam0.has_confidence && cloud_in_cam0.has_range_std,
                 "a dense map fuses clouds with confidence and range_std_m");
   const int frame = num_frames_++;
-  voxels_.reserve(voxels_.size() + cloud_in_cam0.size() / 4);
+  Reserve(voxels_.size() + cloud_in_cam0.size());  // at most one new voxel per point
+  const Eigen::Matrix3d rotation = world_from_cam0.rotation.toRotationMatrix();
   for (size_t i = 0; i < cloud_in_cam0.size(); ++i) {
     const Eigen::Vector3f& p = cloud_in_cam0.positions[i];
     if (cloud_in_cam0.range_std_m[i] > options_.max_relative_range_std * p.norm()) continue;
-    AddPoint(frame, world_from_cam0 * p.cast<double>(), cloud_in_cam0.colours[i],
-             cloud_in_cam0.confidence[i], cloud_in_cam0.range_std_m[i]);
+    AddPoint(frame, rotation * p.cast<double>() + world_from_cam0.translation,
+             cloud_in_cam0.colours[i], cloud_in_cam0.confidence[i], cloud_in_cam0.range_std_m[i]);
   }
 }
 
@@ -89,7 +129,7 @@ PlyCloud DenseMap::Cloud(const std::string& comment) const {
   cloud.comment = comment;
   cloud.has_confidence = true;
   cloud.has_range_std = true;
-  for (const auto& [key, voxel] : voxels_) {
+  for (const Voxel& voxel : voxels_) {
     if (!Kept(voxel) || !(voxel.weight > 0.0)) continue;
     cloud.positions.push_back((voxel.weighted_position / voxel.weight).cast<float>());
     const Eigen::Vector3d rgb = voxel.weighted_rgb / voxel.weight;
@@ -104,15 +144,14 @@ PlyCloud DenseMap::Cloud(const std::string& comment) const {
 
 double PointsPerSquareMetre(const std::vector<Eigen::Vector3f>& points, double cell_m) {
   OMNIRIG_CHECK_POSITIVE(cell_m);
-  std::vector<Eigen::Vector3i> cells;
+  // One 64-bit key per cell (Key's 21 bits per axis: +-52 km at 5 cm), sorted: twice as fast
+  // as sorting the cells' index triples.
+  std::vector<int64_t> cells;
   cells.reserve(points.size());
   for (const Eigen::Vector3f& p : points) {
-    cells.push_back((p.cast<double>() / cell_m).array().floor().cast<int>());
+    cells.push_back(Key((p.cast<double>() / cell_m).array().floor().cast<int>()));
   }
-  const auto less = [](const Eigen::Vector3i& a, const Eigen::Vector3i& b) {
-    return std::lexicographical_compare(a.data(), a.data() + 3, b.data(), b.data() + 3);
-  };
-  std::sort(cells.begin(), cells.end(), less);
+  std::sort(cells.begin(), cells.end());
   const size_t num_cells = std::unique(cells.begin(), cells.end()) - cells.begin();
   return num_cells == 0 ? 0.0 : points.size() / (num_cells * cell_m * cell_m);
 }
@@ -185,7 +224,7 @@ OccupancyGrid DenseMap::Occupancy() const {
   OccupancyGrid grid;
   grid.cell_m = options_.occupancy_cell_m;
   std::vector<Eigen::Vector3d> kept;
-  for (const auto& [key, voxel] : voxels_) {
+  for (const Voxel& voxel : voxels_) {
     if (Kept(voxel) && voxel.weight > 0.0) kept.push_back(voxel.weighted_position / voxel.weight);
   }
   if (kept.empty()) {

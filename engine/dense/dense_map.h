@@ -19,7 +19,6 @@
 #include <functional>
 #include <optional>
 #include <string>
-#include <unordered_map>
 #include <vector>
 
 #include <Eigen/Core>
@@ -103,6 +102,7 @@ class DenseMap {
 
  private:
   struct Voxel {
+    int64_t key = 0;
     double weight = 0.0;
     Eigen::Vector3d weighted_position = Eigen::Vector3d::Zero();
     Eigen::Vector3d weighted_rgb = Eigen::Vector3d::Zero();
@@ -119,8 +119,23 @@ class DenseMap {
     return voxel.num_points >= options_.min_points && voxel.num_frames >= options_.min_frames;
   }
 
+  // The voxel of `key`, added (zero) if new.
+  Voxel& FindOrAdd(int64_t key);
+  // Room for `num_voxels` voxels without growing the index while they are added.
+  void Reserve(size_t num_voxels);
+  struct Slot {
+    int64_t key;     // kEmptyKey (dense_map.cc) when free
+    uint32_t voxel;  // index into voxels_
+  };
+
   DenseMapOptions options_;
-  std::unordered_map<int64_t, Voxel> voxels_;
+  // The voxels in the order they were first touched, and an open-addressing index of them
+  // (linear probing, at most half full): one cache miss per point. A node-based
+  // std::unordered_map cost about 0.8 CPU s per 930,000-point pair (an allocation and several
+  // cache misses per voxel), this about 0.2 (bench_dense, 2026-11-27).
+  std::vector<Voxel> voxels_;
+  std::vector<Slot> slots_;
+  int slot_shift_ = 64;  // 64 - log2(number of slots)
   int num_frames_ = 0;
 };
 

@@ -311,10 +311,11 @@ const StereoRig& CheckedRig(const StereoRig& rig, const DenseStereoOptions& opti
 }
 }  // namespace
 
-DenseStereo::DenseStereo(const StereoRig& rig, const DenseStereoOptions& options)
+DenseStereo::DenseStereo(const StereoRig& rig, const DenseStereoOptions& options,
+                         const std::filesystem::path& tables_dir)
     : rig_(rig),
       options_(options),
-      rectifier_(SharedRectifier(CheckedRig(rig, options), options.grid)) {
+      rectifier_(SharedRectifier(CheckedRig(rig, options), options.grid, tables_dir)) {
   const double step = rectifier_->theta_step_rad(), baseline = rectifier_->baseline_m();
   const double max_parallax_rad = options_.max_parallax_deg * M_PI / 180.0;
   const int cells = static_cast<int>(std::ceil(max_parallax_rad / step));

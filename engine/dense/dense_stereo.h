@@ -10,6 +10,7 @@
 
 #include <array>
 #include <cstdint>
+#include <filesystem>
 #include <memory>
 #include <string>
 #include <utility>
@@ -129,12 +130,13 @@ struct DensePairResult {
   } seconds;
 };
 
-// Holds the rig's rectification tables (SharedRectifier: built once per rig in the process);
-// Reconstruct() is const.
+// Holds the rig's rectification tables (SharedRectifier: built once per rig in the process, and
+// with `tables_dir` kept there on disk for later processes); Reconstruct() is const.
 class DenseStereo {
  public:
   // Throws InvalidArgument for invalid options or rig.
-  DenseStereo(const StereoRig& rig, const DenseStereoOptions& options);
+  DenseStereo(const StereoRig& rig, const DenseStereoOptions& options,
+              const std::filesystem::path& tables_dir = {});
 
   // Images are 8-bit BGR or grey, of the rig's image sizes (throws InvalidArgument otherwise).
   DensePairResult Reconstruct(const cv::Mat& image0, const cv::Mat& image1,

@@ -161,13 +161,13 @@ void WriteDensePair(size_t k, const std::string& name, const DensePairResult& pa
 // Pair k's files are written on a background thread while pair k + 1 is read and matched (the
 // writing, 0.09 CPU s per 1024x768 pair, runs on one thread, the matching on all: bench_dense).
 size_t RunDense(const StereoRig& rig, const ImageReader& read,
-                const std::vector<ImagePairNames>& pairs, const DenseStereoOptions& options,
+                const std::vector<ImagePairNames>& pairs, const StereoPairsOptions& options,
                 const std::filesystem::path& output_dir,
                 const std::function<void(const StereoPairOutcome&)>& on_pair,
                 const ProgressSink& progress, CloudOutputs* outputs,
                 StereoPairsReport::Grid* grid) {
   progress.Report(0.0, "rectify", "building the rectification tables");
-  const DenseStereo dense(rig, options);
+  const DenseStereo dense(rig, options.dense, options.rectification_tables_dir);
   size_t num_points = 0;
   BackgroundTask writer;
   for (size_t k = 0; k < pairs.size(); ++k) {
@@ -244,8 +244,8 @@ StereoPairsReport ReconstructStereoPairs(
   CloudOutputs outputs(output_dir, pairs.size(), placement);
   if (options.use_dense) {
     StereoPairsReport::Grid grid;
-    report.num_points = RunDense(rig, read, pairs, options.dense, output_dir, on_pair,
-                                 progress, &outputs, &grid);
+    report.num_points =
+        RunDense(rig, read, pairs, options, output_dir, on_pair, progress, &outputs, &grid);
     report.grid = grid;
   } else {
     report.num_points =

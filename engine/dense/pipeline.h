@@ -38,6 +38,9 @@ struct StereoPairsOptions {
   bool use_dense = true;            // dense matching, else sparse features
   DenseStereoOptions dense;         // use_dense
   StereoReconstructOptions sparse;  // !use_dense
+  // Dense: where the rig's rectification tables are kept across processes (SharedRectifier);
+  // empty: built once per process.
+  std::filesystem::path rectification_tables_dir;
   void Check() const;
 };
 

@@ -1,10 +1,17 @@
 #include "engine/dense/spherical_rectification.h"
 
+#include <unistd.h>
+
 #include <algorithm>
+#include <atomic>
 #include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
 #include <list>
 #include <mutex>
 #include <optional>
+#include <sstream>
 #include <utility>
 #include <vector>
 
@@ -178,8 +185,124 @@ std::vector<double> RectifierKey(const StereoRig& rig, const SphericalGridOption
 }
 }  // namespace
 
+namespace {
+
+// The tables file's format: bump kTablesVersion whenever it, or what the tables hold for a given
+// rig and options, changes (a new version is a new file name, so old files are never read).
+constexpr char kTablesMagic[] = "omnirig-rectification\n";
+constexpr uint32_t kTablesVersion = 1;
+
+// FNV-1a over the key's bytes (the file name's hash; the file holds the whole key, compared on
+// reading, so a collision costs a rebuild, never wrong tables).
+uint64_t KeyHash(const std::vector<double>& key) {
+  uint64_t hash = 1469598103934665603ull;
+  const auto* bytes = reinterpret_cast<const unsigned char*>(key.data());
+  for (size_t i = 0; i < key.size() * sizeof(double); ++i) {
+    hash = (hash ^ bytes[i]) * 1099511628211ull;
+  }
+  return hash;
+}
+
+// The tables of one camera in file order, with their element sizes.
+std::vector<cv::Mat*> TableMats(cv::Mat (&map_xy)[2], cv::Mat (&map_fraction)[2],
+                                cv::Mat (&valid)[2]) {
+  return {&map_xy[0], &map_fraction[0], &valid[0], &map_xy[1], &map_fraction[1], &valid[1]};
+}
+constexpr int kTableTypes[6] = {CV_16SC2, CV_16UC1, CV_8UC1, CV_16SC2, CV_16UC1, CV_8UC1};
+
+template <typename T>
+bool ReadValue(std::istream& in, T* value) {
+  return static_cast<bool>(in.read(reinterpret_cast<char*>(value), sizeof(T)));
+}
+
+template <typename T>
+void WriteValue(std::FILE* file, const T& value, bool* ok) {
+  *ok = *ok && std::fwrite(&value, sizeof(T), 1, file) == 1;
+}
+
+}  // namespace
+
+std::string RectificationTablesFileName(const StereoRig& rig, const SphericalGridOptions& options) {
+  char hash[17];
+  std::snprintf(hash, sizeof(hash), "%016llx",
+                static_cast<unsigned long long>(KeyHash(RectifierKey(rig, options))));
+  return "rectification-v" + std::to_string(kTablesVersion) + "-" + hash + ".bin";
+}
+
+std::shared_ptr<const SphericalRectifier> SphericalRectifier::Read(
+    const std::filesystem::path& path, const std::vector<double>& key) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return nullptr;
+  char magic[sizeof(kTablesMagic) - 1];
+  uint32_t version = 0;
+  uint64_t key_size = 0;
+  if (!in.read(magic, sizeof(magic)) || std::memcmp(magic, kTablesMagic, sizeof(magic)) != 0 ||
+      !ReadValue(in, &version) || version != kTablesVersion || !ReadValue(in, &key_size) ||
+      key_size != key.size()) {
+    return nullptr;
+  }
+  std::vector<double> stored(key_size);
+  if (!in.read(reinterpret_cast<char*>(stored.data()), key_size * sizeof(double)) ||
+      stored != key) {
+    return nullptr;
+  }
+  auto rectifier = std::shared_ptr<SphericalRectifier>(new SphericalRectifier());
+  SphericalRectifier& r = *rectifier;
+  if (!ReadValue(in, &r.rows_) || !ReadValue(in, &r.cols_) || !ReadValue(in, &r.theta_step_rad_) ||
+      !ReadValue(in, &r.theta_max_rad_) || !ReadValue(in, &r.baseline_m_) ||
+      !in.read(reinterpret_cast<char*>(r.cam0_from_grid_.data()), 9 * sizeof(double)) ||
+      r.rows_ <= 0 || r.cols_ <= 0 || r.rows_ > 100000 || r.cols_ > 100000) {
+    return nullptr;
+  }
+  const std::vector<cv::Mat*> mats = TableMats(r.map_xy_, r.map_fraction_, r.valid_);
+  for (size_t i = 0; i < mats.size(); ++i) {
+    mats[i]->create(r.rows_, r.cols_, kTableTypes[i]);
+    if (!in.read(reinterpret_cast<char*>(mats[i]->data),
+                 static_cast<std::streamsize>(mats[i]->total() * mats[i]->elemSize()))) {
+      return nullptr;
+    }
+  }
+  if (in.peek() != std::char_traits<char>::eof()) return nullptr;  // not this format after all
+  return rectifier;
+}
+
+void SphericalRectifier::Write(const std::filesystem::path& path,
+                               const std::vector<double>& key) const {
+  // A hidden ".part-" name: the service's start-up check removes what a crash leaves.
+  static std::atomic<int> counter{0};
+  const std::filesystem::path temp =
+      path.parent_path() / ("." + path.filename().string() + ".part-" + std::to_string(::getpid()) +
+                            "-" + std::to_string(counter++));
+  std::error_code error;
+  std::filesystem::create_directories(path.parent_path(), error);
+  std::FILE* file = std::fopen(temp.c_str(), "wb");
+  if (!file) return;
+  bool ok = std::fwrite(kTablesMagic, sizeof(kTablesMagic) - 1, 1, file) == 1;
+  WriteValue(file, kTablesVersion, &ok);
+  WriteValue(file, static_cast<uint64_t>(key.size()), &ok);
+  ok = ok && std::fwrite(key.data(), sizeof(double), key.size(), file) == key.size();
+  WriteValue(file, rows_, &ok);
+  WriteValue(file, cols_, &ok);
+  WriteValue(file, theta_step_rad_, &ok);
+  WriteValue(file, theta_max_rad_, &ok);
+  WriteValue(file, baseline_m_, &ok);
+  ok = ok && std::fwrite(cam0_from_grid_.data(), sizeof(double), 9, file) == 9;
+  cv::Mat map_xy[2] = {map_xy_[0], map_xy_[1]}, fraction[2] = {map_fraction_[0], map_fraction_[1]},
+          valid[2] = {valid_[0], valid_[1]};
+  for (cv::Mat* mat : TableMats(map_xy, fraction, valid)) {
+    const cv::Mat continuous = mat->isContinuous() ? *mat : mat->clone();
+    const size_t bytes = continuous.total() * continuous.elemSize();
+    ok = ok && std::fwrite(continuous.data, 1, bytes, file) == bytes;
+  }
+  ok = ok && std::fflush(file) == 0 && ::fsync(fileno(file)) == 0;
+  ok = std::fclose(file) == 0 && ok;
+  if (ok) std::filesystem::rename(temp, path, error);
+  if (!ok || error) std::filesystem::remove(temp, error);
+}
+
 std::shared_ptr<const SphericalRectifier> SharedRectifier(const StereoRig& rig,
-                                                          const SphericalGridOptions& options) {
+                                                          const SphericalGridOptions& options,
+                                                          const std::filesystem::path& tables_dir) {
   constexpr size_t kKept = 2;
   using Entry = std::pair<std::vector<double>, std::shared_ptr<const SphericalRectifier>>;
   static std::mutex mutex;
@@ -188,12 +311,23 @@ std::shared_ptr<const SphericalRectifier> SharedRectifier(const StereoRig& rig,
   // Held while building (up to a second): a second job of the same rig waits for the tables
   // instead of building them again; one of another rig waits too, which is rare and short.
   std::lock_guard<std::mutex> lock(mutex);
+  const std::filesystem::path file = tables_dir.empty()
+                                         ? std::filesystem::path()
+                                         : tables_dir / RectificationTablesFileName(rig, options);
   for (auto it = cache.begin(); it != cache.end(); ++it) {
     if (it->first != key) continue;
     cache.splice(cache.begin(), cache, it);
+    // Built in this process without a folder, or the file removed since: written now.
+    std::error_code error;
+    if (!file.empty() && !std::filesystem::exists(file, error)) it->second->Write(file, key);
     return cache.front().second;
   }
-  auto rectifier = std::make_shared<const SphericalRectifier>(rig, options);
+  std::shared_ptr<const SphericalRectifier> rectifier;
+  if (!file.empty()) rectifier = SphericalRectifier::Read(file, key);
+  if (!rectifier) {
+    rectifier = std::make_shared<const SphericalRectifier>(rig, options);
+    if (!file.empty()) rectifier->Write(file, key);
+  }
   cache.emplace_front(key, rectifier);
   if (cache.size() > kKept) cache.pop_back();
   return rectifier;

@@ -15,7 +15,10 @@
 // the paper for the lifting); the grid's directions are projected into each camera once per rig
 // and stored as cv::remap tables.
 
+#include <filesystem>
 #include <memory>
+#include <string>
+#include <vector>
 
 #include <opencv2/core.hpp>
 
@@ -64,6 +67,18 @@ class SphericalRectifier {
   const Eigen::Matrix3d& cam0_from_grid() const { return cam0_from_grid_; }
 
  private:
+  friend std::shared_ptr<const SphericalRectifier> SharedRectifier(const StereoRig&,
+                                                                   const SphericalGridOptions&,
+                                                                   const std::filesystem::path&);
+  SphericalRectifier() = default;
+  // The tables file (RectificationTablesFileName): `key` (every number the tables depend on),
+  // the grid and the tables. Read() returns null for a missing, truncated or other-version file
+  // or another key; Write() writes a temporary file, flushes it to disk and renames it over
+  // `path`, so that a reader (another process) sees the old file or the whole new one.
+  static std::shared_ptr<const SphericalRectifier> Read(const std::filesystem::path& path,
+                                                        const std::vector<double>& key);
+  void Write(const std::filesystem::path& path, const std::vector<double>& key) const;
+
   int rows_ = 0;
   int cols_ = 0;
   double theta_step_rad_ = 0.0;
@@ -79,10 +94,18 @@ class SphericalRectifier {
 // The rectifier of `rig` with `options`, shared: the last two built in the process are kept
 // (keyed by every number of the rig and the options), so that the jobs of one rig (stereo
 // pairs, a SLAM job's dense map) build the tables once; they take about as long as one pair's
-// reconstruction (bench_dense) and some 40 MB at 1024x768. Thread-safe. Throws as the
-// constructor does.
-std::shared_ptr<const SphericalRectifier> SharedRectifier(const StereoRig& rig,
-                                                          const SphericalGridOptions& options);
+// reconstruction (bench_dense) and some 40 MB at 1024x768. With `tables_dir` (not empty) the
+// tables are also kept on disk, one file per rig and options (RectificationTablesFileName): a
+// later process reads them (bench_dense: a few hundredths of a second) instead of building
+// them; a file it cannot read or write (a full disk, a read-only folder) only costs the
+// building. Thread-safe. Throws as the constructor does.
+std::shared_ptr<const SphericalRectifier> SharedRectifier(
+    const StereoRig& rig, const SphericalGridOptions& options,
+    const std::filesystem::path& tables_dir = {});
+
+// "rectification-vN-HASH.bin": N the file format's version (a new version is a new file, the
+// old ones are never read), HASH 16 hex digits of every number of the rig and the options.
+std::string RectificationTablesFileName(const StereoRig& rig, const SphericalGridOptions& options);
 
 // The finest angle between the bearings of neighbouring pixels (radially and tangentially) on
 // the largest circle around the principal point that fits in the image; the grid's default step.

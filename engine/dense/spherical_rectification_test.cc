@@ -3,9 +3,15 @@
 
 #include "engine/dense/spherical_rectification.h"
 
+#include <sys/stat.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <cmath>
+#include <filesystem>
+#include <fstream>
 #include <random>
+#include <string>
 
 #include <gtest/gtest.h>
 
@@ -114,6 +120,81 @@ TEST(SphericalRectification, SharedRectifierBuildsOncePerRigAndKeepsTwo) {
   EXPECT_NE(SharedRectifier(rig, coarse), first);  // built again, held by `first` still
   coarse.step_rad = -1.0;
   EXPECT_THROW(SharedRectifier(rig, coarse), InvalidArgument);
+}
+
+// The inode of `path` (a rename over it gives it a new one), 0 when it is missing.
+ino_t Inode(const std::filesystem::path& path) {
+  struct stat info {};
+  return ::stat(path.c_str(), &info) == 0 ? info.st_ino : 0;
+}
+
+// Drops every table of the process-wide cache (it keeps two): the next call reads the file.
+void EvictSharedRectifiers(const StereoRig& rig) {
+  for (double step : {0.031, 0.032}) {
+    SphericalGridOptions other;
+    other.step_rad = step;
+    SharedRectifier(rig, other);
+  }
+}
+
+TEST(SphericalRectification, TablesAreKeptOnDiskAndReadByALaterProcess) {
+  const std::filesystem::path dir = std::filesystem::path(::testing::TempDir()) /
+                                    ("omnirig_rectification_tables_" + std::to_string(::getpid()));
+  std::filesystem::remove_all(dir);
+  const StereoRig rig = DefaultRig();
+  SphericalGridOptions options;
+  options.step_rad = 0.009;
+  const std::filesystem::path file = dir / RectificationTablesFileName(rig, options);
+  EXPECT_EQ(file.filename().string().rfind("rectification-v1-", 0), 0u) << file;
+  const auto built = SharedRectifier(rig, options, dir);
+  ASSERT_TRUE(std::filesystem::exists(file));
+  const ino_t written = Inode(file);
+
+  // Another process (here: the process-wide cache emptied) reads the same tables, not builds them
+  // (building writes a new file over the old one).
+  EvictSharedRectifiers(rig);
+  const auto read = SharedRectifier(rig, options, dir);
+  EXPECT_NE(read, built);
+  EXPECT_EQ(Inode(file), written);
+  EXPECT_EQ(read->rows(), built->rows());
+  EXPECT_EQ(read->cols(), built->cols());
+  EXPECT_EQ(read->theta_step_rad(), built->theta_step_rad());
+  EXPECT_EQ(read->theta_max_rad(), built->theta_max_rad());
+  EXPECT_EQ(read->baseline_m(), built->baseline_m());
+  EXPECT_TRUE(read->cam0_from_grid() == built->cam0_from_grid());
+  cv::Mat image(rig.cam0.height, rig.cam0.width, CV_8U);
+  cv::randu(image, 0, 256);
+  for (int camera = 0; camera < 2; ++camera) {
+    EXPECT_EQ(cv::norm(read->Rectify(image, camera), built->Rectify(image, camera), cv::NORM_INF),
+              0.0);
+    EXPECT_EQ(cv::norm(read->ValidMask(camera), built->ValidMask(camera), cv::NORM_INF), 0.0);
+  }
+
+  // Another rig or grid has its own file.
+  StereoRig moved = rig;
+  moved.cam0_from_cam1.translation.z() += 0.001;
+  EXPECT_NE(RectificationTablesFileName(moved, options), file.filename().string());
+
+  // A torn file (a crash mid-write on a file system without ordered writes) is built again and
+  // replaced, as is a file holding another rig's tables under this name.
+  const auto size = std::filesystem::file_size(file);
+  std::filesystem::resize_file(file, size / 2);
+  EvictSharedRectifiers(rig);
+  const auto rebuilt = SharedRectifier(rig, options, dir);
+  EXPECT_EQ(rebuilt->rows(), built->rows());
+  EXPECT_EQ(std::filesystem::file_size(file), size);
+  const std::filesystem::path moved_file = dir / RectificationTablesFileName(moved, options);
+  SharedRectifier(moved, options, dir);
+  std::filesystem::copy_file(moved_file, file, std::filesystem::copy_options::overwrite_existing);
+  EvictSharedRectifiers(rig);
+  EXPECT_NEAR(SharedRectifier(rig, options, dir)->baseline_m(), built->baseline_m(), 1e-15);
+
+  // A folder it cannot write to only costs the building.
+  const std::filesystem::path not_a_folder = dir / "plain_file";
+  std::ofstream(not_a_folder) << "x";
+  EvictSharedRectifiers(rig);
+  EXPECT_EQ(SharedRectifier(rig, options, not_a_folder)->rows(), built->rows());
+  std::filesystem::remove_all(dir);
 }
 
 TEST(SphericalRectification, RemapTablesAreTheModelsProjection) {
