@@ -83,6 +83,7 @@ json TrackedFrameJson(const slam::FrameReport& report, const LiveFrame& frame, i
           {"state", report.state},
           {"reason", report.reason},
           {"keyframe", report.keyframe},
+          {"in_map", report.in_map},
           {"world_from_rig",
            report.world_from_rig ? PoseToJson(*report.world_from_rig) : json(nullptr)},
           {"latency_ms", MillisecondsSince(frame.received)},
@@ -183,6 +184,7 @@ json RunLiveSlam(const json& params, const JobContext& context, const StereoRig&
   const SlamParams parsed = SlamParamsFromJson(params);
   slam::SlamOptions options = parsed.options;
   options.num_threads = std::max(1, context.num_threads);
+  if (parsed.map_job) options.saved_map = LoadSavedMap(context, *parsed.map_job);
   slam::Session session(rig, options, context.progress);
   std::vector<double> stamps;
   std::vector<std::string> names;
@@ -264,7 +266,8 @@ json RunLiveSlam(const json& params, const JobContext& context, const StereoRig&
   const slam::StereoFrameLoader load = slam::StereoImageLoader(dataset_dir, pairs);
   const json input = {{"kind", "live"}, {"num_frames", stamps.size()}};
   json report = WriteSlamReport(rig, result, stamps, {}, input, load, parsed.dense_map,
-                                options.num_threads, context.output_dir, context.progress);
+                                options.num_threads, context.output_dir, context.progress,
+                                {parsed.rig_job, parsed.map_job});
   report["live"] = {{"num_received", num_received + mailbox.num_skipped()},
                     {"num_tracked_frames", session.num_frames()},
                     {"num_skipped", mailbox.num_skipped()},
