@@ -265,9 +265,9 @@ json RunLiveSlam(const json& params, const JobContext& context, const StereoRig&
   for (const std::string& name : names) pairs.push_back({name, "cam0/" + name, "cam1/" + name});
   const slam::StereoFrameLoader load = slam::StereoImageLoader(dataset_dir, pairs);
   const json input = {{"kind", "live"}, {"num_frames", stamps.size()}};
-  json report = WriteSlamReport(rig, result, stamps, {}, input, load, parsed.dense_map,
-                                options.num_threads, context.output_dir, context.progress,
-                                {parsed.rig_job, parsed.map_job});
+  json report =
+      WriteSlamReport(rig, result, stamps, {}, input, load, parsed.dense_map, options.num_threads,
+                      context.output_dir, context.progress, {parsed.rig_job, parsed.map_job});
   report["live"] = {{"num_received", num_received + mailbox.num_skipped()},
                     {"num_tracked_frames", session.num_frames()},
                     {"num_skipped", mailbox.num_skipped()},

@@ -599,11 +599,11 @@ void CheckSavedMapFitsRig(const SlamParams& parsed,
                 "slam job " << id << " in 'map' has no saved map (" << kSavedMapArtifact
                             << "): it ran before slam jobs saved their maps; run it again");
   const std::string map_rig = result["saved_map"]["rig_job"].get<std::string>();
-  OMNIRIG_CHECK(map_rig == parsed.rig_job,
-                "the saved map of slam job " << id << " in 'map' was made with rig " << map_rig
-                                             << ", not with this job's rig " << parsed.rig_job
-                                             << ": a map is localised in with the rig that "
-                                                "made it");
+  OMNIRIG_CHECK(map_rig == parsed.rig_job, "the saved map of slam job "
+                                               << id << " in 'map' was made with rig " << map_rig
+                                               << ", not with this job's rig " << parsed.rig_job
+                                               << ": a map is localised in with the rig that "
+                                                  "made it");
 }
 
 }  // namespace

@@ -178,8 +178,7 @@ nlohmann::json WriteSlamReport(const StereoRig& rig, const slam::SlamResult& res
                                const nlohmann::json& input, const slam::StereoFrameLoader& load,
                                const std::optional<dense::DenseMapOptions>& dense_map,
                                int num_threads, const std::filesystem::path& output_dir,
-                               const ProgressSink& progress,
-                               const SavedMapSource& map_source = {});
+                               const ProgressSink& progress, const SavedMapSource& map_source = {});
 
 nlohmann::json RunSlamJob(const nlohmann::json& params, const JobContext& context);
 

@@ -369,13 +369,11 @@ void CheckReferencedJobs(ServiceState& state, const api::JobType& type,
                        {"field", reference.field}});
     }
     if (job->state != storage::JobState::kSucceeded) {
-      throw HttpError(422, "dependency_not_ready",
-                      "job " + id + " is " + storage::JobStateName(job->state) + ", but a " +
-                          type.name + " job needs a succeeded " +
-                          (wanted.empty() ? job->type : wanted) + there,
-                      {{"job", id},
-                       {"state", storage::JobStateName(job->state)},
-                       {"field", reference.field}});
+      throw HttpError(
+          422, "dependency_not_ready",
+          "job " + id + " is " + storage::JobStateName(job->state) + ", but a " + type.name +
+              " job needs a succeeded " + (wanted.empty() ? job->type : wanted) + there,
+          {{"job", id}, {"state", storage::JobStateName(job->state)}, {"field", reference.field}});
     }
   }
 }

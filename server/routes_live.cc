@@ -10,8 +10,8 @@
 
 #include "api/camera_json.h"
 #include "api/live_slam.h"
-#include "api/slam_job.h"
 #include "api/service_json.h"
+#include "api/slam_job.h"
 #include "engine/slam/video_source.h"
 #include "engine/util/check.h"
 #include "server/json_views.h"

@@ -32,9 +32,7 @@ std::string Png(const cv::Mat& image) {
   return std::string(bytes.begin(), bytes.end());
 }
 
-Rigid3d PoseOf(const json& pose) {
-  return api::PoseFromJson(pose);
-}
+Rigid3d PoseOf(const json& pose) { return api::PoseFromJson(pose); }
 
 class ServerSavedMapTest : public ::testing::Test {
  protected:
@@ -58,17 +56,17 @@ class ServerSavedMapTest : public ::testing::Test {
     service_ = std::make_unique<server::Service>(options);
     port_ = service_->Start();
     client_ = MakeClient(port_);
-    const json dataset = JsonOf(
-        client_->Post("/api/v1/datasets", json{{"name", "rig"}}.dump(), "application/json"));
+    const json dataset =
+        JsonOf(client_->Post("/api/v1/datasets", json{{"name", "rig"}}.dump(), "application/json"));
     rig_dataset_ = dataset["id"];
     rig_ = SubmitFakeRelativePose(service_->state().job_types, *client_, port_, rig_dataset_,
                                   api::RigToJson(first_->rig));
   }
 
   httplib::Result Create(const json& params, const std::string& dataset = "") {
-    return client_->Post(
-        "/api/v1/jobs", json{{"type", "slam"}, {"dataset", dataset}, {"params", params}}.dump(),
-        "application/json");
+    return client_->Post("/api/v1/jobs",
+                         json{{"type", "slam"}, {"dataset", dataset}, {"params", params}}.dump(),
+                         "application/json");
   }
 
   // A live job over `sequence`'s frames (each answered with its pose), finished; its id.
@@ -112,23 +110,23 @@ class ServerSavedMapTest : public ::testing::Test {
     const std::vector<Rigid3d> estimate = Poses(second);
     double sum_sq = 0.0, max_m = 0.0, path_m = 0.0;
     for (size_t i = 0; i < estimate.size(); ++i) {
-      const double error = ((gt_from_map * estimate[i]).translation -
-                            second_->world_from_rig[i].translation)
-                               .norm();
+      const double error =
+          ((gt_from_map * estimate[i]).translation - second_->world_from_rig[i].translation).norm();
       sum_sq += error * error;
       max_m = std::max(max_m, error);
       if (i > 0) {
-        path_m += (second_->world_from_rig[i].translation -
-                   second_->world_from_rig[i - 1].translation)
-                      .norm();
+        path_m +=
+            (second_->world_from_rig[i].translation - second_->world_from_rig[i - 1].translation)
+                .norm();
       }
     }
     const double ate_m = std::sqrt(sum_sq / estimate.size());
     const double fraction = second["localised_in_map_fraction"].get<double>();
-    std::printf("%s: in_map %.1f %% of %zu frames, ATE in the saved map's world %.2f mm = %.4f %% "
-                "of %.2f m, max %.2f mm\n",
-                what, 100.0 * fraction, estimate.size(), 1e3 * ate_m, 100.0 * ate_m / path_m,
-                path_m, 1e3 * max_m);
+    std::printf(
+        "%s: in_map %.1f %% of %zu frames, ATE in the saved map's world %.2f mm = %.4f %% "
+        "of %.2f m, max %.2f mm\n",
+        what, 100.0 * fraction, estimate.size(), 1e3 * ate_m, 100.0 * ate_m / path_m, path_m,
+        1e3 * max_m);
     EXPECT_GE(fraction, 0.95) << what;
     EXPECT_LE(ate_m, 0.001 * path_m) << what;
     EXPECT_LE(max_m, 0.5) << what;
@@ -172,8 +170,8 @@ TEST_F(ServerSavedMapTest, SecondRunsLiveAndBatchLocaliseInTheFirstRunsMap) {
   // The result's map is the saved one with what was added.
   EXPECT_GT(live["saved_map"]["num_keyframes"].get<int>(),
             first["saved_map"]["num_keyframes"].get<int>());
-  const json trajectory = JsonOf(
-      client_->Get(("/api/v1/jobs/" + live_id + "/artifacts/trajectory.json").c_str()));
+  const json trajectory =
+      JsonOf(client_->Get(("/api/v1/jobs/" + live_id + "/artifacts/trajectory.json").c_str()));
   ASSERT_EQ(trajectory["frames"].size(), second_->names.size());
   int in_map = 0;
   for (const json& frame : trajectory["frames"]) in_map += frame["in_map"].get<bool>() ? 1 : 0;
@@ -219,8 +217,8 @@ TEST_F(ServerSavedMapTest, RefusesAMapThatIsNotASucceededSlamJobOfTheSameRig) {
   }
   ASSERT_EQ(client_->Post(("/api/v1/jobs/" + running_id + "/finish").c_str())->status, 202);
   ASSERT_EQ(WaitForJob(port_, running_id, 300)["state"], "succeeded");
-  const std::string other_rig = SubmitFakeRelativePose(
-      service_->state().job_types, *client_, port_, dataset, api::RigToJson(first_->rig));
+  const std::string other_rig = SubmitFakeRelativePose(service_->state().job_types, *client_, port_,
+                                                       dataset, api::RigToJson(first_->rig));
   const std::string running_dataset =
       JsonOf(client_->Get(("/api/v1/jobs/" + running_id).c_str()))["dataset"];
   for (const bool live : {true, false}) {
@@ -230,8 +228,7 @@ TEST_F(ServerSavedMapTest, RefusesAMapThatIsNotASucceededSlamJobOfTheSameRig) {
     EXPECT_EQ(answer->status, 422) << answer->body;
     const json error = JsonOf(answer)["error"];
     EXPECT_EQ(error["code"], "invalid_input");
-    EXPECT_NE(error["message"].get<std::string>().find("made with rig " + rig_),
-              std::string::npos)
+    EXPECT_NE(error["message"].get<std::string>().find("made with rig " + rig_), std::string::npos)
         << error.dump();
   }
   // The same rig: accepted.

@@ -55,9 +55,9 @@ class Reader {
   // A count of items of at least `min_item_bytes` each: no more than the bytes left can hold.
   std::uint32_t Count(std::size_t min_item_bytes, const char* what) {
     const auto n = Get<std::uint32_t>();
-    OMNIRIG_CHECK(n <= (size_ - offset_) / min_item_bytes,
-                  "the saved map is truncated or corrupt: " << n << " " << what
-                                                            << " do not fit in its size");
+    OMNIRIG_CHECK(
+        n <= (size_ - offset_) / min_item_bytes,
+        "the saved map is truncated or corrupt: " << n << " " << what << " do not fit in its size");
     return n;
   }
   Eigen::Vector3d GetVector3() {
@@ -143,10 +143,10 @@ SavedKeyframe GetKeyframe(Reader* r) {
     StereoPoint& p = k.stereo.emplace_back();
     p.feature0 = r->Get<std::int32_t>();
     p.feature1 = r->Get<std::int32_t>();
-    OMNIRIG_CHECK(p.feature0 >= 0 && p.feature0 < static_cast<int>(n) && p.feature1 >= 0 &&
-                      p.feature1 < k.num_cam1_features,
-                  "the saved map is corrupt: keyframe " << k.name
-                                                        << " has a stereo point out of range");
+    OMNIRIG_CHECK(
+        p.feature0 >= 0 && p.feature0 < static_cast<int>(n) && p.feature1 >= 0 &&
+            p.feature1 < k.num_cam1_features,
+        "the saved map is corrupt: keyframe " << k.name << " has a stereo point out of range");
     p.point_in_cam0 = r->GetVector3();
     p.range_std_m = r->Get<double>();
     p.parallax_rad = r->Get<double>();
@@ -185,8 +185,7 @@ Landmark GetLandmark(const std::vector<SavedKeyframe>& keyframes, Reader* r) {
     OMNIRIG_CHECK(o.frame >= 0 && o.frame < static_cast<int>(keyframes.size()) && o.camera <= 1,
                   "the saved map is corrupt: an observation of an unknown keyframe or camera");
     const SavedKeyframe& k = keyframes[o.frame];
-    OMNIRIG_CHECK(o.feature >= 0 &&
-                      o.feature < static_cast<int>(k.landmark_of[o.camera].size()),
+    OMNIRIG_CHECK(o.feature >= 0 && o.feature < static_cast<int>(k.landmark_of[o.camera].size()),
                   "the saved map is corrupt: an observation of an unknown feature");
   }
   return l;
@@ -212,9 +211,9 @@ SavedMap DeserializeSavedMap(const std::uint8_t* data, std::size_t size) {
                 "not an omnirig saved map (it does not start with \"OMNIRIG-MAP\")");
   r.Take(sizeof(kMagic));
   const auto version = r.Get<std::uint32_t>();
-  OMNIRIG_CHECK(version == kSavedMapVersion,
-                "saved map format version " << version << " is not one this omnirig reads (it "
-                                            << "reads version " << kSavedMapVersion << ")");
+  OMNIRIG_CHECK(version == kSavedMapVersion, "saved map format version "
+                                                 << version << " is not one this omnirig reads (it "
+                                                 << "reads version " << kSavedMapVersion << ")");
   SavedMap map;
   const std::uint32_t num_keyframes = r.Count(64, "keyframes");
   const std::uint32_t num_landmarks = r.Count(31, "landmarks");
@@ -225,9 +224,9 @@ SavedMap DeserializeSavedMap(const std::uint8_t* data, std::size_t size) {
   for (const SavedKeyframe& k : map.keyframes) {
     for (const std::vector<int>& of : k.landmark_of) {
       for (int id : of) {
-        OMNIRIG_CHECK(id >= -1 && id < static_cast<int>(num_landmarks),
-                      "the saved map is corrupt: keyframe " << k.name
-                                                            << " sees an unknown landmark");
+        OMNIRIG_CHECK(
+            id >= -1 && id < static_cast<int>(num_landmarks),
+            "the saved map is corrupt: keyframe " << k.name << " sees an unknown landmark");
       }
     }
   }
@@ -240,7 +239,8 @@ void WriteSavedMap(const std::filesystem::path& path, const SavedMap& map) {
   const std::vector<std::uint8_t> bytes = SerializeSavedMap(map);
   std::ofstream out(path, std::ios::binary | std::ios::trunc);
   if (!out) throw std::runtime_error("cannot write " + path.string());
-  out.write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
+  out.write(reinterpret_cast<const char*>(bytes.data()),
+            static_cast<std::streamsize>(bytes.size()));
   if (!out) throw std::runtime_error("failed writing " + path.string());
 }
 

@@ -29,9 +29,7 @@ SlamOptions Options() {
 }
 
 StereoFrameLoader Loader(const synth::StereoSequence& sequence) {
-  return [&sequence](int i) {
-    return StereoImages{sequence.images[0][i], sequence.images[1][i]};
-  };
+  return [&sequence](int i) { return StereoImages{sequence.images[0][i], sequence.images[1][i]}; };
 }
 
 std::vector<Rigid3d> Estimates(const SlamResult& result) {
@@ -88,9 +86,9 @@ TEST_F(SavedMapLocalisation, SecondRunIsLocalisedInTheFirstRunsWorld) {
     sum_sq += error * error;
     max_m = std::max(max_m, error);
     if (i > 0) {
-      path_m += (second_->world_from_rig[i].translation -
-                 second_->world_from_rig[i - 1].translation)
-                    .norm();
+      path_m +=
+          (second_->world_from_rig[i].translation - second_->world_from_rig[i - 1].translation)
+              .norm();
     }
   }
   const double ate_m = std::sqrt(sum_sq / estimate.size());
@@ -101,9 +99,8 @@ TEST_F(SavedMapLocalisation, SecondRunIsLocalisedInTheFirstRunsWorld) {
       "path, other light) %zu frames: in_map %.1f %%, ATE in the saved map's world %.2f mm = "
       "%.4f %% of its %.2f m path, max %.2f mm; first frame %s\n",
       first_->names.size(), first_result_->saved_map.keyframes.size(),
-      first_result_->saved_map.landmarks.size(), second_->names.size(), 100.0 * in_map,
-      1e3 * ate_m, 100.0 * ate_m / path_m, path_m, 1e3 * max_m,
-      second_result_->frames.front().state.c_str());
+      first_result_->saved_map.landmarks.size(), second_->names.size(), 100.0 * in_map, 1e3 * ate_m,
+      100.0 * ate_m / path_m, path_m, 1e3 * max_m, second_result_->frames.front().state.c_str());
   EXPECT_GE(in_map, 0.95);
   EXPECT_LE(ate_m, 0.001 * path_m);
   EXPECT_LE(max_m, 0.5);

@@ -19,9 +19,9 @@ SavedMap SmallMap() {
   for (int k = 0; k < 2; ++k) {
     SavedKeyframe& keyframe = map.keyframes.emplace_back();
     keyframe.name = "frame_00" + std::to_string(k);
-    keyframe.rig_from_world = Rigid3d(Eigen::Quaterniond(Eigen::AngleAxisd(0.1 * k,
-                                                                           Eigen::Vector3d::UnitZ())),
-                                      Eigen::Vector3d(0.5 * k, -0.25, 1.0));
+    keyframe.rig_from_world =
+        Rigid3d(Eigen::Quaterniond(Eigen::AngleAxisd(0.1 * k, Eigen::Vector3d::UnitZ())),
+                Eigen::Vector3d(0.5 * k, -0.25, 1.0));
     keyframe.path_m = 0.5 * k;
     for (int f = 0; f < 3; ++f) {
       keyframe.cam0.pixels.emplace_back(100.0 + f, 200.5 - f);
@@ -30,7 +30,8 @@ SavedMap SmallMap() {
     }
     keyframe.cam0.descriptors = cv::Mat(3, 128, CV_8U);
     for (int r = 0; r < 3; ++r) {
-      for (int c = 0; c < 128; ++c) keyframe.cam0.descriptors.at<std::uint8_t>(r, c) = (r * 31 + c + k) % 256;
+      for (int c = 0; c < 128; ++c)
+        keyframe.cam0.descriptors.at<std::uint8_t>(r, c) = (r * 31 + c + k) % 256;
     }
     keyframe.num_cam1_features = 2;
     keyframe.landmark_of[0] = {0, -1, 1};
@@ -74,9 +75,9 @@ TEST(SavedMap, ReadsBackWhatWasWritten) {
       map.keyframes[1].rig_from_world.translation));
   EXPECT_EQ(read.keyframes[1].landmark_of[0], map.keyframes[1].landmark_of[0]);
   EXPECT_EQ(read.keyframes[1].landmark_of[1], map.keyframes[1].landmark_of[1]);
-  EXPECT_EQ(cv::norm(read.keyframes[1].cam0.descriptors, map.keyframes[1].cam0.descriptors,
-                     cv::NORM_L1),
-            0.0);
+  EXPECT_EQ(
+      cv::norm(read.keyframes[1].cam0.descriptors, map.keyframes[1].cam0.descriptors, cv::NORM_L1),
+      0.0);
   EXPECT_EQ(read.keyframes[0].stereo[0].pixel0, map.keyframes[0].cam0.pixels[0]);
   EXPECT_EQ(read.landmarks[0].observations.size(), 3u);
   // The same bytes again: nothing is lost or rounded on the way.
@@ -92,8 +93,8 @@ TEST(SavedMap, RefusesAnotherVersionAnotherKindAndATruncatedFile) {
   EXPECT_NE(ErrorOf(newer).find("format version 2 is not one this omnirig reads"),
             std::string::npos)
       << ErrorOf(newer);
-  const std::vector<std::uint8_t> ply = {'p', 'l', 'y', '\n', 'f', 'o', 'r', 'm', 'a', 't',
-                                         ' ', 'b', 0, 0, 0, 0};
+  const std::vector<std::uint8_t> ply = {'p', 'l', 'y', '\n', 'f', 'o', 'r', 'm',
+                                         'a', 't', ' ', 'b',  0,   0,   0,   0};
   EXPECT_NE(ErrorOf(ply).find("not an omnirig saved map"), std::string::npos);
   // Every cut is refused (never read past the end).
   for (size_t size = 0; size < bytes.size(); size += 7) {
@@ -107,8 +108,7 @@ TEST(SavedMap, RefusesAnotherVersionAnotherKindAndATruncatedFile) {
 }
 
 TEST(SavedMap, ReadErrorsNameTheFile) {
-  const std::filesystem::path path =
-      std::filesystem::path(::testing::TempDir()) / "not_a_map.bin";
+  const std::filesystem::path path = std::filesystem::path(::testing::TempDir()) / "not_a_map.bin";
   std::ofstream(path) << "hello";
   try {
     ReadSavedMap(path);

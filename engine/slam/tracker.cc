@@ -529,7 +529,8 @@ FrameReport Tracker::BackEnd(FrontEndResult front, bool last_frame) {
   report.keyframe = frame.keyframe;
   report.in_map = report.linked && InSavedMap(frame);
   const int reference_keyframe = frame.keyframe_decision.reference_keyframe;
-  report.reference_keyframe = reference_keyframe >= first_frame_ ? reference_keyframe - first_frame_ : -1;
+  report.reference_keyframe =
+      reference_keyframe >= first_frame_ ? reference_keyframe - first_frame_ : -1;
   linked_[index] = report.linked;
   last_linked_ = report.linked;
   last_ = std::move(frame);
