@@ -49,7 +49,8 @@ slam::StereoImages Images(const LiveFrame& frame) {
 // trajectory.json and map.ply of the run so far, each written whole under a temporary name
 // and renamed: a client reading them while they are refreshed sees the old or the new file.
 void WriteSnapshot(const StereoRig& rig, const slam::SlamSnapshot& snapshot,
-                   const std::vector<double>& stamps, const fs::path& output_dir) {
+                   const std::vector<double>& stamps, const std::optional<std::string>& map_job,
+                   const fs::path& output_dir) {
   json frames = json::array();
   for (size_t i = 0; i < snapshot.names.size(); ++i) {
     frames.push_back(
@@ -60,7 +61,9 @@ void WriteSnapshot(const StereoRig& rig, const slam::SlamSnapshot& snapshot,
           snapshot.world_from_rig[i] ? PoseToJson(*snapshot.world_from_rig[i]) : json(nullptr)}});
   }
   const json trajectory = {
-      {"world_frame", "the rig frame (cam0's frame) of the first tracked frame"},
+      {"world_frame", map_job ? "the world of the saved map of slam job " + *map_job
+                              : std::string("the rig frame (cam0's frame) of the first tracked "
+                                            "frame")},
       {"live", true},
       {"num_keyframes", snapshot.num_keyframes},
       {"frames", frames},
@@ -238,7 +241,7 @@ json RunLiveSlam(const json& params, const JobContext& context, const StereoRig&
     // whole map, which grows with the run.
     if (snapshot_due &&
         (stamps.size() == 1 || since_snapshot.ElapsedSeconds() >= kLiveArtifactInterval_s)) {
-      WriteSnapshot(rig, session.Snapshot(), stamps, context.output_dir);
+      WriteSnapshot(rig, session.Snapshot(), stamps, parsed.map_job, context.output_dir);
       since_snapshot.Restart();
       snapshot_due = false;
     }

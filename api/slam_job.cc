@@ -598,6 +598,9 @@ void CheckSavedMapFitsRig(const SlamParams& parsed,
                     result["saved_map"].value("rig_job", json()).is_string(),
                 "slam job " << id << " in 'map' has no saved map (" << kSavedMapArtifact
                             << "): it ran before slam jobs saved their maps; run it again");
+  OMNIRIG_CHECK(result["saved_map"].value("num_keyframes", 0) > 0,
+                "the saved map of slam job " << id << " in 'map' holds no keyframe (it tracked "
+                                             << "no frame): there is nothing to localise in");
   const std::string map_rig = result["saved_map"]["rig_job"].get<std::string>();
   OMNIRIG_CHECK(map_rig == parsed.rig_job, "the saved map of slam job "
                                                << id << " in 'map' was made with rig " << map_rig

@@ -173,6 +173,7 @@ TEST_F(ServerSavedMapTest, SecondRunsLiveAndBatchLocaliseInTheFirstRunsMap) {
   const json trajectory =
       JsonOf(client_->Get(("/api/v1/jobs/" + live_id + "/artifacts/trajectory.json").c_str()));
   ASSERT_EQ(trajectory["frames"].size(), second_->names.size());
+  EXPECT_NE(trajectory["world_frame"].get<std::string>().find(first_id), std::string::npos);
   int in_map = 0;
   for (const json& frame : trajectory["frames"]) in_map += frame["in_map"].get<bool>() ? 1 : 0;
   EXPECT_NEAR(live["localised_in_map_fraction"].get<double>(),
