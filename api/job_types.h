@@ -46,6 +46,10 @@ struct JobContext {
   // job uses); throws InvalidArgument naming the job when it has none.
   std::function<nlohmann::json(const std::string& job_id)> load_result;
   OpenRecording open_recording;  // the dataset's recordings (params "recording")
+  // The file of artifact `name` of an earlier succeeded job (e.g. the saved map a slam job
+  // localises in); throws InvalidArgument naming the job and the artifact when it has none.
+  std::function<std::filesystem::path(const std::string& job_id, const std::string& name)>
+      artifact_path;
 
   // Appends a line to the job's log when the service gave it one.
   void Log(const std::string& line) const {

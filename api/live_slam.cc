@@ -49,7 +49,8 @@ slam::StereoImages Images(const LiveFrame& frame) {
 // trajectory.json and map.ply of the run so far, each written whole under a temporary name
 // and renamed: a client reading them while they are refreshed sees the old or the new file.
 void WriteSnapshot(const StereoRig& rig, const slam::SlamSnapshot& snapshot,
-                   const std::vector<double>& stamps, const fs::path& output_dir) {
+                   const std::vector<double>& stamps, const std::optional<std::string>& map_job,
+                   const fs::path& output_dir) {
   json frames = json::array();
   for (size_t i = 0; i < snapshot.names.size(); ++i) {
     frames.push_back(
@@ -60,7 +61,9 @@ void WriteSnapshot(const StereoRig& rig, const slam::SlamSnapshot& snapshot,
           snapshot.world_from_rig[i] ? PoseToJson(*snapshot.world_from_rig[i]) : json(nullptr)}});
   }
   const json trajectory = {
-      {"world_frame", "the rig frame (cam0's frame) of the first tracked frame"},
+      {"world_frame", map_job ? "the world of the saved map of slam job " + *map_job
+                              : std::string("the rig frame (cam0's frame) of the first tracked "
+                                            "frame")},
       {"live", true},
       {"num_keyframes", snapshot.num_keyframes},
       {"frames", frames},
@@ -83,6 +86,7 @@ json TrackedFrameJson(const slam::FrameReport& report, const LiveFrame& frame, i
           {"state", report.state},
           {"reason", report.reason},
           {"keyframe", report.keyframe},
+          {"in_map", report.in_map},
           {"world_from_rig",
            report.world_from_rig ? PoseToJson(*report.world_from_rig) : json(nullptr)},
           {"latency_ms", MillisecondsSince(frame.received)},
@@ -183,6 +187,7 @@ json RunLiveSlam(const json& params, const JobContext& context, const StereoRig&
   const SlamParams parsed = SlamParamsFromJson(params);
   slam::SlamOptions options = parsed.options;
   options.num_threads = std::max(1, context.num_threads);
+  if (parsed.map_job) options.saved_map = LoadSavedMap(context, *parsed.map_job);
   slam::Session session(rig, options, context.progress);
   std::vector<double> stamps;
   std::vector<std::string> names;
@@ -237,7 +242,7 @@ json RunLiveSlam(const json& params, const JobContext& context, const StereoRig&
     if (snapshot_due &&
         (stamps.size() == 1 || since_snapshot.ElapsedSeconds() >= kLiveArtifactInterval_s)) {
       try {
-        WriteSnapshot(rig, session.Snapshot(), stamps, context.output_dir);
+        WriteSnapshot(rig, session.Snapshot(), stamps, parsed.map_job, context.output_dir);
         snapshot_due = false;
       } catch (const std::exception& e) {
         // A full disk: the robot still gets its poses; the snapshot is tried again next time.
@@ -272,8 +277,9 @@ json RunLiveSlam(const json& params, const JobContext& context, const StereoRig&
   for (const std::string& name : names) pairs.push_back({name, "cam0/" + name, "cam1/" + name});
   const slam::StereoFrameLoader load = slam::StereoImageLoader(dataset_dir, pairs);
   const json input = {{"kind", "live"}, {"num_frames", stamps.size()}};
-  json report = WriteSlamReport(rig, result, stamps, {}, input, load, parsed.dense_map,
-                                options.num_threads, context.output_dir, context.progress);
+  json report =
+      WriteSlamReport(rig, result, stamps, {}, input, load, parsed.dense_map, options.num_threads,
+                      context.output_dir, context.progress, {parsed.rig_job, parsed.map_job});
   report["live"] = {{"num_received", num_received + mailbox.num_skipped()},
                     {"num_tracked_frames", session.num_frames()},
                     {"num_skipped", mailbox.num_skipped()},

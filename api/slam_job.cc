@@ -17,6 +17,7 @@
 #include "engine/slam/image_source.h"
 #include "engine/slam/map_io.h"
 #include "engine/util/check.h"
+#include "engine/util/error_prefix.h"
 #include "engine/util/image_pairs.h"
 #include "engine/util/timer.h"
 
@@ -77,6 +78,7 @@ json FrameStateToJson(const slam::FrameReport& f) {
           {"state", f.state},
           {"linked", f.linked},
           {"keyframe", f.keyframe},
+          {"in_map", f.in_map},
           {"reason", f.reason},
           {"world_from_rig", f.world_from_rig ? PoseToJson(*f.world_from_rig) : json(nullptr)}};
 }
@@ -139,7 +141,8 @@ std::vector<double> Timestamps(const std::vector<ImagePairNames>& pairs,
 }
 
 json WriteArtifacts(const StereoRig& rig, const slam::SlamResult& result,
-                    const std::vector<double>& stamps, const fs::path& output_dir) {
+                    const std::vector<double>& stamps, const SavedMapSource& map_source,
+                    const fs::path& output_dir) {
   fs::create_directories(output_dir);
   json frames = json::array();
   std::vector<slam::StampedPose> tum;
@@ -150,17 +153,21 @@ json WriteArtifacts(const StereoRig& rig, const slam::SlamResult& result,
     if (f.world_from_rig) tum.push_back({stamps[i], *f.world_from_rig});
   }
   const json trajectory = {
-      {"world_frame", "the rig frame (cam0's frame) of the first tracked frame"},
+      {"world_frame", map_source.map_job
+                          ? "the world of the saved map of slam job " + *map_source.map_job
+                          : std::string("the rig frame (cam0's frame) of the first tracked frame")},
       {"frames", frames},
       {"rig", RigToJson(rig)}};
   WriteTextFile(output_dir / "trajectory.json", trajectory.dump(2) + "\n");
   slam::WriteTum(output_dir / "trajectory.tum", tum);
   slam::WriteKitti(output_dir / "trajectory.kitti.txt", tum);
   slam::WritePly(output_dir / "map.ply", result.map);
+  slam::WriteSavedMap(output_dir / kSavedMapArtifact, result.saved_map);
   return {{"trajectory_json", "trajectory.json"},
           {"trajectory_tum", "trajectory.tum"},
           {"trajectory_kitti", "trajectory.kitti.txt"},
           {"map_ply", "map.ply"},
+          {"slam_map", kSavedMapArtifact},
           {"report_json", "report.json"}};
 }
 
@@ -299,12 +306,17 @@ SlamParams SlamParamsFromJson(const json& params) {
   std::set<std::string> known = KeysOf(frames);
   // "live" and "live_idle_timeout_s" are the live job's (api/live_slam.h): a live job whose
   // server stopped runs again as a batch job over the frames it stored.
-  known.insert({"rig", "ground_truth", "options", "dense_map", "live", "live_idle_timeout_s"});
+  known.insert({"rig", "ground_truth", "options", "dense_map", "live", "live_idle_timeout_s", "map"});
   // A recording's topics ("recording", "topics"; api/recording_input.h), checked at submission.
   const std::set<std::string> recording = RecordingFieldNames();
   known.insert(recording.begin(), recording.end());
   CheckKnownFields(params, "params", known);
   parsed.rig_job = RigJobField(params);
+  if (params.contains("map")) {
+    const std::string map = StringField(params, "params", "map");
+    OMNIRIG_CHECK(!map.empty(), "field 'params.map' must be the id of a succeeded slam job");
+    parsed.map_job = map;
+  }
   if (params.contains("ground_truth")) {
     const std::string name = StringField(params, "params", "ground_truth");
     OMNIRIG_CHECK(!name.empty() && name.find("..") == std::string::npos && name.front() != '/',
@@ -506,16 +518,19 @@ json RunSlamOnInput(const StereoRig& rig, const SlamInput& input,
                     const slam::SlamOptions& options, const fs::path& output_dir,
                     const ProgressSink& progress,
                     const std::function<void(const std::string&)>& log,
-                    const std::optional<dense::DenseMapOptions>& dense_map) {
+                    const std::optional<dense::DenseMapOptions>& dense_map,
+                    const SavedMapSource& map_source) {
   const ProgressSink frame_progress{
       [&](double fraction, const std::string& stage, const std::string& message) {
         progress.Report(fraction, stage, message);
         if (log && !message.empty()) log(message);
       },
       progress.is_cancelled};
-  const slam::SlamResult result = slam::RunSlam(rig, input.names, input.load, options, frame_progress);
+  const slam::SlamResult result =
+      slam::RunSlam(rig, input.names, input.load, options, frame_progress);
   return WriteSlamReport(rig, result, input.timestamps_s, input.ground_truth, input.source,
-                         input.load, dense_map, options.num_threads, output_dir, progress);
+                         input.load, dense_map, options.num_threads, output_dir, progress,
+                         map_source);
 }
 
 // The report's figures of a SLAM run: counts, timings, bundle adjustment, frames and loops.
@@ -635,10 +650,36 @@ void CheckGroundTruthPresent(const std::string& name, const SubmissionInputs& da
   throw InvalidArgument(os.str());
 }
 
+void CheckSavedMapFitsRig(const SlamParams& parsed,
+                          const std::function<json(const std::string&)>& load_result) {
+  const json result = load_result(*parsed.map_job);
+  const std::string& id = *parsed.map_job;
+  OMNIRIG_CHECK(result.is_object() && result.contains("saved_map") &&
+                    result["saved_map"].is_object() &&
+                    result["saved_map"].value("rig_job", json()).is_string(),
+                "slam job " << id << " in 'map' has no saved map (" << kSavedMapArtifact
+                            << "): it ran before slam jobs saved their maps; run it again");
+  OMNIRIG_CHECK(result["saved_map"].value("num_keyframes", 0) > 0,
+                "the saved map of slam job " << id << " in 'map' holds no keyframe (it tracked "
+                                             << "no frame): there is nothing to localise in");
+  const std::string map_rig = result["saved_map"]["rig_job"].get<std::string>();
+  OMNIRIG_CHECK(map_rig == parsed.rig_job, "the saved map of slam job "
+                                               << id << " in 'map' was made with rig " << map_rig
+                                               << ", not with this job's rig " << parsed.rig_job
+                                               << ": a map is localised in with the rig that "
+                                                  "made it");
+}
+
 }  // namespace
+
+void CheckSlamMap(const json& params, const std::function<json(const std::string&)>& load_result) {
+  const SlamParams parsed = SlamParamsFromJson(params);
+  if (parsed.map_job) CheckSavedMapFitsRig(parsed, load_result);
+}
 
 void CheckSlamInputs(const json& params, const SubmissionInputs& dataset) {
   const SlamParams parsed = SlamParamsFromJson(params);
+  if (parsed.map_job) CheckSavedMapFitsRig(parsed, dataset.load_result);
   if (parsed.ground_truth) CheckGroundTruthPresent(*parsed.ground_truth, dataset);
   if (const auto recording = RecordingInputFromJson(params, 2)) {
     CheckRecordingInput(*recording, dataset);
@@ -666,14 +707,15 @@ json RunSlamOnDataset(const StereoRig& rig, const fs::path& dataset_dir,
                       const ProgressSink& progress,
                       const std::function<void(const std::string&)>& log,
                       const std::optional<dense::DenseMapOptions>& dense_map,
-                      const slam::VideoFrameOptions& frame_options) {
+                      const slam::VideoFrameOptions& frame_options,
+                      const SavedMapSource& map_source) {
   options.Check();
   frame_options.Check();
   const auto videos = FindStereoVideos(dataset_dir, image_names);
   const SlamInput input =
       videos ? PrepareVideoInput(rig, *videos, frame_options, ground_truth, progress)
              : PrepareImageInput(dataset_dir, image_names, frame_options.frame_step, ground_truth);
-  return RunSlamOnInput(rig, input, options, output_dir, progress, log, dense_map);
+  return RunSlamOnInput(rig, input, options, output_dir, progress, log, dense_map, map_source);
 }
 
 json WriteSlamReport(const StereoRig& rig, const slam::SlamResult& result,
@@ -681,9 +723,21 @@ json WriteSlamReport(const StereoRig& rig, const slam::SlamResult& result,
                      const std::vector<slam::StampedPose>& ground_truth, const json& input,
                      const slam::StereoFrameLoader& load,
                      const std::optional<dense::DenseMapOptions>& dense_map, int num_threads,
-                     const fs::path& output_dir, const ProgressSink& progress) {
+                     const fs::path& output_dir, const ProgressSink& progress,
+                     const SavedMapSource& map_source) {
   json report = SlamResultToJson(result);
-  report["artifacts"] = WriteArtifacts(rig, result, timestamps_s, output_dir);
+  report["artifacts"] = WriteArtifacts(rig, result, timestamps_s, map_source, output_dir);
+  report["saved_map"] = {
+      {"artifact", kSavedMapArtifact},
+      {"format_version", slam::kSavedMapVersion},
+      {"num_keyframes", result.saved_map.keyframes.size()},
+      {"num_landmarks", result.saved_map.landmarks.size()},
+      {"rig_job", map_source.rig_job},
+      {"localised_in", map_source.map_job ? json(*map_source.map_job) : json(nullptr)}};
+  report["localised_in_map_fraction"] =
+      map_source.map_job && !result.frames.empty()
+          ? json(static_cast<double>(result.num_frames_in_map) / result.frames.size())
+          : json(nullptr);
   report["input"] = input;
   if (!ground_truth.empty()) report["evaluation"] = EvaluateTracked(result, ground_truth);
   if (dense_map) {
@@ -702,17 +756,27 @@ json RunSlamJob(const json& params, const JobContext& context) {
   const StereoRig rig = LoadRig(context.load_result, parsed.rig_job);
   slam::SlamOptions options = parsed.options;
   options.num_threads = std::max(1, context.num_threads);
+  if (parsed.map_job) options.saved_map = LoadSavedMap(context, *parsed.map_job);
   std::optional<fs::path> ground_truth;
   if (parsed.ground_truth) ground_truth = context.dataset_dir / *parsed.ground_truth;
   if (const auto recording = RecordingInputFromJson(params, 2)) {
     const SlamInput input = PrepareRecordingInput(rig, *recording, context.open_recording,
                                                   ground_truth, context.progress);
     return RunSlamOnInput(rig, input, options, context.output_dir, context.progress, context.log,
-                          parsed.dense_map);
+                          parsed.dense_map, {parsed.rig_job, parsed.map_job});
   }
   return RunSlamOnDataset(rig, context.dataset_dir, context.image_names, options, ground_truth,
                           context.output_dir, context.progress, context.log, parsed.dense_map,
-                          parsed.frames);
+                          parsed.frames, {parsed.rig_job, parsed.map_job});
+}
+
+std::shared_ptr<const slam::SavedMap> LoadSavedMap(const JobContext& context,
+                                                   const std::string& map_job) {
+  OMNIRIG_CHECK(context.artifact_path, "this service cannot read other jobs' artifacts");
+  const fs::path path = context.artifact_path(map_job, kSavedMapArtifact);
+  return WithErrorPrefix("the saved map of slam job " + map_job + " in 'map': ", [&] {
+    return std::make_shared<const slam::SavedMap>(slam::ReadSavedMap(path));
+  });
 }
 
 JobType SlamJobType() {
@@ -720,7 +784,10 @@ JobType SlamJobType() {
   type.name = "slam";
   type.validate = [](const json& params) { SlamParamsFromJson(params); };
   type.referenced_jobs = [](const json& params) {
-    return std::vector<JobReference>{{SlamParamsFromJson(params).rig_job, "relative_pose", "rig"}};
+    const SlamParams parsed = SlamParamsFromJson(params);
+    std::vector<JobReference> references = {{parsed.rig_job, "relative_pose", "rig"}};
+    if (parsed.map_job) references.push_back({*parsed.map_job, "slam", "map"});
+    return references;
   };
   type.check_inputs = CheckSlamInputs;
   type.run = RunSlamJob;

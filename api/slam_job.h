@@ -19,11 +19,23 @@
 //    "start_s": 0, "end_s": 12.5,   optional, videos only: the time range (container time)
 //    "pair_tolerance_s": 0.005,     optional, videos and recordings: pairing tolerance
 //                                   (default a quarter of the frame period)
-//    "recording": NAME, "topics": {"cam0": T0, "cam1": T1}}   optional: read a recording
+//    "recording": NAME, "topics": {"cam0": T0, "cam1": T1},   optional: read a recording
 //                                   (start_s, end_s after cam0's first stamp)
+//    "map": JOB_ID}                 optional, a succeeded slam job (batch or live) of the same
+//                                   rig: every frame is localised in its saved map's world
+//                                   (relocalisation against its keyframes, then tracking on its
+//                                   landmarks); what it lacks is mapped and joined to it.
+//                                   Refused at submission (422) when the job is not a succeeded
+//                                   slam job, has no saved map or was made with another rig.
 // Artifacts written to the output folder:
 //   trajectory.json  {"world_frame", "frames": [{"name", "state", "reason", "timestamp_s",
-//                     "world_from_rig": {"rotation_wxyz", "translation_m"} | null}], "rig"}
+//                     "linked", "keyframe", "in_map" (localised in the saved map of "map";
+//                     false without one), "world_from_rig": {"rotation_wxyz",
+//                     "translation_m"} | null}], "rig"}
+//   slam_map.bin     the saved map (engine/slam/saved_map.h: "OMNIRIG-MAP\n", a format
+//                    version, the keyframes with their features and the landmarks), which a
+//                    later job's "map" loads; with "map", the map it loaded with what this run
+//                    added
 //   trajectory.tum   "timestamp tx ty tz qx qy qz qw" per frame with a pose (world_from_rig)
 //   map.ply          binary little-endian: float x y z (m), uchar red green blue,
 //                    int num_observations
@@ -32,7 +44,10 @@
 //                    green blue, float confidence; ROS map_server map, occupied 0 free 254
 //                    unknown 205)
 // Result:
-//   {"artifacts": {"trajectory_json", "trajectory_tum", "map_ply", "report_json"},
+//   {"artifacts": {"trajectory_json", "trajectory_tum", "map_ply", "slam_map", "report_json"},
+//    "saved_map": {"artifact": "slam_map.bin", "format_version", "num_keyframes",
+//                  "num_landmarks", "rig_job", "localised_in": JOB_ID | null},
+//    "localised_in_map_fraction": frames in_map / frames, with "map" (else null),
 //    "input": {"kind": "images", "frame_step", "num_frames", "num_image_pairs"} |
 //             {"kind": "recording", ... (see RecordingFramesJson), "timestamp_pass_s",
 //              "timestamp_pass_cpu_s"} |
@@ -62,6 +77,7 @@
 
 #include <filesystem>
 #include <functional>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -109,7 +125,24 @@ struct SlamParams {
   // fields are refused on an image dataset).
   slam::VideoFrameOptions frames;
   bool video_only_fields = false;
+  std::optional<std::string> map_job;  // "map"
 };
+
+// Where a run's saved map comes from and goes: the rig job it is made with (a later run must
+// use the same) and the saved map it localised in, if any.
+struct SavedMapSource {
+  std::string rig_job;
+  std::optional<std::string> map_job;
+};
+
+// The artifact every succeeded slam job writes its saved map to.
+inline constexpr char kSavedMapArtifact[] = "slam_map.bin";
+
+// The saved map of job `map_job` (params "map"), read from its artifact through
+// context.artifact_path. Throws InvalidArgument naming the job when it has none or the file is
+// not a saved map this omnirig reads.
+std::shared_ptr<const slam::SavedMap> LoadSavedMap(const JobContext& context,
+                                                   const std::string& map_job);
 SlamParams SlamParamsFromJson(const nlohmann::json& params);
 
 // The dataset's videos when it holds a recording (see above): nullopt when it holds none.
@@ -122,6 +155,10 @@ std::optional<slam::StereoVideoFiles> FindStereoVideos(const std::filesystem::pa
 // a video dataset's files open, pair (frame counts and rates) and have the rig's frame size,
 // read from their headers; the video-only params are refused on images. Throws InvalidArgument with the reason.
 void CheckSlamInputs(const nlohmann::json& params, const SubmissionInputs& dataset);
+// The part of it a live job checks too: the saved map of params "map" (a succeeded slam job,
+// found by the caller) exists and was made with params "rig". Throws InvalidArgument.
+void CheckSlamMap(const nlohmann::json& params,
+                  const std::function<nlohmann::json(const std::string&)>& load_result);
 
 // Runs SLAM over a dataset of images or videos, writes the artifacts into output_dir and
 // returns the result JSON. A ground truth (TUM file) is read and checked (one pose per frame)
@@ -135,7 +172,7 @@ nlohmann::json RunSlamOnDataset(
     const std::filesystem::path& output_dir, const ProgressSink& progress,
     const std::function<void(const std::string&)>& log,
     const std::optional<dense::DenseMapOptions>& dense_map = std::nullopt,
-    const slam::VideoFrameOptions& frame_options = {});
+    const slam::VideoFrameOptions& frame_options = {}, const SavedMapSource& map_source = {});
 
 // The end of a run, as RunSlamOnDataset ends one: the artifacts (trajectory, map, report and,
 // with `dense_map`, the dense map and occupancy grid fused from the frames `load` reads) into
@@ -147,7 +184,7 @@ nlohmann::json WriteSlamReport(const StereoRig& rig, const slam::SlamResult& res
                                const nlohmann::json& input, const slam::StereoFrameLoader& load,
                                const std::optional<dense::DenseMapOptions>& dense_map,
                                int num_threads, const std::filesystem::path& output_dir,
-                               const ProgressSink& progress);
+                               const ProgressSink& progress, const SavedMapSource& map_source = {});
 
 nlohmann::json RunSlamJob(const nlohmann::json& params, const JobContext& context);
 

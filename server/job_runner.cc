@@ -233,6 +233,16 @@ api::JobContext BuildContext(const storage::JobRecord& job, storage::JobStore& s
     }
     return nlohmann::json::parse(store.GetResult(job_id).value_or("null"));
   };
+  context.artifact_path = [&store, &data_dir](const std::string& job_id, const std::string& name) {
+    const auto other = store.GetJob(job_id);
+    if (other && other->state == JobState::kSucceeded) {
+      for (const storage::ArtifactRecord& artifact : store.ListArtifacts(job_id)) {
+        if (artifact.name == name) return data_dir.root() / artifact.path;
+      }
+    }
+    throw InvalidArgument("job " + job_id + " has no artifact " + name +
+                          " (it does not exist, has not succeeded or did not write one)");
+  };
   return context;
 }
 

@@ -40,41 +40,6 @@ std::string RequireResult(ServiceState& state, const storage::JobRecord& job) {
   return std::move(*result);
 }
 
-// A job that reads an earlier job's result is refused at submission (422, with the reason)
-// unless that job exists, is of the type it reads and has succeeded: queued, it could only fail.
-void CheckReferencedJobs(ServiceState& state, const api::JobType& type,
-                         const nlohmann::json& params) {
-  if (!type.referenced_jobs) return;
-  for (const api::JobReference& reference : type.referenced_jobs(params)) {
-    const std::string& id = reference.id;
-    const auto job = state.store->GetJob(id);
-    if (!job) {
-      throw HttpError(404, "job_not_found", "referenced job " + id + " does not exist",
-                      {{"job", id}, {"field", reference.field}});
-    }
-    const std::string& wanted = reference.type;
-    const std::string there = " job in '" + reference.field + "'";
-    if (!wanted.empty() && job->type != wanted) {
-      throw HttpError(422, "wrong_job_type",
-                      "job " + id + " is a " + job->type + " job, but a " + type.name +
-                          " job needs a succeeded " + wanted + there,
-                      {{"job", id},
-                       {"type", job->type},
-                       {"expected_type", wanted},
-                       {"field", reference.field}});
-    }
-    if (job->state != storage::JobState::kSucceeded) {
-      throw HttpError(422, "dependency_not_ready",
-                      "job " + id + " is " + storage::JobStateName(job->state) + ", but a " +
-                          type.name + " job needs a succeeded " +
-                          (wanted.empty() ? job->type : wanted) + there,
-                      {{"job", id},
-                       {"state", storage::JobStateName(job->state)},
-                       {"field", reference.field}});
-    }
-  }
-}
-
 // The job type's own check of the inputs (e.g. images of another size than the rig's
 // calibration, videos that do not pair), on what the files' headers tell: no decoding here.
 void CheckInputs(ServiceState& state, const api::JobType& type,
@@ -393,6 +358,39 @@ void StreamEvents(ServiceState& state, const HttpRequest& request, HttpResponse&
 }
 
 }  // namespace
+
+// A job that reads an earlier job's result is refused at submission (422, with the reason)
+// unless that job exists, is of the type it reads and has succeeded: queued, it could only fail.
+void CheckReferencedJobs(ServiceState& state, const api::JobType& type,
+                         const nlohmann::json& params) {
+  if (!type.referenced_jobs) return;
+  for (const api::JobReference& reference : type.referenced_jobs(params)) {
+    const std::string& id = reference.id;
+    const auto job = state.store->GetJob(id);
+    if (!job) {
+      throw HttpError(404, "job_not_found", "referenced job " + id + " does not exist",
+                      {{"job", id}, {"field", reference.field}});
+    }
+    const std::string& wanted = reference.type;
+    const std::string there = " job in '" + reference.field + "'";
+    if (!wanted.empty() && job->type != wanted) {
+      throw HttpError(422, "wrong_job_type",
+                      "job " + id + " is a " + job->type + " job, but a " + type.name +
+                          " job needs a succeeded " + wanted + there,
+                      {{"job", id},
+                       {"type", job->type},
+                       {"expected_type", wanted},
+                       {"field", reference.field}});
+    }
+    if (job->state != storage::JobState::kSucceeded) {
+      throw HttpError(
+          422, "dependency_not_ready",
+          "job " + id + " is " + storage::JobStateName(job->state) + ", but a " + type.name +
+              " job needs a succeeded " + (wanted.empty() ? job->type : wanted) + there,
+          {{"job", id}, {"state", storage::JobStateName(job->state)}, {"field", reference.field}});
+    }
+  }
+}
 
 void AddJobRoutes(HttpServer& http, ServiceState& state) {
   http.Route("POST", "/api/v1/jobs", WithState(state, CreateJob));

@@ -11,6 +11,7 @@
 #include "api/camera_json.h"
 #include "api/live_slam.h"
 #include "api/service_json.h"
+#include "api/slam_job.h"
 #include "engine/slam/video_source.h"
 #include "engine/util/check.h"
 #include "server/json_views.h"
@@ -373,6 +374,19 @@ bool CreateLiveJob(ServiceState& state, const HttpRequest& request, HttpResponse
     throw HttpError(400, "invalid_params", e.what());
   }
   const StereoRig rig = RequireRig(state, parsed.params.at("rig").get<std::string>());
+  // A saved map to localise in ("map"), refused as a batch job refuses it.
+  if (const api::JobType* type = state.job_types.Find("slam")) {
+    CheckReferencedJobs(state, *type, parsed.params);
+  }
+  try {
+    api::CheckSlamMap(parsed.params, [&state](const std::string& id) {
+      const auto result = state.store->GetResult(id);
+      if (!result) throw InvalidArgument("job " + id + " has no result");
+      return nlohmann::json::parse(*result);
+    });
+  } catch (const InvalidArgument& e) {
+    throw HttpError(422, "invalid_input", e.what(), {{"field", "map"}});
+  }
   std::string dataset_id = parsed.dataset;
   if (dataset_id.empty()) {
     // The robot's recording: a dataset of its own, named by the start time.

@@ -116,4 +116,9 @@ void AddDatasetRoutes(HttpServer& http, ServiceState& state);
 void AddJobRoutes(HttpServer& http, ServiceState& state);
 void AddLiveRoutes(HttpServer& http, ServiceState& state);  // routes_live.cc
 
+// The jobs `params` reference (JobType::referenced_jobs) exist (else 404), are of the type named
+// and have succeeded (else 422). routes_jobs.cc; live jobs check theirs too.
+void CheckReferencedJobs(ServiceState& state, const api::JobType& type,
+                         const nlohmann::json& params);
+
 }  // namespace omnirig::server

@@ -86,11 +86,13 @@ bool Tracker::DetectLoop(Frame* frame, const BowVector& bow) {
   // distance rule after verification.
   auto accept = [&](int keyframe) {
     const StoredKeyframe& stored = keyframes_.at(keyframe);
-    if (!stored.linked || stored.order + options_.loop_min_keyframe_gap >= current.order) {
-      return false;
-    }
-    const double reach = options_.loop_max_distance_m +
-                         options_.loop_max_drift_fraction * (current.path_m - stored.path_m);
+    if (!stored.linked) return false;
+    // A saved map's keyframe is of an earlier passage; the drift is this run's since its start.
+    const bool saved = IsSaved(keyframe);
+    if (!saved && stored.order + options_.loop_min_keyframe_gap >= current.order) return false;
+    const double reach =
+        options_.loop_max_distance_m +
+        options_.loop_max_drift_fraction * (current.path_m - (saved ? 0.0 : stored.path_m));
     return (map_.rig_from_world[keyframe].Inverse().translation - position).norm() <= reach;
   };
   for (const KeyframeDatabase::Candidate& candidate : database_.Query(
@@ -136,7 +138,12 @@ void Tracker::CorrectLoop(const Frame& frame, const PlaceMatch& match) {
   OMNIRIG_CHECK(poses.count(frame.index) && poses.count(match.keyframe),
                 "loop between keyframes outside the map");
   const std::map<int, Rigid3d> before = poses;
-  OptimisePoseGraph(edges, {poses.begin()->first}, options_.num_threads, &poses);
+  // The gauge: the first keyframe, or the saved map's keyframes, which stay as saved.
+  std::set<int> fixed = {poses.begin()->first};
+  for (int f = 0; f < first_frame_; ++f) {
+    if (poses.count(f)) fixed.insert(f);
+  }
+  OptimisePoseGraph(edges, fixed, options_.num_threads, &poses);
   for (const auto& [keyframe, pose] : poses) map_.rig_from_world[keyframe] = pose;
   // Each landmark moves with the keyframe that first observed it.
   for (Landmark& landmark : map_.landmarks) {
@@ -193,13 +200,9 @@ void Tracker::SetLandmark(int frame_index, int camera, int feature, int landmark
 }
 
 void Tracker::AdjustLinkedKeyframes() {
-  std::vector<int> linked;
-  for (int keyframe : keyframe_order_) {
-    if (keyframes_.at(keyframe).linked) linked.push_back(keyframe);
-  }
   BundleAdjustmentOptions global = options_.bundle_adjustment;
   global.num_threads = options_.num_threads;
-  BundleAdjust(rig_, linked, global, &map_, cancellation_);
+  BundleAdjust(rig_, FreeKeyframes(/*linked_only=*/true), global, &map_, cancellation_);
   PlaceNonKeyframes();
 }
 

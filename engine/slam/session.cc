@@ -46,8 +46,9 @@ FrameReport Session::Track(const std::string& name, const StereoImages& images, 
   result_.stage_totals.Add(report.times);
   result_.cpu_stage_totals.Add(report.cpu_times);
   result_.frames.push_back(report);
-  if (tracker_->map().has_pose[index]) {
-    report.world_from_rig = tracker_->map().rig_from_world[index].Inverse();
+  const int map_index = tracker_->first_frame() + index;
+  if (tracker_->map().has_pose[map_index]) {
+    report.world_from_rig = tracker_->map().rig_from_world[map_index].Inverse();
   }
   return report;
 }

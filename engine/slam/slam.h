@@ -38,6 +38,7 @@
 // tracked frame.
 
 #include <functional>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -52,6 +53,7 @@
 #include "engine/geometry/camera_model.h"
 #include "engine/slam/bundle_adjustment.h"
 #include "engine/slam/map_io.h"
+#include "engine/slam/saved_map.h"
 #include "engine/util/progress.h"
 
 namespace omnirig::slam {
@@ -145,6 +147,13 @@ struct SlamOptions {
   // position only rests on the 100 mm stereo baseline, one seen from several on the motion's.
   int min_map_point_frames = 2;
   int num_threads = 1;
+  // A map saved by an earlier run (saved_map.h) to localise in: its keyframes are loaded before
+  // the first frame, so that every frame is placed in its world (relocalisation against its
+  // keyframes, then tracking on its landmarks), and what this run maps where it has nothing
+  // joins it. Its keyframes and their poses stay as saved (the adjustments hold them constant:
+  // the saved map's world is the world of this run); its landmarks seen again are refined.
+  // Null: a new map, whose world is the first frame's.
+  std::shared_ptr<const SavedMap> saved_map;
 
   static EssentialRansacOptions DefaultEssentialOptions();
   void Check() const;
@@ -188,6 +197,9 @@ struct FrameReport {
   // continue a motion prediction.
   bool linked = false;
   bool keyframe = false;  // entered the map
+  // With a saved map: the frame is localised in it, i.e. linked to its world and confirming at
+  // least min_tracked_landmarks of its landmarks (false without a saved map).
+  bool in_map = false;
   // The frame's reference keyframe (frame index, -1: none): on a revisit tracked on the map, the
   // earlier passage's keyframe near it; elsewhere the keyframe sharing the most landmarks with
   // it. A non-keyframe's pose follows it.
@@ -207,7 +219,8 @@ struct FrameReport {
   std::optional<Rigid3d> world_from_rig;  // final (after the global adjustment)
 };
 
-// A verified loop: keyframe `frame_index` recognised keyframe `matched_frame_index`.
+// A verified loop: keyframe `frame_index` recognised keyframe `matched_frame_index` (-1 for a
+// keyframe of the saved map, whose name `matched_frame` then is).
 struct LoopReport {
   std::string frame;
   int frame_index = -1;
@@ -239,6 +252,10 @@ struct SlamResult {
   double total_cpu_s = 0.0;      // process CPU time, all threads
   int num_tracked = 0;  // frames with a pose
   int num_lost = 0;
+  // The map to save for later runs: its keyframes in the world of the first frame or, with a
+  // saved map, in that map's world, the saved map's keyframes first.
+  SavedMap saved_map;
+  int num_frames_in_map = 0;  // frames with in_map (with a saved map)
 };
 
 // Runs SLAM over `frame_names.size()` frames. Throws InvalidArgument on invalid options or an

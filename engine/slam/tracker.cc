@@ -409,10 +409,11 @@ void Tracker::LocalBundleAdjustment(int keyframe, FrameReport* report) {
   // The keyframe and those sharing the most landmarks with it: on a first visit the last few
   // keyframes, on a revisit the mapped ones around it, however long ago they were made.
   std::vector<int> window = {keyframe};
+  // The saved map's keyframes stay as saved (their observations hold the window's landmarks).
   for (const auto& [other, shared] :
        CovisibleKeyframes(keyframes_.at(keyframe).frame.landmark_of[0])) {
     if (static_cast<int>(window.size()) >= options_.local_window_frames) break;
-    if (other != keyframe) window.push_back(other);
+    if (other != keyframe && !IsSaved(other)) window.push_back(other);
   }
   // The window's landmarks, from the keyframes' own lists: no scan of the whole map.
   std::vector<int> landmarks;
@@ -468,8 +469,8 @@ Tracker::FrontEndResult Tracker::FrontEnd(int index, const std::string& name,
                                           const StereoFrameLoader& load, bool parallel_cameras) {
   FrontEndResult front;
   front.report.name = name;
-  front.frame.index = index;
   const StageClock load_timer;
+  front.frame.index = first_frame_ + index;
   const StereoImages images = load(index);
   load_timer.ChargeTo(&StageTimes::load_s, &front.report);
   front.usable = DetectAndMatchStereo(images, parallel_cameras, &front.frame, &front.report);
@@ -526,7 +527,10 @@ FrameReport Tracker::BackEnd(FrontEndResult front, bool last_frame) {
         map_.rig_from_world[index] * map_.rig_from_world[keyframe].Inverse();
   }
   report.keyframe = frame.keyframe;
-  report.reference_keyframe = frame.keyframe_decision.reference_keyframe;
+  report.in_map = report.linked && InSavedMap(frame);
+  const int reference_keyframe = frame.keyframe_decision.reference_keyframe;
+  report.reference_keyframe =
+      reference_keyframe >= first_frame_ ? reference_keyframe - first_frame_ : -1;
   linked_[index] = report.linked;
   last_linked_ = report.linked;
   last_ = std::move(frame);
@@ -559,7 +563,8 @@ void Tracker::AddKeyframe(Frame* frame, FrameReport* report) {
   StoredKeyframe& stored = keyframes_[index];
   stored.order = static_cast<int>(keyframe_order_.size());
   stored.linked = report->linked;
-  if (!keyframe_order_.empty()) {
+  // The path of this run (a saved map's keyframes keep the path of theirs).
+  if (!keyframe_order_.empty() && !IsSaved(keyframe_order_.back())) {
     const int previous = keyframe_order_.back();
     stored.path_m = keyframes_.at(previous).path_m +
                     (map_.rig_from_world[index].Inverse().translation -
@@ -666,14 +671,15 @@ void GlobalBundleAdjustment(const StereoRig& rig, const SlamOptions& options,
 }  // namespace
 
 std::vector<std::optional<Rigid3d>> Tracker::CurrentWorldFromRig() const {
-  std::vector<std::optional<Rigid3d>> poses(map_.has_pose.size());
-  for (size_t f = 0; f < poses.size(); ++f) {
+  std::vector<std::optional<Rigid3d>> poses(map_.has_pose.size() - first_frame_);
+  for (size_t i = 0; i < poses.size(); ++i) {
+    const size_t f = first_frame_ + i;
     if (!map_.has_pose[f]) continue;
     const int keyframe = keyframe_of_frame_[f];
     const Rigid3d rig_from_world = keyframe < 0
                                        ? map_.rig_from_world[f]
                                        : rig_from_keyframe_[f] * map_.rig_from_world[keyframe];
-    poses[f] = rig_from_world.Inverse();
+    poses[i] = rig_from_world.Inverse();
   }
   return poses;
 }
@@ -683,25 +689,37 @@ std::vector<MapPoint> Tracker::CurrentMap() const {
 }
 
 void Tracker::Finish(const ProgressSink& progress, SlamResult* result) {
-  GlobalBundleAdjustment(rig_, options_, keyframe_order_, progress, &map_, result);
+  GlobalBundleAdjustment(rig_, options_, FreeKeyframes(/*linked_only=*/false), progress, &map_,
+                         result);
   PlaceNonKeyframes();
   result->num_keyframes = static_cast<int>(keyframe_order_.size());
   for (size_t i = 0; i < result->frames.size(); ++i) {
     FrameReport& frame = result->frames[i];
-    frame.linked = linked_[i] != 0;
-    if (!map_.has_pose[i]) {
+    const int f = first_frame_ + static_cast<int>(i);
+    frame.linked = linked_[f] != 0;
+    frame.in_map = frame.in_map && frame.linked;
+    result->num_frames_in_map += frame.in_map ? 1 : 0;
+    if (!map_.has_pose[f]) {
       ++result->num_lost;
       continue;
     }
     ++result->num_tracked;
-    frame.world_from_rig = map_.rig_from_world[i].Inverse();
+    frame.world_from_rig = map_.rig_from_world[f].Inverse();
   }
   result->loops = loops_;
   for (LoopReport& loop : result->loops) {
+    loop.frame_index -= first_frame_;
     loop.frame = result->frames[loop.frame_index].name;
-    loop.matched_frame = result->frames[loop.matched_frame_index].name;
+    if (IsSaved(loop.matched_frame_index)) {
+      loop.matched_frame = saved_names_[loop.matched_frame_index];
+      loop.matched_frame_index = -1;
+    } else {
+      loop.matched_frame_index -= first_frame_;
+      loop.matched_frame = result->frames[loop.matched_frame_index].name;
+    }
   }
   result->map = ExportMap(map_, options_.min_map_point_frames);
+  result->saved_map = ExportSavedMap(result->frames);
 }
 
 }  // namespace omnirig::slam::internal

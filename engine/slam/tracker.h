@@ -127,7 +127,9 @@ class Tracker {
       : rig_(rig),
         options_(options),
         cancellation_{nullptr, progress.is_cancelled},
-        vocabulary_(DefaultVocabulary()) {}
+        vocabulary_(DefaultVocabulary()) {
+    if (options.saved_map) LoadMap(*options.saved_map);
+  }
 
   // The per-frame half that needs no map: load, mask, features, stereo points. Runs one frame
   // ahead of BackEnd() on a worker thread; never two FrontEnd() calls at once.
@@ -151,6 +153,8 @@ class Tracker {
   std::vector<MapPoint> CurrentMap() const;
   int num_keyframes() const { return static_cast<int>(keyframe_order_.size()); }
   SlamMap& map() { return map_; }
+  // The map's frame index of the run's first frame: the saved map's keyframes come first.
+  int first_frame() const { return first_frame_; }
 
  private:
   // Checks the image sizes (throws), finds the mirror masks on the first usable images, and
@@ -189,7 +193,11 @@ class Tracker {
                       const FrameReport& report) const;
   // Keyframes made after keyframe `keyframe`: more than options_.loop_min_keyframe_gap make it
   // one of an earlier passage through its place.
+  // A keyframe of the saved map is always of an earlier passage.
   int KeyframesSince(int keyframe) const {
+    if (IsSaved(keyframe)) {
+      return static_cast<int>(keyframe_order_.size()) + options_.loop_min_keyframe_gap;
+    }
     return static_cast<int>(keyframe_order_.size()) - 1 - keyframes_.at(keyframe).order;
   }
   // Keyframes that observe the landmarks `landmark_of` holds, by the number observed, most first.
@@ -235,6 +243,16 @@ class Tracker {
   void AdjustLinkedKeyframes();
   // Non-keyframes follow their keyframes' poses.
   void PlaceNonKeyframes();
+  // The saved map's keyframes (frames 0 .. first_frame_ - 1) and landmarks into the map, its
+  // keyframes into the place recognition's database.
+  void LoadMap(const SavedMap& saved);
+  // The linked keyframes and the landmarks they see, for a later run (SlamResult::saved_map).
+  SavedMap ExportSavedMap(const std::vector<FrameReport>& frames) const;
+  bool IsSaved(int frame_index) const { return frame_index < first_frame_; }
+  // The keyframes the adjustments may move: all but the saved map's.
+  std::vector<int> FreeKeyframes(bool linked_only) const;
+  // Whether the frame confirms enough of the saved map's landmarks to be localised in it.
+  bool InSavedMap(const Frame& frame) const;
 
   const StereoRig& rig_;
   const SlamOptions& options_;
@@ -262,6 +280,11 @@ class Tracker {
   std::optional<Segment> segment_;
   std::vector<LoopReport> loops_;
   std::vector<PoseGraphEdge> loop_edges_;
+  // With a saved map: its keyframes are frames 0 .. first_frame_ - 1 (their names in
+  // saved_names_), its landmarks 0 .. num_saved_landmarks_ - 1.
+  int first_frame_ = 0;
+  int num_saved_landmarks_ = 0;
+  std::vector<std::string> saved_names_;
 };
 
 }  // namespace omnirig::slam::internal
