@@ -159,6 +159,11 @@ void DecodeRaw(FieldReader& reader, ImageMessage& message) {
                           std::to_string(width) + "-pixel " + message.encoding + " row (" +
                           std::to_string(row_bytes) + " bytes)");
   }
+  if (step % layout->bytes_per_channel != 0) {
+    throw InvalidArgument("sensor_msgs/Image step " + std::to_string(step) +
+                          " is not a whole number of " + message.encoding + " samples (" +
+                          std::to_string(layout->bytes_per_channel) + " bytes each)");
+  }
   if (data.size() < uint64_t{step} * height) {
     throw InvalidArgument("sensor_msgs/Image data holds " + std::to_string(data.size()) +
                           " bytes, less than step * height = " +
