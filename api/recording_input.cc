@@ -175,4 +175,20 @@ json RecordingTopicsJson(const RecordingInput& input) {
   return topics;
 }
 
+StereoPairsInput ReadStereoPairs(const nlohmann::json& params, const JobContext& context) {
+  StereoPairsInput out{FolderImageReader(context.dataset_dir), {}, nullptr};
+  const auto recording = RecordingInputFromJson(params, 2);
+  if (!recording) {
+    out.pairs = MatchImagePairs(context.image_names);
+    return out;
+  }
+  const RecordingFramesRead frames = ReadRecordingFrames(*recording, context.open_recording,
+                                                         SubRange(context.progress, 0.0, 0.0));
+  RecordingImages images = CollectRecordingImages(frames, context.progress);
+  out.read = std::move(images.read);
+  out.pairs = std::move(images.pairs);
+  out.input = RecordingFramesJson(*recording, frames.frames);
+  return out;
+}
+
 }  // namespace omnirig::api

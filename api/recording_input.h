@@ -66,6 +66,16 @@ struct RecordingImages {
 RecordingImages CollectRecordingImages(const RecordingFramesRead& frames,
                                        const ProgressSink& progress);
 
+// The stereo pairs a job reads: a recording's two topics when `params` name one ("recording",
+// "topics"), the dataset's cam0/NAME, cam1/NAME images otherwise; `input` is the result's
+// "input" (RecordingFramesJson) for a recording and null for images.
+struct StereoPairsInput {
+  ImageReader read;
+  std::vector<ImagePairNames> pairs;
+  nlohmann::json input;
+};
+StereoPairsInput ReadStereoPairs(const nlohmann::json& params, const JobContext& context);
+
 // The result's "input" of a job on a recording: {"kind": "recording", "recording", "topics",
 // "num_messages" (per topic), "num_unpaired" (per topic), "pair_tolerance_s" (two topics),
 // "frame_step", "start_s", "end_s" (null: to the end), "num_frames", "first_stamp_s"}.

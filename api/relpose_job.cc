@@ -234,19 +234,7 @@ json RunRelativePoseJob(const json& params, const JobContext& context) {
   if (!parsed.kalibr_target_file.empty()) {
     parsed.board = ReadKalibrTargetFile(context.dataset_dir, parsed.kalibr_target_file);
   }
-  const auto recording = RecordingInputFromJson(params, 2);
-  ImageReader read = FolderImageReader(context.dataset_dir);
-  std::vector<ImagePairNames> pairs;
-  std::optional<RecordingFramesRead> frames;
-  if (recording) {
-    frames = ReadRecordingFrames(*recording, context.open_recording,
-                                 SubRange(context.progress, 0.0, 0.0));
-    RecordingImages images = CollectRecordingImages(*frames, context.progress);
-    read = std::move(images.read);
-    pairs = std::move(images.pairs);
-  } else {
-    pairs = MatchImagePairs(context.image_names);
-  }
+  const StereoPairsInput input = ReadStereoPairs(params, context);
   std::array<std::optional<GivenCamera>, 2> given;
   std::array<json, 2> camera_json, provenance;
   std::optional<Rigid3d> kalibr_cam0_from_cam1;
@@ -272,7 +260,7 @@ json RunRelativePoseJob(const json& params, const JobContext& context) {
   RigFromImagesOptions options = parsed.options;
   options.relpose.num_threads = std::max(1, context.num_threads);
   const RigFromImagesReport report = EstimateRigFromImages(
-      read, pairs, parsed.board, given, options, context.progress, context.log);
+      input.read, input.pairs, parsed.board, given, options, context.progress, context.log);
   for (int c = 0; c < 2; ++c) {
     const std::optional<CalibrationReport>& calibration = report.cameras[c].calibration;
     if (!calibration) continue;
@@ -294,7 +282,7 @@ json RunRelativePoseJob(const json& params, const JobContext& context) {
   result["intrinsics_model"] =
       report.selection ? ModelSelectionToJson(*report.selection)
                        : json{{"chosen", report.intrinsics_model}, {"selection", "given"}};
-  if (recording) result["input"] = RecordingFramesJson(*recording, frames->frames);
+  if (!input.input.is_null()) result["input"] = input.input;
   return result;
 }
 

@@ -259,19 +259,7 @@ json DensePairJson(const std::string& name, const dense::DensePairResult& r) {
 json RunStereoReconstructJob(const json& params, const JobContext& context) {
   const StereoReconstructParams parsed = StereoReconstructParamsFromJson(params);
   const StereoRig rig = LoadRig(context.load_result, parsed.rig_job);
-  const auto recording = RecordingInputFromJson(params, 2);
-  ImageReader read = FolderImageReader(context.dataset_dir);
-  std::vector<ImagePairNames> pairs;
-  std::optional<RecordingFramesRead> frames;
-  if (recording) {
-    frames = ReadRecordingFrames(*recording, context.open_recording,
-                                 SubRange(context.progress, 0.0, 0.0));
-    RecordingImages images = CollectRecordingImages(*frames, context.progress);
-    read = std::move(images.read);
-    pairs = std::move(images.pairs);
-  } else {
-    pairs = MatchImagePairs(context.image_names);
-  }
+  const StereoPairsInput input = ReadStereoPairs(params, context);
 
   json result = {{"rig", parsed.rig_job},
                  {"method", parsed.method},
@@ -306,9 +294,9 @@ json RunStereoReconstructJob(const json& params, const JobContext& context) {
     if (outcome.placed) pair["placed"] = *outcome.placed;
     result["pairs"].push_back(pair);
   };
-  if (recording) result["input"] = RecordingFramesJson(*recording, frames->frames);
+  if (!input.input.is_null()) result["input"] = input.input;
   const dense::StereoPairsReport report = dense::ReconstructStereoPairs(
-      rig, read, pairs, PlacePairs(parsed, pairs, context), options,
+      rig, input.read, input.pairs, PlacePairs(parsed, input.pairs, context), options,
       context.output_dir, on_pair, context.progress);
   result["num_points"] = report.num_points;
   if (report.trajectory) {
@@ -327,7 +315,7 @@ json RunStereoReconstructJob(const json& params, const JobContext& context) {
                       {"num_disparities", report.grid->num_disparities}};
   }
   if (num_bad_pairs > 0) {
-    result["warning"] = std::to_string(num_bad_pairs) + " of " + std::to_string(pairs.size()) +
+    result["warning"] = std::to_string(num_bad_pairs) + " of " + std::to_string(input.pairs.size()) +
                         " pairs gave few confident pixels (see each pair's warning)";
   }
   return result;
