@@ -357,6 +357,50 @@ TEST_F(RecordingJobsTest, SlamOnABagFollowsTheSameTrajectoryAsOnItsPngFolder) {
   EXPECT_EQ(stepped["frames"][3]["name"], "t1700000000.800");
 }
 
+// The same sequence as ROS 2 records it: a single MCAP file (@mcap/core) and a ROS 2 bag folder
+// with rosbag2's SQLite storage, both from the CDR messages @foxglove/cdr writes. Slam on each
+// follows the trajectory slam follows on the PNG folder (the same pixels: cam0 raw, cam1 PNG).
+TEST_F(RecordingJobsTest, SlamOnRos2RecordingsFollowsTheSameTrajectoryAsOnItsPngFolder) {
+  const synth::StereoSequence sequence = UploadSequenceAsFolderAndBag(8);
+  const fs::path frames = dir_.path() / "frames_run.bag";
+  const fs::path cdr = dir_.path() / "cdr";
+  const fs::path ros2 = dir_.path() / "bag2";
+  const std::string recordings = std::string(std::getenv("OMNIRIG_SOURCE_DIR")) + "/testing/recordings/";
+  const std::string write_mcap = "node " + recordings + "write_stereo_ros2.mjs '" + frames.string() +
+                                 "' '" + (dir_.path() / "run.mcap").string() + "' '" + cdr.string() + "' >&2";
+  ASSERT_EQ(std::system(write_mcap.c_str()), 0) << write_mcap;
+  const std::string write_db3 = "/usr/bin/python3 " + recordings + "write_stereo_db3.py '" +
+                                cdr.string() + "' '" + ros2.string() + "' >&2";
+  ASSERT_EQ(std::system(write_db3.c_str()), 0) << write_db3;
+  ASSERT_EQ(UploadInChunks("run.mcap", ReadFile(dir_.path() / "run.mcap"))->status, 201);
+  ASSERT_EQ(PutWhole("bag2/metadata.yaml", ReadFile(ros2 / "metadata.yaml"))->status, 201);
+  ASSERT_EQ(UploadInChunks("bag2/bag2_0.db3", ReadFile(ros2 / "bag2_0.db3"))->status, 201);
+
+  const std::string rig = SubmitFakeRelativePose(service_->state().job_types, *client_, port_,
+                                                 dataset_, api::RigToJson(sequence.rig));
+  const json on_folder = RunJob("slam", {{"rig", rig}});
+  const json topics = {{"cam0", "/cam0/image_raw"}, {"cam1", "/cam1/image_raw/compressed"}};
+  ASSERT_EQ(on_folder["num_frames"], 8) << on_folder.dump();
+  for (const std::string recording : {"run.mcap", "bag2"}) {
+    const json on_recording =
+        RunJob("slam", {{"rig", rig}, {"recording", recording}, {"topics", topics}});
+    ASSERT_EQ(on_recording["num_frames"], 8) << recording << ": " << on_recording.dump();
+    EXPECT_EQ(on_recording["num_tracked"], on_folder["num_tracked"]) << recording;
+    EXPECT_EQ(on_recording["input"]["num_unpaired"], json({0, 0})) << recording;
+    EXPECT_EQ(on_recording["frames"][3]["name"], "t1700000000.300") << recording;
+    for (int i = 0; i < 8; ++i) {
+      const json& a = on_folder["frames"][i]["world_from_rig"];
+      const json& b = on_recording["frames"][i]["world_from_rig"];
+      ASSERT_FALSE(a.is_null()) << i;
+      ASSERT_FALSE(b.is_null()) << recording << " frame " << i;
+      for (int k = 0; k < 3; ++k) {
+        EXPECT_NEAR(a["translation_m"][k].get<double>(), b["translation_m"][k].get<double>(), 1e-9)
+            << recording << " frame " << i;
+      }
+    }
+  }
+}
+
 // A board waved before the rig, recorded: a calibration from cam0's topic and a rig from both
 // topics agree with the same jobs on the PNG folder (the bag holds the same pixels: cam0 raw
 // mono8, cam1 PNG), and their Kalibr exports name the topics.
