@@ -329,6 +329,26 @@ TEST_F(LiveFaultsTest, OmnirigLivePlaysARecordingAndPrintsItsFigures) {
   const slam::TrajectoryErrors errors = slam::EvaluateTrajectory(estimate, matched);
   EXPECT_NEAR(ate_m, errors.ate_rmse_m, 1e-4);
   EXPECT_LT(ate_m, 0.03);  // a rendered sequence with an exact rig: 3 cm, as tracking each frame
+
+  // Played again with --map: localised in the first run's saved map, and says how much of it.
+  const fs::path again = dir_.path() / "again.out", again_figures = dir_.path() / "again.json";
+  const std::string with_map = (fs::path(binary_dir) / "server" / "omnirig").string() +
+                               " live --server http://127.0.0.1:" + std::to_string(port_) +
+                               " --rig " + rig + " --map " + id + " --json " +
+                               again_figures.string() + " " + Dir().string() + " > " +
+                               again.string() + " 2> " + (dir_.path() / "again.err").string();
+  const int again_status = std::system(with_map.c_str());
+  const std::string again_text = ReadFile(again);
+  ASSERT_TRUE(WIFEXITED(again_status) && WEXITSTATUS(again_status) == 0)
+      << again_text << ReadFile(dir_.path() / "again.err");
+  const json again_summary = json::parse(ReadFile(again_figures));
+  const json again_result = JsonOf(client_->Get(
+      ("/api/v1/jobs/" + again_summary["job"].get<std::string>() + "/result").c_str()));
+  EXPECT_EQ(again_result["saved_map"]["localised_in"], id);
+  const double fraction = again_result["localised_in_map_fraction"].get<double>();
+  EXPECT_NEAR(Figure(again_text, "in map ([0-9.]+) % of the frames tracked"), 100 * fraction, 0.051)
+      << again_text;
+  EXPECT_GE(fraction, 0.95) << again_text;  // the same places, the same light
 }
 
 }  // namespace

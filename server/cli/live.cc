@@ -208,6 +208,8 @@ void DeclareOptions(ArgParser* parser) {
                         "their capture time, or cam0 and cam1 videos, or a stacked "
                         "video (cam0 on top)");
   parser->AddOption("rig", "", "the rig: a succeeded relative_pose job on the server (required)");
+  parser->AddOption("map", "",
+                    "localise in this succeeded slam job's saved map (its world, its landmarks)");
   parser->AddOption("rate", "0",
                     "frames per second to send (0: the recording's own capture times)");
   parser->AddOption("server", "http://127.0.0.1:8080", "server URL");
@@ -244,6 +246,7 @@ int RunLive(const Args& args) {
   OMNIRIG_CHECK(params.is_object(), "--params must be a JSON object");
   params["rig"] = rig;
   params["live"] = true;
+  if (parser.Has("map")) params["map"] = parser.Get("map");
   const json job = Expect(
       client->Post(
           "/api/v1/jobs",
@@ -362,6 +365,9 @@ int RunLive(const Args& args) {
     summary["loops"] = result["loops"].size();
     summary["num_keyframes"] = result["num_keyframes"];
     summary["finish_s"] = result["timings_s"]["global_ba"];
+    if (result.contains("localised_in_map_fraction")) {
+      summary["localised_in_map_fraction"] = result["localised_in_map_fraction"];
+    }
     if (ground_truth) {
       const json trajectory =
           Expect(client->Get(("/api/v1/jobs/" + id + "/artifacts/trajectory.json").c_str()), {200},
@@ -380,6 +386,11 @@ int RunLive(const Args& args) {
             << summary["latency_ms"]["p99"].get<double>() << "; round trip p95 "
             << summary["round_trip_ms"]["p95"].get<double>() << "\n";
   if (summary.contains("loops")) std::cout << "loops " << summary["loops"].get<int>() << "\n";
+  if (summary.contains("localised_in_map_fraction") &&
+      summary["localised_in_map_fraction"].is_number()) {
+    std::cout << "in map " << 100 * summary["localised_in_map_fraction"].get<double>()
+              << " % of the frames tracked (the saved map of job " << parser.Get("map") << ")\n";
+  }
   if (summary.contains("evaluation") && summary["evaluation"].is_object()) {
     std::cout << std::setprecision(4) << "ATE " << summary["evaluation"]["ate_rmse_m"].get<double>()
               << " m (" << summary["evaluation"]["ate_percent_of_path"].get<double>()
