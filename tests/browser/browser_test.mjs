@@ -21,7 +21,9 @@
 //               ground truth and its legend, per-frame statistics, the headline with units, the
 //               errors plotted against the distance travelled, RPE per segment (needs omnirig
 //               synth); then
-//               loops and states injected into the job's result, drawn in the top view
+//               loops and states injected into the job's result, drawn in the top view; and a
+//               live slam job's page while frames are posted: its figures, the trajectory and the
+//               map growing, finished from the page
 //   first_hour  a new user's first hour on a fresh data folder: the first-run panel, the sample
 //               data, a calibration, a rig, a SLAM run and its viewer, and the bad inputs a new
 //               user meets (a wrong rig, a non-image, a skipped file, each type's example
@@ -1153,8 +1155,64 @@ async function stepViewerSlam(page, server) {
   await screenshot(page, 'viewer-slam');
   const errors = refused ? `no error plots (${refused})` : await checkSlamErrors(page, server, jobId);
   const loops = await checkLoopsDrawn(page, jobId, sequence.groundTruth.frames.map((f) => f.name));
-  return `slam job ${jobId}: ${hud}; ${drawn.n} pixels drawn; top view ${topInk.blue} estimate / ${topInk.orange} ground-truth pixels; ${rows} frame rows; ${errors}; ${loops}` +
+  const live = await checkLivePage(page, server, rigJob, sequence.dir);
+  return `slam job ${jobId}: ${hud}; ${drawn.n} pixels drawn; top view ${topInk.blue} estimate / ${topInk.orange} ground-truth pixels; ${rows} frame rows; ${errors}; ${loops}; ${live}` +
     (refused ? `; ground truth not uploaded (${refused})` : '');
+}
+
+// A live slam job's page while a robot sends its frames (here the sequence's, posted as the
+// robot would): the figures count the frames as they are tracked, the top view draws the
+// trajectory growing and the map so far is shown; "Finish the run" ends it and the page shows
+// the finished report.
+async function checkLivePage(page, server, rigJob, sequenceDir) {
+  const created = await fetch(`${server.url}/api/v1/jobs`, { method: 'POST', headers: { 'Content-Type': 'application/json' },
+    body: JSON.stringify({ type: 'slam', dataset: '', params: { rig: rigJob, live: true } }) });
+  check(created.status === 202, `a live slam job starts (${created.status})`);
+  const { id } = await created.json();
+  await page.goto(`${server.url}/#/jobs/${encodeURIComponent(id)}`);
+  await page.waitForSelector('#live-card');
+  const names = fs.readdirSync(path.join(sequenceDir, 'cam0')).filter((n) => /\.png$/i.test(n)).sort().slice(0, 8);
+  const shown = (key) => page.$eval(`#live-figures [data-key=${key}] dd`, (n) => n.textContent.trim()).catch(() => '');
+  let tracked = 0;
+  for (const [i, name] of names.entries()) {
+    const form = new FormData();
+    for (const cam of ['cam0', 'cam1']) {
+      form.append(cam, new Blob([fs.readFileSync(path.join(sequenceDir, cam, name))], { type: 'image/png' }), name);
+    }
+    form.append('stamp', String(10 + 0.1 * i));
+    const answer = await fetch(`${server.url}/api/v1/jobs/${id}/frames`, { method: 'POST', body: form });
+    check(answer.status === 200, `frame ${i} is answered (${answer.status})`);
+    const body = await answer.json();
+    if (body.world_from_rig) tracked += 1;
+    // The page counts the frame once its event arrives.
+    await page.waitForFunction((n) => document.querySelector('#live-figures [data-key=frames-tracked] dd')?.textContent.trim() === String(n),
+      tracked, { timeout: 30000 });
+  }
+  check(tracked >= 6, `the live job tracked the sequence's frames (${tracked} of ${names.length})`);
+  const received = await shown('frames-received');
+  check(received === String(names.length), `frames received ${received} of ${names.length}`);
+  const rate = await shown('frame-rate');
+  check(/^[0-9.]+ frames\/s$/.test(rate), `the frame rate with its unit (${rate})`);
+  const latency = await shown('latency');
+  check(/^p50 [0-9.]+ ms, p95 [0-9.]+ ms$/.test(latency), `the latency percentiles with their unit (${latency})`);
+  const skipped = await shown('frames-skipped');
+  check(/^0 /.test(skipped), `no frame skipped (${skipped})`);
+  await page.waitForFunction((n) => Number(document.querySelector('#live-top-view')?.dataset.poses || 0) >= n, tracked, { timeout: 30000 });
+  const blue = await page.$eval('#live-top-view', (c) => {
+    const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+    let n = 0;
+    for (let i = 0; i < d.length; i += 4) if (d[i + 2] > 180 && d[i] < 80) n += 1;
+    return n;
+  });
+  check(blue > 20, `the live top view draws the trajectory (${blue} blue pixels)`);
+  await page.waitForFunction(() => Number(document.querySelector('#live-map-note')?.dataset.points || 0) > 0, null, { timeout: 30000 });
+  const points = await page.$eval('#live-map-note', (n) => Number(n.dataset.points));
+  await screenshot(page, 'live-slam-running');
+  await page.click('#live-finish');
+  await page.waitForSelector('#slam-headline', { timeout: JOB_TIMEOUT_MS });
+  const done = await (await fetch(`${server.url}/api/v1/jobs/${id}`)).json();
+  check(done.state === 'succeeded', `the live job finished (${done.state})`);
+  return `live job ${id}: ${tracked} of ${names.length} frames tracked on its page, ${rate}, latency ${latency}, ${points} map points shown, finished from the page`;
 }
 
 // The errors against the ground truth as evo shows them: the headline's ATE and RPE with units,

@@ -11,6 +11,7 @@ const { inversePose, loopSegments, parsePgm, parseTum, stateColour, STATE_COLOUR
 const { JET, parseFloatTiff, rangePreviewScale, ticks, TURBO } = await import(path.join(WEB_JS, 'colorbar.js'));
 const { describeKey, formatLength, formatWithUnit, shortId } = await import(path.join(WEB_JS, 'labels.js'));
 const { colourModes, percentileRange, pointValues, turboColours } = await import(path.join(WEB_JS, 'cloud_colour.js'));
+const { liveFigures, liveTrajectory, percentile } = await import(path.join(WEB_JS, 'live_report.js'));
 
 // A TIFF laid out as OpenCV writes a CV_32FC1 image: little-endian, uncompressed, the pixels in
 // strips of `rowsPerStrip` rows, strip offsets (LONG) and byte counts (SHORT) in arrays.
@@ -194,6 +195,31 @@ const tests = {
     assert.deepEqual(percentileRange(values), [20, 980]);
     const [lo, hi] = percentileRange(Float32Array.from([3, 3, 3]));
     assert.ok(lo === 3 && hi > lo);
+  },
+  'a live run\'s figures: frames received, tracked, skipped, rate over capture time, latency'() {
+    const pose = (x) => ({ translation_m: [x, 0, 0], rotation_wxyz: [1, 0, 0, 0] });
+    // 21 frames at 20 Hz of capture time, frame 5 lost, 3 skipped by the server so far.
+    const events = Array.from({ length: 21 }, (_, i) => ({
+      frame_index: i, name: `t${i}`, stamp_s: 100 + i * 0.05, state: i === 5 ? 'lost' : 'tracked',
+      keyframe: i % 4 === 0, in_map: i >= 10, world_from_rig: i === 5 ? null : pose(i), latency_ms: i + 1,
+      num_skipped: Math.min(i, 3) })).reverse();
+    const figures = liveFigures(events);
+    assert.equal(figures.received, 24);
+    assert.equal(figures.tracked, 20);
+    assert.equal(figures.lost, 1);
+    assert.equal(figures.skipped, 3);
+    assert.equal(figures.keyframes, 6);
+    assert.equal(figures.inMap, 11);
+    assert.ok(Math.abs(figures.rateHz - 20) < 1e-9);
+    assert.equal(figures.latencyP50Ms, 11);
+    assert.equal(figures.latencyP95Ms, 20);
+    assert.ok(Number.isNaN(liveFigures([]).rateHz));
+    assert.equal(percentile([5, 1, 3], 100), 5);
+    // The file's poses, then the frames that arrived after it was written.
+    const file = { frames: [{ name: 't0', world_from_rig: pose(0.5) }, { name: 't1', world_from_rig: null }] };
+    const drawn = liveTrajectory(file, events.slice(-3));
+    assert.deepEqual(drawn.map((p) => p.t[0]), [0.5, 2]);
+    assert.equal(drawn[1].index, 2);
   },
   'lengths in m, cm or mm by size'() {
     assert.equal(formatLength(1.234), '1.23 m');

@@ -5,6 +5,7 @@ import { API, asList, del, get, getToken, post } from './api.js';
 import { clear, el, errorBox, errorLines, explainJobError, formatDuration, formatTime, poll, progressBar, shortJobError, showError } from './ui.js';
 import { renderArtifacts } from './artifacts.js';
 import { shortId } from './labels.js';
+import { isLiveSlam, renderLiveReport } from './live_report.js';
 
 export const JOB_TYPES = {
   calibration: 'Calibration of one camera (unified model)',
@@ -548,6 +549,7 @@ async function renderJob(view, id, openRetry = false) {
     reportCleanup = null;
     clear(report);
     clear(artifacts);
+    if (job.state === 'running' && isLiveSlam(job)) reportCleanup = renderLiveReport(report, job);
     if (job.state === 'succeeded') {
       try {
         reportCleanup = await renderReport(report, job, (text) => {
