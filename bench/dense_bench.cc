@@ -462,7 +462,34 @@ dense::DenseMapOptions TightMergedOptions() {
 }
 
 // One omnirig setting on a set's pairs.
+// What bounds a pair's points: the grid's cells, those inside both mirror masks (the usable
+// annulus), those SGBM matched (left-right consistent, unique, not a speckle), the matched ones
+// by confidence, and the points (confident, range std <= DenseStereoOptions'
+// max_relative_range_std); per pair.
+struct PointFunnel {
+  double grid = 0, mirror = 0, matched = 0, confidence_04 = 0, confident = 0, points = 0;
+  int pairs = 0;
+  void Add(const dense::DensePairResult& result) {
+    grid += result.confidence.total();
+    mirror += result.num_mirror_cells;
+    matched += result.num_matched_cells;
+    confidence_04 += cv::countNonZero(result.confidence >= 0.4);
+    confident += cv::countNonZero(result.confidence >= 0.5);
+    points += result.num_points;
+    ++pairs;
+  }
+  void Print() const {
+    const double n = std::max(pairs, 1);
+    std::printf(
+        "cells per pair: grid %.0f, inside both mirror masks %.0f (%.1f %%), matched %.0f "
+        "(%.1f %% of those), confidence >= 0.4 %.0f, >= 0.5 (min_confidence) %.0f, points %.0f\n",
+        grid / n, mirror / n, 100.0 * mirror / std::max(grid, 1.0), matched / n,
+        100.0 * matched / std::max(mirror, 1.0), confidence_04 / n, confident / n, points / n);
+  }
+};
+
 struct OmnirigRun {
+  PointFunnel funnel;
   Score score;
   SubCellBias bias;
   dense::DensePairResult::Seconds stages;
@@ -531,6 +558,7 @@ void RunOmnirig(const BenchSet& set, const dense::DenseStereoOptions& dense_opti
     };
     const dense::DensePairResult result =
         dense.Reconstruct(set.images[0][f], set.images[1][f], progress);
+    run->funnel.Add(result);
     const auto timed = [&](const std::string& name, const auto& write) {
       const double before = CpuSeconds();
       write();
@@ -615,6 +643,7 @@ void RunSet(const BenchSet& set, bool with_peer, bool profile,
     score.Print(setting.name);
   }
   std::printf("\n");
+  ours.funnel.Print();
   ours.bias.Print("omnirig sub-cell disparity, refined (default)");
   unrefined.bias.Print("omnirig sub-cell disparity, SGBM's sub-pixel only");
   std::printf("\nmerged cloud of the %d pairs placed by their true poses:\n", num_frames);

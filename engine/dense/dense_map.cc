@@ -114,7 +114,10 @@ void DenseMap::Add(const Rigid3d& world_from_cam0, const std::vector<DensePoint>
              point.rgb, point.confidence, point.range_std_m);
     if (view) AddToView(point.point_in_cam0, point.range_std_m, &*view);
   }
-  if (view) views_.push_back(std::move(*view));
+  if (view) {
+    FinishView(&*view);
+    views_.push_back(std::move(*view));
+  }
 }
 
 void DenseMap::Add(const Rigid3d& world_from_cam0, const PlyCloud& cloud_in_cam0) {
@@ -133,7 +136,10 @@ void DenseMap::Add(const Rigid3d& world_from_cam0, const PlyCloud& cloud_in_cam0
              cloud_in_cam0.colours[i], cloud_in_cam0.confidence[i], cloud_in_cam0.range_std_m[i]);
     if (view) AddToView(p, cloud_in_cam0.range_std_m[i], &*view);
   }
-  if (view) views_.push_back(std::move(*view));
+  if (view) {
+    FinishView(&*view);
+    views_.push_back(std::move(*view));
+  }
 }
 
 namespace {
@@ -166,6 +172,20 @@ DenseMap::FrameView DenseMap::NewView(const Rigid3d& world_from_cam0) const {
   return view;
 }
 
+void DenseMap::FinishView(FrameView* view) {
+  cv::Mat mean_m, std_m;
+  cv::divide(view->weighted_range, view->weight, mean_m);  // NaN where no point fell
+  // The cell's points share image pixels: their typical std, not the std of their mean.
+  cv::divide(view->count, view->weight, std_m);
+  cv::sqrt(std_m, std_m);
+  view->nearest_m.convertTo(view->nearest_m, CV_16F);
+  mean_m.convertTo(view->mean_m, CV_16F);
+  std_m.convertTo(view->std_m, CV_16F);
+  view->weighted_range.release();
+  view->weight.release();
+  view->count.release();
+}
+
 void DenseMap::AddToView(const Eigen::Vector3f& point_in_cam0, float range_std_m,
                          FrameView* view) const {
   int row = 0, col = 0;
@@ -187,23 +207,23 @@ bool DenseMap::FuseAlongRays(const Voxel& voxel, Eigen::Vector3d* position, doub
   const Eigen::Vector3d in_world = *position;
   Eigen::Vector3d correction = Eigen::Vector3d::Zero();
   double weight_sum = 1.0 / (std_m * std_m);
-  for (const FrameView& view : views_) {
+  const int first = std::max(0, voxel.last_frame - kViewWindow);
+  const int last = std::min(static_cast<int>(views_.size()) - 1, voxel.last_frame + kViewWindow);
+  for (int frame = first; frame <= last; ++frame) {
+    const FrameView& view = views_[frame];
     if (voxel.frame_bits & (uint64_t{1} << (view.frame % 64))) continue;  // its own frame
     int row = 0, col = 0;
     double range_m = 0.0;
     const Eigen::Vector3d in_cam0 = view.cam0_from_world * in_world;
-    if (!ViewCell(in_cam0, options_.visibility_cell_rad, view.nearest_m.rows, view.nearest_m.cols,
-                  &row, &col, &range_m)) {
+    if (!ViewCell(in_cam0, options_.visibility_cell_rad, view.mean_m.rows, view.mean_m.cols, &row,
+                  &col, &range_m)) {
       continue;
     }
-    const double count = view.count.at<float>(row, col);
-    if (count == 0.0) continue;
-    const double weight = view.weight.at<float>(row, col);
-    const double mean_m = view.weighted_range.at<float>(row, col) / weight;
-    // The cell's points share image pixels: their typical std, not the std of their mean.
-    const double seen_std_m = std::sqrt(count / weight);
+    const double mean_m = static_cast<float>(view.mean_m.at<cv::float16_t>(row, col));
+    if (!(mean_m > 0.0)) continue;
+    const double seen_std_m = static_cast<float>(view.std_m.at<cv::float16_t>(row, col));
     const double tolerance_m = sigmas * std::sqrt(std_m * std_m + seen_std_m * seen_std_m);
-    const double nearest_m = view.nearest_m.at<float>(row, col);
+    const double nearest_m = static_cast<float>(view.nearest_m.at<cv::float16_t>(row, col));
     if (nearest_m - range_m > tolerance_m && seen_std_m <= std_m) return false;
     if (std::abs(mean_m - range_m) > tolerance_m) continue;
     const double seen_weight = 1.0 / (seen_std_m * seen_std_m);

@@ -154,19 +154,26 @@ class DenseMap {
   int slot_shift_ = 64;  // 64 - log2(number of slots)
   int num_frames_ = 0;
 
-  // A frame's view for the visibility check (visibility_cell_rad > 0): the nearest fused range
-  // per cell of an equirectangular grid around its cam0 (rows: angle from +z, columns: azimuth
-  // from +x), and that point's range std; 0 where the frame fused nothing.
+  // A frame's view for the check along its rays (visibility_cell_rad > 0): per cell of an
+  // equirectangular grid around its cam0 (rows: angle from +z, columns: azimuth from +x), the
+  // nearest fused range, the precision-weighted mean range and its points' typical std; 0 where
+  // the frame fused nothing. Built in CV_32F sums (range / std^2, 1 / std^2, count), then kept
+  // in half floats (6 bytes a cell: 4.7 MB a frame at 0.005 rad; their 0.05 % rounding is far
+  // below the ranges' stds).
   struct FrameView {
     int frame = 0;
     Rigid3d cam0_from_world;
-    // CV_32F: the nearest range, the sum of range / std^2 and of 1 / std^2, and the points.
-    cv::Mat nearest_m, weighted_range, weight, count;
+    cv::Mat nearest_m, mean_m, std_m;  // CV_16F once finished
+    cv::Mat weighted_range, weight, count;  // CV_32F while the frame is added
   };
   FrameView NewView(const Rigid3d& world_from_cam0) const;
   void AddToView(const Eigen::Vector3f& point_in_cam0, float range_std_m, FrameView* view) const;
+  static void FinishView(FrameView* view);
   // A kept voxel's position after the other frames' views (see visibility_cell_rad); false
-  // when a view sees through it.
+  // when a view sees through it. Only the frames within kViewWindow of the voxel's last frame
+  // are asked (the neighbours in a sequence, which see the same surfaces): the check costs
+  // O(voxels) however many frames are fused.
+  static constexpr int kViewWindow = 8;
   bool FuseAlongRays(const Voxel& voxel, Eigen::Vector3d* position, double std_m) const;
   std::vector<FrameView> views_;
 };
