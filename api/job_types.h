@@ -55,6 +55,11 @@ struct JobContext {
   void Log(const std::string& line) const {
     if (log) log(line);
   }
+  // Where the rigs' rectification tables are kept (SharedRectifier): cache_dir /
+  // "rectification", empty without a cache_dir.
+  std::filesystem::path RectificationTablesDir() const {
+    return cache_dir.empty() ? std::filesystem::path() : cache_dir / "rectification";
+  }
 };
 
 // Writes `text` to `path` (an artifact, an export), creating its folder; throws

@@ -184,7 +184,10 @@ json SkippedFrameJson(const LiveFrame& frame, int num_skipped) {
 json RunLiveSlam(const json& params, const JobContext& context, const StereoRig& rig,
                  LiveMailbox& mailbox, const std::function<void(const json&)>& on_frame) {
   const LiveSlamParams live = LiveSlamParamsFromJson(params);
-  const SlamParams parsed = SlamParamsFromJson(params);
+  SlamParams parsed = SlamParamsFromJson(params);
+  if (parsed.dense_map) {
+    parsed.dense_map->rectification_tables_dir = context.RectificationTablesDir();
+  }
   slam::SlamOptions options = parsed.options;
   options.num_threads = std::max(1, context.num_threads);
   if (parsed.map_job) options.saved_map = LoadSavedMap(context, *parsed.map_job);

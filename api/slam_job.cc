@@ -752,7 +752,10 @@ json WriteSlamReport(const StereoRig& rig, const slam::SlamResult& result,
 }
 
 json RunSlamJob(const json& params, const JobContext& context) {
-  const SlamParams parsed = SlamParamsFromJson(params);
+  SlamParams parsed = SlamParamsFromJson(params);
+  if (parsed.dense_map) {
+    parsed.dense_map->rectification_tables_dir = context.RectificationTablesDir();
+  }
   const StereoRig rig = LoadRig(context.load_result, parsed.rig_job);
   slam::SlamOptions options = parsed.options;
   options.num_threads = std::max(1, context.num_threads);

@@ -4,6 +4,9 @@
 #include <filesystem>
 #include <fstream>
 
+#include <string>
+#include <vector>
+
 #include <gtest/gtest.h>
 #include <opencv2/imgcodecs.hpp>
 
@@ -172,7 +175,18 @@ TEST_F(SlamJob, DenseMapFusesKeyframesAndWritesAnOccupancyGrid) {
                InvalidArgument);
   EXPECT_THROW(type->validate({{"rig", "rig-job"}, {"dense_map", {{"voxel_m", 0.0}}}}),
                InvalidArgument);
+  // The map's rectification tables are kept in the service's cache folder, as the
+  // stereo_reconstruct job keeps them: one file for the rig and the map's grid.
+  context_.cache_dir = context_.output_dir.parent_path() / "cache_dense_map";
+  fs::remove_all(context_.cache_dir);
   const json result = type->run(params, context_);
+  std::vector<std::string> tables;
+  for (const auto& entry : fs::directory_iterator(context_.cache_dir / "rectification")) {
+    tables.push_back(entry.path().filename().string());
+  }
+  ASSERT_EQ(tables.size(), 1u);
+  EXPECT_EQ(tables[0].rfind("rectification-v1-", 0), 0u) << tables[0];
+  fs::remove_all(context_.cache_dir);
   ASSERT_TRUE(result.contains("dense_map")) << result.dump(2);
   const json& map = result["dense_map"];
   // ~20 cm steps over 1.65 m with keyframes 0.5 m apart.

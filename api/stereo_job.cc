@@ -270,8 +270,7 @@ json RunStereoReconstructJob(const json& params, const JobContext& context) {
   options.use_dense = parsed.method == "dense";
   options.dense = parsed.dense;
   options.sparse = parsed.options;
-  if (!context.cache_dir.empty())
-    options.rectification_tables_dir = context.cache_dir / "rectification";
+  options.rectification_tables_dir = context.RectificationTablesDir();
   int num_bad_pairs = 0;
   const auto on_pair = [&](const dense::StereoPairOutcome& outcome) {
     const std::string& name = outcome.names->name;

@@ -344,28 +344,54 @@ void CalibrateStd(const SubCellBias& bias) {
 // within 1 %, and the 95th percentile (half the thickness of the layer that holds 95 % of the
 // points); points per square metre of surface (the surface area: the 5 cm cells the fused
 // points occupy, times 25 cm^2).
+// The 5 cm cell of a point, as a key.
+int64_t CellKey(const Eigen::Vector3d& p) {
+  const Eigen::Vector3i cell = (p / 0.05).array().floor().cast<int>();
+  return (static_cast<int64_t>(cell.x() + 100000) << 40) ^
+         (static_cast<int64_t>(cell.y() + 100000) << 20) ^ (cell.z() + 100000);
+}
+
 struct MergedScore {
   std::vector<double> relative;
+  // The points whose 5 cm cell holds points of at least two pairs (`pair_cells`): where several
+  // pairs see one surface, the contract's layer.
+  std::vector<double> relative_shared;
   size_t points = 0;
   double area_m2 = 0.0;
+  size_t tail_front = 0, tail_behind = 0;
 
   void Score(const std::vector<Eigen::Vector3f>& points_in_world, const synth::Scene& scene,
-             const std::vector<Rigid3d>& world_from_rig) {
+             const std::vector<Rigid3d>& world_from_rig,
+             const std::vector<std::unordered_set<int64_t>>& pair_cells) {
     points = points_in_world.size();
     std::unordered_set<int64_t> cells;
     for (const Eigen::Vector3f& pf : points_in_world) {
       const Eigen::Vector3d p = pf.cast<double>();
       double range = std::numeric_limits<double>::infinity();
+      Eigen::Vector3d centre = Eigen::Vector3d::Zero();
       for (const Rigid3d& pose : world_from_rig) {
-        range = std::min(range, (p - pose.translation).norm());
+        if ((p - pose.translation).norm() < range) {
+          range = (p - pose.translation).norm();
+          centre = pose.translation;
+        }
       }
       relative.push_back(slam::DistanceToSceneSurface(scene, p) / range);
+      int num_pairs = 0;
+      for (const std::unordered_set<int64_t>& cells_of_pair : pair_cells) {
+        num_pairs += cells_of_pair.count(CellKey(p)) ? 1 : 0;
+      }
+      if (num_pairs >= 2) relative_shared.push_back(relative.back());
+      if (relative.back() > 0.015) {
+        const double truth = slam::RangeToSceneSurface(scene, centre, (p - centre) / range);
+        (range < truth ? tail_front : tail_behind) += 1;
+      }
       const Eigen::Vector3i cell = (p / 0.05).array().floor().cast<int>();
       cells.insert((static_cast<int64_t>(cell.x() + 100000) << 40) ^
                    (static_cast<int64_t>(cell.y() + 100000) << 20) ^ (cell.z() + 100000));
     }
     area_m2 = 0.0025 * cells.size();
     std::sort(relative.begin(), relative.end());
+    std::sort(relative_shared.begin(), relative_shared.end());
   }
 
   void Print(const char* name) const {
@@ -379,6 +405,19 @@ struct MergedScore {
         "%.3f %% (layer %.2f %% thick), %.0f points per m^2 of %.1f m^2\n",
         name, points, 100.0 * at(0.5), 100.0 * Score::FractionAtMost(relative, 0.01),
         100.0 * at(0.95), 200.0 * at(0.95), points / std::max(area_m2, 1e-9), area_m2);
+    std::printf("    off by > 1.5 %%: %zu in front of the surface, %zu behind\n", tail_front,
+                tail_behind);
+    const auto shared_at = [&](double q) {
+      return relative_shared.empty()
+                 ? NAN
+                 : relative_shared[std::min(relative_shared.size() - 1,
+                                            static_cast<size_t>(q * relative_shared.size()))];
+    };
+    std::printf(
+        "    where several pairs see the surface (5 cm cells with points of >= 2 pairs): %zu "
+        "points, median %.3f %%, %.1f %% within 1 %%, layer %.2f %% thick\n",
+        relative_shared.size(), 100.0 * shared_at(0.5),
+        100.0 * Score::FractionAtMost(relative_shared, 0.01), 200.0 * shared_at(0.95));
   }
 };
 
@@ -423,7 +462,34 @@ dense::DenseMapOptions TightMergedOptions() {
 }
 
 // One omnirig setting on a set's pairs.
+// What bounds a pair's points: the grid's cells, those inside both mirror masks (the usable
+// annulus), those SGBM matched (left-right consistent, unique, not a speckle), the matched ones
+// by confidence, and the points (confident, range std <= DenseStereoOptions'
+// max_relative_range_std); per pair.
+struct PointFunnel {
+  double grid = 0, mirror = 0, matched = 0, confidence_04 = 0, confident = 0, points = 0;
+  int pairs = 0;
+  void Add(const dense::DensePairResult& result) {
+    grid += result.confidence.total();
+    mirror += result.num_mirror_cells;
+    matched += result.num_matched_cells;
+    confidence_04 += cv::countNonZero(result.confidence >= 0.4);
+    confident += cv::countNonZero(result.confidence >= 0.5);
+    points += result.num_points;
+    ++pairs;
+  }
+  void Print() const {
+    const double n = std::max(pairs, 1);
+    std::printf(
+        "cells per pair: grid %.0f, inside both mirror masks %.0f (%.1f %%), matched %.0f "
+        "(%.1f %% of those), confidence >= 0.4 %.0f, >= 0.5 (min_confidence) %.0f, points %.0f\n",
+        grid / n, mirror / n, 100.0 * mirror / std::max(grid, 1.0), matched / n,
+        100.0 * matched / std::max(mirror, 1.0), confidence_04 / n, confident / n, points / n);
+  }
+};
+
 struct OmnirigRun {
+  PointFunnel funnel;
   Score score;
   SubCellBias bias;
   dense::DensePairResult::Seconds stages;
@@ -431,10 +497,12 @@ struct OmnirigRun {
   // stage that ends at the next report) and the artifact written.
   std::map<std::string, double> stage_cpu;
   std::vector<Eigen::Vector3f> appended;  // every pair's points in the world
+  std::vector<std::unordered_set<int64_t>> pair_cells;  // each pair's 5 cm cells (MergedScore)
   dense::DenseMap fused{dense::MergedCloudOptions()};
   dense::DenseMap fused_tight{TightMergedOptions()};
   double setup_s = 0.0, again_s = 0.0, from_disk_s = 0.0, from_disk_cpu_s = 0.0;
   double fuse_cpu_s = 0.0;  // the merged cloud's DenseMap::Add, all pairs
+  std::vector<std::vector<dense::DensePoint>> clouds;  // each pair's points (its cam0 frame)
 };
 
 // The tables a later process of the service reads from its cache folder instead of building:
@@ -490,6 +558,7 @@ void RunOmnirig(const BenchSet& set, const dense::DenseStereoOptions& dense_opti
     };
     const dense::DensePairResult result =
         dense.Reconstruct(set.images[0][f], set.images[1][f], progress);
+    run->funnel.Add(result);
     const auto timed = [&](const std::string& name, const auto& write) {
       const double before = CpuSeconds();
       write();
@@ -513,8 +582,10 @@ void RunOmnirig(const BenchSet& set, const dense::DenseStereoOptions& dense_opti
     std::vector<float> range_std;
     points.reserve(result.points.size());
     range_std.reserve(result.points.size());
+    run->pair_cells.emplace_back();
     for (const dense::DensePoint& p : result.points) {
       points.push_back(p.point_in_cam0.cast<double>());
+      run->pair_cells.back().insert(CellKey(set.world_from_rig[f] * points.back()));
       range_std.push_back(p.range_std_m);
       run->appended.push_back((set.world_from_rig[f] * points.back()).cast<float>());
     }
@@ -523,6 +594,7 @@ void RunOmnirig(const BenchSet& set, const dense::DenseStereoOptions& dense_opti
     const double fuse_cpu = CpuSeconds();
     run->fused.Add(set.world_from_rig[f], result.points);
     run->fuse_cpu_s += CpuSeconds() - fuse_cpu;
+    run->clouds.push_back(result.points);
     run->fused_tight.Add(set.world_from_rig[f], result.points);
     if (f == 0 && profile) {
       std::printf(
@@ -571,19 +643,28 @@ void RunSet(const BenchSet& set, bool with_peer, bool profile,
     score.Print(setting.name);
   }
   std::printf("\n");
+  ours.funnel.Print();
   ours.bias.Print("omnirig sub-cell disparity, refined (default)");
   unrefined.bias.Print("omnirig sub-cell disparity, SGBM's sub-pixel only");
   std::printf("\nmerged cloud of the %d pairs placed by their true poses:\n", num_frames);
   MergedScore appended, fused, fused_tight;
-  appended.Score(ours.appended, set.scene, set.world_from_rig);
+  appended.Score(ours.appended, set.scene, set.world_from_rig, ours.pair_cells);
   double cpu = CpuSeconds();
   const PlyCloud fused_cloud = ours.fused.Cloud();
   const double cloud_cpu_s = CpuSeconds() - cpu;
   cpu = CpuSeconds();
   dense::PointsPerSquareMetre(fused_cloud.positions);
   const double density_cpu_s = CpuSeconds() - cpu;
-  fused.Score(fused_cloud.positions, set.scene, set.world_from_rig);
-  fused_tight.Score(ours.fused_tight.Cloud().positions, set.scene, set.world_from_rig);
+  fused.Score(fused_cloud.positions, set.scene, set.world_from_rig, ours.pair_cells);
+  fused_tight.Score(ours.fused_tight.Cloud().positions, set.scene, set.world_from_rig,
+                    ours.pair_cells);
+  dense::DenseMapOptions plain_options = dense::MergedCloudOptions();
+  plain_options.visibility_cell_rad = 0.0;
+  dense::DenseMap plain(plain_options);
+  for (size_t f = 0; f < ours.clouds.size(); ++f) plain.Add(set.world_from_rig[f], ours.clouds[f]);
+  MergedScore voxels_only;
+  voxels_only.Score(plain.Cloud().positions, set.scene, set.world_from_rig, ours.pair_cells);
+  voxels_only.Print("  fused in voxels only (without the check along the other pairs' rays)");
   appended.Print("  appended (every pair's points)");
   fused.Print("  fused (MergedCloudOptions: 1 cm voxels, range std <= 2 %)");
   fused_tight.Print("  fused, range std <= 0.9 %");

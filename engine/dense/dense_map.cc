@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
 #include <fstream>
 #include <map>
 #include <stdexcept>
@@ -40,6 +41,8 @@ void DenseMapOptions::Check() const {
   OMNIRIG_CHECK_AT_LEAST(min_frames, 1);
   OMNIRIG_CHECK_IN(occupancy_cell_m, '[', voxel_m, 2, ']');
   OMNIRIG_CHECK_AT_LEAST(min_obstacle_voxels, 1);
+  OMNIRIG_CHECK_IN(visibility_cell_rad, '[', 0, 0.1, ']');
+  OMNIRIG_CHECK_POSITIVE(visibility_sigmas);
   OMNIRIG_CHECK(obstacle_min_height_m > 0.0 && obstacle_max_height_m > obstacle_min_height_m,
                 "the obstacle band must satisfy 0 < obstacle_min_height_m < "
                 "obstacle_max_height_m");
@@ -92,6 +95,7 @@ void DenseMap::AddPoint(int frame, const Eigen::Vector3d& in_world,
   voxel.confidence_sum += confidence;
   voxel.inverse_variance_sum += 1.0 / (std_m * std_m);
   ++voxel.num_points;
+  voxel.frame_bits |= uint64_t{1} << (frame % 64);
   if (voxel.last_frame != frame) {
     voxel.last_frame = frame;
     ++voxel.num_frames;
@@ -102,10 +106,17 @@ void DenseMap::Add(const Rigid3d& world_from_cam0, const std::vector<DensePoint>
   const int frame = num_frames_++;
   Reserve(voxels_.size() + points.size());  // at most one new voxel per point
   const Eigen::Matrix3d rotation = world_from_cam0.rotation.toRotationMatrix();
+  std::optional<FrameView> view;
+  if (options_.visibility_cell_rad > 0.0) view = NewView(world_from_cam0);
   for (const DensePoint& point : points) {
     if (point.range_std_m > options_.max_relative_range_std * point.point_in_cam0.norm()) continue;
     AddPoint(frame, rotation * point.point_in_cam0.cast<double>() + world_from_cam0.translation,
              point.rgb, point.confidence, point.range_std_m);
+    if (view) AddToView(point.point_in_cam0, point.range_std_m, &*view);
+  }
+  if (view) {
+    FinishView(&*view);
+    views_.push_back(std::move(*view));
   }
 }
 
@@ -116,12 +127,114 @@ void DenseMap::Add(const Rigid3d& world_from_cam0, const PlyCloud& cloud_in_cam0
   const int frame = num_frames_++;
   Reserve(voxels_.size() + cloud_in_cam0.size());  // at most one new voxel per point
   const Eigen::Matrix3d rotation = world_from_cam0.rotation.toRotationMatrix();
+  std::optional<FrameView> view;
+  if (options_.visibility_cell_rad > 0.0) view = NewView(world_from_cam0);
   for (size_t i = 0; i < cloud_in_cam0.size(); ++i) {
     const Eigen::Vector3f& p = cloud_in_cam0.positions[i];
     if (cloud_in_cam0.range_std_m[i] > options_.max_relative_range_std * p.norm()) continue;
     AddPoint(frame, rotation * p.cast<double>() + world_from_cam0.translation,
              cloud_in_cam0.colours[i], cloud_in_cam0.confidence[i], cloud_in_cam0.range_std_m[i]);
+    if (view) AddToView(p, cloud_in_cam0.range_std_m[i], &*view);
   }
+  if (view) {
+    FinishView(&*view);
+    views_.push_back(std::move(*view));
+  }
+}
+
+namespace {
+
+// The cell of a direction on a view's equirectangular grid of step `cell_rad`; false for a
+// zero direction.
+bool ViewCell(const Eigen::Vector3d& in_cam0, double cell_rad, int rows, int cols, int* row,
+              int* col, double* range_m) {
+  *range_m = in_cam0.norm();
+  if (!(*range_m > 0.0)) return false;
+  const double polar = std::acos(std::clamp(in_cam0.z() / *range_m, -1.0, 1.0));
+  const double azimuth = std::atan2(in_cam0.y(), in_cam0.x()) + M_PI;
+  *row = std::min(rows - 1, static_cast<int>(polar / cell_rad));
+  *col = std::min(cols - 1, static_cast<int>(azimuth / cell_rad));
+  return true;
+}
+
+}  // namespace
+
+DenseMap::FrameView DenseMap::NewView(const Rigid3d& world_from_cam0) const {
+  const double cell = options_.visibility_cell_rad;
+  FrameView view;
+  view.frame = num_frames_ - 1;
+  view.cam0_from_world = world_from_cam0.Inverse();
+  const int rows = static_cast<int>(std::ceil(M_PI / cell));
+  const int cols = static_cast<int>(std::ceil(2.0 * M_PI / cell));
+  for (cv::Mat* mat : {&view.nearest_m, &view.weighted_range, &view.weight, &view.count}) {
+    *mat = cv::Mat::zeros(rows, cols, CV_32F);
+  }
+  return view;
+}
+
+void DenseMap::FinishView(FrameView* view) {
+  cv::Mat mean_m, std_m;
+  cv::divide(view->weighted_range, view->weight, mean_m);  // NaN where no point fell
+  // The cell's points share image pixels: their typical std, not the std of their mean.
+  cv::divide(view->count, view->weight, std_m);
+  cv::sqrt(std_m, std_m);
+  view->nearest_m.convertTo(view->nearest_m, CV_16F);
+  mean_m.convertTo(view->mean_m, CV_16F);
+  std_m.convertTo(view->std_m, CV_16F);
+  view->weighted_range.release();
+  view->weight.release();
+  view->count.release();
+}
+
+void DenseMap::AddToView(const Eigen::Vector3f& point_in_cam0, float range_std_m,
+                         FrameView* view) const {
+  int row = 0, col = 0;
+  double range_m = 0.0;
+  if (!ViewCell(point_in_cam0.cast<double>(), options_.visibility_cell_rad, view->nearest_m.rows,
+                view->nearest_m.cols, &row, &col, &range_m)) {
+    return;
+  }
+  float& nearest = view->nearest_m.at<float>(row, col);
+  if (nearest == 0.f || range_m < nearest) nearest = static_cast<float>(range_m);
+  const double std_m = std::max(static_cast<double>(range_std_m), 1e-4);
+  view->weighted_range.at<float>(row, col) += static_cast<float>(range_m / (std_m * std_m));
+  view->weight.at<float>(row, col) += static_cast<float>(1.0 / (std_m * std_m));
+  view->count.at<float>(row, col) += 1.f;
+}
+
+bool DenseMap::FuseAlongRays(const Voxel& voxel, Eigen::Vector3d* position, double std_m) const {
+  const double sigmas = options_.visibility_sigmas;
+  const Eigen::Vector3d in_world = *position;
+  Eigen::Vector3d correction = Eigen::Vector3d::Zero();
+  double weight_sum = 1.0 / (std_m * std_m);
+  const int first = std::max(0, voxel.last_frame - kViewWindow);
+  const int last = std::min(static_cast<int>(views_.size()) - 1, voxel.last_frame + kViewWindow);
+  for (int frame = first; frame <= last; ++frame) {
+    const FrameView& view = views_[frame];
+    if (voxel.frame_bits & (uint64_t{1} << (view.frame % 64))) continue;  // its own frame
+    int row = 0, col = 0;
+    double range_m = 0.0;
+    const Eigen::Vector3d in_cam0 = view.cam0_from_world * in_world;
+    if (!ViewCell(in_cam0, options_.visibility_cell_rad, view.mean_m.rows, view.mean_m.cols, &row,
+                  &col, &range_m)) {
+      continue;
+    }
+    const double mean_m = static_cast<float>(view.mean_m.at<cv::float16_t>(row, col));
+    if (!(mean_m > 0.0)) continue;
+    const double seen_std_m = static_cast<float>(view.std_m.at<cv::float16_t>(row, col));
+    const double tolerance_m = sigmas * std::sqrt(std_m * std_m + seen_std_m * seen_std_m);
+    const double nearest_m = static_cast<float>(view.nearest_m.at<cv::float16_t>(row, col));
+    if (nearest_m - range_m > tolerance_m && seen_std_m <= std_m) return false;
+    if (std::abs(mean_m - range_m) > tolerance_m) continue;
+    const double seen_weight = 1.0 / (seen_std_m * seen_std_m);
+    const Eigen::Vector3d ray_in_world =
+        view.cam0_from_world.rotation.inverse() * (in_cam0 / range_m);
+    correction += seen_weight * (mean_m - range_m) * ray_in_world;
+    weight_sum += seen_weight;
+  }
+  // The precision-weighted mean of the voxel's range and the agreeing frames' along their rays.
+  *position += correction / weight_sum;
+  return true;
 }
 
 PlyCloud DenseMap::Cloud(const std::string& comment) const {
@@ -131,13 +244,21 @@ PlyCloud DenseMap::Cloud(const std::string& comment) const {
   cloud.has_range_std = true;
   for (const Voxel& voxel : voxels_) {
     if (!Kept(voxel) || !(voxel.weight > 0.0)) continue;
-    cloud.positions.push_back((voxel.weighted_position / voxel.weight).cast<float>());
+    Eigen::Vector3d position = voxel.weighted_position / voxel.weight;
+    const double std_m = 1.0 / std::sqrt(voxel.inverse_variance_sum);
+    // Along the rays, a voxel counts as one measurement per frame: a frame's points in one
+    // voxel come from neighbouring cells, which share image pixels (their mean is not more
+    // precise than one of them), as the views' cells count theirs (FuseAlongRays).
+    const double ray_std_m =
+        std::sqrt(voxel.num_points / (voxel.inverse_variance_sum * voxel.num_frames));
+    if (!views_.empty() && !FuseAlongRays(voxel, &position, ray_std_m)) continue;
+    cloud.positions.push_back(position.cast<float>());
     const Eigen::Vector3d rgb = voxel.weighted_rgb / voxel.weight;
     cloud.colours.push_back({static_cast<uint8_t>(std::clamp(std::lround(rgb.x()), 0L, 255L)),
                              static_cast<uint8_t>(std::clamp(std::lround(rgb.y()), 0L, 255L)),
                              static_cast<uint8_t>(std::clamp(std::lround(rgb.z()), 0L, 255L))});
     cloud.confidence.push_back(static_cast<float>(voxel.confidence_sum / voxel.num_points));
-    cloud.range_std_m.push_back(static_cast<float>(1.0 / std::sqrt(voxel.inverse_variance_sum)));
+    cloud.range_std_m.push_back(static_cast<float>(std_m));
   }
   return cloud;
 }
@@ -163,6 +284,11 @@ DenseMapOptions MergedCloudOptions() {
   options.min_frames = 1;
   options.max_relative_range_std = 0.02;
   options.occupancy_cell_m = 0.05;
+  // About two cells of the default grid at 1024x768 (0.00263 rad): a cell holds a few of a
+  // pair's points, so its mean range is that pair's surface there (bench_dense, 2026-11-27:
+  // docs/dense.md, "One surface from several pairs").
+  options.visibility_cell_rad = 0.005;
+  options.visibility_sigmas = 3.0;
   return options;
 }
 
@@ -303,7 +429,7 @@ KeyframeFusionReport FuseKeyframes(const StereoRig& rig,
   // Points the map would not fuse are not made.
   stereo_options.max_relative_range_std =
       std::min(stereo_options.max_relative_range_std, map->options().max_relative_range_std);
-  const DenseStereo stereo(rig, stereo_options);
+  const DenseStereo stereo(rig, stereo_options, map->options().rectification_tables_dir);
   report.setup_s = timer.ElapsedSeconds();
   // Batches of num_threads keyframes, each reconstructed on one thread, then fused in frame
   // order: the map does not depend on the thread count, and at most one batch of clouds is held.

@@ -23,6 +23,74 @@
 namespace omnirig::dense {
 namespace {
 
+// Points of a wall x = x_m (world), y and z in [-half_m, half_m] every step_m, in the cam0 frame
+// of a frame at `centre` (no rotation), each with std_m. The wall lies at right angles to cam0's
+// z axis, as the scene does for an upright rig (the views' cells are widest there).
+std::vector<DensePoint> WallPoints(const Eigen::Vector3d& centre, double x_m, double half_m,
+                                   double step_m, float std_m) {
+  std::vector<DensePoint> points;
+  for (double y = -half_m; y <= half_m + 1e-9; y += step_m) {
+    for (double z = -half_m; z <= half_m + 1e-9; z += step_m) {
+      DensePoint point;
+      point.point_in_cam0 = (Eigen::Vector3d(x_m, y, z) - centre).cast<float>();
+      point.confidence = 1.f;
+      point.range_std_m = std_m;
+      points.push_back(point);
+    }
+  }
+  return points;
+}
+
+TEST(DenseMap, MergedCloudFusesAlongTheOtherFramesRaysAndDropsWhatTheySeeThrough) {
+  const Rigid3d at_a, at_b(Eigen::Quaterniond::Identity(), Eigen::Vector3d(0, 0.5, 0));
+  // Frame A sees the wall x = 3 m; frame B sees it 3 cm too far (about 2 combined stds), and
+  // two wrong patches 0.5 m in front of it: one less precise than A's ranges there, one more.
+  const std::vector<DensePoint> a = WallPoints(Eigen::Vector3d::Zero(), 3.0, 0.6, 0.005, 0.01f);
+  std::vector<DensePoint> b = WallPoints(at_b.translation, 3.03, 0.3, 0.005, 0.01f);
+  for (const double corner : {-0.3, 0.3}) {
+    for (DensePoint point : WallPoints(at_b.translation, 2.5, 0.05, 0.005, 0.f)) {
+      point.point_in_cam0 += Eigen::Vector3f(0.f, corner, corner);
+      point.range_std_m = corner > 0 ? 0.005f : 0.02f;
+      b.push_back(point);
+    }
+  }
+  DenseMap map(MergedCloudOptions());
+  map.Add(at_a, a);
+  map.Add(at_b, b);
+  int on_wall = 0, precise_patch = 0, imprecise_patch = 0;
+  for (const Eigen::Vector3f& p : map.Cloud().positions) {
+    if (p.x() < 2.7) {
+      (p.y() > 0 ? precise_patch : imprecise_patch) += 1;
+      continue;
+    }
+    // Where both frames see the wall, each frame's points move to the precision-weighted mean
+    // of the two along the other's ray: one layer at about 3.015 m instead of two 3 cm apart.
+    if (std::abs(p.y()) < 0.25 && std::abs(p.z()) < 0.25) {
+      ++on_wall;
+      EXPECT_NEAR(p.x(), 3.015, 0.004) << p.transpose();
+    }
+  }
+  EXPECT_GT(on_wall, 2 * 50 * 50 * 0.9);  // both frames' voxels (0.5 m x 0.5 m, 1 cm voxels)
+  // A sees through the patch it is more precise than: dropped; the other is kept (10 x 10
+  // voxels and their edges).
+  EXPECT_EQ(imprecise_patch, 0);
+  EXPECT_GE(precise_patch, 10 * 10);
+  // Without the check the two layers stay apart and both patches stay.
+  DenseMapOptions options = MergedCloudOptions();
+  options.visibility_cell_rad = 0.0;
+  DenseMap plain(options);
+  plain.Add(at_a, a);
+  plain.Add(at_b, b);
+  int far_layer = 0, plain_precise_patch = 0, plain_imprecise_patch = 0;
+  for (const Eigen::Vector3f& p : plain.Cloud().positions) {
+    far_layer += p.x() > 3.025 ? 1 : 0;
+    if (p.x() < 2.7) (p.y() > 0 ? plain_precise_patch : plain_imprecise_patch) += 1;
+  }
+  EXPECT_GT(far_layer, 50 * 50);
+  EXPECT_EQ(plain_precise_patch, precise_patch);
+  EXPECT_GE(plain_imprecise_patch, 10 * 10);
+}
+
 TEST(DenseMap, RoomKeyframesFuseOntoTheTrueSurfaces) {
   synth::StereoSequenceOptions sequence_options;
   sequence_options.num_frames = 4;  // 2 m apart along the 6 m path: all keyframes

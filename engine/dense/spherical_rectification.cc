@@ -300,6 +300,37 @@ void SphericalRectifier::Write(const std::filesystem::path& path,
   if (!ok || error) std::filesystem::remove(temp, error);
 }
 
+int PruneRectificationTables(const std::filesystem::path& dir, uintmax_t max_bytes) {
+  struct Entry {
+    std::filesystem::file_time_type used;
+    uintmax_t bytes;
+    std::filesystem::path path;
+  };
+  std::vector<Entry> files;
+  std::error_code error;
+  for (std::filesystem::directory_iterator it(dir, error), end; !error && it != end;
+       it.increment(error)) {
+    const std::string name = it->path().filename().string();
+    if (name.rfind("rectification-v", 0) != 0 || it->path().extension() != ".bin") continue;
+    std::error_code file_error;
+    const uintmax_t bytes = it->file_size(file_error);
+    const std::filesystem::file_time_type used = it->last_write_time(file_error);
+    if (!file_error) files.push_back({used, bytes, it->path()});
+  }
+  std::sort(files.begin(), files.end(),
+            [](const Entry& a, const Entry& b) { return a.used > b.used; });
+  int removed = 0;
+  uintmax_t kept_bytes = 0;
+  for (size_t i = 0; i < files.size(); ++i) {
+    kept_bytes += files[i].bytes;
+    if (i == 0 || kept_bytes <= max_bytes) continue;
+    kept_bytes -= files[i].bytes;
+    std::error_code remove_error;
+    removed += std::filesystem::remove(files[i].path, remove_error) ? 1 : 0;
+  }
+  return removed;
+}
+
 std::shared_ptr<const SphericalRectifier> SharedRectifier(const StereoRig& rig,
                                                           const SphericalGridOptions& options,
                                                           const std::filesystem::path& tables_dir) {
@@ -319,14 +350,26 @@ std::shared_ptr<const SphericalRectifier> SharedRectifier(const StereoRig& rig,
     cache.splice(cache.begin(), cache, it);
     // Built in this process without a folder, or the file removed since: written now.
     std::error_code error;
-    if (!file.empty() && !std::filesystem::exists(file, error)) it->second->Write(file, key);
+    if (!file.empty() && !std::filesystem::exists(file, error)) {
+      it->second->Write(file, key);
+      PruneRectificationTables(tables_dir, kRectificationTablesMaxBytes);
+    } else if (!file.empty()) {
+      std::filesystem::last_write_time(file, std::filesystem::file_time_type::clock::now(), error);
+    }
     return cache.front().second;
   }
   std::shared_ptr<const SphericalRectifier> rectifier;
   if (!file.empty()) rectifier = SphericalRectifier::Read(file, key);
-  if (!rectifier) {
+  std::error_code error;
+  if (rectifier) {
+    // Used now: the last to be pruned (PruneRectificationTables orders by this time).
+    std::filesystem::last_write_time(file, std::filesystem::file_time_type::clock::now(), error);
+  } else {
     rectifier = std::make_shared<const SphericalRectifier>(rig, options);
-    if (!file.empty()) rectifier->Write(file, key);
+    if (!file.empty()) {
+      rectifier->Write(file, key);
+      PruneRectificationTables(tables_dir, kRectificationTablesMaxBytes);
+    }
   }
   cache.emplace_front(key, rectifier);
   if (cache.size() > kKept) cache.pop_back();

@@ -15,6 +15,7 @@
 // the paper for the lifting); the grid's directions are projected into each camera once per rig
 // and stored as cv::remap tables.
 
+#include <cstdint>
 #include <filesystem>
 #include <memory>
 #include <string>
@@ -102,6 +103,20 @@ class SphericalRectifier {
 std::shared_ptr<const SphericalRectifier> SharedRectifier(
     const StereoRig& rig, const SphericalGridOptions& options,
     const std::filesystem::path& tables_dir = {});
+
+// The byte budget of a tables folder: SharedRectifier prunes it to this after each file it
+// writes (PruneRectificationTables). About twenty rigs of 1024x768 cameras on the default grid
+// (25 MB a file), so that the folder of a service that sees many rigs, or many calibrations of
+// one, never grows without limit.
+constexpr uintmax_t kRectificationTablesMaxBytes = uintmax_t{512} << 20;
+
+// Removes the least recently used tables files ("rectification-v*.bin", any version) of `dir`
+// until the rest fit in `max_bytes`; the most recently used file is always kept. "Used" is the
+// file's modification time: SharedRectifier sets it to now whenever it reads a file, so that it
+// holds on file systems mounted without access times. Temporary files (".part-") are the
+// service's start-up check's. Returns the number of files removed; errors (a file removed by
+// another process meanwhile, a folder that cannot be listed) only leave files in place.
+int PruneRectificationTables(const std::filesystem::path& dir, uintmax_t max_bytes);
 
 // "rectification-vN-HASH.bin": N the file format's version (a new version is a new file, the
 // old ones are never read), HASH 16 hex digits of every number of the rig and the options.

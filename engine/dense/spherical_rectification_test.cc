@@ -7,6 +7,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -194,6 +195,53 @@ TEST(SphericalRectification, TablesAreKeptOnDiskAndReadByALaterProcess) {
   std::ofstream(not_a_folder) << "x";
   EvictSharedRectifiers(rig);
   EXPECT_EQ(SharedRectifier(rig, options, not_a_folder)->rows(), built->rows());
+  std::filesystem::remove_all(dir);
+}
+
+TEST(SphericalRectification, TablesFolderIsPrunedToItsBudgetLeastRecentlyUsedFirst) {
+  const std::filesystem::path dir = std::filesystem::path(::testing::TempDir()) /
+                                    ("omnirig_rectification_prune_" + std::to_string(::getpid()));
+  std::filesystem::remove_all(dir);
+  const StereoRig rig = DefaultRig();
+  SphericalGridOptions options;
+  options.step_rad = 0.02;  // small tables: the test is about the folder
+  std::vector<std::filesystem::path> files;
+  for (int i = 0; i < 3; ++i) {
+    StereoRig other = rig;
+    other.cam0_from_cam1.translation.z() += 0.001 * i;
+    SharedRectifier(other, options, dir);
+    files.push_back(dir / RectificationTablesFileName(other, options));
+    ASSERT_TRUE(std::filesystem::exists(files.back()));
+  }
+  const uintmax_t bytes = std::filesystem::file_size(files[0]);
+  // Used in the order 1, 0, 2 (oldest first); a file that is not tables stays whatever its age.
+  const auto now = std::filesystem::file_time_type::clock::now();
+  std::filesystem::last_write_time(files[1], now - std::chrono::hours(3));
+  std::filesystem::last_write_time(files[0], now - std::chrono::hours(2));
+  std::filesystem::last_write_time(files[2], now - std::chrono::hours(1));
+  std::ofstream(dir / "notes.txt") << "x";
+  std::filesystem::last_write_time(dir / "notes.txt", now - std::chrono::hours(9));
+
+  EXPECT_EQ(PruneRectificationTables(dir, 3 * bytes), 0);  // within the budget: nothing goes
+  EXPECT_EQ(PruneRectificationTables(dir, 2 * bytes), 1);
+  EXPECT_FALSE(std::filesystem::exists(files[1]));  // the least recently used
+  EXPECT_TRUE(std::filesystem::exists(files[0]));
+  EXPECT_TRUE(std::filesystem::exists(files[2]));
+  EXPECT_TRUE(std::filesystem::exists(dir / "notes.txt"));
+
+  // Reading a file is a use: after file 0 is read by a later process (the process-wide cache
+  // emptied), file 2 is the least recently used.
+  EvictSharedRectifiers(rig);
+  SharedRectifier(rig, options, dir);
+  EXPECT_GT(std::filesystem::last_write_time(files[0]),
+            std::filesystem::last_write_time(files[2]));
+  EXPECT_EQ(PruneRectificationTables(dir, bytes), 1);
+  EXPECT_TRUE(std::filesystem::exists(files[0]));
+  EXPECT_FALSE(std::filesystem::exists(files[2]));
+  // The most recently used file stays even when it alone exceeds the budget.
+  EXPECT_EQ(PruneRectificationTables(dir, 0), 0);
+  EXPECT_TRUE(std::filesystem::exists(files[0]));
+  EXPECT_EQ(PruneRectificationTables(dir / "missing", 0), 0);
   std::filesystem::remove_all(dir);
 }
 

@@ -55,4 +55,20 @@ api::JobContext LocalJobContext(const std::filesystem::path& dir, int num_thread
   return context;
 }
 
+void AddCacheDirOption(ArgParser* parser) {
+  parser->AddOption("cache-dir", "",
+                    "folder for the rig's rectification tables kept across runs (default: "
+                    "OUTDIR/../.omnirig-cache; \"none\": not kept)");
+}
+
+std::filesystem::path CacheDirFromArgs(const ArgParser& parser,
+                                       const std::filesystem::path& out_dir) {
+  const std::string given = parser.Get("cache-dir");
+  if (given == "none") return {};
+  if (!given.empty()) return given;
+  std::filesystem::path out = std::filesystem::absolute(out_dir).lexically_normal();
+  if (out.filename().empty()) out = out.parent_path();  // "OUTDIR/"
+  return out.parent_path() / ".omnirig-cache";
+}
+
 }  // namespace omnirig::cli

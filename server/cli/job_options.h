@@ -33,4 +33,12 @@ void PrintProgress(double fraction, const std::string& stage, const std::string&
 // progress (PrintProgress) and log lines on stderr.
 api::JobContext LocalJobContext(const std::filesystem::path& dir, int num_threads);
 
+// --cache-dir: where the CLI keeps files derived from inputs across runs (a rig's rectification
+// tables, CACHE/rectification, as the service keeps them in DATA/cache).
+void AddCacheDirOption(ArgParser* parser);
+// The folder --cache-dir names; by default next to the outputs (OUTDIR's parent folder /
+// ".omnirig-cache", so that runs into sibling output folders share it); empty for "none".
+std::filesystem::path CacheDirFromArgs(const ArgParser& parser,
+                                       const std::filesystem::path& out_dir);
+
 }  // namespace omnirig::cli

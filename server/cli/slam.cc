@@ -38,6 +38,7 @@ void DeclareOptions(ArgParser* args) {
   args->AddOption("o", "slam_out", "output folder");
   args->AddOption("options", "", "JSON file with the job's \"options\" object");
   args->AddOption("threads", "2", "worker threads");
+  AddCacheDirOption(args);
   args->AddOption("dense-map", "",
                   "voxel size in metres: also fuse the keyframes' dense clouds into "
                   "dense_map.ply and write occupancy.pgm/.yaml (ROS map_server)");
@@ -79,6 +80,8 @@ std::optional<dense::DenseMapOptions> DenseMapFromArgs(const ArgParser& args) {
   dense::DenseMapOptions dense_map;
   dense_map.voxel_m = args.GetDouble("dense-map");
   dense_map.occupancy_cell_m = std::max(dense_map.occupancy_cell_m, dense_map.voxel_m);
+  const fs::path cache_dir = CacheDirFromArgs(args, args.Get("o"));
+  if (!cache_dir.empty()) dense_map.rectification_tables_dir = cache_dir / "rectification";
   dense_map.Check();
   return dense_map;
 }

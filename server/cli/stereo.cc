@@ -2,12 +2,14 @@
 // `stereo_reconstruct` job type (api/stereo_job.h).
 //
 //   omnirig stereo --rig rig.json DIR -o OUTDIR [--method dense|sparse] [--options opts.json]
-//       [--threads N]
+//       [--threads N] [--cache-dir CACHE|none]
 //
 // rig.json is a relative_pose result (cam0_from_cam1 and both cameras); DIR holds cam0/NAME and
 // cam1/NAME images, paired by NAME. OUTDIR receives cloud.ply, per pair (dense)
 // NAME_range.tiff and NAME_range.png, cloud_NAME.ply with more than one pair, and result.json
-// (the job's result). opts.json holds the job's params other than "rig" and "method".
+// (the job's result). opts.json holds the job's params other than "rig" and "method". The rig's
+// rectification tables are kept in CACHE/rectification (by default OUTDIR/../.omnirig-cache),
+// so a later run of the rig reads them instead of building them.
 
 #include <filesystem>
 #include <fstream>
@@ -57,6 +59,7 @@ int RunStereo(const Args& raw_args) {
   args.AddOption("o", "stereo_out", "output folder");
   args.AddOption("options", "", "JSON file with the job's params other than rig and method");
   args.AddOption("threads", "2", "threads for the dense matcher");
+  AddCacheDirOption(&args);
   args.SetPositional("DIR",
                      "folder with cam0/ and cam1/ images, paired by name (a .tum "
                      "trajectory in it places the pairs into one merged cloud.ply)");
@@ -80,6 +83,7 @@ int RunStereo(const Args& raw_args) {
     }
   }
   context.output_dir = out_dir;
+  context.cache_dir = CacheDirFromArgs(args, out_dir);
   const std::string rig_path = args.Get("rig");
   context.load_result = [&](const std::string&) { return ReadJsonFile(rig_path, "--rig"); };
   cv::setNumThreads(threads);
