@@ -69,7 +69,7 @@ json CalibrationRefinementToJson(const slam::CalibrationRefinementReport& r,
 json TimesToJson(const slam::StageTimes& t) {
   return {{"load", t.load_s},   {"detect", t.detect_s}, {"stereo", t.stereo_s},
           {"match", t.match_s}, {"motion", t.motion_s}, {"map", t.map_s},
-          {"local_ba", t.local_ba_s}, {"loop", t.loop_s}, {"klt", t.klt_s}};
+          {"local_ba", t.local_ba_s}, {"loop", t.loop_s}};
 }
 
 // What trajectory.json and the report both say of a frame.
@@ -86,7 +86,6 @@ json FrameStateToJson(const slam::FrameReport& f) {
 json FrameToJson(const slam::FrameReport& f) {
   json out = FrameStateToJson(f);
   out.update({{"motion_source", f.motion_source},
-              {"optical_flow", f.optical_flow},
               {"num_features", {f.num_features[0], f.num_features[1]}},
               {"num_stereo_points", f.num_stereo_points},
               {"num_matches", f.num_matches},

@@ -177,7 +177,7 @@ void ProfileTracking(const BenchArgs& args, const json& rig_json, int step) {
   slam::Session session(api::RigFromJson(rig_json), options);
   slam::StageTimes total, cpu;
   double decode_s = 0, track_s = 0;
-  int frames = 0, keyframes = 0, flow_frames = 0;
+  int frames = 0, keyframes = 0;
   for (size_t i = 0; i < names.size() && frames < args.profile_frames; i += step, ++frames) {
     Timer decode;
     slam::StereoImages images;
@@ -190,22 +190,19 @@ void ProfileTracking(const BenchArgs& args, const json& rig_json, int step) {
     total.Add(report.times);
     cpu.Add(report.cpu_times);
     keyframes += report.keyframe;
-    flow_frames += report.optical_flow;
   }
   const auto ms = [frames](double s) { return 1000.0 * s / std::max(frames, 1); };
   std::printf(
-      "every %2d. frame: %3d frames, %3d keyframes, %3d by optical flow; ms per frame: decode "
-      "%.1f, track %.1f = klt %.1f + detect %.1f + stereo %.1f + match %.1f + motion %.1f + map %.1f + local BA %.1f + "
+      "every %2d. frame: %3d frames, %3d keyframes; ms per frame: decode %.1f, track %.1f = "
+      "detect %.1f + stereo %.1f + match %.1f + motion %.1f + map %.1f + local BA %.1f + "
       "loop %.1f\n",
-      step, frames, keyframes, flow_frames, ms(decode_s), ms(track_s), ms(total.klt_s),
-      ms(total.detect_s), ms(total.stereo_s),
+      step, frames, keyframes, ms(decode_s), ms(track_s), ms(total.detect_s), ms(total.stereo_s),
       ms(total.match_s), ms(total.motion_s), ms(total.map_s), ms(total.local_ba_s),
       ms(total.loop_s));
   std::printf(
-      "                 CPU ms per frame (both threads): klt %.1f + detect %.1f + stereo %.1f + match %.1f + "
+      "                 CPU ms per frame (both threads): detect %.1f + stereo %.1f + match %.1f + "
       "motion %.1f + map %.1f + local BA %.1f + loop %.1f; load average %s\n",
-      ms(cpu.klt_s), ms(cpu.detect_s), ms(cpu.stereo_s), ms(cpu.match_s), ms(cpu.motion_s),
-      ms(cpu.map_s),
+      ms(cpu.detect_s), ms(cpu.stereo_s), ms(cpu.match_s), ms(cpu.motion_s), ms(cpu.map_s),
       ms(cpu.local_ba_s), ms(cpu.loop_s), LoadAverage().c_str());
   std::fflush(stdout);
 }

@@ -289,22 +289,14 @@ int Run(const Args& args) {
   const slam::SlamResult result = slam::RunSlam(sequence.rig, sequence.names, load, options);
 
   const double cpu_s = static_cast<double>(std::clock() - cpu_start) / CLOCKS_PER_SEC;
-  // feat0/feat1: SIFT features, or (a frame tracked by optical flow, "flow") the points
-  // followed; KF: keyframe.
-  std::printf("\n%-10s %-13s %4s %2s %6s %6s %6s %6s %6s %6s %6s  %s\n", "frame", "state",
-              "by", "KF", "feat0", "feat1", "stereo", "match", "E_inl", "s_inl", "track",
-              "motion / reason");
-  int flow_frames = 0;
+  std::printf("\n%-10s %-13s %6s %6s %6s %6s %6s %6s %6s  %s\n", "frame", "state", "feat0",
+              "feat1", "stereo", "match", "E_inl", "s_inl", "track", "motion / reason");
   for (const slam::FrameReport& f : result.frames) {
-    flow_frames += f.optical_flow;
-    std::printf("%-10s %-13s %4s %2s %6d %6d %6d %6d %6d %6d %6d  %s%s\n", f.name.c_str(),
-                f.state.c_str(), f.optical_flow ? "flow" : "sift", f.keyframe ? "K" : "",
-                f.num_features[0], f.num_features[1], f.num_stereo_points, f.num_matches,
-                f.num_essential_inliers, f.num_scale_inliers, f.num_tracked_landmarks,
-                f.motion_source.c_str(), f.reason.c_str());
+    std::printf("%-10s %-13s %6d %6d %6d %6d %6d %6d %6d  %s%s\n", f.name.c_str(),
+                f.state.c_str(), f.num_features[0], f.num_features[1], f.num_stereo_points,
+                f.num_matches, f.num_essential_inliers, f.num_scale_inliers,
+                f.num_tracked_landmarks, f.motion_source.c_str(), f.reason.c_str());
   }
-  std::printf("frames tracked by optical flow (no SIFT): %d of %zu\n", flow_frames,
-              result.frames.size());
 
   std::vector<Rigid3d> estimate, truth;
   for (size_t i = 0; i < result.frames.size(); ++i) {
@@ -364,8 +356,7 @@ int Run(const Args& args) {
                  : args.decode       ? "load (PNG decode)"
                                      : "load",
                  t.load_s, c.load_s},
-                {"pyramids + optical flow (KLT)", t.klt_s, c.klt_s},
-                {"detect (SIFT)", t.detect_s, c.detect_s},
+                {"detect (mask + SIFT)", t.detect_s, c.detect_s},
                 {"stereo match + triangulate", t.stereo_s, c.stereo_s},
                 {"temporal match", t.match_s, c.match_s},
                 {"motion (E + scale + pose)", t.motion_s, c.motion_s},

@@ -445,10 +445,6 @@ int RunLoopBench(int argc, char** argv) {
     if (f.state != "tracked") std::printf("frame %s: %s %s\n", f.name.c_str(), f.state.c_str(), f.reason.c_str());
   }
   const slam::StageTimes& c = result.cpu_stage_totals;
-  int flow_frames = 0;
-  for (const slam::FrameReport& f : result.frames) flow_frames += f.optical_flow;
-  std::printf("frames tracked by optical flow (no SIFT): %d of %d\n", flow_frames, n);
-  std::printf("CPU ms per frame: klt %.1f\n", 1e3 * c.klt_s / n);
   std::printf("CPU s: load %.1f detect %.1f stereo %.1f match %.1f motion %.1f map %.1f local BA %.1f "
               "loop %.1f global BA %.1f\n", c.load_s, c.detect_s, c.stereo_s, c.match_s, c.motion_s,
               c.map_s, c.local_ba_s, c.loop_s, result.global_ba_cpu_s);

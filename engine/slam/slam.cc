@@ -50,17 +50,8 @@ void StereoMatchOptions::Check() const {
   OMNIRIG_CHECK_POSITIVE(max_range_m);
 }
 
-void OpticalFlowOptions::Check() const {
-  OMNIRIG_CHECK_AT_LEAST(window_px, 5);
-  OMNIRIG_CHECK_NON_NEGATIVE(pyramid_levels);
-  OMNIRIG_CHECK_POSITIVE(max_forward_backward_error_px);
-  OMNIRIG_CHECK_AT_LEAST(min_tracked_landmarks, 3);
-  OMNIRIG_CHECK_POSITIVE(max_association_px);
-}
-
 void SlamOptions::Check() const {
   features.Check();
-  optical_flow.Check();
   stereo.Check();
   essential.Check();
   scale.Check();
@@ -104,7 +95,6 @@ void StageTimes::Add(const StageTimes& o) {
   map_s += o.map_s;
   local_ba_s += o.local_ba_s;
   loop_s += o.loop_s;
-  klt_s += o.klt_s;
 }
 
 StereoImages ReadBoth(const std::function<cv::Mat(int camera)>& read) {

@@ -77,27 +77,8 @@ struct StereoMatchOptions {
   void Check() const;
 };
 
-// The frames between keyframes: the landmarks the last frame sees in each camera followed into
-// the new frame by pyramidal Lucas-Kanade (cv::calcOpticalFlowPyrLK, as basalt's and VINS's front
-// ends do), the pose refined against them. SIFT runs only where a keyframe is made, tracking by
-// flow fails, or the frame must be relocalised.
-struct OpticalFlowOptions {
-  int window_px = 21;
-  int pyramid_levels = 3;  // above full resolution
-  // A point tracked back into the last frame must land this close to where it started.
-  double max_forward_backward_error_px = 0.5;
-  // Fewer landmarks confirmed than this: the frame is tracked with SIFT instead.
-  int min_tracked_landmarks = 50;
-  // A frame that needs a keyframe takes the SIFT path; its features nearer than this to a point
-  // flow followed take on that point's landmark, so that the keyframe holds every landmark the
-  // frames since the last keyframe tracked (SIFT matches with that keyframe find fewer).
-  double max_association_px = 1.5;
-  void Check() const;
-};
-
 struct SlamOptions {
   FeatureOptions features;
-  OpticalFlowOptions optical_flow;
   StereoMatchOptions stereo;
   double temporal_max_descriptor_ratio = 0.8;
   // Temporal candidates must lie within this angle of the feature's bearing turned by the last
@@ -196,14 +177,10 @@ StereoImages ReadBoth(const std::function<cv::Mat(int camera)>& read);
 struct StageTimes {
   double load_s = 0, detect_s = 0, stereo_s = 0, match_s = 0, motion_s = 0, map_s = 0,
          local_ba_s = 0;
-  // Optical flow: the last frame's landmarks followed by KLT, the pose refined against them and
-  // the keyframe decision (frames tracked by flow; a frame flow could not take on pays it too).
-  double klt_s = 0;
   // Place recognition, loop verification and closure, relocalisation, re-linking.
   double loop_s = 0;
   double Total() const {
-    return load_s + detect_s + stereo_s + match_s + motion_s + map_s + local_ba_s + loop_s +
-           klt_s;
+    return load_s + detect_s + stereo_s + match_s + motion_s + map_s + local_ba_s + loop_s;
   }
   void Add(const StageTimes& other);
 };
@@ -220,9 +197,6 @@ struct FrameReport {
   // continue a motion prediction.
   bool linked = false;
   bool keyframe = false;  // entered the map
-  // Tracked by optical flow from the last frame (OpticalFlowOptions), without SIFT: its
-  // num_features are the points followed, it has no stereo points or descriptor matches.
-  bool optical_flow = false;
   // With a saved map: the frame is localised in it, i.e. linked to its world and confirming at
   // least min_tracked_landmarks of its landmarks (false without a saved map).
   bool in_map = false;

@@ -74,42 +74,6 @@ TEST_F(SlamOnShortSequence, TracksEveryFrameInTheFirstFramesWorld) {
   EXPECT_LT(accuracy.map_median_percent_of_range, 1.0);
 }
 
-TEST_F(SlamOnShortSequence, FramesBetweenKeyframesAreTrackedByOpticalFlowWithoutSift) {
-  const SlamOptions options = Options();
-  const SlamResult result = RunSlam(sequence_->rig, sequence_->names, Loader(), options);
-  ASSERT_EQ(result.frames.size(), sequence_->names.size());
-  int flow_frames = 0;
-  for (const FrameReport& frame : result.frames) {
-    ASSERT_TRUE(frame.world_from_rig.has_value()) << frame.name;
-    if (frame.optical_flow) {
-      ++flow_frames;
-      // The landmarks followed from the last frame, the pose refined on them; no SIFT.
-      EXPECT_EQ(frame.state, "tracked") << frame.name;
-      EXPECT_FALSE(frame.keyframe) << frame.name;
-      EXPECT_EQ(frame.cpu_times.detect_s, 0.0) << frame.name;
-      EXPECT_EQ(frame.num_stereo_points, 0) << frame.name;
-      EXPECT_GT(frame.cpu_times.klt_s, 0.0) << frame.name;
-      EXPECT_GE(frame.num_tracked_landmarks, options.optical_flow.min_tracked_landmarks)
-          << frame.name;
-    } else {
-      // SIFT where the map grows: every keyframe has its features.
-      EXPECT_GT(frame.cpu_times.detect_s, 0.0) << frame.name;
-      EXPECT_GT(frame.num_stereo_points, 0) << frame.name;
-    }
-    if (frame.keyframe) {
-      EXPECT_FALSE(frame.optical_flow) << frame.name;
-    }
-  }
-  // The first frame and the last are keyframes. Measured: 2 of the 8 between tracked by flow
-  // (a young map makes a keyframe every other frame; 33 of 40 on bench_slam's 40 frames).
-  EXPECT_FALSE(result.frames.front().optical_flow);
-  EXPECT_FALSE(result.frames.back().optical_flow);
-  EXPECT_GE(flow_frames, 2);
-  const SequenceAccuracy accuracy = EvaluateOnSequence(*sequence_, result, sequence_->rig);
-  EXPECT_LT(accuracy.trajectory.final_drift_percent, 1.0);
-  EXPECT_LT(accuracy.map_median_percent_of_range, 1.0);
-}
-
 TEST_F(SlamOnShortSequence, ABlackFrameIsLostWithItsReasonAndTheRunGoesOn) {
   const int black = 4;
   const SlamResult result = RunSlam(sequence_->rig, sequence_->names, Loader(black), Options());

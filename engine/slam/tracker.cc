@@ -6,10 +6,6 @@
 #include <set>
 #include <thread>
 
-#include <opencv2/video/tracking.hpp>
-
-#include "engine/features/image.h"
-#include "engine/geometry/unified_camera.h"
 #include "engine/util/check.h"
 
 namespace omnirig::slam::internal {
@@ -62,6 +58,10 @@ bool Tracker::DetectAndMatchStereo(const StereoImages& images, bool parallel_cam
   const cv::Mat* image[2] = {&images.cam0, &images.cam1};
   const CameraModel* camera[2] = {&rig_.cam0, &rig_.cam1};
   StageClock timer;
+  if (!CheckImages(images, report)) {
+    timer.ChargeTo(&StageTimes::detect_s, report);
+    return false;
+  }
   std::exception_ptr failure[2];
   double helper_cpu_s = 0;  // cam1's detection on its own thread
   auto detect = [&](int c) {
@@ -267,40 +267,7 @@ std::vector<std::pair<int, int>> Tracker::MatchKeyframeLandmarks(int keyframe,
   return landmark_of_feature;
 }
 
-std::vector<std::pair<int, int>> Tracker::FlowLandmarksOfFeatures(const Frame& flow,
-                                                                  const Frame& frame) const {
-  const double max_sq =
-      options_.optical_flow.max_association_px * options_.optical_flow.max_association_px;
-  // Features by pixel row band, for the nearest within the radius.
-  std::multimap<int, int> by_row;
-  const std::vector<Eigen::Vector2d>& pixels = frame.features[0].pixels;
-  for (int f = 0; f < frame.features[0].size(); ++f) {
-    by_row.emplace(static_cast<int>(std::floor(pixels[f].y())), f);
-  }
-  std::vector<std::pair<int, int>> landmark_of_feature;
-  std::set<int> taken;
-  for (int p = 0; p < flow.features[0].size(); ++p) {
-    const int id = flow.landmark_of[0][p];
-    if (id < 0 || !map_.landmarks[id].valid) continue;
-    const Eigen::Vector2d& at = flow.features[0].pixels[p];
-    const double radius = options_.optical_flow.max_association_px;
-    int best = -1;
-    double best_sq = max_sq;
-    for (auto it = by_row.lower_bound(static_cast<int>(std::floor(at.y() - radius)));
-         it != by_row.end() && it->first <= at.y() + radius; ++it) {
-      const double sq = (pixels[it->second] - at).squaredNorm();
-      if (sq <= best_sq) {
-        best_sq = sq;
-        best = it->second;
-      }
-    }
-    if (best >= 0 && taken.insert(best).second) landmark_of_feature.emplace_back(best, id);
-  }
-  return landmark_of_feature;
-}
-
-void Tracker::TrackLocalMap(Frame* frame, FrameReport* report,
-                            const std::vector<std::pair<int, int>>& also) {
+void Tracker::TrackLocalMap(Frame* frame, FrameReport* report) {
   StageClock timer;
   std::vector<std::pair<int, int>> covisible = CovisibleKeyframes(frame->landmark_of[0]);
   std::set<int> known;  // landmarks the frame holds or gained here
@@ -314,11 +281,6 @@ void Tracker::TrackLocalMap(Frame* frame, FrameReport* report,
   const size_t tracked = landmark_of_feature.size();
   std::vector<char> feature_taken(frame->features[0].size(), 0);
   for (const auto& [f, id] : landmark_of_feature) feature_taken[f] = 1;
-  for (const auto& [f, id] : also) {
-    if (feature_taken[f] || !known.insert(id).second) continue;
-    feature_taken[f] = 1;
-    landmark_of_feature.emplace_back(f, id);
-  }
   // The keyframes of an earlier passage among them: on a first passage the frame tracks the
   // recent keyframes' landmarks from the last frame already.
   int num_local = 0;
@@ -474,15 +436,12 @@ void Tracker::LocalBundleAdjustment(int keyframe, FrameReport* report) {
   timer.ChargeTo(&StageTimes::local_ba_s, report);
 }
 
-bool Tracker::TrackAgainst(const Frame& reference, const Rigid3d& predicted_rig_from_world,
-                           Frame* frame, std::vector<std::pair<int, int>>* matches,
-                           FrameReport* report) {
+bool Tracker::TrackAgainst(const Frame& reference, Frame* frame,
+                           std::vector<std::pair<int, int>>* matches, FrameReport* report) {
   for (int c = 0; c < 2; ++c) frame->landmark_of[c].assign(frame->features[c].size(), -1);
   StageClock timer;
-  const Rigid3d predicted_step =
-      predicted_rig_from_world * map_.rig_from_world[reference.index].Inverse();
   *matches = MatchDescriptorsGated(reference.features[0], frame->features[0],
-                                   predicted_step.RotationMatrix(), options_.temporal_gate_rad,
+                                   last_step_.RotationMatrix(), options_.temporal_gate_rad,
                                    options_.temporal_max_descriptor_ratio,
                                    options_.stereo.max_descriptor_distance);
   if (static_cast<int>(matches->size()) < options_.min_matches) {
@@ -510,140 +469,18 @@ Tracker::FrontEndResult Tracker::FrontEnd(int index, const std::string& name,
                                           const StereoFrameLoader& load, bool parallel_cameras) {
   FrontEndResult front;
   front.report.name = name;
-  front.parallel_cameras = parallel_cameras;
-  StageClock timer;
+  const StageClock load_timer;
   front.frame.index = first_frame_ + index;
-  front.images = load(index);
-  timer.ChargeTo(&StageTimes::load_s, &front.report);
-  timer.Restart();
-  front.usable = CheckImages(front.images, &front.report);
-  if (front.usable) {
-    const cv::Mat* image[2] = {&front.images.cam0, &front.images.cam1};
-    const cv::Size window(options_.optical_flow.window_px, options_.optical_flow.window_px);
-    for (int c = 0; c < 2; ++c) {
-      cv::buildOpticalFlowPyramid(ToGreyscale8(*image[c]), front.frame.pyramid[c], window,
-                                  options_.optical_flow.pyramid_levels);
-    }
-  }
-  timer.ChargeTo(&StageTimes::klt_s, &front.report);
+  const StereoImages images = load(index);
+  load_timer.ChargeTo(&StageTimes::load_s, &front.report);
+  front.usable = DetectAndMatchStereo(images, parallel_cameras, &front.frame, &front.report);
   return front;
 }
 
-void Tracker::FollowLandmarks(const Frame& previous, const Frame& anchor, int camera,
-                              const Rigid3d& predicted_rig_from_world, Frame* frame) const {
-  const CameraModel& model = camera == 0 ? rig_.cam0 : rig_.cam1;
-  const Rigid3d cam_from_world =
-      camera == 0 ? predicted_rig_from_world
-                  : rig_.cam0_from_cam1.Inverse() * predicted_rig_from_world;
-  std::vector<cv::Point2f> from, to, from_anchor;
-  std::vector<int> landmark_ids;
-  auto point = [](const Eigen::Vector2d& p) {
-    return cv::Point2f(static_cast<float>(p.x()), static_cast<float>(p.y()));
-  };
-  for (int f = 0; f < previous.features[camera].size(); ++f) {
-    const int id = previous.landmark_of[camera][f];
-    if (id < 0 || !map_.landmarks[id].valid) continue;
-    from.push_back(point(previous.features[camera].pixels[f]));
-    from_anchor.push_back(previous.optical_flow ? point(previous.anchor_px[camera][f])
-                                                : from.back());
-    // The prediction starts the search: at 20 Hz on the street the flow is tens of pixels.
-    const std::optional<Eigen::Vector2d> predicted =
-        Project(model.intrinsics, cam_from_world * map_.landmarks[id].point_in_world);
-    to.push_back(predicted ? point(*predicted) : from.back());
-    landmark_ids.push_back(id);
-  }
-  CameraFeatures& features = frame->features[camera];
-  features = CameraFeatures();
-  frame->landmark_of[camera].clear();
-  frame->anchor_px[camera].clear();
-  if (from.empty()) return;
-  const OpticalFlowOptions& flow = options_.optical_flow;
-  const cv::Size window(flow.window_px, flow.window_px);
-  const cv::TermCriteria criteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 30, 0.01);
-  std::vector<uchar> status, back_status, anchor_status;
-  std::vector<float> error;
-  cv::calcOpticalFlowPyrLK(previous.pyramid[camera], frame->pyramid[camera], from, to, status,
-                           error, window, flow.pyramid_levels, criteria,
-                           cv::OPTFLOW_USE_INITIAL_FLOW);
-  std::vector<cv::Point2f> back = from;
-  cv::calcOpticalFlowPyrLK(frame->pyramid[camera], previous.pyramid[camera], to, back,
-                           back_status, error, window, flow.pyramid_levels, criteria,
-                           cv::OPTFLOW_USE_INITIAL_FLOW);
-  std::vector<cv::Point2f> aligned = to;
-  const bool use_anchor = previous.optical_flow;
-  if (use_anchor) {
-    cv::calcOpticalFlowPyrLK(anchor.pyramid[camera], frame->pyramid[camera], from_anchor,
-                             aligned, anchor_status, error, window, 0, criteria,
-                             cv::OPTFLOW_USE_INITIAL_FLOW);
-  }
-  const cv::Mat& mask = masks_[camera];
-  const double max_sq = flow.max_forward_backward_error_px * flow.max_forward_backward_error_px;
-  for (size_t i = 0; i < from.size(); ++i) {
-    if (!status[i] || !back_status[i]) continue;
-    const cv::Point2f d = back[i] - from[i];
-    if (d.x * d.x + d.y * d.y > max_sq) continue;
-    if (use_anchor) {
-      // The patch where the chain began agrees within a pixel, or the point is dropped.
-      const cv::Point2f a = aligned[i] - to[i];
-      if (!anchor_status[i] || a.x * a.x + a.y * a.y > 1.0) continue;
-    }
-    const int u = static_cast<int>(std::lround(aligned[i].x));
-    const int v = static_cast<int>(std::lround(aligned[i].y));
-    if (u < 0 || v < 0 || u >= model.width || v >= model.height) continue;
-    if (!mask.empty() && mask.at<std::uint8_t>(v, u) == 0) continue;
-    const Eigen::Vector2d pixel(aligned[i].x, aligned[i].y);
-    const std::optional<Eigen::Vector3d> bearing = Lift(model.intrinsics, pixel);
-    if (!bearing) continue;
-    features.pixels.push_back(pixel);
-    features.bearings.push_back(bearing->normalized());
-    frame->landmark_of[camera].push_back(landmark_ids[i]);
-    frame->anchor_px[camera].emplace_back(from_anchor[i].x, from_anchor[i].y);
-  }
-}
-
-bool Tracker::TrackOpticalFlow(const Frame& previous, Frame* frame, FrameReport* report) {
-  StageClock timer;
-  frame->optical_flow = true;
-  Rigid3d& rig_from_world = map_.rig_from_world[frame->index];
-  rig_from_world = last_step_ * map_.rig_from_world[previous.index];
-  std::vector<Observation> observations;
-  std::vector<Eigen::Vector3d> points;
-  for (int c = 0; c < 2; ++c) {
-    FollowLandmarks(previous, *last_with_features_, c, rig_from_world, frame);
-    for (int f = 0; f < frame->features[c].size(); ++f) {
-      observations.push_back({frame->index, c, f, frame->features[c].pixels[f]});
-      points.push_back(map_.landmarks[frame->landmark_of[c][f]].point_in_world);
-    }
-    report->num_features[c] = frame->features[c].size();
-  }
-  bool tracked = false;
-  if (static_cast<int>(observations.size()) >= options_.optical_flow.min_tracked_landmarks) {
-    std::vector<bool> inliers;
-    rig_from_world = RefineRigPose(rig_, rig_from_world, observations, points,
-                                   options_.bundle_adjustment, &inliers);
-    // The outliers leave the frame: the next one follows the confirmed landmarks only.
-    std::set<int> confirmed;
-    for (size_t i = 0; i < observations.size(); ++i) {
-      const Observation& o = observations[i];
-      int& id = frame->landmark_of[o.camera][o.feature];
-      if (inliers[i]) {
-        confirmed.insert(id);
-      } else {
-        id = -1;
-      }
-    }
-    report->num_tracked_landmarks = static_cast<int>(confirmed.size());
-    tracked = report->num_tracked_landmarks >= options_.optical_flow.min_tracked_landmarks;
-  }
-  if (tracked) {
-    DecideKeyframe(CovisibleKeyframes(frame->landmark_of[0]), frame, *report);
-  }
-  timer.ChargeTo(&StageTimes::klt_s, report);
-  return tracked;
-}
-
 FrameReport Tracker::BackEnd(FrontEndResult front, bool last_frame) {
-  const int index = front.frame.index;
+  FrameReport report = std::move(front.report);
+  Frame frame = std::move(front.frame);
+  const int index = frame.index;
   map_.AddFrame();
   keyframe_of_frame_.push_back(-1);
   rig_from_keyframe_.emplace_back();
@@ -651,58 +488,19 @@ FrameReport Tracker::BackEnd(FrontEndResult front, bool last_frame) {
   OMNIRIG_CHECK(map_.has_pose.size() == static_cast<size_t>(index) + 1,
                 "frames must reach the back end in order");
   if (!front.usable) {
-    front.report.state = "lost";
-    return front.report;
-  }
-  Rigid3d predicted_rig_from_world;
-  if (last_) predicted_rig_from_world = last_step_ * map_.rig_from_world[last_->index];
-  // Between keyframes the landmarks are followed by optical flow; a frame that needs a
-  // keyframe (or that flow cannot track) takes the SIFT path, from flow's pose when it has one.
-  if (last_ && !last_frame) {
-    Frame frame;
-    frame.index = index;
-    for (int c = 0; c < 2; ++c) frame.pyramid[c] = front.frame.pyramid[c];
-    FrameReport report = front.report;
-    const bool tracked = TrackOpticalFlow(*last_, &frame, &report);
-    if (tracked && !frame.keyframe_decision.needs_keyframe) {
-      report.state = "tracked";
-      report.optical_flow = true;
-      report.linked = last_linked_;
-      last_step_ = map_.rig_from_world[index] * map_.rig_from_world[last_->index].Inverse();
-      Conclude(std::move(frame), &report);
-      return report;
-    }
-    front.report.times.klt_s = report.times.klt_s;
-    front.report.cpu_times.klt_s = report.cpu_times.klt_s;
-    if (tracked) {
-      predicted_rig_from_world = map_.rig_from_world[index];
-      return TrackWithFeatures(std::move(front), predicted_rig_from_world, &frame, last_frame);
-    }
-  }
-  return TrackWithFeatures(std::move(front), predicted_rig_from_world, nullptr, last_frame);
-}
-
-FrameReport Tracker::TrackWithFeatures(FrontEndResult front,
-                                       const Rigid3d& predicted_rig_from_world, const Frame* flow,
-                                       bool last_frame) {
-  FrameReport report = std::move(front.report);
-  Frame frame = std::move(front.frame);
-  const int index = frame.index;
-  if (!DetectAndMatchStereo(front.images, front.parallel_cameras, &frame, &report)) {
     report.state = "lost";
     return report;
   }
   for (int c = 0; c < 2; ++c) frame.landmark_of[c].assign(frame.features[c].size(), -1);
   std::vector<std::pair<int, int>> matches;
-  // Where a re-initialised frame starts: the motion estimate when there is one, else the
-  // prediction from the last tracked frame.
+  // Where a re-initialised frame starts: the motion estimate when there is one, else a
+  // constant-velocity prediction from the last tracked frame.
   std::optional<Rigid3d> restart_pose;
   const Frame* reference = nullptr;
   if (last_) {
-    restart_pose = predicted_rig_from_world;
-    if (TrackAgainst(*last_with_features_, predicted_rig_from_world, &frame, &matches,
-                     &report)) {
-      reference = &*last_with_features_;
+    restart_pose = last_step_ * map_.rig_from_world[last_->index];
+    if (TrackAgainst(*last_, &frame, &matches, &report)) {
+      reference = &*last_;
       report.linked = last_linked_;
       report.state = "tracked";
       last_step_ = map_.rig_from_world[index] * map_.rig_from_world[last_->index].Inverse();
@@ -710,58 +508,33 @@ FrameReport Tracker::TrackWithFeatures(FrontEndResult front,
       restart_pose = map_.rig_from_world[index];
     }
   }
-  std::vector<std::pair<int, int>> flow_landmarks;
-  if (flow) flow_landmarks = FlowLandmarksOfFeatures(*flow, frame);
-  if (!reference && flow &&
-      static_cast<int>(flow_landmarks.size()) >= options_.optical_flow.min_tracked_landmarks) {
-    // The SIFT matches failed where flow did not: the frame keeps flow's pose and landmarks.
-    map_.rig_from_world[index] = predicted_rig_from_world;
-    FrameReport attempt = report;
-    if (RefineAgainstLandmarks(flow_landmarks, &frame, &attempt)) {
-      report = attempt;
-      report.reason.clear();
-      report.linked = last_linked_;
-      report.state = "tracked";
-      last_step_ = map_.rig_from_world[index] * map_.rig_from_world[last_->index].Inverse();
-      reference = &*last_with_features_;
-      matches.clear();
-    } else {
-      for (int c = 0; c < 2; ++c) frame.landmark_of[c].assign(frame.features[c].size(), -1);
-    }
-  }
   if (!reference) reference = Relocalise(&frame, &matches, &report);
   if (reference) {
-    TrackLocalMap(&frame, &report, flow_landmarks);
+    TrackLocalMap(&frame, &report);
   } else {
     Restart(restart_pose, &frame, &matches, &report);
   }
+  map_.has_pose[index] = true;
   ChainTo(reference, matches, &frame);
   frame.keyframe =
       report.state != "tracked" || last_frame || frame.keyframe_decision.needs_keyframe;
-  Conclude(std::move(frame), &report);
-  return report;
-}
-
-void Tracker::Conclude(Frame frame, FrameReport* report) {
-  const int index = frame.index;
-  map_.has_pose[index] = true;
   if (frame.keyframe) {
-    AddKeyframe(&frame, report);
+    AddKeyframe(&frame, &report);
   } else {
     const int keyframe = frame.keyframe_decision.reference_keyframe;
     keyframe_of_frame_[index] = keyframe;
     rig_from_keyframe_[index] =
         map_.rig_from_world[index] * map_.rig_from_world[keyframe].Inverse();
   }
-  report->keyframe = frame.keyframe;
-  report->in_map = report->linked && InSavedMap(frame);
+  report.keyframe = frame.keyframe;
+  report.in_map = report.linked && InSavedMap(frame);
   const int reference_keyframe = frame.keyframe_decision.reference_keyframe;
-  report->reference_keyframe =
+  report.reference_keyframe =
       reference_keyframe >= first_frame_ ? reference_keyframe - first_frame_ : -1;
-  linked_[index] = report->linked;
-  last_linked_ = report->linked;
-  if (!frame.optical_flow) last_with_features_ = frame;
+  linked_[index] = report.linked;
+  last_linked_ = report.linked;
   last_ = std::move(frame);
+  return report;
 }
 
 void Tracker::ChainTo(const Frame* reference, const std::vector<std::pair<int, int>>& matches,

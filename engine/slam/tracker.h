@@ -95,14 +95,6 @@ struct Frame {
   // them before the frame becomes a keyframe, which needs them again).
   std::optional<BowVector> bow;
   std::vector<int> words;
-  // Each camera's grey image pyramid (cv::buildOpticalFlowPyramid), for following the frame's
-  // landmarks into the next one. A frame tracked by optical flow has features without
-  // descriptors (the points followed, each with its landmark) and no stereo points.
-  std::vector<cv::Mat> pyramid[2];
-  bool optical_flow = false;
-  // Tracked by optical flow: per feature, its pixel in the last frame with SIFT features, where
-  // the chain of frames that followed it began.
-  std::vector<Eigen::Vector2d> anchor_px[2];
 };
 
 struct StoredKeyframe {
@@ -139,14 +131,11 @@ class Tracker {
     if (options.saved_map) LoadMap(*options.saved_map);
   }
 
-  // The per-frame half that needs no map: load, mask, the grey pyramids. Runs one frame ahead
-  // of BackEnd() on a worker thread; never two FrontEnd() calls at once. The SIFT features
-  // are the back end's to extract, for the frames that need them.
+  // The per-frame half that needs no map: load, mask, features, stereo points. Runs one frame
+  // ahead of BackEnd() on a worker thread; never two FrontEnd() calls at once.
   struct FrontEndResult {
     Frame frame;
     FrameReport report;
-    StereoImages images;
-    bool parallel_cameras = false;
     bool usable = false;
   };
   FrontEndResult FrontEnd(int index, const std::string& name, const StereoFrameLoader& load,
@@ -174,33 +163,10 @@ class Tracker {
   // Returns false (with report->reason) when the frame has too little to work with.
   bool DetectAndMatchStereo(const StereoImages& images, bool parallel_cameras, Frame* frame,
                             FrameReport* report);
-  // Follows the landmarks `previous` sees into `frame` by KLT (both cameras), refines the
-  // frame's pose against them from the constant-velocity prediction and, when at least
-  // options_.optical_flow.min_tracked_landmarks are confirmed, makes the keyframe decision.
-  // False when too few are confirmed. Charged to StageTimes::klt_s.
-  bool TrackOpticalFlow(const Frame& previous, Frame* frame, FrameReport* report);
-  // Camera `camera`'s features of `previous` that see landmarks, followed into `frame` (its
-  // pyramid) from where `predicted_rig_from_world` projects them: forward-backward checked,
-  // inside the image and the mirror mask, lifted, then aligned once more with the patch where
-  // the chain began (`anchor`'s), so that the steps' errors do not add up along the chain.
-  // Fills frame->features[camera] (no descriptors), landmark_of[camera] and anchor_px[camera].
-  void FollowLandmarks(const Frame& previous, const Frame& anchor, int camera,
-                       const Rigid3d& predicted_rig_from_world, Frame* frame) const;
-  // The SIFT path: features and stereo points, tracking against the last frame with SIFT
-  // features (`predicted_rig_from_world`: where the frame is expected), relocalisation or a new
-  // segment, and the keyframe.
-  // `flow`: the frame as optical flow tracked it (nullptr: it did not), whose landmarks the
-  // features take on.
-  FrameReport TrackWithFeatures(FrontEndResult front, const Rigid3d& predicted_rig_from_world,
-                                const Frame* flow, bool last_frame);
-  // The end of a tracked frame's BackEnd(): a keyframe enters the map, a non-keyframe keeps its
-  // pose relative to its reference keyframe; the frame becomes the last one.
-  void Conclude(Frame frame, FrameReport* report);
   // Matches `frame` with `reference` (the last tracked frame), estimates the motion between
   // them and refines the pose against the landmarks tracked into the reference. `matches` are
   // (reference feature, frame feature) in cam0; false with report->reason on failure.
-  // `predicted_rig_from_world` gates the matches (the rotation it implies since the reference).
-  bool TrackAgainst(const Frame& reference, const Rigid3d& predicted_rig_from_world, Frame* frame,
+  bool TrackAgainst(const Frame& reference, Frame* frame,
                     std::vector<std::pair<int, int>>* matches, FrameReport* report);
   // Estimates curr_from_prev with E + scale (or 3D-3D); false with the reason on failure.
   bool EstimateMotion(const Frame& reference, const Frame& frame,
@@ -219,14 +185,8 @@ class Tracker {
   // matched within options_.map_gate_rad, join the ones tracked from the last frame; the pose is
   // refined against all of them. Sets frame->keyframe_decision. After a loop to a mapped place,
   // this carries tracking onto the old keyframes' landmarks, so that the revisit is covered by
-  // the map it already has. `also`: more (frame's cam0 feature, landmark) pairs to join them
-  // (the landmarks optical flow followed into the frame).
-  void TrackLocalMap(Frame* frame, FrameReport* report,
-                     const std::vector<std::pair<int, int>>& also = {});
-  // The landmarks optical flow followed into `flow` (the same frame), given to the frame's
-  // SIFT features in cam0 that lie within max_association_px of them: (feature, landmark).
-  std::vector<std::pair<int, int>> FlowLandmarksOfFeatures(const Frame& flow,
-                                                           const Frame& frame) const;
+  // the map it already has.
+  void TrackLocalMap(Frame* frame, FrameReport* report);
   // Sets frame->keyframe_decision from the keyframes sharing landmarks with the frame
   // (CovisibleKeyframes(), most first).
   void DecideKeyframe(const std::vector<std::pair<int, int>>& covisible, Frame* frame,
@@ -300,9 +260,6 @@ class Tracker {
   const Vocabulary& vocabulary_;
   SlamMap map_;
   std::optional<Frame> last_;  // the last tracked frame
-  // The last tracked frame with SIFT features (last_ unless that was tracked by optical flow):
-  // the SIFT path matches its descriptors.
-  std::optional<Frame> last_with_features_;
   bool last_linked_ = false;
   Rigid3d last_step_;  // curr_from_prev of the last tracked step: the motion prior
   cv::Mat masks_[2];
