@@ -68,8 +68,9 @@ struct LiveFrame {
   // the images' extension, e.g. "t000012.345.png".
   std::string name;
   double stamp_s = 0;
-  // The images, decoded by the job's thread: each camera's file bytes, or (a stacked frame,
-  // split when it was stored) the decoded images.
+  // Each camera's file bytes and its decoded image (decoded by the HTTP request's thread, so that
+  // the job's thread only tracks; a stacked frame is split and decoded when it is stored). An
+  // image left undecoded is decoded by the job's thread, which refuses it if it cannot be.
   std::string encoded[2];
   cv::Mat decoded[2];
   std::chrono::steady_clock::time_point received = std::chrono::steady_clock::now();

@@ -12,6 +12,7 @@
 #include "api/live_slam.h"
 #include "api/service_json.h"
 #include "api/slam_job.h"
+#include "engine/features/image.h"
 #include "engine/slam/video_source.h"
 #include "engine/util/check.h"
 #include "server/json_views.h"
@@ -199,6 +200,14 @@ PreparedFrame PrepareFrame(const std::map<std::string, FramePart>& parts, const 
                           extension[1] + ")");
     }
     prepared.frame->name = stem + extension[0];
+    // Decoded here, on the request's thread (cam1 beside it), so that the job's thread only
+    // tracks. An image that does not decode stays encoded: the job refuses it (422
+    // invalid_frame) after it is stored, as it refuses any frame it cannot track.
+    std::future<cv::Mat> cam1 = std::async(std::launch::async, [&prepared] {
+      return DecodeImageBgr(prepared.frame->encoded[1]);
+    });
+    prepared.frame->decoded[0] = DecodeImageBgr(prepared.frame->encoded[0]);
+    prepared.frame->decoded[1] = cam1.get();
     return prepared;
   }
   const FramePart& part = parts.at("stacked");
