@@ -33,6 +33,7 @@ OptionTable OptionTableOf(ImageCalibrationOptions* o) {
           {"try_enhanced", &o->detect.try_enhanced},
           {"allow_exhaustive", &o->detect.allow_exhaustive},
           {"redetect", &o->redetect_with_model},
+          {"max_views", &o->selection.max_views},
           {"overlay_error_scale", &o->overlay_error_scale}};
 }
 
@@ -131,6 +132,31 @@ json ImageToJson(const CalibrationImageReport& image) {
   return out;
 }
 
+// "frames": what became of every image or frame, in input order: {"name", "used", "reason"},
+// with "duplicate_of" for a near duplicate and "detail" where there is more to say.
+json FramesToJson(const std::vector<FrameReport>& frames) {
+  json out = json::array();
+  for (const FrameReport& frame : frames) {
+    json entry = {{"name", frame.name}, {"used", frame.used}, {"reason", frame.reason}};
+    if (!frame.duplicate_of.empty()) entry["duplicate_of"] = frame.duplicate_of;
+    if (!frame.detail.empty()) entry["detail"] = frame.detail;
+    out.push_back(std::move(entry));
+  }
+  return out;
+}
+
+// "frame_selection": the cap on a long input's views (null: short enough for every view) and
+// the frames per reason.
+json FrameSelectionToJson(const CalibrationReport& report) {
+  json counts = json::object();
+  for (const FrameReport& frame : report.frames) {
+    counts[frame.reason] = counts.value(frame.reason, 0) + 1;
+  }
+  return {{"max_views", report.max_views > 0 ? json(report.max_views) : json(nullptr)},
+          {"num_frames", report.frames.size()},
+          {"reasons", counts}};
+}
+
 }  // namespace
 
 CalibrationRequest CalibrationRequestFromJson(const json& params) {
@@ -216,6 +242,8 @@ json CalibrationReportToJson(const CalibrationReport& report) {
         {"covariance", report.timings.covariance_s},
         {"calibrate_total", report.timings.total_s}}}};
   if (report.svp) result["svp"] = SvpToJson(report);
+  result["frames"] = FramesToJson(report.frames);
+  result["frame_selection"] = FrameSelectionToJson(report);
   return result;
 }
 

@@ -44,6 +44,10 @@ TEST(CalibrationJob, RunsOnTheVmrSetWithOverlays) {
   EXPECT_EQ(result["num_views_used"], 10);
   EXPECT_LT(result["rms_px"].get<double>(), 0.5);
   EXPECT_GT(solve_reports, 3);
+  // A short input: every image detected and used, no cap.
+  ASSERT_EQ(result["frames"].size(), 10u);
+  for (const auto& frame : result["frames"]) EXPECT_EQ(frame["reason"], "used") << frame;
+  EXPECT_TRUE(result["frame_selection"]["max_views"].is_null());
   for (const auto& image : result["images"]) {
     EXPECT_TRUE(fs::exists(out / image["overlay"].get<std::string>())) << image["overlay"];
   }

@@ -44,7 +44,7 @@ TEST(CalibrationJson, ParsesBoardOptionsAndHints) {
   params["options"] = {{"fix", {"xi", "tangential"}}, {"free", {"k5"}},
                        {"huber_loss_px", 2.0},        {"principal_point_px", {320, 240}},
                        {"redetect", false},           {"allow_exhaustive", true},
-                       {"max_num_iterations", 50}};
+                       {"max_num_iterations", 50}, {"max_views", 40}};
   params["hints"] = {{"a.png", {{1, 2}, {3, 4}, {5, 6}, {7, 8}}}};
   const CalibrationRequest request = CalibrationRequestFromJson(params);
   EXPECT_EQ(request.board.cols, 8);
@@ -59,6 +59,11 @@ TEST(CalibrationJson, ParsesBoardOptionsAndHints) {
   EXPECT_TRUE(request.options.detect.allow_exhaustive);
   EXPECT_TRUE(request.options.detect.refine_subpixel);  // default
   EXPECT_EQ(request.options.calibrate.max_num_iterations, 50);
+  EXPECT_EQ(request.options.selection.max_views, 40);
+  EXPECT_EQ(CalibrationRequestFromJson(ValidParams()).options.selection.max_views, 50);
+  params["options"] = {{"max_views", 2}};
+  EXPECT_THROW(CalibrationRequestFromJson(params), InvalidArgument);  // 0 or at least 3
+  params["options"] = {{"max_views", 40}};
   EXPECT_FALSE(request.options.svp);
   ASSERT_EQ(request.options.hints.count("a.png"), 1u);
   EXPECT_EQ(request.options.hints.at("a.png")[3], Eigen::Vector2d(7, 8));
@@ -261,6 +266,25 @@ TEST(CalibrationJson, ResultHasTheIssuesKeys) {
   EXPECT_EQ(unused["reason"], "no checkerboard 8x6 (40 mm) found");
   EXPECT_TRUE(unused["cam_from_board"].is_null());
   EXPECT_EQ(result["solver"]["termination"], "CONVERGENCE");
+  // What became of every frame: none listed when the report has none; a long input's reasons.
+  EXPECT_TRUE(result["frames"].empty());
+  EXPECT_TRUE(result["frame_selection"]["max_views"].is_null());
+  report.max_views = 40;
+  report.frames = {{"t0.msg", false, "no_board", "", ""},
+                   {"t1.msg", true, "used", "", ""},
+                   {"t2.msg", false, "near_duplicate_of", "t1.msg", ""},
+                   {"t3.msg", false, "detection_failed", "", "no checkerboard 8x6 found"}};
+  const json with_frames = CalibrationReportToJson(report);
+  ASSERT_EQ(with_frames["frames"].size(), 4u);
+  EXPECT_EQ(with_frames["frames"][0], json({{"name", "t0.msg"}, {"used", false},
+                                            {"reason", "no_board"}}));
+  EXPECT_TRUE(with_frames["frames"][1]["used"].get<bool>());
+  EXPECT_EQ(with_frames["frames"][2]["duplicate_of"], "t1.msg");
+  EXPECT_EQ(with_frames["frames"][3]["detail"], "no checkerboard 8x6 found");
+  EXPECT_EQ(with_frames["frame_selection"]["max_views"], 40);
+  EXPECT_EQ(with_frames["frame_selection"]["num_frames"], 4);
+  EXPECT_EQ(with_frames["frame_selection"]["reasons"]["used"], 1);
+  EXPECT_EQ(with_frames["images"], result["images"]);  // the existing fields unchanged
   // The camera part reads back with the shared camera JSON.
   EXPECT_NEAR(CameraFromJson(result["camera"]).intrinsics.u0(),
               result["camera"]["intrinsics"]["u0"].get<double>(), 0.0);

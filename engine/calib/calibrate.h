@@ -103,6 +103,20 @@ struct CalibrationTimings {
   double total_s = 0.0;
 };
 
+// What became of one image or frame of a calibration's input, in input order (CalibrateImages).
+// reason: "used", "unreadable", "no_board" (the cheap test of a long input found no whole board),
+// "near_duplicate_of" (duplicate_of names the kept frame whose board is where this one's is),
+// "detection_failed", "not_selected" (detected, another view chosen for the mirror's and the
+// poses' coverage), "outlier" (detected, left out by the calibration); detail says more where
+// there is more (the detector's or the calibration's reason).
+struct FrameReport {
+  std::string name;
+  bool used = false;
+  std::string reason;
+  std::string duplicate_of;
+  std::string detail;
+};
+
 struct CalibrationReport {
   CameraModel camera;
   // Standard deviation of each intrinsic (UnifiedIntrinsics order) from the Ceres covariance
@@ -123,6 +137,11 @@ struct CalibrationReport {
   // svp), on the image named svp_image.
   std::optional<SvpCheckReport> svp;
   std::string svp_image;
+  // Every image or frame given to CalibrateImages (images above holds only those detected fully
+  // on a long input), and the cap on the views of a long input (0: the input was short enough
+  // for every view to be detected and used).
+  std::vector<FrameReport> frames;
+  int max_views = 0;
 };
 
 // Calibrates a camera of `width` x `height` pixels from board detections. Views whose detection

@@ -1,6 +1,7 @@
 #include "engine/calib/pipeline.h"
 
 #include <algorithm>
+#include <map>
 #include <optional>
 #include <sstream>
 #include <utility>
@@ -8,6 +9,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "engine/calib/frame_selection.h"
 #include "engine/features/image.h"
 #include "engine/util/option_check.h"
 #include "engine/util/parallel.h"
@@ -20,10 +22,11 @@ namespace {
 cv::Point2d ToCv(const Eigen::Vector2d& p) { return cv::Point2d(p.x(), p.y()); }
 
 // Reads one image; an empty Mat (with `reason` set) when it is missing, unreadable or truncated.
-cv::Mat ReadImage(const ImageReader& read, const std::string& name, std::string* reason) {
+cv::Mat ReadImage(const ImageReader& read, const std::string& name, std::string* reason,
+                  int imread_flags = cv::IMREAD_COLOR) {
   cv::Mat image;
   try {
-    image = read(name, cv::IMREAD_COLOR);
+    image = read(name, imread_flags);
   } catch (const cv::Exception&) {
     image = cv::Mat();
   }
@@ -204,6 +207,147 @@ bool DetectFirstPass(const ImageReader& read, const std::vector<std::string>& na
   return true;
 }
 
+// The first readable frame fixes the size; a frame of another size is unreadable with the reason.
+bool CheckFrameSize(const cv::Size& size, int* width, int* height, std::string* detail) {
+  if (*width == 0) {
+    *width = size.width;
+    *height = size.height;
+    return true;
+  }
+  if (size.width == *width && size.height == *height) return true;
+  std::ostringstream os;
+  os << "image size " << size.width << "x" << size.height << " differs from the first image's "
+     << *width << "x" << *height;
+  *detail = os.str();
+  return false;
+}
+
+// Step 1 of a long input (frame_selection.h): the cheap test on every frame, in parallel. Fills
+// the frames' sizes (empty when unreadable) and the whole boards' screened corners.
+void ScreenFrames(const ImageReader& read, const std::vector<std::string>& names,
+                  const BoardSpec& board, const ImageCalibrationOptions& options,
+                  const ProgressSink& progress, std::vector<FrameReport>* frames,
+                  std::vector<cv::Size>* sizes,
+                  std::vector<std::vector<Eigen::Vector2d>>* screened) {
+  const bool cheap_test = board.type == BoardSpec::Type::kCheckerboard;
+  auto screen_one = [&](int i, const ProgressSink& cancellation) {
+    cancellation.ThrowIfCancelled();
+    cv::Mat grey = ReadImage(read, names[i], &(*frames)[i].detail,
+                             cheap_test ? cv::IMREAD_GRAYSCALE : cv::IMREAD_COLOR);
+    if (grey.empty()) return;
+    (*sizes)[i] = grey.size();
+    if (!cheap_test) return;
+    if (grey.channels() == 3) cv::cvtColor(grey, grey, cv::COLOR_BGR2GRAY);
+    (*screened)[i] = ScreenFrame(grey, board);
+  };
+  size_t done = 0;
+  RunTasks(static_cast<int>(names.size()), options.calibrate.num_threads, progress, screen_one,
+           [&](int i) {
+             ++done;
+             if (done % 20 != 0 && done != names.size()) return;
+             progress.Report(0.25 * done / names.size(), "screen",
+                             names[i] + ((*screened)[i].empty() ? ": no whole board" : ": board"));
+           });
+  progress.ThrowIfCancelled();
+}
+
+// Steps 1-4 of a long input (frame_selection.h): returns the chosen views, fully detected, and
+// fills every frame's report (the used ones and the outliers are set after the calibration).
+std::vector<CalibrationView> DetectLongInput(const ImageReader& read,
+                                             const std::vector<std::string>& names,
+                                             const BoardSpec& board,
+                                             const ImageCalibrationOptions& options, int* width,
+                                             int* height, const ProgressSink& progress,
+                                             std::vector<FrameReport>* frames) {
+  const size_t n = names.size();
+  frames->assign(n, FrameReport());
+  std::vector<cv::Size> sizes(n);
+  std::vector<std::vector<Eigen::Vector2d>> screened(n);
+  ScreenFrames(read, names, board, options, progress, frames, &sizes, &screened);
+  const bool cheap_test = board.type == BoardSpec::Type::kCheckerboard;
+  for (size_t i = 0; i < n; ++i) {
+    FrameReport& frame = (*frames)[i];
+    frame.name = names[i];
+    if (sizes[i].empty() || !CheckFrameSize(sizes[i], width, height, &frame.detail)) {
+      frame.reason = "unreadable";
+      screened[i].clear();
+    } else if (cheap_test && screened[i].empty()) {
+      frame.reason = "no_board";
+    }
+  }
+  OMNIRIG_CHECK(*width > 0, "calibration: none of the " << n << " images could be read");
+  const std::vector<int> duplicate_of = MarkNearDuplicates(
+      screened, options.selection.near_duplicate_fraction * std::min(*width, *height));
+  std::vector<std::string> candidates;
+  std::vector<size_t> frame_of;
+  for (size_t i = 0; i < n; ++i) {
+    FrameReport& frame = (*frames)[i];
+    if (duplicate_of[i] >= 0) {
+      frame.reason = "near_duplicate_of";
+      frame.duplicate_of = names[duplicate_of[i]];
+    } else if (frame.reason.empty()) {
+      candidates.push_back(names[i]);
+      frame_of.push_back(i);
+    }
+  }
+  if (candidates.empty()) return {};
+  DetectOptions detect = options.detect;
+  detect.try_costly_variants = false;  // plenty of frames: the cheap variants suffice
+  int detect_width = 0, detect_height = 0;
+  std::vector<CalibrationView> views = DetectAll(read, candidates, board, options, detect,
+                                                 &detect_width, &detect_height,
+                                                 SubRange(progress, 0.25, 0.75));
+  const std::vector<int> chosen =
+      SelectViews(views, *width, *height, board, options.selection.max_views, options.calibrate);
+  for (size_t k = 0; k < views.size(); ++k) {
+    FrameReport& frame = (*frames)[frame_of[k]];
+    if (!views[k].detection.found) {
+      frame.reason = "detection_failed";
+      frame.detail = views[k].detection.reason;
+    } else {
+      frame.reason = "not_selected";
+    }
+  }
+  std::vector<CalibrationView> selected;
+  for (int k : chosen) {
+    (*frames)[frame_of[k]].reason.clear();  // used or outlier, after the calibration
+    selected.push_back(std::move(views[k]));
+  }
+  return selected;
+}
+
+// The frames of a short input from its views and calibration (every view detected and offered).
+std::vector<FrameReport> FramesOfViews(const std::vector<CalibrationView>& views) {
+  std::vector<FrameReport> frames;
+  for (const CalibrationView& view : views) {
+    FrameReport frame;
+    frame.name = view.name;
+    const std::string& reason = view.detection.reason;
+    if (!view.detection.found) {
+      const bool unreadable =
+          reason.rfind("cannot read the image", 0) == 0 || reason.rfind("image size ", 0) == 0;
+      frame.reason = unreadable ? "unreadable" : "detection_failed";
+      frame.detail = reason;
+    }
+    frames.push_back(std::move(frame));
+  }
+  return frames;
+}
+
+// Marks the calibrated views of `frames` used, or outliers with the calibration's reason.
+void MarkCalibratedFrames(const CalibrationReport& report, std::vector<FrameReport>* frames) {
+  std::map<std::string, size_t> index;
+  for (size_t i = 0; i < frames->size(); ++i) index.emplace((*frames)[i].name, i);
+  for (const CalibrationImageReport& image : report.images) {
+    const auto it = index.find(image.name);
+    if (it == index.end() || !(*frames)[it->second].reason.empty()) continue;
+    FrameReport& frame = (*frames)[it->second];
+    frame.used = image.used;
+    frame.reason = image.used ? "used" : "outlier";
+    frame.detail = image.used ? "" : image.reason;
+  }
+}
+
 // The SVP check on the requested image (or the first used one) with the calibrated model.
 void RunSvpCheck(const ImageReader& read, const SvpOptions& svp,
                  const std::filesystem::path& overlay_dir, CalibrationReport* report) {
@@ -244,6 +388,7 @@ void ImageCalibrationOptions::Check() const {
   detect.Check();
   calibrate.Check();
   OMNIRIG_CHECK_POSITIVE(overlay_error_scale);
+  selection.Check();
   if (svp) svp->Check();
   for (const auto& [name, hint] : hints) {
     for (const auto& corner : hint) {
@@ -336,23 +481,40 @@ CalibrationReport CalibrateImages(const ImageReader& read,
   int width = 0, height = 0;
   Timer timer;
   std::vector<CalibrationView> views;
-  const bool every_variant_tried =
-      DetectFirstPass(read, names, board, options, &width, &height, progress, &views);
+  // A long input (a recording's frames): screened, near duplicates skipped, views chosen.
+  const int max_views = options.selection.max_views;
+  const bool long_input = max_views > 0 && static_cast<int>(names.size()) > max_views;
+  std::vector<FrameReport> frames;
+  bool every_variant_tried = true;
+  if (long_input) {
+    views = DetectLongInput(read, names, board, options, &width, &height, progress, &frames);
+  } else {
+    every_variant_tried =
+        DetectFirstPass(read, names, board, options, &width, &height, progress, &views);
+  }
   const double detect_s = timer.ElapsedSeconds();
   if (board.type == BoardSpec::Type::kCheckerboard && options.hints.empty() &&
       std::none_of(views.begin(), views.end(),
                    [](const CalibrationView& view) { return view.detection.found; })) {
+    if (long_input) {
+      // The size check reads the first frames; the frames' own reasons follow.
+      for (const std::string& name : names) views.push_back({name, BoardDetection()});
+    }
     std::ostringstream os;
     os << DescribeBoardSizeMismatch(read, views, board) << ":";
-    for (const CalibrationView& view : views) {
-      os << "\n  " << view.name << ": " << view.detection.reason;
+    for (size_t i = 0; i < views.size() && i < 20; ++i) {
+      os << "\n  " << views[i].name << ": "
+         << (long_input ? frames[i].reason + (frames[i].detail.empty() ? "" : " (" + frames[i].detail + ")")
+                        : views[i].detection.reason);
     }
+    if (views.size() > 20) os << "\n  ... and " << views.size() - 20 << " more";
     throw InvalidArgument(os.str());
   }
   CalibrationReport report =
       Calibrate(views, width, height, board, options.calibrate, SubRange(progress, 0.5, 0.8));
   timer.Restart();
-  if (options.redetect_with_model &&
+  // A long input offers more views than the cap: no second pass for the views missed.
+  if (options.redetect_with_model && !long_input &&
       DetectMissed(read, board, options, &report.camera, !every_variant_tried, width, height,
                    progress, &views)) {
     const double redetect_s = timer.ElapsedSeconds();
@@ -362,6 +524,10 @@ CalibrationReport CalibrateImages(const ImageReader& read,
   } else {
     report.timings.redetect_s = timer.ElapsedSeconds();
   }
+  if (!long_input) frames = FramesOfViews(views);
+  MarkCalibratedFrames(report, &frames);
+  report.frames = std::move(frames);
+  report.max_views = long_input ? max_views : 0;
   report.timings.detect_s = detect_s;
   if (!overlay_dir.empty()) WriteOverlays(read, report, options, overlay_dir);
   if (options.svp) {

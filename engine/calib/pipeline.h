@@ -11,6 +11,7 @@
 #include <opencv2/core.hpp>
 
 #include "engine/calib/calibrate.h"
+#include "engine/calib/frame_selection.h"
 #include "engine/features/image.h"
 
 namespace omnirig {
@@ -37,6 +38,11 @@ struct ImageCalibrationOptions {
   // they run only on the views growing does not find, or on every missed view when too few
   // views for a first calibration were found.
   bool redetect_with_model = true;
+  // A long input (more images than selection.max_views, e.g. a recording's frames) is screened
+  // with a cheap board test, near duplicates are skipped, and at most max_views views covering
+  // the mirror and the board's poses are calibrated (frame_selection.h); without the second pass
+  // above. CalibrationReport::frames says what became of every frame.
+  FrameSelectionOptions selection;
   // Overlays: error vectors are drawn this many times longer than they are.
   double overlay_error_scale = 20.0;
   // When set, the single-viewpoint check runs after the calibration and its overlay is written
@@ -53,7 +59,9 @@ inline constexpr const char* kSvpOverlayFileName = "svp_overlay.png";
 // overlay when requested. An SVP check that cannot run (the rim does not project, the image is
 // unreadable) leaves its reason in report.svp and does not fail the calibration. Unreadable images
 // and images of another size than the first readable one are reported as unused with the
-// reason. Progress: "detect" per image over [0, 0.5], then Calibrate's stages over [0.5, 1]
+// reason. A long input (ImageCalibrationOptions::selection) is screened and its views chosen;
+// report.images then holds the views detected fully and chosen, report.frames every frame.
+// Progress: "detect" per image over [0, 0.5], then Calibrate's stages over [0.5, 1]
 // (with a "redetect" pass and a second calibration when views were missed).
 CalibrationReport CalibrateImages(const std::filesystem::path& dir,
                                   const std::vector<std::string>& names, const BoardSpec& board,
