@@ -93,6 +93,17 @@ json TrackedFrameJson(const slam::FrameReport& report, const LiveFrame& frame, i
           {"num_skipped", num_skipped}};
 }
 
+// The answer to a frame whose job was canceled before it was tracked (it is stored in the
+// job's dataset all the same).
+LiveAnswer CanceledAnswer(const LiveFrame& frame) {
+  return {409,
+          {{"error",
+            {{"code", "job_finished"},
+             {"message", "the live job was canceled: frame " + frame.name +
+                             " is stored in its dataset but not tracked"},
+             {"details", {{"name", frame.name}}}}}}};
+}
+
 }  // namespace
 
 bool IsLiveSlam(const json& params) {
@@ -203,6 +214,9 @@ json RunLiveSlam(const json& params, const JobContext& context, const StereoRig&
   while (true) {
     bool finish = false;
     std::shared_ptr<LiveFrame> frame = mailbox.Take(0.1, &finish);
+    if (frame && context.progress.IsCancelled()) {
+      frame->answer.set_value(CanceledAnswer(*frame));
+    }
     context.progress.ThrowIfCancelled();
     if (frame) {
       ++num_received;
@@ -222,6 +236,10 @@ json RunLiveSlam(const json& params, const JobContext& context, const StereoRig&
                     {{"code", "invalid_frame"},
                      {"message", e.what()},
                      {"details", {{"name", frame->name}}}}}}};
+      } catch (const Cancelled&) {
+        // Canceled while this frame was tracked: the sender hears that the job has ended.
+        frame->answer.set_value(CanceledAnswer(*frame));
+        throw;
       } catch (const std::exception& e) {
         // The job fails (the runner records why); the frame's sender hears it first.
         frame->answer.set_value({500,

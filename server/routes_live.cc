@@ -358,9 +358,17 @@ void PostFrame(ServiceState& state, const HttpRequest& request, HttpResponse& re
                           "its dataset but not tracked");
     }
   }
-  // The job's thread answers: tracked, skipped for a newer frame, or refused.
-  const api::LiveAnswer result = answer.get();
-  response.Json(result.status, result.body);
+  // The job's thread answers: tracked, skipped for a newer frame, or refused. A job that ends
+  // without answering (it should not) leaves the sender a 409, not an error of the server.
+  try {
+    const api::LiveAnswer result = answer.get();
+    response.Json(result.status, result.body);
+  } catch (const std::future_error&) {
+    throw HttpError(409, "job_finished",
+                    "live job " + job->record.id +
+                        " ended before this frame was tracked: the frame is stored in its dataset",
+                    {{"job", job->record.id}});
+  }
 }
 
 void FinishLiveJob(ServiceState& state, const HttpRequest& request, HttpResponse& response) {

@@ -5,6 +5,7 @@
 // live job that its server stopped running again as a batch job over the frames it stored.
 
 #include <atomic>
+#include <condition_variable>
 #include <future>
 #include <mutex>
 #include <set>
@@ -302,6 +303,49 @@ TEST_F(ServerLiveTest, IdleTimeoutFinishesAndCancelEnds) {
   EXPECT_EQ(client_->Post(("/api/v1/jobs/" + canceled + "/cancel").c_str())->status, 202);
   EXPECT_EQ(WaitForJob(port_, canceled, 60)["state"], "canceled");
   EXPECT_EQ(PostFrame(*client_, canceled, 1)->status, 409);
+
+  // Two cameras' drivers sending frames back to back while the job is canceled, so that when
+  // the cancel lands one frame is being tracked and another waits: each frame is tracked,
+  // skipped, refused as out of order (409 stamp_not_increasing) or refused because the job has
+  // ended (409 job_finished), never an error of the server.
+  const std::string busy = CreateLive()["id"];
+  std::mutex mutex;
+  std::condition_variable answered;
+  std::vector<std::pair<int, std::string>> answers;  // (status, error code)
+  auto drive = [&](int first) {
+    auto client = MakeClient(port_);
+    const int n = static_cast<int>(sequence_->names.size());
+    for (int i = first;; i += 2) {
+      const auto answer =
+          PostFrame(*client, busy, 0.1 * i, sequence_->images[0][i % n], sequence_->images[1][i % n]);
+      const int status = answer ? answer->status : -1;
+      const json body = answer ? JsonOf(answer) : json();
+      const std::string code = body.contains("error") ? body["error"].value("code", "") : "";
+      {
+        std::lock_guard<std::mutex> lock(mutex);
+        answers.emplace_back(status, code);
+      }
+      answered.notify_all();
+      if (status != 200 && code != "stamp_not_increasing") return;
+    }
+  };
+  std::thread even(drive, 0), odd(drive, 1);
+  {
+    std::unique_lock<std::mutex> lock(mutex);
+    answered.wait(lock, [&] { return answers.size() >= 4; });
+  }
+  EXPECT_EQ(client_->Post(("/api/v1/jobs/" + busy + "/cancel").c_str())->status, 202);
+  even.join();
+  odd.join();
+  EXPECT_EQ(WaitForJob(port_, busy, 60)["state"], "canceled");
+  int finished = 0;
+  for (const auto& [status, code] : answers) {
+    EXPECT_TRUE(status == 200 || (status == 409 && (code == "stamp_not_increasing" ||
+                                                     code == "job_finished")))
+        << status << " " << code;
+    finished += code == "job_finished";
+  }
+  EXPECT_EQ(finished, 2);  // each driver's last frame
 }
 
 TEST_F(ServerLiveTest, AStoppedServersLiveJobRunsAgainAsABatchJobOverItsFrames) {

@@ -6,6 +6,9 @@
 #   - job churn and uploads: bench/soak/churn.py keeps the worker busy with real calibrations
 #     (bench's real image set), cancels, retries and deletes jobs, and uploads, reads back and
 #     deletes a dataset every 10 s;
+#   - SOAK_LIVE_SESSIONS (default 2) robots driving live slam jobs: each plays a rendered
+#     40-frame 640x480 stereo sequence through `omnirig live` at 10 Hz, finishes the job, deletes
+#     it and its dataset, and starts again, until the soak ends;
 #   - every SOAK_SAMPLE_S seconds the server's resident memory, open file descriptors and threads
 #     are sampled from /proc.
 # After SOAK_MINUTES the churn stops and accounts for every job; then the figures: memory and
@@ -22,14 +25,17 @@ WARMUP_MINUTES=${SOAK_WARMUP_MINUTES:-5}
 CLIENTS=${SOAK_CLIENTS:-200}
 DELAY_MS=${SOAK_DELAY_MS:-199}
 SAMPLE_S=${SOAK_SAMPLE_S:-30}
+LIVE_SESSIONS=${SOAK_LIVE_SESSIONS:-2}
 IMAGES=${SOAK_IMAGES:-$ROOT/../shared/data/real/ocamcalib-vmr}
 WORK=$(mktemp -d /tmp/omnirig-soak-XXXXXX)
 SERVER_PID=
 CHURN_PID=
+LIVE_PIDS=()
 cleanup() {
   # SOAK_KEEP=DIR keeps the raw readings (samples, wrk's and the churn's output, server log).
-  [[ -n ${SOAK_KEEP:-} ]] && mkdir -p "$SOAK_KEEP" && cp -r "$WORK"/*.txt "$WORK"/*.err "$SOAK_KEEP"/ 2>/dev/null
+  [[ -n ${SOAK_KEEP:-} ]] && mkdir -p "$SOAK_KEEP" && cp -r "$WORK"/*.txt "$WORK"/*.err "$SOAK_KEEP"/ 2>/dev/null || true
   [[ -n $CHURN_PID ]] && kill "$CHURN_PID" 2>/dev/null || true
+  for pid in "${LIVE_PIDS[@]}"; do kill "$pid" 2>/dev/null || true; done
   [[ -n $SERVER_PID ]] && kill "$SERVER_PID" 2>/dev/null && wait "$SERVER_PID" 2>/dev/null || true
   rm -rf "$WORK"
 }
@@ -52,10 +58,48 @@ URL=http://127.0.0.1:$PORT
 echo "== omnirig soak ($(nproc) cores, $(date -u +%FT%TZ)): $MINUTES min, warm-up $WARMUP_MINUTES min," \
      "$CLIENTS clients at a mean pause of $DELAY_MS ms"
 echo "load_average_start $(cut -d' ' -f1-3 /proc/loadavg)"
+# The live robots' rig: a relative_pose job on a rendered board set, before the clock starts.
+if (( LIVE_SESSIONS > 0 )); then
+  "$OMNIRIG" synth --preset stereo-board --out "$WORK/board" --width 640 --height 480 --views 8 \
+    --supersampling 2 > /dev/null 2>&1
+  "$OMNIRIG" synth --preset stereo-sequence --out "$WORK/sequence" --width 640 --height 480 \
+    --frames 40 --supersampling 2 > /dev/null 2>&1
+  RIG=$("$OMNIRIG" submit --server "$URL" --type relative_pose --out "$WORK/rig" \
+    --params '{"board": {"type": "checkerboard", "cols": 8, "rows": 6, "square_size_mm": 40}}' \
+    "$WORK/board" 2> "$WORK/rig.err" | head -1)
+  [[ -f $WORK/rig/result.json ]] || { echo "soak: the live sessions' rig failed" >&2; cat "$WORK/rig.err" >&2; exit 1; }
+fi
+
+# One robot: live slam runs one after the other until the soak stops; each run's figures (the
+# `omnirig live --json` summary) on one line of live_N.txt, a failed run as "failed".
+live_session() {  # N
+  local run=0 summary job dataset
+  while [[ ! -e $WORK/stop ]]; do
+    run=$((run + 1))
+    summary=$WORK/live_$1_$run.json
+    if "$OMNIRIG" live --server "$URL" --rig "$RIG" --rate 10 --json "$summary" "$WORK/sequence" \
+         > /dev/null 2>> "$WORK/live_$1.err"; then
+      job=$(python3 -c 'import json, sys; print(json.load(open(sys.argv[1]))["job"])' "$summary")
+      dataset=$(curl -s "$URL/api/v1/jobs/$job" | python3 -c 'import json, sys; print(json.load(sys.stdin)["dataset"])')
+      python3 -c 'import json, sys; s = json.load(open(sys.argv[1])); print(s["frames_tracked"], s["frames_skipped"], s["latency_ms"]["p50"], s["latency_ms"]["p95"])' \
+        "$summary" >> "$WORK/live_$1.txt"
+      curl -s -o /dev/null -X DELETE "$URL/api/v1/jobs/$job"
+      curl -s -o /dev/null -X DELETE "$URL/api/v1/datasets/$dataset"
+      rm -f "$summary"
+    else
+      echo failed >> "$WORK/live_$1.txt"
+    fi
+  done
+}
+
 python3 "$ROOT/bench/soak/churn.py" "$URL" "$IMAGES" "$WORK/ids.txt" "$WORK/stop" \
   > "$WORK/churn.txt" 2> "$WORK/churn.err" &
 CHURN_PID=$!
 while [[ ! -s $WORK/ids.txt ]]; do sleep 0.2; done
+for n in $(seq "$LIVE_SESSIONS"); do
+  live_session "$n" &
+  LIVE_PIDS+=($!)
+done
 
 sample() {  # elapsed_s
   local rss fds threads
@@ -79,11 +123,19 @@ touch "$WORK/stop"
 wait "$SAMPLER_PID" || true
 wait "$CHURN_PID"
 CHURN_PID=
+for pid in "${LIVE_PIDS[@]}"; do wait "$pid" || true; done
+LIVE_PIDS=()
 kill -0 "$SERVER_PID" || { echo "soak: the server exited" >&2; exit 1; }
 
 cat "$WORK/samples.txt"
 grep -E '^poll_' "$WORK/wrk.txt"
 cat "$WORK/churn.txt"
+for n in $(seq "$LIVE_SESSIONS"); do
+  # Per robot: runs, failed runs, frames tracked and skipped, the worst run's latency p95.
+  awk -v n="$n" '$1 == "failed" {failed++; next} {runs++; tracked += $1; skipped += $2; if ($4 > p95) p95 = $4}
+    END {printf "live_session_%d runs %d failed %d frames_tracked %d frames_skipped %d worst_latency_p95_ms %.1f\n",
+         n, runs, failed, tracked, skipped, p95}' "$WORK/live_$n.txt"
+done
 echo "load_average_end $(cut -d' ' -f1-3 /proc/loadavg)"
 echo "server_5xx_logged $(grep -c ': 5[0-9][0-9]: ' "$WORK/serve.err" || true)"
 python3 - "$WORK/samples.txt" "$WARMUP_MINUTES" <<'PY'
