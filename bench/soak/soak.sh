@@ -8,7 +8,8 @@
 #     deletes a dataset every 10 s;
 #   - SOAK_LIVE_SESSIONS (default 2) robots driving live slam jobs: each plays a rendered
 #     40-frame 640x480 stereo sequence through `omnirig live` at 10 Hz, finishes the job, deletes
-#     it and its dataset, and starts again, until the soak ends;
+#     it and its dataset, and starts again, until the soak ends (the churn cancels some of them,
+#     as it cancels any running job);
 #   - every SOAK_SAMPLE_S seconds the server's resident memory, open file descriptors and threads
 #     are sampled from /proc.
 # After SOAK_MINUTES the churn stops and accounts for every job; then the figures: memory and
@@ -71,24 +72,38 @@ if (( LIVE_SESSIONS > 0 )); then
 fi
 
 # One robot: live slam runs one after the other until the soak stops; each run's figures (the
-# `omnirig live --json` summary) on one line of live_N.txt, a failed run as "failed".
+# `omnirig live --json` summary) on one line of live_N.txt. A run whose job the churn canceled
+# (its frames then answered 409 job_finished) is "canceled"; any other failure is "failed".
+# Either way its job and dataset are deleted, so that the runs do not fill the disk.
 live_session() {  # N
-  local run=0 summary job dataset
+  local run=0 summary err job dataset
   while [[ ! -e $WORK/stop ]]; do
     run=$((run + 1))
     summary=$WORK/live_$1_$run.json
+    err=$WORK/live_$1_run.err
     if "$OMNIRIG" live --server "$URL" --rig "$RIG" --rate 10 --json "$summary" "$WORK/sequence" \
-         > /dev/null 2>> "$WORK/live_$1.err"; then
-      job=$(python3 -c 'import json, sys; print(json.load(open(sys.argv[1]))["job"])' "$summary")
-      dataset=$(curl -s "$URL/api/v1/jobs/$job" | python3 -c 'import json, sys; print(json.load(sys.stdin)["dataset"])')
+         > /dev/null 2> "$err"; then
       python3 -c 'import json, sys; s = json.load(open(sys.argv[1])); print(s["frames_tracked"], s["frames_skipped"], s["latency_ms"]["p50"], s["latency_ms"]["p95"])' \
         "$summary" >> "$WORK/live_$1.txt"
-      curl -s -o /dev/null -X DELETE "$URL/api/v1/jobs/$job"
-      curl -s -o /dev/null -X DELETE "$URL/api/v1/datasets/$dataset"
-      rm -f "$summary"
+    elif grep -q 'job_finished\|has ended (' "$err"; then
+      echo canceled >> "$WORK/live_$1.txt"
     else
       echo failed >> "$WORK/live_$1.txt"
+      cat "$err" >> "$WORK/live_$1.err"
     fi
+    job=$(sed -n 's/^live job \([0-9a-f]*\) (dataset \([0-9a-f]*\)).*/\1/p' "$err")
+    dataset=$(sed -n 's/^live job \([0-9a-f]*\) (dataset \([0-9a-f]*\)).*/\2/p' "$err")
+    if [[ -n $job ]]; then
+      # A canceled live job the churn retried runs again as a batch job: cancel it first.
+      curl -s -o /dev/null -X POST "$URL/api/v1/jobs/$job/cancel"
+      for _ in $(seq 240); do
+        curl -s "$URL/api/v1/jobs/$job" | grep -q '"state": *"\(queued\|running\)"' || break
+        sleep 0.5
+      done
+      curl -s -o /dev/null -X DELETE "$URL/api/v1/jobs/$job"
+      curl -s -o /dev/null -X DELETE "$URL/api/v1/datasets/$dataset"
+    fi
+    rm -f "$summary"
   done
 }
 
@@ -132,9 +147,10 @@ grep -E '^poll_' "$WORK/wrk.txt"
 cat "$WORK/churn.txt"
 for n in $(seq "$LIVE_SESSIONS"); do
   # Per robot: runs, failed runs, frames tracked and skipped, the worst run's latency p95.
-  awk -v n="$n" '$1 == "failed" {failed++; next} {runs++; tracked += $1; skipped += $2; if ($4 > p95) p95 = $4}
-    END {printf "live_session_%d runs %d failed %d frames_tracked %d frames_skipped %d worst_latency_p95_ms %.1f\n",
-         n, runs, failed, tracked, skipped, p95}' "$WORK/live_$n.txt"
+  awk -v n="$n" '$1 == "failed" {failed++; next} $1 == "canceled" {canceled++; next}
+    {runs++; tracked += $1; skipped += $2; if ($4 > p95) p95 = $4}
+    END {printf "live_session_%d runs_finished %d canceled_by_churn %d failed %d frames_tracked %d frames_skipped %d worst_latency_p95_ms %.1f\n",
+         n, runs, canceled, failed, tracked, skipped, p95}' "$WORK/live_$n.txt"
 done
 echo "load_average_end $(cut -d' ' -f1-3 /proc/loadavg)"
 echo "server_5xx_logged $(grep -c ': 5[0-9][0-9]: ' "$WORK/serve.err" || true)"
