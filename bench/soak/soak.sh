@@ -73,7 +73,8 @@ fi
 
 # One robot: live slam runs one after the other until the soak stops; each run's figures (the
 # `omnirig live --json` summary) on one line of live_N.txt. A run whose job the churn canceled
-# (its frames then answered 409 job_finished) is "canceled"; any other failure is "failed".
+# (its frames then answered 409 job_finished, or the job canceled while it finished) is
+# "canceled"; any other failure is "failed".
 # Either way its job and dataset are deleted, so that the runs do not fill the disk.
 live_session() {  # N
   local run=0 summary err job dataset
@@ -82,10 +83,10 @@ live_session() {  # N
     summary=$WORK/live_$1_$run.json
     err=$WORK/live_$1_run.err
     if "$OMNIRIG" live --server "$URL" --rig "$RIG" --rate 10 --json "$summary" "$WORK/sequence" \
-         > /dev/null 2> "$err"; then
+         > "$err.out" 2> "$err"; then
       python3 -c 'import json, sys; s = json.load(open(sys.argv[1])); print(s["frames_tracked"], s["frames_skipped"], s["latency_ms"]["p50"], s["latency_ms"]["p95"])' \
         "$summary" >> "$WORK/live_$1.txt"
-    elif grep -q 'job_finished\|has ended (' "$err"; then
+    elif grep -q 'job_finished\|has ended (' "$err" || grep -q '^job [0-9a-f]* canceled:' "$err.out"; then
       echo canceled >> "$WORK/live_$1.txt"
     else
       echo failed >> "$WORK/live_$1.txt"

@@ -114,6 +114,8 @@ void FrameSelectionOptions::Check() const {
   OMNIRIG_CHECK(max_views == 0 || max_views >= 3,
                 "max_views must be 0 (no cap) or at least 3, got " << max_views);
   OMNIRIG_CHECK_IN(near_duplicate_fraction, '[', 0.0, 0.5, ']');
+  OMNIRIG_CHECK(long_input_frames >= 0,
+                "long_input_frames must not be negative, got " << long_input_frames);
 }
 
 std::vector<Eigen::Vector2d> ScreenFrame(const cv::Mat& grey, const BoardSpec& board) {

@@ -36,10 +36,16 @@
 namespace omnirig {
 
 struct FrameSelectionOptions {
-  // An input of more images than this is screened and at most max_views views are calibrated;
-  // a shorter one has every view detected and used. 0: no cap (every frame detected fully and
-  // every view used, whatever the input's length).
+  // An input of more than long_input_frames images (and more than max_views) is screened and at
+  // most max_views views are calibrated; a shorter one has every view detected and used, as an
+  // image folder is. 0: no cap (every frame detected fully and every view used, whatever the
+  // input's length).
   int max_views = 50;
+  // Where the long path starts: 15 s of a recording at 20 Hz. A folder of a few dozen images is
+  // detected view by view with every variant and the re-detection pass: OpenCV's classic
+  // detector, which screens a long input, misses boards on catadioptric images that DetectBoard
+  // finds, and only a long input has frames to spare.
+  int long_input_frames = 300;
   // Of the image's smaller side: the mean corner distance under which two frames' boards are the
   // same view.
   double near_duplicate_fraction = 0.04;

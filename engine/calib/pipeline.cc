@@ -483,7 +483,9 @@ CalibrationReport CalibrateImages(const ImageReader& read,
   std::vector<CalibrationView> views;
   // A long input (a recording's frames): screened, near duplicates skipped, views chosen.
   const int max_views = options.selection.max_views;
-  const bool long_input = max_views > 0 && static_cast<int>(names.size()) > max_views;
+  const int num_frames = static_cast<int>(names.size());
+  const bool long_input = max_views > 0 && num_frames > max_views &&
+                          num_frames > options.selection.long_input_frames;
   std::vector<FrameReport> frames;
   bool every_variant_tried = true;
   if (long_input) {

@@ -38,10 +38,11 @@ struct ImageCalibrationOptions {
   // they run only on the views growing does not find, or on every missed view when too few
   // views for a first calibration were found.
   bool redetect_with_model = true;
-  // A long input (more images than selection.max_views, e.g. a recording's frames) is screened
-  // with a cheap board test, near duplicates are skipped, and at most max_views views covering
-  // the mirror and the board's poses are calibrated (frame_selection.h); without the second pass
-  // above. CalibrationReport::frames says what became of every frame.
+  // A long input (more images than selection.long_input_frames and selection.max_views, e.g. a
+  // recording's frames) is screened with a cheap board test, near duplicates are skipped, and at
+  // most max_views views covering the mirror and the board's poses are calibrated
+  // (frame_selection.h); without the second pass above. CalibrationReport::frames says what
+  // became of every frame.
   FrameSelectionOptions selection;
   // Overlays: error vectors are drawn this many times longer than they are.
   double overlay_error_scale = 20.0;
