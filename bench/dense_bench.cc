@@ -58,6 +58,7 @@
 #include <opencv2/ccalib/omnidir.hpp>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "api/camera_json.h"
 #include "api/stereo_job.h"
@@ -67,6 +68,7 @@
 #include "engine/geometry/ply.h"
 #include "engine/slam/map_io.h"
 #include "engine/synth/presets.h"
+#include "engine/util/check.h"
 #include "testing/dense/held_out_scenes.h"
 #include "testing/slam/surface_distance.h"
 
@@ -307,35 +309,76 @@ void RunJob(const synth::StereoSequence& sequence, int num_frames,
   std::filesystem::remove_all(root);
 }
 
-// --calibrate-std: the per-point disparity std is sqrt(floor^2 + (scale * fit_std)^2); run with
-// floor ~0 and scale 1, each point's std in cells is its fit's std. Grid search of (floor, scale)
-// for 68 % of the points within 1 std and 95 % within 2 (squared misses summed).
-void CalibrateStd(const SubCellBias& bias) {
-  double best_cost = 1e9, best_floor = 0, best_scale = 0, best_1 = 0, best_2 = 0;
-  for (double floor = 0.0; floor <= 0.4001; floor += 0.01) {
-    for (double scale = 0.0; scale <= 6.0001; scale += 0.1) {
-      size_t in1 = 0, in2 = 0;
-      for (const auto& [error, fit] : bias.error_and_std_cells) {
-        const double std_cells = std::sqrt(floor * floor + scale * scale * fit * fit);
-        in1 += error <= std_cells;
-        in2 += error <= 2.0 * std_cells;
-      }
-      const double n = std::max<size_t>(1, bias.error_and_std_cells.size());
-      const double f1 = in1 / n, f2 = in2 / n;
-      const double cost = (f1 - 0.68) * (f1 - 0.68) + (f2 - 0.95) * (f2 - 0.95);
-      if (cost < best_cost) {
-        best_cost = cost;
-        best_floor = floor;
-        best_scale = scale;
-        best_1 = f1;
-        best_2 = f2;
+// --calibrate-std: the per-point disparity std is sqrt(floor^2 + (scale * fit_std)^2 +
+// (noise_scale * noise_std)^2), fit_std the refinement's least-squares std (its residual) and
+// noise_std the same form with the images' estimated noise (DenseStereoOptions::
+// disparity_noise_scale). Per point of each development set: |disparity error| (cells), fit_std
+// and noise_std (two runs, each with one term alone; the points are the same). Grid search of
+// (floor, scale, noise_scale) for 68 % of the points within 1 std and 95 % within 2 on every
+// development set (squared misses summed over the sets); also the best with noise_scale 0 (the
+// former model) and with scale 0 (the noise alone), on the same sets.
+struct StdSample {
+  float error, fit, noise;
+};
+
+std::vector<StdSample> StdSamples(const SubCellBias& fit_only, const SubCellBias& noise_only) {
+  OMNIRIG_CHECK(fit_only.error_and_std_cells.size() == noise_only.error_and_std_cells.size(),
+                "the two calibration runs gave other points");
+  std::vector<StdSample> samples;
+  for (size_t i = 0; i < fit_only.error_and_std_cells.size(); ++i) {
+    samples.push_back({static_cast<float>(fit_only.error_and_std_cells[i].first),
+                       static_cast<float>(fit_only.error_and_std_cells[i].second),
+                       static_cast<float>(noise_only.error_and_std_cells[i].second)});
+  }
+  return samples;
+}
+
+std::pair<double, double> WithinStd(const std::vector<StdSample>& samples, double floor,
+                                    double scale, double noise_scale) {
+  size_t in1 = 0, in2 = 0;
+  for (const StdSample& s : samples) {
+    const double std_cells = std::sqrt(floor * floor + scale * scale * s.fit * s.fit +
+                                       noise_scale * noise_scale * s.noise * s.noise);
+    in1 += s.error <= std_cells;
+    in2 += s.error <= 2.0 * std_cells;
+  }
+  const double n = std::max<size_t>(1, samples.size());
+  return {in1 / n, in2 / n};
+}
+
+void CalibrateStd(const std::vector<std::pair<std::string, std::vector<StdSample>>>& sets) {
+  struct Best {
+    double cost = 1e9, floor = 0, scale = 0, noise_scale = 0;
+  };
+  Best best, best_fit_only, best_noise_only;
+  for (double floor = 0.0; floor <= 0.2001; floor += 0.01) {
+    for (double scale = 0.0; scale <= 5.0001; scale += 0.25) {
+      for (double noise_scale = 0.0; noise_scale <= 6.0001; noise_scale += 0.25) {
+        double cost = 0.0;
+        for (const auto& [name, samples] : sets) {
+          const auto [f1, f2] = WithinStd(samples, floor, scale, noise_scale);
+          cost += (f1 - 0.68) * (f1 - 0.68) + (f2 - 0.95) * (f2 - 0.95);
+        }
+        for (Best* b : {&best, noise_scale == 0.0 ? &best_fit_only : nullptr,
+                        scale == 0.0 ? &best_noise_only : nullptr}) {
+          if (b && cost < b->cost) *b = {cost, floor, scale, noise_scale};
+        }
       }
     }
   }
-  std::printf(
-      "std calibration on these pairs: disparity_std_cells %.2f, disparity_std_scale %.1f "
-      "-> %.1f %% within 1 std, %.1f %% within 2 std\n",
-      best_floor, best_scale, 100.0 * best_1, 100.0 * best_2);
+  for (const auto& [label, b] : {std::pair<const char*, Best>{"fit and noise", best},
+                                 {"fit only (the former model)", best_fit_only},
+                                 {"noise only", best_noise_only}}) {
+    std::printf(
+        "std calibration, %s: disparity_std_cells %.2f, disparity_std_scale %.2f, "
+        "disparity_noise_scale %.2f (cost %.5f)\n",
+        label, b.floor, b.scale, b.noise_scale, b.cost);
+    for (const auto& [name, samples] : sets) {
+      const auto [f1, f2] = WithinStd(samples, b.floor, b.scale, b.noise_scale);
+      std::printf("    %s: %.1f %% within 1 std, %.1f %% within 2 std\n", name.c_str(), 100.0 * f1,
+                  100.0 * f2);
+    }
+  }
 }
 
 // The merged cloud of a set's pairs placed by their true poses: fused (MergedCloudOptions, as
@@ -502,6 +545,7 @@ struct OmnirigRun {
   dense::DenseMap fused_tight{TightMergedOptions()};
   double setup_s = 0.0, again_s = 0.0, from_disk_s = 0.0, from_disk_cpu_s = 0.0;
   double fuse_cpu_s = 0.0;  // the merged cloud's DenseMap::Add, all pairs
+  std::vector<std::array<double, 2>> noise_grey;  // each pair's estimated image noise
   std::vector<std::vector<dense::DensePoint>> clouds;  // each pair's points (its cam0 frame)
 };
 
@@ -559,6 +603,7 @@ void RunOmnirig(const BenchSet& set, const dense::DenseStereoOptions& dense_opti
     const dense::DensePairResult result =
         dense.Reconstruct(set.images[0][f], set.images[1][f], progress);
     run->funnel.Add(result);
+    run->noise_grey.push_back(result.noise_grey);
     const auto timed = [&](const std::string& name, const auto& write) {
       const double before = CpuSeconds();
       write();
@@ -644,6 +689,9 @@ void RunSet(const BenchSet& set, bool with_peer, bool profile,
   }
   std::printf("\n");
   ours.funnel.Print();
+  std::printf("images' noise (EstimateNoiseGrey, cam0 / cam1 per pair):");
+  for (const auto& noise : ours.noise_grey) std::printf(" %.2f / %.2f", noise[0], noise[1]);
+  std::printf("\n");
   ours.bias.Print("omnirig sub-cell disparity, refined (default)");
   unrefined.bias.Print("omnirig sub-cell disparity, SGBM's sub-pixel only");
   std::printf("\nmerged cloud of the %d pairs placed by their true poses:\n", num_frames);
@@ -684,11 +732,38 @@ void RunSet(const BenchSet& set, bool with_peer, bool profile,
       st.rectify, st.match, st.confidence, st.epipolar, st.refine, st.triangulate);
 }
 
+// The development room with the held-out set's kind of noise at its own levels and seed: each
+// image (noise 1 already) gets Gaussian noise of 1.5, 2.5 or 3.5 grey levels more (by frame and
+// camera) and is saved as JPEG at quality 92, 88 or 80 (by frame) and decoded. A development
+// set: the std's noise term is calibrated on it.
+BenchSet NoisyRoom(const BenchSet& room) {
+  BenchSet noisy = room;
+  noisy.name = "development room, noisy (+ noise 1.5-3.5, JPEG 80-92)";
+  const int qualities[] = {92, 88, 80};
+  cv::RNG rng(20261127);
+  for (int k = 0; k < 2; ++k) {
+    for (size_t f = 0; f < room.images[k].size(); ++f) {
+      cv::Mat image;
+      room.images[k][f].convertTo(image, CV_32F);
+      cv::Mat noise(image.size(), image.type());
+      rng.fill(noise, cv::RNG::NORMAL, 0.0, 1.5 + 1.0 * ((f + k) % 3));
+      image += noise;
+      cv::Mat image8;
+      image.convertTo(image8, CV_8U);  // rounds and saturates
+      std::vector<uchar> jpeg;
+      cv::imencode(".jpg", image8, jpeg, {cv::IMWRITE_JPEG_QUALITY, qualities[f % 3]});
+      noisy.images[k][f] = cv::imdecode(jpeg, cv::IMREAD_COLOR);
+    }
+  }
+  return noisy;
+}
+
 struct BenchFlags {
   int frames = 4, threads = 2;
   bool with_peer = true, with_job = true;
   bool development_only = false;  // for tuning: the held-out renders are not even made
   bool calibrate_std = false;
+  std::string std_samples_csv;  // --calibrate-std: every 10th point's (error, fit, noise) here
   bool floor = true;  // the clean lounge as well
 };
 
@@ -707,17 +782,39 @@ int Run(const BenchFlags& flags, const dense::DenseStereoOptions& dense_options)
                        sequence.rig,
                        sequence.world_from_rig,
                        sequence.images};
+  const BenchSet noisy_development = NoisyRoom(development);
   if (flags.calibrate_std) {
-    dense::DenseStereoOptions raw = dense_options;
-    raw.disparity_std_cells = 1e-4;
-    raw.disparity_std_scale = 1.0;
-    raw.max_relative_range_std = 1e9;  // every point, whatever its std
-    OmnirigRun run;
-    RunOmnirig(development, raw, false, &run);
-    CalibrateStd(run.bias);
+    std::vector<std::pair<std::string, std::vector<StdSample>>> sets;
+    for (const BenchSet* set : std::array<const BenchSet*, 2>{&development, &noisy_development}) {
+      dense::DenseStereoOptions fit_only = dense_options;
+      fit_only.disparity_std_cells = 1e-4;
+      fit_only.disparity_std_scale = 1.0;
+      fit_only.disparity_noise_scale = 0.0;
+      fit_only.max_relative_range_std = 1e9;  // every point, whatever its std
+      dense::DenseStereoOptions noise_only = fit_only;
+      noise_only.disparity_std_scale = 0.0;
+      noise_only.disparity_noise_scale = 1.0;
+      OmnirigRun fit_run, noise_run;
+      RunOmnirig(*set, fit_only, false, &fit_run);
+      RunOmnirig(*set, noise_only, false, &noise_run);
+      std::printf("%s: images' noise (EstimateNoiseGrey, cam0 / cam1 per pair):", set->name.c_str());
+      for (const auto& noise : fit_run.noise_grey) std::printf(" %.2f / %.2f", noise[0], noise[1]);
+      std::printf("\n");
+      sets.emplace_back(set->name, StdSamples(fit_run.bias, noise_run.bias));
+      if (!flags.std_samples_csv.empty()) {
+        FILE* csv = std::fopen((flags.std_samples_csv + std::to_string(sets.size()) + ".csv").c_str(), "w");
+        for (size_t i = 0; i < sets.back().second.size(); i += 10) {
+          const StdSample& x = sets.back().second[i];
+          std::fprintf(csv, "%.5f,%.5f,%.5f\n", x.error, x.fit, x.noise);
+        }
+        std::fclose(csv);
+      }
+    }
+    CalibrateStd(sets);
     return 0;
   }
   RunSet(development, flags.with_peer, true, dense_options);
+  RunSet(noisy_development, false, false, dense_options);
   if (flags.development_only) return 0;
 
   std::printf("\nrendering %d held-out pairs at 1024x768...\n", flags.frames);
@@ -772,6 +869,10 @@ int main(int argc, char** argv) {
       options.disparity_std_cells = std::atof(argv[++i]);
     else if (!std::strcmp(argv[i], "--disparity-std-scale"))
       options.disparity_std_scale = std::atof(argv[++i]);
+    else if (!std::strcmp(argv[i], "--disparity-noise-scale"))
+      options.disparity_noise_scale = std::atof(argv[++i]);
+    else if (!std::strcmp(argv[i], "--std-samples"))
+      flags.std_samples_csv = argv[++i];
   }
   options.Check();
   return omnirig::Run(flags, options);
