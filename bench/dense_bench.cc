@@ -18,8 +18,10 @@
 // it reads the images and writes pair k's artifacts while it matches pair k + 1; once with the
 // pairs' own clouds, once with a .tum trajectory (cloud.ply of all pairs as well).
 //
-// Two sets of renders, each reported in its own table: the development room (the renders the
-// method and its options were developed and tuned on) and the held-out lounge
+// Sets of renders, each reported in its own table: the development room (the renders the
+// method and its options were developed and tuned on), the same room with the held-out set's
+// kind of noise at its own levels (NoisyRoom: more sensor noise and JPEG; a development set,
+// tuned on) and the held-out lounge
 // (testing/dense/held_out_scenes.h: other textures and scales, JPEG 85-95, sensor noise 2-3,
 // vignetting, blur, a low warm sun), never used for tuning. Per set: omnirig (the default and,
 // for comparison, SGBM's own sub-pixel disparity without the refinement), the peer, the
@@ -30,8 +32,9 @@
 // The floor: the held-out lounge again without sensor noise and JPEG (--no-floor skips it).
 //
 // --no-peer runs omnirig only (for profiling); --no-job skips the job's runs;
-// --development-only runs the development room only (tuning); --calibrate-std fits the range
-// std's two parameters (disparity_std_cells, disparity_std_scale) on the development room.
+// --development-only runs the development sets only (tuning); --calibrate-std fits the range
+// std's two parameters (disparity_std_cells, disparity_std_scale) on the development sets (the
+// room and the noisy room).
 //
 // --block-size, --step-factor and --max-parallax-deg set DenseStereoOptions' block_size,
 // grid.step_factor and max_parallax_deg (to measure what they cost and give).
@@ -68,7 +71,6 @@
 #include "engine/geometry/ply.h"
 #include "engine/slam/map_io.h"
 #include "engine/synth/presets.h"
-#include "engine/util/check.h"
 #include "testing/dense/held_out_scenes.h"
 #include "testing/slam/surface_distance.h"
 
@@ -309,75 +311,43 @@ void RunJob(const synth::StereoSequence& sequence, int num_frames,
   std::filesystem::remove_all(root);
 }
 
-// --calibrate-std: the per-point disparity std is sqrt(floor^2 + (scale * fit_std)^2 +
-// (noise_scale * noise_std)^2), fit_std the refinement's least-squares std (its residual) and
-// noise_std the same form with the images' estimated noise (DenseStereoOptions::
-// disparity_noise_scale). Per point of each development set: |disparity error| (cells), fit_std
-// and noise_std (two runs, each with one term alone; the points are the same). Grid search of
-// (floor, scale, noise_scale) for 68 % of the points within 1 std and 95 % within 2 on every
-// development set (squared misses summed over the sets); also the best with noise_scale 0 (the
-// former model) and with scale 0 (the noise alone), on the same sets.
-struct StdSample {
-  float error, fit, noise;
-};
-
-std::vector<StdSample> StdSamples(const SubCellBias& fit_only, const SubCellBias& noise_only) {
-  OMNIRIG_CHECK(fit_only.error_and_std_cells.size() == noise_only.error_and_std_cells.size(),
-                "the two calibration runs gave other points");
-  std::vector<StdSample> samples;
-  for (size_t i = 0; i < fit_only.error_and_std_cells.size(); ++i) {
-    samples.push_back({static_cast<float>(fit_only.error_and_std_cells[i].first),
-                       static_cast<float>(fit_only.error_and_std_cells[i].second),
-                       static_cast<float>(noise_only.error_and_std_cells[i].second)});
-  }
-  return samples;
-}
-
-std::pair<double, double> WithinStd(const std::vector<StdSample>& samples, double floor,
-                                    double scale, double noise_scale) {
+// --calibrate-std: the per-point disparity std is sqrt(floor^2 + (scale * fit_std)^2), fit_std
+// the refinement's least-squares std (its residual); run with floor ~0 and scale 1, each point's
+// std in cells is its fit's std. Grid search of (floor, scale) for 68 % of the points within 1
+// std and 95 % within 2 on every development set (squared misses summed over the sets).
+std::pair<double, double> WithinStd(const SubCellBias& bias, double floor, double scale) {
   size_t in1 = 0, in2 = 0;
-  for (const StdSample& s : samples) {
-    const double std_cells = std::sqrt(floor * floor + scale * scale * s.fit * s.fit +
-                                       noise_scale * noise_scale * s.noise * s.noise);
-    in1 += s.error <= std_cells;
-    in2 += s.error <= 2.0 * std_cells;
+  for (const auto& [error, fit] : bias.error_and_std_cells) {
+    const double std_cells = std::sqrt(floor * floor + scale * scale * fit * fit);
+    in1 += error <= std_cells;
+    in2 += error <= 2.0 * std_cells;
   }
-  const double n = std::max<size_t>(1, samples.size());
+  const double n = std::max<size_t>(1, bias.error_and_std_cells.size());
   return {in1 / n, in2 / n};
 }
 
-void CalibrateStd(const std::vector<std::pair<std::string, std::vector<StdSample>>>& sets) {
-  struct Best {
-    double cost = 1e9, floor = 0, scale = 0, noise_scale = 0;
-  };
-  Best best, best_fit_only, best_noise_only;
-  for (double floor = 0.0; floor <= 0.2001; floor += 0.01) {
-    for (double scale = 0.0; scale <= 5.0001; scale += 0.25) {
-      for (double noise_scale = 0.0; noise_scale <= 6.0001; noise_scale += 0.25) {
-        double cost = 0.0;
-        for (const auto& [name, samples] : sets) {
-          const auto [f1, f2] = WithinStd(samples, floor, scale, noise_scale);
-          cost += (f1 - 0.68) * (f1 - 0.68) + (f2 - 0.95) * (f2 - 0.95);
-        }
-        for (Best* b : {&best, noise_scale == 0.0 ? &best_fit_only : nullptr,
-                        scale == 0.0 ? &best_noise_only : nullptr}) {
-          if (b && cost < b->cost) *b = {cost, floor, scale, noise_scale};
-        }
+void CalibrateStd(const std::vector<std::pair<std::string, SubCellBias>>& sets) {
+  double best_cost = 1e9, best_floor = 0, best_scale = 0;
+  for (double floor = 0.0; floor <= 0.4001; floor += 0.01) {
+    for (double scale = 0.0; scale <= 6.0001; scale += 0.1) {
+      double cost = 0.0;
+      for (const auto& [name, bias] : sets) {
+        const auto [f1, f2] = WithinStd(bias, floor, scale);
+        cost += (f1 - 0.68) * (f1 - 0.68) + (f2 - 0.95) * (f2 - 0.95);
+      }
+      if (cost < best_cost) {
+        best_cost = cost;
+        best_floor = floor;
+        best_scale = scale;
       }
     }
   }
-  for (const auto& [label, b] : {std::pair<const char*, Best>{"fit and noise", best},
-                                 {"fit only (the former model)", best_fit_only},
-                                 {"noise only", best_noise_only}}) {
-    std::printf(
-        "std calibration, %s: disparity_std_cells %.2f, disparity_std_scale %.2f, "
-        "disparity_noise_scale %.2f (cost %.5f)\n",
-        label, b.floor, b.scale, b.noise_scale, b.cost);
-    for (const auto& [name, samples] : sets) {
-      const auto [f1, f2] = WithinStd(samples, b.floor, b.scale, b.noise_scale);
-      std::printf("    %s: %.1f %% within 1 std, %.1f %% within 2 std\n", name.c_str(), 100.0 * f1,
-                  100.0 * f2);
-    }
+  std::printf("std calibration: disparity_std_cells %.2f, disparity_std_scale %.1f\n", best_floor,
+              best_scale);
+  for (const auto& [name, bias] : sets) {
+    const auto [f1, f2] = WithinStd(bias, best_floor, best_scale);
+    std::printf("    %s: %.1f %% within 1 std, %.1f %% within 2 std\n", name.c_str(), 100.0 * f1,
+                100.0 * f2);
   }
 }
 
@@ -545,7 +515,6 @@ struct OmnirigRun {
   dense::DenseMap fused_tight{TightMergedOptions()};
   double setup_s = 0.0, again_s = 0.0, from_disk_s = 0.0, from_disk_cpu_s = 0.0;
   double fuse_cpu_s = 0.0;  // the merged cloud's DenseMap::Add, all pairs
-  std::vector<std::array<double, 2>> noise_grey;  // each pair's estimated image noise
   std::vector<std::vector<dense::DensePoint>> clouds;  // each pair's points (its cam0 frame)
 };
 
@@ -603,7 +572,6 @@ void RunOmnirig(const BenchSet& set, const dense::DenseStereoOptions& dense_opti
     const dense::DensePairResult result =
         dense.Reconstruct(set.images[0][f], set.images[1][f], progress);
     run->funnel.Add(result);
-    run->noise_grey.push_back(result.noise_grey);
     const auto timed = [&](const std::string& name, const auto& write) {
       const double before = CpuSeconds();
       write();
@@ -689,9 +657,6 @@ void RunSet(const BenchSet& set, bool with_peer, bool profile,
   }
   std::printf("\n");
   ours.funnel.Print();
-  std::printf("images' noise (EstimateNoiseGrey, cam0 / cam1 per pair):");
-  for (const auto& noise : ours.noise_grey) std::printf(" %.2f / %.2f", noise[0], noise[1]);
-  std::printf("\n");
   ours.bias.Print("omnirig sub-cell disparity, refined (default)");
   unrefined.bias.Print("omnirig sub-cell disparity, SGBM's sub-pixel only");
   std::printf("\nmerged cloud of the %d pairs placed by their true poses:\n", num_frames);
@@ -763,7 +728,6 @@ struct BenchFlags {
   bool with_peer = true, with_job = true;
   bool development_only = false;  // for tuning: the held-out renders are not even made
   bool calibrate_std = false;
-  std::string std_samples_csv;  // --calibrate-std: every 10th point's (error, fit, noise) here
   bool floor = true;  // the clean lounge as well
 };
 
@@ -784,31 +748,15 @@ int Run(const BenchFlags& flags, const dense::DenseStereoOptions& dense_options)
                        sequence.images};
   const BenchSet noisy_development = NoisyRoom(development);
   if (flags.calibrate_std) {
-    std::vector<std::pair<std::string, std::vector<StdSample>>> sets;
+    dense::DenseStereoOptions raw = dense_options;
+    raw.disparity_std_cells = 1e-4;
+    raw.disparity_std_scale = 1.0;
+    raw.max_relative_range_std = 1e9;  // every point, whatever its std
+    std::vector<std::pair<std::string, SubCellBias>> sets;
     for (const BenchSet* set : std::array<const BenchSet*, 2>{&development, &noisy_development}) {
-      dense::DenseStereoOptions fit_only = dense_options;
-      fit_only.disparity_std_cells = 1e-4;
-      fit_only.disparity_std_scale = 1.0;
-      fit_only.disparity_noise_scale = 0.0;
-      fit_only.max_relative_range_std = 1e9;  // every point, whatever its std
-      dense::DenseStereoOptions noise_only = fit_only;
-      noise_only.disparity_std_scale = 0.0;
-      noise_only.disparity_noise_scale = 1.0;
-      OmnirigRun fit_run, noise_run;
-      RunOmnirig(*set, fit_only, false, &fit_run);
-      RunOmnirig(*set, noise_only, false, &noise_run);
-      std::printf("%s: images' noise (EstimateNoiseGrey, cam0 / cam1 per pair):", set->name.c_str());
-      for (const auto& noise : fit_run.noise_grey) std::printf(" %.2f / %.2f", noise[0], noise[1]);
-      std::printf("\n");
-      sets.emplace_back(set->name, StdSamples(fit_run.bias, noise_run.bias));
-      if (!flags.std_samples_csv.empty()) {
-        FILE* csv = std::fopen((flags.std_samples_csv + std::to_string(sets.size()) + ".csv").c_str(), "w");
-        for (size_t i = 0; i < sets.back().second.size(); i += 10) {
-          const StdSample& x = sets.back().second[i];
-          std::fprintf(csv, "%.5f,%.5f,%.5f\n", x.error, x.fit, x.noise);
-        }
-        std::fclose(csv);
-      }
+      OmnirigRun run;
+      RunOmnirig(*set, raw, false, &run);
+      sets.emplace_back(set->name, std::move(run.bias));
     }
     CalibrateStd(sets);
     return 0;
@@ -869,10 +817,6 @@ int main(int argc, char** argv) {
       options.disparity_std_cells = std::atof(argv[++i]);
     else if (!std::strcmp(argv[i], "--disparity-std-scale"))
       options.disparity_std_scale = std::atof(argv[++i]);
-    else if (!std::strcmp(argv[i], "--disparity-noise-scale"))
-      options.disparity_noise_scale = std::atof(argv[++i]);
-    else if (!std::strcmp(argv[i], "--std-samples"))
-      flags.std_samples_csv = argv[++i];
   }
   options.Check();
   return omnirig::Run(flags, options);

@@ -1,7 +1,6 @@
 #include "engine/dense/dense_stereo.h"
 
 #include <algorithm>
-#include <array>
 #include <cmath>
 #include <optional>
 #include <tuple>
@@ -96,16 +95,12 @@ cv::Mat MatchedGrey(const cv::Mat& right, const cv::Mat& disparity16) {
 // 0.40-0.54 % after two to four, 0.530 % without). Returns the disparity in cells (CV_32F, -1
 // where none) and each cell's least-squares std (cells): the fit's residual variance over its
 // gradient energy (0 without the refinement).
-// With the images' noise variances (grey levels^2), also each cell's disparity std from that
-// noise alone: (noise0 + a^2 noise1) / (n * energy), the same least-squares form with the
-// images' noise in place of the fit's residual.
 struct RefinedDisparity {
-  cv::Mat disparity, std_cells, noise_std_cells;
+  cv::Mat disparity, std_cells;
 };
 
 RefinedDisparity RefineDisparity(const cv::Mat& left, const cv::Mat& right,
-                                 const cv::Mat& disparity16, const std::array<double, 2>& noise,
-                                 const DenseStereoOptions& o) {
+                                 const cv::Mat& disparity16, const DenseStereoOptions& o) {
   const cv::Size size = left.size();
   // Windows of 15 and 21 cells gave 0.346 % and 0.373 % on the development room against
   // 0.344 % for 11 (bench_dense).
@@ -129,9 +124,7 @@ RefinedDisparity RefineDisparity(const cv::Mat& left, const cv::Mat& right,
       my[c] = static_cast<float>(r);
     }
   }
-  RefinedDisparity out{sgbm.clone(), cv::Mat::zeros(size, CV_32F), cv::Mat::zeros(size, CV_32F)};
-  const float noise0 = static_cast<float>(noise[0] * noise[0]);
-  const float noise1 = static_cast<float>(noise[1] * noise[1]);
+  RefinedDisparity out{sgbm.clone(), cv::Mat::zeros(size, CV_32F)};
   if (o.refine_subcell) {
     cv::Mat w, g;
     cv::remap(right, w, map_x, map_y, cv::INTER_CUBIC, cv::BORDER_REPLICATE);
@@ -167,7 +160,6 @@ RefinedDisparity RefineDisparity(const cv::Mat& left, const cv::Mat& right,
           const float residual =
               std::max(0.f, a * a * var_w + var_l - 2.f * a * cov_wl - step * step * energy);
           out.std_cells.at<float>(r, c) = std::sqrt(residual / (n * energy));
-          out.noise_std_cells.at<float>(r, c) = std::sqrt((noise0 + a * a * noise1) / (n * energy));
         }
       }
     });
@@ -200,7 +192,6 @@ void DenseStereoOptions::Check() const {
   OMNIRIG_CHECK_IN(min_confidence, '[', 0, 1, ')');
   OMNIRIG_CHECK_POSITIVE(disparity_std_cells);
   OMNIRIG_CHECK_NON_NEGATIVE(disparity_std_scale);
-  OMNIRIG_CHECK_NON_NEGATIVE(disparity_noise_scale);
   OMNIRIG_CHECK_POSITIVE(max_relative_range_std);
   OMNIRIG_CHECK_IN(dark_level, '[', 0, 255, ')');
   OMNIRIG_CHECK_IN(mask_margin_cells, '[', 0, 100, ']');
@@ -283,62 +274,6 @@ std::pair<double, int> EpipolarOffset(const cv::Mat& grey0, const cv::Mat& grey1
   return {offsets[num / 2], num};
 }
 
-double EstimateNoiseGrey(const cv::Mat& grey, double dark_level) {
-  OMNIRIG_CHECK(grey.type() == CV_8UC1, "EstimateNoiseGrey takes 8-bit grey images");
-  constexpr double kMaxGrey = 250.0;  // above it the noise may be clipped
-  cv::Mat inside = (grey > dark_level) & (grey < kMaxGrey);
-  cv::erode(inside, inside, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(7, 7)));
-  const cv::Mat kernel = (cv::Mat_<float>(3, 3) << 1, -2, 1, -2, 4, -2, 1, -2, 1);
-  cv::Mat response;
-  cv::filter2D(grey, response, CV_16S, kernel, cv::Point(-1, -1), 0.0, cv::BORDER_REPLICATE);
-  // The flattest pixels: local gradient energy of the smoothed image (the smoothing keeps the
-  // noise out of the choice) at most its kFlatShare quantile.
-  constexpr double kFlatShare = 0.1;
-  cv::Mat smooth, dx, dy, energy;
-  cv::GaussianBlur(grey, smooth, cv::Size(0, 0), 1.5);
-  cv::Sobel(smooth, dx, CV_32F, 1, 0);
-  cv::Sobel(smooth, dy, CV_32F, 0, 1);
-  cv::boxFilter(dx.mul(dx) + dy.mul(dy), energy, CV_32F, cv::Size(5, 5));
-  std::vector<float> energies;
-  for (int r = 0; r < grey.rows; ++r) {
-    const uint8_t* in = inside.ptr<uint8_t>(r);
-    const float* e = energy.ptr<float>(r);
-    for (int c = 0; c < grey.cols; ++c) {
-      if (in[c]) energies.push_back(e[c]);
-    }
-  }
-  if (energies.empty()) return 0.0;
-  const size_t at = static_cast<size_t>(kFlatShare * (energies.size() - 1));
-  std::nth_element(energies.begin(), energies.begin() + at, energies.end());
-  const float flat = energies[at];
-  // The median of |response| (integers up to 16 * 255) over those pixels, by a histogram.
-  std::vector<int64_t> histogram(16 * 255 + 1, 0);
-  int64_t count = 0;
-  for (int r = 0; r < grey.rows; ++r) {
-    const int16_t* value = response.ptr<int16_t>(r);
-    const uint8_t* in = inside.ptr<uint8_t>(r);
-    const float* e = energy.ptr<float>(r);
-    for (int c = 0; c < grey.cols; ++c) {
-      if (!in[c] || e[c] > flat) continue;
-      ++histogram[std::abs(value[c])];
-      ++count;
-    }
-  }
-  // Bin k holds |response| in [k - 0.5, k + 0.5) (bin 0: [0, 0.5)); linear within the bin.
-  const double half = 0.5 * static_cast<double>(count);
-  double below = 0.0;
-  for (size_t k = 0; k < histogram.size(); ++k) {
-    const double in_bin = static_cast<double>(histogram[k]);
-    if (below + in_bin >= half) {
-      const double low = k == 0 ? 0.0 : k - 0.5, width = k == 0 ? 0.5 : 1.0;
-      const double median = low + width * (half - below) / in_bin;
-      return median / (6.0 * 0.6745);
-    }
-    below += in_bin;
-  }
-  return 0.0;
-}
-
 cv::Mat WindowCorrelation(const cv::Mat& a, const cv::Mat& b, int window, double noise_grey) {
   const cv::Size size(window, window);
   cv::Mat mean_a, mean_b, mean_aa, mean_bb, mean_ab;
@@ -410,15 +345,12 @@ DenseStereo::RectifiedPair DenseStereo::RectifyPair(const cv::Mat& image0,
       [&](const cv::Range& cameras) {
         for (int camera = cameras.start; camera < cameras.end; ++camera) {
           if (camera == 0) {
-            pair.noise_grey[0] = EstimateNoiseGrey(ToGreyscale8(image0), options_.dark_level);
             pair.colour0 = rectifier_->Rectify(image0, 0);
             pair.grey0 = ToGreyscale8(pair.colour0);
             pair.mask0 =
                 MirrorMask(pair.grey0, Eigen::Vector2d::Zero(), mask, rectifier_->ValidMask(0));
           } else {
-            const cv::Mat grey1 = ToGreyscale8(image1);
-            pair.noise_grey[1] = EstimateNoiseGrey(grey1, options_.dark_level);
-            pair.grey1 = rectifier_->Rectify(grey1, 1);
+            pair.grey1 = rectifier_->Rectify(ToGreyscale8(image1), 1);
             pair.mask1 =
                 MirrorMask(pair.grey1, Eigen::Vector2d::Zero(), mask, rectifier_->ValidMask(1));
           }
@@ -429,23 +361,20 @@ DenseStereo::RectifiedPair DenseStereo::RectifyPair(const cv::Mat& image0,
 }
 
 void DenseStereo::TriangulateCells(const cv::Mat& disparity, const cv::Mat& disparity_std,
-                                   const cv::Mat& noise_std, const cv::Mat& correlation, int first,
-                                   const RectifiedPair& pair, GridCells* cells,
-                                   DensePairResult* result) const {
+                                   const cv::Mat& correlation, int first, const RectifiedPair& pair,
+                                   GridCells* cells, DensePairResult* result) const {
   const int rows = disparity.rows, width = disparity.cols;
   const int num_values = static_cast<int>(cot_parallax_.size());
   const double baseline = rectifier_->baseline_m();
   const float scale = static_cast<float>(result->confidence_scale);
   const double floor2 = options_.disparity_std_cells * options_.disparity_std_cells;
   const double fit_scale2 = options_.disparity_std_scale * options_.disparity_std_scale;
-  const double noise_scale2 = options_.disparity_noise_scale * options_.disparity_noise_scale;
   std::vector<int> row_mirror(rows, 0), row_matched(rows, 0);
   std::vector<double> row_confidence(rows, 0.0);
   cv::parallel_for_(cv::Range(0, rows), [&](const cv::Range& range_of_rows) {
     for (int r = range_of_rows.start; r < range_of_rows.end; ++r) {
       const float* d = disparity.ptr<float>(r);
       const float* d_std = disparity_std.ptr<float>(r);
-      const float* n_std = noise_std.ptr<float>(r);
       const uint8_t* m0 = pair.mask0.ptr<uint8_t>(r) + first;
       const uint8_t* m1 = pair.mask1.ptr<uint8_t>(r) + first;
       const float* corr = correlation.ptr<float>(r);
@@ -466,8 +395,7 @@ void DenseStereo::TriangulateCells(const cv::Mat& disparity, const cv::Mat& disp
         conf_row[c] = conf;
         const double sin_theta = sin_theta_[first + c];
         const double range_m = baseline * (sin_theta * cot_parallax_[k] + cos_theta_[first + c]);
-        const double std_cells = std::sqrt(floor2 + fit_scale2 * d_std[c] * d_std[c] +
-                                           noise_scale2 * n_std[c] * n_std[c]);
+        const double std_cells = std::sqrt(floor2 + fit_scale2 * d_std[c] * d_std[c]);
         const double std_m = sin_theta * range_std_per_sin_theta_[k] * std_cells;
         if (conf < options_.min_confidence || !(range_m > 0.0) ||
             std_m > options_.max_relative_range_std * range_m) {
@@ -556,7 +484,6 @@ DensePairResult DenseStereo::Reconstruct(const cv::Mat& image0, const cv::Mat& i
   progress.ThrowIfCancelled();
   DensePairResult result;
   result.seconds.rectify = timer.ElapsedSeconds();
-  result.noise_grey = pair.noise_grey;
   const int rows = rectifier_->rows(), cols = rectifier_->cols();
   GridCells cells{cv::Mat::zeros(rows, cols, CV_32F), cv::Mat::zeros(rows, cols, CV_32F),
                   cv::Mat::zeros(rows, cols, CV_32F)};
@@ -588,14 +515,13 @@ DensePairResult DenseStereo::Reconstruct(const cv::Mat& image0, const cv::Mat& i
     result.seconds.epipolar = timer.ElapsedSeconds();
     progress.Report(0.88, "refine");
     timer.Restart();
-    const RefinedDisparity refined =
-        RefineDisparity(left, right_float, disparity16, pair.noise_grey, options_);
+    const RefinedDisparity refined = RefineDisparity(left, right_float, disparity16, options_);
     result.seconds.refine = timer.ElapsedSeconds();
     progress.ThrowIfCancelled();
     progress.Report(0.93, "triangulate");
     timer.Restart();
-    TriangulateCells(refined.disparity, refined.std_cells, refined.noise_std_cells, correlation,
-                     first, pair, &cells, &result);
+    TriangulateCells(refined.disparity, refined.std_cells, correlation, first, pair, &cells,
+                     &result);
   }
   CollectPoints(cells, pair.colour0, &result);
   result.num_points = static_cast<int>(result.points.size());

@@ -65,21 +65,18 @@ struct DenseStereoOptions {
   bool refine_subcell = true;
   // Each point's disparity std (cells, 1 sigma), turned into its range std:
   // sqrt(disparity_std_cells^2 + (disparity_std_scale * fit_std)^2), where fit_std is the
-  // refinement's least-squares std of the cell (0 without refinement). Calibrated on the
-  // development room (bench_dense --calibrate-std, 2 pairs, 2026-11-27: 69.6 % of the points
-  // within 1 std of the true range along their ray, 91.8 % within 2; the errors' tail is
-  // heavier than a Gaussian's, so no pair of values reaches 95 % at 2 std without overstating
-  // the 1-std share). The fit's std alone underestimates: neighbouring cells of the grid share
-  // image pixels (the grid resamples the images), so the window's samples are not independent.
-  double disparity_std_cells = 0.06;
-  double disparity_std_scale = 3.0;
-  // The images' noise in the disparity std: each image's noise sigma_n is estimated from the
-  // image itself (EstimateNoiseGrey), and a refined cell's disparity std from it is the
-  // Lucas-Kanade form sqrt(sigma_n0^2 + a^2 sigma_n1^2) / sqrt(sum of the window's squared
-  // gradients, cam1 scaled by a to cam0's contrast) cells, times disparity_noise_scale (the
-  // noise of neighbouring cells is not independent: the grid resamples the images, JPEG and
-  // the sensor's noise are spatially correlated). Added in quadrature to the two terms above.
-  double disparity_noise_scale = 0.0;
+  // refinement's least-squares std of the cell (0 without refinement). Calibrated on the two
+  // development sets at once (bench_dense --calibrate-std, 2 pairs each, 2026-11-27): the room
+  // as rendered (70.5 % of the points within 1 std of the true range along their ray, 92.0 %
+  // within 2) and the room with more sensor noise and JPEG (68.7 %, 91.2 %); the errors' tail
+  // is heavier than a Gaussian's, so no pair of values reaches 95 % at 2 std without
+  // overstating the 1-std share. The fit's std alone underestimates: neighbouring cells of the
+  // grid share image pixels (the grid resamples the images), and JPEG and sensor noise are
+  // spatially correlated, so the window's samples are not independent. (An estimate of the
+  // images' noise from the images themselves did not help: JPEG removes the fine-scale noise
+  // such an estimate sees while the disparity error grows; docs/dense.md.)
+  double disparity_std_cells = 0.02;
+  double disparity_std_scale = 3.6;
   // Points whose range std exceeds this fraction of their range are not reported.
   double max_relative_range_std = 0.1;
   // Mirror mask (engine/features/mirror_mask.h, shape kDarkRowEnds): along each grid row,
@@ -129,8 +126,6 @@ struct DensePairResult {
   double epipolar_offset_cells = -1.0;
   int num_epipolar_samples = 0;
   double confidence_scale = 1.0;
-  // Each image's noise (grey levels, 1 sigma) as estimated from the image (EstimateNoiseGrey).
-  std::array<double, 2> noise_grey{0.0, 0.0};
   // Wall seconds of each stage (rectification and masks, semi-global matching, the matched
   // windows' correlation, the pair-level check, triangulation and panoramas).
   struct Seconds {
@@ -159,7 +154,6 @@ class DenseStereo {
   struct RectifiedPair {
     cv::Mat colour0, grey0, grey1;  // cam0 as given (grey or BGR), both grey
     cv::Mat mask0, mask1;           // MirrorMask of each
-    std::array<double, 2> noise_grey{0.0, 0.0};  // EstimateNoiseGrey of each camera's image
   };
   // The panoramas' cells in the grid's layout (transposed at the end of Reconstruct).
   struct GridCells {
@@ -175,9 +169,8 @@ class DenseStereo {
   // and matched cells and the mean confidence. Confidences are scaled by
   // result->confidence_scale.
   void TriangulateCells(const cv::Mat& disparity, const cv::Mat& disparity_std,
-                        const cv::Mat& noise_std, const cv::Mat& correlation, int first,
-                        const RectifiedPair& pair, GridCells* cells,
-                        DensePairResult* result) const;
+                        const cv::Mat& correlation, int first, const RectifiedPair& pair,
+                        GridCells* cells, DensePairResult* result) const;
 
   // One DensePoint per known range cell, in row-major grid order (cam0's frame).
   void CollectPoints(const GridCells& cells, const cv::Mat& colour0, DensePairResult* result) const;
@@ -206,14 +199,6 @@ PlyCloud ToPlyCloud(const std::vector<DensePoint>& points, const std::string& co
 std::pair<double, int> EpipolarOffset(const cv::Mat& grey0, const cv::Mat& grey1,
                                       const cv::Mat& mask0, int num_disparities,
                                       const DenseStereoOptions& options);
-
-// The standard deviation (grey levels) of an 8-bit grey image's noise, from the image itself
-// in one pass (Immerkaer's estimate, made robust): the median absolute response to the kernel
-// [1 -2 1; -2 4 -2; 1 -2 1], which cancels locally linear shading, over the pixels whose 5 x 5
-// neighbourhood lies strictly between dark_level and 250 (inside the mirror, not clipped),
-// divided by 6 * 0.6745 (the kernel's norm times the median of |N(0, 1)|). Texture adds to it
-// little (the median is over mostly smooth neighbourhoods); 0 when no pixel qualifies.
-double EstimateNoiseGrey(const cv::Mat& grey, double dark_level);
 
 // Zero-mean normalised cross-correlation of the window x window neighbourhoods of `a` and `b`
 // (CV_32F, same size) at every cell, with noise added to both standard deviations (see

@@ -171,47 +171,6 @@ TEST(DenseStereo, DarkPairGivesFewPoints) {
   EXPECT_LT(result.num_points, 50000);
 }
 
-// The images' noise, estimated from a rendered room image (noise 1 grey level per colour channel,
-// about 0.75 in grey with the 8-bit rounding) with known Gaussian noise added: within 10 % of
-// the noise the grey image then holds, whatever the texture of the room.
-TEST(DenseStereo, EstimatesTheImagesNoiseFromTheImage) {
-  const synth::StereoSequence& sequence = RoomPair();
-  cv::Mat grey;
-  cv::cvtColor(sequence.images[0][0], grey, cv::COLOR_BGR2GRAY);
-  const double dark_level = DenseStereoOptions().dark_level;
-  // The render's noise in grey: 1 per channel weighted by the grey conversion, and the rounding
-  // of the channels and of the grey level (variance 1/12 each).
-  const double w2 = 0.299 * 0.299 + 0.587 * 0.587 + 0.114 * 0.114;
-  const double rendered = std::sqrt(w2 * (1.0 + 1.0 / 12.0) + 1.0 / 12.0);
-  cv::RNG rng(7);
-  for (const double added : {0.0, 1.0, 2.0, 4.0, 8.0}) {
-    cv::Mat noisy;
-    grey.convertTo(noisy, CV_32F);
-    cv::Mat noise(grey.size(), CV_32F);
-    rng.fill(noise, cv::RNG::NORMAL, 0.0, added);
-    noisy += noise;
-    noisy.convertTo(noisy, CV_8U);
-    const double truth = std::sqrt(rendered * rendered + added * added);
-    const double estimate = EstimateNoiseGrey(noisy, dark_level);
-    std::printf("noise added %.1f: in the image %.3f, estimated %.3f\n", added, truth, estimate);
-    EXPECT_NEAR(estimate, truth, 0.1 * truth);
-  }
-  // A flat image: no texture to tell from the noise; the choice of the flattest pixels does not
-  // bias the estimate.
-  for (const double sigma : {1.0, 3.0}) {
-    cv::Mat flat(400, 400, CV_32F, cv::Scalar(120.0));
-    cv::Mat noise(flat.size(), CV_32F);
-    rng.fill(noise, cv::RNG::NORMAL, 0.0, sigma);
-    flat += noise;
-    flat.convertTo(flat, CV_8U);
-    const double truth = std::sqrt(sigma * sigma + 1.0 / 12.0);
-    const double estimate = EstimateNoiseGrey(flat, dark_level);
-    std::printf("flat image, noise %.1f: in the image %.3f, estimated %.3f\n", sigma, truth, estimate);
-    EXPECT_NEAR(estimate, truth, 0.1 * truth);
-  }
-  EXPECT_EQ(EstimateNoiseGrey(cv::Mat(100, 100, CV_8U, cv::Scalar(5)), dark_level), 0.0);
-}
-
 TEST(DenseStereo, RefusesImagesOfAnotherSize) {
   const synth::StereoSequence& sequence = RoomPair();
   const DenseStereo dense(sequence.rig, DenseStereoOptions());
