@@ -65,14 +65,18 @@ struct DenseStereoOptions {
   bool refine_subcell = true;
   // Each point's disparity std (cells, 1 sigma), turned into its range std:
   // sqrt(disparity_std_cells^2 + (disparity_std_scale * fit_std)^2), where fit_std is the
-  // refinement's least-squares std of the cell (0 without refinement). Calibrated on the
-  // development room (bench_dense --calibrate-std, 2 pairs, 2026-11-27: 69.6 % of the points
-  // within 1 std of the true range along their ray, 91.8 % within 2; the errors' tail is
-  // heavier than a Gaussian's, so no pair of values reaches 95 % at 2 std without overstating
-  // the 1-std share). The fit's std alone underestimates: neighbouring cells of the grid share
-  // image pixels (the grid resamples the images), so the window's samples are not independent.
-  double disparity_std_cells = 0.06;
-  double disparity_std_scale = 3.0;
+  // refinement's least-squares std of the cell (0 without refinement). Calibrated on the two
+  // development sets at once (bench_dense --calibrate-std, 2 pairs each, 2026-11-27): the room
+  // as rendered (70.5 % of the points within 1 std of the true range along their ray, 92.0 %
+  // within 2) and the room with more sensor noise and JPEG (68.7 %, 91.2 %); the errors' tail
+  // is heavier than a Gaussian's, so no pair of values reaches 95 % at 2 std without
+  // overstating the 1-std share. The fit's std alone underestimates: neighbouring cells of the
+  // grid share image pixels (the grid resamples the images), and JPEG and sensor noise are
+  // spatially correlated, so the window's samples are not independent. (An estimate of the
+  // images' noise from the images themselves did not help: JPEG removes the fine-scale noise
+  // such an estimate sees while the disparity error grows; docs/dense.md.)
+  double disparity_std_cells = 0.02;
+  double disparity_std_scale = 3.6;
   // Points whose range std exceeds this fraction of their range are not reported.
   double max_relative_range_std = 0.1;
   // Mirror mask (engine/features/mirror_mask.h, shape kDarkRowEnds): along each grid row,
