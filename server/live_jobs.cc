@@ -3,6 +3,7 @@
 #include <chrono>
 #include <filesystem>
 #include <iostream>
+#include <vector>
 
 #include "server/job_runner.h"
 #include "server/service.h"
@@ -26,6 +27,19 @@ LiveJobs::~LiveJobs() {
 
 storage::JobRecord LiveJobs::Start(const std::string& dataset_id, const nlohmann::json& params,
                                    const StereoRig& rig) {
+  std::vector<std::shared_ptr<LiveJob>> done;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    for (auto it = jobs_.begin(); it != jobs_.end();) {
+      if (!it->second->done) {
+        ++it;
+        continue;
+      }
+      done.push_back(it->second);
+      it = jobs_.erase(it);
+    }
+  }
+  for (const auto& ended : done) ended->thread.join();
   auto job = std::make_shared<LiveJob>();
   job->rig = rig;
   job->record = state_.store->CreateClaimedJob(
@@ -111,6 +125,7 @@ void LiveJobs::Run(const std::shared_ptr<LiveJob>& job) {
               << std::endl;
   }
   events->Changed(id);
+  job->done = true;
 }
 
 void LiveJobs::RenewLeases() {

@@ -41,7 +41,8 @@ struct LiveJob {
   std::string last_name;
   std::atomic<bool> cancel{false};
   std::atomic<bool> interrupt{false};
-  std::atomic<bool> ended{false};  // the job's thread returned: frames get 409
+  std::atomic<bool> ended{false};  // the job's run returned: frames get 409
+  std::atomic<bool> done{false};   // the thread's last step: it can be joined
   std::thread thread;
 };
 
@@ -52,10 +53,13 @@ class LiveJobs {
   LiveJobs(const LiveJobs&) = delete;
   LiveJobs& operator=(const LiveJobs&) = delete;
 
-  // Creates the job (running, claimed by this process) and starts its thread.
+  // Creates the job (running, claimed by this process) and starts its thread. Joins and forgets
+  // the jobs whose threads are done: a thread never joined keeps its stack for as long as the
+  // process runs (a day of robots' runs is hundreds of them).
   storage::JobRecord Start(const std::string& dataset_id, const nlohmann::json& params,
                            const StereoRig& rig);
-  // The live job `id` started by this process (running or ended), or nullptr.
+  // The live job `id` started by this process (running, or ended and not yet forgotten), or
+  // nullptr.
   std::shared_ptr<LiveJob> Find(const std::string& id);
   // The running job's snapshot files (trajectory.json, map.ply) from its attempt folder; false
   // when `id` is not a live job running here or has no such file yet.

@@ -304,10 +304,23 @@ void StoreFrame(ServiceState& state, const std::string& dataset_id,
   }
 }
 
+bool IsLiveRecord(const storage::JobRecord& record) {
+  if (record.type != "slam") return false;
+  const nlohmann::json params = nlohmann::json::parse(record.params, nullptr, false);
+  return params.is_object() && params.contains("live") && params["live"] == true;
+}
+
 std::shared_ptr<LiveJob> RequireLiveJob(ServiceState& state, const std::string& id) {
   const auto record = state.store->GetJob(id);
   if (!record) throw HttpError(404, "job_not_found", "no job " + id);
   std::shared_ptr<LiveJob> job = state.live->Find(id);
+  if (!job && record->state != storage::JobState::kRunning && IsLiveRecord(*record)) {
+    // A live job that ended here and was forgotten (LiveJobs::Start), or ended in another process.
+    throw HttpError(409, "job_finished",
+                    "live job " + id + " has ended (" + storage::JobStateName(record->state) +
+                        "): it takes no more frames",
+                    {{"state", storage::JobStateName(record->state)}});
+  }
   if (!job) {
     throw HttpError(409, "job_not_live",
                     "job " + id + " is not a live job running in this server (it is a " +

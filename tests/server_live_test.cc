@@ -346,6 +346,16 @@ TEST_F(ServerLiveTest, IdleTimeoutFinishesAndCancelEnds) {
     finished += code == "job_finished";
   }
   EXPECT_EQ(finished, 2);  // each driver's last frame
+
+  // A live job's start forgets the live jobs whose threads are done (joined): a frame to one of
+  // them is refused as finished all the same.
+  for (const std::string& ended : {idle, canceled, busy}) {
+    const auto answer =
+        PostFrame(*client_, ended, 100.0, sequence_->images[0][0], sequence_->images[1][0]);
+    ASSERT_TRUE(answer);
+    EXPECT_EQ(answer->status, 409) << ended;
+    EXPECT_EQ(JsonOf(answer)["error"]["code"], "job_finished") << answer->body;
+  }
 }
 
 TEST_F(ServerLiveTest, AStoppedServersLiveJobRunsAgainAsABatchJobOverItsFrames) {
