@@ -176,6 +176,7 @@ ServiceState::~ServiceState() = default;
 Service::~Service() {
   if (state_ && state_->events) state_->events->Close();
   if (http_) http_->Stop();
+  if (state_ && state_->workers) state_->workers->StopClaiming();
   if (state_ && state_->live) state_->live->Drain();
   if (state_ && state_->workers) state_->workers->Drain(0);
 }
@@ -190,7 +191,10 @@ int Service::Start() {
 int Service::Drain(double timeout_s) {
   state_->events->Close();  // ends the event streams, which would hold the HTTP threads
   http_->Stop();
-  const int live = state_->live->Drain();  // live jobs go back to the queue as batch jobs
+  // Live jobs go back to the queue as batch jobs, for a worker of another server (or of this
+  // one's next start): this one's workers take no more jobs first.
+  state_->workers->StopClaiming();
+  const int live = state_->live->Drain();
   return live + state_->workers->Drain(timeout_s);
 }
 

@@ -72,12 +72,14 @@ bool WorkerPool::Cancel(const std::string& job_id) {
   return true;
 }
 
+void WorkerPool::StopClaiming() {
+  std::lock_guard<std::mutex> lock(mutex_);
+  stopping_ = true;
+  wake_.notify_all();
+}
+
 int WorkerPool::Drain(double timeout_s) {
-  {
-    std::lock_guard<std::mutex> lock(mutex_);
-    stopping_ = true;
-    wake_.notify_all();
-  }
+  StopClaiming();
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
   int interrupted = 0;
   {

@@ -70,6 +70,9 @@ class WorkerPool {
   void Notify();
   // Sets the cancel flag of a job running in this process; false when it is not running here.
   bool Cancel(const std::string& job_id);
+  // Stops taking jobs (the running ones go on). Drain() begins with it; a service stopping calls
+  // it before it hands its live jobs back to the queue, so that no worker here takes them.
+  void StopClaiming();
   // Stops taking jobs, waits up to `timeout_s` for running ones, then interrupts the rest and
   // hands them back to the queue (their attempt is not counted). Returns the requeued count.
   int Drain(double timeout_s);
