@@ -3,6 +3,7 @@
 #include <chrono>
 #include <filesystem>
 #include <iostream>
+#include <set>
 
 #include "server/job_runner.h"
 #include "server/service.h"
@@ -50,7 +51,11 @@ std::shared_ptr<LiveJob> LiveJobs::Find(const std::string& id) {
 bool LiveJobs::ServeArtifact(const std::string& id, const std::string& name,
                              HttpResponse& response) {
   const std::shared_ptr<LiveJob> job = Find(id);
-  if (!job || job->ended || (name != "trajectory.json" && name != "map.ply")) return false;
+  if (!job || job->ended) return false;
+  // The files the job refreshes while it runs (api/live_publisher.h).
+  static const std::set<std::string> kLiveFiles = {"trajectory.json", "map.ply", "occupancy.pgm",
+                                                   "occupancy.yaml"};
+  if (kLiveFiles.count(name) == 0) return false;
   const std::filesystem::path path = state_.data_dir->AttemptDir(id, job->record.attempts) / name;
   std::error_code error;
   const auto size = std::filesystem::file_size(path, error);
@@ -76,6 +81,11 @@ void LiveJobs::Run(const std::shared_ptr<LiveJob>& job) {
                               nlohmann::json data = frame;
                               data["job"] = id;
                               events->Publish(id, "frame", data);
+                            },
+                            [events, id](const nlohmann::json& refreshed) {
+                              nlohmann::json data = refreshed;
+                              data["job"] = id;
+                              events->Publish(id, "artifacts", data);
                             });
   };
   events->Changed(id);
