@@ -159,6 +159,9 @@ export function renderLiveReport(container, job) {
     try {
       const text = await fetchArtifactText(job.id, 'occupancy.yaml');
       const bytes = await fetchArtifactBytes(job.id, 'occupancy.pgm');
+      // The two files are replaced one after the other: a yaml that changed meanwhile may not
+      // place this image (the next refresh reads both again).
+      if (await fetchArtifactText(job.id, 'occupancy.yaml') !== text) return;
       const grid = parseOccupancy(bytes, text);
       const same = occupancyFiles && occupancyFiles.text === text && occupancyFiles.bytes.length === bytes.length &&
         occupancyFiles.bytes.every((v, i) => v === bytes[i]);
