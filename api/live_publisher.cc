@@ -202,12 +202,12 @@ void LivePublisher::FuseNewKeyframes(const LiveSnapshot& first, Fusion* fusion) 
     fusion->last_frame = frame;
     fusion->last_position = pose->translation;
     try {
+      const slam::StereoImages images =
+          slam::StereoImageLoader(options_.dataset_dir, {{name, "cam0/" + name, "cam1/" + name}})(0);
       if (!fusion->stereo) {
         fusion->stereo = std::make_unique<dense::DenseStereo>(
             rig_, dense::KeyframeStereoOptions(options), options.rectification_tables_dir);
       }
-      const slam::StereoImages images =
-          slam::StereoImageLoader(options_.dataset_dir, {{name, "cam0/" + name, "cam1/" + name}})(0);
       fusion->map.Add(*pose, fusion->stereo->Reconstruct(images.cam0, images.cam1, stopping).points);
     } catch (const InvalidArgument& e) {
       // Its images cannot be read back: the grid goes on without it (the final grid retries).
