@@ -31,8 +31,8 @@ void RemoveTemporaries(const fs::path& dir, std::initializer_list<const char*> n
 struct LivePublisher::Fusion {
   explicit Fusion(const dense::DenseMapOptions& options) : map(options) {}
   dense::DenseMap map;
-  std::unique_ptr<dense::DenseStereo> stereo;  // made at the first keyframe
-  int last_frame = -1;                          // the last keyframe fused (or given up)
+  std::unique_ptr<dense::DenseStereo> stereo;    // made at the first keyframe
+  int last_frame = -1;                           // the last keyframe fused (or given up)
   std::optional<Eigen::Vector3d> last_position;  // where it was fused
   Timer since_write;
   bool unwritten = false;  // keyframes fused since the grid was last written
@@ -202,13 +202,14 @@ void LivePublisher::FuseNewKeyframes(const LiveSnapshot& first, Fusion* fusion) 
     fusion->last_frame = frame;
     fusion->last_position = pose->translation;
     try {
-      const slam::StereoImages images =
-          slam::StereoImageLoader(options_.dataset_dir, {{name, "cam0/" + name, "cam1/" + name}})(0);
+      const slam::StereoImages images = slam::StereoImageLoader(
+          options_.dataset_dir, {{name, "cam0/" + name, "cam1/" + name}})(0);
       if (!fusion->stereo) {
         fusion->stereo = std::make_unique<dense::DenseStereo>(
             rig_, dense::KeyframeStereoOptions(options), options.rectification_tables_dir);
       }
-      fusion->map.Add(*pose, fusion->stereo->Reconstruct(images.cam0, images.cam1, stopping).points);
+      fusion->map.Add(*pose,
+                      fusion->stereo->Reconstruct(images.cam0, images.cam1, stopping).points);
     } catch (const InvalidArgument& e) {
       // Its images cannot be read back: the grid goes on without it (the final grid retries).
       Log("keyframe " + name + " is not in the occupancy grid so far: " + e.what());

@@ -65,8 +65,8 @@ std::shared_ptr<const LiveSnapshot> TwoFrames() {
   auto snapshot = std::make_shared<LiveSnapshot>();
   snapshot->slam.names = {"t000000.000.png", "t000000.100.png"};
   snapshot->slam.states = {"initialised", "tracked"};
-  snapshot->slam.world_from_rig = {Rigid3d(), Rigid3d(Eigen::Quaterniond::Identity(),
-                                                      Eigen::Vector3d(0.5, 0, 0))};
+  snapshot->slam.world_from_rig = {
+      Rigid3d(), Rigid3d(Eigen::Quaterniond::Identity(), Eigen::Vector3d(0.5, 0, 0))};
   snapshot->slam.keyframes = {0, 1};
   snapshot->slam.num_keyframes = 2;
   slam::MapPoint point;

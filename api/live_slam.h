@@ -24,8 +24,8 @@
 // the run holds them now) are rewritten in the output folder at most every
 // kLiveArtifactInterval_s, and after the first frame; with "dense_map", occupancy.pgm and
 // occupancy.yaml too, the grid so far, after new keyframes (api/live_publisher.h: they are
-// written off the tracking thread, which only takes the snapshot). At the end: loops settled, the global
-// adjustment and the batch job's artifacts and result, with "live": {"num_received",
+// written off the tracking thread, which only takes the snapshot). At the end: loops settled,
+// the global adjustment and the batch job's artifacts and result, with "live": {"num_received",
 // "num_tracked_frames", "num_skipped", "latency_ms": {"p50", "p95", "p99", "max"},
 // "ended_by": "finish" | "idle_timeout"}.
 

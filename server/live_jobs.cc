@@ -75,18 +75,17 @@ void LiveJobs::Run(const std::shared_ptr<LiveJob>& job) {
   JobEvents* events = state_.events.get();
   options.on_progress = [events](const std::string& id) { events->Changed(id); };
   const std::string id = job->record.id;
-  options.run = [job, events, id](const nlohmann::json& params, const api::JobContext& context) {
-    return api::RunLiveSlam(params, context, job->rig, job->mailbox,
-                            [events, id](const nlohmann::json& frame) {
-                              nlohmann::json data = frame;
-                              data["job"] = id;
-                              events->Publish(id, "frame", data);
-                            },
-                            [events, id](const nlohmann::json& refreshed) {
-                              nlohmann::json data = refreshed;
-                              data["job"] = id;
-                              events->Publish(id, "artifacts", data);
-                            });
+  // The job's `frame` and `artifacts` events (each with "job": its id).
+  const auto publish = [events, id](const std::string& type) {
+    return [events, id, type](const nlohmann::json& event) {
+      nlohmann::json data = event;
+      data["job"] = id;
+      events->Publish(id, type, data);
+    };
+  };
+  options.run = [job, publish](const nlohmann::json& params, const api::JobContext& context) {
+    return api::RunLiveSlam(params, context, job->rig, job->mailbox, publish("frame"),
+                            publish("artifacts"));
   };
   events->Changed(id);
   const storage::JobOutcome outcome =

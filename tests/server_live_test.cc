@@ -231,8 +231,8 @@ Pgm ParsePgm(const std::string& bytes) {
 TEST_F(ServerLiveTest, TheOccupancyGridIsServedWhileTheJobRunsAndMadeAgainAtTheEnd) {
   // Keyframes 0.25 m apart on this 1.05 m run, on the full-resolution grid (as slam_job_test's
   // dense map of the short sequence: at 640x480 a coarser grid leaves few points).
-  const json job = CreateLive(
-      {{"dense_map", {{"keyframe_spacing_m", 0.25}, {"grid_step_factor", 1}}}});
+  const json job =
+      CreateLive({{"dense_map", {{"keyframe_spacing_m", 0.25}, {"grid_step_factor", 1}}}});
   const std::string id = job["id"];
   // The job tells of each refresh of its files: the first grid with occupied cells is awaited.
   std::promise<void> opened;
@@ -269,7 +269,7 @@ TEST_F(ServerLiveTest, TheOccupancyGridIsServedWhileTheJobRunsAndMadeAgainAtTheE
   EXPECT_EQ(yaml->status, 200) << yaml->body;
   const Pgm live = ParsePgm(pgm->body);
   EXPECT_GT(live.width * live.height, 1) << pgm->body.substr(0, 20);
-  EXPECT_GT(std::count(live.cells.begin(), live.cells.end(), '\0'), 0);  // occupied cells
+  EXPECT_GT(std::count(live.cells.begin(), live.cells.end(), '\0'), 0);    // occupied cells
   EXPECT_GT(std::count(live.cells.begin(), live.cells.end(), '\xfe'), 0);  // free cells
   // Its yaml names the served image (not the temporary it was written as), at the cell size.
   EXPECT_NE(yaml->body.find("image: occupancy.pgm\n"), std::string::npos) << yaml->body;
