@@ -294,6 +294,18 @@ TEST_F(ServerLiveTest, TheOccupancyGridIsServedWhileTheJobRunsAndMadeAgainAtTheE
   for (const std::string& name : names) EXPECT_EQ(name.find(".part-live"), std::string::npos);
 }
 
+TEST_F(ServerLiveTest, CancelEndsALiveJobWhoseGridIsBeingMade) {
+  // Canceled while keyframes wait for (or are in) their dense stereo: the job ends canceled, its
+  // publisher's threads stopped, and the server goes on.
+  const std::string id =
+      CreateLive({{"dense_map", {{"keyframe_spacing_m", 0.1}, {"grid_step_factor", 1}}}})["id"];
+  for (int i = 0; i < 4; ++i) EXPECT_EQ(PostFrame(*client_, id, i)->status, 200);
+  EXPECT_EQ(client_->Post(("/api/v1/jobs/" + id + "/cancel").c_str())->status, 202);
+  EXPECT_EQ(WaitForJob(port_, id, 120)["state"], "canceled");
+  EXPECT_EQ(PostFrame(*client_, id, 4)->status, 409);
+  EXPECT_EQ(client_->Get("/api/v1/health")->status, 200);
+}
+
 TEST_F(ServerLiveTest, RefusesBadFramesAndGoesOn) {
   const std::string id = CreateLive()["id"];
   ASSERT_EQ(PostFrame(*client_, id, 0)->status, 200);
