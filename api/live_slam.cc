@@ -5,6 +5,7 @@
 
 #include "api/camera_json.h"
 #include "api/json_fields.h"
+#include "api/live_publisher.h"
 #include "api/slam_job.h"
 #include "engine/features/image.h"
 #include "engine/slam/image_source.h"
@@ -44,38 +45,6 @@ slam::StereoImages Images(const LiveFrame& frame) {
   images.cam1 =
       frame.decoded[1].empty() ? Decode(frame.encoded[1], frame.name + " cam1") : frame.decoded[1];
   return images;
-}
-
-// trajectory.json and map.ply of the run so far, each written whole under a temporary name
-// and renamed: a client reading them while they are refreshed sees the old or the new file.
-void WriteSnapshot(const StereoRig& rig, const slam::SlamSnapshot& snapshot,
-                   const std::vector<double>& stamps, const std::optional<std::string>& map_job,
-                   const fs::path& output_dir) {
-  json frames = json::array();
-  for (size_t i = 0; i < snapshot.names.size(); ++i) {
-    frames.push_back(
-        {{"name", snapshot.names[i]},
-         {"state", snapshot.states[i]},
-         {"timestamp_s", stamps[i]},
-         {"world_from_rig",
-          snapshot.world_from_rig[i] ? PoseToJson(*snapshot.world_from_rig[i]) : json(nullptr)}});
-  }
-  const json trajectory = {
-      {"world_frame", map_job ? "the world of the saved map of slam job " + *map_job
-                              : std::string("the rig frame (cam0's frame) of the first tracked "
-                                            "frame")},
-      {"live", true},
-      {"num_keyframes", snapshot.num_keyframes},
-      {"frames", frames},
-      {"rig", RigToJson(rig)}};
-  // Each written under a temporary name (".NAME.part-live": the artifact collector and the
-  // start-up check skip such names), then renamed into place.
-  const fs::path trajectory_temp = output_dir / ".trajectory.json.part-live";
-  WriteTextFile(trajectory_temp, trajectory.dump(2) + "\n");
-  fs::rename(trajectory_temp, output_dir / "trajectory.json");
-  const fs::path map_temp = output_dir / ".map.ply.part-live";
-  slam::WritePly(map_temp, snapshot.map);
-  fs::rename(map_temp, output_dir / "map.ply");
 }
 
 json TrackedFrameJson(const slam::FrameReport& report, const LiveFrame& frame, int index,
@@ -193,7 +162,8 @@ json SkippedFrameJson(const LiveFrame& frame, int num_skipped) {
 }
 
 json RunLiveSlam(const json& params, const JobContext& context, const StereoRig& rig,
-                 LiveMailbox& mailbox, const std::function<void(const json&)>& on_frame) {
+                 LiveMailbox& mailbox, const std::function<void(const json&)>& on_frame,
+                 const std::function<void(const json&)>& on_artifacts) {
   const LiveSlamParams live = LiveSlamParamsFromJson(params);
   SlamParams parsed = SlamParamsFromJson(params);
   if (parsed.dense_map) {
@@ -203,6 +173,16 @@ json RunLiveSlam(const json& params, const JobContext& context, const StereoRig&
   options.num_threads = std::max(1, context.num_threads);
   if (parsed.map_job) options.saved_map = LoadSavedMap(context, *parsed.map_job);
   slam::Session session(rig, options, context.progress);
+  LivePublisherOptions publishing;
+  publishing.output_dir = context.output_dir;
+  publishing.map_job = parsed.map_job;
+  publishing.dense_map = parsed.dense_map;
+  publishing.dataset_dir = context.dataset_dir;
+  publishing.interval_s = kLiveArtifactInterval_s;
+  publishing.log = context.log;
+  publishing.on_artifacts = on_artifacts;
+  // Stopped and joined when this returns or throws (its destructor).
+  LivePublisher publisher(rig, std::move(publishing));
   std::vector<double> stamps;
   std::vector<std::string> names;
   std::vector<double> latencies_ms;
@@ -258,21 +238,13 @@ json RunLiveSlam(const json& params, const JobContext& context, const StereoRig&
                                     std::to_string(mailbox.num_skipped()) + " skipped");
       }
     }
-    // The first frame's snapshot at once, then at most one per interval: a snapshot exports the
-    // whole map, which grows with the run.
+    // The first frame's snapshot at once, then at most one per interval: the copy of the map
+    // grows with the run; the publisher writes it while tracking goes on.
     if (snapshot_due &&
         (stamps.size() == 1 || since_snapshot.ElapsedSeconds() >= kLiveArtifactInterval_s)) {
-      try {
-        WriteSnapshot(rig, session.Snapshot(), stamps, parsed.map_job, context.output_dir);
-        snapshot_due = false;
-      } catch (const std::exception& e) {
-        // A full disk: the robot still gets its poses; the snapshot is tried again next time.
-        context.Log(std::string("the map and trajectory so far cannot be written: ") + e.what());
-        std::error_code ignored;
-        for (const char* temp : {".trajectory.json.part-live", ".map.ply.part-live"}) {
-          fs::remove(context.output_dir / temp, ignored);
-        }
-      }
+      publisher.Publish(
+          std::make_shared<const LiveSnapshot>(LiveSnapshot{session.Snapshot(), stamps}));
+      snapshot_due = false;
       since_snapshot.Restart();
     }
     if (finish) break;
@@ -289,6 +261,8 @@ json RunLiveSlam(const json& params, const JobContext& context, const StereoRig&
                    {{"code", "job_finished"},
                     {"message", "the live job is finishing: it takes no more frames"},
                     {"details", json::object()}}}}});
+  // The final artifacts replace the publisher's, made again from the final poses.
+  publisher.Stop();
   OMNIRIG_CHECK(session.num_frames() > 0,
                 "the live job ended (" << ended_by << ") before any frame was tracked");
   const slam::SlamResult result = session.Finish();

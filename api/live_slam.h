@@ -22,8 +22,10 @@
 //
 // While the job runs, trajectory.json and map.ply (as the batch job writes them, the poses as
 // the run holds them now) are rewritten in the output folder at most every
-// kLiveArtifactInterval_s, and after the first frame. At the end: loops settled, the global
-// adjustment and the batch job's artifacts and result, with "live": {"num_received",
+// kLiveArtifactInterval_s, and after the first frame; with "dense_map", occupancy.pgm and
+// occupancy.yaml too, the grid so far, after new keyframes (api/live_publisher.h: they are
+// written off the tracking thread, which only takes the snapshot). At the end: loops settled,
+// the global adjustment and the batch job's artifacts and result, with "live": {"num_received",
 // "num_tracked_frames", "num_skipped", "latency_ms": {"p50", "p95", "p99", "max"},
 // "ended_by": "finish" | "idle_timeout"}.
 
@@ -107,10 +109,13 @@ nlohmann::json SkippedFrameJson(const LiveFrame& frame, int num_skipped);
 
 // Runs a live job on the job's thread until finished (RequestFinish, or idle past
 // live_idle_timeout_s), canceled (context.progress: throws Cancelled) or failed; answers every
-// frame it takes; `on_frame` (may be empty) sees every tracked frame's answer. Returns the
-// result JSON, with the artifacts written into context.output_dir.
+// frame it takes; `on_frame` (may be empty) sees every tracked frame's answer, and
+// `on_artifacts` (may be empty; called from another thread) every refresh of the files above
+// ({"artifacts": [names], ...}, LivePublisherOptions::on_artifacts). Returns the result JSON,
+// with the artifacts written into context.output_dir.
 nlohmann::json RunLiveSlam(const nlohmann::json& params, const JobContext& context,
                            const StereoRig& rig, LiveMailbox& mailbox,
-                           const std::function<void(const nlohmann::json&)>& on_frame);
+                           const std::function<void(const nlohmann::json&)>& on_frame,
+                           const std::function<void(const nlohmann::json&)>& on_artifacts = {});
 
 }  // namespace omnirig::api

@@ -34,6 +34,7 @@
 
 #include "api/camera_json.h"
 #include "api/job_types.h"
+#include "api/live_publisher.h"
 #include "engine/slam/map_io.h"
 #include "engine/slam/session.h"
 #include "engine/synth/presets.h"
@@ -164,7 +165,10 @@ std::string LoadAverage() {
 // tracker) in this thread, no HTTP, each `step`-th frame from the start (1: every frame, as a
 // server that keeps up tracks them; larger: as one that falls behind and skips the frames
 // between). Prints the mean per frame of decoding the two PNGs and of each tracking stage, and
-// the keyframes among the frames.
+// the keyframes among the frames; and every 10th frame the live job's snapshot: the copy the
+// tracking thread takes (slam::Session::Snapshot) and the writing of trajectory.json and
+// map.ply from it, which the live job's publisher does on its own thread
+// (api/live_publisher.h), so that it adds nothing to a frame's latency.
 void ProfileTracking(const BenchArgs& args, const json& rig_json, int step) {
   const fs::path dir(args.dir);
   std::vector<std::string> names;
@@ -176,8 +180,12 @@ void ProfileTracking(const BenchArgs& args, const json& rig_json, int step) {
   options.num_threads = args.threads;
   slam::Session session(api::RigFromJson(rig_json), options);
   slam::StageTimes total, cpu;
-  double decode_s = 0, track_s = 0;
-  int frames = 0, keyframes = 0;
+  double decode_s = 0, track_s = 0, snapshot_s = 0, write_s = 0;
+  int frames = 0, keyframes = 0, snapshots = 0;
+  const fs::path out =
+      fs::temp_directory_path() / ("omnirig-live-snapshot-" + std::to_string(::getpid()));
+  fs::create_directories(out);
+  std::vector<double> stamps_s;
   for (size_t i = 0; i < names.size() && frames < args.profile_frames; i += step, ++frames) {
     Timer decode;
     slam::StereoImages images;
@@ -190,7 +198,18 @@ void ProfileTracking(const BenchArgs& args, const json& rig_json, int step) {
     total.Add(report.times);
     cpu.Add(report.cpu_times);
     keyframes += report.keyframe;
+    stamps_s.push_back(0.1 * i);
+    if (frames % 10 == 9) {
+      Timer copy;
+      const api::LiveSnapshot snapshot{session.Snapshot(), stamps_s};
+      snapshot_s += copy.ElapsedSeconds();
+      Timer write;
+      api::WriteLiveSnapshot(session.rig(), snapshot, std::nullopt, out);
+      write_s += write.ElapsedSeconds();
+      ++snapshots;
+    }
   }
+  fs::remove_all(out);
   const auto ms = [frames](double s) { return 1000.0 * s / std::max(frames, 1); };
   std::printf(
       "every %2d. frame: %3d frames, %3d keyframes; ms per frame: decode %.1f, track %.1f = "
@@ -204,6 +223,11 @@ void ProfileTracking(const BenchArgs& args, const json& rig_json, int step) {
       "motion %.1f + map %.1f + local BA %.1f + loop %.1f; load average %s\n",
       ms(cpu.detect_s), ms(cpu.stereo_s), ms(cpu.match_s), ms(cpu.motion_s), ms(cpu.map_s),
       ms(cpu.local_ba_s), ms(cpu.loop_s), LoadAverage().c_str());
+  const auto per = [snapshots](double s) { return 1000.0 * s / std::max(snapshots, 1); };
+  std::printf(
+      "                 live snapshot every 10 frames (%d): copy %.2f ms (tracking thread), "
+      "trajectory.json + map.ply written %.2f ms (publisher thread)\n",
+      snapshots, per(snapshot_s), per(write_s));
   std::fflush(stdout);
 }
 

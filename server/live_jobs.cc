@@ -3,6 +3,7 @@
 #include <chrono>
 #include <filesystem>
 #include <iostream>
+#include <set>
 #include <vector>
 
 #include "server/job_runner.h"
@@ -64,7 +65,11 @@ std::shared_ptr<LiveJob> LiveJobs::Find(const std::string& id) {
 bool LiveJobs::ServeArtifact(const std::string& id, const std::string& name,
                              HttpResponse& response) {
   const std::shared_ptr<LiveJob> job = Find(id);
-  if (!job || job->ended || (name != "trajectory.json" && name != "map.ply")) return false;
+  if (!job || job->ended) return false;
+  // The files the job refreshes while it runs (api/live_publisher.h).
+  static const std::set<std::string> kLiveFiles = {"trajectory.json", "map.ply", "occupancy.pgm",
+                                                   "occupancy.yaml"};
+  if (kLiveFiles.count(name) == 0) return false;
   const std::filesystem::path path = state_.data_dir->AttemptDir(id, job->record.attempts) / name;
   std::error_code error;
   const auto size = std::filesystem::file_size(path, error);
@@ -84,13 +89,17 @@ void LiveJobs::Run(const std::shared_ptr<LiveJob>& job) {
   JobEvents* events = state_.events.get();
   options.on_progress = [events](const std::string& id) { events->Changed(id); };
   const std::string id = job->record.id;
-  options.run = [job, events, id](const nlohmann::json& params, const api::JobContext& context) {
-    return api::RunLiveSlam(params, context, job->rig, job->mailbox,
-                            [events, id](const nlohmann::json& frame) {
-                              nlohmann::json data = frame;
-                              data["job"] = id;
-                              events->Publish(id, "frame", data);
-                            });
+  // The job's `frame` and `artifacts` events (each with "job": its id).
+  const auto publish = [events, id](const std::string& type) {
+    return [events, id, type](const nlohmann::json& event) {
+      nlohmann::json data = event;
+      data["job"] = id;
+      events->Publish(id, type, data);
+    };
+  };
+  options.run = [job, publish](const nlohmann::json& params, const api::JobContext& context) {
+    return api::RunLiveSlam(params, context, job->rig, job->mailbox, publish("frame"),
+                            publish("artifacts"));
   };
   events->Changed(id);
   const storage::JobOutcome outcome =

@@ -9,7 +9,9 @@
 //
 // Routes (routes_live.cc): POST /api/v1/jobs with a live slam job's params (CreateLiveJob, from
 // the jobs route), POST /api/v1/jobs/{id}/frames, POST /api/v1/jobs/{id}/finish, and the
-// running job's trajectory.json and map.ply through the artifacts route (ServeArtifact).
+// running job's trajectory.json and map.ply, and with "dense_map" occupancy.pgm and
+// occupancy.yaml, through the artifacts route (ServeArtifact); each refresh of them is an
+// `artifacts` event of the job ({"job", "artifacts": [names], ...}).
 
 #include <atomic>
 #include <map>
@@ -61,8 +63,9 @@ class LiveJobs {
   // The live job `id` started by this process (running, or ended and not yet forgotten), or
   // nullptr.
   std::shared_ptr<LiveJob> Find(const std::string& id);
-  // The running job's snapshot files (trajectory.json, map.ply) from its attempt folder; false
-  // when `id` is not a live job running here or has no such file yet.
+  // The running job's snapshot files (trajectory.json, map.ply, occupancy.pgm, occupancy.yaml)
+  // from its attempt folder; false when `id` is not a live job running here or has no such
+  // file yet.
   bool ServeArtifact(const std::string& id, const std::string& name, HttpResponse& response);
   // Interrupts the running live jobs and waits for their threads: each goes back to the queue
   // (a worker runs it again as a batch job over its frames). Returns how many.

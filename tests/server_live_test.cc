@@ -1,14 +1,17 @@
 // Live slam jobs end to end (server/live_jobs.h): a real server on a loopback port, frames of a
 // rendered sequence posted as a robot sends them, each answered with its pose; the frame
-// events, the map and trajectory served while the job runs, finish, idle timeout, cancel, the
-// bad inputs refused while the job goes on, newest-wins skipping, two live jobs at once, and a
-// live job that its server stopped running again as a batch job over the frames it stored.
+// events, the map and trajectory (and with a dense map the occupancy grid) served while the
+// job runs, finish, idle timeout, cancel, the bad inputs refused while the job goes on,
+// newest-wins skipping, two live jobs at once, and a live job that its server stopped running
+// again as a batch job over the frames it stored.
 
+#include <algorithm>
 #include <atomic>
 #include <condition_variable>
 #include <future>
 #include <mutex>
 #include <set>
+#include <sstream>
 #include <thread>
 
 #include <gtest/gtest.h>
@@ -109,9 +112,12 @@ TEST_F(ServerLiveTest, TracksEachFrameAsItComesAndFinishesAsTheBatchJob) {
   const std::string dataset = job["dataset"];
   ASSERT_FALSE(dataset.empty());  // a dataset of its own
 
-  // The frame events, followed while the frames are sent.
+  // The frame events, followed while the frames are sent, and the first refresh of the files
+  // the job rewrites while it runs (written off its tracking thread: an `artifacts` event).
   std::promise<void> opened;
   std::atomic<int> frame_events{0};
+  std::promise<bool> trajectory_written;
+  bool trajectory_told = false;
   std::thread events([&] {
     FollowEvents(
         port_, id, 120,
@@ -121,8 +127,14 @@ TEST_F(ServerLiveTest, TracksEachFrameAsItComesAndFinishesAsTheBatchJob) {
         },
         [&](const std::string& type, const json& data) {
           if (type == "frame") ++frame_events;
+          if (type == "artifacts" && !trajectory_told &&
+              data["artifacts"] == json{"trajectory.json", "map.ply"}) {
+            trajectory_told = true;
+            trajectory_written.set_value(true);
+          }
           return type == "job" && data["state"] == "succeeded";
         });
+    if (!trajectory_told) trajectory_written.set_value(false);
   });
   opened.get_future().wait();
 
@@ -147,8 +159,8 @@ TEST_F(ServerLiveTest, TracksEachFrameAsItComesAndFinishesAsTheBatchJob) {
             .norm();
     EXPECT_NEAR(moved.norm(), true_m, 0.03) << "frame " << i;
   }
-  // The map and trajectory so far, while the job runs (the first frame's snapshot is written
-  // before its answer: one exists now).
+  // The map and trajectory so far, while the job runs (once the job has told of them).
+  ASSERT_TRUE(trajectory_written.get_future().get());
   const auto trajectory =
       client_->Get(("/api/v1/jobs/" + id + "/artifacts/trajectory.json").c_str());
   ASSERT_EQ(trajectory->status, 200) << trajectory->body;
@@ -197,6 +209,101 @@ TEST_F(ServerLiveTest, TracksEachFrameAsItComesAndFinishesAsTheBatchJob) {
           << "frame " << i;
     }
   }
+}
+
+// A ROS map_server PGM (binary P5, 8-bit): its width, height and cells; empty when it is not one.
+struct Pgm {
+  int width = 0, height = 0;
+  std::string cells;
+};
+Pgm ParsePgm(const std::string& bytes) {
+  std::istringstream in(bytes);
+  std::string magic;
+  int width = 0, height = 0, max_value = 0;
+  in >> magic >> width >> height >> max_value;
+  if (magic != "P5" || max_value != 255 || width <= 0 || height <= 0) return {};
+  in.get();  // the one whitespace before the cells
+  const std::string cells = bytes.substr(static_cast<size_t>(in.tellg()));
+  if (cells.size() != static_cast<size_t>(width) * height) return {};
+  return {width, height, cells};
+}
+
+TEST_F(ServerLiveTest, TheOccupancyGridIsServedWhileTheJobRunsAndMadeAgainAtTheEnd) {
+  // Keyframes 0.25 m apart on this 1.05 m run, on the full-resolution grid (as slam_job_test's
+  // dense map of the short sequence: at 640x480 a coarser grid leaves few points).
+  const json job =
+      CreateLive({{"dense_map", {{"keyframe_spacing_m", 0.25}, {"grid_step_factor", 1}}}});
+  const std::string id = job["id"];
+  // The job tells of each refresh of its files: the first grid with occupied cells is awaited.
+  std::promise<void> opened;
+  std::promise<bool> grid_written;
+  bool grid_told = false;
+  std::thread events([&] {
+    FollowEvents(
+        port_, id, 240,
+        [&] {
+          opened.set_value();
+          return false;
+        },
+        [&](const std::string& type, const json& data) {
+          if (type == "artifacts" && !grid_told &&
+              data["artifacts"] == json{"occupancy.pgm", "occupancy.yaml"}) {
+            EXPECT_GE(data["num_fused_keyframes"].get<int>(), 2) << data.dump();
+            grid_told = true;
+            grid_written.set_value(true);
+          }
+          return type == "job" && data["state"] == "succeeded";
+        });
+    if (!grid_told) grid_written.set_value(false);
+  });
+  opened.get_future().wait();
+  const int n = static_cast<int>(sequence_->names.size());
+  for (int i = 0; i < n; ++i) EXPECT_EQ(PostFrame(*client_, id, i)->status, 200);
+  const bool written = grid_written.get_future().get();
+  EXPECT_TRUE(written);
+  // The grid so far, served while the job runs (not finished: it waits for /finish).
+  EXPECT_EQ(JsonOf(client_->Get(("/api/v1/jobs/" + id).c_str()))["state"], "running");
+  const auto pgm = client_->Get(("/api/v1/jobs/" + id + "/artifacts/occupancy.pgm").c_str());
+  const auto yaml = client_->Get(("/api/v1/jobs/" + id + "/artifacts/occupancy.yaml").c_str());
+  EXPECT_EQ(pgm->status, 200) << pgm->body;
+  EXPECT_EQ(yaml->status, 200) << yaml->body;
+  const Pgm live = ParsePgm(pgm->body);
+  EXPECT_GT(live.width * live.height, 1) << pgm->body.substr(0, 20);
+  EXPECT_GT(std::count(live.cells.begin(), live.cells.end(), '\0'), 0);    // occupied cells
+  EXPECT_GT(std::count(live.cells.begin(), live.cells.end(), '\xfe'), 0);  // free cells
+  // Its yaml names the served image (not the temporary it was written as), at the cell size.
+  EXPECT_NE(yaml->body.find("image: occupancy.pgm\n"), std::string::npos) << yaml->body;
+  EXPECT_NE(yaml->body.find("resolution: 0.05\n"), std::string::npos) << yaml->body;
+  // Nothing of the grid is listed as a recorded artifact while it runs.
+  EXPECT_EQ(JsonOf(client_->Get(("/api/v1/jobs/" + id + "/artifacts").c_str())).size(), 0u);
+
+  const json finished = Finish(id);
+  events.join();
+  ASSERT_EQ(finished["state"], "succeeded") << finished.dump();
+  const json result = Result(id);
+  EXPECT_EQ(result["artifacts"]["occupancy_pgm"], "occupancy.pgm");
+  EXPECT_GE(result["dense_map"]["keyframes"].size(), 2u) << result["dense_map"].dump();
+  const auto final_pgm = client_->Get(("/api/v1/jobs/" + id + "/artifacts/occupancy.pgm").c_str());
+  ASSERT_EQ(final_pgm->status, 200);
+  const Pgm grid = ParsePgm(final_pgm->body);
+  EXPECT_GT(std::count(grid.cells.begin(), grid.cells.end(), '\0'), 0);
+  const json listed = JsonOf(client_->Get(("/api/v1/jobs/" + id + "/artifacts").c_str()));
+  std::set<std::string> names;
+  for (const json& artifact : listed) names.insert(artifact["name"].get<std::string>());
+  EXPECT_TRUE(names.count("occupancy.pgm") && names.count("occupancy.yaml")) << listed.dump();
+  for (const std::string& name : names) EXPECT_EQ(name.find(".part-live"), std::string::npos);
+}
+
+TEST_F(ServerLiveTest, CancelEndsALiveJobWhoseGridIsBeingMade) {
+  // Canceled while keyframes wait for (or are in) their dense stereo: the job ends canceled, its
+  // publisher's threads stopped, and the server goes on.
+  const std::string id =
+      CreateLive({{"dense_map", {{"keyframe_spacing_m", 0.1}, {"grid_step_factor", 1}}}})["id"];
+  for (int i = 0; i < 4; ++i) EXPECT_EQ(PostFrame(*client_, id, i)->status, 200);
+  EXPECT_EQ(client_->Post(("/api/v1/jobs/" + id + "/cancel").c_str())->status, 202);
+  EXPECT_EQ(WaitForJob(port_, id, 120)["state"], "canceled");
+  EXPECT_EQ(PostFrame(*client_, id, 4)->status, 409);
+  EXPECT_EQ(client_->Get("/api/v1/health")->status, 200);
 }
 
 TEST_F(ServerLiveTest, RefusesBadFramesAndGoesOn) {

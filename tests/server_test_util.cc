@@ -192,8 +192,9 @@ nlohmann::json WaitForJob(int port, const std::string& id, double timeout_s,
         return reached(job);
       },
       [&](const std::string& type, const nlohmann::json& data) {
-        // A live job's tracked frame says nothing of its state: the wait goes on.
-        if (type == "frame") return false;
+        // A live job's tracked frame or refreshed files say nothing of its state: the wait goes
+        // on.
+        if (type == "frame" || type == "artifacts") return false;
         if (type == "job") job = data;
         return type != "job" || reached(job);
       });

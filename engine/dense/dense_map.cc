@@ -372,7 +372,8 @@ OccupancyGrid DenseMap::Occupancy() const {
 }
 
 void WriteOccupancyGrid(const std::filesystem::path& pgm_path,
-                        const std::filesystem::path& yaml_path, const OccupancyGrid& grid) {
+                        const std::filesystem::path& yaml_path, const OccupancyGrid& grid,
+                        const std::string& image_name) {
   std::ofstream pgm(pgm_path, std::ios::binary | std::ios::trunc);
   if (!pgm) throw std::runtime_error("cannot write " + pgm_path.string());
   pgm << "P5\n" << grid.cells.cols << " " << grid.cells.rows << "\n255\n";
@@ -387,7 +388,7 @@ void WriteOccupancyGrid(const std::filesystem::path& pgm_path,
   if (!pgm) throw std::runtime_error("failed writing " + pgm_path.string());
   std::ofstream yaml(yaml_path, std::ios::trunc);
   if (!yaml) throw std::runtime_error("cannot write " + yaml_path.string());
-  yaml << "image: " << pgm_path.filename().string() << "\n"
+  yaml << "image: " << (image_name.empty() ? pgm_path.filename().string() : image_name) << "\n"
        << "resolution: " << grid.cell_m << "\n"
        << "origin: [" << grid.origin_m.x() << ", " << grid.origin_m.y() << ", 0.0]\n"
        << "negate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n";
@@ -407,17 +408,9 @@ std::vector<int> SelectKeyframes(const std::vector<std::optional<Rigid3d>>& worl
   return keyframes;
 }
 
-KeyframeFusionReport FuseKeyframes(const StereoRig& rig,
-                                   const std::vector<std::optional<Rigid3d>>& world_from_rig,
-                                   const StereoPairLoader& load, int num_threads,
-                                   const ProgressSink& progress, DenseMap* map) {
-  OMNIRIG_CHECK(num_threads >= 1, "num_threads must be at least 1, got " << num_threads);
-  KeyframeFusionReport report;
-  report.keyframes = SelectKeyframes(world_from_rig, map->options().keyframe_spacing_m);
-  if (report.keyframes.empty()) return report;
-  Timer timer;
+DenseStereoOptions KeyframeStereoOptions(const DenseMapOptions& options) {
   DenseStereoOptions stereo_options;
-  stereo_options.grid.step_factor = map->options().grid_step_factor;
+  stereo_options.grid.step_factor = options.grid_step_factor;
   // The map selects and weighs its points by their geometry, as a constant 0.25-cell disparity
   // std makes them (about twice the calibrated std of a well-fitted match), with the refined
   // disparities' positions. The calibrated std under the 2 % filter let far, wrongly matched
@@ -428,8 +421,21 @@ KeyframeFusionReport FuseKeyframes(const StereoRig& rig,
   stereo_options.disparity_std_scale = 0.0;
   // Points the map would not fuse are not made.
   stereo_options.max_relative_range_std =
-      std::min(stereo_options.max_relative_range_std, map->options().max_relative_range_std);
-  const DenseStereo stereo(rig, stereo_options, map->options().rectification_tables_dir);
+      std::min(stereo_options.max_relative_range_std, options.max_relative_range_std);
+  return stereo_options;
+}
+
+KeyframeFusionReport FuseKeyframes(const StereoRig& rig,
+                                   const std::vector<std::optional<Rigid3d>>& world_from_rig,
+                                   const StereoPairLoader& load, int num_threads,
+                                   const ProgressSink& progress, DenseMap* map) {
+  OMNIRIG_CHECK(num_threads >= 1, "num_threads must be at least 1, got " << num_threads);
+  KeyframeFusionReport report;
+  report.keyframes = SelectKeyframes(world_from_rig, map->options().keyframe_spacing_m);
+  if (report.keyframes.empty()) return report;
+  Timer timer;
+  const DenseStereo stereo(rig, KeyframeStereoOptions(map->options()),
+                           map->options().rectification_tables_dir);
   report.setup_s = timer.ElapsedSeconds();
   // Batches of num_threads keyframes, each reconstructed on one thread, then fused in frame
   // order: the map does not depend on the thread count, and at most one batch of clouds is held.

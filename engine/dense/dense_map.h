@@ -197,6 +197,10 @@ double PointsPerSquareMetre(const std::vector<Eigen::Vector3f>& points, double c
 std::vector<int> SelectKeyframes(const std::vector<std::optional<Rigid3d>>& world_from_rig,
                                  double keyframe_spacing_m);
 
+// The dense stereo run on each keyframe of a map with `options` (its grid, and the points the
+// map would fuse), by FuseKeyframes and by a live job's map growing keyframe by keyframe.
+DenseStereoOptions KeyframeStereoOptions(const DenseMapOptions& options);
+
 // Loads frame `index`'s images (cam0, cam1; 8-bit BGR or grey). Called from up to num_threads
 // threads at once (FuseKeyframes).
 using StereoPairLoader = std::function<std::array<cv::Mat, 2>(int index)>;
@@ -220,9 +224,12 @@ KeyframeFusionReport FuseKeyframes(const StereoRig& rig,
                                    const ProgressSink& progress, DenseMap* map);
 
 // Writes `grid` as ROS map_server files: NAME.pgm (binary P5: occupied 0, free 254, unknown 205)
-// and NAME.yaml (image, resolution, origin, negate, occupied_thresh, free_thresh). Throws
-// std::runtime_error when a file cannot be written.
+// and NAME.yaml (image, resolution, origin, negate, occupied_thresh, free_thresh). The yaml's
+// image is `image_name`, or pgm_path's file name when empty (a grid written under temporary
+// names and renamed names its final image). Throws std::runtime_error when a file cannot be
+// written.
 void WriteOccupancyGrid(const std::filesystem::path& pgm_path,
-                        const std::filesystem::path& yaml_path, const OccupancyGrid& grid);
+                        const std::filesystem::path& yaml_path, const OccupancyGrid& grid,
+                        const std::string& image_name = "");
 
 }  // namespace omnirig::dense

@@ -144,6 +144,13 @@ TEST(DenseMap, RoomKeyframesFuseOntoTheTrueSurfaces) {
   EXPECT_EQ(std::filesystem::file_size(dir / "occupancy.pgm"),
             std::to_string(grid.cells.cols).size() + std::to_string(grid.cells.rows).size() + 9 +
                 static_cast<size_t>(grid.cells.total()));
+  // Written under temporary names (to be renamed), the yaml names the final image.
+  WriteOccupancyGrid(dir / ".occupancy.pgm.part", dir / ".occupancy.yaml.part", grid,
+                     "occupancy.pgm");
+  std::ifstream renamed_yaml(dir / ".occupancy.yaml.part");
+  const std::string renamed((std::istreambuf_iterator<char>(renamed_yaml)),
+                            std::istreambuf_iterator<char>());
+  EXPECT_NE(renamed.find("image: occupancy.pgm\n"), std::string::npos) << renamed;
   std::filesystem::remove_all(dir);
 }
 

@@ -55,9 +55,11 @@ FrameReport Session::Track(const std::string& name, const StereoImages& images, 
 
 SlamSnapshot Session::Snapshot() const {
   SlamSnapshot snapshot;
-  for (const FrameReport& frame : result_.frames) {
+  for (size_t i = 0; i < result_.frames.size(); ++i) {
+    const FrameReport& frame = result_.frames[i];
     snapshot.names.push_back(frame.name);
     snapshot.states.push_back(frame.state);
+    if (frame.keyframe) snapshot.keyframes.push_back(static_cast<int>(i));
   }
   snapshot.world_from_rig = tracker_->CurrentWorldFromRig();
   snapshot.map = tracker_->CurrentMap();

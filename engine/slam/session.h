@@ -23,12 +23,14 @@ namespace internal {
 class Tracker;
 }
 
-// The run so far: per frame tracked or lost, its name and current world_from_rig.
+// The run so far: per frame tracked or lost, its name and current world_from_rig; the frames
+// that entered the map as keyframes (their poses the local adjustments refined), in order.
 struct SlamSnapshot {
   std::vector<std::string> names;
   std::vector<std::string> states;
   std::vector<std::optional<Rigid3d>> world_from_rig;
   std::vector<MapPoint> map;
+  std::vector<int> keyframes;  // frame indices
   int num_keyframes = 0;
 };
 

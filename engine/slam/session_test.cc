@@ -69,8 +69,14 @@ TEST_F(SessionOnShortSequence, GivesRunSlamsResultFrameByFrame) {
 
 TEST_F(SessionOnShortSequence, SnapshotFollowsTheRunAndPosesMoveWithTheCamera) {
   Session session(sequence_->rig, SlamOptions());
-  for (int i = 0; i < 4; ++i) session.Track(sequence_->names[i], Frame(i));
+  std::vector<int> keyframes;  // as the frames' reports said
+  for (int i = 0; i < 4; ++i) {
+    if (session.Track(sequence_->names[i], Frame(i)).keyframe) keyframes.push_back(i);
+  }
   const SlamSnapshot snapshot = session.Snapshot();
+  ASSERT_FALSE(keyframes.empty());
+  EXPECT_EQ(snapshot.keyframes, keyframes);
+  EXPECT_EQ(snapshot.keyframes.front(), 0);  // the first frame initialises the map
   ASSERT_EQ(snapshot.names.size(), 4u);
   EXPECT_EQ(snapshot.names[3], sequence_->names[3]);
   EXPECT_EQ(snapshot.states[0], "initialised");

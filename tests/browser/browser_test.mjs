@@ -1162,11 +1162,12 @@ async function stepViewerSlam(page, server) {
 
 // A live slam job's page while a robot sends its frames (here the sequence's, posted as the
 // robot would): the figures count the frames as they are tracked, the top view draws the
-// trajectory growing and the map so far is shown; "Finish the run" ends it and the page shows
-// the finished report.
+// trajectory growing over the occupancy grid so far (the job has a dense map) and the map so far
+// is shown; "Finish the run" ends it and the page shows the finished report.
 async function checkLivePage(page, server, rigJob, sequenceDir) {
   const created = await fetch(`${server.url}/api/v1/jobs`, { method: 'POST', headers: { 'Content-Type': 'application/json' },
-    body: JSON.stringify({ type: 'slam', dataset: '', params: { rig: rigJob, live: true } }) });
+    // Keyframes 0.25 m apart on the full-resolution grid (at 640x480 a coarser one leaves few points).
+    body: JSON.stringify({ type: 'slam', dataset: '', params: { rig: rigJob, live: true, dense_map: { keyframe_spacing_m: 0.25, grid_step_factor: 1 } } }) });
   check(created.status === 202, `a live slam job starts (${created.status})`);
   const { id } = await created.json();
   await page.goto(`${server.url}/#/jobs/${encodeURIComponent(id)}`);
@@ -1207,12 +1208,19 @@ async function checkLivePage(page, server, rigJob, sequenceDir) {
   check(blue > 20, `the live top view draws the trajectory (${blue} blue pixels)`);
   await page.waitForFunction(() => Number(document.querySelector('#live-map-note')?.dataset.points || 0) > 0, null, { timeout: 30000 });
   const points = await page.$eval('#live-map-note', (n) => Number(n.dataset.points));
+  // The grid so far, drawn under the trajectory once two keyframes are fused, with its key.
+  await page.waitForFunction(() => Number(document.querySelector('#live-top-view')?.dataset.occupiedCells || 0) > 0, null, { timeout: JOB_TIMEOUT_MS });
+  const occupied = await page.$eval('#live-top-view', (c) => Number(c.dataset.occupiedCells));
+  const key = await page.$eval('#live-occupancy-key', (n) => n.textContent).catch(() => '');
+  check(/occupied/.test(key), `the live grid's colour key is shown (${key.slice(0, 60)})`);
+  const finishedNow = await (await fetch(`${server.url}/api/v1/jobs/${id}`)).json();
+  check(finishedNow.state === 'running', `the grid is shown while the job runs (${finishedNow.state})`);
   await screenshot(page, 'live-slam-running');
   await page.click('#live-finish');
   await page.waitForSelector('#slam-headline', { timeout: JOB_TIMEOUT_MS });
   const done = await (await fetch(`${server.url}/api/v1/jobs/${id}`)).json();
   check(done.state === 'succeeded', `the live job finished (${done.state})`);
-  return `live job ${id}: ${tracked} of ${names.length} frames tracked on its page, ${rate}, latency ${latency}, ${points} map points shown, finished from the page`;
+  return `live job ${id}: ${tracked} of ${names.length} frames tracked on its page, ${rate}, latency ${latency}, ${points} map points shown, ${occupied} occupied cells of the grid so far, finished from the page`;
 }
 
 // The errors against the ground truth as evo shows them: the headline's ATE and RPE with units,

@@ -6,7 +6,7 @@ import { fileURLToPath } from 'node:url';
 
 const WEB_JS = path.resolve(path.dirname(fileURLToPath(import.meta.url)), '../../web/js');
 const { parsePly } = await import(path.join(WEB_JS, 'ply.js'));
-const { inversePose, loopSegments, parsePgm, parseTum, stateColour, STATE_COLOURS, trajectoryFromJson, transformTrajectory } =
+const { inversePose, loopSegments, parseOccupancy, parsePgm, parseTum, stateColour, STATE_COLOURS, trajectoryFromJson, transformTrajectory } =
   await import(path.join(WEB_JS, 'topview.js'));
 const { JET, parseFloatTiff, rangePreviewScale, ticks, TURBO } = await import(path.join(WEB_JS, 'colorbar.js'));
 const { describeKey, formatLength, formatWithUnit, shortId } = await import(path.join(WEB_JS, 'labels.js'));
@@ -103,6 +103,17 @@ const tests = {
     assert.equal(grid.cols, 3);
     assert.equal(grid.rows, 2);
     assert.deepEqual([...grid.cells], [0, 254, 205, 205, 0, 254]);
+  },
+  'occupancy grid from its map_server files: the PGM placed by the yaml'() {
+    const bytes = new Uint8Array([...new TextEncoder().encode('P5\n2 1\n255\n'), 0, 254]);
+    const yaml = 'image: occupancy.pgm\nresolution: 0.05\norigin: [-1.25, 0.5e-1, 0.0]\nnegate: 0\n';
+    const grid = parseOccupancy(bytes, yaml);
+    assert.equal(grid.cols, 2);
+    assert.equal(grid.cell_m, 0.05);
+    assert.deepEqual(grid.origin_m, [-1.25, 0.05]);
+    assert.deepEqual([...grid.cells], [0, 254]);
+    assert.equal(parseOccupancy(bytes, 'image: occupancy.pgm\n'), null);  // no resolution nor origin
+    assert.throws(() => parseOccupancy(new TextEncoder().encode('P2\n1 1\n255\n0'), yaml));
   },
   'result keys in words with their units'() {
     assert.deepEqual(describeKey('num_scale_inliers'), { label: 'scale inliers', unit: '' });

@@ -1,13 +1,16 @@
 // The page of a live slam job while it runs (params.live): the trajectory and the map growing as
 // the robot sends its frames, the frame rate, the latency from receipt to pose, the frames
-// skipped, and the share placed in a saved map when the job localises in one. Frames arrive as
-// the server's `frame` events (GET /api/v1/events?job=ID); trajectory.json and map.ply, which
-// the server refreshes while the job runs, are read again every few seconds (they carry the
-// map's corrections). Without events (a server with a token) the page reads those files only.
+// skipped, the share placed in a saved map when the job localises in one, and with a dense map
+// (params.dense_map) the occupancy grid so far under the trajectory, as the finished page draws
+// it. Frames arrive as the server's `frame` events (GET /api/v1/events?job=ID); trajectory.json
+// and map.ply, and occupancy.pgm and occupancy.yaml, which the server refreshes while the job
+// runs, are read again every few seconds (they carry the map's corrections) and the grid at once
+// when its `artifacts` event tells of a new one. Without events (a server with a token) the page
+// reads those files only.
 
-import { API, fetchArtifactBytes, fetchArtifactJson, getToken, post } from './api.js';
+import { API, fetchArtifactBytes, fetchArtifactJson, fetchArtifactText, getToken, post } from './api.js';
 import { parsePly } from './ply.js';
-import { drawTopView, trajectoryFromJson } from './topview.js';
+import { drawTopView, OCCUPANCY_COLOURS, parseOccupancy, trajectoryFromJson } from './topview.js';
 import { clear, el, errorBox, formatNumber } from './ui.js';
 
 export const isLiveSlam = (job) => job.type === 'slam' && Boolean(job.params && job.params.live === true);
@@ -92,7 +95,11 @@ export function renderLiveReport(container, job) {
   let mapBytes = 0;
   let scene = null;
   let stopped = false;
+  let occupancy = null;  // the grid so far (with a dense map)
+  let occupancyFiles = null;  // its yaml and PGM bytes, to redraw only when they changed
+  const dense = Boolean(job.params && job.params.dense_map);
   const figures = el('div#live-figures');
+  const occupancyHolder = el('div#live-occupancy');
   const canvas = el('canvas.topview#live-top-view', { width: 560, height: 560 });
   const mapNote = el('p.muted#live-map-note', 'Waiting for the first frames…');
   const sceneHolder = el('div#live-map');
@@ -112,15 +119,16 @@ export function renderLiveReport(container, job) {
     el('div.card#live-card', el('h2', 'Live: the trajectory and the map as the robot sends its frames'),
       figures,
       el('p.muted', localising ? `Localising in the saved map of job ${job.params.map}. ` : '',
-        'The trajectory and the map are redrawn as frames arrive; the poses of earlier frames move as the map is adjusted.'),
-      canvas, el('p', finish), problem),
+        'The trajectory and the map are redrawn as frames arrive; the poses of earlier frames move as the map is adjusted.',
+        dense ? ' The occupancy grid under it grows as keyframes are fused (made again from the final poses when the run ends).' : ''),
+      canvas, occupancyHolder, el('p', finish), problem),
     el('div.card', el('h2', 'The map so far'), mapNote, sceneHolder));
   const redraw = () => {
     const list = [...events.values()];
     clear(figures, headline(liveFigures(list), localising));
     const trajectory = liveTrajectory(trajectoryJson, list);
     canvas.dataset.poses = String(trajectory.length);
-    drawTopView(canvas, trajectory, null, []);
+    drawTopView(canvas, trajectory, null, [], occupancy, OCCUPANCY_COLOURS);
   };
   redraw();
 
@@ -136,8 +144,42 @@ export function renderLiveReport(container, job) {
       }
       redraw();
     });
+    if (dense) {
+      source.addEventListener('artifacts', (e) => {
+        try {
+          if (JSON.parse(e.data).artifacts.includes('occupancy.pgm')) refreshOccupancy();
+        } catch (_) {
+          // a malformed event: the next refresh reads the grid
+        }
+      });
+    }
   }
+  // The grid so far: drawn under the trajectory, with the key of its colours.
+  const refreshOccupancy = async () => {
+    try {
+      const text = await fetchArtifactText(job.id, 'occupancy.yaml');
+      const bytes = await fetchArtifactBytes(job.id, 'occupancy.pgm');
+      // The two files are replaced one after the other: a yaml that changed meanwhile may not
+      // place this image (the next refresh reads both again).
+      if (await fetchArtifactText(job.id, 'occupancy.yaml') !== text) return;
+      const grid = parseOccupancy(bytes, text);
+      const same = occupancyFiles && occupancyFiles.text === text && occupancyFiles.bytes.length === bytes.length &&
+        occupancyFiles.bytes.every((v, i) => v === bytes[i]);
+      if (stopped || !grid || same) return;
+      occupancyFiles = { text, bytes };
+      occupancy = grid;
+      const occupied = grid.cells.reduce((n, v) => n + (v === 0 ? 1 : 0), 0);
+      canvas.dataset.occupiedCells = String(occupied);
+      const { occupancyKey } = await import('./viewer.js');
+      if (stopped) return;
+      clear(occupancyHolder, occupancyKey(grid, 'live-occupancy-key'));
+      redraw();
+    } catch (_) {
+      // Not written yet (fewer than two keyframes fused) or being replaced: read it next time.
+    }
+  };
   const refresh = async () => {
+    if (dense) refreshOccupancy();
     try {
       trajectoryJson = await fetchArtifactJson(job.id, 'trajectory.json');
       // Without events, the file's frames are the figures' only source.

@@ -106,6 +106,21 @@ export function parsePgm(bytes) {
   return { cols, rows, cells: bytes.subarray(at, at + cols * rows) };
 }
 
+// The occupancy grid's colours on the top view, as map_server's viewers show them.
+export const OCCUPANCY_COLOURS = { occupied: [17, 24, 39], free: [255, 255, 255], unknown: [203, 213, 225] };
+
+// A slam job's occupancy grid from its ROS map_server files (occupancy.pgm's bytes and
+// occupancy.yaml's text): {cols, rows, cells (0 occupied, 254 free, 205 unknown; row 0 the
+// largest y), cell_m, origin_m: [x, y] of the lower-left corner}, or null when the yaml lacks
+// the resolution or origin. Throws when the PGM is not a binary 8-bit one.
+export function parseOccupancy(bytes, yamlText) {
+  const grid = parsePgm(bytes);
+  const resolution = /resolution:\s*([-\d.eE+]+)/.exec(yamlText);
+  const origin = /origin:\s*\[\s*([-\d.eE+]+)\s*,\s*([-\d.eE+]+)/.exec(yamlText);
+  if (!resolution || !origin) return null;
+  return { ...grid, cell_m: Number(resolution[1]), origin_m: [Number(origin[1]), Number(origin[2])] };
+}
+
 // The two axes along which the trajectories spread most: the "ground plane" whatever the
 // convention (y down for camera frames, z up for a robot).
 function planeAxes(poses) {

@@ -13,8 +13,8 @@ import { listArtifacts, renderArtifacts } from './artifacts.js';
 import { parsePly } from './ply.js';
 import { reconstructPairsCard } from './reconstruct_report.js';
 import {
-  drawTopView, GROUND_TRUTH_COLOUR, inversePose, LOOP_COLOUR, loopSegments, parsePgm, parseTum, STATE_COLOURS,
-  trajectoryFromJson, transformTrajectory,
+  drawTopView, GROUND_TRUTH_COLOUR, inversePose, LOOP_COLOUR, loopSegments, OCCUPANCY_COLOURS, parseOccupancy, parseTum,
+  STATE_COLOURS, trajectoryFromJson, transformTrajectory,
 } from './topview.js';
 import { colourBar, colourKey, TURBO } from './colorbar.js';
 import { colourModes, percentileRange, pointValues, turboColours } from './cloud_colour.js';
@@ -239,27 +239,35 @@ export function slamHeadline(result) {
 }
 
 // The occupancy grid of a slam job's dense map (ROS map_server: occupancy.pgm and its yaml), or
-// null: {cols, rows, cells (0 occupied, 254 free, 205 unknown; row 0 the largest y), cell_m,
-// origin_m: [x, y] of the lower-left corner}.
+// null (parseOccupancy).
 async function loadOccupancy(jobId, artifacts) {
   const pgm = pick(artifacts, /(^|\/)occupancy\.pgm$/i);
   const yaml = pick(artifacts, /(^|\/)occupancy\.yaml$/i);
   if (!pgm || !yaml) return null;
   try {
     const [bytes, text] = await Promise.all([fetchArtifactBytes(jobId, pgm.name), fetchArtifactText(jobId, yaml.name)]);
-    const grid = parsePgm(bytes);
-    const resolution = /resolution:\s*([-\d.eE+]+)/.exec(text);
-    const origin = /origin:\s*\[\s*([-\d.eE+]+)\s*,\s*([-\d.eE+]+)/.exec(text);
-    if (!resolution || !origin) return null;
-    return { ...grid, cell_m: Number(resolution[1]), origin_m: [Number(origin[1]), Number(origin[2])] };
+    return parseOccupancy(bytes, text);
   } catch (err) {
     console.warn('occupancy', err);
     return null;
   }
 }
 
-// The occupancy grid's colours on the top view, as map_server's viewers show them.
-export const OCCUPANCY_COLOURS = { occupied: [17, 24, 39], free: [255, 255, 255], unknown: [203, 213, 225] };
+export { OCCUPANCY_COLOURS };
+
+// The key of the occupancy grid's colours under a top view (`id` its element's).
+export function occupancyKey(occupancy, id = 'occupancy-key') {
+  const rgb = ([r, g, b]) => `rgb(${r}, ${g}, ${b})`;
+  return colourKey({
+    id,
+    title: `Occupancy grid (cells of ${formatLength(occupancy.cell_m)}, ${occupancy.cols} × ${occupancy.rows}), seen from above in the world's x-y plane`,
+    items: [
+      { colour: rgb(OCCUPANCY_COLOURS.occupied), label: 'occupied: an obstacle' },
+      { colour: rgb(OCCUPANCY_COLOURS.free), label: 'free: floor seen, nothing in the way' },
+      { colour: rgb(OCCUPANCY_COLOURS.unknown), label: 'unknown: not seen' },
+    ],
+  });
+}
 
 // Downloads and parses a PLY artifact with a progress bar in `status`; null (and the error
 // shown) when it cannot be read.
@@ -369,17 +377,6 @@ async function loadReport(jobId, artifacts, result) {
 function topView(trajectory, groundTruth, result, occupancy) {
   const canvas = el('canvas.topview#top-view', { width: 560, height: 560 });
   requestAnimationFrame(() => drawTopView(canvas, trajectory, groundTruth, result.loops, occupancy, OCCUPANCY_COLOURS));
-  const rgb = ([r, g, b]) => `rgb(${r}, ${g}, ${b})`;
-  const cell = occupancy ? formatLength(occupancy.cell_m) : '';
-  const occupancyKey = occupancy ? colourKey({
-    id: 'occupancy-key',
-    title: `Occupancy grid (cells of ${cell}, ${occupancy.cols} × ${occupancy.rows}), seen from above in the world's x-y plane`,
-    items: [
-      { colour: rgb(OCCUPANCY_COLOURS.occupied), label: 'occupied: an obstacle' },
-      { colour: rgb(OCCUPANCY_COLOURS.free), label: 'free: floor seen, nothing in the way' },
-      { colour: rgb(OCCUPANCY_COLOURS.unknown), label: 'unknown: not seen' },
-    ],
-  }) : null;
   const frames = (n) => `${n} frame${n === 1 ? '' : 's'}`;
   const count = (state) => trajectory.filter((p) => (p.state === 'initialised' ? 'tracked' : p.state || 'tracked') === state).length;
   // Frames without a pose: those the trajectory skips, and any after its last pose.
@@ -388,7 +385,7 @@ function topView(trajectory, groundTruth, result, occupancy) {
   const item = (key, colour, text, line = true) => el('li.legend-item', { dataset: { key } },
     el(line ? 'span.swatch' : 'span.swatch.gap', { style: line ? `background: ${colour}` : undefined }), text);
   const loops = Array.isArray(result.loops) ? loopSegments(trajectory, result.loops).length : null;
-  return el('div', canvas, occupancyKey, el('ul.legend#top-view-legend',
+  return el('div', canvas, occupancy ? occupancyKey(occupancy) : null, el('ul.legend#top-view-legend',
     Object.entries(STATE_COLOURS).map(([state, colour]) => item(state, colour, `${state} (${frames(count(state))})`)),
     item('lost', '', `lost: a gap in the line (${frames(lost)})`, false),
     loops === null ? null : item('loop', LOOP_COLOUR, `loop closure: joins its two keyframes (${loops})`),
