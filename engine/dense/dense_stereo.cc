@@ -1,7 +1,9 @@
 #include "engine/dense/dense_stereo.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <functional>
 #include <optional>
 #include <tuple>
 #include <vector>
@@ -99,6 +101,14 @@ struct RefinedDisparity {
   cv::Mat disparity, std_cells;
 };
 
+// Runs fn(0) .. fn(num - 1) on OpenCV's threads: independent image-wide filters, each serial in
+// OpenCV (box filters and remaps nested in a parallel region run on their calling thread).
+void ParallelTasks(int num, const std::function<void(int)>& fn) {
+  cv::parallel_for_(cv::Range(0, num), [&](const cv::Range& tasks) {
+    for (int i = tasks.start; i < tasks.end; ++i) fn(i);
+  }, num);
+}
+
 RefinedDisparity RefineDisparity(const cv::Mat& left, const cv::Mat& right,
                                  const cv::Mat& disparity16, const DenseStereoOptions& o) {
   const cv::Size size = left.size();
@@ -107,63 +117,69 @@ RefinedDisparity RefineDisparity(const cv::Mat& left, const cv::Mat& right,
   constexpr int kWindowCells = 11;
   const cv::Size window(kWindowCells, kWindowCells);
   const float n = static_cast<float>(window.area());
-  cv::Mat right_dx;
-  cv::Sobel(right, right_dx, CV_32F, 1, 0, 1, 0.5);  // central difference
-  cv::Mat mean_l, mean_ll;
-  cv::boxFilter(left, mean_l, CV_32F, window);
-  cv::boxFilter(left.mul(left), mean_ll, CV_32F, window);
   cv::Mat sgbm(size, CV_32F), map_x(size, CV_32F), map_y(size, CV_32F);
-  for (int r = 0; r < size.height; ++r) {
-    const int16_t* d = disparity16.ptr<int16_t>(r);
-    float* sg = sgbm.ptr<float>(r);
-    float* mx = map_x.ptr<float>(r);
-    float* my = map_y.ptr<float>(r);
-    for (int c = 0; c < size.width; ++c) {
-      sg[c] = d[c] > 0 ? d[c] / 16.f : -1.f;
-      mx[c] = d[c] > 0 ? c - sg[c] : static_cast<float>(c);
-      my[c] = static_cast<float>(r);
-    }
-  }
-  RefinedDisparity out{sgbm.clone(), cv::Mat::zeros(size, CV_32F)};
-  if (o.refine_subcell) {
-    cv::Mat w, g;
-    cv::remap(right, w, map_x, map_y, cv::INTER_CUBIC, cv::BORDER_REPLICATE);
-    cv::remap(right_dx, g, map_x, map_y, cv::INTER_LINEAR, cv::BORDER_REPLICATE);
-    cv::Mat mw, mg, mww, mgg, mgw, mgl, mwl;
-    cv::boxFilter(w, mw, CV_32F, window);
-    cv::boxFilter(g, mg, CV_32F, window);
-    cv::boxFilter(w.mul(w), mww, CV_32F, window);
-    cv::boxFilter(g.mul(g), mgg, CV_32F, window);
-    cv::boxFilter(g.mul(w), mgw, CV_32F, window);
-    cv::boxFilter(g.mul(left), mgl, CV_32F, window);
-    cv::boxFilter(w.mul(left), mwl, CV_32F, window);
-    cv::parallel_for_(cv::Range(0, size.height), [&](const cv::Range& rows) {
-      for (int r = rows.start; r < rows.end; ++r) {
-        const float* sg = sgbm.ptr<float>(r);
-        float* d = out.disparity.ptr<float>(r);
-        for (int c = 0; c < size.width; ++c) {
-          if (!(sg[c] > 0.f)) continue;
-          const float ml = mean_l.at<float>(r, c), m_w = mw.at<float>(r, c);
-          const float m_g = mg.at<float>(r, c);
-          const float var_l = std::max(0.f, mean_ll.at<float>(r, c) - ml * ml);
-          const float var_w = std::max(0.f, mww.at<float>(r, c) - m_w * m_w);
-          const float var_g = mgg.at<float>(r, c) - m_g * m_g;
-          if (!(var_g > 1e-3f) || !(var_w > 1e-3f)) continue;
-          const float a = std::sqrt((var_l + 1e-3f) / (var_w + 1e-3f));
-          const float cov_gw = mgw.at<float>(r, c) - m_g * m_w;
-          const float cov_gl = mgl.at<float>(r, c) - m_g * ml;
-          const float step = std::clamp((a * cov_gw - cov_gl) / (a * var_g), -0.5f, 0.5f);
-          d[c] += step;
-          // Residual per sample of the fit at SGBM's disparity, less what the step explains.
-          const float cov_wl = mwl.at<float>(r, c) - m_w * ml;
-          const float energy = a * a * var_g;
-          const float residual =
-              std::max(0.f, a * a * var_w + var_l - 2.f * a * cov_wl - step * step * energy);
-          out.std_cells.at<float>(r, c) = std::sqrt(residual / (n * energy));
-        }
+  cv::parallel_for_(cv::Range(0, size.height), [&](const cv::Range& rows) {
+    for (int r = rows.start; r < rows.end; ++r) {
+      const int16_t* d = disparity16.ptr<int16_t>(r);
+      float* sg = sgbm.ptr<float>(r);
+      float* mx = map_x.ptr<float>(r);
+      float* my = map_y.ptr<float>(r);
+      for (int c = 0; c < size.width; ++c) {
+        sg[c] = d[c] > 0 ? d[c] / 16.f : -1.f;
+        mx[c] = d[c] > 0 ? c - sg[c] : static_cast<float>(c);
+        my[c] = static_cast<float>(r);
       }
-    });
-  }
+    }
+  });
+  RefinedDisparity out{sgbm.clone(), cv::Mat::zeros(size, CV_32F)};
+  if (!o.refine_subcell) return out;
+  // cam1 warped by each cell's disparity (bicubic) and its gradient along the row, then the
+  // windows' sums of the products the fit needs: each filter on a thread of its own.
+  cv::Mat w, g;
+  ParallelTasks(2, [&](int i) {
+    if (i == 0) {
+      cv::remap(right, w, map_x, map_y, cv::INTER_CUBIC, cv::BORDER_REPLICATE);
+    } else {
+      cv::Mat right_dx;
+      cv::Sobel(right, right_dx, CV_32F, 1, 0, 1, 0.5);  // central difference
+      cv::remap(right_dx, g, map_x, map_y, cv::INTER_LINEAR, cv::BORDER_REPLICATE);
+    }
+  });
+  cv::Mat mean_l, mean_ll, mw, mg, mww, mgg, mgw, mgl, mwl;
+  const std::array<std::tuple<cv::Mat*, const cv::Mat*, const cv::Mat*>, 9> sums = {{
+      {&mean_l, &left, nullptr}, {&mean_ll, &left, &left}, {&mw, &w, nullptr},
+      {&mg, &g, nullptr}, {&mww, &w, &w}, {&mgg, &g, &g}, {&mgw, &g, &w}, {&mgl, &g, &left},
+      {&mwl, &w, &left}}};
+  ParallelTasks(static_cast<int>(sums.size()), [&](int i) {
+    const auto [sum, a, b] = sums[i];
+    cv::boxFilter(b ? a->mul(*b) : *a, *sum, CV_32F, window);
+  });
+  cv::parallel_for_(cv::Range(0, size.height), [&](const cv::Range& rows) {
+    for (int r = rows.start; r < rows.end; ++r) {
+      const float* sg = sgbm.ptr<float>(r);
+      float* d = out.disparity.ptr<float>(r);
+      for (int c = 0; c < size.width; ++c) {
+        if (!(sg[c] > 0.f)) continue;
+        const float ml = mean_l.at<float>(r, c), m_w = mw.at<float>(r, c);
+        const float m_g = mg.at<float>(r, c);
+        const float var_l = std::max(0.f, mean_ll.at<float>(r, c) - ml * ml);
+        const float var_w = std::max(0.f, mww.at<float>(r, c) - m_w * m_w);
+        const float var_g = mgg.at<float>(r, c) - m_g * m_g;
+        if (!(var_g > 1e-3f) || !(var_w > 1e-3f)) continue;
+        const float a = std::sqrt((var_l + 1e-3f) / (var_w + 1e-3f));
+        const float cov_gw = mgw.at<float>(r, c) - m_g * m_w;
+        const float cov_gl = mgl.at<float>(r, c) - m_g * ml;
+        const float step = std::clamp((a * cov_gw - cov_gl) / (a * var_g), -0.5f, 0.5f);
+        d[c] += step;
+        // Residual per sample of the fit at SGBM's disparity, less what the step explains.
+        const float cov_wl = mwl.at<float>(r, c) - m_w * ml;
+        const float energy = a * a * var_g;
+        const float residual =
+            std::max(0.f, a * a * var_w + var_l - 2.f * a * cov_wl - step * step * energy);
+        out.std_cells.at<float>(r, c) = std::sqrt(residual / (n * energy));
+      }
+    }
+  });
   return out;
 }
 
@@ -277,11 +293,13 @@ std::pair<double, int> EpipolarOffset(const cv::Mat& grey0, const cv::Mat& grey1
 cv::Mat WindowCorrelation(const cv::Mat& a, const cv::Mat& b, int window, double noise_grey) {
   const cv::Size size(window, window);
   cv::Mat mean_a, mean_b, mean_aa, mean_bb, mean_ab;
-  cv::boxFilter(a, mean_a, CV_32F, size);
-  cv::boxFilter(b, mean_b, CV_32F, size);
-  cv::boxFilter(a.mul(a), mean_aa, CV_32F, size);
-  cv::boxFilter(b.mul(b), mean_bb, CV_32F, size);
-  cv::boxFilter(a.mul(b), mean_ab, CV_32F, size);
+  const std::array<std::tuple<cv::Mat*, const cv::Mat*, const cv::Mat*>, 5> sums = {{
+      {&mean_a, &a, nullptr}, {&mean_b, &b, nullptr}, {&mean_aa, &a, &a}, {&mean_bb, &b, &b},
+      {&mean_ab, &a, &b}}};
+  ParallelTasks(static_cast<int>(sums.size()), [&](int i) {
+    const auto [sum, x, y] = sums[i];
+    cv::boxFilter(y ? x->mul(*y) : *x, *sum, CV_32F, size);
+  });
   const float noise2 = static_cast<float>(noise_grey * noise_grey);
   cv::Mat out(a.size(), CV_32F);
   cv::parallel_for_(cv::Range(0, a.rows), [&](const cv::Range& rows) {
@@ -525,9 +543,11 @@ DensePairResult DenseStereo::Reconstruct(const cv::Mat& image0, const cv::Mat& i
   }
   CollectPoints(cells, pair.colour0, &result);
   result.num_points = static_cast<int>(result.points.size());
-  cv::transpose(cells.range, result.range_m);
-  cv::transpose(cells.range_std, result.range_std_m);
-  cv::transpose(cells.confidence, result.confidence);
+  const std::array<std::pair<const cv::Mat*, cv::Mat*>, 3> panoramas = {
+      {{&cells.range, &result.range_m},
+       {&cells.range_std, &result.range_std_m},
+       {&cells.confidence, &result.confidence}}};
+  ParallelTasks(3, [&](int i) { cv::transpose(*panoramas[i].first, *panoramas[i].second); });
   result.seconds.triangulate = timer.ElapsedSeconds();
   progress.Report(1.0, "triangulate");
   return result;

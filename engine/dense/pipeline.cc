@@ -1,5 +1,6 @@
 #include "engine/dense/pipeline.h"
 
+#include <future>
 #include <memory>
 #include <stdexcept>
 #include <utility>
@@ -170,10 +171,21 @@ size_t RunDense(const StereoRig& rig, const ImageReader& read,
   const DenseStereo dense(rig, options.dense, options.rectification_tables_dir);
   size_t num_points = 0;
   BackgroundTask writer;
+  // Pair k + 1's images are read (decoded) while pair k is matched, the two cameras at once.
+  const auto read_pair = [&read, &pairs](size_t k) {
+    std::future<cv::Mat> image1 =
+        std::async(std::launch::async, [&] { return ReadImage(read, pairs[k].cam1); });
+    cv::Mat image0 = ReadImage(read, pairs[k].cam0);
+    return std::make_pair(std::move(image0), image1.get());
+  };
+  std::future<std::pair<cv::Mat, cv::Mat>> next_images;
+  if (!pairs.empty()) next_images = std::async(std::launch::async, read_pair, 0);
   for (size_t k = 0; k < pairs.size(); ++k) {
     progress.ThrowIfCancelled();
-    const cv::Mat image0 = ReadImage(read, pairs[k].cam0);
-    const cv::Mat image1 = ReadImage(read, pairs[k].cam1);
+    const std::pair<cv::Mat, cv::Mat> images = next_images.get();
+    const cv::Mat& image0 = images.first;
+    const cv::Mat& image1 = images.second;
+    if (k + 1 < pairs.size()) next_images = std::async(std::launch::async, read_pair, k + 1);
     auto pair_result =
         std::make_shared<DensePairResult>(WithErrorPrefix("pair '" + pairs[k].name + "': ", [&] {
           return dense.Reconstruct(image0, image1, PairRange(progress, k, pairs.size()));
