@@ -29,7 +29,9 @@
 // true range along their ray, and the merged cloud of the pairs placed by their true poses,
 // fused as the stereo job fuses them.
 //
-// The floor: the held-out lounge again without sensor noise and JPEG (--no-floor skips it).
+// The floor: the held-out lounge again without sensor noise and JPEG, and the image noise's share
+// of the error on the noisy sets against their clean renders (PrintNoiseFloor; --no-floor skips
+// the clean lounge and its figures).
 //
 // --no-peer runs omnirig only (for profiling); --no-job skips the job's runs;
 // --development-only runs the development sets only (tuning); --calibrate-std fits the range
@@ -68,6 +70,8 @@
 #include "engine/dense/dense_map.h"
 #include "engine/dense/dense_stereo.h"
 #include "engine/dense/range_io.h"
+#include "engine/features/image.h"
+#include "engine/features/mirror_mask.h"
 #include "engine/geometry/ply.h"
 #include "engine/slam/map_io.h"
 #include "engine/synth/presets.h"
@@ -697,6 +701,135 @@ void RunSet(const BenchSet& set, bool with_peer, bool profile,
       st.rectify, st.match, st.confidence, st.epipolar, st.refine, st.triangulate);
 }
 
+// The image noise's share of the error, with the clean renders of the same frames. On the grid,
+// each camera's noise is the noisy render less the clean one (sensor noise and JPEG as the
+// matcher sees them, after the resampling). Two figures per cell inside both mirrors whose ray
+// hits the scene, for windows of the refinement's 11 cells and of 21:
+// - the Cramer-Rao bound of an unbiased disparity from the window under white noise of the
+//   grid's std: (sigma_0^2 + sigma_1^2) / sum_W (dI/dc)^2 (dI/dc the clean cam0 grid's gradient
+//   along the row), as a range std with the cell's true range; its expected median |error| is
+//   0.674 std and its share within 1 % of range erf(0.01 r / (sqrt 2 std));
+// - the error this noise itself puts into a least-squares fit of the window's disparity at the
+//   true disparity, to first order: sum_W g (n0 - n1) / sum_W g^2, n1 cam1's noise at the cells
+//   the true disparity pairs (correlated noise, JPEG's blocks and the resampling's, as it is).
+// An estimator that reports N points a pair takes N cells; it can only know the cells'
+// texture, not the noise's draw, so the N cells of the lowest bound are taken and the median
+// of each figure over them printed: no window estimator's median on these cells falls below
+// what the noise alone puts into it (the matching adds its own bias on top).
+void PrintNoiseFloor(const BenchSet& noisy, const BenchSet& clean,
+                     const dense::DenseStereoOptions& dense_options,
+                     const std::vector<int>& points_per_pair) {
+  const std::shared_ptr<const dense::SphericalRectifier> grid =
+      dense::SharedRectifier(noisy.rig, dense_options.grid);
+  const double b = grid->baseline_m(), step = grid->theta_step_rad();
+  const MirrorMaskOptions mask_options = dense_options.MaskOptions();
+  const std::array<int, 2> windows = {11, 21};
+  struct Cell {
+    double bound;        // Cramer-Rao median |error| / r
+    double within;       // Cramer-Rao share within 1 %
+    double noise_error;  // |first-order error of the fit| / r
+    bool operator<(const Cell& o) const { return bound < o.bound; }
+  };
+  std::array<std::vector<Cell>, 2> cells;
+  double noise_sum = 0.0;
+  const size_t num_pairs = noisy.world_from_rig.size();
+  const int rows = grid->rows(), cols = grid->cols();
+  for (size_t f = 0; f < num_pairs; ++f) {
+    cv::Mat clean_grid[2], noise[2], mask[2];
+    double sigma2[2];
+    for (int k = 0; k < 2; ++k) {
+      const cv::Mat clean_grey = grid->Rectify(ToGreyscale8(clean.images[k][f]), k);
+      const cv::Mat noisy_grey = grid->Rectify(ToGreyscale8(noisy.images[k][f]), k);
+      mask[k] =
+          MirrorMask(clean_grey, Eigen::Vector2d::Zero(), mask_options, grid->ValidMask(k));
+      clean_grey.convertTo(clean_grid[k], CV_32F);
+      noisy_grey.convertTo(noise[k], CV_32F);
+      noise[k] -= clean_grid[k];
+      cv::Scalar mean, deviation;
+      cv::meanStdDev(noise[k], mean, deviation, mask[k]);
+      sigma2[k] = deviation[0] * deviation[0];
+      noise_sum += deviation[0] / (2.0 * num_pairs);
+    }
+    // Each cell's true range and disparity (NaN where the ray misses or a mask holds no cell).
+    const Rigid3d& world_from_cam0 = noisy.world_from_rig[f];
+    cv::Mat range(rows, cols, CV_64F, cv::Scalar(NAN)), metres_per_cell(rows, cols, CV_64F);
+    cv::Mat map_x(rows, cols, CV_32F), map_y(rows, cols, CV_32F);
+    cv::parallel_for_(cv::Range(0, rows), [&](const cv::Range& range_of_rows) {
+      for (int r = range_of_rows.start; r < range_of_rows.end; ++r) {
+        const double phi = grid->Phi(r);
+        for (int c = 0; c < cols; ++c) {
+          map_x.at<float>(r, c) = static_cast<float>(c);
+          map_y.at<float>(r, c) = static_cast<float>(r);
+          if (!mask[0].at<uint8_t>(r, c)) continue;
+          const double theta = grid->Theta(c);
+          const Eigen::Vector3d ray =
+              grid->cam0_from_grid() * Eigen::Vector3d(std::sin(theta) * std::cos(phi),
+                                                       std::sin(theta) * std::sin(phi),
+                                                       std::cos(theta));
+          const double r_m = slam::RangeToSceneSurface(noisy.scene, world_from_cam0.translation,
+                                                       world_from_cam0.rotation * ray);
+          if (!std::isfinite(r_m)) continue;
+          const double parallax =
+              std::atan2(r_m * std::sin(theta), r_m * std::cos(theta) - b) - theta;
+          const double d = parallax / step;
+          if (c - d < 0 || !mask[1].at<uint8_t>(r, static_cast<int>(std::lround(c - d)))) continue;
+          range.at<double>(r, c) = r_m;
+          metres_per_cell.at<double>(r, c) =
+              b * std::sin(theta) / std::pow(std::sin(parallax), 2) * step;
+          map_x.at<float>(r, c) = static_cast<float>(c - d);
+        }
+      }
+    });
+    cv::Mat dx, noise1_at_match;
+    cv::Sobel(clean_grid[0], dx, CV_32F, 1, 0, 1, 0.5);  // as the refinement's gradient
+    cv::remap(noise[1], noise1_at_match, map_x, map_y, cv::INTER_LINEAR, cv::BORDER_REPLICATE);
+    const cv::Mat noise_difference = noise[0] - noise1_at_match;
+    for (int w = 0; w < 2; ++w) {
+      const cv::Size window(windows[w], windows[w]);
+      cv::Mat energy, projection;
+      cv::boxFilter(dx.mul(dx), energy, CV_32F, window, cv::Point(-1, -1), false);
+      cv::boxFilter(dx.mul(noise_difference), projection, CV_32F, window, cv::Point(-1, -1),
+                    false);
+      for (int r = 0; r < rows; ++r) {
+        for (int c = 0; c < cols; ++c) {
+          const double r_m = range.at<double>(r, c);
+          if (!std::isfinite(r_m)) continue;
+          const double e = std::max(1e-9, double{energy.at<float>(r, c)});
+          const double per_cell = metres_per_cell.at<double>(r, c) / r_m;
+          const double relative_std = std::sqrt((sigma2[0] + sigma2[1]) / e) * per_cell;
+          cells[w].push_back({0.674 * relative_std,
+                              std::erf(0.01 / (std::sqrt(2.0) * relative_std)),
+                              std::abs(projection.at<float>(r, c) / e) * per_cell});
+        }
+      }
+    }
+  }
+  std::printf("\nthe image noise's share (noise %.2f grey levels on the grid, %zu cells a pair "
+              "in both mirrors with a true range):\n",
+              noise_sum, cells[0].size() / std::max<size_t>(1, num_pairs));
+  for (int w = 0; w < 2; ++w) {
+    std::sort(cells[w].begin(), cells[w].end());
+    for (const int n : points_per_pair) {
+      const size_t num = std::min(cells[w].size(), n * num_pairs);
+      if (num == 0) continue;
+      double within_bound = 0.0, within_noise = 0.0;
+      std::vector<double> noise_errors;
+      for (size_t i = 0; i < num; ++i) {
+        within_bound += cells[w][i].within;
+        within_noise += cells[w][i].noise_error <= 0.01 ? 1.0 : 0.0;
+        noise_errors.push_back(cells[w][i].noise_error);
+      }
+      std::nth_element(noise_errors.begin(), noise_errors.begin() + num / 2, noise_errors.end());
+      std::printf(
+          "  %dx%d window, the %d cells a pair of the lowest bound: Cramer-Rao (white noise) "
+          "median |error| >= %.3f %% of range, within 1 %% <= %.1f %%; the noise's own error "
+          "in the fit: median %.3f %%, within 1 %% %.1f %%\n",
+          windows[w], windows[w], n, 100.0 * cells[w][num / 2].bound, 100.0 * within_bound / num,
+          100.0 * noise_errors[num / 2], 100.0 * within_noise / num);
+    }
+  }
+}
+
 // The development room with the held-out set's kind of noise at its own levels and seed: each
 // image (noise 1 already) gets Gaussian noise of 1.5, 2.5 or 3.5 grey levels more (by frame and
 // camera) and is saved as JPEG at quality 92, 88 or 80 (by frame) and decoded. A development
@@ -763,6 +896,7 @@ int Run(const BenchFlags& flags, const dense::DenseStereoOptions& dense_options)
   }
   RunSet(development, flags.with_peer, true, dense_options);
   RunSet(noisy_development, false, false, dense_options);
+  PrintNoiseFloor(noisy_development, development, dense_options, {600000, 900000});
   if (flags.development_only) return 0;
 
   std::printf("\nrendering %d held-out pairs at 1024x768...\n", flags.frames);
@@ -780,6 +914,7 @@ int Run(const BenchFlags& flags, const dense::DenseStereoOptions& dense_options)
                        std::move(clean.scene), clean.rig,
                        clean.world_from_rig,   std::move(clean.images)};
     RunSet(clean_set, false, false, dense_options);
+    PrintNoiseFloor(held_out, clean_set, dense_options, {600000, 1000000});
   }
 
   if (flags.with_job) {
