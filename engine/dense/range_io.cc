@@ -43,20 +43,25 @@ cv::Mat RangePreview(const cv::Mat& range_m) {
     return std::log(*it);
   };
   const float lo = percentile(0.02), hi = std::max(percentile(0.98), lo + 1e-3f);
-  cv::Mat level(range_m.size(), CV_8U, cv::Scalar(0));
-  cv::parallel_for_(cv::Range(0, range_m.rows), [&](const cv::Range& rows) {
-    for (int r = rows.start; r < rows.end; ++r) {
-      const float* row = range_m.ptr<float>(r);
-      uint8_t* out = level.ptr<uint8_t>(r);
-      for (int c = 0; c < range_m.cols; ++c) {
-        if (!(row[c] > 0.f)) continue;
-        const float t = std::clamp((std::log(row[c]) - lo) / (hi - lo), 0.f, 1.f);
-        out[c] = static_cast<uint8_t>(std::lround(255.f * (1.f - t)));  // near = high = red
-      }
+  // Serial on purpose: the job writes previews on a thread of its own while it matches the next
+  // pair, and OpenCV runs a parallel_for_ that starts while another one runs (process-wide)
+  // serially, so a parallel loop here could leave the matching on one core.
+  static const cv::Mat turbo = [] {
+    cv::Mat levels(1, 256, CV_8U), colours;
+    for (int i = 0; i < 256; ++i) levels.at<uint8_t>(0, i) = static_cast<uint8_t>(i);
+    cv::applyColorMap(levels, colours, cv::COLORMAP_TURBO);
+    return colours;
+  }();
+  for (int r = 0; r < range_m.rows; ++r) {
+    const float* row = range_m.ptr<float>(r);
+    cv::Vec3b* out = preview.ptr<cv::Vec3b>(r);
+    for (int c = 0; c < range_m.cols; ++c) {
+      if (!(row[c] > 0.f)) continue;  // unknown stays black
+      const float t = std::clamp((std::log(row[c]) - lo) / (hi - lo), 0.f, 1.f);
+      const int level = static_cast<int>(std::lround(255.f * (1.f - t)));  // near = high = red
+      out[c] = turbo.at<cv::Vec3b>(0, level);
     }
-  });
-  cv::applyColorMap(level, preview, cv::COLORMAP_TURBO);
-  preview.setTo(cv::Scalar::all(0), range_m <= 0.f);
+  }
   return preview;
 }
 
