@@ -48,6 +48,7 @@
 #include <array>
 #include <chrono>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <cstring>
 #include <ctime>
@@ -84,6 +85,20 @@ double Seconds(std::chrono::steady_clock::time_point start) {
 // CPU seconds of the process (all threads): on a shared machine the wall time depends on the
 // other processes' load, the CPU time much less.
 double CpuSeconds() { return static_cast<double>(std::clock()) / CLOCKS_PER_SEC; }
+
+// FNV-1a of a cloud's vertices (positions, colours, confidence, range std), for comparing runs.
+uint64_t CloudHash(const PlyCloud& cloud) {
+  uint64_t hash = 0xcbf29ce484222325ull;
+  const auto add = [&hash](const void* data, size_t bytes) {
+    const auto* p = static_cast<const unsigned char*>(data);
+    for (size_t i = 0; i < bytes; ++i) hash = (hash ^ p[i]) * 0x100000001b3ull;
+  };
+  add(cloud.positions.data(), cloud.positions.size() * sizeof(Eigen::Vector3f));
+  add(cloud.colours.data(), cloud.colours.size() * 3);
+  add(cloud.confidence.data(), cloud.confidence.size() * sizeof(float));
+  add(cloud.range_std_m.data(), cloud.range_std_m.size() * sizeof(float));
+  return hash;
+}
 
 // The scene and poses a set of pairs is scored against.
 struct BenchSet {
@@ -515,6 +530,7 @@ struct OmnirigRun {
   dense::DenseMap fused_tight{TightMergedOptions()};
   double setup_s = 0.0, again_s = 0.0, from_disk_s = 0.0, from_disk_cpu_s = 0.0;
   double fuse_cpu_s = 0.0;  // the merged cloud's DenseMap::Add, all pairs
+  double fuse_s = 0.0;      // the same, wall
   std::vector<std::vector<dense::DensePoint>> clouds;  // each pair's points (its cam0 frame)
 };
 
@@ -604,9 +620,11 @@ void RunOmnirig(const BenchSet& set, const dense::DenseStereoOptions& dense_opti
     }
     run->score.Add(points, set.scene, set.world_from_rig[f], s, cpu_s, range_std);
     run->bias.Add(result.points, dense.rectifier(), set.scene, set.world_from_rig[f]);
+    const auto fuse_start = std::chrono::steady_clock::now();
     const double fuse_cpu = CpuSeconds();
     run->fused.Add(set.world_from_rig[f], result.points);
     run->fuse_cpu_s += CpuSeconds() - fuse_cpu;
+    run->fuse_s += Seconds(fuse_start);
     run->clouds.push_back(result.points);
     run->fused_tight.Add(set.world_from_rig[f], result.points);
     if (f == 0 && profile) {
@@ -662,12 +680,14 @@ void RunSet(const BenchSet& set, bool with_peer, bool profile,
   std::printf("\nmerged cloud of the %d pairs placed by their true poses:\n", num_frames);
   MergedScore appended, fused, fused_tight;
   appended.Score(ours.appended, set.scene, set.world_from_rig, ours.pair_cells);
+  auto start = std::chrono::steady_clock::now();
   double cpu = CpuSeconds();
   const PlyCloud fused_cloud = ours.fused.Cloud();
-  const double cloud_cpu_s = CpuSeconds() - cpu;
+  const double cloud_cpu_s = CpuSeconds() - cpu, cloud_s = Seconds(start);
+  start = std::chrono::steady_clock::now();
   cpu = CpuSeconds();
-  dense::PointsPerSquareMetre(fused_cloud.positions);
-  const double density_cpu_s = CpuSeconds() - cpu;
+  const double fused_per_m2 = dense::PointsPerSquareMetre(fused_cloud.positions);
+  const double density_cpu_s = CpuSeconds() - cpu, density_s = Seconds(start);
   fused.Score(fused_cloud.positions, set.scene, set.world_from_rig, ours.pair_cells);
   fused_tight.Score(ours.fused_tight.Cloud().positions, set.scene, set.world_from_rig,
                     ours.pair_cells);
@@ -681,10 +701,19 @@ void RunSet(const BenchSet& set, bool with_peer, bool profile,
   appended.Print("  appended (every pair's points)");
   fused.Print("  fused (MergedCloudOptions: 1 cm voxels, range std <= 2 %)");
   fused_tight.Print("  fused, range std <= 0.9 %");
+  const size_t per_pair = std::max<size_t>(1, set.world_from_rig.size());
   std::printf(
       "  the job's fusion, CPU s: %.3f per pair adding its points, %.3f for the cloud of the "
       "voxels, %.3f for its points per m^2\n",
-      ours.fuse_cpu_s / std::max<size_t>(1, set.world_from_rig.size()), cloud_cpu_s, density_cpu_s);
+      ours.fuse_cpu_s / per_pair, cloud_cpu_s, density_cpu_s);
+  std::printf(
+      "  the job's fusion, wall s: %.3f per pair adding its points, %.3f for the cloud of the "
+      "voxels, %.3f for its points per m^2\n",
+      ours.fuse_s / per_pair, cloud_s, density_s);
+  // Changes to the fusion's speed must leave its cloud bit for bit the same.
+  std::printf("  the job's merged cloud: %zu points, %.6f points per m^2, FNV-1a %016llx\n",
+              fused_cloud.size(), fused_per_m2,
+              static_cast<unsigned long long>(CloudHash(fused_cloud)));
   if (profile) {
     std::printf("\nomnirig per pair, CPU s by stage (end to end, artifacts written):");
     for (const auto& [name, seconds] : ours.stage_cpu)
