@@ -7,6 +7,7 @@
 #include <map>
 #include <stdexcept>
 #include <string>
+#include <thread>
 
 #include "engine/util/check.h"
 #include "engine/util/option_check.h"
@@ -83,10 +84,9 @@ DenseMap::Voxel& DenseMap::FindOrAdd(int64_t key) {
   }
 }
 
-void DenseMap::AddPoint(int frame, const Eigen::Vector3d& in_world,
+void DenseMap::AddPoint(int frame, const Eigen::Vector3d& in_world, int64_t key,
                         const std::array<uint8_t, 3>& rgb, float confidence, float range_std_m) {
-  const Eigen::Vector3i index = (in_world / options_.voxel_m).array().floor().cast<int>();
-  Voxel& voxel = FindOrAdd(Key(index));
+  Voxel& voxel = FindOrAdd(key);
   const double std_m = std::max(static_cast<double>(range_std_m), 1e-4);
   const double weight = confidence / (std_m * std_m);
   voxel.weight += weight;
@@ -99,46 +99,6 @@ void DenseMap::AddPoint(int frame, const Eigen::Vector3d& in_world,
   if (voxel.last_frame != frame) {
     voxel.last_frame = frame;
     ++voxel.num_frames;
-  }
-}
-
-void DenseMap::Add(const Rigid3d& world_from_cam0, const std::vector<DensePoint>& points) {
-  const int frame = num_frames_++;
-  Reserve(voxels_.size() + points.size());  // at most one new voxel per point
-  const Eigen::Matrix3d rotation = world_from_cam0.rotation.toRotationMatrix();
-  std::optional<FrameView> view;
-  if (options_.visibility_cell_rad > 0.0) view = NewView(world_from_cam0);
-  for (const DensePoint& point : points) {
-    if (point.range_std_m > options_.max_relative_range_std * point.point_in_cam0.norm()) continue;
-    AddPoint(frame, rotation * point.point_in_cam0.cast<double>() + world_from_cam0.translation,
-             point.rgb, point.confidence, point.range_std_m);
-    if (view) AddToView(point.point_in_cam0, point.range_std_m, &*view);
-  }
-  if (view) {
-    FinishView(&*view);
-    views_.push_back(std::move(*view));
-  }
-}
-
-void DenseMap::Add(const Rigid3d& world_from_cam0, const PlyCloud& cloud_in_cam0) {
-  cloud_in_cam0.Check();
-  OMNIRIG_CHECK(cloud_in_cam0.has_confidence && cloud_in_cam0.has_range_std,
-                "a dense map fuses clouds with confidence and range_std_m");
-  const int frame = num_frames_++;
-  Reserve(voxels_.size() + cloud_in_cam0.size());  // at most one new voxel per point
-  const Eigen::Matrix3d rotation = world_from_cam0.rotation.toRotationMatrix();
-  std::optional<FrameView> view;
-  if (options_.visibility_cell_rad > 0.0) view = NewView(world_from_cam0);
-  for (size_t i = 0; i < cloud_in_cam0.size(); ++i) {
-    const Eigen::Vector3f& p = cloud_in_cam0.positions[i];
-    if (cloud_in_cam0.range_std_m[i] > options_.max_relative_range_std * p.norm()) continue;
-    AddPoint(frame, rotation * p.cast<double>() + world_from_cam0.translation,
-             cloud_in_cam0.colours[i], cloud_in_cam0.confidence[i], cloud_in_cam0.range_std_m[i]);
-    if (view) AddToView(p, cloud_in_cam0.range_std_m[i], &*view);
-  }
-  if (view) {
-    FinishView(&*view);
-    views_.push_back(std::move(*view));
   }
 }
 
@@ -186,20 +146,114 @@ void DenseMap::FinishView(FrameView* view) {
   view->count.release();
 }
 
-void DenseMap::AddToView(const Eigen::Vector3f& point_in_cam0, float range_std_m,
-                         FrameView* view) const {
-  int row = 0, col = 0;
-  double range_m = 0.0;
-  if (!ViewCell(point_in_cam0.cast<double>(), options_.visibility_cell_rad, view->nearest_m.rows,
-                view->nearest_m.cols, &row, &col, &range_m)) {
-    return;
-  }
-  float& nearest = view->nearest_m.at<float>(row, col);
+void DenseMap::AddToView(int cell, double range_m, float range_std_m, FrameView* view) {
+  float& nearest = view->nearest_m.ptr<float>()[cell];
   if (nearest == 0.f || range_m < nearest) nearest = static_cast<float>(range_m);
   const double std_m = std::max(static_cast<double>(range_std_m), 1e-4);
-  view->weighted_range.at<float>(row, col) += static_cast<float>(range_m / (std_m * std_m));
-  view->weight.at<float>(row, col) += static_cast<float>(1.0 / (std_m * std_m));
-  view->count.at<float>(row, col) += 1.f;
+  view->weighted_range.ptr<float>()[cell] += static_cast<float>(range_m / (std_m * std_m));
+  view->weight.ptr<float>()[cell] += static_cast<float>(1.0 / (std_m * std_m));
+  view->count.ptr<float>()[cell] += 1.f;
+}
+
+namespace {
+
+// A point of the frame being added, placed: computed in parallel, fused in point order.
+struct PlacedPoint {
+  Eigen::Vector3d in_world;
+  double range_m;     // from cam0
+  int64_t key;        // its voxel's; kEmptyKey when the point is not fused (range std too large)
+  int32_t view_cell;  // row * cols + col in the frame's view; -1 for none
+};
+
+// The threads of the fusion: OpenCV's (cv::setNumThreads), which the job's matching runs on.
+// Not cv::parallel_for_: the stereo job adds a pair on its writer thread while the next pair is
+// matched, and OpenCV runs a parallel_for_ that starts while another runs (in any thread)
+// serially, the matching's included.
+int FusionThreads() { return std::max(1, cv::getNumThreads()); }
+
+// Runs body(begin, end) over [0, size) in chunks of `chunk` on FusionThreads() threads.
+template <typename Body>
+void ForChunks(size_t size, size_t chunk, const Body& body) {
+  const int num_chunks = static_cast<int>((size + chunk - 1) / chunk);
+  RunTasks(
+      num_chunks, FusionThreads(), ProgressSink{},
+      [&](int i, const ProgressSink&) { body(i * chunk, std::min(size, (i + 1) * chunk)); },
+      nullptr);
+}
+
+}  // namespace
+
+template <typename PointAt>
+void DenseMap::AddFrame(const Rigid3d& world_from_cam0, size_t num_points,
+                        const PointAt& point_at) {
+  const int frame = num_frames_++;
+  Reserve(voxels_.size() + num_points);  // at most one new voxel per point
+  const Eigen::Matrix3d rotation = world_from_cam0.rotation.toRotationMatrix();
+  std::optional<FrameView> view;
+  if (options_.visibility_cell_rad > 0.0) view = NewView(world_from_cam0);
+  const int rows = view ? view->nearest_m.rows : 0, cols = view ? view->nearest_m.cols : 0;
+  std::vector<PlacedPoint> placed(num_points);
+  ForChunks(num_points, 1 << 16, [&](size_t begin, size_t end) {
+    for (size_t i = begin; i < end; ++i) {
+      const FramePoint point = point_at(i);
+      PlacedPoint& out = placed[i];
+      out.key = kEmptyKey;
+      out.view_cell = -1;
+      if (point.range_std_m > options_.max_relative_range_std * point.in_cam0.norm()) continue;
+      out.in_world = rotation * point.in_cam0.template cast<double>() + world_from_cam0.translation;
+      out.key = Key((out.in_world / options_.voxel_m).array().floor().template cast<int>());
+      int row = 0, col = 0;
+      if (view && ViewCell(point.in_cam0.template cast<double>(), options_.visibility_cell_rad,
+                           rows, cols, &row, &col, &out.range_m)) {
+        out.view_cell = row * cols + col;
+      }
+    }
+  });
+  // The view and the voxels are independent: the view is filled beside the voxels.
+  const auto fill_view = [&] {
+    for (size_t i = 0; i < num_points; ++i) {
+      if (placed[i].view_cell >= 0) {
+        AddToView(placed[i].view_cell, placed[i].range_m, point_at(i).range_std_m, &*view);
+      }
+    }
+    FinishView(&*view);
+  };
+  struct JoinOnExit {
+    std::thread thread;
+    ~JoinOnExit() {
+      if (thread.joinable()) thread.join();
+    }
+  } view_thread;
+  if (view && FusionThreads() > 1) view_thread.thread = std::thread(fill_view);
+  for (size_t i = 0; i < num_points; ++i) {
+    if (placed[i].key == kEmptyKey) continue;
+    const FramePoint point = point_at(i);
+    AddPoint(frame, placed[i].in_world, placed[i].key, point.rgb, point.confidence,
+             point.range_std_m);
+  }
+  if (view_thread.thread.joinable()) {
+    view_thread.thread.join();
+  } else if (view) {
+    fill_view();
+  }
+  if (view) views_.push_back(std::move(*view));
+}
+
+void DenseMap::Add(const Rigid3d& world_from_cam0, const std::vector<DensePoint>& points) {
+  AddFrame(world_from_cam0, points.size(), [&points](size_t i) {
+    const DensePoint& p = points[i];
+    return FramePoint{p.point_in_cam0, p.rgb, p.confidence, p.range_std_m};
+  });
+}
+
+void DenseMap::Add(const Rigid3d& world_from_cam0, const PlyCloud& cloud_in_cam0) {
+  cloud_in_cam0.Check();
+  OMNIRIG_CHECK(cloud_in_cam0.has_confidence && cloud_in_cam0.has_range_std,
+                "a dense map fuses clouds with confidence and range_std_m");
+  AddFrame(world_from_cam0, cloud_in_cam0.size(), [&cloud_in_cam0](size_t i) {
+    return FramePoint{cloud_in_cam0.positions[i], cloud_in_cam0.colours[i],
+                      cloud_in_cam0.confidence[i], cloud_in_cam0.range_std_m[i]};
+  });
 }
 
 bool DenseMap::FuseAlongRays(const Voxel& voxel, Eigen::Vector3d* position, double std_m) const {
