@@ -225,7 +225,13 @@ void DenseMap::AddFrame(const Rigid3d& world_from_cam0, size_t num_points,
     }
   } view_thread;
   if (view && FusionThreads() > 1) view_thread.thread = std::thread(fill_view);
+  // The keys are known ahead: each slot is fetched while the points before it are added (the
+  // index holds no more than it did after Reserve, so the slots stay where they are).
+  constexpr size_t kAhead = 16;
   for (size_t i = 0; i < num_points; ++i) {
+    if (i + kAhead < num_points && placed[i + kAhead].key != kEmptyKey) {
+      __builtin_prefetch(&slots_[SlotOf(placed[i + kAhead].key, slot_shift_)]);
+    }
     if (placed[i].key == kEmptyKey) continue;
     const FramePoint point = point_at(i);
     AddPoint(frame, placed[i].in_world, placed[i].key, point.rgb, point.confidence,
