@@ -39,7 +39,11 @@
 // --block-size, --step-factor and --max-parallax-deg set DenseStereoOptions' block_size,
 // grid.step_factor and max_parallax_deg (to measure what they cost and give).
 //
-// Usage: bench_dense [--frames N] [--threads N] [--no-peer] [--no-job] [--development-only]
+// --job-only runs the stereo_reconstruct job's two runs only (its wall time, A/B against
+// another build under the same load).
+//
+// Usage: bench_dense [--frames N] [--threads N] [--no-peer] [--no-job] [--job-only]
+//                    [--development-only]
 //                    [--calibrate-std] [--block-size N] [--step-factor F] [--max-parallax-deg D]
 //                    [--no-floor] [--disparity-std-cells C]
 //                    [--disparity-std-scale S]
@@ -757,6 +761,7 @@ struct BenchFlags {
   bool with_peer = true, with_job = true;
   bool development_only = false;  // for tuning: the held-out renders are not even made
   bool calibrate_std = false;
+  bool job_only = false;
   bool floor = true;  // the clean lounge as well
 };
 
@@ -775,6 +780,11 @@ int Run(const BenchFlags& flags, const dense::DenseStereoOptions& dense_options)
                        sequence.rig,
                        sequence.world_from_rig,
                        sequence.images};
+  if (flags.job_only) {
+    RunJob(sequence, flags.frames, dense_options, false);
+    RunJob(sequence, flags.frames, dense_options, true);
+    return 0;
+  }
   const BenchSet noisy_development = NoisyRoom(development);
   if (flags.calibrate_std) {
     dense::DenseStereoOptions raw = dense_options;
@@ -828,6 +838,7 @@ int main(int argc, char** argv) {
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--no-peer")) flags.with_peer = false;
     if (!std::strcmp(argv[i], "--no-job")) flags.with_job = false;
+    if (!std::strcmp(argv[i], "--job-only")) flags.job_only = true;
     if (!std::strcmp(argv[i], "--development-only")) flags.development_only = true;
     if (!std::strcmp(argv[i], "--calibrate-std")) flags.calibrate_std = true;
     if (!std::strcmp(argv[i], "--no-floor")) flags.floor = false;
