@@ -41,7 +41,11 @@
 // --block-size, --step-factor and --max-parallax-deg set DenseStereoOptions' block_size,
 // grid.step_factor and max_parallax_deg (to measure what they cost and give).
 //
-// Usage: bench_dense [--frames N] [--threads N] [--no-peer] [--no-job] [--development-only]
+// --job-only runs the stereo_reconstruct job's two runs only (its wall time, A/B against
+// another build under the same load).
+//
+// Usage: bench_dense [--frames N] [--threads N] [--no-peer] [--no-job] [--job-only]
+//                    [--development-only]
 //                    [--calibrate-std] [--block-size N] [--step-factor F] [--max-parallax-deg D]
 //                    [--no-floor] [--disparity-std-cells C]
 //                    [--disparity-std-scale S]
@@ -50,6 +54,7 @@
 #include <array>
 #include <chrono>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <cstring>
 #include <ctime>
@@ -88,6 +93,20 @@ double Seconds(std::chrono::steady_clock::time_point start) {
 // CPU seconds of the process (all threads): on a shared machine the wall time depends on the
 // other processes' load, the CPU time much less.
 double CpuSeconds() { return static_cast<double>(std::clock()) / CLOCKS_PER_SEC; }
+
+// FNV-1a of a cloud's vertices (positions, colours, confidence, range std), for comparing runs.
+uint64_t CloudHash(const PlyCloud& cloud) {
+  uint64_t hash = 0xcbf29ce484222325ull;
+  const auto add = [&hash](const void* data, size_t bytes) {
+    const auto* p = static_cast<const unsigned char*>(data);
+    for (size_t i = 0; i < bytes; ++i) hash = (hash ^ p[i]) * 0x100000001b3ull;
+  };
+  add(cloud.positions.data(), cloud.positions.size() * sizeof(Eigen::Vector3f));
+  add(cloud.colours.data(), cloud.colours.size() * 3);
+  add(cloud.confidence.data(), cloud.confidence.size() * sizeof(float));
+  add(cloud.range_std_m.data(), cloud.range_std_m.size() * sizeof(float));
+  return hash;
+}
 
 // The scene and poses a set of pairs is scored against.
 struct BenchSet {
@@ -519,6 +538,7 @@ struct OmnirigRun {
   dense::DenseMap fused_tight{TightMergedOptions()};
   double setup_s = 0.0, again_s = 0.0, from_disk_s = 0.0, from_disk_cpu_s = 0.0;
   double fuse_cpu_s = 0.0;  // the merged cloud's DenseMap::Add, all pairs
+  double fuse_s = 0.0;      // the same, wall
   std::vector<std::vector<dense::DensePoint>> clouds;  // each pair's points (its cam0 frame)
 };
 
@@ -608,9 +628,11 @@ void RunOmnirig(const BenchSet& set, const dense::DenseStereoOptions& dense_opti
     }
     run->score.Add(points, set.scene, set.world_from_rig[f], s, cpu_s, range_std);
     run->bias.Add(result.points, dense.rectifier(), set.scene, set.world_from_rig[f]);
+    const auto fuse_start = std::chrono::steady_clock::now();
     const double fuse_cpu = CpuSeconds();
     run->fused.Add(set.world_from_rig[f], result.points);
     run->fuse_cpu_s += CpuSeconds() - fuse_cpu;
+    run->fuse_s += Seconds(fuse_start);
     run->clouds.push_back(result.points);
     run->fused_tight.Add(set.world_from_rig[f], result.points);
     if (f == 0 && profile) {
@@ -666,12 +688,14 @@ void RunSet(const BenchSet& set, bool with_peer, bool profile,
   std::printf("\nmerged cloud of the %d pairs placed by their true poses:\n", num_frames);
   MergedScore appended, fused, fused_tight;
   appended.Score(ours.appended, set.scene, set.world_from_rig, ours.pair_cells);
+  auto start = std::chrono::steady_clock::now();
   double cpu = CpuSeconds();
   const PlyCloud fused_cloud = ours.fused.Cloud();
-  const double cloud_cpu_s = CpuSeconds() - cpu;
+  const double cloud_cpu_s = CpuSeconds() - cpu, cloud_s = Seconds(start);
+  start = std::chrono::steady_clock::now();
   cpu = CpuSeconds();
-  dense::PointsPerSquareMetre(fused_cloud.positions);
-  const double density_cpu_s = CpuSeconds() - cpu;
+  const double fused_per_m2 = dense::PointsPerSquareMetre(fused_cloud.positions);
+  const double density_cpu_s = CpuSeconds() - cpu, density_s = Seconds(start);
   fused.Score(fused_cloud.positions, set.scene, set.world_from_rig, ours.pair_cells);
   fused_tight.Score(ours.fused_tight.Cloud().positions, set.scene, set.world_from_rig,
                     ours.pair_cells);
@@ -685,10 +709,19 @@ void RunSet(const BenchSet& set, bool with_peer, bool profile,
   appended.Print("  appended (every pair's points)");
   fused.Print("  fused (MergedCloudOptions: 1 cm voxels, range std <= 2 %)");
   fused_tight.Print("  fused, range std <= 0.9 %");
+  const size_t per_pair = std::max<size_t>(1, set.world_from_rig.size());
   std::printf(
       "  the job's fusion, CPU s: %.3f per pair adding its points, %.3f for the cloud of the "
       "voxels, %.3f for its points per m^2\n",
-      ours.fuse_cpu_s / std::max<size_t>(1, set.world_from_rig.size()), cloud_cpu_s, density_cpu_s);
+      ours.fuse_cpu_s / per_pair, cloud_cpu_s, density_cpu_s);
+  std::printf(
+      "  the job's fusion, wall s: %.3f per pair adding its points, %.3f for the cloud of the "
+      "voxels, %.3f for its points per m^2\n",
+      ours.fuse_s / per_pair, cloud_s, density_s);
+  // Changes to the fusion's speed must leave its cloud bit for bit the same.
+  std::printf("  the job's merged cloud: %zu points, %.6f points per m^2, FNV-1a %016llx\n",
+              fused_cloud.size(), fused_per_m2,
+              static_cast<unsigned long long>(CloudHash(fused_cloud)));
   if (profile) {
     std::printf("\nomnirig per pair, CPU s by stage (end to end, artifacts written):");
     for (const auto& [name, seconds] : ours.stage_cpu)
@@ -861,6 +894,7 @@ struct BenchFlags {
   bool with_peer = true, with_job = true;
   bool development_only = false;  // for tuning: the held-out renders are not even made
   bool calibrate_std = false;
+  bool job_only = false;
   bool floor = true;  // the clean lounge as well
 };
 
@@ -879,6 +913,11 @@ int Run(const BenchFlags& flags, const dense::DenseStereoOptions& dense_options)
                        sequence.rig,
                        sequence.world_from_rig,
                        sequence.images};
+  if (flags.job_only) {
+    RunJob(sequence, flags.frames, dense_options, false);
+    RunJob(sequence, flags.frames, dense_options, true);
+    return 0;
+  }
   const BenchSet noisy_development = NoisyRoom(development);
   if (flags.calibrate_std) {
     dense::DenseStereoOptions raw = dense_options;
@@ -934,6 +973,7 @@ int main(int argc, char** argv) {
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--no-peer")) flags.with_peer = false;
     if (!std::strcmp(argv[i], "--no-job")) flags.with_job = false;
+    if (!std::strcmp(argv[i], "--job-only")) flags.job_only = true;
     if (!std::strcmp(argv[i], "--development-only")) flags.development_only = true;
     if (!std::strcmp(argv[i], "--calibrate-std")) flags.calibrate_std = true;
     if (!std::strcmp(argv[i], "--no-floor")) flags.floor = false;

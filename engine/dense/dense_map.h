@@ -128,9 +128,21 @@ class DenseMap {
     int last_frame = -1;
     uint64_t frame_bits = 0;  // bit (frame % 64) of every frame that added a point
   };
-  // Adds one point (world frame) of the frame being added.
-  void AddPoint(int frame, const Eigen::Vector3d& in_world, const std::array<uint8_t, 3>& rgb,
-                float confidence, float range_std_m);
+  // A point of a frame being added (its cam0 frame), as both Add overloads read theirs.
+  struct FramePoint {
+    const Eigen::Vector3f& in_cam0;
+    const std::array<uint8_t, 3>& rgb;
+    float confidence;
+    float range_std_m;
+  };
+  // Both Adds: point_at(i) is point i's FramePoint. The points' world positions, voxel keys and
+  // view cells are computed on cv::getNumThreads() threads, then the voxels and the view are
+  // filled in point order (each on its own thread): the map does not depend on the thread count.
+  template <typename PointAt>
+  void AddFrame(const Rigid3d& world_from_cam0, size_t num_points, const PointAt& point_at);
+  // Adds one point (world frame, in the voxel of `key`) of the frame being added.
+  void AddPoint(int frame, const Eigen::Vector3d& in_world, int64_t key,
+                const std::array<uint8_t, 3>& rgb, float confidence, float range_std_m);
   bool Kept(const Voxel& voxel) const {
     return voxel.num_points >= options_.min_points && voxel.num_frames >= options_.min_frames;
   }
@@ -167,7 +179,8 @@ class DenseMap {
     cv::Mat weighted_range, weight, count;  // CV_32F while the frame is added
   };
   FrameView NewView(const Rigid3d& world_from_cam0) const;
-  void AddToView(const Eigen::Vector3f& point_in_cam0, float range_std_m, FrameView* view) const;
+  // Adds a point at range_m in cell `cell` (row * cols + col) of the view.
+  static void AddToView(int cell, double range_m, float range_std_m, FrameView* view);
   static void FinishView(FrameView* view);
   // A kept voxel's position after the other frames' views (see visibility_cell_rad); false
   // when a view sees through it. Only the frames within kViewWindow of the voxel's last frame

@@ -7,6 +7,7 @@
 #include <array>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <optional>
@@ -154,6 +155,38 @@ TEST(DenseMap, RoomKeyframesFuseOntoTheTrueSurfaces) {
   std::filesystem::remove_all(dir);
 }
 
+// The fusion runs on OpenCV's threads (the points placed, the view beside the voxels, the cloud
+// in chunks): the cloud must not depend on their number, bit for bit. Walls of 2 m x 4 m at
+// 4 mm are enough points and voxels for several chunks.
+TEST(DenseMap, MergedCloudIsTheSameBitForBitOnAnyNumberOfThreads) {
+  const Rigid3d at_a, at_b(Eigen::Quaterniond::Identity(), Eigen::Vector3d(0, 0.5, 0.1));
+  std::vector<DensePoint> a = WallPoints(Eigen::Vector3d::Zero(), 3.0, 2.0, 0.004, 0.01f);
+  std::vector<DensePoint> b = WallPoints(at_b.translation, 3.02, 2.0, 0.004, 0.012f);
+  for (size_t i = 0; i < b.size(); ++i) {
+    b[i].confidence = 0.5f + 0.5f * static_cast<float>(i % 7) / 7.f;
+    b[i].rgb = {static_cast<uint8_t>(i % 251), static_cast<uint8_t>(i % 13), 7};
+  }
+  const int threads = cv::getNumThreads();
+  std::vector<PlyCloud> clouds;
+  for (const int num_threads : {1, 3}) {
+    cv::setNumThreads(num_threads);
+    DenseMap map(MergedCloudOptions());
+    map.Add(at_a, a);
+    map.Add(at_b, b);
+    clouds.push_back(map.Cloud());
+  }
+  cv::setNumThreads(threads);
+  ASSERT_GT(clouds[0].size(), size_t{100000});
+  ASSERT_EQ(clouds[0].size(), clouds[1].size());
+  EXPECT_EQ(0, std::memcmp(clouds[0].positions.data(), clouds[1].positions.data(),
+                           clouds[0].size() * sizeof(Eigen::Vector3f)));
+  EXPECT_EQ(clouds[0].colours, clouds[1].colours);
+  EXPECT_EQ(0, std::memcmp(clouds[0].confidence.data(), clouds[1].confidence.data(),
+                           clouds[0].size() * sizeof(float)));
+  EXPECT_EQ(0, std::memcmp(clouds[0].range_std_m.data(), clouds[1].range_std_m.data(),
+                           clouds[0].size() * sizeof(float)));
+}
+
 // A 1 m x 1 m square sampled every centimetre, inside one layer of 5 cm cells: 10,000 points
 // per square metre; the same points at a 45-degree slope cross more cells, so the figure errs low.
 TEST(DenseMap, PointsPerSquareMetreOfASampledSquare) {
@@ -169,6 +202,16 @@ TEST(DenseMap, PointsPerSquareMetreOfASampledSquare) {
   EXPECT_LT(PointsPerSquareMetre(sloped), 10000.0);
   EXPECT_GT(PointsPerSquareMetre(sloped), 10000.0 / 1.8);
   EXPECT_EQ(PointsPerSquareMetre({}), 0.0);
+  // One point in each of 300 x 300 cells of 5 cm, two in every tenth: the count is exact however
+  // many cells there are.
+  std::vector<Eigen::Vector3f> grid;
+  for (int i = 0; i < 300; ++i) {
+    for (int j = 0; j < 300; ++j) {
+      grid.emplace_back(0.05f * i + 0.01f, 0.05f * j + 0.01f, 0.02f);
+      if ((i * 300 + j) % 10 == 0) grid.emplace_back(0.05f * i + 0.03f, 0.05f * j + 0.03f, 0.04f);
+    }
+  }
+  EXPECT_NEAR(PointsPerSquareMetre(grid), 99000 / (90000 * 0.05 * 0.05), 1e-6);
 }
 
 TEST(DenseMap, KeyframesArePosedFramesSpacedApart) {
