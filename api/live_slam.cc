@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <exception>
 
 #include "api/camera_json.h"
 #include "api/json_fields.h"
@@ -71,6 +72,135 @@ LiveAnswer CanceledAnswer(const LiveFrame& frame) {
              {"message", "the live job was canceled: frame " + frame.name +
                              " is stored in its dataset but not tracked"},
              {"details", {{"name", frame.name}}}}}}};
+}
+
+// The answer to a frame taken from the mailbox whose job ended (canceled or failed) before it
+// was tracked.
+LiveAnswer EndedAnswer(const LiveFrame& frame, const ProgressSink& progress) {
+  if (progress.IsCancelled()) return CanceledAnswer(frame);
+  return {409,
+          {{"error",
+            {{"code", "job_finished"},
+             {"message", "the live job has ended: frame " + frame.name +
+                             " is stored in its dataset but not tracked"},
+             {"details", {{"name", frame.name}}}}}}};
+}
+
+// A frame taken from the mailbox and its front end (decoding if the request's thread left it
+// undecoded, Session::FrontEnd). Pipelined (a job with 2 threads or more, as RunSlam), the front
+// end runs on a thread of its own, beside the back end of the frame before; otherwise on the
+// job's thread when the frame's turn comes. The destructor waits for that thread; a frame never
+// handed over by Take() (the job ended first) is answered there.
+class FrontEndJob {
+ public:
+  FrontEndJob(std::shared_ptr<LiveFrame> frame, slam::Session& session, bool pipelined,
+              const ProgressSink& progress)
+      : frame_(std::move(frame)), progress_(progress) {
+    const LiveFrame* taken = frame_.get();
+    prepared_ =
+        std::async(pipelined ? std::launch::async : std::launch::deferred,
+                   [&session, taken] { return session.FrontEnd(taken->name, Images(*taken)); });
+  }
+  ~FrontEndJob() {
+    // A front end on its own thread ends first; one not yet run on the job's thread never runs.
+    if (prepared_.valid() &&
+        prepared_.wait_for(std::chrono::seconds(0)) != std::future_status::deferred) {
+      prepared_.wait();
+    }
+    try {
+      if (frame_) frame_->answer.set_value(EndedAnswer(*frame_, progress_));
+    } catch (const std::exception&) {
+      // Out of memory for the answer: the sender's request ends with the job (the promise is
+      // broken).
+    }
+  }
+  FrontEndJob(const FrontEndJob&) = delete;
+  FrontEndJob& operator=(const FrontEndJob&) = delete;
+
+  // Hands the frame over (`*frame`: the caller answers it from now on, also when this throws)
+  // and waits for its front end; throws what the front end threw.
+  slam::PreparedFrame Take(std::shared_ptr<LiveFrame>* frame) {
+    *frame = std::move(frame_);
+    return prepared_.get();
+  }
+
+ private:
+  std::shared_ptr<LiveFrame> frame_;
+  const ProgressSink& progress_;
+  std::future<slam::PreparedFrame> prepared_;
+};
+
+// What the job's loop keeps of the frames it tracked.
+struct TrackedFrames {
+  std::vector<double> stamps;
+  std::vector<std::string> names;
+  std::vector<double> latencies_ms;
+  int num_received = 0;  // taken from the mailbox
+  bool snapshot_due = false;
+  Timer since_frame;  // since the last frame was answered
+};
+
+// Tracks the frame of `*next` (waits for its front end) and answers it. Pipelined, the newest
+// frame waiting in the mailbox, if any, becomes `*next` when the back end starts and goes through
+// its front end meanwhile (a frame arriving later waits in the slot of one). A frame the
+// front end refuses (InvalidArgument: undecodable, another size) is answered 422 and the job
+// goes on; cancellation and failures are answered and thrown.
+void TrackNext(slam::Session& session, LiveMailbox& mailbox, bool pipelined,
+               const ProgressSink& progress, std::optional<FrontEndJob>* next,
+               TrackedFrames* tracked, const std::function<void(const json&)>& on_frame) {
+  std::shared_ptr<LiveFrame> frame;
+  std::optional<slam::PreparedFrame> prepared;
+  std::exception_ptr front_failure;
+  try {
+    prepared.emplace((*next)->Take(&frame));
+  } catch (...) {
+    front_failure = std::current_exception();
+  }
+  next->reset();
+  LiveAnswer answer;
+  try {
+    if (front_failure) std::rethrow_exception(front_failure);
+    // Canceled while its front end ran: the sender hears that the job has ended.
+    progress.ThrowIfCancelled();
+    bool finish = false;  // the loop hears of it when no frame is under way
+    std::shared_ptr<LiveFrame> newer = pipelined ? mailbox.Take(0.0, &finish) : nullptr;
+    if (newer) {
+      ++tracked->num_received;
+      next->emplace(std::move(newer), session, pipelined, progress);
+    }
+    const slam::FrameReport report = session.Track(std::move(*prepared));
+    answer.body = TrackedFrameJson(report, *frame, session.num_frames() - 1, mailbox.num_skipped());
+    tracked->stamps.push_back(frame->stamp_s);
+    tracked->names.push_back(frame->name);
+    tracked->latencies_ms.push_back(answer.body["latency_ms"].get<double>());
+    tracked->snapshot_due = true;
+  } catch (const InvalidArgument& e) {
+    answer = {422,
+              {{"error",
+                {{"code", "invalid_frame"},
+                 {"message", e.what()},
+                 {"details", {{"name", frame->name}}}}}}};
+  } catch (const Cancelled&) {
+    // Canceled while this frame was tracked: the sender hears that the job has ended.
+    frame->answer.set_value(CanceledAnswer(*frame));
+    throw;
+  } catch (const std::exception& e) {
+    // The job fails (the runner records why); the frame's sender hears it first.
+    frame->answer.set_value({500,
+                             {{"error",
+                               {{"code", "job_failed"},
+                                {"message", e.what()},
+                                {"details", {{"name", frame->name}}}}}}});
+    throw;
+  }
+  frame->answer.set_value(answer);
+  tracked->since_frame.Restart();
+  if (answer.status == 200) {
+    if (on_frame) on_frame(answer.body);
+    progress.Report(0.0, "live",
+                    std::to_string(session.num_frames()) + " frames tracked, " +
+                        std::to_string(mailbox.num_skipped()) + " skipped");
+  }
 }
 
 }  // namespace
@@ -183,74 +313,45 @@ json RunLiveSlam(const json& params, const JobContext& context, const StereoRig&
   publishing.on_artifacts = on_artifacts;
   // Stopped and joined when this returns or throws (its destructor).
   LivePublisher publisher(rig, std::move(publishing));
-  std::vector<double> stamps;
-  std::vector<std::string> names;
-  std::vector<double> latencies_ms;
-  int num_received = 0;
+  TrackedFrames tracked;
   std::string ended_by = "finish";
-  Timer since_snapshot, since_frame;
-  bool snapshot_due = false;
+  Timer since_snapshot;
   context.progress.Report(0.0, "live", "waiting for frames");
+  // With 2 threads or more the next frame's front end runs beside this one's back end, so that
+  // the job keeps up with the slower of the two rather than their sum.
+  const bool pipelined = options.num_threads >= 2;
+  // The frame whose front end runs or is due (declared after the session: its thread ends
+  // first).
+  std::optional<FrontEndJob> next;
   while (true) {
     bool finish = false;
-    std::shared_ptr<LiveFrame> frame = mailbox.Take(0.1, &finish);
-    if (frame && context.progress.IsCancelled()) {
-      frame->answer.set_value(CanceledAnswer(*frame));
+    // With no front end under way, wait for a frame; otherwise its turn has come.
+    if (!next) {
+      std::shared_ptr<LiveFrame> taken = mailbox.Take(0.1, &finish);
+      if (taken) ++tracked.num_received;
+      if (taken && context.progress.IsCancelled()) {
+        taken->answer.set_value(CanceledAnswer(*taken));
+      } else if (taken) {
+        next.emplace(std::move(taken), session, pipelined, context.progress);
+      }
     }
     context.progress.ThrowIfCancelled();
-    if (frame) {
-      ++num_received;
-      LiveAnswer answer;
-      try {
-        const slam::StereoImages images = Images(*frame);
-        const slam::FrameReport report = session.Track(frame->name, images);
-        answer.body =
-            TrackedFrameJson(report, *frame, session.num_frames() - 1, mailbox.num_skipped());
-        stamps.push_back(frame->stamp_s);
-        names.push_back(frame->name);
-        latencies_ms.push_back(answer.body["latency_ms"].get<double>());
-        snapshot_due = true;
-      } catch (const InvalidArgument& e) {
-        answer = {422,
-                  {{"error",
-                    {{"code", "invalid_frame"},
-                     {"message", e.what()},
-                     {"details", {{"name", frame->name}}}}}}};
-      } catch (const Cancelled&) {
-        // Canceled while this frame was tracked: the sender hears that the job has ended.
-        frame->answer.set_value(CanceledAnswer(*frame));
-        throw;
-      } catch (const std::exception& e) {
-        // The job fails (the runner records why); the frame's sender hears it first.
-        frame->answer.set_value({500,
-                                 {{"error",
-                                   {{"code", "job_failed"},
-                                    {"message", e.what()},
-                                    {"details", {{"name", frame->name}}}}}}});
-        throw;
-      }
-      frame->answer.set_value(answer);
-      since_frame.Restart();
-      if (answer.status == 200) {
-        if (on_frame) on_frame(answer.body);
-        context.progress.Report(0.0, "live",
-                                std::to_string(session.num_frames()) + " frames tracked, " +
-                                    std::to_string(mailbox.num_skipped()) + " skipped");
-      }
-    }
+    const bool tracked_one = next.has_value();
+    if (next) TrackNext(session, mailbox, pipelined, context.progress, &next, &tracked, on_frame);
     // The first frame's snapshot at once, then at most one per interval: the copy of the map
-    // grows with the run; the publisher writes it while tracking goes on.
-    if (snapshot_due &&
-        (stamps.size() == 1 || since_snapshot.ElapsedSeconds() >= kLiveArtifactInterval_s)) {
+    // grows with the run; the publisher writes it while tracking goes on (and while the next
+    // frame's front end runs: Session::Snapshot reads only what the back end writes).
+    if (tracked.snapshot_due && (tracked.stamps.size() == 1 ||
+                                 since_snapshot.ElapsedSeconds() >= kLiveArtifactInterval_s)) {
       publisher.Publish(
-          std::make_shared<const LiveSnapshot>(LiveSnapshot{session.Snapshot(), stamps}));
-      snapshot_due = false;
+          std::make_shared<const LiveSnapshot>(LiveSnapshot{session.Snapshot(), tracked.stamps}));
+      tracked.snapshot_due = false;
       since_snapshot.Restart();
     }
     if (finish) break;
     // Idle: no frame received, nor one being tracked, for the timeout.
-    if (!frame &&
-        std::min(mailbox.IdleSeconds(), since_frame.ElapsedSeconds()) >= live.idle_timeout_s) {
+    if (!tracked_one && std::min(mailbox.IdleSeconds(), tracked.since_frame.ElapsedSeconds()) >=
+                            live.idle_timeout_s) {
       ended_by = "idle_timeout";
       context.Log("no frame for " + std::to_string(live.idle_timeout_s) + " s: finishing");
       break;
@@ -269,20 +370,21 @@ json RunLiveSlam(const json& params, const JobContext& context, const StereoRig&
   const fs::path dataset_dir = context.dataset_dir;
   // The dense map (with "dense_map") reads the tracked frames back from the dataset.
   std::vector<ImagePairNames> pairs;
-  for (const std::string& name : names) pairs.push_back({name, "cam0/" + name, "cam1/" + name});
+  for (const std::string& name : tracked.names)
+    pairs.push_back({name, "cam0/" + name, "cam1/" + name});
   const slam::StereoFrameLoader load = slam::StereoImageLoader(dataset_dir, pairs);
-  const json input = {{"kind", "live"}, {"num_frames", stamps.size()}};
-  json report =
-      WriteSlamReport(rig, result, stamps, {}, input, load, parsed.dense_map, options.num_threads,
-                      context.output_dir, context.progress, {parsed.rig_job, parsed.map_job});
-  report["live"] = {{"num_received", num_received + mailbox.num_skipped()},
+  const json input = {{"kind", "live"}, {"num_frames", tracked.stamps.size()}};
+  json report = WriteSlamReport(rig, result, tracked.stamps, {}, input, load, parsed.dense_map,
+                                options.num_threads, context.output_dir, context.progress,
+                                {parsed.rig_job, parsed.map_job});
+  report["live"] = {{"num_received", tracked.num_received + mailbox.num_skipped()},
                     {"num_tracked_frames", session.num_frames()},
                     {"num_skipped", mailbox.num_skipped()},
                     {"latency_ms",
-                     {{"p50", Percentile(latencies_ms, 50)},
-                      {"p95", Percentile(latencies_ms, 95)},
-                      {"p99", Percentile(latencies_ms, 99)},
-                      {"max", Percentile(latencies_ms, 100)}}},
+                     {{"p50", Percentile(tracked.latencies_ms, 50)},
+                      {"p95", Percentile(tracked.latencies_ms, 95)},
+                      {"p99", Percentile(tracked.latencies_ms, 99)},
+                      {"max", Percentile(tracked.latencies_ms, 100)}}},
                     {"ended_by", ended_by}};
   return report;
 }

@@ -11,9 +11,17 @@
 //
 // The server hands each frame to the job through a LiveMailbox: one slot, newest wins. A frame
 // still waiting when a newer one arrives is skipped (answered "skipped", never tracked), so a
-// robot faster than tracking meets a bounded delay, never a growing queue. The frames are the
-// dataset's too (stored by the server as they arrive), so that a job whose server stopped runs
-// again, as a batch slam job, over all of them.
+// robot faster than tracking meets a bounded delay, never a growing queue. With 2 threads or
+// more (JobContext::num_threads) the job tracks in a pipeline, as the batch RunSlam does: when
+// the back end of a frame starts (tracking, keyframes, local adjustment, place recognition), the
+// newest frame waiting is taken and its front end (decoding if needed, mirror mask, features of
+// both cameras, stereo points: slam::Session::FrontEnd) runs on a thread of its own meanwhile;
+// frames arriving later wait in the slot of one. So the job keeps up with the slower of the two
+// halves rather than their sum, and only a frame that will be tracked gets a front end. A
+// finish tracks the frame in its front end first; a cancel answers it 409 job_finished.
+//
+// The frames are the dataset's too (stored by the server as they arrive), so that a job whose
+// server stopped runs again, as a batch slam job, over all of them.
 //
 // A frame's answer (200): {"frame_index" (its index among the tracked frames; null when
 // skipped), "name", "stamp_s", "state" ("initialised", "tracked", ... as slam.h's

@@ -10,18 +10,22 @@
 //
 // Then it profiles the tracker (slam::Session, no HTTP) over the first --profile-frames frames,
 // every frame and every 10th: the mean wall and CPU milliseconds per frame of decoding and of
-// each tracking stage. The load average is printed with the figures: on a shared machine the
-// wall-clock figures grow with it.
+// each tracking stage; and every frame again in the live job's pipeline (each frame's decoding
+// and front end on a thread of its own beside the back end of the frame before): the wall
+// milliseconds per frame against the serial pass's. The load average is printed with the
+// figures: on a shared machine the wall-clock figures grow with it.
 //
 // usage: bench_live [--rates 10,20,30] [--frames 600] [--laps 2] [--loop-length 50]
 //                   [--width 1024] [--height 768] [--threads 2] [--supersampling 4] [--dir DIR]
 //                   [--profile-frames 120]
 
+#include <algorithm>
 #include <cstdio>
 #include <cstdlib>
 #include <ctime>
 #include <filesystem>
 #include <fstream>
+#include <future>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -161,6 +165,16 @@ std::string LoadAverage() {
   return one + " " + five + " " + fifteen;
 }
 
+// The rendered frames' names (cam0/NAME, cam1/NAME), in order.
+std::vector<std::string> FrameNames(const fs::path& dir) {
+  std::vector<std::string> names;
+  for (const auto& entry : fs::directory_iterator(dir / "cam0")) {
+    names.push_back(entry.path().filename().string());
+  }
+  std::sort(names.begin(), names.end());
+  return names;
+}
+
 // Where a frame's time goes: the rendered frames tracked by a slam::Session (the live job's
 // tracker) in this thread, no HTTP, each `step`-th frame from the start (1: every frame, as a
 // server that keeps up tracks them; larger: as one that falls behind and skips the frames
@@ -168,14 +182,11 @@ std::string LoadAverage() {
 // the keyframes among the frames; and every 10th frame the live job's snapshot: the copy the
 // tracking thread takes (slam::Session::Snapshot) and the writing of trajectory.json and
 // map.ply from it, which the live job's publisher does on its own thread
-// (api/live_publisher.h), so that it adds nothing to a frame's latency.
-void ProfileTracking(const BenchArgs& args, const json& rig_json, int step) {
+// (api/live_publisher.h), so that it adds nothing to a frame's latency. Returns the wall ms per
+// frame of decoding and tracking.
+double ProfileTracking(const BenchArgs& args, const json& rig_json, int step) {
   const fs::path dir(args.dir);
-  std::vector<std::string> names;
-  for (const auto& entry : fs::directory_iterator(dir / "cam0")) {
-    names.push_back(entry.path().filename().string());
-  }
-  std::sort(names.begin(), names.end());
+  const std::vector<std::string> names = FrameNames(dir);
   slam::SlamOptions options;
   options.num_threads = args.threads;
   slam::Session session(api::RigFromJson(rig_json), options);
@@ -228,6 +239,42 @@ void ProfileTracking(const BenchArgs& args, const json& rig_json, int step) {
       "                 live snapshot every 10 frames (%d): copy %.2f ms (tracking thread), "
       "trajectory.json + map.ply written %.2f ms (publisher thread)\n",
       snapshots, per(snapshot_s), per(write_s));
+  std::fflush(stdout);
+  return ms(decode_s + track_s);
+}
+
+// The live job's pipeline (with 2 threads or more) in this process, no HTTP: the first
+// --profile-frames frames, each decoded and through slam::Session::FrontEnd on a thread of its
+// own while the frame before goes through Session::Track (its back end), as a job does when a
+// frame waits whenever a back end starts. Prints the wall ms per frame against `serial_ms`, the
+// same frames decoded and tracked one after the other (ProfileTracking with step 1, just before).
+void ProfilePipeline(const BenchArgs& args, const json& rig_json, double serial_ms) {
+  const fs::path dir(args.dir);
+  const std::vector<std::string> names = FrameNames(dir);
+  const int n = std::min<int>(args.profile_frames, static_cast<int>(names.size()));
+  if (n == 0) return;
+  slam::SlamOptions options;
+  options.num_threads = args.threads;
+  slam::Session session(api::RigFromJson(rig_json), options);
+  const auto front_end = [&](int i) {
+    slam::StereoImages images;
+    images.cam0 = cv::imread((dir / "cam0" / names[i]).string(), cv::IMREAD_COLOR);
+    images.cam1 = cv::imread((dir / "cam1" / names[i]).string(), cv::IMREAD_COLOR);
+    return session.FrontEnd(names[i], images);
+  };
+  Timer wall;
+  int keyframes = 0;
+  std::future<slam::PreparedFrame> next = std::async(std::launch::async, front_end, 0);
+  for (int i = 0; i < n; ++i) {
+    slam::PreparedFrame prepared = next.get();
+    if (i + 1 < n) next = std::async(std::launch::async, front_end, i + 1);
+    keyframes += session.Track(std::move(prepared)).keyframe;
+  }
+  const double pipelined_ms = 1000.0 * wall.ElapsedSeconds() / n;
+  std::printf(
+      "pipelined:       %3d frames, %3d keyframes; ms per frame: %.1f (decode + front end of the "
+      "next frame beside the back end of this one), serial %.1f: x%.2f; load average %s\n",
+      n, keyframes, pipelined_ms, serial_ms, serial_ms / pipelined_ms, LoadAverage().c_str());
   std::fflush(stdout);
 }
 
@@ -290,7 +337,9 @@ int main(int argc, char** argv) {
     }
     std::fflush(stdout);
   }
-  for (const int step : {1, 10}) ProfileTracking(args, rig, step);
+  const double serial_ms = ProfileTracking(args, rig, 1);
+  ProfilePipeline(args, rig, serial_ms);
+  ProfileTracking(args, rig, 10);
   std::error_code ignored;
   fs::remove_all(data, ignored);
   return 0;

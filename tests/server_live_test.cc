@@ -2,8 +2,9 @@
 // rendered sequence posted as a robot sends them, each answered with its pose; the frame
 // events, the map and trajectory (and with a dense map the occupancy grid) served while the
 // job runs, finish, idle timeout, cancel, the bad inputs refused while the job goes on,
-// newest-wins skipping, two live jobs at once, and a live job that its server stopped running
-// again as a batch job over the frames it stored.
+// newest-wins skipping, two live jobs at once, a job tracking in a pipeline (2 threads) finished
+// and canceled while frames stream in, and a live job that its server stopped running again as a
+// batch job over the frames it stored.
 
 #include <algorithm>
 #include <atomic>
@@ -45,12 +46,13 @@ class ServerLiveTest : public ::testing::Test {
 
   void SetUp() override { Start(); }
 
-  void Start() {
+  // With 2 threads per job a live job tracks in a pipeline (api/live_slam.h).
+  void Start(int threads_per_job = 1) {
     server::ServiceOptions options;
     options.port = 0;
     options.data_dir = dir_.path() / "data";
     options.workers.num_workers = 1;
-    options.workers.threads_per_job = 1;
+    options.workers.threads_per_job = threads_per_job;
     options.http_threads = 16;
     options.min_free_bytes = 0;
     service_ = std::make_unique<server::Service>(options);
@@ -89,6 +91,52 @@ class ServerLiveTest : public ::testing::Test {
     const auto finished = client_->Post(("/api/v1/jobs/" + job + "/finish").c_str());
     EXPECT_EQ(finished->status, 202) << finished->body;
     return WaitForJob(port_, job, 240);
+  }
+
+  // Two cameras' drivers sending frames back to back while the job is canceled, so that when
+  // the cancel lands one frame is being tracked and another waits: each frame is tracked,
+  // skipped, refused as out of order (409 stamp_not_increasing) or refused because the job has
+  // ended (409 job_finished), never an error of the server. Returns the job.
+  std::string CancelWhileFramesArrive() {
+    const std::string busy = CreateLive()["id"];
+    std::mutex mutex;
+    std::condition_variable answered;
+    std::vector<std::pair<int, std::string>> answers;  // (status, error code)
+    auto drive = [&](int first) {
+      auto client = MakeClient(port_);
+      const int n = static_cast<int>(sequence_->names.size());
+      for (int i = first;; i += 2) {
+        const auto answer = PostFrame(*client, busy, 0.1 * i, sequence_->images[0][i % n],
+                                      sequence_->images[1][i % n]);
+        const int status = answer ? answer->status : -1;
+        const json body = answer ? JsonOf(answer) : json();
+        const std::string code = body.contains("error") ? body["error"].value("code", "") : "";
+        {
+          std::lock_guard<std::mutex> lock(mutex);
+          answers.emplace_back(status, code);
+        }
+        answered.notify_all();
+        if (status != 200 && code != "stamp_not_increasing") return;
+      }
+    };
+    std::thread even(drive, 0), odd(drive, 1);
+    {
+      std::unique_lock<std::mutex> lock(mutex);
+      answered.wait(lock, [&] { return answers.size() >= 4; });
+    }
+    EXPECT_EQ(client_->Post(("/api/v1/jobs/" + busy + "/cancel").c_str())->status, 202);
+    even.join();
+    odd.join();
+    EXPECT_EQ(WaitForJob(port_, busy, 60)["state"], "canceled");
+    int finished = 0;
+    for (const auto& [status, code] : answers) {
+      EXPECT_TRUE(status == 200 ||
+                  (status == 409 && (code == "stamp_not_increasing" || code == "job_finished")))
+          << status << " " << code;
+      finished += code == "job_finished";
+    }
+    EXPECT_EQ(finished, 2);  // each driver's last frame
+    return busy;
   }
 
   json Result(const std::string& job) {
@@ -411,48 +459,7 @@ TEST_F(ServerLiveTest, IdleTimeoutFinishesAndCancelEnds) {
   EXPECT_EQ(WaitForJob(port_, canceled, 60)["state"], "canceled");
   EXPECT_EQ(PostFrame(*client_, canceled, 1)->status, 409);
 
-  // Two cameras' drivers sending frames back to back while the job is canceled, so that when
-  // the cancel lands one frame is being tracked and another waits: each frame is tracked,
-  // skipped, refused as out of order (409 stamp_not_increasing) or refused because the job has
-  // ended (409 job_finished), never an error of the server.
-  const std::string busy = CreateLive()["id"];
-  std::mutex mutex;
-  std::condition_variable answered;
-  std::vector<std::pair<int, std::string>> answers;  // (status, error code)
-  auto drive = [&](int first) {
-    auto client = MakeClient(port_);
-    const int n = static_cast<int>(sequence_->names.size());
-    for (int i = first;; i += 2) {
-      const auto answer =
-          PostFrame(*client, busy, 0.1 * i, sequence_->images[0][i % n], sequence_->images[1][i % n]);
-      const int status = answer ? answer->status : -1;
-      const json body = answer ? JsonOf(answer) : json();
-      const std::string code = body.contains("error") ? body["error"].value("code", "") : "";
-      {
-        std::lock_guard<std::mutex> lock(mutex);
-        answers.emplace_back(status, code);
-      }
-      answered.notify_all();
-      if (status != 200 && code != "stamp_not_increasing") return;
-    }
-  };
-  std::thread even(drive, 0), odd(drive, 1);
-  {
-    std::unique_lock<std::mutex> lock(mutex);
-    answered.wait(lock, [&] { return answers.size() >= 4; });
-  }
-  EXPECT_EQ(client_->Post(("/api/v1/jobs/" + busy + "/cancel").c_str())->status, 202);
-  even.join();
-  odd.join();
-  EXPECT_EQ(WaitForJob(port_, busy, 60)["state"], "canceled");
-  int finished = 0;
-  for (const auto& [status, code] : answers) {
-    EXPECT_TRUE(status == 200 || (status == 409 && (code == "stamp_not_increasing" ||
-                                                     code == "job_finished")))
-        << status << " " << code;
-    finished += code == "job_finished";
-  }
-  EXPECT_EQ(finished, 2);  // each driver's last frame
+  const std::string busy = CancelWhileFramesArrive();
 
   // A live job's start forgets the live jobs whose threads are done (joined): a frame to one of
   // them is refused as finished all the same.
@@ -463,6 +470,62 @@ TEST_F(ServerLiveTest, IdleTimeoutFinishesAndCancelEnds) {
     EXPECT_EQ(answer->status, 409) << ended;
     EXPECT_EQ(JsonOf(answer)["error"]["code"], "job_finished") << answer->body;
   }
+}
+
+// With 2 threads a job tracks in a pipeline: the front end of the newest frame waiting (features,
+// stereo) beside the back end of the frame before. Every frame sent back to back, each from its
+// own connection once the previous one is stored, and the finish at once after the last: each
+// frame is tracked (frame indices consecutive in stamp order) or skipped while it waited, and
+// the last one, waiting or in its front end when the finish lands, is tracked before the job
+// finishes. Then a cancel while frames stream in: a frame in its front end hears that the job
+// has ended.
+TEST_F(ServerLiveTest, APipelinedJobTracksTheFrameInItsFrontEndBeforeFinishing) {
+  client_.reset();
+  service_.reset();
+  Start(/*threads_per_job=*/2);
+  const json job = CreateLive();
+  const std::string id = job["id"];
+  const std::string dataset = job["dataset"];
+  const int n = static_cast<int>(sequence_->names.size());
+  std::vector<std::future<std::pair<int, json>>> pending;
+  for (int i = 0; i < n; ++i) {
+    pending.push_back(std::async(std::launch::async, [&, i] {
+      auto client = MakeClient(port_);
+      const auto answer = PostFrame(*client, id, i);
+      return answer ? std::make_pair(answer->status, JsonOf(answer))
+                    : std::make_pair(-1, json(nullptr));
+    }));
+    while (JsonOf(MakeClient(port_)->Get(("/api/v1/datasets/" + dataset).c_str()))["image_count"] <
+           2 * (i + 1)) {
+      std::this_thread::yield();
+    }
+  }
+  const auto finish = client_->Post(("/api/v1/jobs/" + id + "/finish").c_str());
+  EXPECT_EQ(finish->status, 202) << finish->body;
+  int tracked = 0, skipped = 0;
+  for (int i = 0; i < n; ++i) {
+    const auto [status, frame] = pending[i].get();
+    ASSERT_EQ(status, 200) << "frame " << i << ": " << frame.dump();
+    if (frame["state"] == "skipped") {
+      EXPECT_TRUE(frame["frame_index"].is_null()) << frame.dump();
+      ++skipped;
+      continue;
+    }
+    EXPECT_EQ(frame["frame_index"], tracked) << frame.dump();
+    EXPECT_EQ(frame["name"], slam::FrameName(0.1 * i) + ".png");
+    EXPECT_TRUE(frame["world_from_rig"].is_object()) << frame.dump();
+    ++tracked;
+  }
+  const json done = WaitForJob(port_, id, 240);
+  ASSERT_EQ(done["state"], "succeeded") << done.dump();
+  const json result = Result(id);
+  EXPECT_EQ(result["num_frames"], tracked);
+  EXPECT_EQ(result["frames"][tracked - 1]["name"], slam::FrameName(0.1 * (n - 1)) + ".png");
+  EXPECT_EQ(result["live"]["num_skipped"], skipped);
+  EXPECT_EQ(result["live"]["num_received"], n);
+  EXPECT_EQ(result["live"]["ended_by"], "finish");
+
+  CancelWhileFramesArrive();
 }
 
 TEST_F(ServerLiveTest, AStoppedServersLiveJobRunsAgainAsABatchJobOverItsFrames) {

@@ -1,11 +1,21 @@
 #include "engine/slam/session.h"
 
 #include <ctime>
+#include <stdexcept>
 
 #include "engine/slam/tracker.h"
 #include "engine/util/check.h"
 
 namespace omnirig::slam {
+namespace internal {
+
+struct PreparedFrameData {
+  int index = -1;
+  Tracker::FrontEndResult front;
+};
+
+}  // namespace internal
+
 namespace {
 
 double WallSeconds() {
@@ -26,23 +36,46 @@ Session::Session(const StereoRig& rig, const SlamOptions& options, const Progres
 
 Session::~Session() = default;
 
+PreparedFrame::PreparedFrame(std::unique_ptr<internal::PreparedFrameData> data)
+    : data_(std::move(data)) {}
+PreparedFrame::PreparedFrame(PreparedFrame&&) noexcept = default;
+PreparedFrame& PreparedFrame::operator=(PreparedFrame&&) noexcept = default;
+PreparedFrame::~PreparedFrame() = default;
+
+const std::string& PreparedFrame::name() const { return data_->front.report.name; }
+
 FrameReport Session::Track(const std::string& name, const StereoImages& images, bool last_frame) {
+  return Track(FrontEnd(name, images), last_frame);
+}
+
+PreparedFrame Session::FrontEnd(const std::string& name, const StereoImages& images) {
   OMNIRIG_CHECK(!finished_, "the SLAM session has finished");
   const CameraModel* camera[2] = {&rig_.cam0, &rig_.cam1};
   const cv::Mat* image[2] = {&images.cam0, &images.cam1};
-  // Checked before the tracker sees the frame: a frame refused here leaves no trace, so the
-  // session goes on with the next one.
+  // Checked before the tracker sees the frame and before it takes an index: a frame refused
+  // here leaves no trace, so the session goes on with the next one.
   for (int c = 0; c < 2; ++c) {
     OMNIRIG_CHECK(image[c]->cols == camera[c]->width && image[c]->rows == camera[c]->height,
                   "frame " << name << ": cam" << c << " image is " << image[c]->cols << "x"
                            << image[c]->rows << " but the rig's calibration is " << camera[c]->width
                            << "x" << camera[c]->height);
   }
-  const int index = num_frames();
-  internal::Tracker::FrontEndResult front = tracker_->FrontEnd(
-      index, name, [&images](int) { return images; },
+  auto data = std::make_unique<internal::PreparedFrameData>();
+  data->index = num_prepared_;
+  data->front = tracker_->FrontEnd(
+      data->index, name, [&images](int) { return images; },
       /*parallel_cameras=*/options_.num_threads >= 2);
-  FrameReport report = tracker_->BackEnd(std::move(front), last_frame);
+  ++num_prepared_;
+  return PreparedFrame(std::move(data));
+}
+
+FrameReport Session::Track(PreparedFrame prepared, bool last_frame) {
+  OMNIRIG_CHECK(!finished_, "the SLAM session has finished");
+  if (!prepared.data_ || prepared.data_->index != num_frames()) {
+    throw std::logic_error("Session::Track: the prepared frame is not the next one to track");
+  }
+  const int index = num_frames();
+  FrameReport report = tracker_->BackEnd(std::move(prepared.data_->front), last_frame);
   result_.stage_totals.Add(report.times);
   result_.cpu_stage_totals.Add(report.cpu_times);
   result_.frames.push_back(report);

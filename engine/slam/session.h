@@ -6,9 +6,12 @@
 // and trajectories a client can look at while it drives; Finish() settles the run as RunSlam
 // ends one (the global adjustment, non-keyframes placed by their keyframes) and returns the
 // same SlamResult. The same frames through Track() (the last one with last_frame) and Finish()
-// give RunSlam's result.
+// give RunSlam's result, whether each frame goes through Track(name, images) or through
+// FrontEnd() then Track(prepared) with the next frame's FrontEnd() beside this one's Track().
 //
-// Not thread-safe: one caller at a time (the live job's thread).
+// Not thread-safe, but for one pairing: FrontEnd() of the next frame may run on another thread
+// while Track() of the frame before runs (RunSlam's pipeline: the tracker's front end one frame
+// ahead of its back end). Otherwise one caller at a time (the live job's thread).
 
 #include <memory>
 #include <optional>
@@ -21,7 +24,23 @@ namespace omnirig::slam {
 
 namespace internal {
 class Tracker;
-}
+struct PreparedFrameData;
+}  // namespace internal
+
+// A frame through the tracker's front end (Session::FrontEnd: mirror mask, features of both
+// cameras, stereo points), waiting for its Session::Track(). Move-only; opaque.
+class PreparedFrame {
+ public:
+  PreparedFrame(PreparedFrame&&) noexcept;
+  PreparedFrame& operator=(PreparedFrame&&) noexcept;
+  ~PreparedFrame();
+  const std::string& name() const;
+
+ private:
+  friend class Session;
+  explicit PreparedFrame(std::unique_ptr<internal::PreparedFrameData> data);
+  std::unique_ptr<internal::PreparedFrameData> data_;
+};
 
 // The run so far: per frame tracked or lost, its name and current world_from_rig; the frames
 // that entered the map as keyframes (their poses the local adjustments refined), in order.
@@ -48,7 +67,19 @@ class Session {
   // tracked now (nullopt when lost). `last_frame` makes it a keyframe, as RunSlam does with a
   // sequence's last frame. Throws InvalidArgument when an image's size differs from the rig's
   // calibration (the session is unchanged and goes on), and after Finish().
+  // Track(FrontEnd(name, images), last_frame).
   FrameReport Track(const std::string& name, const StereoImages& images, bool last_frame = false);
+  // The front end of the next frame to track, which takes the next index (num_frames() if no
+  // frame waits prepared, else one more). May run on another thread while Track() of the frame
+  // prepared before runs; never two FrontEnd() at once, and every frame prepared is tracked, in
+  // the order prepared. Throws InvalidArgument when an image's size differs from the rig's
+  // calibration (the frame takes no index: the session is unchanged and goes on), and after
+  // Finish().
+  PreparedFrame FrontEnd(const std::string& name, const StereoImages& images);
+  // The back end of a prepared frame (tracking, keyframes, local adjustment, place
+  // recognition): its report as Track(name, images, last_frame) gives it. Throws
+  // std::logic_error when `prepared` is not the next frame to track.
+  FrameReport Track(PreparedFrame prepared, bool last_frame = false);
   SlamSnapshot Snapshot() const;
   // The end of the run: loops settled, the global adjustment; the result of every frame
   // tracked. Throws InvalidArgument without frames or when called twice.
@@ -63,6 +94,7 @@ class Session {
   const ProgressSink progress_;
   std::unique_ptr<internal::Tracker> tracker_;
   SlamResult result_;
+  int num_prepared_ = 0;  // FrontEnd()'s alone: the indices given so far
   double start_wall_s_ = 0, start_cpu_s_ = 0;
   bool finished_ = false;
 };

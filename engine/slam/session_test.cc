@@ -1,8 +1,10 @@
 // Session (session.h): the frames of a rendered sequence fed one at a time give RunSlam's
-// result on the same frames, poses are given as frames are tracked, the snapshot follows the
-// run, and a frame of the wrong size is refused without ending the session. Label integration
-// (renders images).
+// result on the same frames (tracked whole, or with the next frame's front end on another
+// thread beside this one's back end), poses are given as frames are tracked, the snapshot
+// follows the run, and a frame of the wrong size is refused without ending the session. Label
+// integration (renders images).
 
+#include <future>
 #include <string>
 
 #include <gtest/gtest.h>
@@ -31,6 +33,24 @@ class SessionOnShortSequence : public ::testing::Test {
 
 synth::StereoSequence* SessionOnShortSequence::sequence_ = nullptr;
 
+// The same run: RunSlam twice on these frames differs by ~1e-16 m (the global adjustment's sums
+// in another order), far below 1e-9.
+void ExpectSameRun(const SlamResult& live, const SlamResult& batch, const std::string& what) {
+  ASSERT_EQ(live.frames.size(), batch.frames.size()) << what;
+  EXPECT_EQ(live.num_tracked, batch.num_tracked) << what;
+  EXPECT_EQ(live.num_keyframes, batch.num_keyframes) << what;
+  EXPECT_EQ(live.map.size(), batch.map.size()) << what;
+  EXPECT_EQ(live.loops.size(), batch.loops.size()) << what;
+  for (size_t i = 0; i < batch.frames.size(); ++i) {
+    EXPECT_EQ(live.frames[i].name, batch.frames[i].name) << what;
+    ASSERT_TRUE(live.frames[i].world_from_rig && batch.frames[i].world_from_rig) << what;
+    const Rigid3d& a = *live.frames[i].world_from_rig;
+    const Rigid3d& b = *batch.frames[i].world_from_rig;
+    EXPECT_LT((a.translation - b.translation).norm(), 1e-9) << what << " frame " << i;
+    EXPECT_LT(a.rotation.angularDistance(b.rotation), 1e-9) << what << " frame " << i;
+  }
+}
+
 TEST_F(SessionOnShortSequence, GivesRunSlamsResultFrameByFrame) {
   for (const int num_threads : {1, 2}) {
     SlamOptions options;
@@ -46,25 +66,36 @@ TEST_F(SessionOnShortSequence, GivesRunSlamsResultFrameByFrame) {
       ASSERT_TRUE(report.world_from_rig.has_value()) << sequence_->names[i];
       EXPECT_EQ(session.Snapshot().world_from_rig.size(), static_cast<size_t>(i + 1));
     }
-    const SlamResult live = session.Finish();
-    ASSERT_EQ(live.frames.size(), batch.frames.size());
-    EXPECT_EQ(live.num_tracked, batch.num_tracked);
-    EXPECT_EQ(live.num_keyframes, batch.num_keyframes);
-    EXPECT_EQ(live.map.size(), batch.map.size());
-    EXPECT_EQ(live.loops.size(), batch.loops.size());
-    for (size_t i = 0; i < batch.frames.size(); ++i) {
-      ASSERT_TRUE(live.frames[i].world_from_rig && batch.frames[i].world_from_rig);
-      const Rigid3d& a = *live.frames[i].world_from_rig;
-      const Rigid3d& b = *batch.frames[i].world_from_rig;
-      // The same run: RunSlam twice on these frames differs by ~1e-16 m (the global
-      // adjustment's sums in another order), far below 1e-9.
-      EXPECT_LT((a.translation - b.translation).norm(), 1e-9)
-          << "threads " << num_threads << " frame " << i;
-      EXPECT_LT(a.rotation.angularDistance(b.rotation), 1e-9)
-          << "threads " << num_threads << " frame " << i;
-    }
+    ExpectSameRun(session.Finish(), batch, "threads " + std::to_string(num_threads));
     EXPECT_THROW(session.Finish(), InvalidArgument);
   }
+}
+
+// The live job's pipeline: the front end of frame i + 1 on another thread while frame i's back
+// end runs on this one, and the snapshot taken between frames while a front end runs.
+TEST_F(SessionOnShortSequence, GivesRunSlamsResultWithTheFrontEndAFrameAhead) {
+  SlamOptions options;
+  options.num_threads = 2;
+  const SlamResult batch = RunSlam(
+      sequence_->rig, sequence_->names, [](int i) { return Frame(i); }, options);
+  Session session(sequence_->rig, options);
+  const int n = static_cast<int>(sequence_->names.size());
+  const auto front_end = [&session](int i) {
+    return session.FrontEnd(sequence_->names[i], Frame(i));
+  };
+  std::future<PreparedFrame> next = std::async(std::launch::async, front_end, 0);
+  for (int i = 0; i < n; ++i) {
+    PreparedFrame prepared = next.get();
+    EXPECT_EQ(prepared.name(), sequence_->names[i]);
+    if (i + 1 < n) next = std::async(std::launch::async, front_end, i + 1);
+    const FrameReport report = session.Track(std::move(prepared), i + 1 == n);
+    EXPECT_EQ(report.state, batch.frames[i].state) << sequence_->names[i];
+    EXPECT_EQ(report.keyframe, batch.frames[i].keyframe) << sequence_->names[i];
+    ASSERT_TRUE(report.world_from_rig.has_value()) << sequence_->names[i];
+    EXPECT_EQ(session.num_frames(), i + 1);
+    EXPECT_EQ(session.Snapshot().names.size(), static_cast<size_t>(i + 1));
+  }
+  ExpectSameRun(session.Finish(), batch, "pipelined");
 }
 
 TEST_F(SessionOnShortSequence, SnapshotFollowsTheRunAndPosesMoveWithTheCamera) {
@@ -107,6 +138,23 @@ TEST_F(SessionOnShortSequence, RefusesAFrameOfTheWrongSizeAndGoesOn) {
   EXPECT_EQ(next.state, "tracked") << next.reason;
   const SlamResult result = session.Finish();
   EXPECT_EQ(result.num_tracked, 2);
+}
+
+// Refused by the front end while a frame waits prepared: the refused frame takes no index, the
+// prepared one and the next are tracked with consecutive indices.
+TEST_F(SessionOnShortSequence, RefusesAFrameOfTheWrongSizeWhileAFrameWaitsPrepared) {
+  Session session(sequence_->rig, SlamOptions());
+  session.Track(sequence_->names[0], Frame(0));
+  PreparedFrame first = session.FrontEnd(sequence_->names[1], Frame(1));
+  const cv::Mat small(100, 120, CV_8UC3, cv::Scalar(128, 128, 128));
+  EXPECT_THROW(session.FrontEnd("small", StereoImages{small, small}), InvalidArgument);
+  EXPECT_EQ(session.num_frames(), 1);
+  EXPECT_EQ(session.Track(std::move(first)).state, "tracked");
+  EXPECT_EQ(session.Track(sequence_->names[2], Frame(2)).state, "tracked");
+  const SlamResult result = session.Finish();
+  ASSERT_EQ(result.frames.size(), 3u);
+  EXPECT_EQ(result.frames[2].name, sequence_->names[2]);
+  EXPECT_EQ(result.num_tracked, 3);
 }
 
 }  // namespace
