@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <exception>
+#include <future>
 
 #include "api/camera_json.h"
 #include "api/json_fields.h"
@@ -41,10 +42,15 @@ cv::Mat Decode(const std::string& bytes, const std::string& what) {
 
 slam::StereoImages Images(const LiveFrame& frame) {
   slam::StereoImages images;
+  // cam1 on a thread beside cam0's when both are still encoded.
+  std::future<cv::Mat> cam1;
+  if (frame.decoded[1].empty()) {
+    cam1 = std::async(frame.decoded[0].empty() ? std::launch::async : std::launch::deferred,
+                      [&frame] { return Decode(frame.encoded[1], frame.name + " cam1"); });
+  }
   images.cam0 =
       frame.decoded[0].empty() ? Decode(frame.encoded[0], frame.name + " cam0") : frame.decoded[0];
-  images.cam1 =
-      frame.decoded[1].empty() ? Decode(frame.encoded[1], frame.name + " cam1") : frame.decoded[1];
+  images.cam1 = cam1.valid() ? cam1.get() : frame.decoded[1];
   return images;
 }
 

@@ -78,9 +78,9 @@ struct LiveFrame {
   // the images' extension, e.g. "t000012.345.png".
   std::string name;
   double stamp_s = 0;
-  // Each camera's file bytes and its decoded image (decoded by the HTTP request's thread, so that
-  // the job's thread only tracks; a stacked frame is split and decoded when it is stored). An
-  // image left undecoded is decoded by the job's thread, which refuses it if it cannot be.
+  // Each camera's file bytes and, for a stacked frame (split when it is stored), its decoded
+  // image. Separate cam0 and cam1 parts are decoded by the job when it takes the frame (a frame
+  // skipped for a newer one is never decoded), which refuses an image it cannot decode.
   std::string encoded[2];
   cv::Mat decoded[2];
   std::chrono::steady_clock::time_point received = std::chrono::steady_clock::now();

@@ -5,8 +5,10 @@
 // there later; the rig is the render's calibration (a relative_pose job whose result is that
 // rig). Each rate plays the whole recording as a new live job and prints: frames tracked and
 // skipped (newest wins when tracking falls behind), latency from receipt to pose as the server
-// measures it (p50/p95/p99) and the client's round trip, the loops closed, the ATE after the
-// live job's finish (SE(3)-aligned against the render's poses, and as % of the path).
+// measures it (p50/p95/p99), the client's round trip and capture to pose (c2p: how late the
+// client sent the frame plus the round trip), the loops closed, the ATE after the live job's
+// finish (SE(3)-aligned against the render's poses, and as % of the path). --in-flight N is
+// `omnirig live`'s: N frames outstanding at once.
 //
 // Then it profiles the tracker (slam::Session, no HTTP) over the first --profile-frames frames,
 // every frame and every 10th: the mean wall and CPU milliseconds per frame of decoding and of
@@ -17,7 +19,7 @@
 //
 // usage: bench_live [--rates 10,20,30] [--frames 600] [--laps 2] [--loop-length 50]
 //                   [--width 1024] [--height 768] [--threads 2] [--supersampling 4] [--dir DIR]
-//                   [--profile-frames 120]
+//                   [--profile-frames 120] [--in-flight 1]
 
 #include <algorithm>
 #include <cstdio>
@@ -58,6 +60,7 @@ struct BenchArgs {
   double loop_length_m = 50.0;
   int profile_frames = 120;
   std::string dir;
+  std::string in_flight = "1";  // omnirig live's --in-flight
 };
 
 BenchArgs Parse(int argc, char** argv) {
@@ -88,6 +91,8 @@ BenchArgs Parse(int argc, char** argv) {
       args.dir = next();
     else if (a == "--profile-frames")
       args.profile_frames = std::atoi(next().c_str());
+    else if (a == "--in-flight")
+      args.in_flight = next();
   }
   if (args.dir.empty()) {
     std::ostringstream dir;
@@ -304,19 +309,23 @@ int main(int argc, char** argv) {
       "%d, measured %s\n",
       args.frames, args.width, args.height, args.laps, args.loop_length_m, args.threads, date);
   std::printf("load average before the runs (1, 5, 15 min): %s\n", LoadAverage().c_str());
-  std::printf("%6s %8s %8s %9s %9s %9s %10s %6s %9s %8s\n", "rate", "tracked", "skipped", "p50 ms",
-              "p95 ms", "p99 ms", "rt p95 ms", "loops", "ATE m", "ATE %");
+  std::printf("%6s %8s %8s %9s %9s %9s %10s %11s %11s %6s %9s %8s\n", "rate", "tracked",
+              "skipped", "p50 ms", "p95 ms", "p99 ms", "rt p95 ms", "c2p p50 ms", "c2p p95 ms",
+              "loops", "ATE m", "ATE %");
   for (const double rate : args.rates) {
     const fs::path out = data / ("live-" + std::to_string(static_cast<int>(rate)) + ".json");
     const int code =
         cli::RunLive({"--server", "http://127.0.0.1:" + std::to_string(port), "--rig", rig_job,
-                      "--rate", std::to_string(rate), "--json", out.string(), args.dir});
+                      "--rate", std::to_string(rate), "--in-flight", args.in_flight, "--json",
+                      out.string(), args.dir});
     const json s = json::parse(std::ifstream(out));
     const json e = s.value("evaluation", json());
-    std::printf("%6.0f %8d %8d %9.1f %9.1f %9.1f %10.1f %6d %9.4f %8.3f%s\n", rate,
+    std::printf("%6.0f %8d %8d %9.1f %9.1f %9.1f %10.1f %11.1f %11.1f %6d %9.4f %8.3f%s\n", rate,
                 s["frames_tracked"].get<int>(), s["frames_skipped"].get<int>(),
                 s["latency_ms"]["p50"].get<double>(), s["latency_ms"]["p95"].get<double>(),
                 s["latency_ms"]["p99"].get<double>(), s["round_trip_ms"]["p95"].get<double>(),
+                s["capture_to_pose_ms"]["p50"].get<double>(),
+                s["capture_to_pose_ms"]["p95"].get<double>(),
                 s.value("loops", 0), e.is_object() ? e["ate_rmse_m"].get<double>() : -1.0,
                 e.is_object() ? e["ate_percent_of_path"].get<double>() : -1.0,
                 code == 0 ? "" : "  (job did not succeed)");

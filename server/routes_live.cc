@@ -200,14 +200,10 @@ PreparedFrame PrepareFrame(const std::map<std::string, FramePart>& parts, const 
                           extension[1] + ")");
     }
     prepared.frame->name = stem + extension[0];
-    // Decoded here, on the request's thread (cam1 beside it), so that the job's thread only
-    // tracks. An image that does not decode stays encoded: the job refuses it (422
-    // invalid_frame) after it is stored, as it refuses any frame it cannot track.
-    std::future<cv::Mat> cam1 = std::async(std::launch::async, [&prepared] {
-      return DecodeImageBgr(prepared.frame->encoded[1]);
-    });
-    prepared.frame->decoded[0] = DecodeImageBgr(prepared.frame->encoded[0]);
-    prepared.frame->decoded[1] = cam1.get();
+    // Not decoded here: the job decodes the frames it tracks, in the front end that runs beside
+    // the back end of the frame before, so a frame skipped for a newer one costs its storing
+    // only. One that does not decode is refused there (422 invalid_frame) after it is stored,
+    // as any frame the job cannot track.
     return prepared;
   }
   const FramePart& part = parts.at("stacked");

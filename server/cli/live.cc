@@ -1,13 +1,19 @@
 // `omnirig live`: plays a recording against a server as the robot that captured it would send
 // it, and reports what the robot would have met. Starts a live slam job, captures every stereo
-// frame at its time (the recording's stamps, or --rate) and sends them in order on one
-// connection, as a camera driver with a queue of one does: while the server is still tracking
-// the last frame sent, the frames captured meanwhile wait, and only the newest of them goes next
-// (the others are counted skipped by the client). A frame's stamp is then always after the last
-// one the server heard. Then it finishes the job and prints the latency
-// percentiles (receipt to pose, as the server measures it, and the round trip the client saw),
-// the frames tracked and skipped, the loops, and the trajectory against a ground truth (a .tum
-// beside the images, one pose per frame, as the batch slam job reads it) when there is one.
+// frame at its time (the recording's stamps, or --rate) and sends it as a camera driver does.
+// By default (--in-flight 1) one frame at a time, with a queue of one: while the server is still
+// tracking the last frame sent, the frames captured meanwhile wait, and only the newest of them
+// goes next (the others are counted skipped by the client); each pose is then as fresh as the
+// server can make it. With --in-flight N each frame is posted as it is captured while fewer than
+// N requests are outstanding (each on a connection of its own): the server tracks the newest
+// frame it holds, runs the next frame's front end beside the back end of the one before, and
+// answers the frames it could not reach "skipped" (more frames tracked, each pose later:
+// docs/slam.md). A frame that reaches the server after a newer one (409 stamp_not_increasing:
+// requests on several connections can overtake one another under load) is counted skipped.
+// Then it finishes the job and prints the latency percentiles (receipt to pose, as the server
+// measures it; the round trip the client saw; capture to pose, the robot's wait), the frames
+// tracked and skipped, the loops, and the trajectory against a ground truth (a .tum beside the
+// images, one pose per frame, as the batch slam job reads it) when there is one.
 //
 // A recording: a folder of cam0/NAME and cam1/NAME images (NAME the capture time, as
 // "1403636579.763.png" or "t000012.345.png"; other names are played at --rate, default 10 Hz),
@@ -218,6 +224,10 @@ void DeclareOptions(ArgParser* parser) {
   parser->AddOption("dataset", "", "store the frames in this dataset (default: a new one)");
   parser->AddOption("ground-truth", "", "a .tum of the recording (default: the folder's .tum)");
   parser->AddOption("json", "", "also write the figures to this file, as JSON");
+  parser->AddOption("in-flight", "1",
+                    "frames outstanding at once: 1 sends the newest frame once the last one is "
+                    "answered (the freshest poses); more posts each frame as it is captured and "
+                    "lets the server skip (more frames tracked, each pose later)");
 }
 
 }  // namespace
@@ -232,6 +242,8 @@ int RunLive(const Args& args) {
     return 2;
   }
   const double rate_hz = parser.GetDouble("rate");
+  const int in_flight = parser.GetInt("in-flight");
+  OMNIRIG_CHECK(in_flight >= 1 && in_flight <= 16, "--in-flight must be from 1 to 16");
   OMNIRIG_CHECK(rate_hz >= 0 && std::isfinite(rate_hz), "--rate must be a positive number");
   std::optional<fs::path> ground_truth;
   std::vector<RecordedFrame> frames = ReadRecording(parser.positional(), rate_hz, &ground_truth);
@@ -258,7 +270,8 @@ int RunLive(const Args& args) {
             << "): " << frames.size() << " frames at "
             << (rate_hz > 0 ? FormatHz(rate_hz) : std::string("capture rate")) << "\n";
 
-  // Capture (this thread) and send (the sender thread) meet in a slot of one frame, the newest.
+  // Capture (this thread) and send (--in-flight sender threads) meet in a slot of one frame, the
+  // newest; a sender takes it as soon as it is free.
   struct Captured {
     size_t index = 0;
     Clock::time_point due;
@@ -272,7 +285,7 @@ int RunLive(const Args& args) {
     outcome.answer = {{"state", "skipped"}, {"skipped_by", "client"}};
   }
   const Clock::time_point start = Clock::now();
-  std::thread sender([&] {
+  const auto send = [&] {
     auto connection = Connect(server, token);
     while (true) {
       Captured frame;
@@ -298,9 +311,17 @@ int RunLive(const Args& args) {
           std::chrono::duration<double, std::milli>(Clock::now() - sent).count();
       outcome.answer = result ? json::parse(result->body, nullptr, false)
                               : json{{"error", {{"message", httplib::to_string(result.error())}}}};
-      if (result && result->status != 200) outcome.answer["status"] = result->status;
+      if (result && result->status == 409 && outcome.answer.is_object() &&
+          outcome.answer.contains("error") &&
+          outcome.answer["error"].value("code", "") == "stamp_not_increasing") {
+        outcome.answer = {{"state", "skipped"}, {"skipped_by", "server, after a newer frame"}};
+      } else if (result && result->status != 200) {
+        outcome.answer["status"] = result->status;
+      }
     }
-  });
+  };
+  std::vector<std::thread> senders;
+  for (int i = 0; i < in_flight; ++i) senders.emplace_back(send);
   for (size_t i = 0; i < frames.size(); ++i) {
     const double at_s =
         rate_hz > 0 ? static_cast<double>(i) / rate_hz : frames[i].stamp_s - frames[0].stamp_s;
@@ -314,10 +335,10 @@ int RunLive(const Args& args) {
   {
     std::lock_guard<std::mutex> lock(mutex);
     captured_all = true;
-    changed.notify_one();
+    changed.notify_all();
   }
-  sender.join();
-  std::vector<double> latency_ms, round_trip_ms, late_ms;
+  for (std::thread& sender : senders) sender.join();
+  std::vector<double> latency_ms, round_trip_ms, late_ms, capture_to_pose_ms;
   int tracked = 0, skipped = 0, refused = 0, lost = 0;
   for (const FrameOutcome& outcome : outcomes) {
     late_ms.push_back(outcome.late_ms);
@@ -334,6 +355,7 @@ int RunLive(const Args& args) {
     if (state == "lost") ++lost;
     latency_ms.push_back(outcome.answer["latency_ms"].get<double>());
     round_trip_ms.push_back(outcome.round_trip_ms);
+    capture_to_pose_ms.push_back(outcome.late_ms + outcome.round_trip_ms);
   }
   const double played_s = std::chrono::duration<double>(Clock::now() - start).count();
   Expect(client->Post(("/api/v1/jobs/" + id + "/finish").c_str()), {202}, "finish");
@@ -352,12 +374,14 @@ int RunLive(const Args& args) {
       {"frames_skipped", skipped},
       {"frames_lost", lost},
       {"frames_refused", refused},
+      {"in_flight", in_flight},
       {"rate_hz", rate_hz > 0 ? rate_hz
                               : (frames.size() - 1) /
                                     std::max(frames.back().stamp_s - frames[0].stamp_s, 1e-9)},
       {"played_s", played_s},
       {"latency_ms", Percentiles(latency_ms)},
       {"round_trip_ms", Percentiles(round_trip_ms)},
+      {"capture_to_pose_ms", Percentiles(capture_to_pose_ms)},
       {"send_late_ms", Percentiles(late_ms)}};
   if (finished["state"] == "succeeded") {
     const json result =
@@ -384,7 +408,10 @@ int RunLive(const Args& args) {
             << "latency ms (receipt to pose) p50 " << summary["latency_ms"]["p50"].get<double>()
             << " p95 " << summary["latency_ms"]["p95"].get<double>() << " p99 "
             << summary["latency_ms"]["p99"].get<double>() << "; round trip p95 "
-            << summary["round_trip_ms"]["p95"].get<double>() << "\n";
+            << summary["round_trip_ms"]["p95"].get<double>() << "\n"
+            << "capture to pose ms (the robot's wait: sent late plus round trip) p50 "
+            << summary["capture_to_pose_ms"]["p50"].get<double>() << " p95 "
+            << summary["capture_to_pose_ms"]["p95"].get<double>() << "\n";
   if (summary.contains("loops")) std::cout << "loops " << summary["loops"].get<int>() << "\n";
   if (summary.contains("localised_in_map_fraction") &&
       summary["localised_in_map_fraction"].is_number()) {
