@@ -330,11 +330,12 @@ TEST_F(LiveFaultsTest, OmnirigLivePlaysARecordingAndPrintsItsFigures) {
   EXPECT_NEAR(ate_m, errors.ate_rmse_m, 1e-4);
   EXPECT_LT(ate_m, 0.03);  // a rendered sequence with an exact rig: 3 cm, as tracking each frame
 
-  // Played again with --map: localised in the first run's saved map, and says how much of it.
+  // Played again with --map: localised in the first run's saved map, and says how much of it;
+  // this time each frame posted as it is captured, up to 3 outstanding (the server skips).
   const fs::path again = dir_.path() / "again.out", again_figures = dir_.path() / "again.json";
   const std::string with_map = (fs::path(binary_dir) / "server" / "omnirig").string() +
                                " live --server http://127.0.0.1:" + std::to_string(port_) +
-                               " --rig " + rig + " --map " + id + " --json " +
+                               " --rig " + rig + " --map " + id + " --in-flight 3 --json " +
                                again_figures.string() + " " + Dir().string() + " > " +
                                again.string() + " 2> " + (dir_.path() / "again.err").string();
   const int again_status = std::system(with_map.c_str());
@@ -345,6 +346,16 @@ TEST_F(LiveFaultsTest, OmnirigLivePlaysARecordingAndPrintsItsFigures) {
   const json again_result = JsonOf(client_->Get(
       ("/api/v1/jobs/" + again_summary["job"].get<std::string>() + "/result").c_str()));
   EXPECT_EQ(again_result["saved_map"]["localised_in"], id);
+  // Every frame answered: tracked, or skipped by the server or the client; none refused.
+  EXPECT_EQ(again_summary["in_flight"], 3);
+  EXPECT_EQ(again_summary["frames_refused"], 0) << again_text;
+  EXPECT_EQ(again_summary["frames_tracked"].get<int>() + again_summary["frames_skipped"].get<int>(),
+            kNumFrames)
+      << again_text;
+  EXPECT_EQ(again_result["num_frames"], again_summary["frames_tracked"]);
+  EXPECT_LE(again_result["live"]["num_skipped"].get<int>(),
+            again_summary["frames_skipped"].get<int>());
+  EXPECT_GT(Figure(again_text, "capture to pose ms .* p50 ([0-9.]+)"), 0.0) << again_text;
   const double fraction = again_result["localised_in_map_fraction"].get<double>();
   EXPECT_NEAR(Figure(again_text, "in map ([0-9.]+) % of the frames tracked"), 100 * fraction, 0.051)
       << again_text;
