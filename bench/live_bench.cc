@@ -10,7 +10,8 @@
 // finish (SE(3)-aligned against the render's poses, and as % of the path). --in-flight N is
 // `omnirig live`'s: N frames outstanding at once.
 //
-// Then it profiles the tracker (slam::Session, no HTTP) over the first --profile-frames frames,
+// Then it profiles the tracker (slam::Session, no HTTP) over the first --profile-frames frames
+// (0: none),
 // every frame and every 10th: the mean wall and CPU milliseconds per frame of decoding and of
 // each tracking stage; and every frame again in the live job's pipeline (each frame's decoding
 // and front end on a thread of its own beside the back end of the frame before): the wall
@@ -346,9 +347,11 @@ int main(int argc, char** argv) {
     }
     std::fflush(stdout);
   }
-  const double serial_ms = ProfileTracking(args, rig, 1);
-  ProfilePipeline(args, rig, serial_ms);
-  ProfileTracking(args, rig, 10);
+  if (args.profile_frames > 0) {
+    const double serial_ms = ProfileTracking(args, rig, 1);
+    ProfilePipeline(args, rig, serial_ms);
+    ProfileTracking(args, rig, 10);
+  }
   std::error_code ignored;
   fs::remove_all(data, ignored);
   return 0;
