@@ -11,9 +11,8 @@
 // `omnirig live`'s: N frames outstanding at once.
 //
 // Then it profiles the tracker (slam::Session, no HTTP) over the first --profile-frames frames
-// (0: none),
-// every frame and every 10th: the mean wall and CPU milliseconds per frame of decoding and of
-// each tracking stage; and every frame again in the live job's pipeline (each frame's decoding
+// (0: none), every frame and every 10th: the mean wall and CPU milliseconds per frame of decoding
+// and of each tracking stage; and every frame again in the live job's pipeline (each frame's decoding
 // and front end on a thread of its own beside the back end of the frame before): the wall
 // milliseconds per frame against the serial pass's. The load average is printed with the
 // figures: on a shared machine the wall-clock figures grow with it.
