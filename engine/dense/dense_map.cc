@@ -2,9 +2,10 @@
 
 #include <algorithm>
 #include <cmath>
-#include <optional>
+#include <exception>
 #include <fstream>
 #include <map>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <thread>
@@ -218,13 +219,23 @@ void DenseMap::AddFrame(const Rigid3d& world_from_cam0, size_t num_points,
     }
     FinishView(&*view);
   };
+  // An error on the view's thread (out of memory) is rethrown here once it has joined.
   struct JoinOnExit {
     std::thread thread;
+    std::exception_ptr error;
     ~JoinOnExit() {
       if (thread.joinable()) thread.join();
     }
   } view_thread;
-  if (view && FusionThreads() > 1) view_thread.thread = std::thread(fill_view);
+  if (view && FusionThreads() > 1) {
+    view_thread.thread = std::thread([&fill_view, &view_thread] {
+      try {
+        fill_view();
+      } catch (...) {
+        view_thread.error = std::current_exception();
+      }
+    });
+  }
   // The keys are known ahead: each slot is fetched while the points before it are added (the
   // index holds no more than it did after Reserve, so the slots stay where they are).
   constexpr size_t kAhead = 16;
@@ -239,6 +250,7 @@ void DenseMap::AddFrame(const Rigid3d& world_from_cam0, size_t num_points,
   }
   if (view_thread.thread.joinable()) {
     view_thread.thread.join();
+    if (view_thread.error) std::rethrow_exception(view_thread.error);
   } else if (view) {
     fill_view();
   }
