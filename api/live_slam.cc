@@ -69,27 +69,24 @@ json TrackedFrameJson(const slam::FrameReport& report, const LiveFrame& frame, i
           {"num_skipped", num_skipped}};
 }
 
-// The answer to a frame whose job was canceled before it was tracked (it is stored in the
-// job's dataset all the same).
-LiveAnswer CanceledAnswer(const LiveFrame& frame) {
+// The answer to a frame whose job ended (`how`: "was canceled", "has ended") before it was
+// tracked; it is stored in the job's dataset all the same.
+LiveAnswer JobFinishedAnswer(const LiveFrame& frame, const std::string& how) {
   return {409,
           {{"error",
             {{"code", "job_finished"},
-             {"message", "the live job was canceled: frame " + frame.name +
+             {"message", "the live job " + how + ": frame " + frame.name +
                              " is stored in its dataset but not tracked"},
              {"details", {{"name", frame.name}}}}}}};
 }
 
-// The answer to a frame taken from the mailbox whose job ended (canceled or failed) before it
-// was tracked.
+LiveAnswer CanceledAnswer(const LiveFrame& frame) {
+  return JobFinishedAnswer(frame, "was canceled");
+}
+
+// A frame taken from the mailbox whose job ended (canceled or failed) before it was tracked.
 LiveAnswer EndedAnswer(const LiveFrame& frame, const ProgressSink& progress) {
-  if (progress.IsCancelled()) return CanceledAnswer(frame);
-  return {409,
-          {{"error",
-            {{"code", "job_finished"},
-             {"message", "the live job has ended: frame " + frame.name +
-                             " is stored in its dataset but not tracked"},
-             {"details", {{"name", frame.name}}}}}}};
+  return JobFinishedAnswer(frame, progress.IsCancelled() ? "was canceled" : "has ended");
 }
 
 // A frame taken from the mailbox and its front end (decoding if the request's thread left it
