@@ -8,7 +8,8 @@
 // measures it (p50/p95/p99), the client's round trip and capture to pose (c2p: how late the
 // client sent the frame plus the round trip), the loops closed, the ATE after the live job's
 // finish (SE(3)-aligned against the render's poses, and as % of the path). --in-flight N is
-// `omnirig live`'s: N frames outstanding at once.
+// `omnirig live`'s: N frames outstanding at once; --dense-map VOXEL_M gives the live job a dense
+// map (its occupancy grid made while it runs, beside the tracking).
 //
 // Then it profiles the tracker (slam::Session, no HTTP) over the first --profile-frames frames
 // (0: none), every frame and every 10th: the mean wall and CPU milliseconds per frame of decoding
@@ -19,7 +20,7 @@
 //
 // usage: bench_live [--rates 10,20,30] [--frames 600] [--laps 2] [--loop-length 50]
 //                   [--width 1024] [--height 768] [--threads 2] [--supersampling 4] [--dir DIR]
-//                   [--profile-frames 120] [--in-flight 1]
+//                   [--profile-frames 120] [--in-flight 1] [--dense-map VOXEL_M]
 
 #include <algorithm>
 #include <cstdio>
@@ -61,6 +62,7 @@ struct BenchArgs {
   int profile_frames = 120;
   std::string dir;
   std::string in_flight = "1";  // omnirig live's --in-flight
+  double dense_map_voxel_m = 0;   // > 0: the live job makes its dense map and occupancy grid
 };
 
 BenchArgs Parse(int argc, char** argv) {
@@ -93,6 +95,8 @@ BenchArgs Parse(int argc, char** argv) {
       args.profile_frames = std::atoi(next().c_str());
     else if (a == "--in-flight")
       args.in_flight = next();
+    else if (a == "--dense-map")
+      args.dense_map_voxel_m = std::atof(next().c_str());
   }
   if (args.dir.empty()) {
     std::ostringstream dir;
@@ -316,8 +320,11 @@ int main(int argc, char** argv) {
     const fs::path out = data / ("live-" + std::to_string(static_cast<int>(rate)) + ".json");
     const int code =
         cli::RunLive({"--server", "http://127.0.0.1:" + std::to_string(port), "--rig", rig_job,
-                      "--rate", std::to_string(rate), "--in-flight", args.in_flight, "--json",
-                      out.string(), args.dir});
+                      "--rate", std::to_string(rate), "--in-flight", args.in_flight, "--params",
+                      args.dense_map_voxel_m > 0
+                          ? json{{"dense_map", {{"voxel_m", args.dense_map_voxel_m}}}}.dump()
+                          : "{}",
+                      "--json", out.string(), args.dir});
     const json s = json::parse(std::ifstream(out));
     const json e = s.value("evaluation", json());
     std::printf("%6.0f %8d %8d %9.1f %9.1f %9.1f %10.1f %11.1f %11.1f %6d %9.4f %8.3f%s\n", rate,
@@ -343,6 +350,12 @@ int main(int argc, char** argv) {
           1000 * t.value("motion", 0.0) / n, 1000 * t.value("map", 0.0) / n,
           1000 * t.value("local_ba", 0.0) / n, 1000 * t.value("loop", 0.0) / n,
           t.value("global_ba", 0.0), LoadAverage().c_str());
+      if (r.contains("dense_map") && r["dense_map"].is_object()) {
+        const json& d = r["dense_map"];
+        std::printf("       dense map at the finish: %d keyframes, %d points, %.1f s\n",
+                    static_cast<int>(d.value("keyframes", json::array()).size()),
+                    d.value("num_points", 0), d.value("seconds", 0.0));
+      }
     }
     std::fflush(stdout);
   }
