@@ -8,8 +8,9 @@
 // N requests are outstanding (each on a connection of its own): the server tracks the newest
 // frame it holds, runs the next frame's front end beside the back end of the one before, and
 // answers the frames it could not reach "skipped" (more frames tracked, each pose later:
-// docs/slam.md). A frame that reaches the server after a newer one (409 stamp_not_increasing:
-// requests on several connections can overtake one another under load) is counted skipped.
+// docs/slam.md). There, a frame that reaches the server after a newer one (409
+// stamp_not_increasing: requests on several connections can overtake one another under load)
+// is counted skipped.
 // Then it finishes the job and prints the latency percentiles (receipt to pose, as the server
 // measures it; the round trip the client saw; capture to pose, the robot's wait), the frames
 // tracked and skipped, the loops, and the trajectory against a ground truth (a .tum beside the
@@ -311,7 +312,9 @@ int RunLive(const Args& args) {
           std::chrono::duration<double, std::milli>(Clock::now() - sent).count();
       outcome.answer = result ? json::parse(result->body, nullptr, false)
                               : json{{"error", {{"message", httplib::to_string(result.error())}}}};
-      if (result && result->status == 409 && outcome.answer.is_object() &&
+      // Overtaken on another connection (only possible with several in flight; one at a time,
+      // such a 409 means the recording's own stamps go back, and it counts as refused).
+      if (in_flight > 1 && result && result->status == 409 && outcome.answer.is_object() &&
           outcome.answer.contains("error") &&
           outcome.answer["error"].value("code", "") == "stamp_not_increasing") {
         outcome.answer = {{"state", "skipped"}, {"skipped_by", "server, after a newer frame"}};
