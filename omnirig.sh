@@ -18,7 +18,7 @@ APT_PACKAGES=(build-essential cmake ninja-build ccache pkg-config git
   libeigen3-dev libopencv-dev libopencv-contrib-dev libceres-dev libcpp-httplib-dev
   nlohmann-json3-dev libsqlite3-dev sqlite3 googletest libgtest-dev libbenchmark-dev
   libssl-dev libpq-dev libopengv-dev libbz2-dev liblz4-dev libzstd-dev zlib1g-dev nodejs npm
-  curl jq)
+  libpng-dev curl jq)
 # Only the tests need these: the browser they drive, a PostgreSQL server they start themselves,
 # clang with its libFuzzer and sanitizer runtimes for the fuzz targets (fuzz/), unzip, which
 # checks the job archives the server streams, and ROS's own bag writer (ROS 1 bags with bz2 and

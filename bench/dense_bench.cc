@@ -38,15 +38,17 @@
 // std's two parameters (disparity_std_cells, disparity_std_scale) on the development sets (the
 // room and the noisy room).
 //
-// --block-size, --step-factor and --max-parallax-deg set DenseStereoOptions' block_size,
-// grid.step_factor and max_parallax_deg (to measure what they cost and give).
+// --block-size, --refine-window, --step-factor and --max-parallax-deg set DenseStereoOptions'
+// block_size, refine_window_cells, grid.step_factor and max_parallax_deg (to measure what they
+// cost and give).
 //
 // --job-only runs the stereo_reconstruct job's two runs only (its wall time, A/B against
 // another build under the same load).
 //
 // Usage: bench_dense [--frames N] [--threads N] [--no-peer] [--no-job] [--job-only]
 //                    [--development-only]
-//                    [--calibrate-std] [--block-size N] [--step-factor F] [--max-parallax-deg D]
+//                    [--calibrate-std] [--block-size N] [--refine-window N] [--step-factor F]
+//                    [--max-parallax-deg D]
 //                    [--no-floor] [--disparity-std-cells C]
 //                    [--disparity-std-scale S]
 
@@ -737,7 +739,7 @@ void RunSet(const BenchSet& set, bool with_peer, bool profile,
 // The image noise's share of the error, with the clean renders of the same frames. On the grid,
 // each camera's noise is the noisy render less the clean one (sensor noise and JPEG as the
 // matcher sees them, after the resampling). Two figures per cell inside both mirrors whose ray
-// hits the scene, for windows of the refinement's 11 cells and of 21:
+// hits the scene, for windows of 11 cells, of the refinement's (15) and of 21:
 // - the Cramer-Rao bound of an unbiased disparity from the window under white noise of the
 //   grid's std: (sigma_0^2 + sigma_1^2) / sum_W (dI/dc)^2 (dI/dc the clean cam0 grid's gradient
 //   along the row), as a range std with the cell's true range; its expected median |error| is
@@ -756,14 +758,14 @@ void PrintNoiseFloor(const BenchSet& noisy, const BenchSet& clean,
       dense::SharedRectifier(noisy.rig, dense_options.grid);
   const double b = grid->baseline_m(), step = grid->theta_step_rad();
   const MirrorMaskOptions mask_options = dense_options.MaskOptions();
-  const std::array<int, 2> windows = {11, 21};
+  const std::array<int, 3> windows = {11, 15, 21};
   struct Cell {
     double bound;        // Cramer-Rao median |error| / r
     double within;       // Cramer-Rao share within 1 %
     double noise_error;  // |first-order error of the fit| / r
     bool operator<(const Cell& o) const { return bound < o.bound; }
   };
-  std::array<std::vector<Cell>, 2> cells;
+  std::array<std::vector<Cell>, windows.size()> cells;
   double noise_sum = 0.0;
   const size_t num_pairs = noisy.world_from_rig.size();
   const int rows = grid->rows(), cols = grid->cols();
@@ -817,7 +819,7 @@ void PrintNoiseFloor(const BenchSet& noisy, const BenchSet& clean,
     cv::Sobel(clean_grid[0], dx, CV_32F, 1, 0, 1, 0.5);  // as the refinement's gradient
     cv::remap(noise[1], noise1_at_match, map_x, map_y, cv::INTER_LINEAR, cv::BORDER_REPLICATE);
     const cv::Mat noise_difference = noise[0] - noise1_at_match;
-    for (int w = 0; w < 2; ++w) {
+    for (size_t w = 0; w < windows.size(); ++w) {
       const cv::Size window(windows[w], windows[w]);
       cv::Mat energy, projection;
       cv::boxFilter(dx.mul(dx), energy, CV_32F, window, cv::Point(-1, -1), false);
@@ -840,7 +842,7 @@ void PrintNoiseFloor(const BenchSet& noisy, const BenchSet& clean,
   std::printf("\nthe image noise's share (noise %.2f grey levels on the grid, %zu cells a pair "
               "in both mirrors with a true range):\n",
               noise_sum, cells[0].size() / std::max<size_t>(1, num_pairs));
-  for (int w = 0; w < 2; ++w) {
+  for (size_t w = 0; w < windows.size(); ++w) {
     std::sort(cells[w].begin(), cells[w].end());
     for (const int n : points_per_pair) {
       const size_t num = std::min(cells[w].size(), n * num_pairs);
@@ -982,6 +984,8 @@ int main(int argc, char** argv) {
       flags.frames = std::max(1, std::atoi(argv[++i]));
     else if (!std::strcmp(argv[i], "--threads"))
       flags.threads = std::max(1, std::atoi(argv[++i]));
+    else if (!std::strcmp(argv[i], "--refine-window"))
+      options.refine_window_cells = std::atoi(argv[++i]);
     else if (!std::strcmp(argv[i], "--block-size"))
       options.block_size = std::atoi(argv[++i]);
     else if (!std::strcmp(argv[i], "--step-factor"))

@@ -25,7 +25,8 @@
 // bench_slam --loop ...: the long closed-loop bench instead (bench/slam_loop_bench.cc).
 //
 // usage: bench_slam [--frames N] [--width W] [--height H] [--threads T] [--street]
-//                   [--max-features N] [--local-window N] [--local-iterations N] [--no-decode]
+//                   [--max-features N] [--detection-scale S] [--local-window N]
+//                   [--local-iterations N] [--no-decode]
 //                   [--black-frame I] [--no-calibration-runs] [--video mp4|avi|mkv]
 //                   [--dense-map [--grid-step-factor F] [--keyframe-spacing M]]
 
@@ -68,6 +69,7 @@ struct Args {
   bool street = false;
   bool decode = true;
   int max_features = -1;  // -1: the library defaults
+  double detection_scale = -1;  // FeatureOptions::detection_scale; -1: the library default
   int local_window = -1;
   int local_iterations = -1;
   int black_frame = -1;  // this frame's cam0 image is replaced by a black one (tracking loss)
@@ -112,6 +114,8 @@ Args ParseArgs(int argc, char** argv) {
     else if (a == "--keyframe-spacing" && i + 1 < argc)
       args.keyframe_spacings_m = Numbers(argv[++i]);
     else if (a == "--max-features") args.max_features = next();
+    else if (a == "--detection-scale" && i + 1 < argc)
+      args.detection_scale = std::atof(argv[++i]);
     else if (a == "--local-window") args.local_window = next();
     else if (a == "--local-iterations") args.local_iterations = next();
   }
@@ -284,6 +288,7 @@ int Run(const Args& args) {
   slam::SlamOptions options;
   options.num_threads = args.threads;
   if (args.max_features >= 0) options.features.max_features = args.max_features;
+  if (args.detection_scale > 0) options.features.detection_scale = args.detection_scale;
   if (args.local_window >= 0) options.local_window_frames = args.local_window;
   if (args.local_iterations > 0) options.local_max_iterations = args.local_iterations;
   const slam::SlamResult result = slam::RunSlam(sequence.rig, sequence.names, load, options);

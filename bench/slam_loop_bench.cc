@@ -31,7 +31,7 @@
 // usage: bench_slam --loop [--loop-dir DIR] [--frames 2000] [--laps 2] [--loop-length 100]
 //                   [--width 1024] [--height 768] [--threads 2] [--revisit-m 1.5]
 //                   [--revisit-deg 30] [--no-loop-closure] [--supersampling 4] [--blur 0]
-//                   [--max-features N] [--local-iterations N]
+//                   [--max-features N] [--detection-scale S] [--local-iterations N]
 
 #include "bench/slam_loop_bench.h"
 
@@ -76,6 +76,7 @@ struct LoopArgs {
   int supersampling = 4;  // of the render
   double blur_px = 0.0;
   int max_features = -1;      // -1: the library defaults
+  double detection_scale = -1;  // FeatureOptions::detection_scale; -1: the library default
   int local_iterations = -1;
 };
 
@@ -97,6 +98,7 @@ LoopArgs ParseLoopArgs(int argc, char** argv) {
     else if (a == "--supersampling") args.supersampling = std::atoi(next().c_str());
     else if (a == "--blur") args.blur_px = std::atof(next().c_str());
     else if (a == "--max-features") args.max_features = std::atoi(next().c_str());
+    else if (a == "--detection-scale") args.detection_scale = std::atof(next().c_str());
     else if (a == "--local-iterations") args.local_iterations = std::atoi(next().c_str());
   }
   if (args.dir.empty()) {
@@ -387,6 +389,7 @@ int RunLoopBench(int argc, char** argv) {
   options.num_threads = args.threads;
   options.loop_closure = args.loop_closure;
   if (args.max_features >= 0) options.features.max_features = args.max_features;
+  if (args.detection_scale > 0) options.features.detection_scale = args.detection_scale;
   if (args.local_iterations > 0) options.local_max_iterations = args.local_iterations;
   const double rss_before_mb = ResidentMegabytes();
   const slam::SlamResult result = slam::RunSlam(rig, names, load, options);

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The project's multi-threaded code under ThreadSanitizer: configures build-tsan (once), builds
 # only the tests that start threads, and runs them. Not part of CI (`./omnirig.sh test`): a TSan
-# build of these targets took ~20 min on 2 shared cores from a cold ccache, the tests ~5 min.
+# build of these targets took ~20 min on 2 shared cores from a cold ccache, the 15 tests 8.5 min
+# (2026-11-28; the live job's pipeline and server_live 4 of them).
 #
 #   scripts/tsan.sh                 configure, build, run every threaded test below
 #   scripts/tsan.sh -R server/http  only the tests whose ctest name matches (ctest -R)
@@ -18,17 +19,21 @@ export CCACHE_BASEDIR="$ROOT"
 
 # ctest name -> build target. Each test here runs code on more than one thread.
 declare -A TESTS=(
-  [engine/util/parallel]=engine_util_parallel_test                # RunTasks
-  [engine/relpose_model_select]=engine_relpose_model_select_test  # candidates, folds: 3-4 threads
-  [api/calibration_job]=api_calibration_job_test                  # parallel detection, 2 threads
-  [api/slam_job]=api_slam_job_test                                # pipelined front/back end
-  [engine/synth_render]=engine_synth_render_test                  # RunTasks rows, renderer cache
-  [storage/sqlite_job_store]=storage_sqlite_job_store_test        # concurrent claims, readers
-  [server/http]=server_http_test                                  # thread per connection, refuser
-  [server/events]=server_events_test                              # SSE streams
-  [server/worker_pool]=server_worker_pool_test                    # workers, heartbeat, drain
-  [tests/server_api]=tests_server_api_test                        # workers, queue, cancel, drain
-  [tests/server_crash]=tests_server_crash_test                    # SIGKILLed server, restarts
+  [engine/util/parallel]=engine_util_parallel_test  # RunTasks
+  [engine/rig/relpose_model_select]=engine_rig_relpose_model_select_test  # candidates, folds
+  [api/calibration_job]=api_calibration_job_test  # parallel detection, 2 threads
+  [api/slam_job]=api_slam_job_test  # pipelined front/back end
+  [engine/synth_render]=engine_synth_render_test  # RunTasks rows, renderer cache
+  [storage/sqlite_job_store]=storage_sqlite_job_store_test  # concurrent claims, readers
+  [server/http]=server_http_test  # thread per connection, refuser
+  [server/events]=server_events_test  # SSE streams
+  [server/worker_pool]=server_worker_pool_test  # workers, heartbeat, drain
+  [tests/server_api]=tests_server_api_test  # workers, queue, cancel, drain
+  [tests/server_crash]=tests_server_crash_test  # SIGKILLed server, restarts
+  [engine/util/background_task]=engine_util_background_task_test  # the dense job's writer
+  [engine/slam/session]=engine_slam_session_test  # live front end beside back end
+  [api/live_publisher]=api_live_publisher_test  # live snapshots written behind
+  [tests/server_live]=tests_server_live_test  # live frames, finish, cancel
 )
 
 log() { printf '\033[1m[tsan]\033[0m %s\n' "$*" >&2; }

@@ -112,10 +112,7 @@ void ParallelTasks(int num, const std::function<void(int)>& fn) {
 RefinedDisparity RefineDisparity(const cv::Mat& left, const cv::Mat& right,
                                  const cv::Mat& disparity16, const DenseStereoOptions& o) {
   const cv::Size size = left.size();
-  // Windows of 15 and 21 cells gave 0.346 % and 0.373 % on the development room against
-  // 0.344 % for 11 (bench_dense).
-  constexpr int kWindowCells = 11;
-  const cv::Size window(kWindowCells, kWindowCells);
+  const cv::Size window(o.refine_window_cells, o.refine_window_cells);
   const float n = static_cast<float>(window.area());
   cv::Mat sgbm(size, CV_32F), map_x(size, CV_32F), map_y(size, CV_32F);
   cv::parallel_for_(cv::Range(0, size.height), [&](const cv::Range& rows) {
@@ -198,6 +195,9 @@ void DenseStereoOptions::Check() const {
                 "block_size must be odd and in [1, 11], got " << block_size);
   OMNIRIG_CHECK_IN(uniqueness_ratio, '[', 0, 100, ']');
   OMNIRIG_CHECK_NON_NEGATIVE(speckle_window_cells);
+  OMNIRIG_CHECK(refine_window_cells >= 3 && refine_window_cells <= 31 &&
+                    refine_window_cells % 2 == 1,
+                "refine_window_cells must be odd and in [3, 31], got " << refine_window_cells);
   OMNIRIG_CHECK_IN(speckle_range_cells, '[', 1, 16, ']');
   OMNIRIG_CHECK_IN(left_right_max_diff_cells, '[', 0, 16, ']');
   OMNIRIG_CHECK(

@@ -56,27 +56,37 @@ struct DenseStereoOptions {
   double image_noise_grey = 2.0;
   double min_confidence = 0.5;
   // Sub-cell refinement of SGBM's disparity (RefineDisparity in dense_stereo.cc): one
-  // Gauss-Newton step of a 1-D Lucas-Kanade fit along the row over 11 x 11-cell windows. SGBM's
+  // Gauss-Newton step of a 1-D Lucas-Kanade fit along the row over square windows of
+  // refine_window_cells (figures below with 11; 15 since 2026-11-28, see there). SGBM's
   // own sub-pixel disparity is drawn towards whole cells; bench_dense, 2 pairs each, 2026-11-27:
   // on the development room the median error fell from 0.530 % to 0.343 % of range, on the
   // held-out lounge from 0.827 % to 0.801 % (its JPEG and sensor noise dominate), on the same
   // lounge without noise and JPEG from 0.621 % to 0.364 %. Not a job parameter: `false` only
   // lets bench_dense and the tests measure SGBM's own disparity beside it.
   bool refine_subcell = true;
+  // The refinement's window (odd). The image noise's share of a window's fit falls with its
+  // size, a slanted surface's departure from one disparity per window grows with it.
+  // bench_dense, development sets, 2 pairs each (2026-11-28), with the range std calibrated
+  // again for each window: 11 cells gave the room 0.343 % / 86.1 % within 1 %, the noisy room
+  // 0.501 % / 74.8 %; 15 cells 0.344 % / 86.6 % and 0.487 % / 76.3 % (4 pairs: 0.351 / 86.2 and
+  // 0.507 / 74.8 against 0.352 / 85.7 and 0.524 / 73.2); 21 cells 0.373 % on the room. Box
+  // sums: the window's size costs nothing.
+  int refine_window_cells = 15;
   // Each point's disparity std (cells, 1 sigma), turned into its range std:
   // sqrt(disparity_std_cells^2 + (disparity_std_scale * fit_std)^2), where fit_std is the
   // refinement's least-squares std of the cell (0 without refinement). Calibrated on the two
-  // development sets at once (bench_dense --calibrate-std, 2 pairs each, 2026-11-27): the room
-  // as rendered (70.5 % of the points within 1 std of the true range along their ray, 92.0 %
-  // within 2) and the room with more sensor noise and JPEG (68.7 %, 91.2 %); the errors' tail
-  // is heavier than a Gaussian's, so no pair of values reaches 95 % at 2 std without
+  // development sets at once (bench_dense --calibrate-std, 2 pairs each, 2026-11-28, the
+  // 15-cell window): the room as rendered (70.4 % of the points within 1 std of the true range
+  // along their ray, 92.0 % within 2) and the room with more sensor noise and JPEG (69.1 %,
+  // 91.4 %; with the 11-cell window the scale was 3.6: 70.5 / 92.0 and 68.7 / 91.2); the
+  // errors' tail is heavier than a Gaussian's, so no pair of values reaches 95 % at 2 std without
   // overstating the 1-std share. The fit's std alone underestimates: neighbouring cells of the
   // grid share image pixels (the grid resamples the images), and JPEG and sensor noise are
   // spatially correlated, so the window's samples are not independent. (An estimate of the
   // images' noise from the images themselves did not help: JPEG removes the fine-scale noise
   // such an estimate sees while the disparity error grows; docs/dense.md.)
   double disparity_std_cells = 0.02;
-  double disparity_std_scale = 3.6;
+  double disparity_std_scale = 5.0;
   // Points whose range std exceeds this fraction of their range are not reported.
   double max_relative_range_std = 0.1;
   // Mirror mask (engine/features/mirror_mask.h, shape kDarkRowEnds): along each grid row,

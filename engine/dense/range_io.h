@@ -12,11 +12,13 @@ namespace omnirig::dense {
 // when the file cannot be written, InvalidArgument for another image type.
 void WriteRangeTiff(const std::filesystem::path& path, const cv::Mat& range_m);
 
-// A colour preview of `range_m` (CV_32F): the turbo colour map over log range between the 2nd
-// and 98th percentiles of the known ranges (near red, far blue), black where unknown.
+// A colour preview of `range_m` (CV_32F, BGR): 255 levels of the turbo colour map over log range
+// between the 2nd and 98th percentiles of the known ranges (near red, far blue), black where
+// unknown.
 cv::Mat RangePreview(const cv::Mat& range_m);
 
-// Writes RangePreview(range_m) as PNG. Throws std::runtime_error when it cannot be written.
+// Writes RangePreview(range_m) as an 8-bit palette PNG (a third of an RGB one's pixels to
+// compress). Throws std::runtime_error when it cannot be written.
 void WriteRangePng(const std::filesystem::path& path, const cv::Mat& range_m);
 
 }  // namespace omnirig::dense
