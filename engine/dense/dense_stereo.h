@@ -57,7 +57,7 @@ struct DenseStereoOptions {
   double min_confidence = 0.5;
   // Sub-cell refinement of SGBM's disparity (RefineDisparity in dense_stereo.cc): one
   // Gauss-Newton step of a 1-D Lucas-Kanade fit along the row over square windows of
-  // refine_window_cells (figures below with 11; 15 since 2026-11-28, see there). SGBM's
+  // refine_window_cells (the figures here with 11 cells; 15 since 2026-11-28). SGBM's
   // own sub-pixel disparity is drawn towards whole cells; bench_dense, 2 pairs each, 2026-11-27:
   // on the development room the median error fell from 0.530 % to 0.343 % of range, on the
   // held-out lounge from 0.827 % to 0.801 % (its JPEG and sensor noise dominate), on the same

@@ -1,5 +1,7 @@
 #include "engine/dense/range_io.h"
 
+#include <unistd.h>
+
 #include <cmath>
 #include <filesystem>
 #include <stdexcept>
@@ -15,8 +17,8 @@ class RangeIoTest : public ::testing::Test {
  protected:
   void SetUp() override {
     dir_ = std::filesystem::temp_directory_path() /
-           ("omnirig_range_io_" + std::to_string(::testing::UnitTest::GetInstance()->random_seed()) +
-            "_" + ::testing::UnitTest::GetInstance()->current_test_info()->name());
+           ("omnirig_range_io_" + std::to_string(getpid()) + "_" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
     std::filesystem::remove_all(dir_);
     std::filesystem::create_directories(dir_);
   }
