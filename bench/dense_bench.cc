@@ -38,16 +38,17 @@
 // std's two parameters (disparity_std_cells, disparity_std_scale) on the development sets (the
 // room and the noisy room).
 //
-// --block-size, --refine-window, --step-factor and --max-parallax-deg set DenseStereoOptions'
-// block_size, refine_window_cells, grid.step_factor and max_parallax_deg (to measure what they
-// cost and give).
+// --block-size, --sgbm-p1, --sgbm-p2, --refine-window, --step-factor and --max-parallax-deg set
+// DenseStereoOptions' block_size, smoothness_p1, smoothness_p2, refine_window_cells,
+// grid.step_factor and max_parallax_deg (to measure what they cost and give).
 //
 // --job-only runs the stereo_reconstruct job's two runs only (its wall time, A/B against
 // another build under the same load).
 //
 // Usage: bench_dense [--frames N] [--threads N] [--no-peer] [--no-job] [--job-only]
 //                    [--development-only]
-//                    [--calibrate-std] [--block-size N] [--refine-window N] [--step-factor F]
+//                    [--calibrate-std] [--block-size N] [--sgbm-p1 N] [--sgbm-p2 N]
+//                    [--refine-window N] [--step-factor F]
 //                    [--max-parallax-deg D]
 //                    [--no-floor] [--disparity-std-cells C]
 //                    [--disparity-std-scale S]
@@ -750,7 +751,10 @@ void RunSet(const BenchSet& set, bool with_peer, bool profile,
 // An estimator that reports N points a pair takes N cells; it can only know the cells'
 // texture, not the noise's draw, so the N cells of the lowest bound are taken and the median
 // of each figure over them printed: no window estimator's median on these cells falls below
-// what the noise alone puts into it (the matching adds its own bias on top).
+// what the noise alone puts into it (the matching adds its own bias on top). And the same
+// first-order error on the cells omnirig itself reports (the noisy pairs reconstructed with
+// dense_options), in the refinement's window: what the noise alone puts into the points the
+// product gives, which it chose by their windows' correlation rather than by their texture.
 void PrintNoiseFloor(const BenchSet& noisy, const BenchSet& clean,
                      const dense::DenseStereoOptions& dense_options,
                      const std::vector<int>& points_per_pair) {
@@ -763,13 +767,17 @@ void PrintNoiseFloor(const BenchSet& noisy, const BenchSet& clean,
     double bound;        // Cramer-Rao median |error| / r
     double within;       // Cramer-Rao share within 1 %
     double noise_error;  // |first-order error of the fit| / r
+    bool reported;       // omnirig gives a point at this cell
     bool operator<(const Cell& o) const { return bound < o.bound; }
   };
   std::array<std::vector<Cell>, windows.size()> cells;
   double noise_sum = 0.0;
   const size_t num_pairs = noisy.world_from_rig.size();
   const int rows = grid->rows(), cols = grid->cols();
+  const dense::DenseStereo dense(noisy.rig, dense_options);
   for (size_t f = 0; f < num_pairs; ++f) {
+    const cv::Mat reported =
+        dense.Reconstruct(noisy.images[0][f], noisy.images[1][f]).range_m.t();  // grid layout
     cv::Mat clean_grid[2], noise[2], mask[2];
     double sigma2[2];
     for (int k = 0; k < 2; ++k) {
@@ -834,7 +842,8 @@ void PrintNoiseFloor(const BenchSet& noisy, const BenchSet& clean,
           const double relative_std = std::sqrt((sigma2[0] + sigma2[1]) / e) * per_cell;
           cells[w].push_back({0.674 * relative_std,
                               std::erf(0.01 / (std::sqrt(2.0) * relative_std)),
-                              std::abs(projection.at<float>(r, c) / e) * per_cell});
+                              std::abs(projection.at<float>(r, c) / e) * per_cell,
+                              reported.at<float>(r, c) > 0.f});
         }
       }
     }
@@ -862,6 +871,22 @@ void PrintNoiseFloor(const BenchSet& noisy, const BenchSet& clean,
           windows[w], windows[w], n, 100.0 * cells[w][num / 2].bound, 100.0 * within_bound / num,
           100.0 * noise_errors[num / 2], 100.0 * within_noise / num);
     }
+    if (windows[w] != dense_options.refine_window_cells) continue;
+    std::vector<double> reported_errors;
+    for (const Cell& cell : cells[w]) {
+      if (cell.reported) reported_errors.push_back(cell.noise_error);
+    }
+    if (reported_errors.empty()) continue;
+    const size_t num = reported_errors.size();
+    const double within = static_cast<double>(std::count_if(
+        reported_errors.begin(), reported_errors.end(), [](double e) { return e <= 0.01; }));
+    std::nth_element(reported_errors.begin(), reported_errors.begin() + num / 2,
+                     reported_errors.end());
+    std::printf(
+        "  %dx%d window, the %zu cells a pair omnirig reports (with a true range): the noise's "
+        "own error in the fit: median %.3f %%, within 1 %% %.1f %%\n",
+        windows[w], windows[w], num / std::max<size_t>(1, num_pairs),
+        100.0 * reported_errors[num / 2], 100.0 * within / num);
   }
 }
 
@@ -988,6 +1013,10 @@ int main(int argc, char** argv) {
       options.refine_window_cells = std::atoi(argv[++i]);
     else if (!std::strcmp(argv[i], "--block-size"))
       options.block_size = std::atoi(argv[++i]);
+    else if (!std::strcmp(argv[i], "--sgbm-p1"))
+      options.smoothness_p1 = std::atoi(argv[++i]);
+    else if (!std::strcmp(argv[i], "--sgbm-p2"))
+      options.smoothness_p2 = std::atoi(argv[++i]);
     else if (!std::strcmp(argv[i], "--step-factor"))
       options.grid.step_factor = std::atof(argv[++i]);
     else if (!std::strcmp(argv[i], "--max-parallax-deg"))

@@ -50,7 +50,8 @@ cv::Mat MatchRows(const cv::Mat& left, const cv::Mat& right, int num_disparities
   cv::copyMakeBorder(r, r, 0, 0, num_disparities, 0, cv::BORDER_CONSTANT, cv::Scalar(0));
   const int w2 = o.block_size * o.block_size;
   cv::Ptr<cv::StereoSGBM> sgbm = cv::StereoSGBM::create(
-      0, num_disparities, o.block_size, 8 * w2, 32 * w2, o.left_right_max_diff_cells, 63,
+      0, num_disparities, o.block_size, o.smoothness_p1 * w2, o.smoothness_p2 * w2,
+      o.left_right_max_diff_cells, 63,
       o.uniqueness_ratio, o.speckle_window_cells, o.speckle_range_cells,
       cv::StereoSGBM::MODE_SGBM_3WAY);
   cv::Mat disparity16;
@@ -193,6 +194,9 @@ void DenseStereoOptions::Check() const {
   OMNIRIG_CHECK_IN(max_parallax_deg, '(', 0, 45, ']');
   OMNIRIG_CHECK(block_size >= 1 && block_size <= 11 && block_size % 2 == 1,
                 "block_size must be odd and in [1, 11], got " << block_size);
+  OMNIRIG_CHECK(smoothness_p1 >= 1 && smoothness_p2 > smoothness_p1,
+                "smoothness_p1 must be at least 1 and smoothness_p2 above it, got "
+                    << smoothness_p1 << " and " << smoothness_p2);
   OMNIRIG_CHECK_IN(uniqueness_ratio, '[', 0, 100, ']');
   OMNIRIG_CHECK_NON_NEGATIVE(speckle_window_cells);
   OMNIRIG_CHECK(refine_window_cells >= 3 && refine_window_cells <= 31 &&

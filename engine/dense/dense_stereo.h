@@ -37,13 +37,28 @@ struct DenseStereoOptions {
   // angle theta from the baseline and range r has parallax ~ baseline * sin(theta) / r: 8 degrees
   // reaches 0.7 m for a 0.1 m baseline.
   double max_parallax_deg = 8.0;
-  // cv::StereoSGBM: matching window (odd), smoothness P1 = 8 w^2 and P2 = 32 w^2 (grey levels),
-  // uniqueness margin in percent, speckle filter (regions smaller than speckle_window_cells whose
-  // disparity varies by at most speckle_range_cells are removed), and the left-right
-  // consistency check's largest disagreement in cells. A 7-cell window costs SGBM no more than
-  // a 5-cell one (the path aggregation dominates) and matches more of the room's surfaces within
-  // 1 % of range (bench_dense).
-  int block_size = 7;
+  // cv::StereoSGBM: matching window (odd), smoothness P1 = smoothness_p1 w^2 and P2 =
+  // smoothness_p2 w^2 (w the window; the penalties of a one-cell and of a larger disparity
+  // change between neighbours), uniqueness margin in percent, speckle filter (regions smaller
+  // than speckle_window_cells whose disparity varies by at most speckle_range_cells are
+  // removed), and the left-right consistency check's largest disagreement in cells. SGBM's
+  // cost does not depend on the window (the path aggregation dominates). 9 cells since
+  // 2026-12-07 (7 before), chosen with the smoothness below on the development sets (2 pairs
+  // each, median / within 1 % of range): 5 cells gave the room 0.331 % / 87.3 % and the noisy
+  // room 0.441 % / 80.2 %, 7 cells 0.318 / 88.5 and 0.406 / 83.0, 9 cells 0.311 / 89.2 and
+  // 0.387 / 84.4, 11 cells 0.348 / 84.2 and 0.425 / 79.8 with 8 % fewer points.
+  int block_size = 9;
+  // The smoothness: 32 and 192 since 2026-12-07 (OpenCV's customary 8 and 32 before). Chosen on
+  // the development sets alone (bench_dense --development-only --sgbm-p1 --sgbm-p2, 2 pairs
+  // each, median error / within 1 % of range): 8/32 gave the room 0.344 % / 86.6 % and the noisy
+  // room 0.487 % / 76.3 %; 16/96 0.327 / 87.7 and 0.439 / 80.1; 24/128 0.320 / 88.2 and
+  // 0.416 / 81.9; 32/192 0.318 / 88.5 and 0.406 / 83.0; 48/256 0.324 / 88.7 and 0.402 / 83.9.
+  // The noise makes SGBM's integer disparities wander between neighbours; the stronger
+  // penalties keep the start the refinement steps from within its reach. On the held-out
+  // lounge, which did not choose (4 pairs): 0.698 % -> 0.593 % with the 7-cell window, 0.573 %
+  // with 9 (docs/dense.md).
+  int smoothness_p1 = 32;
+  int smoothness_p2 = 192;
   int uniqueness_ratio = 10;
   int speckle_window_cells = 100;
   int speckle_range_cells = 2;
@@ -75,18 +90,19 @@ struct DenseStereoOptions {
   // Each point's disparity std (cells, 1 sigma), turned into its range std:
   // sqrt(disparity_std_cells^2 + (disparity_std_scale * fit_std)^2), where fit_std is the
   // refinement's least-squares std of the cell (0 without refinement). Calibrated on the two
-  // development sets at once (bench_dense --calibrate-std, 2 pairs each, 2026-11-28, the
-  // 15-cell window): the room as rendered (70.4 % of the points within 1 std of the true range
-  // along their ray, 92.0 % within 2) and the room with more sensor noise and JPEG (69.1 %,
-  // 91.4 %; with the 11-cell window the scale was 3.6: 70.5 / 92.0 and 68.7 / 91.2); the
+  // development sets at once (bench_dense --calibrate-std, 2 pairs each, 2026-12-07, the
+  // 15-cell window, SGBM's 9-cell window and smoothness 32 / 192): the room as rendered (69.4 %
+  // of the points within 1 std of the true range along their ray, 92.0 % within 2) and the room
+  // with more sensor noise and JPEG (69.0 %, 92.3 %; with SGBM's 7-cell window and smoothness
+  // 8 / 32 it was 0.02 cells and scale 5.0, with the 11-cell refinement window 3.6); the
   // errors' tail is heavier than a Gaussian's, so no pair of values reaches 95 % at 2 std without
   // overstating the 1-std share. The fit's std alone underestimates: neighbouring cells of the
   // grid share image pixels (the grid resamples the images), and JPEG and sensor noise are
   // spatially correlated, so the window's samples are not independent. (An estimate of the
   // images' noise from the images themselves did not help: JPEG removes the fine-scale noise
   // such an estimate sees while the disparity error grows; docs/dense.md.)
-  double disparity_std_cells = 0.02;
-  double disparity_std_scale = 5.0;
+  double disparity_std_cells = 0.07;
+  double disparity_std_scale = 3.2;
   // Points whose range std exceeds this fraction of their range are not reported.
   double max_relative_range_std = 0.1;
   // Mirror mask (engine/features/mirror_mask.h, shape kDarkRowEnds): along each grid row,
