@@ -83,6 +83,7 @@
 #include "engine/geometry/ply.h"
 #include "engine/slam/map_io.h"
 #include "engine/synth/presets.h"
+#include "engine/util/allocator.h"
 #include "testing/dense/held_out_scenes.h"
 #include "testing/slam/surface_distance.h"
 
@@ -995,6 +996,7 @@ int Run(const BenchFlags& flags, const dense::DenseStereoOptions& dense_options)
 }  // namespace omnirig
 
 int main(int argc, char** argv) {
+  omnirig::ConfigureAllocator();  // as the omnirig service runs
   omnirig::BenchFlags flags;
   omnirig::dense::DenseStereoOptions options;
   for (int i = 1; i < argc; ++i) {

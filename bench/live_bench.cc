@@ -45,6 +45,7 @@
 #include "engine/slam/map_io.h"
 #include "engine/slam/session.h"
 #include "engine/synth/presets.h"
+#include "engine/util/allocator.h"
 #include "engine/util/timer.h"
 #include "server/cli/commands.h"
 #include "server/service.h"
@@ -291,6 +292,7 @@ void ProfilePipeline(const BenchArgs& args, const json& rig_json, double serial_
 }  // namespace omnirig
 
 int main(int argc, char** argv) {
+  omnirig::ConfigureAllocator();  // as the omnirig service runs
   using namespace omnirig;
   const BenchArgs args = Parse(argc, argv);
   const json rig = RenderOrLoad(args);

@@ -53,6 +53,7 @@
 #include "engine/slam/slam.h"
 #include "engine/slam/video_source.h"
 #include "engine/synth/presets.h"
+#include "engine/util/allocator.h"
 #include "engine/util/timer.h"
 #include "testing/dense/map_accuracy.h"
 #include "testing/slam/sequence_accuracy.h"
@@ -409,6 +410,7 @@ int Run(const Args& args) {
 }  // namespace omnirig
 
 int main(int argc, char** argv) {
+  omnirig::ConfigureAllocator();  // as the omnirig service runs
   for (int i = 1; i < argc; ++i) {
     if (std::strcmp(argv[i], "--loop") == 0) return omnirig::RunLoopBench(argc, argv);
   }

@@ -1,12 +1,11 @@
 // omnirig: one executable, one subcommand per task.
 
-#include <malloc.h>
-
 #include <cstring>
 #include <exception>
 #include <iostream>
 #include <string>
 
+#include "engine/util/allocator.h"
 #include "engine/util/check.h"
 #include "server/cli/commands.h"
 #include "server/commands.h"
@@ -54,12 +53,7 @@ void PrintHelp() {
 }  // namespace
 
 int main(int argc, char** argv) {
-  // glibc gives threads that allocate at once arenas of their own, up to 8 per core, and an
-  // arena keeps the most its threads ever held. The service's HTTP threads decode uploads and
-  // live frames while jobs run SIFT and adjustments on theirs: in a soak with live robots
-  // (docs/soak.md) 16 arenas held about 320 MB with 15-45 MB in use, and the resident memory
-  // kept growing; with two arenas it was half and flat. Set before any thread starts.
-  mallopt(M_ARENA_MAX, 2);
+  omnirig::ConfigureAllocator();  // before any thread starts
   if (argc < 2 || std::strcmp(argv[1], "--help") == 0 || std::strcmp(argv[1], "-h") == 0) {
     PrintHelp();
     return argc < 2 ? 2 : 0;
