@@ -193,7 +193,7 @@ void DenseMap::AddFrame(const Rigid3d& world_from_cam0, size_t num_points,
   std::optional<FrameView> view;
   if (options_.visibility_cell_rad > 0.0) view = NewView(world_from_cam0);
   const int rows = view ? view->nearest_m.rows : 0, cols = view ? view->nearest_m.cols : 0;
-  std::vector<PlacedPoint> placed(num_points);
+  std::vector<PlacedPoint, LargeArrayAllocator<PlacedPoint>> placed(num_points);
   ForChunks(num_points, 1 << 16, [&](size_t begin, size_t end) {
     for (size_t i = begin; i < end; ++i) {
       const FramePoint point = point_at(i);

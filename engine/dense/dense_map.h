@@ -27,6 +27,7 @@
 #include "engine/dense/dense_stereo.h"
 #include "engine/geometry/ply.h"
 #include "engine/geometry/rigid3.h"
+#include "engine/util/allocator.h"
 
 namespace omnirig::dense {
 
@@ -160,9 +161,11 @@ class DenseMap {
   // The voxels in the order they were first touched, and an open-addressing index of them
   // (linear probing, at most half full): one cache miss per point. A node-based
   // std::unordered_map cost about 0.8 CPU s per 930,000-point pair (an allocation and several
-  // cache misses per voxel), this about 0.2 (bench_dense, 2026-11-27).
-  std::vector<Voxel> voxels_;
-  std::vector<Slot> slots_;
+  // cache misses per voxel), this about 0.2 (bench_dense, 2026-11-27). Both in huge pages
+  // (LargeArrayAllocator): a merged cloud's table holds hundreds of MB, touched once it is
+  // allocated.
+  std::vector<Voxel, LargeArrayAllocator<Voxel>> voxels_;
+  std::vector<Slot, LargeArrayAllocator<Slot>> slots_;
   int slot_shift_ = 64;  // 64 - log2(number of slots)
   int num_frames_ = 0;
 
