@@ -84,6 +84,17 @@ LiveAnswer CanceledAnswer(const LiveFrame& frame) {
   return JobFinishedAnswer(frame, "was canceled");
 }
 
+// A frame the server could not store: not tracked. The server answers its sender with the
+// storing's error; this answer is the job's side of it, for a reader of the frame's promise.
+LiveAnswer NotStoredAnswer(const LiveFrame& frame) {
+  return {409,
+          {{"error",
+            {{"code", "frame_not_stored"},
+             {"message", "frame " + frame.name +
+                             " could not be stored in the job's dataset: it was not tracked"},
+             {"details", {{"name", frame.name}}}}}}};
+}
+
 // A frame taken from the mailbox whose job ended (canceled or failed) before it was tracked.
 LiveAnswer EndedAnswer(const LiveFrame& frame, const ProgressSink& progress) {
   return JobFinishedAnswer(frame, progress.IsCancelled() ? "was canceled" : "has ended");
@@ -160,7 +171,19 @@ void TrackNext(slam::Session& session, LiveMailbox& mailbox, bool pipelined,
     front_failure = std::current_exception();
   }
   next->reset();
+  // The server stored the frame while its front end ran; one it could not store is not tracked
+  // (its sender hears why from the server, which answers that request itself).
+  if (!front_failure && frame->stored.valid()) {
+    try {
+      frame->stored.get();
+    } catch (...) {
+      session.Discard(std::move(*prepared));
+      frame->answer.set_value(NotStoredAnswer(*frame));
+      return;
+    }
+  }
   LiveAnswer answer;
+  bool answered = false;  // the sender has its pose; the keyframe's mapping may still run
   try {
     if (front_failure) std::rethrow_exception(front_failure);
     // Canceled while its front end ran: the sender hears that the job has ended.
@@ -171,13 +194,24 @@ void TrackNext(slam::Session& session, LiveMailbox& mailbox, bool pipelined,
       ++tracked->num_received;
       next->emplace(std::move(newer), session, pipelined, progress);
     }
-    const slam::FrameReport report = session.Track(std::move(*prepared));
-    answer.body = TrackedFrameJson(report, *frame, session.num_frames() - 1, mailbox.num_skipped());
+    // The sender hears its pose as soon as it is tracked; a keyframe's mapping (new landmarks,
+    // place recognition, local adjustment) runs after the answer, before the next frame's back
+    // end, so the run is the one it would be had the answer waited.
+    const int index = session.num_frames();
+    session.Track(std::move(*prepared), /*last_frame=*/false,
+                  [&](const slam::FrameReport& report) {
+                    answer.body = TrackedFrameJson(report, *frame, index, mailbox.num_skipped());
+                    frame->answer.set_value(answer);
+                    answered = true;
+                  });
     tracked->stamps.push_back(frame->stamp_s);
     tracked->names.push_back(frame->name);
     tracked->latencies_ms.push_back(answer.body["latency_ms"].get<double>());
     tracked->snapshot_due = true;
   } catch (const InvalidArgument& e) {
+    // Refused after its pose was answered: the session holds part of the frame, so the job
+    // cannot go on.
+    if (answered) throw;
     answer = {422,
               {{"error",
                 {{"code", "invalid_frame"},
@@ -185,18 +219,20 @@ void TrackNext(slam::Session& session, LiveMailbox& mailbox, bool pipelined,
                  {"details", {{"name", frame->name}}}}}}};
   } catch (const Cancelled&) {
     // Canceled while this frame was tracked: the sender hears that the job has ended.
-    frame->answer.set_value(CanceledAnswer(*frame));
+    if (!answered) frame->answer.set_value(CanceledAnswer(*frame));
     throw;
   } catch (const std::exception& e) {
     // The job fails (the runner records why); the frame's sender hears it first.
-    frame->answer.set_value({500,
-                             {{"error",
-                               {{"code", "job_failed"},
-                                {"message", e.what()},
-                                {"details", {{"name", frame->name}}}}}}});
+    if (!answered) {
+      frame->answer.set_value({500,
+                               {{"error",
+                                 {{"code", "job_failed"},
+                                  {"message", e.what()},
+                                  {"details", {{"name", frame->name}}}}}}});
+    }
     throw;
   }
-  frame->answer.set_value(answer);
+  if (!answered) frame->answer.set_value(answer);
   tracked->since_frame.Restart();
   if (answer.status == 200) {
     if (on_frame) on_frame(answer.body);
@@ -381,7 +417,7 @@ json RunLiveSlam(const json& params, const JobContext& context, const StereoRig&
                                 options.num_threads, context.output_dir, context.progress,
                                 {parsed.rig_job, parsed.map_job});
   report["live"] = {{"num_received", tracked.num_received + mailbox.num_skipped()},
-                    {"num_tracked_frames", session.num_frames()},
+                    {"num_tracked_frames", tracked.stamps.size()},
                     {"num_skipped", mailbox.num_skipped()},
                     {"latency_ms",
                      {{"p50", Percentile(tracked.latencies_ms, 50)},

@@ -21,12 +21,17 @@
 // finish tracks the frame in its front end first; a cancel answers it 409 job_finished.
 //
 // The frames are the dataset's too (stored by the server as they arrive), so that a job whose
-// server stopped runs again, as a batch slam job, over all of them.
+// server stopped runs again, as a batch slam job, over all of them. The server hands a frame
+// over as it starts storing it (LiveFrame::stored): the front end runs while the files are
+// written and synced, and the back end waits for them, so every frame tracked is stored.
 //
 // A frame's answer (200): {"frame_index" (its index among the tracked frames; null when
 // skipped), "name", "stamp_s", "state" ("initialised", "tracked", ... as slam.h's
 // FrameReport, or "skipped"), "keyframe", "world_from_rig": {"rotation_wxyz",
 // "translation_m"} | null, "latency_ms" (receipt to pose), "num_skipped" (the job's so far)}.
+// It leaves once the pose is tracked (slam::Session::Track's on_pose): a keyframe's mapping
+// (new landmarks, place recognition, local adjustment) runs after it, before the next frame's
+// back end, and refines the keyframe's pose in the job's later artifacts.
 //
 // While the job runs, trajectory.json and map.ply (as the batch job writes them, the poses as
 // the run holds them now) are rewritten in the output folder at most every
@@ -85,6 +90,11 @@ struct LiveFrame {
   cv::Mat decoded[2];
   std::chrono::steady_clock::time_point received = std::chrono::steady_clock::now();
   std::promise<LiveAnswer> answer;
+  // The server stores the frame in the job's dataset while the job runs its front end: ready
+  // once the files are committed, holding the storing's exception when they could not be. The
+  // job tracks only a stored frame; one that was not is dropped unanswered by the job (its
+  // sender hears the server's error). Not valid: the frame was stored before it was handed over.
+  std::shared_future<void> stored;
 };
 
 // The one-slot mailbox between the HTTP threads (Put) and the job's thread (Take).

@@ -34,6 +34,7 @@ declare -A TESTS=(
   [engine/slam/session]=engine_slam_session_test  # live front end beside back end
   [api/live_publisher]=api_live_publisher_test  # live snapshots written behind
   [tests/server_live]=tests_server_live_test  # live frames, finish, cancel
+  [api/live_slam]=api_live_slam_test  # frames stored beside their front end, answers before mapping
 )
 
 log() { printf '\033[1m[tsan]\033[0m %s\n' "$*" >&2; }

@@ -250,13 +250,17 @@ void CheckFrameRoom(ServiceState& state, int64_t incoming) {
   }
 }
 
+int64_t FrameBytes(const std::vector<std::pair<std::string, std::string>>& files) {
+  int64_t bytes = 0;
+  for (const auto& file : files) bytes += static_cast<int64_t>(file.second.size());
+  return bytes;
+}
+
 // Stores the frame's files in the dataset (written, fsynced, renamed, recorded together): a
 // frame that cannot be stored whole leaves nothing behind.
 void StoreFrame(ServiceState& state, const std::string& dataset_id,
                 const std::vector<std::pair<std::string, std::string>>& files) {
-  int64_t incoming = 0;
-  for (const auto& file : files) incoming += static_cast<int64_t>(file.second.size());
-  CheckFrameRoom(state, incoming);
+  CheckFrameRoom(state, FrameBytes(files));
   std::vector<std::unique_ptr<storage::AtomicFileWriter>> writers;
   std::vector<storage::ImageRecord> records;
   std::vector<std::filesystem::path> committed;
@@ -354,13 +358,26 @@ void PostFrame(ServiceState& state, const HttpRequest& request, HttpResponse& re
     if (job->ended) {
       throw HttpError(409, "job_finished", "live job " + job->record.id + " has ended");
     }
-    StoreFrame(state, job->record.dataset_id, prepared.files);
-    job->last_stamp_s = stamp_s;
-    job->last_name = name;
+    // A frame the disk cannot hold is refused before the job sees it.
+    CheckFrameRoom(state, FrameBytes(prepared.files));
     prepared.frame->stamp_s = stamp_s;
     prepared.frame->received = received;
     answer = prepared.frame->answer.get_future();
-    if (!job->mailbox.Put(prepared.frame)) {
+    // The job takes the frame at once and runs its front end (decoding, features) while the
+    // files are written and synced here; it tracks the frame only once they are stored.
+    std::promise<void> stored;
+    prepared.frame->stored = stored.get_future().share();
+    const bool handed_over = job->mailbox.Put(prepared.frame);
+    try {
+      StoreFrame(state, job->record.dataset_id, prepared.files);
+      stored.set_value();
+    } catch (...) {
+      stored.set_exception(std::current_exception());
+      throw;
+    }
+    job->last_stamp_s = stamp_s;
+    job->last_name = name;
+    if (!handed_over) {
       throw HttpError(409, "job_finished",
                       "live job " + job->record.id +
                           " is finishing: the frame was stored in "

@@ -261,6 +261,41 @@ TEST_F(LiveFaultsTest, FramesOnAFullDiskAre507AndTheJobGoesOnWhenSpaceReturns) {
   EXPECT_EQ(Dataset(dataset)["image_count"], 8);
 }
 
+// The job takes a frame as the server starts storing it: a frame whose files are written but
+// cannot be recorded (the dataset is full) is refused, and the job, which already had it, does
+// not track it.
+TEST_F(LiveFaultsTest, AFrameThatCannotBeStoredIsNotTracked) {
+  StartServer(dir_.path() / "data", {"--max-images", "6"});
+  const std::string rig = SubmitRig();
+  const json job = CreateLive(rig);
+  const std::string id = job["id"], dataset = job["dataset"];
+  for (int i = 0; i < 3; ++i) {
+    const auto answer = PostFrame(*client_, id, i);
+    ASSERT_EQ(answer->status, 200) << answer->body;
+    EXPECT_EQ(JsonOf(answer)["frame_index"], i);
+  }
+  for (int attempt = 0; attempt < 2; ++attempt) {
+    const auto refused = PostFrame(*client_, id, 3);
+    ASSERT_TRUE(refused);
+    ASSERT_EQ(refused->status, 413) << refused->body;
+    EXPECT_EQ(JsonOf(refused)["error"]["code"], "too_many_images") << refused->body;
+  }
+  EXPECT_EQ(Dataset(dataset)["image_count"], 6);
+  ASSERT_EQ(client_->Post(("/api/v1/jobs/" + id + "/finish").c_str())->status, 202);
+  const json done = WaitForJob(port_, id, 240);
+  ASSERT_EQ(done["state"], "succeeded") << done.dump();
+  const json result = JsonOf(client_->Get(("/api/v1/jobs/" + id + "/result").c_str()));
+  EXPECT_EQ(result["num_frames"], 3) << result.dump();
+  EXPECT_EQ(result["live"]["num_tracked_frames"], 3);
+  EXPECT_EQ(result["live"]["num_skipped"], 0);
+  const json trajectory =
+      JsonOf(client_->Get(("/api/v1/jobs/" + id + "/artifacts/trajectory.json").c_str()));
+  ASSERT_EQ(trajectory["frames"].size(), 3u) << trajectory.dump();
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_EQ(trajectory["frames"][i]["name"], slam::FrameName(0.1 * i) + ".png");
+  }
+}
+
 // The number `omnirig live` printed in the first group of `pattern`.
 double Figure(const std::string& text, const std::string& pattern) {
   std::smatch match;

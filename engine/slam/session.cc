@@ -69,13 +69,14 @@ PreparedFrame Session::FrontEnd(const std::string& name, const StereoImages& ima
   return PreparedFrame(std::move(data));
 }
 
-FrameReport Session::Track(PreparedFrame prepared, bool last_frame) {
+FrameReport Session::Track(PreparedFrame prepared, bool last_frame,
+                           const std::function<void(const FrameReport&)>& on_pose) {
   OMNIRIG_CHECK(!finished_, "the SLAM session has finished");
   if (!prepared.data_ || prepared.data_->index != num_frames()) {
     throw std::logic_error("Session::Track: the prepared frame is not the next one to track");
   }
   const int index = num_frames();
-  FrameReport report = tracker_->BackEnd(std::move(prepared.data_->front), last_frame);
+  FrameReport report = tracker_->BackEnd(std::move(prepared.data_->front), last_frame, on_pose);
   result_.stage_totals.Add(report.times);
   result_.cpu_stage_totals.Add(report.cpu_times);
   result_.frames.push_back(report);
@@ -84,6 +85,13 @@ FrameReport Session::Track(PreparedFrame prepared, bool last_frame) {
     report.world_from_rig = tracker_->map().rig_from_world[map_index].Inverse();
   }
   return report;
+}
+
+void Session::Discard(PreparedFrame prepared) {
+  if (!prepared.data_ || prepared.data_->index != num_prepared_ - 1) {
+    throw std::logic_error("Session::Discard: only the last frame prepared can be given back");
+  }
+  --num_prepared_;
 }
 
 SlamSnapshot Session::Snapshot() const {

@@ -13,6 +13,7 @@
 // while Track() of the frame before runs (RunSlam's pipeline: the tracker's front end one frame
 // ahead of its back end). Otherwise one caller at a time (the live job's thread).
 
+#include <functional>
 #include <memory>
 #include <optional>
 #include <string>
@@ -77,9 +78,17 @@ class Session {
   // Finish().
   PreparedFrame FrontEnd(const std::string& name, const StereoImages& images);
   // The back end of a prepared frame (tracking, keyframes, local adjustment, place
-  // recognition): its report as Track(name, images, last_frame) gives it. Throws
-  // std::logic_error when `prepared` is not the next frame to track.
-  FrameReport Track(PreparedFrame prepared, bool last_frame = false);
+  // recognition): its report as Track(name, images, last_frame) gives it. `on_pose` (may be
+  // empty) hears the report once the frame's pose is tracked, with world_from_rig as tracked,
+  // before a keyframe's mapping (new landmarks, place recognition, local adjustment) refines
+  // it: a live caller answers there. Throws std::logic_error when `prepared` is not the next
+  // frame to track.
+  FrameReport Track(PreparedFrame prepared, bool last_frame = false,
+                    const std::function<void(const FrameReport&)>& on_pose = {});
+  // Gives back the index of the last frame prepared, which will not be tracked (a live frame
+  // the server could not store): the next FrontEnd() takes it again. Throws std::logic_error
+  // for any other frame.
+  void Discard(PreparedFrame prepared);
   SlamSnapshot Snapshot() const;
   // The end of the run: loops settled, the global adjustment; the result of every frame
   // tracked. Throws InvalidArgument without frames or when called twice.

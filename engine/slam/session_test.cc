@@ -5,6 +5,7 @@
 // integration (renders images).
 
 #include <future>
+#include <optional>
 #include <string>
 
 #include <gtest/gtest.h>
@@ -137,6 +138,55 @@ TEST_F(SessionOnShortSequence, RefusesAFrameOfTheWrongSizeAndGoesOn) {
   const FrameReport next = session.Track(sequence_->names[1], Frame(1));
   EXPECT_EQ(next.state, "tracked") << next.reason;
   const SlamResult result = session.Finish();
+  EXPECT_EQ(result.num_tracked, 2);
+}
+
+// A live caller answers from on_pose: once per frame, before Track() returns, with the frame's
+// pose as tracked (a keyframe's mapping refines it afterwards); the run is the same.
+TEST_F(SessionOnShortSequence, HearsEachPoseBeforeTheKeyframesMappingAndTheRunIsTheSame) {
+  SlamOptions options;
+  options.num_threads = 2;
+  const SlamResult batch = RunSlam(
+      sequence_->rig, sequence_->names, [](int i) { return Frame(i); }, options);
+  Session session(sequence_->rig, options);
+  const int n = static_cast<int>(sequence_->names.size());
+  for (int i = 0; i < n; ++i) {
+    std::optional<FrameReport> heard;
+    int calls = 0;
+    const FrameReport report = session.Track(
+        session.FrontEnd(sequence_->names[i], Frame(i)), i + 1 == n,
+        [&](const FrameReport& tracked) {
+          ++calls;
+          heard = tracked;
+          EXPECT_EQ(session.num_frames(), i);  // before Track() returns
+        });
+    ASSERT_EQ(calls, 1) << sequence_->names[i];
+    EXPECT_EQ(heard->state, report.state) << sequence_->names[i];
+    EXPECT_EQ(heard->keyframe, report.keyframe) << sequence_->names[i];
+    ASSERT_TRUE(heard->world_from_rig && report.world_from_rig) << sequence_->names[i];
+    const double moved_m =
+        (heard->world_from_rig->translation - report.world_from_rig->translation).norm();
+    if (!report.keyframe) {
+      EXPECT_EQ(moved_m, 0.0) << sequence_->names[i];
+    }
+    EXPECT_LT(moved_m, 0.01) << sequence_->names[i];
+  }
+  ExpectSameRun(session.Finish(), batch, "with on_pose");
+}
+
+// A frame prepared and then not tracked (the live server could not store it) gives its index
+// back to the next frame; only the last frame prepared can be given back.
+TEST_F(SessionOnShortSequence, GivesBackTheIndexOfAFrameThatWillNotBeTracked) {
+  Session session(sequence_->rig, SlamOptions());
+  session.Track(sequence_->names[0], Frame(0));
+  session.Discard(session.FrontEnd(sequence_->names[1], Frame(1)));
+  EXPECT_EQ(session.Track(sequence_->names[2], Frame(2)).state, "tracked");
+  PreparedFrame third = session.FrontEnd(sequence_->names[3], Frame(3));
+  PreparedFrame fourth = session.FrontEnd(sequence_->names[4], Frame(4));
+  EXPECT_THROW(session.Discard(std::move(third)), std::logic_error);
+  const SlamResult result = session.Finish();
+  ASSERT_EQ(result.frames.size(), 2u);
+  EXPECT_EQ(result.frames[1].name, sequence_->names[2]);
   EXPECT_EQ(result.num_tracked, 2);
 }
 

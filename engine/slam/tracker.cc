@@ -477,7 +477,8 @@ Tracker::FrontEndResult Tracker::FrontEnd(int index, const std::string& name,
   return front;
 }
 
-FrameReport Tracker::BackEnd(FrontEndResult front, bool last_frame) {
+FrameReport Tracker::BackEnd(FrontEndResult front, bool last_frame,
+                             const std::function<void(const FrameReport&)>& on_pose) {
   FrameReport report = std::move(front.report);
   Frame frame = std::move(front.frame);
   const int index = frame.index;
@@ -489,6 +490,7 @@ FrameReport Tracker::BackEnd(FrontEndResult front, bool last_frame) {
                 "frames must reach the back end in order");
   if (!front.usable) {
     report.state = "lost";
+    if (on_pose) on_pose(report);
     return report;
   }
   for (int c = 0; c < 2; ++c) frame.landmark_of[c].assign(frame.features[c].size(), -1);
@@ -518,19 +520,26 @@ FrameReport Tracker::BackEnd(FrontEndResult front, bool last_frame) {
   ChainTo(reference, matches, &frame);
   frame.keyframe =
       report.state != "tracked" || last_frame || frame.keyframe_decision.needs_keyframe;
-  if (frame.keyframe) {
-    AddKeyframe(&frame, &report);
-  } else {
-    const int keyframe = frame.keyframe_decision.reference_keyframe;
-    keyframe_of_frame_[index] = keyframe;
-    rig_from_keyframe_[index] =
-        map_.rig_from_world[index] * map_.rig_from_world[keyframe].Inverse();
-  }
   report.keyframe = frame.keyframe;
-  report.in_map = report.linked && InSavedMap(frame);
   const int reference_keyframe = frame.keyframe_decision.reference_keyframe;
   report.reference_keyframe =
       reference_keyframe >= first_frame_ ? reference_keyframe - first_frame_ : -1;
+  if (on_pose) {
+    // The pose as tracked: a keyframe's mapping below (its landmarks, place recognition, the
+    // local adjustment) refines it, and the next frame waits for that, not the caller.
+    FrameReport tracked = report;
+    tracked.in_map = report.linked && InSavedMap(frame);
+    tracked.world_from_rig = map_.rig_from_world[index].Inverse();
+    on_pose(tracked);
+  }
+  if (frame.keyframe) {
+    AddKeyframe(&frame, &report);
+  } else {
+    keyframe_of_frame_[index] = reference_keyframe;
+    rig_from_keyframe_[index] =
+        map_.rig_from_world[index] * map_.rig_from_world[reference_keyframe].Inverse();
+  }
+  report.in_map = report.linked && InSavedMap(frame);
   linked_[index] = report.linked;
   last_linked_ = report.linked;
   last_ = std::move(frame);

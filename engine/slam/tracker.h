@@ -5,6 +5,7 @@
 // (relocalisation against the map, new segments and their re-linking). Not a public interface.
 
 #include <ctime>
+#include <functional>
 #include <map>
 #include <optional>
 #include <string>
@@ -142,7 +143,10 @@ class Tracker {
                           bool parallel_cameras);
   // Tracking, relocalisation or a new segment; for a keyframe the map update, place
   // recognition and local bundle adjustment. `last_frame` makes the frame a keyframe.
-  FrameReport BackEnd(FrontEndResult front, bool last_frame);
+  // `on_pose` (may be empty) hears the frame's report, with world_from_rig as tracked, once the
+  // pose and the keyframe decision are known, before a keyframe's mapping refines them.
+  FrameReport BackEnd(FrontEndResult front, bool last_frame,
+                      const std::function<void(const FrameReport&)>& on_pose = {});
   // The end of the run: the global adjustment over the keyframes (into `result`), the other
   // frames placed relative to their keyframes, the loops and per-frame links into `result`.
   void Finish(const ProgressSink& progress, SlamResult* result);
