@@ -28,6 +28,12 @@ class SessionOnShortSequence : public ::testing::Test {
   static StereoImages Frame(int i) {
     return StereoImages{sequence_->images[0][i], sequence_->images[1][i]};
   }
+  // RunSlam over the whole sequence with `num_threads`: what a session over the same frames
+  // must give.
+  static SlamResult BatchRun(int num_threads, SlamOptions* options) {
+    options->num_threads = num_threads;
+    return RunSlam(sequence_->rig, sequence_->names, [](int i) { return Frame(i); }, *options);
+  }
 
   static synth::StereoSequence* sequence_;
 };
@@ -55,9 +61,7 @@ void ExpectSameRun(const SlamResult& live, const SlamResult& batch, const std::s
 TEST_F(SessionOnShortSequence, GivesRunSlamsResultFrameByFrame) {
   for (const int num_threads : {1, 2}) {
     SlamOptions options;
-    options.num_threads = num_threads;
-    const SlamResult batch = RunSlam(
-        sequence_->rig, sequence_->names, [](int i) { return Frame(i); }, options);
+    const SlamResult batch = BatchRun(num_threads, &options);
     Session session(sequence_->rig, options);
     const int n = static_cast<int>(sequence_->names.size());
     for (int i = 0; i < n; ++i) {
@@ -76,9 +80,7 @@ TEST_F(SessionOnShortSequence, GivesRunSlamsResultFrameByFrame) {
 // end runs on this one, and the snapshot taken between frames while a front end runs.
 TEST_F(SessionOnShortSequence, GivesRunSlamsResultWithTheFrontEndAFrameAhead) {
   SlamOptions options;
-  options.num_threads = 2;
-  const SlamResult batch = RunSlam(
-      sequence_->rig, sequence_->names, [](int i) { return Frame(i); }, options);
+  const SlamResult batch = BatchRun(2, &options);
   Session session(sequence_->rig, options);
   const int n = static_cast<int>(sequence_->names.size());
   const auto front_end = [&session](int i) {
@@ -145,9 +147,7 @@ TEST_F(SessionOnShortSequence, RefusesAFrameOfTheWrongSizeAndGoesOn) {
 // pose as tracked (a keyframe's mapping refines it afterwards); the run is the same.
 TEST_F(SessionOnShortSequence, HearsEachPoseBeforeTheKeyframesMappingAndTheRunIsTheSame) {
   SlamOptions options;
-  options.num_threads = 2;
-  const SlamResult batch = RunSlam(
-      sequence_->rig, sequence_->names, [](int i) { return Frame(i); }, options);
+  const SlamResult batch = BatchRun(2, &options);
   Session session(sequence_->rig, options);
   const int n = static_cast<int>(sequence_->names.size());
   for (int i = 0; i < n; ++i) {
