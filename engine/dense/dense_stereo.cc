@@ -92,12 +92,24 @@ cv::Mat MatchedGrey(const cv::Mat& right, const cv::Mat& disparity16) {
 // cam1's window at columns c - d (bicubic), with both windows' mean removed and cam1's scaled
 // to cam0's contrast (the two cameras see a point at other image radii, hence other
 // vignetting). The windows are box sums over the images, each cell warping its own sample by
-// its own disparity (the disparity is taken as constant over a window, as SGBM does). One step
-// from SGBM's disparity is what the development renders support: further steps of this
-// windowed fit made the median error grow again (bench_dense: 0.344 % of range after one step,
-// 0.40-0.54 % after two to four, 0.530 % without). Returns the disparity in cells (CV_32F, -1
-// where none) and each cell's least-squares std (cells): the fit's residual variance over its
+// its own disparity (the disparity is taken as constant over a window, as SGBM does). The step
+// so found is the window's mean misalignment (each sample weighted by its gradient energy), so
+// it is added to the window's mean disparity (the plain mean of its matched cells' SGBM
+// disparities: on a slanted surface a symmetric window's mean is the centre's disparity, where
+// a mean weighted by the gradients is not), not to the cell's own: SGBM's cell-to-cell scatter
+// is averaged away. Where that mean is more than kMaxWindowDisparityShiftCells from the cell's
+// disparity (a depth edge in the window) the step is added to the cell's own. One step: when
+// the step was added to the cell's own disparity, further steps made the median error grow
+// again (bench_dense: 0.344 % of range after one step, 0.40-0.54 % after two to four, 0.530 %
+// without). Returns the disparity in cells (CV_32F, -1 where none) and each cell's least-squares std (cells): the fit's residual variance over its
 // gradient energy (0 without the refinement).
+// Chosen on the development renders (bench_dense --development-only, 2 pairs, 2026-12-08):
+// 0.25, 0.5, 1 and 2 cells gave medians of 0.219, 0.218, 0.219 and 0.219 % of range on the
+// room and 0.283, 0.280, 0.281 and 0.283 % on the noisy room, within 1 % 91.5, 91.4, 91.0
+// and 90.6 % and 88.4, 88.6, 88.2 and 87.8 %; the step added to the cell's own disparity,
+// 0.311 % / 89.2 % and 0.388 % / 84.4 %.
+constexpr float kMaxWindowDisparityShiftCells = 0.5f;
+
 struct RefinedDisparity {
   cv::Mat disparity, std_cells;
 };
@@ -143,11 +155,26 @@ RefinedDisparity RefineDisparity(const cv::Mat& left, const cv::Mat& right,
       cv::remap(right_dx, g, map_x, map_y, cv::INTER_LINEAR, cv::BORDER_REPLICATE);
     }
   });
-  cv::Mat mean_l, mean_ll, mw, mg, mww, mgg, mgw, mgl, mwl;
-  const std::array<std::tuple<cv::Mat*, const cv::Mat*, const cv::Mat*>, 9> sums = {{
+  // 1 where SGBM matched, and the disparity there: their window means give the window's mean
+  // disparity over its matched cells.
+  cv::Mat matched(size, CV_32F), matched_disparity(size, CV_32F);
+  cv::parallel_for_(cv::Range(0, size.height), [&](const cv::Range& rows) {
+    for (int r = rows.start; r < rows.end; ++r) {
+      const float* sg = sgbm.ptr<float>(r);
+      float* m = matched.ptr<float>(r);
+      float* md = matched_disparity.ptr<float>(r);
+      for (int c = 0; c < size.width; ++c) {
+        m[c] = sg[c] > 0.f ? 1.f : 0.f;
+        md[c] = sg[c] > 0.f ? sg[c] : 0.f;
+      }
+    }
+  });
+  cv::Mat mean_l, mean_ll, mw, mg, mww, mgg, mgw, mgl, mwl, matched_fraction, mean_matched_d;
+  const std::array<std::tuple<cv::Mat*, const cv::Mat*, const cv::Mat*>, 11> sums = {{
       {&mean_l, &left, nullptr}, {&mean_ll, &left, &left}, {&mw, &w, nullptr},
       {&mg, &g, nullptr}, {&mww, &w, &w}, {&mgg, &g, &g}, {&mgw, &g, &w}, {&mgl, &g, &left},
-      {&mwl, &w, &left}}};
+      {&mwl, &w, &left}, {&matched_fraction, &matched, nullptr},
+      {&mean_matched_d, &matched_disparity, nullptr}}};
   ParallelTasks(static_cast<int>(sums.size()), [&](int i) {
     const auto [sum, a, b] = sums[i];
     cv::boxFilter(b ? a->mul(*b) : *a, *sum, CV_32F, window);
@@ -168,6 +195,14 @@ RefinedDisparity RefineDisparity(const cv::Mat& left, const cv::Mat& right,
         const float cov_gw = mgw.at<float>(r, c) - m_g * m_w;
         const float cov_gl = mgl.at<float>(r, c) - m_g * ml;
         const float step = std::clamp((a * cov_gw - cov_gl) / (a * var_g), -0.5f, 0.5f);
+        // The step is the window's mean misalignment: it corrects the window's mean disparity,
+        // which SGBM's cell-to-cell scatter does not move as it moves the cell's own.
+        // (Cell c is matched itself, so the fraction is at least one cell's.)
+        const float window_disparity =
+            mean_matched_d.at<float>(r, c) / matched_fraction.at<float>(r, c);
+        if (std::abs(window_disparity - d[c]) <= kMaxWindowDisparityShiftCells) {
+          d[c] = window_disparity;
+        }
         d[c] += step;
         // Residual per sample of the fit at SGBM's disparity, less what the step explains.
         const float cov_wl = mwl.at<float>(r, c) - m_w * ml;

@@ -90,19 +90,21 @@ struct DenseStereoOptions {
   // Each point's disparity std (cells, 1 sigma), turned into its range std:
   // sqrt(disparity_std_cells^2 + (disparity_std_scale * fit_std)^2), where fit_std is the
   // refinement's least-squares std of the cell (0 without refinement). Calibrated on the two
-  // development sets at once (bench_dense --calibrate-std, 2 pairs each, 2026-12-07, the
-  // 15-cell window, SGBM's 9-cell window and smoothness 32 / 192): the room as rendered (69.4 %
-  // of the points within 1 std of the true range along their ray, 92.0 % within 2) and the room
-  // with more sensor noise and JPEG (69.0 %, 92.3 %; with SGBM's 7-cell window and smoothness
-  // 8 / 32 it was 0.02 cells and scale 5.0, with the 11-cell refinement window 3.6); the
+  // development sets at once (bench_dense --calibrate-std, 2 pairs each, 2026-12-08, the
+  // 15-cell window stepping from the window's mean disparity, SGBM's 9-cell window and
+  // smoothness 32 / 192): the room as rendered (69.7 % of the points within 1 std of the true
+  // range along their ray, 91.1 % within 2) and the room with more sensor noise and JPEG
+  // (70.1 %, 91.7 %; stepping from each cell's own disparity it was 0.07 cells and scale 3.2,
+  // with SGBM's 7-cell window and smoothness 8 / 32 0.02 cells and scale 5.0, with the 11-cell
+  // refinement window 3.6); the
   // errors' tail is heavier than a Gaussian's, so no pair of values reaches 95 % at 2 std without
   // overstating the 1-std share. The fit's std alone underestimates: neighbouring cells of the
   // grid share image pixels (the grid resamples the images), and JPEG and sensor noise are
   // spatially correlated, so the window's samples are not independent. (An estimate of the
   // images' noise from the images themselves did not help: JPEG removes the fine-scale noise
   // such an estimate sees while the disparity error grows; docs/dense.md.)
-  double disparity_std_cells = 0.07;
-  double disparity_std_scale = 3.2;
+  double disparity_std_cells = 0.04;
+  double disparity_std_scale = 2.6;
   // Points whose range std exceeds this fraction of their range are not reported.
   double max_relative_range_std = 0.1;
   // Mirror mask (engine/features/mirror_mask.h, shape kDarkRowEnds): along each grid row,

@@ -79,8 +79,8 @@ TEST(DenseStereo, RoomPairIsDenseAndAccurateAllAround) {
       result.num_points, result.mean_confidence, 100 * accuracy.median_relative_distance,
       100 * accuracy.within_1_percent, 100 * accuracy.azimuth_coverage);
   EXPECT_GE(result.num_points, 500000);
-  EXPECT_LE(accuracy.median_relative_distance, 0.006);
-  EXPECT_GE(accuracy.within_1_percent, 0.70);
+  EXPECT_LE(accuracy.median_relative_distance, 0.003);
+  EXPECT_GE(accuracy.within_1_percent, 0.88);
   EXPECT_EQ(accuracy.azimuth_coverage, 1.0);
   // The panoramas: one column per azimuth, the range known exactly where points are.
   EXPECT_EQ(result.range_m.cols, dense.rectifier().rows());
@@ -118,8 +118,10 @@ TEST(DenseStereo, SubCellRefinementIsMoreAccurateAndItsStdIsCalibrated) {
       100 * before.median_relative_distance, 100 * before.within_1_percent,
       100 * after.median_relative_distance, 100 * after.within_1_percent, 100 * within(1.0),
       100 * within(2.0));
-  EXPECT_LT(after.median_relative_distance, 0.8 * before.median_relative_distance);
-  EXPECT_GT(after.within_1_percent, before.within_1_percent + 0.05);
+  // Stepping from each cell's own disparity gave 0.63 times SGBM's median error (2026-12-07);
+  // from the window's mean disparity 0.44 times.
+  EXPECT_LT(after.median_relative_distance, 0.5 * before.median_relative_distance);
+  EXPECT_GT(after.within_1_percent, before.within_1_percent + 0.15);
   EXPECT_GE(within(1.0), 0.60);
   EXPECT_LE(within(1.0), 0.76);
   EXPECT_GE(within(2.0), 0.88);
