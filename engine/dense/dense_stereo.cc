@@ -85,6 +85,14 @@ cv::Mat MatchedGrey(const cv::Mat& right, const cv::Mat& disparity16) {
   return matched;
 }
 
+// How far (cells) the window's mean disparity may lie from a cell's own for the refinement's
+// step to be added to it (RefineDisparity). Chosen on the development renders (bench_dense
+// --development-only, 2 pairs, 2026-12-08): 0.25, 0.5, 1 and 2 cells gave medians of 0.219,
+// 0.218, 0.219 and 0.219 % of range on the room and 0.283, 0.280, 0.281 and 0.283 % on the
+// noisy room, within 1 % 91.5, 91.4, 91.0 and 90.6 % and 88.4, 88.6, 88.2 and 87.8 %; the step
+// added to the cell's own disparity, 0.311 % / 89.2 % and 0.388 % / 84.4 %.
+constexpr float kMaxWindowDisparityShiftCells = 0.5f;
+
 // Sub-cell refinement of SGBM's disparity on the rectified images themselves. SGBM's sub-pixel
 // step (a parabola through its aggregated costs) draws disparities towards whole cells (pixel
 // locking: bench_dense measures it). Each matched cell's disparity d takes one Gauss-Newton
@@ -98,18 +106,13 @@ cv::Mat MatchedGrey(const cv::Mat& right, const cv::Mat& disparity16) {
 // disparities: on a slanted surface a symmetric window's mean is the centre's disparity, where
 // a mean weighted by the gradients is not), not to the cell's own: SGBM's cell-to-cell scatter
 // is averaged away. Where that mean is more than kMaxWindowDisparityShiftCells from the cell's
-// disparity (a depth edge in the window) the step is added to the cell's own. One step: when
-// the step was added to the cell's own disparity, further steps made the median error grow
-// again (bench_dense: 0.344 % of range after one step, 0.40-0.54 % after two to four, 0.530 %
-// without). Returns the disparity in cells (CV_32F, -1 where none) and each cell's least-squares std (cells): the fit's residual variance over its
-// gradient energy (0 without the refinement).
-// Chosen on the development renders (bench_dense --development-only, 2 pairs, 2026-12-08):
-// 0.25, 0.5, 1 and 2 cells gave medians of 0.219, 0.218, 0.219 and 0.219 % of range on the
-// room and 0.283, 0.280, 0.281 and 0.283 % on the noisy room, within 1 % 91.5, 91.4, 91.0
-// and 90.6 % and 88.4, 88.6, 88.2 and 87.8 %; the step added to the cell's own disparity,
-// 0.311 % / 89.2 % and 0.388 % / 84.4 %.
-constexpr float kMaxWindowDisparityShiftCells = 0.5f;
-
+// disparity (a depth edge in the window) the step is added to the cell's own. One step: from
+// the cell's own disparity further steps made the median error grow again (bench_dense: 0.344 %
+// of range after one step, 0.40-0.54 % after two to four, 0.530 % without); from the window's
+// mean they lower the median but not the share within 1 %, for the refinement's time again
+// each (docs/dense.md). Returns the disparity in cells (CV_32F, -1 where none) and each cell's
+// least-squares std (cells): the fit's residual variance over its gradient energy (0 without
+// the refinement).
 struct RefinedDisparity {
   cv::Mat disparity, std_cells;
 };

@@ -96,13 +96,13 @@ struct DenseStereoOptions {
   // range along their ray, 91.1 % within 2) and the room with more sensor noise and JPEG
   // (70.1 %, 91.7 %; stepping from each cell's own disparity it was 0.07 cells and scale 3.2,
   // with SGBM's 7-cell window and smoothness 8 / 32 0.02 cells and scale 5.0, with the 11-cell
-  // refinement window 3.6); the
-  // errors' tail is heavier than a Gaussian's, so no pair of values reaches 95 % at 2 std without
-  // overstating the 1-std share. The fit's std alone underestimates: neighbouring cells of the
-  // grid share image pixels (the grid resamples the images), and JPEG and sensor noise are
-  // spatially correlated, so the window's samples are not independent. (An estimate of the
-  // images' noise from the images themselves did not help: JPEG removes the fine-scale noise
-  // such an estimate sees while the disparity error grows; docs/dense.md.)
+  // refinement window 3.6); the errors' tail is heavier than a Gaussian's, so no pair of values
+  // reaches 95 % at 2 std without overstating the 1-std share. The fit's std alone
+  // underestimates: neighbouring cells of the grid share image pixels (the grid resamples the
+  // images), and JPEG and sensor noise are spatially correlated, so the window's samples are
+  // not independent. (An estimate of the images' noise from the images themselves did not
+  // help: JPEG removes the fine-scale noise such an estimate sees while the disparity error
+  // grows; docs/dense.md.)
   double disparity_std_cells = 0.04;
   double disparity_std_scale = 2.6;
   // Points whose range std exceeds this fraction of their range are not reported.
