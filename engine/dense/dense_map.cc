@@ -535,13 +535,15 @@ std::vector<int> SelectKeyframes(const std::vector<std::optional<Rigid3d>>& worl
 DenseStereoOptions KeyframeStereoOptions(const DenseMapOptions& options) {
   DenseStereoOptions stereo_options;
   stereo_options.grid.step_factor = options.grid_step_factor;
-  // The map selects and weighs its points by their geometry, as a constant 0.25-cell disparity
-  // std makes them (about twice the calibrated std of a well-fitted match), with the refined
-  // disparities' positions. The calibrated std under the 2 % filter let far, wrongly matched
-  // points into the map: dense_map_test (4 room keyframes, 2026-11-27) observed 19,668 cells,
-  // 98.3 % agreeing, against 8,730 and 99.5 % this way (docs/dense.md); a filter of 0.9 % on
-  // the calibrated std kept 99.5 % but left a third of the points of 640x480 images.
-  stereo_options.disparity_std_cells = 0.25;
+  // The map selects and weighs its points by their geometry, as a constant disparity std makes
+  // them, with the refined disparities' positions. The calibrated std under the 2 % filter let
+  // far, wrongly matched points into the map: dense_map_test (4 room keyframes, 2026-11-27)
+  // observed 19,668 cells, 98.3 % agreeing, against 8,730 and 99.5 % with 0.25 cells
+  // (docs/dense.md); a filter of 0.9 % on the calibrated std kept 99.5 % but left a third of
+  // the points of 640x480 images. 0.15 cells since the refinement steps from the window's mean
+  // disparity (2026-12-08; its median error on the development renders is 0.05-0.06 cells),
+  // chosen with DenseMapOptions::grid_step_factor (see there).
+  stereo_options.disparity_std_cells = 0.15;
   stereo_options.disparity_std_scale = 0.0;
   // Points the map would not fuse are not made.
   stereo_options.max_relative_range_std =

@@ -35,25 +35,29 @@ struct DenseMapOptions {
   double voxel_m = 0.02;
   // Keyframes: a tracked frame is fused when it lies at least this far from the last fused one.
   // With grid_step_factor, the fusion's cost (the keyframes' dense stereo): bench_slam
-  // --dense-map on the 40-frame room (6.3 m) chose 1.5 m and 1.25, the setting that meets the
-  // issue's three targets (fusion 19-26 % of SLAM's wall time, median 0.37 % of range, 99.5 %
-  // of 8,786 occupancy cells agreeing). 1 m keyframes observe 13,088 cells for 29-40 % of
-  // SLAM's time; the full-resolution grid (factor 1) 14,558 cells for 37-45 %.
-  // docs/dense.md has the table.
+  // --dense-map on the 40-frame room (6.3 m) chose 1.5 m (2026-11-26: with factor 1.25, fusion
+  // 19-26 % of SLAM's wall time, median 0.37 % of range, 99.5 % of 8,786 occupancy cells
+  // agreeing; 1 m keyframes observed 13,088 cells for 29-40 % of SLAM's time). docs/dense.md
+  // has the table.
   double keyframe_spacing_m = 1.5;
   // The keyframes' dense stereo runs on a grid this many times coarser than the images' finest
   // angular resolution (SphericalGridOptions::step_factor). Coarser is cheaper (the cells fall
   // with its square) but its range std grows with the step, so fewer points pass
-  // max_relative_range_std and those that do are less precise: at 1.5 the median rose to
-  // 0.44-0.53 % of range, at 2 above 0.65 %.
-  double grid_step_factor = 1.25;
+  // max_relative_range_std. Chosen with the map's disparity std (FuseKeyframes: 0.15 cells) on
+  // the room (bench_slam --dense-map, 2026-12-08, the refinement stepping from the window's
+  // mean disparity): 1.25 and 0.25 cells (before) observed 9,101 cells, 99.6 % agreeing, for
+  // 36-40 % of SLAM's wall time; 1.5 and 0.25 5,451; 1.5 and 0.2 10,100 (99.5 %); 1.5 and 0.15
+  // 17,433 (99.4 %, but 32 of 639 occupied cells wrongly, against 2 of 128); 1.75 and 0.15
+  // 13,364 (99.6 %, 4 of 293 wrongly) for 18-20 %. The street, which did not choose: 12,380
+  // cells, 99.7 % agreeing, against 8,340 and 99.7 % before.
+  double grid_step_factor = 1.75;
   // A voxel is kept when at least this many points of at least min_frames keyframes fell in it
   // (a surface seen once, or by one frame only, is not confirmed).
   int min_points = 2;
   int min_frames = 2;
   // Points whose range std exceeds this fraction of their range are not fused (far points seen
   // with little parallax would otherwise fill voxels of their own with their larger errors).
-  // The map's range std is geometric: FuseKeyframes gives every point 0.25 cells of disparity
+  // The map's range std is geometric: FuseKeyframes gives every point 0.15 cells of disparity
   // std, not the calibrated per-point std of dense_stereo.h (see there).
   double max_relative_range_std = 0.02;
   // Occupancy grid: cell size, and the band of heights above the floor that holds obstacles
