@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdint>
 #include <functional>
 #include <optional>
 #include <tuple>
@@ -131,16 +132,23 @@ RefinedDisparity RefineDisparity(const cv::Mat& left, const cv::Mat& right,
   const cv::Size window(o.refine_window_cells, o.refine_window_cells);
   const float n = static_cast<float>(window.area());
   cv::Mat sgbm(size, CV_32F), map_x(size, CV_32F), map_y(size, CV_32F);
+  // 1 where SGBM matched, and its disparity (1/16 cells) there, else 0: their window sums
+  // (integer, exact) give the window's mean disparity over its matched cells.
+  cv::Mat matched(size, CV_8U), matched_disparity16(size, CV_16S);
   cv::parallel_for_(cv::Range(0, size.height), [&](const cv::Range& rows) {
     for (int r = rows.start; r < rows.end; ++r) {
       const int16_t* d = disparity16.ptr<int16_t>(r);
       float* sg = sgbm.ptr<float>(r);
       float* mx = map_x.ptr<float>(r);
       float* my = map_y.ptr<float>(r);
+      uint8_t* m = matched.ptr<uint8_t>(r);
+      int16_t* md = matched_disparity16.ptr<int16_t>(r);
       for (int c = 0; c < size.width; ++c) {
         sg[c] = d[c] > 0 ? d[c] / 16.f : -1.f;
         mx[c] = d[c] > 0 ? c - sg[c] : static_cast<float>(c);
         my[c] = static_cast<float>(r);
+        m[c] = d[c] > 0 ? 1 : 0;
+        md[c] = d[c] > 0 ? d[c] : 0;
       }
     }
   });
@@ -158,29 +166,21 @@ RefinedDisparity RefineDisparity(const cv::Mat& left, const cv::Mat& right,
       cv::remap(right_dx, g, map_x, map_y, cv::INTER_LINEAR, cv::BORDER_REPLICATE);
     }
   });
-  // 1 where SGBM matched, and the disparity there: their window means give the window's mean
-  // disparity over its matched cells.
-  cv::Mat matched(size, CV_32F), matched_disparity(size, CV_32F);
-  cv::parallel_for_(cv::Range(0, size.height), [&](const cv::Range& rows) {
-    for (int r = rows.start; r < rows.end; ++r) {
-      const float* sg = sgbm.ptr<float>(r);
-      float* m = matched.ptr<float>(r);
-      float* md = matched_disparity.ptr<float>(r);
-      for (int c = 0; c < size.width; ++c) {
-        m[c] = sg[c] > 0.f ? 1.f : 0.f;
-        md[c] = sg[c] > 0.f ? sg[c] : 0.f;
-      }
-    }
-  });
-  cv::Mat mean_l, mean_ll, mw, mg, mww, mgg, mgw, mgl, mwl, matched_fraction, mean_matched_d;
-  const std::array<std::tuple<cv::Mat*, const cv::Mat*, const cv::Mat*>, 11> sums = {{
+  cv::Mat mean_l, mean_ll, mw, mg, mww, mgg, mgw, mgl, mwl, num_matched, sum_matched_d16;
+  const std::array<std::tuple<cv::Mat*, const cv::Mat*, const cv::Mat*>, 9> sums = {{
       {&mean_l, &left, nullptr}, {&mean_ll, &left, &left}, {&mw, &w, nullptr},
       {&mg, &g, nullptr}, {&mww, &w, &w}, {&mgg, &g, &g}, {&mgw, &g, &w}, {&mgl, &g, &left},
-      {&mwl, &w, &left}, {&matched_fraction, &matched, nullptr},
-      {&mean_matched_d, &matched_disparity, nullptr}}};
-  ParallelTasks(static_cast<int>(sums.size()), [&](int i) {
-    const auto [sum, a, b] = sums[i];
-    cv::boxFilter(b ? a->mul(*b) : *a, *sum, CV_32F, window);
+      {&mwl, &w, &left}}};
+  ParallelTasks(static_cast<int>(sums.size()) + 2, [&](int i) {
+    if (i == static_cast<int>(sums.size())) {
+      cv::boxFilter(matched, num_matched, CV_32S, window, cv::Point(-1, -1), false);
+    } else if (i > static_cast<int>(sums.size())) {
+      cv::boxFilter(matched_disparity16, sum_matched_d16, CV_32S, window, cv::Point(-1, -1),
+                    false);
+    } else {
+      const auto [sum, a, b] = sums[i];
+      cv::boxFilter(b ? a->mul(*b) : *a, *sum, CV_32F, window);
+    }
   });
   cv::parallel_for_(cv::Range(0, size.height), [&](const cv::Range& rows) {
     for (int r = rows.start; r < rows.end; ++r) {
@@ -200,9 +200,9 @@ RefinedDisparity RefineDisparity(const cv::Mat& left, const cv::Mat& right,
         const float step = std::clamp((a * cov_gw - cov_gl) / (a * var_g), -0.5f, 0.5f);
         // The step is the window's mean misalignment: it corrects the window's mean disparity,
         // which SGBM's cell-to-cell scatter does not move as it moves the cell's own.
-        // (Cell c is matched itself, so the fraction is at least one cell's.)
-        const float window_disparity =
-            mean_matched_d.at<float>(r, c) / matched_fraction.at<float>(r, c);
+        // (Cell c is matched itself, so the count is at least 1.)
+        const float window_disparity = static_cast<float>(sum_matched_d16.at<int32_t>(r, c)) /
+                                       (16.f * static_cast<float>(num_matched.at<int32_t>(r, c)));
         if (std::abs(window_disparity - d[c]) <= kMaxWindowDisparityShiftCells) {
           d[c] = window_disparity;
         }
