@@ -45,8 +45,10 @@
 // --job-only runs the stereo_reconstruct job's two runs only (its wall time, A/B against
 // another build under the same load).
 //
+// --job-rounds N runs only the job against the peer's first matching in N alternating rounds
+// (RunJobRounds) and prints the median ratio.
 // Usage: bench_dense [--frames N] [--threads N] [--no-peer] [--no-job] [--job-only]
-//                    [--development-only]
+//                    [--job-rounds N] [--development-only]
 //                    [--calibrate-std] [--block-size N] [--sgbm-p1 N] [--sgbm-p2 N]
 //                    [--refine-window N] [--step-factor F]
 //                    [--max-parallax-deg D]
@@ -297,8 +299,8 @@ std::vector<Eigen::Vector3d> PeerReconstruct(const PeerRig& peer, const cv::Mat&
 // (NAME_range.tiff, NAME_range.png, cloud_NAME.ply; with `merged`, the dataset holds the true
 // trajectory as a .tum file and the job also writes cloud.ply of all pairs). The job writes pair
 // k's files while it matches pair k + 1. Prints wall and CPU seconds per pair.
-void RunJob(const synth::StereoSequence& sequence, int num_frames,
-            const dense::DenseStereoOptions& dense_options, bool merged) {
+double RunJob(const synth::StereoSequence& sequence, int num_frames,
+              const dense::DenseStereoOptions& dense_options, bool merged, bool print = true) {
   const std::filesystem::path root =
       std::filesystem::temp_directory_path() / "omnirig_bench_dense_job";
   std::filesystem::remove_all(root);
@@ -330,12 +332,16 @@ void RunJob(const synth::StereoSequence& sequence, int num_frames,
   const double cpu = CpuSeconds();
   const nlohmann::json result = api::RunStereoReconstructJob(params, context);
   const double s = Seconds(start), cpu_s = CpuSeconds() - cpu;
-  std::printf(
-      "omnirig stereo_reconstruct job, %d pairs%s: %.3f s/pair wall, %.3f CPU s/pair, "
-      "%zu points, artifact %s\n",
-      num_frames, merged ? " + cloud.ply of all (.tum)" : "", s / num_frames, cpu_s / num_frames,
-      result["num_points"].get<size_t>(), result["artifact"].get<std::string>().c_str());
+  if (print) {
+    std::printf(
+        "omnirig stereo_reconstruct job, %d pairs%s: %.3f s/pair wall, %.3f CPU s/pair, "
+        "%zu points, artifact %s\n",
+        num_frames, merged ? " + cloud.ply of all (.tum)" : "", s / num_frames,
+        cpu_s / num_frames, result["num_points"].get<size_t>(),
+        result["artifact"].get<std::string>().c_str());
+  }
   std::filesystem::remove_all(root);
+  return s / num_frames;
 }
 
 // --calibrate-std: the per-point disparity std is sqrt(floor^2 + (scale * fit_std)^2), fit_std
@@ -483,6 +489,35 @@ std::vector<PeerSetting> PeerSettings() {
        longlati, (cv::Mat_<double>(3, 3) << 2048 / M_PI, 0, 0, 0, 768 / (2 * M_PI), 0, 0, 0, 1), 80,
        5},
   };
+}
+
+// The job (without the merged cloud) and the peer's first matching (PERSPECTIVE, f = w/4) on
+// the same pairs in alternating rounds, after one job that pages its buffers in: the machine's
+// speed drifts between runs, so each round's ratio compares the two at nearly the same time.
+// Prints each round and the median ratio.
+void RunJobRounds(const synth::StereoSequence& sequence, int num_frames, int rounds,
+                  const dense::DenseStereoOptions& dense_options) {
+  const PeerRig peer = ToPeer(sequence.rig);
+  const PeerSetting setting = PeerSettings().front();
+  RunJob(sequence, num_frames, dense_options, false, false);
+  std::vector<double> ratios;
+  std::printf("\nthe job's time a pair against %s, %d pairs a round:\n", setting.name,
+              num_frames);
+  for (int round = 0; round < rounds; ++round) {
+    const double job_s = RunJob(sequence, num_frames, dense_options, false, false);
+    const auto start = std::chrono::steady_clock::now();
+    for (int f = 0; f < num_frames; ++f) {
+      PeerReconstruct(peer, sequence.images[0][f], sequence.images[1][f], setting.flag,
+                      setting.size, setting.k_new, setting.disparities, setting.window);
+    }
+    const double peer_s = Seconds(start) / num_frames;
+    ratios.push_back(job_s / peer_s);
+    std::printf("  round %d: job %.3f s, peer %.3f s, %.2fx\n", round + 1, job_s, peer_s,
+                ratios.back());
+  }
+  std::sort(ratios.begin(), ratios.end());
+  std::printf("  median of %d rounds: %.2fx (range %.2f-%.2fx)\n", rounds,
+              ratios[ratios.size() / 2], ratios.front(), ratios.back());
 }
 
 void PrintTableHeader() {
@@ -933,7 +968,8 @@ struct BenchFlags {
   bool development_only = false;  // for tuning: the held-out renders are not even made
   bool calibrate_std = false;
   bool job_only = false;
-  bool floor = true;  // the clean lounge as well
+  int job_rounds = 0;  // > 0: only the job against the peer in alternating rounds
+  bool floor = true;   // the clean lounge as well
 };
 
 int Run(const BenchFlags& flags, const dense::DenseStereoOptions& dense_options) {
@@ -951,6 +987,10 @@ int Run(const BenchFlags& flags, const dense::DenseStereoOptions& dense_options)
                        sequence.rig,
                        sequence.world_from_rig,
                        sequence.images};
+  if (flags.job_rounds > 0) {
+    RunJobRounds(sequence, flags.frames, flags.job_rounds, dense_options);
+    return 0;
+  }
   if (flags.job_only) {
     RunJob(sequence, flags.frames, dense_options, false);
     RunJob(sequence, flags.frames, dense_options, true);
@@ -1019,6 +1059,8 @@ int main(int argc, char** argv) {
     if (i + 1 >= argc) continue;
     if (!std::strcmp(argv[i], "--frames"))
       flags.frames = std::max(1, std::atoi(argv[++i]));
+    else if (!std::strcmp(argv[i], "--job-rounds"))
+      flags.job_rounds = std::max(1, std::atoi(argv[++i]));
     else if (!std::strcmp(argv[i], "--threads"))
       flags.threads = std::max(1, std::atoi(argv[++i]));
     else if (!std::strcmp(argv[i], "--refine-window"))

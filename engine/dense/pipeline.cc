@@ -19,8 +19,8 @@
 namespace omnirig::dense {
 namespace {
 
-cv::Mat ReadImage(const ImageReader& read, const std::string& name) {
-  const cv::Mat image = read(name, cv::IMREAD_COLOR);
+cv::Mat ReadImage(const ImageReader& read, const std::string& name, int imread_flags) {
+  const cv::Mat image = read(name, imread_flags);
   OMNIRIG_CHECK(!image.empty(), "cannot read image '" << name << "'");
   return image;
 }
@@ -122,8 +122,8 @@ size_t RunSparse(const StereoRig& rig, const ImageReader& read,
   size_t num_points = 0;
   for (size_t k = 0; k < pairs.size(); ++k) {
     progress.ThrowIfCancelled();
-    const cv::Mat image0 = ReadImage(read, pairs[k].cam0);
-    const cv::Mat image1 = ReadImage(read, pairs[k].cam1);
+    const cv::Mat image0 = ReadImage(read, pairs[k].cam0, cv::IMREAD_COLOR);
+    const cv::Mat image1 = ReadImage(read, pairs[k].cam1, cv::IMREAD_COLOR);
     const StereoPairReport report = WithErrorPrefix("pair '" + pairs[k].name + "': ", [&] {
       return ReconstructStereoPair(rig, image0, image1, options,
                                    PairRange(progress, k, pairs.size()));
@@ -172,10 +172,12 @@ size_t RunDense(const StereoRig& rig, const ImageReader& read,
   size_t num_points = 0;
   BackgroundTask writer;
   // Pair k + 1's images are read (decoded) while pair k is matched, the two cameras at once.
+  // Only cam0's colours make the points' colours: cam1 is read as grey (a JPEG's luma alone).
   const auto read_pair = [&read, &pairs](size_t k) {
-    std::future<cv::Mat> image1 =
-        std::async(std::launch::async, [&] { return ReadImage(read, pairs[k].cam1); });
-    cv::Mat image0 = ReadImage(read, pairs[k].cam0);
+    std::future<cv::Mat> image1 = std::async(std::launch::async, [&] {
+      return ReadImage(read, pairs[k].cam1, cv::IMREAD_GRAYSCALE);
+    });
+    cv::Mat image0 = ReadImage(read, pairs[k].cam0, cv::IMREAD_COLOR);
     return std::make_pair(std::move(image0), image1.get());
   };
   std::future<std::pair<cv::Mat, cv::Mat>> next_images;
@@ -198,10 +200,12 @@ size_t RunDense(const StereoRig& rig, const ImageReader& read,
     outcome.range_tiff = base + "_range.tiff";
     outcome.range_png = base + "_range.png";
     outputs->Describe(k, pairs[k].name, &outcome);
-    if (on_pair) on_pair(outcome);
     num_points += pair_result->points.size();
-    writer.Run([k, name = pairs[k].name, pair_result, &output_dir, outputs] {
-      WriteDensePair(k, name, *pair_result, output_dir, outputs);
+    // on_pair (the pair's figures, e.g. the medians of its ranges) runs with the writing, so
+    // the next pair's matching starts at once.
+    writer.Run([k, outcome, pair_result, &output_dir, outputs, &on_pair] {
+      if (on_pair) on_pair(outcome);
+      WriteDensePair(k, outcome.names->name, *pair_result, output_dir, outputs);
     });
   }
   writer.Wait();
