@@ -1077,6 +1077,10 @@ int main(int argc, char** argv) {
       options.max_parallax_deg = std::atof(argv[++i]);
     else if (!std::strcmp(argv[i], "--disparity-std-cells"))
       options.disparity_std_cells = std::atof(argv[++i]);
+    else if (!std::strcmp(argv[i], "--min-confidence"))
+      options.min_confidence = std::atof(argv[++i]);
+    else if (!std::strcmp(argv[i], "--max-relative-range-std"))
+      options.max_relative_range_std = std::atof(argv[++i]);
     else if (!std::strcmp(argv[i], "--disparity-std-scale"))
       options.disparity_std_scale = std::atof(argv[++i]);
   }
