@@ -38,9 +38,10 @@
 // std's two parameters (disparity_std_cells, disparity_std_scale) on the development sets (the
 // room and the noisy room).
 //
-// --block-size, --sgbm-p1, --sgbm-p2, --refine-window, --step-factor and --max-parallax-deg set
-// DenseStereoOptions' block_size, smoothness_p1, smoothness_p2, refine_window_cells,
-// grid.step_factor and max_parallax_deg (to measure what they cost and give).
+// --block-size, --sgbm-p1, --sgbm-p2, --refine-window, --step-factor, --max-parallax-deg,
+// --min-confidence and --max-relative-range-std set DenseStereoOptions' block_size,
+// smoothness_p1, smoothness_p2, refine_window_cells, grid.step_factor, max_parallax_deg,
+// min_confidence and max_relative_range_std (to measure what they cost and give).
 //
 // --job-only runs the stereo_reconstruct job's two runs only (its wall time, A/B against
 // another build under the same load).
@@ -53,7 +54,8 @@
 //                    [--refine-window N] [--step-factor F]
 //                    [--max-parallax-deg D]
 //                    [--no-floor] [--disparity-std-cells C]
-//                    [--disparity-std-scale S]
+//                    [--disparity-std-scale S] [--min-confidence C]
+//                    [--max-relative-range-std S]
 
 #include <algorithm>
 #include <array>
