@@ -39,9 +39,13 @@ std::vector<std::string> SplitList(const std::string& text, char separator) {
   return parts;
 }
 
+// Each line goes to stderr in one write: a job reports from more than one thread (the dense
+// job's pair figures come from its writer thread), and its lines must not interleave.
 void PrintProgress(double fraction, const std::string& stage, const std::string& message) {
-  std::cerr << "[" << std::setw(3) << static_cast<int>(100.0 * fraction) << "%] " << stage
-            << (message.empty() ? "" : " " + message) << "\n";
+  std::ostringstream line;
+  line << "[" << std::setw(3) << static_cast<int>(100.0 * fraction) << "%] " << stage
+       << (message.empty() ? "" : " " + message) << "\n";
+  std::cerr << line.str();
 }
 
 api::JobContext LocalJobContext(const std::filesystem::path& dir, int num_threads) {
@@ -51,7 +55,7 @@ api::JobContext LocalJobContext(const std::filesystem::path& dir, int num_thread
   context.image_names = ListPairImages(dir);
   context.num_threads = num_threads;
   context.progress.report = PrintProgress;
-  context.log = [](const std::string& line) { std::cerr << line << "\n"; };
+  context.log = [](const std::string& line) { std::cerr << line + "\n"; };
   return context;
 }
 
