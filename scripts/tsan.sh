@@ -31,6 +31,7 @@ declare -A TESTS=(
   [tests/server_api]=tests_server_api_test  # workers, queue, cancel, drain
   [tests/server_crash]=tests_server_crash_test  # SIGKILLed server, restarts
   [engine/util/background_task]=engine_util_background_task_test  # the dense job's writer
+  [api/stereo_job_unit]=api_stereo_job_unit_test  # dense pairs matched two at a time
   [engine/slam/session]=engine_slam_session_test  # live front end beside back end
   [api/live_publisher]=api_live_publisher_test  # live snapshots written behind
   [tests/server_live]=tests_server_live_test  # live frames, finish, cancel

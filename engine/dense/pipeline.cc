@@ -1,5 +1,7 @@
 #include "engine/dense/pipeline.h"
 
+#include <atomic>
+#include <deque>
 #include <future>
 #include <memory>
 #include <stdexcept>
@@ -159,8 +161,14 @@ void WriteDensePair(size_t k, const std::string& name, const DensePairResult& pa
   }
 }
 
-// Pair k's files are written on a background thread while pair k + 1 is read and matched (the
-// writing, 0.09 CPU s per 1024x768 pair, runs on one thread, the matching on all: bench_dense).
+// Pairs matched at once, each on a thread of its own. One pair's matching leaves a core idle
+// in its serial stretches and beside its file writing; two pairs at once fill them (OpenCV runs
+// a parallel loop that starts while another one runs serially, so the two pairs share the
+// cores rather than oversubscribe them). Measured with bench_dense --job-rounds: docs/dense.md.
+constexpr size_t kPairsInFlight = 2;
+
+// The pairs are read and matched kPairsInFlight at a time; their outcomes and files follow in
+// pair order, written on a background thread while the next pairs are matched.
 size_t RunDense(const StereoRig& rig, const ImageReader& read,
                 const std::vector<ImagePairNames>& pairs, const StereoPairsOptions& options,
                 const std::filesystem::path& output_dir,
@@ -169,29 +177,41 @@ size_t RunDense(const StereoRig& rig, const ImageReader& read,
                 StereoPairsReport::Grid* grid) {
   progress.Report(0.0, "rectify", "building the rectification tables");
   const DenseStereo dense(rig, options.dense, options.rectification_tables_dir);
-  size_t num_points = 0;
-  BackgroundTask writer;
-  // Pair k + 1's images are read (decoded) while pair k is matched, the two cameras at once.
-  // Only cam0's colours make the points' colours: cam1 is read as grey (a JPEG's luma alone).
-  const auto read_pair = [&read, &pairs](size_t k) {
-    std::future<cv::Mat> image1 = std::async(std::launch::async, [&] {
-      return ReadImage(read, pairs[k].cam1, cv::IMREAD_GRAYSCALE);
-    });
-    cv::Mat image0 = ReadImage(read, pairs[k].cam0, cv::IMREAD_COLOR);
-    return std::make_pair(std::move(image0), image1.get());
-  };
-  std::future<std::pair<cv::Mat, cv::Mat>> next_images;
-  if (!pairs.empty()) next_images = std::async(std::launch::async, read_pair, 0);
-  for (size_t k = 0; k < pairs.size(); ++k) {
+  // Only the oldest pair in flight reports its progress, so that the job's fraction only grows.
+  std::atomic<size_t> front{0};
+  const auto match_pair = [&](size_t k) {
     progress.ThrowIfCancelled();
-    const std::pair<cv::Mat, cv::Mat> images = next_images.get();
-    const cv::Mat& image0 = images.first;
-    const cv::Mat& image1 = images.second;
-    if (k + 1 < pairs.size()) next_images = std::async(std::launch::async, read_pair, k + 1);
-    auto pair_result =
-        std::make_shared<DensePairResult>(WithErrorPrefix("pair '" + pairs[k].name + "': ", [&] {
-          return dense.Reconstruct(image0, image1, PairRange(progress, k, pairs.size()));
-        }));
+    // Only cam0's colours make the points' colours: cam1 is read as grey (a JPEG's luma alone).
+    const cv::Mat image0 = ReadImage(read, pairs[k].cam0, cv::IMREAD_COLOR);
+    const cv::Mat image1 = ReadImage(read, pairs[k].cam1, cv::IMREAD_GRAYSCALE);
+    const ProgressSink range = PairRange(progress, k, pairs.size());
+    ProgressSink pair_progress;
+    pair_progress.report = [&front, k, range](double fraction, const std::string& stage,
+                                              const std::string& message) {
+      if (front.load() == k) range.Report(fraction, stage, message);
+    };
+    pair_progress.is_cancelled = progress.is_cancelled;
+    return std::make_shared<DensePairResult>(WithErrorPrefix(
+        "pair '" + pairs[k].name + "': ",
+        [&] { return dense.Reconstruct(image0, image1, pair_progress); }));
+  };
+  // Declared before the pairs in flight: an error unwinds them (each waits for its pair) before
+  // the writer (which waits for its task).
+  BackgroundTask writer;
+  std::deque<std::future<std::shared_ptr<DensePairResult>>> in_flight;
+  size_t next = 0;
+  const auto launch = [&] {
+    while (next < pairs.size() && in_flight.size() < kPairsInFlight) {
+      in_flight.push_back(std::async(std::launch::async, match_pair, next++));
+    }
+  };
+  launch();
+  size_t num_points = 0;
+  for (size_t k = 0; k < pairs.size(); ++k) {
+    const std::shared_ptr<DensePairResult> pair_result = in_flight.front().get();
+    in_flight.pop_front();
+    front = k + 1;
+    launch();
     StereoPairOutcome outcome;
     outcome.index = k;
     outcome.names = &pairs[k];
@@ -202,7 +222,7 @@ size_t RunDense(const StereoRig& rig, const ImageReader& read,
     outputs->Describe(k, pairs[k].name, &outcome);
     num_points += pair_result->points.size();
     // on_pair (the pair's figures, e.g. the medians of its ranges) runs with the writing, so
-    // the next pair's matching starts at once.
+    // that this thread goes back to wait for the next pair at once.
     writer.Run([k, outcome, pair_result, &output_dir, outputs, &on_pair] {
       if (on_pair) on_pair(outcome);
       WriteDensePair(k, outcome.names->name, *pair_result, output_dir, outputs);
