@@ -181,13 +181,9 @@ size_t RunDense(const StereoRig& rig, const ImageReader& read,
   std::atomic<size_t> front{0};
   const auto match_pair = [&](size_t k) {
     progress.ThrowIfCancelled();
-    // The two cameras are decoded at once (a job of one pair has no other pair to overlap).
     // Only cam0's colours make the points' colours: cam1 is read as grey (a JPEG's luma alone).
-    std::future<cv::Mat> read_image1 = std::async(std::launch::async, [&] {
-      return ReadImage(read, pairs[k].cam1, cv::IMREAD_GRAYSCALE);
-    });
     const cv::Mat image0 = ReadImage(read, pairs[k].cam0, cv::IMREAD_COLOR);
-    const cv::Mat image1 = read_image1.get();
+    const cv::Mat image1 = ReadImage(read, pairs[k].cam1, cv::IMREAD_GRAYSCALE);
     const ProgressSink range = PairRange(progress, k, pairs.size());
     ProgressSink pair_progress;
     pair_progress.report = [&front, k, range](double fraction, const std::string& stage,
