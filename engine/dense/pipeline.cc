@@ -179,11 +179,18 @@ size_t RunDense(const StereoRig& rig, const ImageReader& read,
   const DenseStereo dense(rig, options.dense, options.rectification_tables_dir);
   // Only the oldest pair in flight reports its progress, so that the job's fraction only grows.
   std::atomic<size_t> front{0};
+  // One pair is matched on this thread, as the service's worker runs job after job on it (the
+  // pair's buffers then come from memory the allocator already holds for this thread).
+  const bool one_pair = pairs.size() == 1;
   const auto match_pair = [&](size_t k) {
     progress.ThrowIfCancelled();
     // Only cam0's colours make the points' colours: cam1 is read as grey (a JPEG's luma alone).
+    // A job of one pair has no other pair to overlap: its two images are decoded at once.
+    std::future<cv::Mat> read_image1 = std::async(
+        one_pair ? std::launch::async : std::launch::deferred,
+        [&] { return ReadImage(read, pairs[k].cam1, cv::IMREAD_GRAYSCALE); });
     const cv::Mat image0 = ReadImage(read, pairs[k].cam0, cv::IMREAD_COLOR);
-    const cv::Mat image1 = ReadImage(read, pairs[k].cam1, cv::IMREAD_GRAYSCALE);
+    const cv::Mat image1 = read_image1.get();
     const ProgressSink range = PairRange(progress, k, pairs.size());
     ProgressSink pair_progress;
     pair_progress.report = [&front, k, range](double fraction, const std::string& stage,
@@ -202,7 +209,8 @@ size_t RunDense(const StereoRig& rig, const ImageReader& read,
   size_t next = 0;
   const auto launch = [&] {
     while (next < pairs.size() && in_flight.size() < kPairsInFlight) {
-      in_flight.push_back(std::async(std::launch::async, match_pair, next++));
+      in_flight.push_back(std::async(one_pair ? std::launch::deferred : std::launch::async,
+                                     match_pair, next++));
     }
   };
   launch();
