@@ -47,9 +47,10 @@
 // another build under the same load).
 //
 // --job-rounds N runs only the job against the peer's first matching in N alternating rounds
-// (RunJobRounds) and prints the median ratio.
+// (RunJobRounds) and prints the median ratio; with --merged, the job that also writes the merged
+// cloud of the pairs.
 // Usage: bench_dense [--frames N] [--threads N] [--no-peer] [--no-job] [--job-only]
-//                    [--job-rounds N] [--development-only]
+//                    [--job-rounds N [--merged]] [--development-only]
 //                    [--calibrate-std] [--block-size N] [--sgbm-p1 N] [--sgbm-p2 N]
 //                    [--refine-window N] [--step-factor F]
 //                    [--max-parallax-deg D]
@@ -493,20 +494,21 @@ std::vector<PeerSetting> PeerSettings() {
   };
 }
 
-// The job (without the merged cloud) and the peer's first matching (PERSPECTIVE, f = w/4) on
+// The job (with `merged`, also the merged cloud of the pairs placed by a .tum trajectory) and
+// the peer's first matching (PERSPECTIVE, f = w/4) on
 // the same pairs in alternating rounds, after one job that pages its buffers in: the machine's
 // speed drifts between runs, so each round's ratio compares the two at nearly the same time.
 // Prints each round and the median ratio.
 void RunJobRounds(const synth::StereoSequence& sequence, int num_frames, int rounds,
-                  const dense::DenseStereoOptions& dense_options) {
+                  const dense::DenseStereoOptions& dense_options, bool merged) {
   const PeerRig peer = ToPeer(sequence.rig);
   const PeerSetting setting = PeerSettings().front();
-  RunJob(sequence, num_frames, dense_options, false, false);
+  RunJob(sequence, num_frames, dense_options, merged, false);
   std::vector<double> ratios;
-  std::printf("\nthe job's time a pair against %s, %d pairs a round:\n", setting.name,
-              num_frames);
+  std::printf("\nthe job's time a pair%s against %s, %d pairs a round:\n",
+              merged ? " (with the merged cloud)" : "", setting.name, num_frames);
   for (int round = 0; round < rounds; ++round) {
-    const double job_s = RunJob(sequence, num_frames, dense_options, false, false);
+    const double job_s = RunJob(sequence, num_frames, dense_options, merged, false);
     const auto start = std::chrono::steady_clock::now();
     for (int f = 0; f < num_frames; ++f) {
       PeerReconstruct(peer, sequence.images[0][f], sequence.images[1][f], setting.flag,
@@ -971,6 +973,7 @@ struct BenchFlags {
   bool calibrate_std = false;
   bool job_only = false;
   int job_rounds = 0;  // > 0: only the job against the peer in alternating rounds
+  bool merged_rounds = false;  // the rounds' job with the merged cloud (a .tum trajectory)
   bool floor = true;   // the clean lounge as well
 };
 
@@ -990,7 +993,7 @@ int Run(const BenchFlags& flags, const dense::DenseStereoOptions& dense_options)
                        sequence.world_from_rig,
                        sequence.images};
   if (flags.job_rounds > 0) {
-    RunJobRounds(sequence, flags.frames, flags.job_rounds, dense_options);
+    RunJobRounds(sequence, flags.frames, flags.job_rounds, dense_options, flags.merged_rounds);
     return 0;
   }
   if (flags.job_only) {
@@ -1055,6 +1058,7 @@ int main(int argc, char** argv) {
     if (!std::strcmp(argv[i], "--no-peer")) flags.with_peer = false;
     if (!std::strcmp(argv[i], "--no-job")) flags.with_job = false;
     if (!std::strcmp(argv[i], "--job-only")) flags.job_only = true;
+    if (!std::strcmp(argv[i], "--merged")) flags.merged_rounds = true;
     if (!std::strcmp(argv[i], "--development-only")) flags.development_only = true;
     if (!std::strcmp(argv[i], "--calibrate-std")) flags.calibrate_std = true;
     if (!std::strcmp(argv[i], "--no-floor")) flags.floor = false;
