@@ -86,11 +86,11 @@ std::string CloudFileName(const std::string& pair_name);
 std::string RangeBaseName(const std::string& pair_name);
 
 // Reads `dataset_dir / pair.cam0` (colour) and `.cam1` (grey) of each pair, matches them with
-// `rig`, calls `on_pair` with the outcome and writes the pair's files into `output_dir` (dense:
+// `rig`, calls `on_pair` with the outcome and writes the pair's files into `output_dir`. Dense:
 // two pairs are read and matched at once, each on a thread of its own (a job of one pair on
 // the calling thread), and each pair's on_pair and files follow on a background thread while
-// the next pairs are matched; at most one pair waits to be written). `on_pair` is called once per pair, in pair order, one call at a time,
-// but for dense pairs not on the calling thread.
+// the next pairs are matched; at most one pair waits to be written. `on_pair` is called once
+// per pair, in pair order, one call at a time, but for dense pairs not on the calling thread.
 // `placement` (optional) holds one pose per pair. Throws InvalidArgument for an image that
 // cannot be read ("cannot read image 'cam0/NAME'") and, naming the pair ("pair 'NAME': ..."),
 // for images that do not fit the rig; std::runtime_error naming the pair when a file cannot be
