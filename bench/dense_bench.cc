@@ -301,7 +301,8 @@ std::vector<Eigen::Vector3d> PeerReconstruct(const PeerRig& peer, const cv::Mat&
 // temporary dataset: reading the images, matching, the result's figures and the artifacts
 // (NAME_range.tiff, NAME_range.png, cloud_NAME.ply; with `merged`, the dataset holds the true
 // trajectory as a .tum file and the job also writes cloud.ply of all pairs). The job writes pair
-// k's files while it matches pair k + 1. Prints wall and CPU seconds per pair.
+// k's files while it matches the next pairs. Prints wall and CPU seconds per pair (with
+// `print`); returns the wall seconds per pair.
 double RunJob(const synth::StereoSequence& sequence, int num_frames,
               const dense::DenseStereoOptions& dense_options, bool merged, bool print = true) {
   const std::filesystem::path root =
@@ -495,10 +496,9 @@ std::vector<PeerSetting> PeerSettings() {
 }
 
 // The job (with `merged`, also the merged cloud of the pairs placed by a .tum trajectory) and
-// the peer's first matching (PERSPECTIVE, f = w/4) on
-// the same pairs in alternating rounds, after one job that pages its buffers in: the machine's
-// speed drifts between runs, so each round's ratio compares the two at nearly the same time.
-// Prints each round and the median ratio.
+// the peer's first matching (PERSPECTIVE, f = w/4) on the same pairs in alternating rounds,
+// after one job that pages its buffers in: the machine's speed drifts between runs, so each
+// round's ratio compares the two at nearly the same time. Prints each round and the median.
 void RunJobRounds(const synth::StereoSequence& sequence, int num_frames, int rounds,
                   const dense::DenseStereoOptions& dense_options, bool merged) {
   const PeerRig peer = ToPeer(sequence.rig);
